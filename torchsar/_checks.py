@@ -1,0 +1,234 @@
+"""Input validation and the error types used by every public function.
+
+One place decides what a valid input is, so every entry point raises the same typed errors
+with messages that name the argument, what was expected and what was given.
+
+Error types (all subclasses of the built-in ``ValueError`` / ``TypeError`` so callers that
+catch those keep working):
+
+- :class:`InputTypeError` (``TypeError``): not a tensor, integer where float is expected,
+  complex where real is expected (or the reverse).
+- :class:`ShapeError` (``ValueError``): wrong number of dimensions or mismatched shapes.
+- :class:`InputValueError` (``ValueError``): NaN, Inf or negative values.
+- :class:`WindowSizeError` (``ValueError``): a window that does not fit in the image.
+- :class:`OptionError` (``ValueError``): an invalid keyword option (out of range, unknown mode).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import torch
+from torch import Tensor
+
+__all__ = [
+    "InputTypeError",
+    "InputValueError",
+    "OptionError",
+    "ShapeError",
+    "TorchSARError",
+    "check_choice",
+    "check_complex",
+    "check_image",
+    "check_int",
+    "check_mask",
+    "check_odd",
+    "check_positive",
+    "check_probability",
+    "check_same_shape",
+    "check_window_fits",
+    "WindowSizeError",
+    "float_dtype",
+]
+
+
+class TorchSARError(Exception):
+    """Base class of every error torchsar raises for bad input."""
+
+
+class InputTypeError(TorchSARError, TypeError):
+    """An argument has the wrong type or dtype (e.g. complex where real is expected)."""
+
+
+class ShapeError(TorchSARError, ValueError):
+    """An argument has the wrong number of dimensions or a mismatched shape."""
+
+
+class InputValueError(TorchSARError, ValueError):
+    """An argument holds invalid values (NaN, Inf, negative intensity)."""
+
+
+class WindowSizeError(TorchSARError, ValueError):
+    """A window (guard + training band, filter window) is larger than the image."""
+
+
+class OptionError(TorchSARError, ValueError):
+    """A keyword option is out of range or not one of the allowed values."""
+
+
+_AXES = {2: "(H, W)", 3: "(C, H, W)", 4: "(B, C, H, W)"}
+
+
+def float_dtype(dtype: torch.dtype) -> torch.dtype:
+    """Return the floating dtype computations use for an input dtype.
+
+    float64 stays float64 (and complex128 maps to float64); every other dtype computes in
+    float32. This is the single dtype policy of the library.
+    """
+    return torch.float64 if dtype in (torch.float64, torch.complex128) else torch.float32
+
+
+def check_image(
+    x: object,
+    name: str = "x",
+    *,
+    ndim: int = 4,
+    complex_ok: bool = False,
+    real_ok: bool = True,
+    nonnegative: bool = True,
+) -> Tensor:
+    """Validate an image batch and return it unchanged.
+
+    Args:
+        x: the candidate tensor.
+        name: the argument name used in error messages.
+        ndim: required number of dimensions (4 for ``(B, C, H, W)``).
+        complex_ok: accept complex dtypes.
+        real_ok: accept real floating dtypes.
+        nonnegative: require every value >= 0 (intensity/amplitude). Ignored for complex.
+
+    Returns:
+        ``x`` itself (no copy).
+
+    Raises:
+        InputTypeError: not a tensor, integer/bool dtype, or complex/real where not allowed.
+        ShapeError: wrong number of dimensions.
+        InputValueError: NaN, Inf, or negative values where forbidden.
+
+    Example:
+        >>> check_image(torch.ones(2, 1, 8, 8)).shape
+        torch.Size([2, 1, 8, 8])
+    """
+    if not isinstance(x, Tensor):
+        raise InputTypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
+    if x.dim() != ndim:
+        axes = _AXES.get(ndim, f"{ndim} dims")
+        raise ShapeError(
+            f"{name} must have shape {axes} ({ndim} dims), got {tuple(x.shape)} ({x.dim()} dims)"
+        )
+    is_complex = x.is_complex()
+    if is_complex and not complex_ok:
+        raise InputTypeError(
+            f"{name} must be real (intensity or amplitude), got complex dtype {x.dtype}; "
+            f"pass x.abs().square() for intensity"
+        )
+    if not is_complex and not real_ok:
+        raise InputTypeError(f"{name} must be complex, got real dtype {x.dtype}")
+    if not is_complex and not x.is_floating_point():
+        raise InputTypeError(f"{name} must have a floating dtype, got {x.dtype}; use {name}.float()")
+    if x.numel() == 0:
+        return x
+    if not bool(torch.isfinite(x).all()):
+        n_nan = int(torch.isnan(x).sum())
+        n_inf = int(torch.isinf(x).sum())
+        raise InputValueError(
+            f"{name} must be finite, got {n_nan} NaN and {n_inf} Inf values; "
+            f"replace them (e.g. torch.nan_to_num) or mark them invalid with a `valid` mask"
+        )
+    if nonnegative and not is_complex:
+        low = float(x.min())
+        if low < 0:
+            raise InputValueError(
+                f"{name} must be non-negative (SAR intensity/amplitude), got minimum {low:g}"
+            )
+    return x
+
+
+def check_complex(x: object, name: str = "x", *, ndim: int = 3) -> Tensor:
+    """Validate a complex tensor (phase history or SLC image) of ``ndim`` dimensions."""
+    return check_image(x, name, ndim=ndim, complex_ok=True, real_ok=False)
+
+
+def check_mask(mask: object, like: Tensor, name: str = "valid") -> Tensor:
+    """Validate a boolean mask broadcastable to ``like``; return it as a bool tensor."""
+    if not isinstance(mask, Tensor):
+        raise InputTypeError(f"{name} must be a torch.Tensor, got {type(mask).__name__}")
+    if mask.dtype != torch.bool:
+        raise InputTypeError(f"{name} must be a bool tensor, got dtype {mask.dtype}")
+    try:
+        torch.broadcast_shapes(mask.shape, like.shape)
+    except RuntimeError:
+        raise ShapeError(
+            f"{name} must broadcast to {tuple(like.shape)}, got {tuple(mask.shape)}"
+        ) from None
+    return mask.to(like.device)
+
+
+def check_same_shape(a: Tensor, b: Tensor, name_a: str, name_b: str) -> None:
+    """Raise :class:`ShapeError` unless ``a`` and ``b`` have the same shape."""
+    if a.shape != b.shape:
+        raise ShapeError(
+            f"{name_a} and {name_b} must have the same shape, "
+            f"got {tuple(a.shape)} and {tuple(b.shape)}"
+        )
+
+
+def check_int(value: object, name: str, *, minimum: int | None = None) -> int:
+    """Validate an integer option (bools rejected) with an optional lower bound."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise OptionError(f"{name} must be an int, got {value!r}")
+    if minimum is not None and value < minimum:
+        raise OptionError(f"{name} must be >= {minimum}, got {value}")
+    return value
+
+
+def check_odd(value: object, name: str, *, minimum: int = 1) -> int:
+    """Validate an odd integer window size >= ``minimum``."""
+    v = check_int(value, name, minimum=minimum)
+    if v % 2 == 0:
+        raise OptionError(f"{name} must be odd, got {v}")
+    return v
+
+
+def check_positive(value: object, name: str, *, allow_zero: bool = False) -> float:
+    """Validate a finite real number > 0 (or >= 0 with ``allow_zero``)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise OptionError(f"{name} must be a real number, got {value!r}")
+    v = float(value)
+    ok = v >= 0 if allow_zero else v > 0
+    if not ok or v != v or v in (float("inf"), float("-inf")):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise OptionError(f"{name} must be finite and {bound}, got {value!r}")
+    return v
+
+
+def check_probability(value: object, name: str = "pfa") -> float:
+    """Validate a probability strictly between 0 and 1."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < 1:
+        raise OptionError(f"{name} must be a probability in (0, 1), got {value!r}")
+    return float(value)
+
+
+def check_choice(value: object, name: str, choices: Iterable[str]) -> str:
+    """Validate a string mode against its allowed values (listed in the error)."""
+    allowed: Sequence[str] = tuple(choices)
+    if value not in allowed:
+        raise OptionError(f"{name} must be one of {', '.join(map(repr, allowed))}; got {value!r}")
+    return value  # type: ignore[return-value]
+
+
+def check_window_fits(x: Tensor, extent: int | tuple[int, int], name: str = "window") -> None:
+    """Raise :class:`WindowSizeError` if a window of ``extent`` pixels exceeds the image.
+
+    Args:
+        x: image batch ``(..., H, W)``.
+        extent: full window size (e.g. ``2 * (guard + train) + 1``), or ``(height, width)``.
+        name: how the window is described in the message (e.g. ``"guard + train"``).
+    """
+    eh, ew = (extent, extent) if isinstance(extent, int) else extent
+    h, w = x.shape[-2], x.shape[-1]
+    if eh > h or ew > w:
+        raise WindowSizeError(
+            f"{name} window of {eh}x{ew} pixels is larger than the image ({h}x{w}); "
+            f"use a smaller window or a larger image"
+        )
