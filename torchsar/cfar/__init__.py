@@ -5,6 +5,9 @@ Every variant returns a :class:`Detection` with ``mask == statistic > threshold`
 
 from torchsar.cfar.ca import ca
 from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.go import go
+from torchsar.cfar.order_statistic import os
+from torchsar.cfar.so import so
 from torchsar.cfar.two_parameter import two_parameter
 
-__all__ = ["Detection", "ca", "detection_from", "two_parameter"]
+__all__ = ["Detection", "ca", "detection_from", "go", "os", "so", "two_parameter"]

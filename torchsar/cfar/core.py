@@ -44,7 +44,7 @@ def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tenso
     """``factor(n) / factor(count)`` where ``count != n``; ``None`` when every count is ``n``."""
     if count.dim() >= 2 and count.shape[:-2].numel() > 1 and count.stride()[0] == 0:
         count = count[(0,) * (count.dim() - 2)]  # a broadcast (H, W) count: work on one copy
-    if bool(count.min() == n):
+    if count.numel() == 0 or bool(count.min() == n):
         return None
     f = factor_map(count, factor)
     return torch.where(count == n, torch.ones_like(f), factor(n) / f)
