@@ -30,11 +30,12 @@ def block_scale(counts: list[Tensor], interior: tuple[int, ...], factor) -> Tens
     interior ones (``None`` when every pixel has the interior sizes)."""
     c = torch.stack(torch.broadcast_tensors(*counts), dim=-1)
     full = torch.tensor(interior, dtype=c.dtype, device=c.device)
-    if bool((c == full).all()):
+    other = (c != full).any(-1)
+    if not bool(other.any()):
         return None
-    f = keyed_factor_map(c, factor)
-    same = (c == full).all(-1)
-    return torch.where(same, torch.ones_like(f), factor(interior) / f)
+    scale = torch.ones(other.shape, dtype=torch.float64, device=c.device)
+    scale[other] = factor(interior) / keyed_factor_map(c[other], factor)
+    return scale
 
 
 def block_cfar(

@@ -24,6 +24,7 @@ __all__ = [
     "keyed_factor_map",
     "os_factor",
     "os_rank",
+    "student_factor",
 ]
 
 
@@ -178,17 +179,40 @@ def block_factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:
 def keyed_factor_map(keys: Tensor, factor: Callable[[tuple[int, ...]], float]) -> Tensor:
     """Evaluate ``factor(key)`` at every distinct row of integer ``keys`` ``(..., k)``.
 
+    Rows are packed into one int64 code (each entry must be in ``[0, 2^(63 // k))``) and
+    ``factor`` is called once per distinct code.
+
     Args:
-        keys: float or int tensor ``(..., k)`` of integer-valued counts (e.g. block sizes).
+        keys: float or int tensor ``(..., k)`` of integer-valued entries (e.g. block sizes).
         factor: ``factor(tuple_of_ints) -> float`` (cache it).
 
     Returns:
         float64 tensor ``keys.shape[:-1]``.
+
+    Example:
+        >>> keyed_factor_map(torch.tensor([[1, 2], [3, 4], [1, 2]]), lambda k: k[0] + k[1]).tolist()
+        [3.0, 7.0, 3.0]
     """
     k = keys.round().long().clamp_min(0)
-    flat = k.reshape(-1, k.shape[-1])
-    if flat.shape[0] == 0:
-        return torch.zeros(keys.shape[:-1], dtype=torch.float64, device=keys.device)
-    uniq, inv = torch.unique(flat, dim=0, return_inverse=True)
-    table = torch.tensor([factor(tuple(row)) for row in uniq.tolist()], dtype=torch.float64)
-    return table.to(keys.device)[inv].reshape(keys.shape[:-1])
+    bits = 63 // k.shape[-1]
+    code = torch.zeros(k.shape[:-1], dtype=torch.long, device=k.device)
+    for i in range(k.shape[-1]):
+        code = code | (k[..., i] << (bits * i))
+    if code.numel() == 0:
+        return torch.zeros(code.shape, dtype=torch.float64, device=k.device)
+    uniq, inv = torch.unique(code.flatten(), return_inverse=True)
+    mask = (1 << bits) - 1
+    rows = [tuple((c >> (bits * i)) & mask for i in range(k.shape[-1])) for c in uniq.tolist()]
+    table = torch.tensor([factor(r) for r in rows], dtype=torch.float64)
+    return table.to(k.device)[inv].reshape(code.shape)
+
+
+@lru_cache(maxsize=4096)
+def student_factor(n: int, pfa: float) -> float:
+    """``t_{n-1}^{-1}(1 - pfa) sqrt(1 + 1/n)``: the exact prediction-interval factor of a new
+    normal sample from ``n`` samples (mean and unbiased standard deviation)."""
+    from scipy import stats
+
+    if n <= 1:
+        return math.inf
+    return float(stats.t.ppf(1.0 - pfa, n - 1) * math.sqrt(1.0 + 1.0 / n))
