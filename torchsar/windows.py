@@ -394,8 +394,8 @@ def ring_sums(
 
     Example:
         >>> x = torch.ones(1, 1, 9, 9)
-        >>> ring_sums(x, 1, 2).count[0, 0, 4, 4].item()  # 5x5 ring around a 3x3 guard box
-        16.0
+        >>> ring_sums(x, 1, 2).count[0, 0, 4, 4].item()  # 7x7 box minus the 3x3 guard box
+        40.0
     """
     return rect_sums(x, [Ring(guard, train).region], valid=valid, moments=moments)[0]
 
