@@ -37,9 +37,8 @@ from torchsar.windows import Ring
 
 __all__ = ["ring_order_statistic"]
 
-_MISSING = 65535  # rank of cells that are never counted
 _CELL_BUDGET = 65535  # cells per tile, so ranks fit 16 bits
-_COMPARE_BUDGET = 1 << 24  # bytes of the per-step compare buffer (N x tile)
+_COMPARE_BUDGET = 1 << 21  # bytes of the per-step compare buffer (N x tile)
 
 
 def ring_order_statistic(
@@ -74,8 +73,11 @@ def ring_order_statistic(
     if (2 * o + 1) ** 2 > _CELL_BUDGET // 2:
         _unfold_select(planes, ring, kk, vm, out)
         return out.reshape(b, c, h, w)
-    for tile in _tiles(b * c, h, w, o, ring.n):
-        _select_tile(planes, ring, kk, vm, out, tile)
+    tiles = _tiles(b * c, h, w, o, ring.n)
+    longest = max(_tile_length(t, o) for t in tiles)
+    ws = _Workspace(ring.n, longest, x.device)
+    for tile in tiles:
+        _select_tile(planes, ring, kk, vm, out, tile, ws)
     return out.reshape(b, c, h, w)
 
 
@@ -94,28 +96,53 @@ def _tiles(p: int, h: int, w: int, o: int, n: int) -> list[tuple[int, int, int, 
     ]
 
 
+def _tile_length(tile: tuple[int, ...], o: int) -> int:
+    """Number of flat positions bisected for a tile (pixels plus the junk between rows)."""
+    p0, p1, y0, y1, x0, x1 = tile
+    wp, hp = x1 - x0 + 2 * o, y1 - y0 + 2 * o
+    return (p1 - p0 - 1) * hp * wp + (y1 - y0 - 1) * wp + (x1 - x0)
+
+
+def _rank_bits(cells: int) -> int:
+    """Bits of the tile ranks: ``cells`` real ranks plus the "missing" rank ``2^B - 1``."""
+    return max(9, cells.bit_length())
+
+
+def _missing(cells: int) -> int:
+    """The rank of missing cells: all ones, so its high byte is 255 (never counted)."""
+    return (1 << _rank_bits(cells)) - 1
+
+
 def _tile_ranks(
     planes: Tensor, vm: Tensor | None, tile: tuple[int, ...], o: int
 ) -> tuple[Tensor, Tensor]:
     """Padded int32 rank image ``(P, th + 2o, tw + 2o)`` of a tile (missing cells
-    ``_MISSING``) and the tile's sorted counted values."""
+    ``2^B - 1``, see :func:`_missing`) and the tile's sorted counted values."""
     p0, p1, y0, y1, x0, x1 = tile
     h, w = planes.shape[-2:]
     ya, yb, xa, xb = max(0, y0 - o), min(h, y1 + o), max(0, x0 - o), min(w, x1 + o)
     vals = planes[p0:p1, ya:yb, xa:xb]
     keep = None if vm is None else vm[p0:p1, ya:yb, xa:xb]
     flat = vals.reshape(-1) if keep is None else vals[keep]
-    srt, order = torch.sort(flat)
+    order = _argsort(flat)
+    srt = flat[order]
     rank = torch.empty(flat.numel(), dtype=torch.int32, device=flat.device)
     rank[order] = torch.arange(flat.numel(), dtype=torch.int32, device=flat.device)
     shape = (p1 - p0, y1 - y0 + 2 * o, x1 - x0 + 2 * o)
-    pad = torch.full(shape, _MISSING, dtype=torch.int32, device=flat.device)
+    pad = torch.full(shape, _missing(flat.numel()), dtype=torch.int32, device=flat.device)
     region = pad[:, ya - y0 + o : yb - y0 + o, xa - x0 + o : xb - x0 + o]
     if keep is None:
         region.copy_(rank.view(vals.shape))
     else:
         region[keep] = rank
     return pad, srt
+
+
+def _argsort(v: Tensor) -> Tensor:
+    """Ascending argsort; numpy's on CPU (several times faster than ``torch.sort`` there)."""
+    if v.device.type == "cpu":
+        return torch.from_numpy(v.numpy().argsort())
+    return torch.sort(v, stable=True).indices
 
 
 def _ring_blocks(ring: Ring) -> list[tuple[int, int, int, int]]:
@@ -138,37 +165,91 @@ def _views(flat: Tensor, base: int, length: int, wp: int, ring: Ring) -> list[Te
     ]
 
 
-def _bisect(
-    views: list[Tensor], prefix: Tensor, kk: Tensor, bits: range, low: bool, cmp: Tensor
-) -> None:
-    """Decide the given bits of ``prefix`` (in place): keep the bit clear when at least ``kk``
-    cells are ``<=`` the candidate ``prefix + 2^b - 1`` (high byte or low byte of it)."""
-    parts = list(torch.split(cmp, [v.shape[0] * v.shape[1] for v in views]))
-    acc_dtype = torch.uint8 if kk.dtype == torch.uint8 else torch.int16
+class _Workspace:
+    """Buffers reused by every tile of one call: fresh large allocations (page faults) cost
+    more than the uint8 arithmetic, so every step writes into these with ``out=``."""
+
+    def __init__(self, n: int, length: int, device: torch.device) -> None:
+        self.cells = torch.empty((n, length), dtype=torch.uint8, device=device)
+        self.flags = torch.empty((n, length), dtype=torch.bool, device=device)
+        acc = torch.uint8 if n <= 255 else torch.int16
+        self.count = torch.empty(length, dtype=acc, device=device)
+        self.kk = torch.empty(length, dtype=acc, device=device)
+        self.less = torch.empty(length, dtype=torch.bool, device=device)
+        self.thr = torch.empty(length, dtype=torch.uint8, device=device)
+        self.prefix = torch.empty(length, dtype=torch.int32, device=device)
+        self.tmp = torch.empty(length, dtype=torch.int32, device=device)
+
+    def take(self, length: int) -> tuple[Tensor, ...]:
+        """Views of the first ``length`` positions of every buffer."""
+        return tuple(
+            b[..., :length]
+            for b in (
+                self.cells,
+                self.flags,
+                self.count,
+                self.kk,
+                self.less,
+                self.thr,
+                self.prefix,
+                self.tmp,
+            )
+        )
+
+
+def _bisect(bufs: tuple[Tensor, ...], bits: range, shift: int, low: bool) -> None:
+    """Decide the given bits of ``prefix`` (in place): keep bit ``b`` clear when at least
+    ``kk`` cells are ``<=`` the candidate ``prefix + 2^b - 1`` -- its high part
+    (``>> shift``) against the high-byte cells, or its low ``shift`` bits against the
+    remapped low cells."""
+    cells, flags, count, kk, less, thr, prefix, tmp = bufs
     for b in bits:
-        cand = prefix + ((1 << b) - 1)
-        thr = (cand & 255 if low else cand >> 8).to(torch.uint8)
-        for v, part in zip(views, parts, strict=True):
-            torch.le(v, thr, out=part.view(v.shape))
-        count = cmp.view(torch.uint8).sum(0, dtype=acc_dtype)
-        prefix += (count < kk).to(torch.int32) << b
+        torch.add(prefix, (1 << b) - 1, out=tmp)
+        if low:
+            tmp.bitwise_and_((1 << shift) - 1)
+        else:
+            tmp.bitwise_right_shift_(shift)
+        thr.copy_(tmp)
+        torch.le(cells, thr, out=flags)
+        torch.sum(flags.view(torch.uint8), 0, dtype=count.dtype, out=count)
+        torch.lt(count, kk, out=less)
+        tmp.copy_(less)
+        prefix.add_(tmp, alpha=1 << b)
 
 
-def _remap_low(hv: list[Tensor], lv: list[Tensor], high: Tensor, out: Tensor) -> list[Tensor]:
-    """Low-byte images relative to each pixel's decided high byte: the low byte where the high
-    bytes agree, 0 ("always below") where the cell's is smaller, 255 ("never") where larger."""
-    res, start = [], 0
-    for h_, l_ in zip(hv, lv, strict=True):
-        d = out[start : start + h_.shape[0] * h_.shape[1]].view(h_.shape)
-        start += h_.shape[0] * h_.shape[1]
-        torch.mul(l_, torch.eq(h_, high), out=d)
-        d.masked_fill_(torch.gt(h_, high), 255)
-        res.append(d)
-    return res
+def _gather_cells(views: list[Tensor], cells: Tensor) -> None:
+    """Copy the strided ring views into the contiguous ``(N, L)`` cell buffer."""
+    start = 0
+    for v in views:
+        size = v.shape[0] * v.shape[1]
+        cells[start : start + size].view(v.shape).copy_(v)
+        start += size
+
+
+def _remap_low(bufs: tuple[Tensor, ...], lv: list[Tensor], shift: int) -> None:
+    """Replace the high-byte cells by low-byte cells relative to each pixel's decided high
+    byte ``K = prefix >> shift``: the low bits where the cell's high byte is ``K``, 0
+    ("always below") where smaller, 255 ("never counted") where larger (the low steps test at
+    most ``2^shift - 2``). uint8 ops into the workspace only."""
+    cells, flags, _, _, _, thr, prefix, tmp = bufs
+    torch.bitwise_right_shift(prefix, shift, out=tmp)
+    thr.copy_(tmp)
+    torch.gt(cells, thr, out=flags)
+    above = flags.clone()
+    torch.ge(cells, thr, out=flags)
+    _gather_cells(lv, cells)
+    torch.minimum(cells, flags.view(torch.uint8).neg_(), out=cells)
+    cells.bitwise_or_(above.view(torch.uint8).neg_())
 
 
 def _select_tile(
-    planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None, out: Tensor, tile: tuple[int, ...]
+    planes: Tensor,
+    ring: Ring,
+    kk: Tensor,
+    vm: Tensor | None,
+    out: Tensor,
+    tile: tuple[int, ...],
+    ws: _Workspace,
 ) -> None:
     """Bisect the ranks of one tile and write the selected values into ``out``."""
     p0, p1, y0, y1, x0, x1 = tile
@@ -178,24 +259,23 @@ def _select_tile(
     th, tw = y1 - y0, x1 - x0
     base = o * wp + o
     length = (pc - 1) * hp * wp + (th - 1) * wp + tw
-    dev = ranks.device
-    high = (ranks >> 8).to(torch.uint8).reshape(-1)
-    low = (ranks & 255).to(torch.uint8).reshape(-1)
-    k_dtype = torch.uint8 if ring.n <= 255 else torch.int16
-    k_flat = torch.ones(pc * hp * wp, dtype=k_dtype, device=dev)
-    k_flat.view(pc, hp, wp)[:, o : o + th, o : o + tw] = kk[p0:p1, y0:y1, x0:x1].to(k_dtype)
-    k_line = k_flat[base : base + length]
-    prefix = torch.zeros(length, dtype=torch.int32, device=dev)
-    cmp = torch.empty((ring.n, length), dtype=torch.bool, device=dev)
-    hv = _views(high, base, length, wp, ring)
-    _bisect(hv, prefix, k_line, range(15, 7, -1), False, cmp)
-    remapped = torch.empty((ring.n, length), dtype=torch.uint8, device=dev)
-    _remap_low(hv, _views(low, base, length, wp, ring), (prefix >> 8).to(torch.uint8), remapped)
-    _bisect([remapped.view(1, ring.n, length)], prefix, k_line, range(7, -1, -1), True, cmp)
-    full = torch.zeros(pc * hp * wp, dtype=torch.int64, device=dev)
-    full[base : base + length] = prefix.clamp_(max=max(srt.numel() - 1, 0))
+    bufs = ws.take(length)
+    k_flat = torch.ones(pc * hp * wp, dtype=bufs[3].dtype, device=ranks.device)
+    k_flat.view(pc, hp, wp)[:, o : o + th, o : o + tw] = kk[p0:p1, y0:y1, x0:x1].to(k_flat.dtype)
+    bufs[3].copy_(k_flat[base : base + length])
+    bits = _rank_bits(srt.numel())
+    shift = bits - 8
+    high = (ranks >> shift).to(torch.uint8).reshape(-1)
+    bufs[6].zero_()
+    _gather_cells(_views(high, base, length, wp, ring), bufs[0])
+    _bisect(bufs, range(bits - 1, shift - 1, -1), shift, False)
+    low = (ranks & ((1 << shift) - 1)).to(torch.uint8).reshape(-1)
+    _remap_low(bufs, _views(low, base, length, wp, ring), shift)
+    _bisect(bufs, range(shift - 1, -1, -1), shift, True)
+    full = torch.zeros(pc * hp * wp, dtype=torch.int64, device=ranks.device)
+    full[base : base + length] = bufs[6].clamp(max=max(srt.numel() - 1, 0))
     sel = full.view(pc, hp, wp)[:, o : o + th, o : o + tw]
-    vals = srt[sel] if srt.numel() else torch.zeros(sel.shape, dtype=out.dtype, device=dev)
+    vals = srt[sel] if srt.numel() else torch.zeros(sel.shape, dtype=out.dtype, device=out.device)
     kt = kk[p0:p1, y0:y1, x0:x1]
     out[p0:p1, y0:y1, x0:x1] = torch.where(kt > 0, vals, torch.zeros_like(vals))
 
