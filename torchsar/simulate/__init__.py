@@ -3,6 +3,15 @@
 from torchsar.simulate.batch import SimBatch
 from torchsar.simulate.chips import chips
 from torchsar.simulate.clutter import CLUTTER_MODELS, DEFAULT_SHAPE_PARAM, clutter
+from torchsar.simulate.scenes import scenes
 from torchsar.simulate.seeding import image_seed
 
-__all__ = ["CLUTTER_MODELS", "DEFAULT_SHAPE_PARAM", "SimBatch", "chips", "clutter", "image_seed"]
+__all__ = [
+    "CLUTTER_MODELS",
+    "DEFAULT_SHAPE_PARAM",
+    "SimBatch",
+    "chips",
+    "clutter",
+    "image_seed",
+    "scenes",
+]
