@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import torch
 
-from torchsar.simulate import chips, clutter
+from torchsar.simulate import chips, clutter, scenes
 
 
 def cases() -> list[tuple[str, Callable, Callable]]:
@@ -28,6 +28,11 @@ def cases() -> list[tuple[str, Callable, Callable]]:
             "chips 200x128x128 k L=4",
             lambda: chips(200, size=128, clutter="k", looks=4.0),
             lambda: clutter((200, 1, 128, 128), model="k", looks=4.0),
+        ),
+        (
+            "scenes 4x512x512 gamma L=1",
+            lambda: scenes(4, size=512),
+            lambda: clutter((4, 1, 512, 512), model="exponential"),
         ),
     ]
 

@@ -82,7 +82,9 @@ class Canvas:
         R0, C0, R1, C1 = max(0, r0 - gap), max(0, c0 - gap), min(H, r1 + gap), min(W, c1 + gap)
         pad = torch.zeros((R1 - R0, C1 - C0), dtype=torch.float32, device=body.device)
         pad[r0 - R0 : r1 - R0, c0 - C0 : c1 - C0] = body.float()
-        grown = nnf.max_pool2d(pad[None, None], 2 * gap + 1, stride=1, padding=gap)[0, 0] > 0
+        k = 2 * gap + 1  # separable square dilation: rows, then columns
+        grown = nnf.max_pool2d(pad[None, None], (k, 1), stride=1, padding=(gap, 0))
+        grown = nnf.max_pool2d(grown, (1, k), stride=1, padding=(0, gap))[0, 0] > 0
         self.keepout[R0:R1, C0:C1] |= grown
 
     def paint(self, target: Placed) -> int:

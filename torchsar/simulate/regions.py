@@ -29,11 +29,16 @@ def _voronoi(size: tuple[int, int], k: int, draws: Draws) -> tuple[Tensor, list[
         kind = "forest" if draws.uniform(0.0, 1.0) < 0.5 else "field"
         mean_db = draws.uniform(*MEAN_DB[kind])
         cells.append({"id": i, "kind": kind, "mean_db": mean_db, "seed_rc": (rows[i], cols[i])})
-    r = torch.arange(H, device=dev, dtype=torch.float32)[None, :, None]
-    c = torch.arange(W, device=dev, dtype=torch.float32)[None, None, :]
-    sr = torch.tensor(rows, device=dev, dtype=torch.float32)[:, None, None]
-    sc = torch.tensor(cols, device=dev, dtype=torch.float32)[:, None, None]
-    return ((r - sr) ** 2 + (c - sc) ** 2).argmin(dim=0), cells
+    r = torch.arange(H, device=dev, dtype=torch.float32)[:, None]
+    c = torch.arange(W, device=dev, dtype=torch.float32)[None, :]
+    best = torch.full((H, W), float("inf"), device=dev)
+    labels = torch.zeros((H, W), dtype=torch.int64, device=dev)
+    for i in range(k):  # running nearest seed (first seed wins ties, like argmin)
+        d = (r - rows[i]) ** 2 + (c - cols[i]) ** 2
+        closer = d < best
+        best = torch.where(closer, d, best)
+        labels = torch.where(closer, i, labels)
+    return labels, cells
 
 
 def _road(size: tuple[int, int], draws: Draws) -> tuple[Tensor, dict]:
