@@ -22,9 +22,9 @@ from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import torchsar as ts  # noqa: E402
-from torchsar.order_statistics import ring_order_statistic  # noqa: E402
-from torchsar.windows import Ring  # noqa: E402
+import torchsar as ts
+from torchsar.order_statistics import ring_order_statistic
+from torchsar.windows import Ring
 
 GUARD, TRAIN = 2, 4
 
