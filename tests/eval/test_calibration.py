@@ -70,3 +70,11 @@ def test_cli_pfa_end_to_end(tmp_path):
 def test_cli_pfa_errors(tmp_path, capsys, argv, msg):
     assert main([*argv, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
     assert msg in capsys.readouterr().err
+
+
+def test_every_registered_detector_runs_with_its_defaults():
+    x = torch.empty(2, 1, 40, 40).exponential_(generator=torch.Generator().manual_seed(1))
+    for name, spec in DETECTORS.items():
+        d = spec(x)
+        assert d.mask.shape == x.shape, name
+        assert torch.equal(d.mask, d.statistic > d.threshold), name
