@@ -99,7 +99,9 @@ def _wide(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_pfa(table: pd.DataFrame, path: Path) -> None:
-    """One panel per clutter model: measured vs design Pfa (log-log) with 95 % intervals."""
+    """One panel per clutter model: measured vs design Pfa (log-log) with 95 % intervals;
+    a detector without any false alarm is drawn as an open triangle at the interval's upper
+    bound."""
     cases = list(dict.fromkeys(table["clutter"]))
     cols = 3
     rows = (len(cases) + cols - 1) // cols
@@ -107,18 +109,15 @@ def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     for ax, case in zip(axes.flat, cases, strict=False):
         sub = table[table["clutter"] == case]
         for i, (name, df) in enumerate(sub.groupby("detector", sort=False)):
-            y = df["measured_pfa"].clip(lower=1e-7)
-            err = [y - df["ci_low"].clip(lower=1e-7), df["ci_high"] - y]
+            color = plt.cm.tab20(i % 20)
+            seen = df[df["false_alarms"] > 0]
+            y = seen["measured_pfa"]
+            err = [y - seen["ci_low"], seen["ci_high"] - y]
             ax.errorbar(
-                df["design_pfa"],
-                y,
-                yerr=err,
-                fmt="o-",
-                ms=3,
-                color=f"C{i % 10}",
-                label=name,
-                capsize=2,
+                seen["design_pfa"], y, yerr=err, fmt="o-", ms=3, color=color, label=name, capsize=2
             )
+            none = df[df["false_alarms"] == 0]  # no false alarm: mark the 95 % upper bound
+            ax.plot(none["design_pfa"], none["ci_high"], "v", ms=5, color=color, mfc="none")
         lim = [sub["design_pfa"].min() / 3, sub["design_pfa"].max() * 3]
         ax.plot(lim, lim, "k--", lw=0.8)
         ax.set(xscale="log", yscale="log", title=case, xlabel="design Pfa", ylabel="measured Pfa")
