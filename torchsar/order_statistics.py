@@ -35,6 +35,9 @@ References:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import torch
 from torch import Tensor
 
@@ -81,9 +84,29 @@ def ring_order_statistic(
     tiles = _tiles(b * c, h, w, o, ring.n)
     longest = max(_tile_length(t, o) for t in tiles)
     ws = _Workspace(ring.n, longest, x.device)
-    for tile in tiles:
-        _select_tile(planes, ring, kk, vm, out, tile, ws)
+    with _one_cpu_thread(x.device):
+        for tile in tiles:
+            _select_tile(planes, ring, kk, vm, out, tile, ws)
     return out.reshape(b, c, h, w)
+
+
+@contextmanager
+def _one_cpu_thread(device: torch.device) -> Iterator[None]:
+    """Run the bisection on one intra-op thread on CPU (restored afterwards).
+
+    Its steps are short, memory-bound uint8 passes over cache-sized tiles: OpenMP fork/join
+    per op costs more than it gains, and on a loaded machine it collapses (measured: 2
+    threads 6x slower than 1 for a 2 x 512 x 512 batch). Not thread-safe with respect to
+    other Python threads changing ``torch.set_num_threads`` concurrently."""
+    if device.type != "cpu":
+        yield
+        return
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def _tiles(p: int, h: int, w: int, o: int, n: int) -> list[tuple[int, int, int, int, int, int]]:
