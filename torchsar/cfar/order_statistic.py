@@ -12,7 +12,7 @@ from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
 from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.order_statistics import ring_order_statistic
-from torchsar.windows import Ring, Sums, windowed
+from torchsar.windows import Ring, Sums, region_count, windowed
 
 __all__ = ["os"]
 
@@ -86,6 +86,8 @@ def _check_rank(rank: int | None, ring: Ring) -> int:
 
 def _ring_counts(x: Tensor, ring: Ring, vmask: Tensor | None) -> Tensor:
     """Counted ring cells per pixel, float64: ``(H, W)`` without a mask, else ``(B, C, H, W)``."""
+    if vmask is None:
+        return region_count(*x.shape[-2:], ring.region, x.device)
 
     def count(_xs: Tensor, sums: list[Sums]) -> Tensor:
         return sums[0].count.clone()
