@@ -37,6 +37,8 @@ def czt(a: Tensor, alpha: Tensor, n_out: int) -> Tensor:
     """
     m_in = a.shape[-1]
     dev = a.device
+    if a.numel() == 0:
+        return torch.zeros(*a.shape[:-1], n_out, dtype=a.dtype, device=dev)
     length = 1 << math.ceil(math.log2(max(m_in + n_out - 1, 1)))
     al = torch.as_tensor(alpha, dtype=torch.float64, device=dev)
     al = al.expand(a.shape[:-1]).unsqueeze(-1)

@@ -6,6 +6,7 @@ import math
 from collections.abc import Callable
 from functools import partial
 
+import torch
 from torch import Tensor
 from torch.nn import functional as nnf
 
@@ -70,6 +71,19 @@ def detect_peaks(
         return mask
     b, c, h, w = intensity.shape
     flat = intensity.reshape(b * c, 1, h, w)
-    padded = nnf.pad(flat, (r, r, r, r), mode="circular") if min(h, w) > r else flat
-    local = nnf.max_pool2d(padded, 2 * r + 1, stride=1, padding=0 if min(h, w) > r else r)
-    return mask & (flat == local).reshape(b, c, h, w)
+    return mask & (flat == _window_max(flat, r)).reshape(b, c, h, w)
+
+
+def _window_max(x: Tensor, r: int) -> Tensor:
+    """Maximum over the ``(2r+1)^2`` window with circular borders (separable, doubling)."""
+    return _run_max(_run_max(x, r, -1), r, -2)
+
+
+def _run_max(x: Tensor, r: int, dim: int) -> Tensor:
+    """Circular running maximum over ``[i - r, i + r]`` along ``dim`` in ``O(log r)`` passes."""
+    k = 2 * r + 1
+    m, span = x, 1
+    while 2 * span <= k:
+        m = torch.maximum(m, torch.roll(m, -span, dim))
+        span *= 2
+    return torch.roll(torch.maximum(m, torch.roll(m, span - k, dim)), r, dim)

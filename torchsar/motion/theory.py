@@ -104,7 +104,7 @@ def planar_image_positions(
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams()
         >>> c = torch.tensor([[0.0, 0.0]], dtype=torch.float64)
-        >>> planar_image_positions(torch.tensor([[10.0, 0.0]]), p, c).round(decimals=3).tolist()
+        >>> (planar_image_positions(torch.tensor([[10.0, 0.0]]), p, c).round(decimals=3) + 0).tolist()
         [[[10.0, 0.0]]]
     """
     pts = positions.to(torch.float64)[..., :, None, :]
