@@ -28,7 +28,9 @@ def _lowpass(shape):
 
 class TestEstimateShift:
     @given(
-        dy=st.floats(-6, 6), dx=st.floats(-6, 6), seed=st.integers(0, 1000),
+        dy=st.floats(-6, 6),
+        dx=st.floats(-6, 6),
+        seed=st.integers(0, 1000),
         norm=st.sampled_from([None, "phase"]),
     )
     def test_agrees_with_skimage(self, dy, dx, seed, norm):

@@ -31,7 +31,9 @@ class TestSimulatePhaseHistory:
         p = make_params(azimuth_resolution=1.0, prf=2000.0)  # PRF high enough: no aliasing
         y, x, vr, va = 20.0, -10.0, 7.0, 3.0
         pos = torch.tensor([[[y, x]]], dtype=torch.float64)
-        g = simulate_phase_history(pos, p, velocities=torch.tensor([[[vr, va]]], dtype=torch.float64))
+        g = simulate_phase_history(
+            pos, p, velocities=torch.tensor([[[vr, va]]], dtype=torch.float64)
+        )
         t = pulse_times(p)
         k0 = (p.n_samples - 1) // 2  # f = f0 (K even: half a step below)
         f = p.center_frequency + (k0 - (p.n_samples - 1) / 2) * p.frequency_step
@@ -41,7 +43,11 @@ class TestSimulatePhaseHistory:
         rng = y + vr * tm + p.scene_range
         azi = x + (va - p.platform_speed) * tm
         r_dot = (vr * rng + (va - p.platform_speed) * azi) / torch.hypot(rng, azi)
-        r0_dot = p.platform_speed**2 * tm / torch.hypot(torch.full_like(tm, p.scene_range), p.platform_speed * tm)
+        r0_dot = (
+            p.platform_speed**2
+            * tm
+            / torch.hypot(torch.full_like(tm, p.scene_range), p.platform_speed * tm)
+        )
         expected = -4 * math.pi * f / 299_792_458.0 * (r_dot - r0_dot) / p.prf
         torch.testing.assert_close(dphi, expected, atol=2e-3, rtol=0)
         # range history from the phase slope over frequency at the aperture centre

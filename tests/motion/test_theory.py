@@ -27,11 +27,16 @@ class TestPlanarTheory:
     def test_point_at_centre_has_no_distortion(self, small):
         c = torch.tensor([[30.0, -40.0]], dtype=torch.float64)
         got = planar_image_positions(torch.tensor([[31.0, -39.5]]), small, c)
-        torch.testing.assert_close(got[0, 0], torch.tensor([1.0, 0.5], dtype=torch.float64), atol=1e-3, rtol=0)
+        torch.testing.assert_close(
+            got[0, 0], torch.tensor([1.0, 0.5], dtype=torch.float64), atol=1e-3, rtol=0
+        )
 
     def test_distortion_grows_quadratically(self, small):
         c = torch.zeros(1, 2, dtype=torch.float64)
-        d = [planar_image_positions(torch.tensor([[0.0, x]]), small, c)[0, 0, 0] for x in (20.0, 40.0)]
+        d = [
+            planar_image_positions(torch.tensor([[0.0, x]]), small, c)[0, 0, 0]
+            for x in (20.0, 40.0)
+        ]
         # range distortion of a cross-range offset x is ~ x^2 / (2 R0)
         assert float(d[0]) == pytest.approx(20.0**2 / 2e4, rel=0.05)
         assert float(d[1]) == pytest.approx(40.0**2 / 2e4, rel=0.05)

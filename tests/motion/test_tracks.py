@@ -19,13 +19,17 @@ def _blobs(params, centers, positions, sigma_px=1.6):
     """Complex images (1, P, H, W) with Gaussian blobs at ``positions (N, P, 2)`` (m, relative)."""
     h, w = params.image_size
     dy, dx = params.pixel_spacing
-    yy, xx = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    yy, xx = torch.meshgrid(
+        torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij"
+    )
     imgs = torch.zeros(1, centers.shape[0], h, w, dtype=torch.complex128)
     for p in range(centers.shape[0]):
         for n in range(positions.shape[0]):
             r = positions[n, p, 0] / dy + h // 2
             c = positions[n, p, 1] / dx + w // 2
-            imgs[0, p] += torch.exp(-((yy - r) ** 2 + (xx - c) ** 2) / (2 * sigma_px**2)) * (1 + 0.5j)
+            imgs[0, p] += torch.exp(-((yy - r) ** 2 + (xx - c) ** 2) / (2 * sigma_px**2)) * (
+                1 + 0.5j
+            )
     return imgs
 
 
@@ -41,7 +45,9 @@ class TestAssociate:
         got = associate(ref, cand, torch.zeros(2), period, 3.0)
         assert got.tolist() == [1, 0, 2]  # 40 and -49 are 1 m apart modulo 90
         assert associate(ref, cand[:0], torch.zeros(2), period, 3.0).tolist() == [-1, -1, -1]
-        shifted = associate(ref, cand + torch.tensor([5.0, 0.0]), torch.tensor([5.0, 0.0]), period, 3.0)
+        shifted = associate(
+            ref, cand + torch.tensor([5.0, 0.0]), torch.tensor([5.0, 0.0]), period, 3.0
+        )
         assert shifted.tolist() == [1, 0, 2]
 
 
@@ -50,7 +56,9 @@ class TestMeasureDisplacements:
         c = subpatch_centers(small)
         truth = torch.tensor([[10.0, -20.0], [-25.0, 5.0], [30.0, 15.0]], dtype=torch.float64)
         pos = truth[:, None, :] - c[None]  # stationary: s - c_p
-        extra = torch.tensor([[0.0, 0.0], [0.31, -0.12], [-0.22, 0.41], [0.09, 0.27]], dtype=torch.float64)
+        extra = torch.tensor(
+            [[0.0, 0.0], [0.31, -0.12], [-0.22, 0.41], [0.09, 0.27]], dtype=torch.float64
+        )
         pos[2] += extra  # target 2 moves differently in each image
         imgs = _blobs(small, c, pos)
         tr = measure_displacements(imgs, small, c, detector=_threshold, radius=4, chip=16)
@@ -65,7 +73,9 @@ class TestMeasureDisplacements:
         c = subpatch_centers(tiny)
         imgs = torch.zeros(2, 4, 64, 64, dtype=torch.complex64)
         imgs[0, :, 32, 32] = 1.0
-        tr = measure_displacements(imgs, tiny, c, detector=lambda x: detection_from(x, 0.5), radius=2, chip=8, gate=40.0)
+        tr = measure_displacements(
+            imgs, tiny, c, detector=lambda x: detection_from(x, 0.5), radius=2, chip=8, gate=40.0
+        )
         assert tr.valid.shape[:2] == (2, 1)
         assert not tr.valid[1].any() and math.isnan(float(tr.excess[1, 0, 0, 0]))
         empty = measure_displacements(imgs[:0], tiny, c, chip=8)

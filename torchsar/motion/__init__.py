@@ -5,6 +5,7 @@ from torchsar.motion.decision import MoverDecision, detect_movers, registration_
 from torchsar.motion.formation import polar_format, rereference
 from torchsar.motion.params import SpotlightConsistencyWarning, SpotlightParams
 from torchsar.motion.peaks import default_detector, detect_peaks
+from torchsar.motion.pipeline import MoverResult, find_movers
 from torchsar.motion.shift import estimate_shift
 from torchsar.motion.simulate import simulate_phase_history
 from torchsar.motion.subpatch import subpatch_centers, subpatch_images
@@ -18,6 +19,7 @@ from torchsar.motion.tracks import Tracks, associate, measure_displacements
 
 __all__ = [
     "MoverDecision",
+    "MoverResult",
     "SpotlightConsistencyWarning",
     "SpotlightParams",
     "Tracks",
@@ -27,6 +29,7 @@ __all__ = [
     "detect_movers",
     "detect_peaks",
     "estimate_shift",
+    "find_movers",
     "first_order_offsets",
     "folded_speed",
     "measure_displacements",

@@ -40,7 +40,8 @@ def registration_sigma(snr: Tensor, resolution: tuple[float, float]) -> Tensor:
     signal-to-noise ratio ``snr`` the position CRLB is ``sqrt(3) rho / (pi sqrt(2 snr))``.
 
     Example:
-        >>> registration_sigma(torch.tensor([100.0], dtype=torch.float64), (1.0, 0.5)).round(decimals=4).tolist()
+        >>> snr = torch.tensor([100.0], dtype=torch.float64)
+        >>> registration_sigma(snr, (1.0, 0.5)).round(decimals=4).tolist()
         [[0.039, 0.0195]]
     """
     k = math.sqrt(3) / (math.pi * torch.sqrt(2 * snr.clamp(min=1e-12)))

@@ -8,7 +8,6 @@ from functools import partial
 
 import torch
 from torch import Tensor
-from torch.nn import functional as nnf
 
 from torchsar._checks import check_image, check_int
 from torchsar.cfar import Detection, ca

@@ -104,7 +104,8 @@ def planar_image_positions(
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams()
         >>> c = torch.tensor([[0.0, 0.0]], dtype=torch.float64)
-        >>> (planar_image_positions(torch.tensor([[10.0, 0.0]]), p, c).round(decimals=3) + 0).tolist()
+        >>> q = planar_image_positions(torch.tensor([[10.0, 0.0]]), p, c)
+        >>> (q.round(decimals=3) + 0).tolist()
         [[[10.0, 0.0]]]
     """
     pts = positions.to(torch.float64)[..., :, None, :]
