@@ -17,16 +17,20 @@ __all__ = ["plot_ladder", "plot_pairs"]
 AXES = ("range", "azimuth")
 
 
-def _pair_values(data: dict[str, tuple[torch.Tensor, torch.Tensor]], kind: int):
-    """``{"a-b": (P, 2)}``: pair separation in each subpatch minus that in subpatch 1."""
+def _pair_values(data: dict[str, tuple[torch.Tensor, torch.Tensor]], kind: int, period):
+    """``{"a-b": (P, 2)}``: pair separation in each subpatch minus that in subpatch 1.
+
+    Folded into +-period / 2 (the images are periodic with the sampled extent).
+    """
     out = {}
     for a, b in combinations(sorted(data), 2):
         d = data[a][kind] - data[b][kind]
-        out[f"{a}-{b}"] = (d - d[0]).numpy()
+        d = d - d[0]
+        out[f"{a}-{b}"] = (d - period * torch.floor(d / period + 0.5)).numpy()
     return out
 
 
-def plot_pairs(data, path: Path, title: str) -> None:
+def plot_pairs(data, path: Path, title: str, period: torch.Tensor) -> None:
     """The paper's Figures 5-8: displacement of each target pair per subpatch ("A#x").
 
     Rows: range / azimuth component. Columns: stationary pairs / pairs with the mover "M".
@@ -34,7 +38,7 @@ def plot_pairs(data, path: Path, title: str) -> None:
     planar-distortion correction.
     """
     fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharey="row", squeeze=False)
-    raw, corr = _pair_values(data, 0), _pair_values(data, 1)
+    raw, corr = _pair_values(data, 0, period), _pair_values(data, 1, period)
     for col, with_mover in enumerate((False, True)):
         names = [n for n in raw if ("M" in n) == with_mover]
         for row in range(2):

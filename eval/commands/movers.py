@@ -281,6 +281,7 @@ def _write(out, table, pair_data, params, notes, args, seconds) -> None:
                 data,
                 tmp / f"pairs_{direction}.png",
                 f"{direction} motion, {args.figure_speed:g} m/s",
+                _period(params),
             )
         plot_ladder(table, PAPER, tmp / "ladder.png")
         write_config(
