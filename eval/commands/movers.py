@@ -231,6 +231,12 @@ def _decision_columns(dec, b: int, best: int, near: list[int], n_sigma: float, t
     }
 
 
+def _still_score(dec, b: int, matched: dict[int, int]) -> float:
+    """Largest decision score among the tracks of the stationary targets."""
+    idx = [i for j, i in matched.items() if j != MOVER]
+    return _nanmax(dec.score[b, idx]) if idx else float("nan")
+
+
 def _row(direction, speed, b, result, pos, vel, params, args) -> dict:
     matched, near = _match(result, b, pos, vel, params)
     best = matched.get(MOVER, -1)
@@ -249,6 +255,8 @@ def _row(direction, speed, b, result, pos, vel, params, args) -> dict:
         **_decision_columns(result.decision, b, best, near, args.n_sigma, "_corrected"),
         "theory_shift_corrected_m": theory_corr,
         "stationary_found": sum(j in matched for j in range(len(LAYOUT)) if j != MOVER),
+        "stationary_max_score_corrected": _still_score(result.decision, b, matched),
+        "stationary_max_score": _still_score(raw, b, matched),
         "tracks": int(result.tracks.valid[b, :, 0].sum()),
         "mover_snr_db": 10 * math.log10(snr) if snr == snr else snr,
         "doppler_hz": 2 * v_r / params.wavelength,

@@ -80,13 +80,13 @@ def _range_grid(kappa: Tensor, cos_t: Tensor) -> tuple[float, float, int]:
 
 
 def _sinc_resample(g: Tensor, q: Tensor, taps: int = 16) -> Tensor:
-    """Kaiser-windowed sinc interpolation of ``g (B, M, K)`` at fractional indices ``q (M, K')``."""
+    """Hann-windowed sinc interpolation of ``g (B, M, K)`` at fractional indices ``q (M, K')``."""
     k = g.shape[-1]
     base = torch.floor(q).long()
     j = torch.arange(taps, device=g.device) - (taps // 2 - 1)
     idx = base[..., None] + j  # (M, K', taps)
     d = q[..., None] - idx
-    w = torch.sinc(d) * torch.special.i0(6.0 * torch.sqrt((1 - (d / (taps / 2)) ** 2).clamp(min=0)))
+    w = torch.sinc(d) * torch.cos(d * (math.pi / taps)).square()  # Hann-windowed sinc
     w = torch.where((idx >= 0) & (idx < k), w, torch.zeros_like(w)).to(g.real.dtype)
     src = g[:, torch.arange(g.shape[1], device=g.device)[:, None, None], idx.clamp(0, k - 1)]
     return (src * w).sum(-1) / w.sum(-1).clamp(min=1e-12)
