@@ -26,7 +26,7 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_choice, check_complex, check_int
+from torchsar._checks import ShapeError, check_choice, check_complex, check_int
 from torchsar.motion.czt import czt
 from torchsar.motion.geometry import look_tangents, pulse_times, slant_ranges, wavenumbers
 from torchsar.motion.params import SpotlightParams
@@ -144,8 +144,6 @@ def polar_format(
     check_int(h, "size[0]", minimum=1)
     check_int(w, "size[1]", minimum=1)
     if g.shape[1:] != (params.n_pulses, params.n_samples):
-        from torchsar._checks import ShapeError
-
         raise ShapeError(
             f"g must have shape (B, {params.n_pulses}, {params.n_samples}) for these params, "
             f"got {tuple(g.shape)}"

@@ -155,6 +155,14 @@ def scene_positions(
 
     Returns:
         float64 ``(..., P, 2)`` scene positions ``(range, azimuth)`` in m.
+
+    Example:
+        >>> import warnings; warnings.simplefilter("ignore")
+        >>> p = SpotlightParams()
+        >>> c = torch.tensor([[0.0, 50.0]], dtype=torch.float64)
+        >>> q = planar_image_positions(torch.tensor([[5.0, -20.0]]), p, c)  # distorted
+        >>> (scene_positions(q, p, c).round(decimals=4) + 0).tolist()
+        [[[5.0, -20.0]]]
     """
     q = image_positions.to(torch.float64)
     c = centers.to(torch.float64)
@@ -180,6 +188,14 @@ def first_order_offsets(
 
     Returns:
         float64 ``(..., N, P, 2)`` offsets ``(range, azimuth)`` in m.
+
+    Example:
+        >>> import warnings; warnings.simplefilter("ignore")
+        >>> p = SpotlightParams()
+        >>> c = torch.tensor([[0.0, -50.0], [0.0, 50.0]], dtype=torch.float64)
+        >>> v = torch.tensor([[0.4, 0.0]], dtype=torch.float64)
+        >>> first_order_offsets(torch.zeros(1, 2), v, p, c).tolist()
+        [[[-0.1, -20.0], [0.1, -20.0]]]
     """
     v = velocities.to(torch.float64)[..., :, None, :]
     x_t = positions.to(torch.float64)[..., :, None, 1]
@@ -191,9 +207,13 @@ def first_order_offsets(
 
 
 def folded_speed(speed: float | Tensor, params: SpotlightParams) -> float | Tensor:
-    """Radial speed folded into ``[-lambda PRF / 4, lambda PRF / 4)`` (the sampled Doppler)."""
-    return (
-        _wrap(torch.as_tensor(speed, dtype=torch.float64), params.blind_speed)
-        if isinstance(speed, Tensor)
-        else speed - params.blind_speed * math.floor(speed / params.blind_speed + 0.5)
-    )
+    """Radial speed folded into ``[-lambda PRF / 4, lambda PRF / 4)`` (the sampled Doppler).
+
+    Example:
+        >>> import warnings; warnings.simplefilter("ignore")
+        >>> round(folded_speed(2.34, SpotlightParams()), 3)
+        -0.658
+    """
+    if isinstance(speed, Tensor):
+        return _wrap(speed.to(torch.float64), params.blind_speed)
+    return speed - params.blind_speed * math.floor(speed / params.blind_speed + 0.5)
