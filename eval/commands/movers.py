@@ -207,10 +207,19 @@ def _theory(pos, vel, params: SpotlightParams, centers) -> tuple[float, float]:
     )
 
 
-def _flags(mover: torch.Tensor, near: list[int]) -> tuple[bool, int]:
-    """(mover detected, number of flagged tracks outside the mover's gate)."""
+def _flags(mover: torch.Tensor, best: int, near: list[int]) -> tuple[bool, int, int]:
+    """(mover's track flagged, flagged tracks outside the mover's gate, flagged fragments).
+
+    Fragments: other tracks inside the mover's gate (pieces of a smeared mover), counted
+    neither as detection nor as false movers.
+    """
     flagged = mover.nonzero().flatten().tolist()
-    return any(i in near for i in flagged), sum(i not in near for i in flagged)
+    detected = best >= 0 and best in flagged
+    return (
+        detected,
+        sum(i not in near for i in flagged),
+        sum(i in near and i != best for i in flagged),
+    )
 
 
 def _nanmax(x: torch.Tensor) -> float:
@@ -219,13 +228,14 @@ def _nanmax(x: torch.Tensor) -> float:
 
 
 def _decision_columns(dec, b: int, best: int, near: list[int], n_sigma: float, tag: str) -> dict:
-    detected, false = _flags(dec.mover[b], near)
+    detected, false, fragments = _flags(dec.mover[b], best, near)
     nan = float("nan")
     ok = best >= 0
     return {
         f"measured_shift{tag}_m": _nanmax(dec.residual[b, best].norm(dim=-1)) if ok else nan,
         f"detected{tag}": detected,
         f"false_movers{tag}": false,
+        f"fragments_flagged{tag}": fragments,
         f"score{tag}": float(dec.score[b, best]) if ok else nan,
         f"tolerance{tag}_m": n_sigma * float(dec.sigma[b, best].max()) if ok else nan,
     }
