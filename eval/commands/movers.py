@@ -59,6 +59,7 @@ SHOWN = [
     "theory_shift_corrected_m",
     "detected_corrected",
     "false_movers_corrected",
+    "lookalike_flagged_corrected",
 ]
 
 
@@ -86,6 +87,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--figure-speed", type=float, default=2.34, help="speed of the pair figures")
     p.add_argument("--batch-size", type=int, default=2, help="scenes imaged at once")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--no-control",
+        dest="control",
+        action="store_false",
+        help="skip the control scenes (each mover replaced by a stationary target at its "
+        "apparent position; doubles the run time)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
@@ -131,9 +139,12 @@ def run(args: argparse.Namespace) -> int:
     for direction in directions:
         for start in range(0, len(speeds), args.batch_size):
             chunk = speeds[start : start + args.batch_size]
-            result, pos, vel = _analyse(params, chunk, DIRECTIONS[direction], args)
+            axis = DIRECTIONS[direction]
+            result, pos, vel = _analyse(params, chunk, axis, args)
+            control = _control_columns(params, chunk, axis, args) if args.control else None
             for b, speed in enumerate(chunk):
-                rows.append(_row(direction, speed, b, result, pos[b], vel[b], params, args))
+                row = _row(direction, speed, b, result, pos[b], vel[b], params, args)
+                rows.append({**row, **(control[b] if control else {})})
                 if math.isclose(speed, args.figure_speed):
                     pair_data[direction] = _pair_positions(result, b, pos[b], vel[b], params)
             bar.update(len(chunk))
@@ -142,22 +153,58 @@ def run(args: argparse.Namespace) -> int:
     table = pd.DataFrame(rows)
     _write(out, table, pair_data, params, notes, args, seconds)
     print("\n".join(f"note: {n}" for n in notes))
-    print(table[SHOWN].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    print(
+        table[[c for c in SHOWN if c in table]].to_string(
+            index=False, float_format=lambda v: f"{v:.3g}"
+        )
+    )
     print(
         f"\n{len(rows)} scenes in {seconds:.1f} s ({torch.get_num_threads()} threads); wrote {out}/"
     )
     return 0
 
 
+def _apparent(pos: torch.Tensor, vel: torch.Tensor, params: SpotlightParams) -> torch.Tensor:
+    """Stationary look-alike of each mover: ``(y + v_r x / V, x - v_r (R0 + y) / V)``."""
+    y, x, v = pos[..., 0], pos[..., 1], vel[..., 0]
+    speed = params.platform_speed
+    return torch.stack([y + v * x / speed, x - v * (params.scene_range + y) / speed], dim=-1)
+
+
 def _analyse(
-    params: SpotlightParams, speeds: list[float], axis: int, args: argparse.Namespace
+    params: SpotlightParams,
+    speeds: list[float],
+    axis: int,
+    args: argparse.Namespace,
+    control: bool = False,
 ) -> tuple[MoverResult, torch.Tensor, torch.Tensor]:
+    """Image and decide a batch of scenes; ``control`` replaces the mover by its look-alike."""
     pos, vel = _scenes(speeds, axis)
+    if control:
+        pos[:, MOVER] = _apparent(pos[:, MOVER], vel[:, MOVER], params)
+        vel = torch.zeros_like(vel)
     gen = torch.Generator().manual_seed(args.seed + 1000 * axis + int(100 * speeds[0]))
     g = simulate_phase_history(
         pos, params, velocities=vel, noise_std=_noise_std(params, args.snr_db), generator=gen
     ).to(torch.complex64)
     return find_movers(g, params, n_sigma=args.n_sigma), pos, vel
+
+
+def _control_columns(params, speeds, axis, args) -> list[dict]:
+    """Is the mover's stationary look-alike flagged too? (one dict per speed)."""
+    result, pos, vel = _analyse(params, speeds, axis, args, control=True)
+    raw = detect_movers(result.tracks.excess, n_sigma=args.n_sigma, min_sigma=0.01)
+    out = []
+    for b in range(len(speeds)):
+        matched, near = _match(result, b, pos[b], vel[b], params)
+        best = matched.get(MOVER, -1)
+        out.append(
+            {
+                "lookalike_flagged": _flags(raw.mover[b], best, near)[0],
+                "lookalike_flagged_corrected": _flags(result.decision.mover[b], best, near)[0],
+            }
+        )
+    return out
 
 
 def _period(params: SpotlightParams) -> torch.Tensor:
@@ -293,7 +340,7 @@ def _write(out, table, pair_data, params, notes, args, seconds) -> None:
 
     with result_dir(out) as tmp:
         table.to_csv(tmp / "movers.csv", index=False)
-        (tmp / "movers.md").write_text(markdown(table[SHOWN]))
+        (tmp / "movers.md").write_text(markdown(table[[c for c in SHOWN if c in table]]))
         for direction, data in pair_data.items():
             plot_pairs(
                 data,

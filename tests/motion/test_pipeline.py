@@ -31,14 +31,21 @@ class TestFindMovers:
         assert not r.decision.mover.any()
         assert r.tracks.corrected[0].abs().nan_to_num().max() < 0.05
 
-    def test_aliased_radial_mover_is_detected(self, small):
-        # 2.34 m/s: Doppler 156 Hz > PRF / 2, the subpatch windows show different replicas
-        r = _scene(small, [10.0, 20.0], (2.34, 0.0))
+    def test_aliased_mover_is_flagged_like_its_stationary_lookalike(self, small):
+        # 2.34 m/s: apparent azimuth 20 - 117 = -97 m, outside the zone shared by the four
+        # 150 m subpatch windows, so the subpatch images show different replicas ...
+        v, y, x = 2.34, 10.0, 20.0
+        r = _scene(small, [y, x], (v, 0.0))
         assert r.decision.mover[0].sum() == 1
         # reference image centre (-50, -50): range + v x_c / V, azimuth - v R_c / V
         mover = _track_of(r, small, [60.0 - 0.585, 70.0 - 116.4])
         assert r.decision.mover[0, mover]
         assert float(r.decision.residual[0, mover].norm(dim=-1).max()) > 0.2
+        # ... and a stationary target at that apparent position is flagged just the same
+        apparent = [y + v * x / 200.0, x - v * (small.scene_range + y) / 200.0]
+        s = _scene(small, apparent)
+        still = _track_of(s, small, [60.0 - 0.585, 70.0 - 116.4])
+        assert s.decision.mover[0].sum() == 1 and s.decision.mover[0, still]
 
     def test_unaliased_radial_mover_equals_a_displaced_stationary_target(self, small):
         """The limitation behind the ladder: to first order a radial mover's subpatch

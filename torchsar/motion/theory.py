@@ -29,13 +29,14 @@ radial mover is consistent in every subpatch (planar-model residual < 1e-6 m at 
 m/s); (b) without correction (the seed) the stationary "pattern" is itself spread by
 ``~ (x_i - x_j) dc / R`` (0.1-0.3 m for targets 20-40 m apart), the mover's signature is of
 the same size and kind, and a stationary target at the mover's apparent position would be
-flagged as well. What *does* separate a radial mover is Doppler aliasing: when the
-apparent position ``x - v_r R / V`` crosses the edge of some subpatch windows but not
-others, different subpatches show different replicas ``k``, whose equivalent speeds
-``v_r + k lambda PRF / 2`` differ; that residual survives the correction. It is geometry
-dependent (speeds at which no window edge is crossed, and the blind speeds
-``n lambda PRF / 2 = 3, 6, ...`` m/s, give nothing) and fades when the aliased streak
-(``~|k| P B / f0`` long) becomes too weak to detect.
+flagged as well. The only residual that survives the correction comes from azimuth
+ambiguity: when the apparent position ``x - v_r R / V`` lies outside the central zone shared
+by all subpatch windows (``|x| < 25`` m for Table 1: 150 m windows around centres at
+``+-50`` m), different subpatches show different replicas ``k`` and disagree. A stationary
+target at that apparent position is flagged in exactly the same way (tested), so this is
+an ambiguity detector, not a motion detector; it is silent near the blind speeds
+``n lambda PRF / 2 = 3, 6, ...`` m/s (apparent position back in the central zone) and fails
+when the aliased streak (``~|k| P B / f0`` long) becomes too weak to detect.
 
 **First order, along-track motion ``v_a``.** The extra range ``v_a t (x_T - V t) / R``
 gives a quadratic phase (defocus, smear ``~2 v_a T_a``) and a linear term that, referred to
