@@ -6,6 +6,15 @@ speed and direction the deramped data are simulated, four subpatch images formed
 detected (CA-CFAR) and associated, their displacements measured by sub-pixel
 cross-correlation and the mover decision taken (:func:`torchsar.motion.find_movers`).
 
+Two decisions per scene: the seed's (raw displacements against the median pattern of the
+targets, tolerance from the pooled robust spread) and the distortion-corrected one (planar
+distortion removed, noise-derived CRLB tolerance; columns ``*_corrected``). The theory
+columns apply the same estimator to the planar-model predicted image positions
+(:mod:`torchsar.motion.theory`). For range motion a control scene replaces the mover by a
+stationary target at its apparent position ``(y + v x / V, x - v R / V)``
+(``lookalike_flagged*``): when that look-alike is flagged as well, the detection is azimuth
+ambiguity, not motion.
+
 Writes ``movers.csv`` / ``movers.md`` (one row per direction and speed), ``config.json``, and
 figures: ``pairs_range.png`` / ``pairs_azimuth.png`` (displacement of each target pair per
 subpatch, the paper's Figures 5-8) and ``ladder.png`` (measured vs theoretical displacement).

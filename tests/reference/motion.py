@@ -16,7 +16,10 @@ def phase_history(params, positions, velocities):
         radar = np.array([-params.scene_range, params.platform_speed * t])
         r0 = np.linalg.norm(radar)
         for k in range(k_n):
-            f = params.center_frequency + (k - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+            f = (
+                params.center_frequency
+                + (k - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+            )
             for p, v in zip(positions, velocities, strict=True):
                 r = np.linalg.norm(np.asarray(p) + np.asarray(v) * t - radar)
                 g[m, k] += np.exp(-4j * np.pi * f / C * (r - r0))
@@ -32,7 +35,10 @@ def planar_image(params, g, center, ys, xs):
     """
     m_n, k_n = g.shape
     t = (np.arange(m_n) - (m_n - 1) / 2) / params.prf
-    f = params.center_frequency + (np.arange(k_n) - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+    f = (
+        params.center_frequency
+        + (np.arange(k_n) - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+    )
     kappa = 4 * np.pi * f / C
     radar = np.stack([-params.scene_range * np.ones_like(t), params.platform_speed * t], 1)
     rc = np.linalg.norm(np.asarray(center) - radar, axis=1)
