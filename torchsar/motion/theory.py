@@ -81,8 +81,12 @@ def _planar_fit(
     params: SpotlightParams,
     velocities: Tensor | None,
     window: str,
+    wrap: bool = True,
 ) -> Tensor:
-    """Planar-model image position ``(..., 2)`` of ``points`` relative to ``centers``."""
+    """Planar-model image position ``(..., 2)`` of ``points`` relative to ``centers``.
+
+    With ``wrap`` the position is folded into the sampled window (replica ``k``).
+    """
     t = pulse_times(params, device=points.device)
     c = centers.to(torch.float64)
     u = (c[..., 1:2] - params.platform_speed * t) / (params.scene_range + c[..., 0:1])
@@ -93,6 +97,8 @@ def _planar_fit(
     sz, suz = (w * z).sum(-1), (w * u * z).sum(-1)
     x = (sw * suz - su * sz) / (sw * suu - su * su)
     y = (sz - x * su) / sw
+    if not wrap:
+        return torch.stack([y, x], dim=-1)
     r_c = params.scene_range + c[..., 0]
     period_x = params.wavelength * params.prf * r_c / (2 * params.platform_speed)
     k = torch.floor(x / period_x + 0.5)  # replica shown in the window
@@ -169,7 +175,7 @@ def scene_positions(
     c = centers.to(torch.float64)
     s = q + c
     for _ in range(iterations):
-        s = s + (q - _planar_fit(s, c, params, None, window))
+        s = s + (q - _planar_fit(s, c, params, None, window, wrap=False))
     return s
 
 
