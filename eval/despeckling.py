@@ -109,6 +109,8 @@ def _tiles(x: Tensor, tile: int) -> Tensor:
 
 def _cv(t: Tensor) -> Tensor:
     flat = t.to(torch.float64).flatten(1)
+    if flat.shape[0] == 0:
+        return flat.new_zeros(0)
     mean = flat.mean(1)
     return flat.std(1, correction=0) / torch.where(mean > 0, mean, torch.ones_like(mean))
 
