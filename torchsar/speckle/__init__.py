@@ -2,6 +2,8 @@
 
 All take intensity ``(B, C, H, W)`` (amplitude with ``amplitude=True``), an odd ``window``
 and the number of ``looks``; window statistics over in-image cells, interior pixels exact.
+:data:`FILTERS` maps names to the functions (for command lines and pipelines). The filters
+are not autograd-differentiable (window sums are accumulated in place for speed).
 """
 
 from torchsar.speckle.frost import enhanced_frost, frost
