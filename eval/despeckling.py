@@ -212,8 +212,8 @@ def plot_panel(
     shown = ([("clean", s.clean)] if s.clean is not None else []) + [("noisy", s.image)]
     shown += [(f"{n} {window}x{window}", apply_filter(n, s, window, looks)[0]) for n in filters]
     db = [(t, 10 * np.log10(x[0, 0, rows, cols].double().numpy() + 1e-10)) for t, x in shown]
-    ref = db[-len(filters) - 1][1]
-    vmin, vmax = np.percentile(ref, [1, 99.5])
+    ref = db[0][1] if s.clean is not None else db[-1][1]  # clean, else a filtered crop
+    vmin, vmax = np.percentile(ref, [1, 99.8])
     ncol = 4
     nrow = math.ceil(len(db) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 3.3 * nrow), squeeze=False)
@@ -222,7 +222,8 @@ def plot_panel(
     for ax, (title, img) in zip(axes.flat, db, strict=False):
         ax.imshow(img, cmap="gray", vmin=vmin, vmax=vmax)
         ax.set_title(title, fontsize=9)
-    fig.suptitle(f"intensity (dB), crop {size}x{size}, looks {looks:g}", fontsize=10)
+    h, w = db[0][1].shape
+    fig.suptitle(f"intensity (dB), crop {h}x{w}, looks {looks:g}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
