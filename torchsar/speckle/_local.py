@@ -69,7 +69,7 @@ def prepare(x: Tensor, window: int, looks: float, amplitude: bool) -> Request:
     """Validate the common filter arguments and convert amplitude to intensity."""
     check_image(x, "x")
     window = check_odd(window, "window", minimum=3)
-    check_window_fits(x, window, f"window={window}")
+    check_window_fits(x, window, "speckle filter")
     looks = check_positive(looks, "looks")
     if not isinstance(amplitude, bool):
         raise OptionError(f"amplitude must be a bool, got {amplitude!r}")
