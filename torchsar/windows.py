@@ -474,19 +474,20 @@ def _exp_distance_strip(
         for p in range(1, radius + 1)
     ]
     rows = _pair_counts(h, r, r + rr, radius, x.device, x.dtype)
+    if r >= radius and r + rr + radius <= h:
+        rows = rows[:, :1]  # interior strip: the same counts on every row, broadcast them
     cols = _pair_counts(w, 0, w, radius, x.device, x.dtype)
-    num, den = torch.zeros_like(decay), torch.zeros_like(decay)
-    for d2, orbits in shells:
-        s = sum(_orbit_sums(v, p, q, radius, w) for p, q in orbits)
+    num = mid[..., radius : radius + w].clone()  # the centre cell, weight exp(0) = 1
+    den = torch.ones_like(num)
+    for d2, orbits in shells[1:]:
+        s = _orbit_sums(v, *orbits[0], radius, w)
+        for p, q in orbits[1:]:
+            s.add_(_orbit_sums(v, p, q, radius, w))
         n = sum(
             rows[p, :, None] * cols[q] + (rows[q, :, None] * cols[p] if p != q else 0)
             for p, q in orbits
         )
-        if d2 == 0:
-            num.add_(s)
-            den.add_(n)
-            continue
-        e = torch.exp(decay * -(d2**0.5))
+        e = torch.mul(decay, -(d2**0.5)).exp_()
         num.addcmul_(e, s)
         den.addcmul_(e, n)
     return num.div_(den)
@@ -508,7 +509,8 @@ def exp_distance_mean(x: Tensor, radius: int, decay: Tensor, *, strip: int | Non
     Args:
         x: real tensor ``(B, C, H, W)`` (validated by the caller); the result has its dtype.
         radius: half-width of the box.
-        decay: non-negative, finite, broadcastable to ``x`` (e.g. ``damping * Ci^2``).
+        decay: non-negative, broadcastable to ``x`` (e.g. ``damping * Ci^2``); ``inf`` keeps
+            only the centre cell.
         strip: rows per strip (default: sized so strip buffers stay around 1 MB).
 
     Returns:

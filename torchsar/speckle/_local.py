@@ -29,10 +29,10 @@ from torchsar.windows import Rect, Sums, windowed
 __all__ = [
     "Request",
     "Speckle",
+    "decay_map",
     "filter_intensity",
     "finish",
     "local_moments",
-    "moments_map",
     "prepare",
 ]
 
@@ -123,10 +123,11 @@ def filter_intensity(req: Request, formula: Formula) -> Tensor:
     return finish(req, out)
 
 
-def moments_map(req: Request) -> tuple[Tensor, Tensor]:
-    """Full-size window mean and ``Ci^2`` in ``req.dtype`` (for the Frost-type filters)."""
+def decay_map(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:
+    """Full-size ``decay(Ci^2)`` in ``req.dtype``, evaluated strip by strip (for the
+    Frost-type filters' per-pixel weight decay)."""
 
-    def apply(_xs: Tensor, sums: list[Sums]) -> tuple[Tensor, Tensor]:
-        return local_moments(sums[0], req.dtype)
+    def apply(_xs: Tensor, sums: list[Sums]) -> Tensor:
+        return decay(local_moments(sums[0], req.dtype)[1])
 
     return windowed(req.intensity, [Rect.box(req.radius)], apply, moments=2)

@@ -9,15 +9,21 @@ distance shell per pixel.
 Border rule: ``mu`` and ``Ci`` over the in-image window cells (as every speckle filter), and
 the weighted mean over the in-image cells, normalised by the sum of their weights. Interior
 pixels are exact.
+
+Enhanced Frost's three classes are the limits of one weighted mean: ``decay = 0`` gives the
+window mean ``mu`` (``Ci <= Cu``) and ``decay = inf`` gives the centre pixel ``I``
+(``Ci >= Cmax``), so the whole filter is one distance-shell pass.
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.speckle._local import Speckle, finish, moments_map, prepare
+from torchsar.speckle._local import Speckle, decay_map, finish, prepare
 from torchsar.windows import exp_distance_mean
 
 __all__ = ["enhanced_frost", "frost"]
@@ -62,17 +68,17 @@ def frost(
     """
     req = prepare(x, window, looks, amplitude)
     damping = check_positive(damping, "damping", allow_zero=True)
-    _mu, ci2 = moments_map(req)
-    return finish(req, exp_distance_mean(req.intensity, req.radius, ci2.mul_(damping)))
+    decay = decay_map(req, lambda ci2: ci2.mul_(damping))
+    return finish(req, exp_distance_mean(req.intensity, req.radius, decay))
 
 
 def _enhanced_decay(ci2: Tensor, sp: Speckle, damping: float) -> Tensor:
-    """``damping (Ci - Cu) / (Cmax - Ci)`` inside ``Cu < Ci < Cmax``, 0 elsewhere."""
+    """``damping (Ci - Cu) / (Cmax - Ci)`` for ``Cu < Ci < Cmax``; 0 for ``Ci <= Cu`` (window
+    mean) and ``inf`` for ``Ci >= Cmax`` (centre pixel only)."""
     cu, cmax = sp.cu2**0.5, sp.cmax2**0.5
     ci = ci2.sqrt()
-    band = (ci > cu) & (ci < cmax)
-    gap = torch.where(band, cmax - ci, torch.ones_like(ci))
-    return torch.where(band, damping * (ci - cu) / gap, torch.zeros_like(ci))
+    decay = (ci - cu).clamp_min_(0).mul_(damping).div_(cmax - ci)
+    return decay.masked_fill_(ci >= cmax, torch.inf)
 
 
 def enhanced_frost(
@@ -116,8 +122,5 @@ def enhanced_frost(
     """
     req = prepare(x, window, looks, amplitude)
     damping = check_positive(damping, "damping", allow_zero=True)
-    sp = req.speckle
-    mu, ci2 = moments_map(req)
-    weighted = exp_distance_mean(req.intensity, req.radius, _enhanced_decay(ci2, sp, damping))
-    out = torch.where(ci2 <= sp.cu2, mu, weighted)
-    return finish(req, torch.where(ci2 >= sp.cmax2, req.intensity, out))
+    decay = decay_map(req, partial(_enhanced_decay, sp=req.speckle, damping=damping))
+    return finish(req, exp_distance_mean(req.intensity, req.radius, decay))
