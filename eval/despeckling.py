@@ -82,12 +82,12 @@ class Sample:
 
 
 def samples(dataset) -> Iterator[Sample]:
-    """The dataset's images as :class:`Sample` (clean images from simulated batches)."""
-    batch = getattr(dataset, "batch", None)
+    """The dataset's images as :class:`Sample`; items with a ``clean`` entry (simulated
+    datasets) give the clean reflectivity."""
     for i in range(len(dataset)):
         item = dataset[i]
         meta = item.get("meta", {})
-        clean = None if batch is None else batch.clean[i : i + 1]
+        clean = item["clean"][None] if item.get("clean") is not None else None
         looks = (meta.get("clutter") or {}).get("looks")
         boxes = meta.get("boxes") or []
         yield Sample(

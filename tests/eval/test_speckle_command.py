@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -34,10 +33,10 @@ class FakeSim:
         clean[..., 40:46, 20:30] = 300.0
         image = clean * torch.empty_like(clean).exponential_(generator=g)
         mask = clean > 100
-        self.batch = SimpleNamespace(image=image, clean=clean)
         self.items = [
             {
                 "image": image[i],
+                "clean": clean[i],
                 "mask": mask[i],
                 "instances": mask[i].int(),
                 "ignore": torch.zeros_like(mask[i]),
