@@ -10,7 +10,7 @@ from torchsar.simulate import SimBatch, image_seed, scenes
 
 from .groundtruth import assert_ground_truth
 
-KW = {"size": 256, "building_px": (30, 60), "vehicle_px": (10, 24)}
+KW = {"size": 256, "building_px": (30, 60), "vehicle_px": (10, 24), "n_targets": (5, 15)}
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def batch() -> SimBatch:
 def test_shapes_and_counts(batch):
     assert batch.image.shape == (3, 1, 256, 256) and batch.instances.dtype == torch.int32
     for m in batch.meta:
-        assert 5 <= len(m["boxes"]) <= 30
+        assert 5 <= len(m["boxes"]) <= 15
         assert "building" in m["classes"] and "vehicle" in m["classes"]
         assert m["region_map"].shape == (256, 256)
 
