@@ -1,7 +1,7 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, motion, windows
+from torchsar import cfar, metrics, motion, simulate, speckle, windows
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "cfar", "motion", "windows"]
+__all__ = ["__version__", "cfar", "metrics", "motion", "simulate", "speckle", "windows"]

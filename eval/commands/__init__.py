@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "movers"]
+COMMANDS = ["run", "speckle", "movers"]
 
 
 def load(name: str):
