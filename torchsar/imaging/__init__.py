@@ -1,6 +1,46 @@
 """Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics."""
 
+from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
 from torchsar.imaging.fourier import fft2c, ifft2c
+from torchsar.imaging.geometry import SpotlightGeometry
+from torchsar.imaging.lp import default_lam, lp_image
 from torchsar.imaging.operators import FourierOperator, LinearOperator
+from torchsar.imaging.phase_errors import (
+    apply_phase_error,
+    nonseparable_phase_error,
+    polynomial_phase_error,
+    quadratic_phase_error,
+    separable_phase_error,
+    sinusoidal_phase_error,
+    uniform_phase_error,
+)
+from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
+from torchsar.imaging.phase_step import phase_step_1d, phase_step_2d, phase_step_separable
+from torchsar.imaging.scenes import point_scene, speckled_scene
 
-__all__ = ["FourierOperator", "LinearOperator", "fft2c", "ifft2c"]
+__all__ = [
+    "AutofocusResult",
+    "FourierOperator",
+    "LinearOperator",
+    "SpotlightGeometry",
+    "add_noise",
+    "apply_phase_error",
+    "default_lam",
+    "fft2c",
+    "ifft2c",
+    "lp_image",
+    "nonseparable_phase_error",
+    "phase_history",
+    "phase_step_1d",
+    "phase_step_2d",
+    "phase_step_separable",
+    "point_phase_history",
+    "point_scene",
+    "polynomial_phase_error",
+    "quadratic_phase_error",
+    "separable_phase_error",
+    "sinusoidal_phase_error",
+    "sparse_autofocus",
+    "speckled_scene",
+    "uniform_phase_error",
+]

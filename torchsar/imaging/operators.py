@@ -41,6 +41,10 @@ class LinearOperator:
         """Return ``C^H C f``."""
         return self.adjoint(self.forward(f))
 
+    def select(self, index: Tensor) -> LinearOperator:
+        """The operator for the batch items ``index`` (itself unless it is per-item)."""
+        return self
+
     def __call__(self, f: Tensor) -> Tensor:
         return self.forward(f)
 
@@ -83,6 +87,12 @@ class FourierOperator(LinearOperator):
         self.data_shape = (m, k)
         self.mask = None if mask is None else _check_sampling_mask(mask, (m, k))
         self.gram_is_identity = mask is None
+
+    def select(self, index: Tensor) -> FourierOperator:
+        """The operator for batch items ``index`` (slices a per-item ``(B, M, K)`` mask)."""
+        if self.mask is None or self.mask.dim() == 2:
+            return self
+        return FourierOperator(self.image_shape, mask=self.mask[index.to(self.mask.device)])
 
     def forward(self, f: Tensor) -> Tensor:
         """``C f``: ``(B, 1, M, K)`` image -> ``(B, M, K)`` phase history."""
