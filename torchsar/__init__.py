@@ -1,0 +1,7 @@
+"""torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
+
+from torchsar import cfar, windows
+
+__version__ = "0.1.0"
+
+__all__ = ["__version__", "cfar", "windows"]

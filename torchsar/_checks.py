@@ -27,6 +27,7 @@ __all__ = [
     "OptionError",
     "ShapeError",
     "TorchSARError",
+    "WindowSizeError",
     "check_choice",
     "check_complex",
     "check_image",
@@ -37,7 +38,6 @@ __all__ = [
     "check_probability",
     "check_same_shape",
     "check_window_fits",
-    "WindowSizeError",
     "float_dtype",
 ]
 
@@ -125,7 +125,9 @@ def check_image(
     if not is_complex and not real_ok:
         raise InputTypeError(f"{name} must be complex, got real dtype {x.dtype}")
     if not is_complex and not x.is_floating_point():
-        raise InputTypeError(f"{name} must have a floating dtype, got {x.dtype}; use {name}.float()")
+        raise InputTypeError(
+            f"{name} must have a floating dtype, got {x.dtype}; use {name}.float()"
+        )
     if x.numel() == 0:
         return x
     if not bool(torch.isfinite(x).all()):

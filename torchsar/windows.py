@@ -23,22 +23,24 @@ bottom, left.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from torchsar._checks import check_int, check_window_fits
 
 __all__ = [
     "Rect",
+    "Region",
     "Ring",
     "Sums",
     "box_sums",
     "pinwheel_rects",
     "rect_sums",
     "ring_sums",
+    "windowed",
 ]
 
 
@@ -60,6 +62,26 @@ class Rect:
     def box(radius: int) -> Rect:
         """The centred square of side ``2 * radius + 1``."""
         return Rect(-radius, radius, -radius, radius)
+
+
+@dataclass(frozen=True)
+class Region:
+    """A signed sum of rectangles, e.g. a CFAR ring = outer box minus guard box.
+
+    Summing over a region costs four slices per rectangle, independent of its area.
+    """
+
+    plus: tuple[Rect, ...]
+    minus: tuple[Rect, ...] = ()
+
+    @property
+    def area(self) -> int:
+        """Number of cells (rectangles in ``minus`` must lie inside those in ``plus``)."""
+        return sum(r.area for r in self.plus) - sum(r.area for r in self.minus)
+
+    def signed(self) -> list[tuple[int, Rect]]:
+        """``[(+1, rect), ..., (-1, rect), ...]``."""
+        return [(1, r) for r in self.plus] + [(-1, r) for r in self.minus]
 
 
 @dataclass(frozen=True)
@@ -87,6 +109,11 @@ class Ring:
     def n(self) -> int:
         """Number of training cells, ``(2(g+t)+1)^2 - (2g+1)^2``."""
         return self.extent**2 - (2 * self.guard + 1) ** 2
+
+    @property
+    def region(self) -> Region:
+        """The training ring as a :class:`Region` (outer box minus guard box)."""
+        return Region((Rect.box(self.outer),), (Rect.box(self.guard),))
 
     def check_fits(self, x: Tensor) -> None:
         """Raise :class:`~torchsar._checks.WindowSizeError` if the ring exceeds ``x``."""
@@ -133,62 +160,205 @@ class Sums:
         return torch.where(dof > 0, v.clamp_min(0), torch.zeros_like(v))
 
 
-def _integral(xd: Tensor, pad: int) -> Tensor:
-    """Zero-padded 2-D integral image (in place on ``xd``, which must already be padded by
-    ``pad + 1`` zeros at the top/left and ``pad`` at the bottom/right):
-    ``out[..., i, j] = sum(xd[..., :i, :j])``. Shape ``(..., H+2p+1, W+2p+1)``."""
-    return xd.cumsum_(-1).cumsum_(-2)
+def _integral(buf: Tensor) -> Tensor:
+    """In-place 2-D integral image of a buffer whose first row and column are zero:
+    afterwards ``buf[..., i, j] = sum(original[..., :i, :j])``."""
+    return buf.cumsum_(-1).cumsum_(-2)
 
 
-def _padded(x: Tensor, shift: Tensor, pad: int, vmask: Tensor | None) -> Tensor:
-    """``x - shift`` (zero where invalid) written into a zero float64 buffer with the
-    padding :func:`_integral` expects; conversion, centring and padding in one pass."""
-    b, c, h, w = x.shape
-    buf = x.new_zeros((b, c, h + 2 * pad + 1, w + 2 * pad + 1), dtype=torch.float64)
-    inner = buf[..., pad + 1 : pad + 1 + h, pad + 1 : pad + 1 + w]
-    inner.copy_(x).sub_(shift)
-    if vmask is not None:
-        inner.masked_fill_(~vmask, 0.0)
-    return buf
+def _corner_sum(s: Tensor, region: Region, pad: int, h: int, w: int) -> Tensor:
+    """Region sums for ``h x w`` pixels from a padded integral image: four shifted slices
+    per signed rectangle, accumulated in place."""
+    out: Tensor | None = None
+    for sign, rect in region.signed():
+        top, bot = pad + rect.r0, pad + rect.r1 + 1
+        left, right = pad + rect.c0, pad + rect.c1 + 1
+        corners = (
+            (sign, s[..., bot : bot + h, right : right + w]),
+            (-sign, s[..., top : top + h, right : right + w]),
+            (-sign, s[..., bot : bot + h, left : left + w]),
+            (sign, s[..., top : top + h, left : left + w]),
+        )
+        for sg, view in corners:
+            if out is None:
+                out = view.clone() if sg > 0 else -view
+            elif sg > 0:
+                out.add_(view)
+            else:
+                out.sub_(view)
+    assert out is not None  # a Region has at least one rectangle
+    return out
 
 
-def _corner_sum(s: Tensor, rect: Rect, pad: int, h: int, w: int) -> Tensor:
-    """Rectangle sums for every pixel from a padded integral image ``s`` (4 shifted slices)."""
-    top, bot = pad + rect.r0, pad + rect.r1 + 1
-    left, right = pad + rect.c0, pad + rect.c1 + 1
-    out = s[..., bot : bot + h, right : right + w].clone()
-    out.sub_(s[..., top : top + h, right : right + w])
-    out.sub_(s[..., bot : bot + h, left : left + w])
-    return out.add_(s[..., top : top + h, left : left + w])
+def _region_count(region: Region, n_rows: int, n_cols: int, r: int, rr: int, device) -> Tensor:
+    """In-image cell counts of a region for rows ``[r, r + rr)``: ``(rr, W)`` float64."""
+    out = torch.zeros((rr, n_cols), dtype=torch.float64, device=device)
+    for sign, rect in region.signed():
+        rows = _axis_counts(n_rows, rect.r0, rect.r1, r, r + rr, device)
+        cols = _axis_counts(n_cols, rect.c0, rect.c1, 0, n_cols, device)
+        out += sign * rows[:, None] * cols[None, :]
+    return out
 
 
-def _axis_counts(n: int, lo: int, hi: int, device: torch.device) -> Tensor:
-    """Number of in-range indices in ``[i + lo, i + hi]`` for ``i = 0..n-1``."""
-    i = torch.arange(n, device=device, dtype=torch.float64)
+def _as_region(shape: Rect | Region) -> Region:
+    return shape if isinstance(shape, Region) else Region((shape,))
+
+
+def _axis_counts(n: int, lo: int, hi: int, start: int, stop: int, device: torch.device) -> Tensor:
+    """Number of in-range indices in ``[i + lo, i + hi]`` for ``i = start..stop-1``, ``0..n-1``."""
+    i = torch.arange(start, stop, device=device, dtype=torch.float64)
     return ((i + hi).clamp(max=n - 1) - (i + lo).clamp(min=0) + 1).clamp_min(0)
 
 
-def _pad_for(rects: tuple[Rect, ...]) -> int:
+def _pad_for(regions: tuple[Region, ...]) -> int:
+    rects = [r for reg in regions for _, r in reg.signed()]
     return max(max(abs(r.r0), abs(r.r1), abs(r.c0), abs(r.c1)) for r in rects)
+
+
+def _image_mean(x: Tensor, vmask: Tensor | None) -> Tensor:
+    """Per-image, per-channel mean ``(B, C, 1, 1)`` float64 over valid cells (the summing
+    offset; any offset is exact, the mean just keeps the integral image small)."""
+    if x.numel() == 0:
+        return x.new_zeros((*x.shape[:2], 1, 1), dtype=torch.float64)
+    if vmask is None:
+        return x.mean(dim=(-2, -1), keepdim=True, dtype=torch.float64)
+    m = vmask.to(torch.float64)
+    num = (x.to(torch.float64) * m).sum(dim=(-2, -1), keepdim=True)
+    return num / m.sum(dim=(-2, -1), keepdim=True).clamp_min(1)
+
+
+def _strip_buffer(src: Tensor, r: int, rr: int, pad: int, shift: Tensor | None) -> Tensor:
+    """Float64 zero buffer ``(B, C, rr + 2 pad + 1, W + 2 pad + 1)`` holding rows
+    ``[r - pad, r + rr + pad)`` of ``src - shift`` (zeros outside the image), first row and
+    column left zero for the integral image."""
+    b, c, h, w = src.shape
+    buf = torch.zeros(
+        (b, c, rr + 2 * pad + 1, w + 2 * pad + 1), dtype=torch.float64, device=src.device
+    )
+    lo, hi = max(r - pad, 0), min(r + rr + pad, h)
+    dst = buf[..., 1 + lo - (r - pad) : 1 + hi - (r - pad), pad + 1 : pad + 1 + w]
+    dst.copy_(src[..., lo:hi, :])
+    if shift is not None:
+        dst.sub_(shift)
+    return buf
+
+
+def _strip_sums(
+    x: Tensor,
+    rects: tuple[Region, ...],
+    r: int,
+    rr: int,
+    pad: int,
+    shift: Tensor,
+    vmask: Tensor | None,
+    moments: int,
+) -> list[Sums]:
+    """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
+    h, w = x.shape[-2:]
+    buf = _strip_buffer(x, r, rr, pad, shift)
+    cnt = None
+    if vmask is not None:
+        vbuf = _strip_buffer(vmask, r, rr, pad, None)
+        buf.mul_(vbuf)
+        cnt = _integral(vbuf)
+    s2 = _integral(buf * buf) if moments >= 2 else None
+    s1 = _integral(buf)
+    out = []
+    for rect in rects:
+        if cnt is None:
+            count = _region_count(rect, h, w, r, rr, x.device)
+        else:
+            count = _corner_sum(cnt, rect, pad, rr, w).round_()
+        out.append(
+            Sums(
+                count,
+                _corner_sum(s1, rect, pad, rr, w),
+                None if s2 is None else _corner_sum(s2, rect, pad, rr, w),
+                shift,
+            )
+        )
+    return out
+
+
+_STRIP_ELEMENTS = 1 << 17  # float64 strip rows of ~1 MB per image stay cache-resident
+
+
+def _strip_rows(x: Tensor, pad: int, strip: int | None) -> int:
+    """Rows per strip. Depends on the image width only, never on the batch size, so every
+    image is summed in the same strips whatever batch it comes in (bit-identical results)."""
+    h, w = x.shape[-2:]
+    if strip is not None:
+        return max(1, min(strip, h))
+    return max(1, min(h, max(16, _STRIP_ELEMENTS // (w + 2 * pad + 1))))
+
+
+def windowed(
+    x: Tensor,
+    rects: Sequence[Rect | Region],
+    fn: Callable[..., Tensor | tuple[Tensor, ...]],
+    *,
+    valid: Tensor | None = None,
+    moments: int = 2,
+    extras: tuple[Tensor, ...] = (),
+    strip: int | None = None,
+) -> Tensor | tuple[Tensor, ...]:
+    """Compute a local statistic from rectangle sums, row strip by row strip.
+
+    This is the one mechanism behind every window statistic: for each strip of output rows it
+    builds float64 integral images of ``x - shift`` (and its square) for the strip plus its
+    halo, reads the sums of every rectangle with four slices each, and calls
+    ``fn(x_strip, sums, *extra_strips)``. Memory stays bounded by the strip size and the work
+    per pixel does not depend on the window size.
+
+    Args:
+        x: real tensor ``(B, C, H, W)`` (validated by the caller).
+        rects: rectangles (or signed :class:`Region` sums of rectangles, e.g. ``Ring.region``)
+            of offsets relative to each pixel.
+        fn: ``fn(x_strip, sums, *extra_strips) -> Tensor | tuple[Tensor, ...]``; ``x_strip`` is
+            ``x[..., r:r+rr, :]``, ``sums`` a list of :class:`Sums` (one per rect, float64
+            ``(B, C, rr, W)``; ``count`` may be a broadcastable ``(rr, W)`` when there is no
+            ``valid`` mask), ``extra_strips`` the same rows of each tensor in ``extras``.
+            It must return tensors of shape ``(B, C, rr, W)``.
+        valid: optional bool mask broadcastable to ``x``; invalid cells are never counted.
+        moments: 1 for sums only, 2 to also provide sums of squares.
+        extras: tensors ``(B, C, H, W)`` sliced alongside ``x`` and passed to ``fn``.
+        strip: rows per strip (default: sized so float64 buffers stay around 1 MB).
+
+    Returns:
+        What ``fn`` returns, assembled to full height ``(B, C, H, W)``.
+    """
+    regions = tuple(_as_region(r) for r in rects)
+    h, w = x.shape[-2:]
+    vmask = None if valid is None else valid.expand_as(x)
+    shift = _image_mean(x, vmask)
+    pad = _pad_for(regions)
+    rows = _strip_rows(x, pad, strip)
+    outs: list[Tensor] = []
+    single = False
+    for r in range(0, max(h, 1), rows):
+        rr = min(rows, h - r)
+        sums = _strip_sums(x, regions, r, rr, pad, shift, vmask, moments)
+        res = fn(x[..., r : r + rr, :], sums, *(e[..., r : r + rr, :] for e in extras))
+        single = isinstance(res, Tensor)
+        parts = (res,) if single else tuple(res)
+        if not outs:
+            outs = [p.new_empty((*p.shape[:-2], h, w)) for p in parts]
+        for o, p in zip(outs, parts, strict=True):
+            o[..., r : r + rr, :] = p
+    return outs[0] if single else tuple(outs)
 
 
 def rect_sums(
     x: Tensor,
-    rects: tuple[Rect, ...] | list[Rect],
+    rects: Sequence[Rect | Region],
     *,
     valid: Tensor | None = None,
     moments: int = 2,
 ) -> list[Sums]:
-    """Sums of ``x`` (and ``x^2``) over each rectangle, for every pixel.
+    """Full-image :class:`Sums` over each rectangle or region (float64, ``(B, C, H, W)``).
 
-    Args:
-        x: real tensor ``(B, C, H, W)``.
-        rects: rectangles of offsets relative to each pixel (see :class:`Rect`).
-        valid: optional bool mask broadcastable to ``x``; invalid cells are not counted.
-        moments: 1 for sums only, 2 to also return sums of squares.
-
-    Returns:
-        One :class:`Sums` per rectangle, float64 ``(B, C, H, W)``, sharing one integral image.
+    Convenient for small images and tests; statistics on large images should use
+    :func:`windowed`, which never materialises full-size float64 sums.
 
     Example:
         >>> x = torch.arange(16.0).reshape(1, 1, 4, 4)
@@ -196,40 +366,20 @@ def rect_sums(
         5.0
     """
     rects = tuple(rects)
-    b, c, h, w = x.shape
+
+    def collect(_xs: Tensor, sums: list[Sums]) -> tuple[Tensor, ...]:
+        out: list[Tensor] = []
+        for s in sums:
+            out += [s.count.expand_as(s.s1), s.s1, s.s1 if s.s2 is None else s.s2]
+        return tuple(out)
+
+    flat = windowed(x, rects, collect, valid=valid, moments=moments)
     vmask = None if valid is None else valid.expand_as(x)
     shift = _image_mean(x, vmask)
-    pad = _pad_for(rects)
-    xd = _padded(x, shift, pad, vmask)
-    s2_int = _integral(xd * xd, pad) if moments >= 2 else None
-    s1_int = _integral(xd, pad)
-    cnt_int = None
-    if vmask is not None:
-        cnt_int = _integral(_padded(vmask, vmask.new_zeros(()), pad, None), pad)
-    out = []
-    for rect in rects:
-        if cnt_int is None:
-            rows = _axis_counts(h, rect.r0, rect.r1, x.device)
-            cols = _axis_counts(w, rect.c0, rect.c1, x.device)
-            count = (rows[:, None] * cols[None, :]).expand(b, c, h, w)
-        else:
-            count = _corner_sum(cnt_int, rect, pad, h, w).round_()
-        s1 = _corner_sum(s1_int, rect, pad, h, w)
-        s2 = None if s2_int is None else _corner_sum(s2_int, rect, pad, h, w)
-        out.append(Sums(count, s1, s2, shift))
-    return out
-
-
-def _image_mean(x: Tensor, vmask: Tensor | None) -> Tensor:
-    """Per-image, per-channel mean ``(B, C, 1, 1)`` float64 over valid cells (the summing
-    offset; any offset is exact, the mean just keeps the integral image small)."""
-    if x.numel() == 0:
-        return x.new_zeros(x.shape[:2] + (1, 1), dtype=torch.float64)
-    if vmask is None:
-        return x.mean(dim=(-2, -1), keepdim=True, dtype=torch.float64)
-    m = vmask.to(torch.float64)
-    num = (x.to(torch.float64) * m).sum(dim=(-2, -1), keepdim=True)
-    return num / m.sum(dim=(-2, -1), keepdim=True).clamp_min(1)
+    return [
+        Sums(flat[3 * i], flat[3 * i + 1], flat[3 * i + 2] if moments >= 2 else None, shift)
+        for i in range(len(rects))
+    ]
 
 
 def box_sums(x: Tensor, radius: int, *, valid: Tensor | None = None, moments: int = 2) -> Sums:
@@ -244,13 +394,10 @@ def ring_sums(
 
     Example:
         >>> x = torch.ones(1, 1, 9, 9)
-        >>> ring_sums(x, 1, 2).count[0, 0, 4, 4].item()  # 5x5 ring around a 3x3 guard box
-        16.0
+        >>> ring_sums(x, 1, 2).count[0, 0, 4, 4].item()  # 7x7 box minus the 3x3 guard box
+        40.0
     """
-    outer, inner = rect_sums(
-        x, [Rect.box(guard + train), Rect.box(guard)], valid=valid, moments=moments
-    )
-    return outer - inner
+    return rect_sums(x, [Ring(guard, train).region], valid=valid, moments=moments)[0]
 
 
 def pinwheel_rects(guard: int, train: int) -> tuple[Rect, Rect, Rect, Rect]:

@@ -1,0 +1,55 @@
+"""Benchmark cases: window-based CFAR against scipy.ndimage references of the same statistic."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+import torchsar as ts
+
+GUARD, TRAIN = 2, 4
+
+
+def _scipy_ring_moments(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ring mean and second moment with scipy.ndimage.uniform_filter (outer box - guard box)."""
+    o, i = 2 * (GUARD + TRAIN) + 1, 2 * GUARD + 1
+    n = o * o - i * i
+    mo = ndimage.uniform_filter(a, o, mode="constant")
+    mi = ndimage.uniform_filter(a, i, mode="constant")
+    a2 = a * a
+    qo = ndimage.uniform_filter(a2, o, mode="constant")
+    qi = ndimage.uniform_filter(a2, i, mode="constant")
+    return (mo * o * o - mi * i * i) / n, (qo * o * o - qi * i * i) / n
+
+
+def scipy_two_parameter(a: np.ndarray) -> np.ndarray:
+    mu, m2 = _scipy_ring_moments(a)
+    return (a - mu) / np.sqrt(np.maximum(m2 - mu * mu, 0))
+
+
+def scipy_ca(a: np.ndarray) -> np.ndarray:
+    o, i = 2 * (GUARD + TRAIN) + 1, 2 * GUARD + 1
+    mo = ndimage.uniform_filter(a, o, mode="constant")
+    mi = ndimage.uniform_filter(a, i, mode="constant")
+    return a / ((mo * o * o - mi * i * i) / (o * o - i * i))
+
+
+def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
+    gen = torch.Generator().manual_seed(0)
+    x = torch.empty(1, 1, 1024, 1024).exponential_(generator=gen)
+    a = x[0, 0].numpy()
+    return [
+        (
+            "two_parameter 1024x1024 f32 (g=2,t=4) vs scipy uniform_filter",
+            lambda: ts.cfar.two_parameter(x, guard=GUARD, train=TRAIN),
+            lambda: scipy_two_parameter(a),
+        ),
+        (
+            "ca 1024x1024 f32 (g=2,t=4) vs scipy uniform_filter",
+            lambda: ts.cfar.ca(x, guard=GUARD, train=TRAIN),
+            lambda: scipy_ca(a),
+        ),
+    ]

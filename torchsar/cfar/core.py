@@ -1,0 +1,64 @@
+"""Shared CFAR machinery: input handling, the border rule, and the statistic assembly.
+
+Border rule (applies to every ring-based variant): ring cells outside the image or marked
+invalid by ``valid`` are not counted. A pixel with fewer training cells than the interior
+``N`` keeps its own exact threshold by rescaling its statistic by
+``factor(N) / factor(n_pixel)``, so one global threshold (the interior factor) is exact at
+every pixel and ROC sweeps stay consistent. Interior pixels are untouched. Pixels whose cell
+under test is invalid, or whose ring has no valid cell, get statistic ``-inf``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from torch import Tensor
+
+from torchsar._checks import check_image, check_mask, check_probability, float_dtype
+from torchsar.cfar.thresholds import factor_map
+from torchsar.windows import Ring
+
+__all__ = ["border_scale", "finish", "prepare", "ratio"]
+
+
+def prepare(
+    x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None
+) -> tuple[Ring, float, Tensor | None]:
+    """Validate the common CFAR arguments; return the ring, ``pfa`` and the bool mask."""
+    check_image(x, "x")
+    ring = Ring(guard, train)
+    ring.check_fits(x)
+    pfa = check_probability(pfa, "pfa")
+    vmask = None if valid is None else check_mask(valid, x, "valid")
+    return ring, pfa, vmask
+
+
+def ratio(num: Tensor, den: Tensor) -> Tensor:
+    """``num / den`` for ``den >= 0``: ``±inf`` by the sign of ``num`` where ``den == 0`` and
+    ``0 / 0 = 0`` (never NaN)."""
+    return torch.nan_to_num_(num / den, nan=0.0, posinf=torch.inf, neginf=-torch.inf)
+
+
+def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tensor | None:
+    """``factor(n) / factor(count)`` where ``count != n``; ``None`` when every count is ``n``."""
+    if count.dim() >= 2 and count.shape[:-2].numel() > 1 and count.stride()[0] == 0:
+        count = count[(0,) * (count.dim() - 2)]  # a broadcast (H, W) count: work on one copy
+    if bool(count.min() == n):
+        return None
+    f = factor_map(count, factor)
+    return torch.where(count == n, torch.ones_like(f), factor(n) / f)
+
+
+def finish(statistic: Tensor, count: Tensor, vmask: Tensor | None, dtype: torch.dtype) -> Tensor:
+    """Cast the statistic to the output dtype and mark untestable pixels ``-inf``."""
+    out = statistic.to(dtype)
+    bad = count <= 0
+    if vmask is not None:
+        bad = bad | ~vmask
+    return out.masked_fill(bad, -torch.inf)
+
+
+def out_dtype(x: Tensor) -> torch.dtype:
+    """The statistic dtype for input ``x`` (the library's dtype policy)."""
+    return float_dtype(x.dtype)
