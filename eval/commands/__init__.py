@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run"]
+COMMANDS = ["run", "autofocus"]
 
 
 def load(name: str):
