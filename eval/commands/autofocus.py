@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 import torchsar.imaging as ti
 from eval.autofocus_experiment import ERROR_CASES, METHODS, Config, run_error_case
+from eval.gotcha_experiment import run_gotcha
 from eval.output import default_out, result_dir, write_config
 from eval.plots import slug
 from eval.tables import markdown
@@ -36,6 +37,7 @@ METRICS = [
     "iterations",
     "seconds",
 ]
+DEFAULT_GOTCHA = Path("../shared/data/gotcha")
 DETECTION = ["pd_ca", "pfa_ca", "pd_global", "pfa_global"]
 
 
@@ -61,6 +63,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--methods", default=",".join(METHODS), help=f"comma-separated methods: {','.join(METHODS)}"
     )
     p.add_argument("--pfa", type=float, default=d.pfa, help="CA-CFAR design Pfa")
+    p.add_argument(
+        "--gotcha",
+        type=Path,
+        default=DEFAULT_GOTCHA,
+        help="GOTCHA folder for the real-data injected-error experiment "
+        f"(default: {DEFAULT_GOTCHA}, skipped when absent)",
+    )
+    p.add_argument("--gotcha-trials", type=int, default=3, help="injected errors per type")
+    p.add_argument("--no-gotcha", action="store_true", help="skip the GOTCHA experiment")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -115,6 +126,24 @@ def plot_panel(name: str, data: dict, formed: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def gotcha_table(args: argparse.Namespace, tmp: Path) -> None:
+    """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
+    rows, panel = run_gotcha(Path(args.gotcha), trials=args.gotcha_trials, seed=args.seed)
+    trials = pd.DataFrame(rows)
+    trials.to_csv(tmp / "gotcha_trials.csv", index=False)
+    cols = ["phase_rmse", "entropy", "reference_entropy", "reflector_peak_ratio", "seconds"]
+    summarise(trials, cols).to_csv(tmp / "gotcha.csv", index=False)
+    names = list(panel)
+    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 2.9))
+    for ax, name in zip(axes, names, strict=True):
+        ax.imshow(_db(panel[name].sqrt()).numpy(), cmap="gray", vmin=-40, vmax=0, origin="lower")
+        ax.set_title(name, fontsize=6)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(tmp / "gotcha.png", dpi=110)
+    plt.close(fig)
+
+
 def run(args: argparse.Namespace) -> int:
     errors = _names(args.errors, ERROR_CASES, "error types")
     methods = _names(args.methods, METHODS, "methods")
@@ -147,9 +176,13 @@ def run(args: argparse.Namespace) -> int:
             + "\n"
             + markdown(detection[["error", "method"] + [c + "_mean" for c in DETECTION]])
         )
-        write_config(
-            tmp, "autofocus", {**dataclasses.asdict(cfg), "errors": errors, "methods": methods}
+        if not args.no_gotcha and args.gotcha is not None and Path(args.gotcha).is_dir():
+            gotcha_table(args, tmp)
+        options = {**dataclasses.asdict(cfg), "errors": errors, "methods": methods}
+        options.update(
+            gotcha=str(args.gotcha), gotcha_trials=args.gotcha_trials, no_gotcha=args.no_gotcha
         )
+        write_config(tmp, "autofocus", options)
     print(markdown(table[shown]))
     print(f"results in {out}")
     return 0

@@ -127,6 +127,16 @@ class BackprojectionOperator(LinearOperator):
             out[:, sl] = torch.fft.fft(t, dim=-1)[..., :k]
         return out * self.scale
 
+    def _backproject(self, g: Tensor, sl: slice) -> Tensor:
+        """Per-pulse backprojections of pulses ``sl``: ``(B, m, P)`` (unscaled)."""
+        i0, i1, w1, carrier = self._geometry(sl, g.device)
+        prof = torch.fft.ifft(g[:, sl], n=self.nfft, dim=-1) * self.nfft  # (B, m, N)
+        b = g.shape[0]
+        v0 = torch.gather(prof, -1, i0.expand(b, *i0.shape))
+        v1 = torch.gather(prof, -1, i1.expand(b, *i1.shape))
+        w = w1.to(prof.real.dtype)
+        return (v0 * (1 - w) + v1 * w) * carrier.conj().to(g.dtype)
+
     def adjoint(self, g: Tensor) -> Tensor:
         """``C^H g`` (backprojection): ``(B, M, K)`` -> image ``(B, 1, H, W)``."""
         g = as_complex(g)
@@ -135,12 +145,20 @@ class BackprojectionOperator(LinearOperator):
         if g.shape[0] == 0:
             return img.reshape(0, 1, *self.image_shape)
         for s in range(0, m, self.chunk):
-            sl = slice(s, min(m, s + self.chunk))
-            i0, i1, w1, carrier = self._geometry(sl, g.device)
-            prof = torch.fft.ifft(g[:, sl], n=self.nfft, dim=-1) * self.nfft  # (B, m, N)
-            b = g.shape[0]
-            v0 = torch.gather(prof, -1, i0.expand(b, *i0.shape))
-            v1 = torch.gather(prof, -1, i1.expand(b, *i1.shape))
-            w = w1.to(prof.real.dtype)
-            img += ((v0 * (1 - w) + v1 * w) * carrier.conj().to(g.dtype)).sum(dim=1)
+            img += self._backproject(g, slice(s, min(m, s + self.chunk))).sum(dim=1)
         return (img * self.scale).reshape(g.shape[0], 1, *self.image_shape)
+
+    def pulse_images(self, g: Tensor) -> Tensor:
+        """Per-pulse terms of the backprojection: ``(B, M, H, W)``, summing to ``C^H g``.
+
+        ``C^H (exp(-1j phi) g) = sum_m exp(-1j phi_m) b_m`` for any per-pulse phase, which
+        makes 1-D autofocus on backprojected imagery cheap (see :func:`pulse_autofocus`).
+        """
+        g = as_complex(g)
+        m, _ = self.data_shape
+        out = torch.zeros(g.shape[0], m, self.pixels.shape[0], dtype=g.dtype, device=g.device)
+        if g.shape[0] > 0:
+            for s in range(0, m, self.chunk):
+                sl = slice(s, min(m, s + self.chunk))
+                out[:, sl] = self._backproject(g, sl)
+        return (out * self.scale).reshape(g.shape[0], m, *self.image_shape)
