@@ -21,7 +21,13 @@ import torch
 from tqdm import tqdm
 
 import torchsar.imaging as ti
-from eval.autofocus_experiment import ERROR_CASES, METHODS, Config, run_error_case
+from eval.autofocus_experiment import (
+    DEFAULT_METHODS,
+    ERROR_CASES,
+    METHODS,
+    Config,
+    run_error_case,
+)
 from eval.gotcha_experiment import run_gotcha
 from eval.output import default_out, result_dir, write_config
 from eval.plots import slug
@@ -60,7 +66,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help=f"comma-separated error types: {','.join(ERROR_CASES)}",
     )
     p.add_argument(
-        "--methods", default=",".join(METHODS), help=f"comma-separated methods: {','.join(METHODS)}"
+        "--methods",
+        default=",".join(DEFAULT_METHODS),
+        help=f"comma-separated methods (default: all but sparse-keep-restarts): "
+        f"{','.join(METHODS)}",
     )
     p.add_argument("--pfa", type=float, default=d.pfa, help="CA-CFAR design Pfa")
     p.add_argument(

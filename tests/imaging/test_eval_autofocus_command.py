@@ -42,6 +42,30 @@ def test_autofocus_command_writes_tables(tmp_path):
     assert float(sparse["corr_mean"].iloc[0]) > float(conv["corr_mean"].iloc[0])
 
 
+def test_keep_restarts_only_for_2d(tmp_path):
+    out = tmp_path / "pr"
+    args = [
+        "autofocus",
+        "--out",
+        str(out),
+        "--scenes",
+        "1",
+        "--size",
+        "16",
+        "--no-gotcha",
+        "--errors",
+        "1d-uniform-pi,2d-pi",
+        "--methods",
+        "conventional,sparse-keep-restarts",
+        "--no-progress",
+    ]
+    assert main(args) == 0
+    table = pd.read_csv(out / "autofocus.csv")
+    methods = set(zip(table.error, table.method, strict=True))
+    assert ("2d-pi", "sparse-keep-restarts") in methods
+    assert ("1d-uniform-pi", "sparse-keep-restarts") not in methods
+
+
 def test_autofocus_command_rejects_unknown_method(tmp_path, capsys):
     try:
         main(["autofocus", "--out", str(tmp_path / "x"), "--methods", "magic"])

@@ -24,9 +24,9 @@ class TestLpImage:
         gen = torch.Generator().manual_seed(0)
         mask = torch.rand(32, 32, generator=gen) > 0.4
         op = FourierOperator((32, 32), mask=mask)
-        img = lp_image(g * mask, op)
-        conv = op.adjoint(g * mask)
-        c_lp, c_conv = magnitude_correlation(img, f), magnitude_correlation(conv, f)
+        img = lp_image(g[:2] * mask, op, max_iter=30, cg_iterations=10)
+        conv = op.adjoint(g[:2] * mask)
+        c_lp, c_conv = magnitude_correlation(img, f[:2]), magnitude_correlation(conv, f[:2])
         assert (c_lp > c_conv + 0.05).all()
         assert (c_lp > 0.95).all()
 

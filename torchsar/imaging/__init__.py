@@ -1,6 +1,7 @@
 """Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics."""
 
 from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
+from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.imaging.fourier import fft2c, ifft2c
 from torchsar.imaging.geometry import SpotlightGeometry
 from torchsar.imaging.lp import default_lam, lp_image
@@ -27,10 +28,12 @@ from torchsar.imaging.phase_errors import (
 )
 from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
 from torchsar.imaging.phase_step import phase_step_1d, phase_step_2d, phase_step_separable
+from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
 from torchsar.imaging.scenes import point_scene, speckled_scene
 
 __all__ = [
     "AutofocusResult",
+    "BackprojectionOperator",
     "FourierOperator",
     "LinearOperator",
     "MinEntropyResult",
@@ -57,6 +60,8 @@ __all__ = [
     "point_phase_history",
     "point_scene",
     "polynomial_phase_error",
+    "pulse_autofocus",
+    "pulse_min_entropy",
     "quadratic_phase_error",
     "separable_phase_error",
     "sharpness",

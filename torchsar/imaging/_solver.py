@@ -29,6 +29,7 @@ class Settings:
     inner: int
     cg_iterations: int
     warmup: int = 0  # iterations over which lam ramps geometrically from lam/16 to lam
+    keep: int | None = None  # hard threshold: keep this many largest pixels after each step
 
 
 @dataclass
@@ -60,13 +61,26 @@ def image_update(
     """One half-quadratic step ``(2 C^H C + p lam Lambda(f)) f = 2 C^H g_corr``."""
     weight = cfg.p * scale * s.lam * (s.f.abs().square() + s.eps).pow(cfg.p / 2 - 1)
     rhs = 2 * op.adjoint(g_corr)
+    if cfg.keep is not None and op.gram_is_identity:
+        return hard_threshold(rhs / 2, cfg.keep)
     if op.gram_is_identity:
         return rhs / (2 + weight)
 
     def apply_a(x: Tensor) -> Tensor:
         return 2 * op.normal(x) + weight * x
 
-    return conjugate_gradient(apply_a, rhs, s.f, iterations=cfg.cg_iterations, tol=1e-6)
+    f = conjugate_gradient(apply_a, rhs, s.f, iterations=cfg.cg_iterations, tol=1e-6)
+    return f if cfg.keep is None else hard_threshold(f, cfg.keep)
+
+
+def hard_threshold(f: Tensor, keep: int) -> Tensor:
+    """Keep the ``keep`` largest-magnitude pixels of each item, zero the rest."""
+    mag = f.abs().flatten(1)
+    keep = min(keep, mag.shape[1])
+    if keep == 0 or mag.shape[0] == 0:
+        return torch.zeros_like(f) if keep == 0 else f
+    kth = mag.topk(keep, dim=1).values[:, -1:]
+    return f * (mag >= kth).reshape(f.shape)
 
 
 def phase_update(g: Tensor, d: Tensor, s: State, error: str) -> tuple[Tensor, Tensor]:

@@ -57,6 +57,7 @@ def sparse_autofocus(
     inner: int = 1,
     restarts: int = 0,
     warmup: int = 10,
+    keep: int | None = None,
     cg_iterations: int = 30,
     generator: torch.Generator | None = None,
 ) -> AutofocusResult:
@@ -83,6 +84,10 @@ def sparse_autofocus(
         warmup: continuation: over the first ``warmup`` iterations ``lam`` grows
             geometrically from ``lam / 16`` to ``lam`` (keeps the weak coherent part of a
             badly defocused image alive early on); no item stops during the warm-up.
+        keep: if given, the image step becomes a hard threshold keeping the ``keep``
+            largest pixels (the ``p -> 0`` limit with a known sparsity level; alternating
+            projections). Meant for pure phase retrieval (2-D errors spanning ``[-pi, pi]``)
+            together with ``restarts``.
         cg_iterations: CG iterations per image step when ``C^H C != I``.
         generator: random generator for the restarts.
 
@@ -111,7 +116,11 @@ def sparse_autofocus(
     error = check_choice(error, "error", ERRORS)
     op, g = _resolve(g, operator)
     cfg = settings(p, error, max_iter, tol, inner, cg_iterations)
-    cfg = dataclasses.replace(cfg, warmup=check_int(warmup, "warmup", minimum=0))
+    cfg = dataclasses.replace(
+        cfg,
+        warmup=check_int(warmup, "warmup", minimum=0),
+        keep=None if keep is None else check_int(keep, "keep", minimum=1),
+    )
     restarts = check_int(restarts, "restarts", minimum=0)
     lam_t = lam_tensor(lam, g, op, cfg.p, kappa=1.0 if error == "2d" else 1.5)
     best, history, iters = solve(g, initial_state(g, op, lam_t, eps), op, cfg)
