@@ -23,6 +23,7 @@ def test_autofocus_command_writes_tables(tmp_path):
             "--methods",
             "conventional,sparse-autofocus",
             "--no-progress",
+            "--no-gotcha",
         ]
     )
     assert code == 0
