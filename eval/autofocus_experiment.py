@@ -98,7 +98,7 @@ def _conventional(g: Tensor, kind: str, phi: Tensor) -> tuple:
 
 
 def _lp(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    return ti.lp_image(g), None, None
+    return ti.lp_image(g, max_iter=50), None, None
 
 
 def _pga(g: Tensor, kind: str, phi: Tensor) -> tuple:

@@ -54,7 +54,7 @@ def sparse_autofocus(
     eps: float | None = None,
     max_iter: int = 100,
     tol: float = 1e-4,
-    inner: int = 1,
+    inner: int = 2,
     restarts: int = 0,
     warmup: int = 10,
     keep: int | None = None,
