@@ -130,11 +130,9 @@ def sparse_autofocus(
         s, h, it = solve(g, start, op, cfg)
         better = h[:, -1] < best_cost
         best.put(better.nonzero().flatten(), s.take(better))
-        history[better], iters[better], best_cost = (
-            h[better],
-            it[better],
-            torch.minimum(best_cost, h[:, -1]),
-        )
+        history[better] = h[better]
+        iters[better] = it[better]
+        best_cost = torch.minimum(best_cost, h[:, -1])
     phase = best.phi[..., 0] if error == "1d" else best.phi
     return AutofocusResult(best.f, phase, best_cost, history, iters, lam_t)
 

@@ -7,7 +7,7 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int, check_positive
+from torchsar._checks import OptionError, check_complex, check_int, check_positive
 from torchsar.imaging._solver import Settings, State, solve
 from torchsar.imaging.operators import FourierOperator, LinearOperator
 
@@ -158,10 +158,7 @@ def lp_image(
 def _resolve(g: Tensor, operator: LinearOperator | None) -> tuple[LinearOperator, Tensor]:
     """Default operator and data validation."""
     if operator is None:
-        if not isinstance(g, Tensor) or g.dim() != 3:
-            from torchsar._checks import check_complex
-
-            check_complex(g, "g", ndim=3)
+        g = check_complex(g, "g", ndim=3)
         operator = FourierOperator(tuple(g.shape[-2:]))
     if not isinstance(operator, LinearOperator):
         raise OptionError(f"operator must be a LinearOperator, got {type(operator).__name__}")
