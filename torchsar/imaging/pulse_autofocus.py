@@ -31,8 +31,9 @@ def pulse_autofocus(
     *,
     p: float = 1.0,
     kappa: float = 1.5,
-    max_iter: int = 50,
+    max_iter: int = 200,
     tol: float = 1e-4,
+    inner: int = 2,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Sparsity-driven 1-D autofocus from per-pulse images (matched-filter image step).
 
@@ -43,6 +44,7 @@ def pulse_autofocus(
             :func:`default_lam`).
         max_iter: iteration limit.
         tol: relative image change that stops an item.
+        inner: image updates per phase step.
 
     Returns:
         ``(image (B, 1, H, W), phase (B, M), iterations (B,))``.
@@ -71,8 +73,10 @@ def pulse_autofocus(
     for it in range(1, max_iter + 1):
         if not bool(active.any()):
             break
-        w = p * lam * (f.abs().square() + eps).pow(p / 2 - 1)
-        f_new = 2 * _form(b, phi) / (2 + w)
+        y, f_new = _form(b, phi), f
+        for _ in range(inner):
+            w = p * lam * (f_new.abs().square() + eps).pow(p / 2 - 1)
+            f_new = 2 * y / (2 + w)
         phi_new = torch.einsum("bhw,bmhw->bm", f_new[:, 0].conj(), b).angle()
         change = (f_new - f).flatten(1).norm(dim=1) / f.flatten(1).norm(dim=1).clamp_min(1e-30)
         keep = active[:, None, None, None]
