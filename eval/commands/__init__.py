@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "autofocus"]
+COMMANDS = ["run", "speckle", "autofocus"]
 
 
 def load(name: str):
