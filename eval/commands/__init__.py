@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "speckle", "movers"]
+COMMANDS = ["run", "speckle", "autofocus", "movers"]
 
 
 def load(name: str):
