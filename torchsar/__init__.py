@@ -1,7 +1,17 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, windows
+from torchsar import cfar, imaging, io, metrics, motion, simulate, speckle, windows
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "cfar", "windows"]
+__all__ = [
+    "__version__",
+    "cfar",
+    "imaging",
+    "io",
+    "metrics",
+    "motion",
+    "simulate",
+    "speckle",
+    "windows",
+]

@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "pfa"]
+COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers"]
 
 
 def load(name: str):
