@@ -25,9 +25,9 @@ Algorithm (exact, memory bounded, no per-pixel Python loop):
 The work per pixel is ``B N`` byte compares and sums (``N`` ring cells), vectorised over the
 tile, independent of the data (on one thread, 512 x 512, g=2, t=4: 4.4x faster than
 ``scipy.ndimage.rank_filter`` with the same footprint, 3.4x for the whole OS-CFAR; see
-``scripts/benchmarks/cfar_family.py``; ratios drop to ~2.5x when the machine is loaded). All per-step
-buffers are allocated once per call: on CPU, fresh large temporaries (page faults) cost more
-than the arithmetic. Rings wider than a 16-bit tile allows (``2(g+t)+1 > 181``) fall back to
+``scripts/benchmarks/cfar_family.py``; the ratios drop to ~2.5x on a loaded machine).
+All per-step buffers are allocated once per call: on CPU, fresh large temporaries (page
+faults) cost more than the arithmetic. Rings wider than a 16-bit tile allows (``2(g+t)+1 > 181``) fall back to
 a gather + sort per row.
 
 References:
