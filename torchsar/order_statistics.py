@@ -27,8 +27,8 @@ tile, independent of the data (on one thread, 512 x 512, g=2, t=4: 4.4x faster t
 ``scipy.ndimage.rank_filter`` with the same footprint, 3.4x for the whole OS-CFAR; see
 ``scripts/benchmarks/cfar_family.py``; the ratios drop to ~2.5x on a loaded machine).
 All per-step buffers are allocated once per call: on CPU, fresh large temporaries (page
-faults) cost more than the arithmetic. Rings wider than a 16-bit tile allows (``2(g+t)+1 > 181``) fall back to
-a gather + sort per row.
+faults) cost more than the arithmetic. Rings wider than a 16-bit tile allows
+(``2(g+t)+1 > 181``) fall back to a gather + sort per row.
 
 References:
     Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350 (OS-CFAR).
