@@ -31,7 +31,7 @@ __all__ = ["DATASETS", "FolderDataset", "SimDataset", "make_dataset", "read_imag
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg")
 DATASETS = ("sim-chips", "sim-scenes", "folder:PATH")
-DEFAULT_N = {"sim-chips": 96, "sim-scenes": 6}
+DEFAULT_N = {"sim-chips": 64, "sim-scenes": 4}
 
 
 class SimDataset(Dataset):

@@ -139,38 +139,49 @@ _STRUCTURES = {1: ndimage.generate_binary_structure(2, 1), 2: np.ones((3, 3), bo
 
 
 def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarray, int]:
-    """Connected components of a 2-D bool array (1 = 4-, 2 = 8-connectivity)."""
-    labels, n = ndimage.label(mask, structure=_STRUCTURES[connectivity])
+    """Connected components of a bool array; the last two axes are the image plane, leading
+    axes index separate images (labels are unique across the whole array).
+    ``connectivity``: 1 = 4-connected, 2 = 8-connected."""
+    plane = _STRUCTURES[connectivity]
+    structure = np.zeros((3,) * (mask.ndim - 2) + (3, 3), bool)
+    structure[(1,) * (mask.ndim - 2)] = plane
+    labels, n = ndimage.label(mask, structure=structure)
     return labels, int(n)
 
 
-def _image_objects(
+def _global_ids(inst: np.ndarray) -> np.ndarray:
+    """Instance ids made unique across images ``(N, H, W)`` (0 stays background)."""
+    per_image = inst.reshape(inst.shape[0], -1).max(axis=1, initial=0)
+    offset = np.concatenate([[0], np.cumsum(per_image)[:-1]])
+    return np.where(inst > 0, inst + offset[:, None, None], 0)
+
+
+def _batch_objects(
     labels: np.ndarray, n: int, inst: np.ndarray, ignore: np.ndarray | None
 ) -> ObjectCounts:
-    """Object counts of one image from its component labels and instance ids."""
-    m = int(inst.max()) if inst.size else 0
-    ids = np.unique(inst[inst > 0])
-    overlap = np.bincount(
-        (labels.astype(np.int64) * (m + 1) + inst).ravel(), minlength=(n + 1) * (m + 1)
-    ).reshape(n + 1, m + 1)
-    comp_area = overlap.sum(axis=1)
-    hits = overlap[1:, 1:] > 0  # (components, instance ids)
-    per_inst = hits[:, ids - 1] if ids.size else np.zeros((n, 0), bool)
-    detected = per_inst.any(axis=0)
-    inter = (overlap[1:, 1:][:, ids - 1] * per_inst).sum(axis=0) if ids.size else np.zeros(0)
-    union_comp = (comp_area[1:, None] * per_inst).sum(axis=0) if ids.size else np.zeros(0)
-    inst_area = overlap[:, 1:].sum(axis=0)[ids - 1] if ids.size else np.zeros(0)
-    iou = inter / np.maximum(inst_area + union_comp - inter, 1)
-    lonely = ~hits.any(axis=1)
-    if ignore is not None and n:
-        outside = np.bincount(labels[~ignore].ravel(), minlength=n + 1)[1:] > 0
-        lonely &= outside
+    """Object counts of a stack of images from component labels and global instance ids."""
+    m = int(inst.max(initial=0))
+    lab, ids = labels.ravel(), inst.ravel()
+    both = (lab > 0) & (ids > 0)
+    pairs, overlap = np.unique(lab[both].astype(np.int64) * (m + 1) + ids[both], return_counts=True)
+    pair_comp, pair_inst = pairs // (m + 1), pairs % (m + 1)
+    comp_area = np.bincount(lab, minlength=n + 1)
+    inst_area = np.bincount(ids, minlength=m + 1)
+    inter = np.bincount(pair_inst, weights=overlap, minlength=m + 1)
+    union_comp = np.bincount(pair_inst, weights=comp_area[pair_comp], minlength=m + 1)
+    detected = np.bincount(pair_inst, minlength=m + 1)[1:] > 0
+    iou = (inter / np.maximum(inst_area + union_comp - inter, 1))[1:]
+    lonely = np.ones(n + 1, bool)
+    lonely[pair_comp] = False
+    lonely[0] = False
+    if ignore is not None:
+        lonely &= np.bincount(lab[~ignore.ravel()], minlength=n + 1) > 0
     return ObjectCounts(
-        images=1,
-        instances=int(ids.size),
+        images=int(labels.shape[0]),
+        instances=int((inst_area[1:] > 0).sum()),
         detected=int(detected.sum()),
         false_alarms=int(lonely.sum()),
-        fragments=int(per_inst[:, detected].sum()),
+        fragments=int(pair_comp.size),
         iou_sum=float(iou[detected].sum()),
     )
 
@@ -202,8 +213,7 @@ def object_counts(
     p = pred.detach().cpu().numpy().reshape(-1, *pred.shape[-2:])
     g = instances.detach().cpu().numpy().astype(np.int64).reshape(p.shape)
     ig = None if ignore is None else _as_bool(ignore, "ignore").cpu().numpy().reshape(p.shape)
-    total = ObjectCounts()
-    for i in range(p.shape[0]):
-        labels, n = label_components(p[i], connectivity)
-        total = total + _image_objects(labels, n, g[i], None if ig is None else ig[i])
-    return total
+    if p.shape[0] == 0:
+        return ObjectCounts()
+    labels, n = label_components(p, connectivity)
+    return _batch_objects(labels, n, _global_ids(g), ig)

@@ -27,7 +27,7 @@ def default_pixel_grid(points_per_decade: int = 40) -> Tensor:
     return torch.cat([-pos.flip(0), torch.zeros(1, dtype=torch.float64), pos])
 
 
-def default_object_grid(threshold: float, n: int = 25) -> Tensor:
+def default_object_grid(threshold: float, n: int = 17) -> Tensor:
     """Object-level thresholds around a design threshold: ``threshold x [0.1 .. 10]``
     (log-spaced) for positive thresholds, ``threshold + [-5 .. 5]`` otherwise."""
     if threshold > 0:
@@ -35,10 +35,9 @@ def default_object_grid(threshold: float, n: int = 25) -> Tensor:
     return threshold + torch.linspace(-5, 5, n, dtype=torch.float64)
 
 
-def _exceedances(values: Tensor, grid: Tensor) -> Tensor:
-    """``out[k] = #(values > grid[k])`` via one bucketize and a suffix sum."""
-    idx = torch.bucketize(values.to(torch.float64).flatten(), grid.to(values.device))
-    hist = torch.bincount(idx, minlength=grid.numel() + 1).cpu()
+def _exceedances(bins: Tensor, n_grid: int) -> Tensor:
+    """``out[k] = #(values > grid[k])`` from bucket indices (one bincount, a suffix sum)."""
+    hist = torch.bincount(bins, minlength=n_grid + 1).cpu()
     return hist.flip(0).cumsum(0).flip(0)[1:]
 
 
@@ -76,10 +75,12 @@ class RocAccumulator:
         ignore: Tensor | None = None,
     ) -> None:
         """Add a batch: ``statistic`` float, ``target`` bool, ``instances`` int, same shape."""
+        grid = self.pixel_grid.to(device=statistic.device, dtype=statistic.dtype)
+        bins = torch.bucketize(statistic, grid)  # statistic > grid[k]  <=>  bin > k
         care = torch.ones_like(target) if ignore is None else ~ignore
         tgt, clu = target & care, ~target & care
-        self.target_hits += _exceedances(statistic[tgt], self.pixel_grid)
-        self.clutter_hits += _exceedances(statistic[clu], self.pixel_grid)
+        self.target_hits += _exceedances(bins[tgt], grid.numel())
+        self.clutter_hits += _exceedances(bins[clu], grid.numel())
         self.targets += int(tgt.sum())
         self.clutter += int(clu.sum())
         for k, t in enumerate(self.object_grid.tolist()):
