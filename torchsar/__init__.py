@@ -1,7 +1,7 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, windows
+from torchsar import cfar, region, windows
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "cfar", "windows"]
+__all__ = ["__version__", "cfar", "region", "windows"]

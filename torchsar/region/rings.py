@@ -1,0 +1,127 @@
+"""Steps e–h: guard ring K and background ring C of a region, censoring, ring statistics.
+
+All on a crop: the region's bounding box widened by ``guard + background`` (clipped to the
+image), never the whole image per region. Dilation uses a square structuring element
+(Chebyshev distance), the region analogue of the square guard box of window CFARs
+(DESIGN §4.1); dilating by ``guard`` then by ``background`` equals one dilation by their sum.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as nnf
+from torch import Tensor
+
+__all__ = ["Crop", "RingStats", "crop_around", "dilate", "ring_masks", "ring_stats"]
+
+
+@dataclass(frozen=True)
+class Crop:
+    """A rectangle ``[r0, r1) x [c0, c1)`` of an image and a region's mask inside it."""
+
+    r0: int
+    r1: int
+    c0: int
+    c1: int
+    region: Tensor  # bool (r1 - r0, c1 - c0)
+
+    def cut(self, img: Tensor) -> Tensor:
+        """The same rectangle of an ``(H, W)`` image (a view)."""
+        return img[self.r0 : self.r1, self.c0 : self.c1]
+
+
+def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int, device) -> Crop:
+    """The bounding box of flat indices ``idx`` widened by ``margin``, clipped to ``shape``.
+
+    Example:
+        >>> c = crop_around(np.array([5]), (4, 4), 1, "cpu")
+        >>> (c.r0, c.r1, c.c0, c.c1), c.region.sum().item()
+        ((0, 3, 0, 3), 1)
+    """
+    h, w = shape
+    rows, cols = idx // w, idx % w
+    r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h)
+    c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
+    mask = torch.zeros((r1 - r0, c1 - c0), dtype=torch.bool, device=device)
+    mask[torch.as_tensor(rows - r0, device=device), torch.as_tensor(cols - c0, device=device)] = (
+        True
+    )
+    return Crop(r0, r1, c0, c1, mask)
+
+
+def dilate(mask: Tensor, radius: int) -> Tensor:
+    """Dilate a bool ``(h, w)`` mask by a ``(2 radius + 1)^2`` square (outside = False).
+
+    Example:
+        >>> m = torch.zeros(5, 5, dtype=torch.bool); m[2, 2] = True
+        >>> int(dilate(m, 1).sum())
+        9
+    """
+    if radius == 0:
+        return mask.clone()
+    k = 2 * radius + 1
+    m = mask.to(torch.float32)[None, None]
+    m = nnf.max_pool2d(m, (1, k), stride=1, padding=(0, radius))  # separable: rows, then
+    return nnf.max_pool2d(m, (k, 1), stride=1, padding=(radius, 0))[0, 0] > 0  # columns
+
+
+def ring_masks(region: Tensor, guard: int, background: int) -> tuple[Tensor, Tensor]:
+    """Guard area K (region dilated by ``guard``, region included) and background ring C
+    (K dilated by ``background``, minus K) — seed steps e and f.
+
+    Example:
+        >>> t = torch.zeros(9, 9, dtype=torch.bool); t[4, 4] = True
+        >>> k, c = ring_masks(t, 1, 2)
+        >>> int(k.sum()), int(c.sum())
+        (9, 40)
+    """
+    k = dilate(region, guard)
+    c = dilate(region, guard + background) & ~k  # square dilations compose: g then b = g + b
+    return k, c
+
+
+@dataclass(frozen=True)
+class RingStats:
+    """Statistics of one region: ``mu_t`` (step d), the censored background size and
+    ``mu_c`` / ``sigma_c`` (step h, population standard deviation)."""
+
+    mu_t: float
+    n_background: int
+    mu_c: float
+    sigma_c: float
+
+
+def ring_stats(
+    crop: Crop,
+    raw: Tensor,
+    target_img: Tensor,
+    lowpass: Tensor,
+    taken: Tensor,
+    guard: int,
+    background: int,
+) -> RingStats:
+    """Steps d–h on one crop.
+
+    ``mu_t`` is the mean of ``target_img`` over the region. The background ring C loses the
+    pixels whose low-pass value is ``>= mu_t`` and the pixels in ``taken`` (already detected
+    targets); ``mu_c`` and ``sigma_c`` are taken from ``raw`` over what remains.
+
+    Args:
+        crop: the region and its crop rectangle.
+        raw, target_img, lowpass, taken: full ``(H, W)`` images (``taken`` bool).
+        guard, background: ring widths R_G and R_C.
+    """
+    _, ring = ring_masks(crop.region, guard, background)
+    mu_t = float(crop.cut(target_img)[crop.region].mean())
+    ring &= crop.cut(lowpass) < mu_t
+    ring &= ~crop.cut(taken)
+    vals = crop.cut(raw)[ring]
+    n = int(vals.numel())
+    if n == 0:
+        return RingStats(mu_t, 0, float("nan"), float("nan"))
+    mu_c = float(vals.mean())
+    sigma_c = float((vals - mu_c).square().mean().sqrt())
+    return RingStats(mu_t, n, mu_c, sigma_c)
