@@ -1,0 +1,1 @@
+"""torchsar evaluation harness: datasets, detector registry, runner, tables, plots, CLI."""

@@ -1,0 +1,73 @@
+"""The detector registry: a detector is one function plus one line here.
+
+Each :class:`DetectorSpec` names a function ``fn(x, **params) -> Detection`` and its default
+parameters; the CLI overrides them with ``--param NAME.KEY=VALUE``.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from torch import Tensor
+
+import torchsar as ts
+from eval.errors import EvalError
+from torchsar.cfar import Detection
+
+__all__ = ["DETECTORS", "DetectorSpec", "parse_params", "resolve"]
+
+
+@dataclass(frozen=True)
+class DetectorSpec:
+    """A registered detector: ``fn(x, **params)`` with default ``params``."""
+
+    name: str
+    fn: Callable[..., Detection]
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def with_params(self, overrides: Mapping[str, Any]) -> DetectorSpec:
+        return DetectorSpec(self.name, self.fn, {**self.params, **overrides})
+
+    def __call__(self, x: Tensor) -> Detection:
+        return self.fn(x, **self.params)
+
+
+WINDOW = {"guard": 2, "train": 4, "pfa": 1e-3}
+
+DETECTORS: dict[str, DetectorSpec] = {
+    s.name: s
+    for s in [
+        DetectorSpec("ca", ts.cfar.ca, WINDOW),
+        DetectorSpec("two_parameter", ts.cfar.two_parameter, WINDOW),
+    ]
+}
+
+
+def parse_params(items: list[str]) -> dict[str, dict[str, Any]]:
+    """Parse ``["ca.guard=3", "region.k=0.5"]`` into ``{"ca": {"guard": 3}, ...}``."""
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        key, eq, raw = item.partition("=")
+        name, dot, param = key.partition(".")
+        if not (eq and dot and name and param):
+            raise EvalError(f"--param must look like DETECTOR.NAME=VALUE, got {item!r}")
+        try:
+            value = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw  # a bare string such as a mode name
+        out.setdefault(name, {})[param] = value
+    return out
+
+
+def resolve(names: list[str], params: Mapping[str, Mapping[str, Any]]) -> list[DetectorSpec]:
+    """Look detectors up by name and apply parameter overrides (all checked first)."""
+    unknown = [n for n in list(names) + list(params) if n not in DETECTORS]
+    if unknown:
+        raise EvalError(f"unknown detector {unknown[0]!r}; valid: {', '.join(sorted(DETECTORS))}")
+    stray = set(params) - set(names)
+    if stray:
+        raise EvalError(f"--param given for detector(s) not being run: {sorted(stray)}")
+    return [DETECTORS[n].with_params(params.get(n, {})) for n in names]

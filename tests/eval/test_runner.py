@@ -1,0 +1,53 @@
+from __future__ import annotations
+
+import pytest
+import torch
+
+from eval.detectors import DETECTORS
+from eval.runner import evaluate
+from torchsar._checks import InputValueError
+
+
+class ListDataset(torch.utils.data.Dataset):
+    def __init__(self, images):
+        self.images = images
+
+    def __len__(self):
+        return len(self.images)
+
+    def __getitem__(self, i):
+        img = self.images[i]
+        return {
+            "image": img,
+            "mask": torch.zeros_like(img, dtype=torch.bool),
+            "instances": torch.zeros_like(img, dtype=torch.int32),
+            "ignore": torch.zeros_like(img, dtype=torch.bool),
+            "meta": {"name": str(i)},
+        }
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -1.0])
+def test_bad_pixels_raise_typed_error(bad):
+    img = torch.ones(1, 32, 32)
+    img[0, 3, 3] = bad
+    with pytest.raises(InputValueError):
+        evaluate(ListDataset([img]), [DETECTORS["ca"]], progress=False)
+
+
+def test_results_do_not_depend_on_batch_size():
+    g = torch.Generator().manual_seed(0)
+    imgs = [torch.empty(1, 40, 40).exponential_(generator=g) for _ in range(5)]
+    imgs.insert(2, torch.empty(1, 30, 30).exponential_(generator=g))  # a size change mid-batch
+    runs = [
+        evaluate(ListDataset(imgs), [DETECTORS["ca"]], batch_size=b, progress=False)[0]
+        for b in (1, 4, 16)
+    ]
+    for r in runs[1:]:
+        assert r.pixels == runs[0].pixels
+        assert r.objects == runs[0].objects
+        assert torch.equal(r.roc.clutter_hits, runs[0].roc.clutter_hits)
+
+
+def test_empty_dataset():
+    (res,) = evaluate(ListDataset([]), [DETECTORS["ca"]], progress=False)
+    assert res.images == 0 and res.roc is None
