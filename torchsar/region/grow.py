@@ -177,7 +177,7 @@ def grow(
     limit = tau * beta
     free, stamp = grid.free, grid.stamp
     push, pop = heapq.heappush, heapq.heappop
-    cap = len(f) if budget is None else budget
+    cap = len(f) + 1 if budget is None else budget
     while heap and heap[0][0] <= limit:
         p = pop(heap)[1]
         region.append(p)
