@@ -45,11 +45,9 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int, device) ->
     rows, cols = idx // w, idx % w
     r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h)
     c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
-    mask = torch.zeros((r1 - r0, c1 - c0), dtype=torch.bool, device=device)
-    mask[torch.as_tensor(rows - r0, device=device), torch.as_tensor(cols - c0, device=device)] = (
-        True
-    )
-    return Crop(r0, r1, c0, c1, mask)
+    mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    mask[rows - r0, cols - c0] = True
+    return Crop(r0, r1, c0, c1, torch.from_numpy(mask).to(device))
 
 
 def dilate(mask: Tensor, radius: int) -> Tensor:

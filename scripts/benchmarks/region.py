@@ -1,0 +1,72 @@
+"""Benchmark cases: region-growing CFAR on speckled scenes with many extended targets.
+
+``ours`` is :func:`torchsar.region.region_cfar` as shipped (heap, then an exact compiled flood
+fill for large regions); ``reference`` is the same detector with the pure-Python heap only
+(``budget=None``), i.e. the literal priority-queue growth. Targets: 512x512 < 1.5 s and
+1024x1024 with ~50 targets < 5 s on one thread (the printed ``ours`` times).
+Run alone: ``PYTHONPATH=. python scripts/benchmarks/region.py``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from torchsar.region import region_cfar
+from torchsar.windows import box_sums
+
+
+def scene(size: int, n_targets: int, seed: int = 0) -> torch.Tensor:
+    """1-look speckle over a 6 dB clutter edge with rectangular targets of 30-120 px
+    (bright bodies with point scatterers), ``(1, 1, size, size)`` float32."""
+    rng = np.random.default_rng(seed)
+    clean = np.ones((size, size))
+    clean[:, size // 2 :] = 4.0
+    yy, xx = np.mgrid[:size, :size]
+    for _ in range(n_targets):
+        length, width, th = rng.uniform(30, 120), rng.uniform(10, 30), rng.uniform(0, np.pi)
+        cy, cx = rng.uniform(70, size - 70, size=2)
+        u = (yy - cy) * np.cos(th) + (xx - cx) * np.sin(th)
+        v = -(yy - cy) * np.sin(th) + (xx - cx) * np.cos(th)
+        body = (np.abs(u) < length / 2) & (np.abs(v) < width / 2)
+        clean[body] = clean[int(cy), int(cx)] * rng.uniform(4, 12)
+    img = clean * rng.exponential(1.0, size=clean.shape)
+    return torch.tensor(img, dtype=torch.float32)[None, None]
+
+
+def _box5(x: torch.Tensor) -> torch.Tensor:
+    """A stand-in despeckler (5x5 box mean) so the case measures the detector itself."""
+    return box_sums(x, 2, moments=1).mean().to(x.dtype)
+
+
+def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
+    out = []
+    for size, n in ((512, 12), (1024, 50)):
+        x = scene(size, n)
+        f = _box5(x)
+        opts = dict(despeckle=lambda _, f=f: f)
+        out.append(
+            (
+                f"region_cfar {size}x{size}, {n} targets (pure heap reference)",
+                lambda x=x, o=opts: region_cfar(x, **o),
+                lambda x=x, o=opts: region_cfar(x, budget=None, **o),
+            )
+        )
+    return out
+
+
+if __name__ == "__main__":
+    torch.set_num_threads(1)
+    for name, ours, ref in cases():
+        times = []
+        for fn in (ours, ref):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        print(
+            f"{name:<60s} ours {times[0]:7.2f} s  ref {times[1]:7.2f} s  "
+            f"{times[1] / times[0]:5.2f}x"
+        )
