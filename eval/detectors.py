@@ -42,6 +42,7 @@ DETECTORS: dict[str, DetectorSpec] = {
     for s in [
         DetectorSpec("ca", ts.cfar.ca, WINDOW),
         DetectorSpec("two_parameter", ts.cfar.two_parameter, WINDOW),
+        DetectorSpec("region", ts.region.region_cfar, {}),
     ]
 }
 

@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run"]
+COMMANDS = ["run", "compare-region"]
 
 
 def load(name: str):
