@@ -108,8 +108,17 @@ class TestSizeLimits:
         assert row.reason == "too_large" and row.statistic == -np.inf and row.size == 9
 
     def test_too_small(self):
-        row = _row_of(self._case(min_size=10), (4, 4))
+        r = self._case(min_size=10)
+        row = _row_of(r, (4, 4))
         assert row.reason == "too_small" and not row.accepted
+        assert not r.detection.mask.any() and row.statistic > 0.25  # its test statistic stays
+
+    def test_min_size_counts_touching_regions(self):
+        x = _textured(12, 14)
+        x[..., 4:8, 2:5] = 100.0
+        x[..., 4:8, 5:8] = 50.0  # two touching regions of 12 pixels each: one object of 24
+        r = region_search(x, preset="paper", despeckle=None, guard=1, min_size=20)
+        assert int(r.detection.mask.sum()) == 24
 
     def test_within_limits(self):
         assert _row_of(self._case(min_size=9, max_size=9), (4, 4)).accepted

@@ -38,6 +38,7 @@ class _ImageState:
         self.stat = np.full(h * w, -np.inf)
         self.region_id = np.zeros(h * w, dtype=np.int32)
         self.table = RegionTable()
+        self.k = p.k
 
 
 def _statistic(mu_t: float, mu_c: float, sigma_c: float) -> float:
@@ -55,10 +56,8 @@ def _test_region(
     h, w = st.shape
     seed = (int(idx[0]) // w, int(idx[0]) % w)
     nan = float("nan")
-    too_large = p.max_size is not None and idx.size > p.max_size
-    if too_large or idx.size < p.min_size:
-        reason = "too_large" if too_large else "too_small"
-        return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, reason)
+    if p.max_size is not None and idx.size > p.max_size:
+        return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, "too_large")
     crop = crop_around(idx, (h, w), p.guard + p.background, "cpu")
     raw, target_img, low = imgs
     rs = ring_stats(crop, raw, target_img, low, st.taken, p.guard, p.background)
@@ -92,9 +91,31 @@ def _visit(st: _ImageState, seed: int, imgs: tuple[Tensor, ...], p: RegionParams
     st.table.rows.append(row)
 
 
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+def _drop_small_objects(st: _ImageState, min_size: int) -> None:
+    """Reject accepted regions whose object (the 8-connected union of touching accepted
+    regions) has fewer than ``min_size`` pixels: statistic ``-inf``, reason "too_small"."""
+    if min_size <= 1:
+        return
+    h, w = st.shape
+    lab, n = ndimage.label((st.stat > st.k).reshape(h, w), structure=_EIGHT)
+    if n == 0:
+        return
+    small = np.flatnonzero(np.bincount(lab.reshape(-1), minlength=n + 1)[1:] < min_size) + 1
+    drop = np.isin(lab.reshape(-1), small)
+    tags = np.unique(st.region_id[drop])
+    st.stat[drop] = -np.inf
+    for t in tags[tags > 0]:
+        r = st.table.rows[t - 1]
+        st.table.rows[t - 1] = RegionRow(**{**r.__dict__, "accepted": False, "reason": "too_small"})
+
+
 def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
     """Region ids of the accepted regions: 1..n in acceptance order, or, with ``merge = d``,
-    one id per group of accepted regions closer than ``d`` pixels (0: touching)."""
+    one id per group of accepted regions closer than ``d`` pixels (0: touching, including
+    diagonally, like the evaluator's 8-connected objects)."""
     h, w = st.shape
     if merge is None:
         tags = np.array([i + 1 for i, r in enumerate(st.table.rows) if r.accepted], dtype=np.int64)
@@ -103,7 +124,7 @@ def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
         return np.where(mask, lut[st.region_id], 0).reshape(h, w)
     m2 = mask.reshape(h, w)
     grown = ndimage.binary_dilation(m2, np.ones((2 * merge + 1,) * 2)) if merge else m2
-    lab, _ = ndimage.label(grown)
+    lab, _ = ndimage.label(grown, structure=_EIGHT)
     return np.where(m2, lab, 0)
 
 
@@ -129,6 +150,7 @@ def detect_image(
     for s in seeds.tolist():
         if not st.covered[s]:
             _visit(st, s, imgs, p)
+    _drop_small_objects(st, p.min_size)
     stat = st.stat.astype(dtype)
     mask = stat > dtype.type(p.k)
     labels = _labels(st, mask, p.merge)

@@ -166,8 +166,13 @@ def region_cfar(
       gives one label to accepted regions closer than ``merge`` pixels (0 = touching).
 
     Fixes for the failure modes on speckle (all off in ``preset="paper"``): ``max_size``
-    (regions reaching it are rejected as clutter floods, "too_large"), ``min_size`` (regions
-    smaller are rejected, "too_small"), ``merge`` (fragments of one target share a label).
+    (regions larger are rejected as clutter floods, "too_large"; a target cannot be larger
+    than the largest object of interest), ``min_size`` (after all seeds, accepted regions
+    whose object — the 8-connected union of touching accepted regions — is smaller are
+    rejected, "too_small": single speckle peaks pass the region test as easily as a pixel
+    CFAR with threshold ``k`` does, but a target covers many resolution cells; applying the
+    rule to objects, not regions, keeps the small bright parts of a large target), ``merge``
+    (touching accepted regions share one label).
 
     Statistic: every tested region's ``(mu_T - mu_C) / sigma_C`` is painted over its
     pixels; untested regions (too large/small, too little background) and pixels outside
@@ -189,7 +194,8 @@ def region_cfar(
             (``"enhanced_frost"``), a callable ``x -> F`` or None (grow on ``x``).
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
         **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
-            ``blocking``, ``max_size``, ``min_size``, ``merge`` (see above).
+            ``blocking``, ``max_size``, ``min_size``, ``merge`` (see above), ``budget``
+            (heap pixels before the exact flood-fill finish; None = heap only).
 
     Returns:
         :class:`~torchsar.cfar.Detection` with ``threshold = k`` and ``labels`` (0 = none,
