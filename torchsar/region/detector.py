@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 from scipy import ndimage
 from torch import Tensor
 
@@ -34,7 +33,7 @@ class _ImageState:
         self.grid = Grid.new(f.numpy(), p.connectivity)
         self.free = np.frombuffer(self.grid.free, dtype=np.uint8)
         self.covered = np.zeros(h * w, dtype=bool)
-        self.taken = torch.zeros((h, w), dtype=torch.bool)
+        self.taken = np.zeros((h, w), dtype=bool)
         self.stat = np.full(h * w, -np.inf)
         self.region_id = np.zeros(h * w, dtype=np.int32)
         self.table = RegionTable()
@@ -50,7 +49,7 @@ def _statistic(mu_t: float, mu_c: float, sigma_c: float) -> float:
 
 
 def _test_region(
-    st: _ImageState, idx: np.ndarray, imgs: tuple[Tensor, ...], p: RegionParams
+    st: _ImageState, idx: np.ndarray, imgs: tuple[np.ndarray, ...], p: RegionParams
 ) -> RegionRow:
     """Steps d–i for one grown region; returns its table row (label filled in later)."""
     h, w = st.shape
@@ -74,7 +73,7 @@ def _test_region(
     )  # fmt: skip
 
 
-def _visit(st: _ImageState, seed: int, imgs: tuple[Tensor, ...], p: RegionParams) -> None:
+def _visit(st: _ImageState, seed: int, imgs: tuple[np.ndarray, ...], p: RegionParams) -> None:
     """Grow, test and record the region of one seed (steps c–i)."""
     tag = len(st.table) + 1
     idx = grow(st.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget)
@@ -83,7 +82,7 @@ def _visit(st: _ImageState, seed: int, imgs: tuple[Tensor, ...], p: RegionParams
         st.free[idx] = 0
     row = _test_region(st, idx, imgs, p)
     if row.accepted:
-        st.taken.view(-1)[torch.from_numpy(idx)] = True
+        st.taken.reshape(-1)[idx] = True
         st.free[idx] = 0
     better = st.stat[idx] < row.statistic
     st.stat[idx[better]] = row.statistic
@@ -146,7 +145,7 @@ def detect_image(
     """
     st = _ImageState(f, p)
     seeds = seed_order(f, local_maxima(f[None, None], p.seed_window)[0, 0])
-    imgs = (raw, target_img, low)
+    imgs = (raw.numpy(), target_img.numpy(), low.numpy())
     for s in seeds.tolist():
         if not st.covered[s]:
             _visit(st, s, imgs, p)

@@ -28,8 +28,8 @@ class Crop:
     c1: int
     region: Tensor  # bool (r1 - r0, c1 - c0)
 
-    def cut(self, img: Tensor) -> Tensor:
-        """The same rectangle of an ``(H, W)`` image (a view)."""
+    def cut(self, img):  # Tensor | np.ndarray -> the same type
+        """The same rectangle of an ``(H, W)`` image or array (a view)."""
         return img[self.r0 : self.r1, self.c0 : self.c1]
 
 
@@ -94,10 +94,10 @@ class RingStats:
 
 def ring_stats(
     crop: Crop,
-    raw: Tensor,
-    target_img: Tensor,
-    lowpass: Tensor,
-    taken: Tensor,
+    raw: np.ndarray,
+    target_img: np.ndarray,
+    lowpass: np.ndarray,
+    taken: np.ndarray,
     guard: int,
     background: int,
 ) -> RingStats:
@@ -105,21 +105,22 @@ def ring_stats(
 
     ``mu_t`` is the mean of ``target_img`` over the region. The background ring C loses the
     pixels whose low-pass value is ``>= mu_t`` and the pixels in ``taken`` (already detected
-    targets); ``mu_c`` and ``sigma_c`` are taken from ``raw`` over what remains.
+    targets); ``mu_c`` and ``sigma_c`` are taken from ``raw`` over what remains. The rings
+    come from tensor dilations; the few reductions on the crop use numpy views of the same
+    memory (per-call overhead matters here: there is one call per grown region).
 
     Args:
         crop: the region and its crop rectangle.
-        raw, target_img, lowpass, taken: full ``(H, W)`` images (``taken`` bool).
+        raw, target_img, lowpass, taken: full ``(H, W)`` CPU arrays (``taken`` bool).
         guard, background: ring widths R_G and R_C.
     """
-    _, ring = ring_masks(crop.region, guard, background)
-    mu_t = float(crop.cut(target_img)[crop.region].mean())
+    _, ring_t = ring_masks(crop.region, guard, background)
+    ring = ring_t.cpu().numpy()
+    region = crop.region.cpu().numpy()
+    mu_t = float(crop.cut(target_img)[region].mean())
     ring &= crop.cut(lowpass) < mu_t
     ring &= ~crop.cut(taken)
     vals = crop.cut(raw)[ring]
-    n = int(vals.numel())
-    if n == 0:
+    if vals.size == 0:
         return RingStats(mu_t, 0, float("nan"), float("nan"))
-    mu_c = float(vals.mean())
-    sigma_c = float((vals - mu_c).square().mean().sqrt())
-    return RingStats(mu_t, n, mu_c, sigma_c)
+    return RingStats(mu_t, int(vals.size), float(vals.mean()), float(vals.std()))
