@@ -57,7 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mstar-n", type=int, default=None, help="use only the first N chips")
     p.add_argument("--guards", type=_ints, default=[2, 6, 16, 32], help="guard sweep")
     p.add_argument("--trains", type=_ints, default=[2, 6, 12], help="train sweep")
-    p.add_argument("--pfas", type=_floats, default=[1e-2, 1e-3, 1e-4, 1e-5, 1e-6])
+    p.add_argument("--pfas", type=_floats, default=[1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
     p.add_argument("--batch-size", type=int, default=4)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)

@@ -1,0 +1,35 @@
+"""End-to-end test of ``torchsar-eval compare-region`` on tiny settings."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+import torchsar as ts
+from eval.cli import main
+
+needs = pytest.mark.skipif(
+    not (hasattr(ts, "simulate") and hasattr(ts, "speckle")),
+    reason="needs torchsar.simulate and torchsar.speckle",
+)
+
+
+@needs
+def test_compare_region_tiny(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(
+        [
+            "compare-region", "--out", str(out), "--n", "1", "--n-tune", "1",
+            "--mstar", str(tmp_path / "absent"), "--guards", "4", "--trains", "4",
+            "--pfas", "1e-4", "--no-progress",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    summary = pd.read_csv(out / "summary.csv")
+    assert {"region-paper", "region", "ca", "two_parameter"} <= set(summary.detector)
+    assert set(summary.dataset) == {"sim-scenes"}
+    chosen = pd.read_csv(out / "chosen.csv")
+    assert set(chosen.guard) == {4}
+    assert (out / "panel_sim-scenes.png").stat().st_size > 0
+    text = capsys.readouterr().out
+    assert "not found: skipped" in text
