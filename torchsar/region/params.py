@@ -51,7 +51,7 @@ class RegionParams:
 
 PRESETS: dict[str, RegionParams] = {
     "paper": RegionParams(),
-    "torchsar": RegionParams(k=0.25, max_size=20000, min_size=1, merge=0),
+    "torchsar": RegionParams(tau=0.4, k=2.0, max_size=10_000, min_size=50, merge=0),
 }
 
 

@@ -105,12 +105,11 @@ def region_search(x: Tensor, *, preset: str = "torchsar", **options: object) -> 
     Takes the same keyword options as :func:`region_cfar`.
 
     Example:
-        >>> x = torch.ones(1, 1, 24, 24); x[0, 0, 10:13, 10:13] = 10.0
+        >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10:18, 10:18] = 10.0
         >>> x[0, 0, ::2, ::2] += 0.1  # mild clutter texture: grown into one flat region
         >>> r = region_search(x, despeckle=None)
-        >>> row = [t for t in r.tables[0].rows if t.accepted][0]
-        >>> row.seed, row.size
-        ((10, 10), 9)
+        >>> [(t.seed, t.size, t.accepted, t.reason) for t in r.tables[0].rows]
+        [((10, 10), 64, True, ''), ((0, 0), 960, False, 'few_background')]
     """
     check_image(x, "x")
     p = resolve_params(preset, **options)
@@ -214,11 +213,11 @@ def region_cfar(
         IEEE 19th Signal Processing and Communications Applications Conference (SIU), 2011.
 
     Example:
-        >>> x = torch.ones(1, 1, 24, 24); x[0, 0, 10:13, 10:13] = 10.0
+        >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10:18, 10:18] = 10.0
         >>> x[0, 0, ::2, ::2] += 0.1  # mild clutter texture: grown into one flat region
         >>> d = region_cfar(x, despeckle=None)
         >>> int(d.mask.sum()), int(d.labels.max())
-        (9, 1)
+        (64, 1)
     """
     given = {
         name: value
