@@ -50,8 +50,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__.splitlines()[0],
     )
     p.add_argument("--out", type=Path, default=None, help="output folder")
-    p.add_argument("--n", type=int, default=6, help="simulated evaluation scenes")
-    p.add_argument("--n-tune", type=int, default=3, help="simulated tuning scenes")
+    p.add_argument(
+        "--sim",
+        action="append",
+        choices=["sim-scenes", "sim-chips"],
+        help="simulated dataset (repeatable; default: sim-scenes)",
+    )
+    p.add_argument("--n", type=int, default=6, help="simulated evaluation images")
+    p.add_argument("--n-tune", type=int, default=3, help="simulated tuning images")
     p.add_argument("--seed", type=int, default=0, help="seed of the evaluation scenes")
     p.add_argument("--mstar", type=Path, default=MSTAR, help="MSTAR SARBake folder")
     p.add_argument("--mstar-n", type=int, default=None, help="use only the first N chips")
@@ -66,10 +72,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _datasets(args: argparse.Namespace, notes: list[str]) -> dict[str, tuple[object, object]]:
     """``{name: (tuning dataset, evaluation dataset)}``."""
     out = {
-        "sim-scenes": (
-            make_dataset("sim-scenes", n=args.n_tune, seed=args.seed + 1000),
-            make_dataset("sim-scenes", n=args.n, seed=args.seed),
+        sim: (
+            make_dataset(sim, n=args.n_tune, seed=args.seed + 1000),
+            make_dataset(sim, n=args.n, seed=args.seed),
         )
+        for sim in args.sim or ["sim-scenes"]
     }
     if args.mstar.is_dir():
         ds = make_dataset(f"folder:{args.mstar}", n=args.mstar_n)

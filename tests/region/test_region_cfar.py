@@ -109,6 +109,14 @@ class TestContract:
         b = region_cfar(xt.contiguous(), despeckle=None)
         assert torch.equal(a.statistic, b.statistic)
 
+    @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+    def test_device_independent(self):
+        x = _speckle_scene(9)
+        a = region_cfar(x, despeckle=None)
+        b = region_cfar(x.cuda(), despeckle=None)
+        assert b.statistic.device.type == "cuda"
+        assert torch.equal(a.statistic, b.statistic.cpu()) and torch.equal(a.labels, b.labels.cpu())
+
     def test_deterministic(self):
         x = _speckle_scene(8)
         a, b = region_cfar(x, despeckle=_box3), region_cfar(x, despeckle=_box3)
