@@ -153,3 +153,24 @@ def test_paper_preset_is_the_paper():
     assert p.despeckle == "enhanced_frost" and p.connectivity == 4 and p.seed_window == 5
     assert (p.max_size, p.min_size, p.merge) == (None, 1, None)
     assert p == RegionParams()
+
+
+class TestFillHoles:
+    def _case(self, fill):
+        x = _textured(20, 20)
+        x[..., 4:14, 4:14] = 9.0
+        x[..., 4:14:2, 4:14] = 11.0  # a target body (rows 11 / 9: one region)
+        x[..., 8:10, 8:10] = 16.0  # a bright spot inside: its ring lies on the target itself
+        return region_search(
+            x, preset="paper", despeckle=None, guard=1, background=1, k=10.0, fill_holes=fill
+        )
+
+    def test_enclosed_rejected_region_joins_the_target(self):
+        plain, filled = self._case(False), self._case(True)
+        spot = _row_of(plain, (8, 8))
+        assert not spot.accepted  # background = the target body: z = 6 <= k
+        assert not plain.detection.mask[0, 0, 8:10, 8:10].any()
+        assert filled.detection.mask[0, 0, 4:14, 4:14].all()
+        body = _row_of(filled, (4, 4))
+        assert float(filled.detection.statistic[0, 0, 8, 8]) == pytest.approx(body.statistic)
+        assert torch.equal(filled.detection.labels > 0, filled.detection.mask)

@@ -111,6 +111,24 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
         st.table.rows[t - 1] = RegionRow(**{**r.__dict__, "accepted": False, "reason": "too_small"})
 
 
+def _fill_holes(st: _ImageState) -> None:
+    """Give the pixels enclosed by accepted regions (holes, e.g. bright scatterers whose ring
+    lay on the target itself and were rejected) to an adjacent accepted region: its statistic
+    and its id. The table keeps each region's own decision."""
+    h, w = st.shape
+    mask = (st.stat > st.k).reshape(h, w)
+    holes = ndimage.binary_fill_holes(mask) & ~mask
+    lab, n = ndimage.label(holes)
+    if n == 0:
+        return
+    acc = np.where(mask, st.region_id.reshape(h, w), 0)
+    owner = ndimage.maximum(ndimage.maximum_filter(acc, 3), labels=lab, index=np.arange(1, n + 1))
+    owner = np.asarray(owner, dtype=np.int64)[lab[holes] - 1]
+    flat = np.flatnonzero(holes.reshape(-1))
+    st.region_id[flat] = owner
+    st.stat[flat] = np.array([st.table.rows[t - 1].statistic for t in owner.tolist()])
+
+
 def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
     """Region ids of the accepted regions: 1..n in acceptance order, or, with ``merge = d``,
     one id per group of accepted regions closer than ``d`` pixels (0: touching, including
@@ -149,6 +167,8 @@ def detect_image(
     for s in seeds.tolist():
         if not st.covered[s]:
             _visit(st, s, imgs, p)
+    if p.fill_holes:
+        _fill_holes(st)
     _drop_small_objects(st, p.min_size)
     stat = st.stat.astype(dtype)
     mask = stat > dtype.type(p.k)

@@ -46,12 +46,15 @@ class RegionParams:
     max_size: int | None = None
     min_size: int = 1
     merge: int | None = None
+    fill_holes: bool = False
     budget: int | None = 64
 
 
 PRESETS: dict[str, RegionParams] = {
     "paper": RegionParams(),
-    "torchsar": RegionParams(tau=0.4, k=2.0, max_size=10_000, min_size=50, merge=0),
+    "torchsar": RegionParams(
+        tau=0.4, k=2.0, max_size=10_000, min_size=50, merge=0, fill_holes=True
+    ),
 }
 
 
@@ -78,6 +81,12 @@ def _check_k(value: object) -> float:
     return float(value)
 
 
+def _check_bool(value: object, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise OptionError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
 def _validate(p: RegionParams) -> RegionParams:
     max_size = None if p.max_size is None else check_int(p.max_size, "max_size", minimum=1)
     merge = None if p.merge is None else check_int(p.merge, "merge", minimum=0)
@@ -100,6 +109,7 @@ def _validate(p: RegionParams) -> RegionParams:
         max_size=max_size,
         min_size=check_int(p.min_size, "min_size", minimum=1),
         merge=merge,
+        fill_holes=_check_bool(p.fill_holes, "fill_holes"),
         budget=None if p.budget is None else check_int(p.budget, "budget", minimum=1),
     )
 

@@ -175,8 +175,11 @@ def region_cfar(
     "too_small": single speckle peaks pass the region test as easily as a pixel CFAR with
     threshold ``k`` does, while a target covers many resolution cells; applying the rule to
     objects keeps the small bright parts of a large target), a larger ``k``, and a wider
-    ``tau`` (fewer, larger regions per target: less fragmentation). ``merge`` gives touching
-    accepted regions one label.
+    ``tau`` (fewer, larger regions per target: less fragmentation), and ``fill_holes``
+    (pixels enclosed by accepted regions join an adjacent one, with its statistic and id:
+    a bright spot inside a target is grown first, tested against a ring lying on the target
+    itself, rejected, and would otherwise leave a hole). ``merge`` gives touching accepted
+    regions one label.
 
     Presets (options not passed explicitly come from the preset):
 
@@ -188,6 +191,7 @@ def region_cfar(
     min_size      1        50
     max_size      None     10000
     merge         None     0
+    fill_holes    False    True
     ============  =======  ==========
 
     Every other option is the same in both (the paper's values and the readings above).
@@ -215,7 +219,8 @@ def region_cfar(
             (``"enhanced_frost"``), a callable ``x -> F`` or None (grow on ``x``).
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
         **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
-            ``blocking``, ``max_size``, ``min_size``, ``merge`` (see above), ``budget``
+            ``blocking``, ``max_size``, ``min_size``, ``merge``, ``fill_holes`` (see above),
+            ``budget``
             (heap pixels before the exact flood-fill finish; None = heap only).
 
     Returns:
