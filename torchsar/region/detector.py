@@ -57,7 +57,7 @@ def _test_region(
     nan = float("nan")
     if p.max_size is not None and idx.size > p.max_size:
         return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, "too_large")
-    crop = crop_around(idx, (h, w), p.guard + p.background, "cpu")
+    crop = crop_around(idx, (h, w), p.guard + p.background)
     raw, target_img, low = imgs
     rs = ring_stats(crop, raw, target_img, low, st.taken, p.guard, p.background)
     if rs.n_background < p.min_background:

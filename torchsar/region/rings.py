@@ -4,6 +4,11 @@ All on a crop: the region's bounding box widened by ``guard + background`` (clip
 image), never the whole image per region. Dilation uses a square structuring element
 (Chebyshev distance), the region analogue of the square guard box of window CFARs
 (DESIGN §4.1); dilating by ``guard`` then by ``background`` equals one dilation by their sum.
+
+This runs once per grown region inside the CPU loop, so it works on numpy views and uses
+:func:`scipy.ndimage.maximum_filter` (exact, separable): on 20x20 / 60x60 / 300x300 crops it
+took 0.25 / 0.31 / 6.2 ms for both dilations against 0.58 / 2.0 / 59 ms with
+``torch.nn.functional.max_pool2d`` (1 thread), the per-region cost that dominated the run.
 """
 
 from __future__ import annotations
@@ -11,9 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
-import torch.nn.functional as nnf
-from torch import Tensor
+from scipy import ndimage
 
 __all__ = ["Crop", "RingStats", "crop_around", "dilate", "ring_masks", "ring_stats"]
 
@@ -26,18 +29,18 @@ class Crop:
     r1: int
     c0: int
     c1: int
-    region: Tensor  # bool (r1 - r0, c1 - c0)
+    region: np.ndarray  # bool (r1 - r0, c1 - c0)
 
-    def cut(self, img):  # Tensor | np.ndarray -> the same type
-        """The same rectangle of an ``(H, W)`` image or array (a view)."""
+    def cut(self, img: np.ndarray) -> np.ndarray:
+        """The same rectangle of an ``(H, W)`` array (a view)."""
         return img[self.r0 : self.r1, self.c0 : self.c1]
 
 
-def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int, device) -> Crop:
+def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
     """The bounding box of flat indices ``idx`` widened by ``margin``, clipped to ``shape``.
 
     Example:
-        >>> c = crop_around(np.array([5]), (4, 4), 1, "cpu")
+        >>> c = crop_around(np.array([5]), (4, 4), 1)
         >>> (c.r0, c.r1, c.c0, c.c1), c.region.sum().item()
         ((0, 3, 0, 3), 1)
     """
@@ -47,31 +50,28 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int, device) ->
     c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
     mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
     mask[rows - r0, cols - c0] = True
-    return Crop(r0, r1, c0, c1, torch.from_numpy(mask).to(device))
+    return Crop(r0, r1, c0, c1, mask)
 
 
-def dilate(mask: Tensor, radius: int) -> Tensor:
+def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     """Dilate a bool ``(h, w)`` mask by a ``(2 radius + 1)^2`` square (outside = False).
 
     Example:
-        >>> m = torch.zeros(5, 5, dtype=torch.bool); m[2, 2] = True
+        >>> m = np.zeros((5, 5), dtype=bool); m[2, 2] = True
         >>> int(dilate(m, 1).sum())
         9
     """
     if radius == 0:
-        return mask.clone()
-    k = 2 * radius + 1
-    m = mask.to(torch.float32)[None, None]
-    m = nnf.max_pool2d(m, (1, k), stride=1, padding=(0, radius))  # separable: rows, then
-    return nnf.max_pool2d(m, (k, 1), stride=1, padding=(radius, 0))[0, 0] > 0  # columns
+        return mask.copy()
+    return ndimage.maximum_filter(mask, size=2 * radius + 1, mode="constant", cval=False)
 
 
-def ring_masks(region: Tensor, guard: int, background: int) -> tuple[Tensor, Tensor]:
+def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndarray, np.ndarray]:
     """Guard area K (region dilated by ``guard``, region included) and background ring C
     (K dilated by ``background``, minus K) — seed steps e and f.
 
     Example:
-        >>> t = torch.zeros(9, 9, dtype=torch.bool); t[4, 4] = True
+        >>> t = np.zeros((9, 9), dtype=bool); t[4, 4] = True
         >>> k, c = ring_masks(t, 1, 2)
         >>> int(k.sum()), int(c.sum())
         (9, 40)
@@ -105,18 +105,15 @@ def ring_stats(
 
     ``mu_t`` is the mean of ``target_img`` over the region. The background ring C loses the
     pixels whose low-pass value is ``>= mu_t`` and the pixels in ``taken`` (already detected
-    targets); ``mu_c`` and ``sigma_c`` are taken from ``raw`` over what remains. The rings
-    come from tensor dilations; the few reductions on the crop use numpy views of the same
-    memory (per-call overhead matters here: there is one call per grown region).
+    targets); ``mu_c`` and ``sigma_c`` are taken from ``raw`` over what remains.
 
     Args:
         crop: the region and its crop rectangle.
         raw, target_img, lowpass, taken: full ``(H, W)`` CPU arrays (``taken`` bool).
         guard, background: ring widths R_G and R_C.
     """
-    _, ring_t = ring_masks(crop.region, guard, background)
-    ring = ring_t.cpu().numpy()
-    region = crop.region.cpu().numpy()
+    _, ring = ring_masks(crop.region, guard, background)
+    region = crop.region
     mu_t = float(crop.cut(target_img)[region].mean())
     ring &= crop.cut(lowpass) < mu_t
     ring &= ~crop.cut(taken)
