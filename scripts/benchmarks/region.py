@@ -19,22 +19,33 @@ from torchsar.region import region_cfar
 from torchsar.windows import box_sums
 
 
-def scene(size: int, n_targets: int, seed: int = 0) -> torch.Tensor:
-    """1-look speckle over a 6 dB clutter edge with rectangular targets of 30-120 px
-    (bright bodies with point scatterers), ``(1, 1, size, size)`` float32."""
+def scene(size: int, n_targets: int, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """1-look speckle over a 6 dB clutter edge with rectangular targets of 30-120 px (bright
+    bodies), every third one with a parallel twin 3-8 px away (a tight group).
+
+    Returns the intensity ``(1, 1, size, size)`` float32 and the instance ids (int32).
+    """
     rng = np.random.default_rng(seed)
     clean = np.ones((size, size))
     clean[:, size // 2 :] = 4.0
+    inst = np.zeros((size, size), dtype=np.int32)
     yy, xx = np.mgrid[:size, :size]
-    for _ in range(n_targets):
+    k = 0
+    for i in range(n_targets):
         length, width, th = rng.uniform(30, 120), rng.uniform(10, 30), rng.uniform(0, np.pi)
         cy, cx = rng.uniform(70, size - 70, size=2)
-        u = (yy - cy) * np.cos(th) + (xx - cx) * np.sin(th)
-        v = -(yy - cy) * np.sin(th) + (xx - cx) * np.cos(th)
-        body = (np.abs(u) < length / 2) & (np.abs(v) < width / 2)
-        clean[body] = clean[int(cy), int(cx)] * rng.uniform(4, 12)
+        gain = rng.uniform(4, 12)
+        shifts = [0.0] if i % 3 else [0.0, width + rng.uniform(3, 8)]
+        for off in shifts:
+            u = (yy - cy) * np.cos(th) + (xx - cx) * np.sin(th)
+            v = -(yy - cy) * np.sin(th) + (xx - cx) * np.cos(th) - off
+            body = (np.abs(u) < length / 2) & (np.abs(v) < width / 2) & (inst == 0)
+            k += 1
+            inst[body] = k
+            clean[body] = clean[int(cy), int(cx)] * gain
     img = clean * rng.exponential(1.0, size=clean.shape)
-    return torch.tensor(img, dtype=torch.float32)[None, None]
+    as_t = torch.from_numpy
+    return as_t(img).float()[None, None], as_t(inst)[None, None]
 
 
 def _box5(x: torch.Tensor) -> torch.Tensor:
@@ -45,7 +56,7 @@ def _box5(x: torch.Tensor) -> torch.Tensor:
 def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     out = []
     for size, n in ((512, 12), (1024, 50)):
-        x = scene(size, n)
+        x, _ = scene(size, n)
         f = _box5(x)
         opts = dict(despeckle=lambda _, f=f: f)
         out.append(
