@@ -26,7 +26,7 @@ from eval.runner import batches, evaluate
 from eval.tables import markdown, summary_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "benchmarks"))
-from region import scene  # noqa: E402  (the benchmark's scene generator)
+from region import scene  # the benchmark's scene generator
 
 
 class BenchScenes(torch.utils.data.Dataset):
