@@ -91,6 +91,12 @@ class TestContract:
             assert torch.equal(one.statistic, d.statistic[i : i + 1])
             assert torch.equal(one.labels, d.labels[i : i + 1])
 
+    def test_workers_give_the_same_result(self):
+        xs = torch.cat([_speckle_scene(s) for s in range(3)])
+        a = region_cfar(xs, despeckle=_box3)
+        b = region_cfar(xs, despeckle=_box3, workers=2)
+        assert torch.equal(a.statistic, b.statistic) and torch.equal(a.labels, b.labels)
+
     def test_channels_are_independent_images(self):
         x = torch.cat([_speckle_scene(5), _speckle_scene(6)], dim=1)
         d = region_cfar(x, despeckle=None)

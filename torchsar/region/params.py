@@ -48,6 +48,7 @@ class RegionParams:
     merge: int | None = None
     fill_holes: bool = False
     budget: int | None = 64
+    workers: int = 1
 
 
 PRESETS: dict[str, RegionParams] = {
@@ -111,6 +112,7 @@ def _validate(p: RegionParams) -> RegionParams:
         merge=merge,
         fill_holes=_check_bool(p.fill_holes, "fill_holes"),
         budget=None if p.budget is None else check_int(p.budget, "budget", minimum=1),
+        workers=check_int(p.workers, "workers", minimum=1),
     )
 
 

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -79,6 +81,24 @@ def _lowpass(raw: Tensor, f: Tensor, how: str | int | None) -> Tensor:
     return box_sums(raw, int(how) // 2, moments=1).mean()
 
 
+def _detect(args: tuple) -> tuple[np.ndarray, np.ndarray, RegionTable]:
+    (raw, f, target, low), p, np_dtype = args
+    return detect_image(raw, f, target, low, p, np_dtype)
+
+
+def _map_images(planes: list[tuple[Tensor, ...]], p: RegionParams, np_dtype: np.dtype):
+    """Run every image plane, in order; with ``p.workers > 1`` in a process pool (the
+    result does not depend on the number of workers: images are independent)."""
+    jobs = [(pl, p, np_dtype) for pl in planes]
+    if p.workers <= 1 or len(jobs) <= 1:
+        return [_detect(j) for j in jobs]
+    ctx = multiprocessing.get_context(
+        "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    )
+    with ProcessPoolExecutor(max_workers=min(p.workers, len(jobs)), mp_context=ctx) as pool:
+        return list(pool.map(_detect, jobs))
+
+
 def _run(x: Tensor, p: RegionParams) -> tuple[Detection, list[RegionTable]]:
     dtype = float_dtype(x.dtype)
     np_dtype = np.dtype("float64" if dtype == torch.float64 else "float32")
@@ -88,11 +108,12 @@ def _run(x: Tensor, p: RegionParams) -> tuple[Detection, list[RegionTable]]:
     tables: list[RegionTable] = []
     if x.numel():
         raw, f, target, low = _images(x, p)
-        for i in range(b):
-            for j in range(c):
-                s, lab, tab = detect_image(raw[i, j], f[i, j], target[i, j], low[i, j], p, np_dtype)
-                stat[i, j], labels[i, j] = s, lab
-                tables.append(tab)
+        planes = [(raw[i, j], f[i, j], target[i, j], low[i, j]) for i in range(b) for j in range(c)]
+        for n, (s, lab, tab) in enumerate(
+            _map_images(planes, replace(p, despeckle=None), np_dtype)
+        ):
+            stat[n // c, n % c], labels[n // c, n % c] = s, lab
+            tables.append(tab)
     st = torch.from_numpy(stat).to(x.device)
     thr = torch.tensor(p.k, dtype=dtype, device=x.device)
     det = Detection(st > thr, st, thr, torch.from_numpy(labels).to(x.device))
@@ -220,7 +241,8 @@ def region_cfar(
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
         **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
             ``blocking``, ``max_size``, ``min_size``, ``merge``, ``fill_holes`` (see above),
-            ``budget``
+            ``budget``, ``workers`` (1; > 1 runs the images of a batch in a process pool;
+            the result is the same)
             (heap pixels before the exact flood-fill finish; None = heap only).
 
     Returns:
