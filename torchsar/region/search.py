@@ -221,7 +221,8 @@ def region_cfar(
     4.5 m², 10000 px is 900 m²), scale them with the pixel area.
 
     Statistic: every tested region's ``(mu_T - mu_C) / sigma_C`` is painted over its
-    pixels; untested regions (too large/small, too little background) and pixels outside
+    pixels (filled holes take their neighbour's); regions rejected before or regardless of
+    the test (too large, too little background, too small an object) and pixels outside
     every region are ``-inf``. So ``mask == statistic > k`` is exactly the union of the
     accepted regions, and sweeping a threshold over ``statistic`` traces an ROC in which
     a region is detected as a whole. (The censoring of earlier targets from later
@@ -241,9 +242,9 @@ def region_cfar(
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
         **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
             ``blocking``, ``max_size``, ``min_size``, ``merge``, ``fill_holes`` (see above),
-            ``budget``, ``workers`` (1; > 1 runs the images of a batch in a process pool;
-            the result is the same)
-            (heap pixels before the exact flood-fill finish; None = heap only).
+            ``budget`` (64: pixels grown by the Python heap before the exact flood-fill
+            finish; None = heap only), ``workers`` (1; > 1 runs the images of a batch in a
+            process pool; same result).
 
     Returns:
         :class:`~torchsar.cfar.Detection` with ``threshold = k`` and ``labels`` (0 = none,
