@@ -36,6 +36,7 @@ __all__ = [
     "check_odd",
     "check_positive",
     "check_probability",
+    "check_range",
     "check_same_shape",
     "check_window_fits",
     "float_dtype",
@@ -234,3 +235,23 @@ def check_window_fits(x: Tensor, extent: int | tuple[int, int], name: str = "win
             f"{name} window of {eh}x{ew} pixels is larger than the image ({h}x{w}); "
             f"use a smaller window or a larger image"
         )
+
+
+def check_range(
+    value: object, name: str, *, minimum: float | None = None, maximum: float | None = None
+) -> tuple[float, float]:
+    """Validate a ``(low, high)`` pair of finite reals with ``low <= high`` inside the bounds."""
+    ok = isinstance(value, tuple | list) and len(value) == 2
+    ok = ok and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    if ok:
+        low, high = float(value[0]), float(value[1])
+        ok = low <= high and all(v == v and abs(v) != float("inf") for v in (low, high))
+        ok = ok and (minimum is None or low >= minimum) and (maximum is None or high <= maximum)
+    if not ok:
+        bounds = (
+            f" within [{minimum}, {maximum}]" if minimum is not None or maximum is not None else ""
+        )
+        raise OptionError(
+            f"{name} must be a pair (low, high) of reals, low <= high{bounds}; got {value!r}"
+        )
+    return low, high

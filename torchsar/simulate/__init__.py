@@ -1,0 +1,17 @@
+"""MSTAR-like simulated chips and scenes with ground truth, and SAR clutter models."""
+
+from torchsar.simulate.batch import SimBatch
+from torchsar.simulate.chips import chips
+from torchsar.simulate.clutter import CLUTTER_MODELS, DEFAULT_SHAPE_PARAM, clutter
+from torchsar.simulate.scenes import scenes
+from torchsar.simulate.seeding import image_seed
+
+__all__ = [
+    "CLUTTER_MODELS",
+    "DEFAULT_SHAPE_PARAM",
+    "SimBatch",
+    "chips",
+    "clutter",
+    "image_seed",
+    "scenes",
+]

@@ -1,0 +1,101 @@
+"""The simulated batch: speckled image, clean reflectivity and ground truth."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from torchsar.simulate.seeding import image_seed, make_generator
+
+__all__ = ["SimBatch", "build_batch"]
+
+_FIELDS = ("image", "clean", "mask", "instances", "ignore")
+
+
+@dataclass(frozen=True)
+class SimBatch:
+    """A batch of simulated SAR intensity images with ground truth.
+
+    Attributes:
+        image: ``(n, 1, H, W)`` float32 speckled intensity, ``clean * clutter``.
+        clean: ``(n, 1, H, W)`` float32 noise-free mean intensity (reflectivity); the clutter
+            texture of K/G0 models is part of the random clutter, not of ``clean``.
+        mask: ``(n, 1, H, W)`` bool target pixels (``instances > 0``).
+        instances: ``(n, 1, H, W)`` int32 instance ids, 0 = background, 1..k per image.
+        ignore: ``(n, 1, H, W)`` bool don't-care pixels (radar shadow), disjoint from ``mask``.
+        meta: one dict per image: ``boxes`` (``(r0, c0, r1, c1)`` end-exclusive, one per
+            instance in id order), ``classes``, ``targets`` (per-instance details),
+            ``clutter`` (model, looks, shape_param), ``seed`` (the per-image seed), ``index``,
+            ``batch_seed``, ``pixel_m``, ``regions`` (description of the background).
+
+    Example:
+        >>> from torchsar.simulate import chips
+        >>> b = chips(2, size=64, length_px=(16, 24))
+        >>> len(b), b[1]["image"].shape, b[1]["meta"]["classes"]
+        (2, torch.Size([1, 64, 64]), ['vehicle'])
+    """
+
+    image: Tensor
+    clean: Tensor
+    mask: Tensor
+    instances: Tensor
+    ignore: Tensor
+    meta: list[dict]
+
+    def __len__(self) -> int:
+        return int(self.image.shape[0])
+
+    def __getitem__(self, i: int) -> dict:
+        """Image ``i`` as a dict of ``(1, H, W)`` tensors plus its ``meta``."""
+        out: dict = {name: getattr(self, name)[i] for name in _FIELDS}
+        out["meta"] = self.meta[i]
+        return out
+
+    def to(self, device: torch.device | str) -> SimBatch:
+        """A copy of the batch with every tensor on ``device``."""
+        moved = {name: getattr(self, name).to(device) for name in _FIELDS}
+        return SimBatch(**moved, meta=self.meta)
+
+    @staticmethod
+    def stack(parts: list[dict], size: tuple[int, int], device: torch.device) -> SimBatch:
+        """Stack per-image dicts of ``(H, W)`` tensors (and ``meta``) into a batch."""
+        dtypes = {
+            "image": torch.float32,
+            "clean": torch.float32,
+            "mask": torch.bool,
+            "instances": torch.int32,
+            "ignore": torch.bool,
+        }
+        if not parts:
+            empty = {
+                k: torch.zeros((0, 1, *size), dtype=d, device=device) for k, d in dtypes.items()
+            }
+            return SimBatch(**empty, meta=[])
+        fields = {k: torch.stack([p[k] for p in parts])[:, None].to(d) for k, d in dtypes.items()}
+        return SimBatch(**fields, meta=[p["meta"] for p in parts])
+
+
+def build_batch(
+    n: int,
+    *,
+    seed: int,
+    start: int,
+    size: tuple[int, int],
+    device: torch.device,
+    render: Callable[[torch.Generator], dict],
+) -> SimBatch:
+    """Render images ``start .. start + n - 1``, each from its own seeded generator.
+
+    ``render(generator)`` returns a dict of ``(H, W)`` tensors and a ``meta`` dict; the seed
+    bookkeeping (``index``, ``seed``, ``batch_seed``) is added here.
+    """
+    parts = []
+    for index in range(start, start + n):
+        s = image_seed(seed, index)
+        part = render(make_generator(s, device))
+        part["meta"] = {"index": index, "seed": s, "batch_seed": seed, **part["meta"]}
+        parts.append(part)
+    return SimBatch.stack(parts, size, device)
