@@ -37,6 +37,8 @@ __all__ = [
     "Ring",
     "Sums",
     "box_sums",
+    "distance_shells",
+    "exp_distance_mean",
     "pinwheel_rects",
     "rect_sums",
     "ring_sums",
@@ -411,3 +413,121 @@ def pinwheel_rects(guard: int, train: int) -> tuple[Rect, Rect, Rect, Rect]:
         Rect(g + 1, o, -g, o),  # bottom: t rows, columns from -g to the right edge
         Rect(-g, o, -o, -g - 1),  # left: t columns, rows from -g to the bottom edge
     )
+
+
+# --- isotropic distance weights (Frost-type filters) -------------------------------------------
+
+
+def distance_shells(radius: int) -> list[tuple[int, tuple[tuple[int, int], ...]]]:
+    """Offsets of the ``(2 radius + 1)^2`` box grouped by Euclidean distance to the centre.
+
+    Each shell is ``(d2, orbits)``: the squared distance ``d2`` and the offset orbits
+    ``(p, q)``, ``0 <= p <= q <= radius``, with ``p^2 + q^2 = d2``. An orbit stands for every
+    offset ``(±p, ±q)`` and ``(±q, ±p)``; shells are sorted by distance.
+
+    Example:
+        >>> [d2 for d2, _ in distance_shells(1)]
+        [0, 1, 2]
+    """
+    check_int(radius, "radius", minimum=0)
+    shells: dict[int, list[tuple[int, int]]] = {}
+    for p in range(radius + 1):
+        for q in range(p, radius + 1):
+            shells.setdefault(p * p + q * q, []).append((p, q))
+    return [(d2, tuple(orbits)) for d2, orbits in sorted(shells.items())]
+
+
+def _pair_counts(n: int, start: int, stop: int, radius: int, device, dtype) -> Tensor:
+    """``(radius + 1, stop - start)``: how many of ``i - p`` and ``i + p`` (just ``i`` for
+    ``p = 0``) lie in ``[0, n)``, for ``p = 0..radius`` and ``i = start..stop-1``."""
+    i = torch.arange(start, stop, device=device)
+    p = torch.arange(radius + 1, device=device)[:, None]
+    both = ((i - p) >= 0).to(dtype) + ((i + p) < n).to(dtype)
+    return torch.where(p == 0, torch.ones_like(both), both)
+
+
+def _orbit_sums(v: list[Tensor], p: int, q: int, radius: int, w: int) -> Tensor:
+    """Sum of the padded strip over the orbit ``(±p, ±q), (±q, ±p)``; ``v[p]`` holds the
+    vertical pair sums ``x[i - p] + x[i + p]`` (``x`` for ``p = 0``), ``radius`` columns of
+    zero padding on each side."""
+
+    def horizontal(a: Tensor, b: int) -> Tensor:
+        if b == 0:
+            return a[..., radius : radius + w]
+        return a[..., radius - b : radius - b + w] + a[..., radius + b : radius + b + w]
+
+    s = horizontal(v[p], q)
+    return s if p == q else s.add_(horizontal(v[q], p))
+
+
+def _exp_distance_strip(
+    x: Tensor, decay: Tensor, r: int, rr: int, radius: int, shells: list
+) -> Tensor:
+    """:func:`exp_distance_mean` for output rows ``[r, r + rr)`` (``decay`` already sliced)."""
+    h, w = x.shape[-2:]
+    buf = x.new_zeros((*x.shape[:-2], rr + 2 * radius, w + 2 * radius))
+    lo, hi = max(r - radius, 0), min(r + rr + radius, h)
+    buf[..., lo - (r - radius) : hi - (r - radius), radius : radius + w] = x[..., lo:hi, :]
+    mid = buf[..., radius : radius + rr, :]
+    v = [mid] + [
+        buf[..., radius - p : radius - p + rr, :] + buf[..., radius + p : radius + p + rr, :]
+        for p in range(1, radius + 1)
+    ]
+    rows = _pair_counts(h, r, r + rr, radius, x.device, x.dtype)
+    if r >= radius and r + rr + radius <= h:
+        rows = rows[:, :1]  # interior strip: the same counts on every row, broadcast them
+    cols = _pair_counts(w, 0, w, radius, x.device, x.dtype)
+    num = mid[..., radius : radius + w].clone()  # the centre cell, weight exp(0) = 1
+    den = torch.ones_like(num)
+    for d2, orbits in shells[1:]:
+        s = _orbit_sums(v, *orbits[0], radius, w)
+        for p, q in orbits[1:]:
+            s.add_(_orbit_sums(v, p, q, radius, w))
+        n = sum(
+            rows[p, :, None] * cols[q] + (rows[q, :, None] * cols[p] if p != q else 0)
+            for p, q in orbits
+        )
+        e = torch.mul(decay, -(d2**0.5)).exp_()
+        num.addcmul_(e, s)
+        den.addcmul_(e, n)
+    return num.div_(den)
+
+
+def exp_distance_mean(x: Tensor, radius: int, decay: Tensor, *, strip: int | None = None) -> Tensor:
+    """Local mean weighted by ``exp(-decay * d)``, with a per-pixel ``decay`` (Frost kernel).
+
+    ``out[i, j] = sum_k exp(-decay[i, j] d_k) x[k] / sum_k exp(-decay[i, j] d_k)`` over the
+    cells ``k`` of the ``(2 radius + 1)^2`` box around ``(i, j)`` that lie inside the image,
+    ``d_k`` the Euclidean distance (pixels) from ``k`` to ``(i, j)``. Exact weights, no
+    per-pixel kernels: cells are grouped into distance shells (:func:`distance_shells`), the
+    shell sums ``S_d`` come from shifted slices of a zero-padded row strip (vertical pair sums,
+    then horizontal pairs: ``(radius + 1)^2`` additions per pixel) and the result is
+    ``sum_d exp(-decay d) S_d / sum_d exp(-decay d) n_d``, with ``n_d`` the in-image cell
+    count of the shell (the constant shell size at interior pixels). Memory is linear in
+    the image; one ``exp`` per shell and pixel.
+
+    Args:
+        x: real tensor ``(B, C, H, W)`` (validated by the caller); the result has its dtype.
+        radius: half-width of the box.
+        decay: non-negative, broadcastable to ``x`` (e.g. ``damping * Ci^2``); ``inf`` keeps
+            only the centre cell.
+        strip: rows per strip (default: sized so strip buffers stay around 1 MB).
+
+    Returns:
+        ``(B, C, H, W)`` weighted means (``decay = 0`` gives the in-image box mean).
+
+    Example:
+        >>> x = torch.arange(9.0).reshape(1, 1, 3, 3)
+        >>> exp_distance_mean(x, 1, torch.zeros(1, 1, 3, 3))[0, 0, 1, 1].item()
+        4.0
+    """
+    h = x.shape[-2]
+    decay = decay.to(x.dtype).expand_as(x)
+    shells = distance_shells(radius)
+    rows = _strip_rows(x, radius, strip)
+    out = torch.empty_like(x)
+    for r in range(0, h, rows):
+        rr = min(rows, h - r)
+        d = decay[..., r : r + rr, :]
+        out[..., r : r + rr, :] = _exp_distance_strip(x, d, r, rr, radius, shells)
+    return out

@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "compare-region"]
+COMMANDS = ["run", "speckle", "compare-region"]
 
 
 def load(name: str):

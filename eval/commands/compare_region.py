@@ -18,7 +18,6 @@ from pathlib import Path
 from torch.utils.data import Subset
 
 import torchsar as ts
-import torchsar.simulate  # make the simulated datasets available (ts.simulate)
 from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, DetectorSpec
 from eval.output import default_out, result_dir, write_config

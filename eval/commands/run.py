@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+
+import torch
 
 from eval.datasets import DATASETS, make_dataset
 from eval.detectors import DETECTORS, parse_params, resolve
+from eval.errors import EvalError
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
 from eval.runner import evaluate
 from eval.tables import markdown, pixel_roc_table, roc_table, summary_table
+from torchsar.speckle import FILTERS
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
 
@@ -59,8 +65,32 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="DET.KEY=VALUE",
         help="detector parameter override, e.g. ca.guard=3 (repeatable)",
     )
+    p.add_argument(
+        "--despeckle",
+        choices=sorted(FILTERS),
+        default=None,
+        help="speckle filter applied before every detector (default: none)",
+    )
+    p.add_argument(
+        "--despeckle-param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="speckle filter option, e.g. window=7 or looks=4 (repeatable)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
+
+
+def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict]:
+    """The optional speckle-filter stage and its resolved options (validated up front)."""
+    if name is None:
+        if items:
+            raise EvalError("--despeckle-param given without --despeckle")
+        return None, {}
+    opts = parse_params([f"{name}.{item}" for item in items]).get(name, {})
+    FILTERS[name](torch.ones(1, 1, 16, 16), **opts)  # fail now on a bad option, not mid-run
+    return partial(FILTERS[name], **opts), opts
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         else [d.strip() for d in args.detectors.split(",") if d.strip()]
     )
     specs = resolve(names, parse_params(args.param))
+    preprocess, despeckle_opts = despeckler(args.despeckle, args.despeckle_param)
     if args.batch_size < 1:
         raise SystemExit("torchsar-eval: error: --batch-size must be >= 1")
     if args.n is not None and args.n < 0:
@@ -82,7 +113,12 @@ def run(args: argparse.Namespace) -> int:
     with result_dir(out) as tmp:
         results = {
             name: evaluate(
-                ds, specs, batch_size=args.batch_size, progress=not args.no_progress, desc=name
+                ds,
+                specs,
+                batch_size=args.batch_size,
+                preprocess=preprocess,
+                progress=not args.no_progress,
+                desc=name,
             )
             for name, ds in datasets.items()
         }
@@ -107,6 +143,9 @@ def run(args: argparse.Namespace) -> int:
             {
                 "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
                 "detectors": {s.name: dict(s.params) for s in specs},
+                "despeckle": None
+                if args.despeckle is None
+                else {"filter": args.despeckle, **despeckle_opts},
                 "batch_size": args.batch_size,
                 "seed": args.seed,
                 "out": str(out),

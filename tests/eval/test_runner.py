@@ -51,3 +51,17 @@ def test_results_do_not_depend_on_batch_size():
 def test_empty_dataset():
     (res,) = evaluate(ListDataset([]), [DETECTORS["ca"]], progress=False)
     assert res.images == 0 and res.roc is None
+
+
+def test_preprocess_runs_before_detectors():
+    seen = []
+
+    def stage(x):
+        seen.append(x.shape)
+        return x * 0 + 1.0  # flat image: CA detects nothing
+
+    img = torch.ones(1, 32, 32)
+    img[0, 16, 16] = 100.0
+    (res,) = evaluate(ListDataset([img]), [DETECTORS["ca"]], preprocess=stage, progress=False)
+    assert seen == [(1, 1, 32, 32)]
+    assert res.pixels.fp == 0

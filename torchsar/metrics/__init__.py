@@ -1,5 +1,13 @@
-"""Pure scoring functions: pixel and object detection counts, ROC accumulation."""
+"""Pure scoring functions: detection counts, ROC accumulation, despeckling quality."""
 
+from torchsar.metrics.despeckling import (
+    edge_preservation,
+    edge_ratio,
+    enl,
+    psnr,
+    ratio_moments,
+    ssim,
+)
 from torchsar.metrics.detection import (
     ObjectCounts,
     PixelCounts,
@@ -20,8 +28,14 @@ __all__ = [
     "RocAccumulator",
     "default_object_grid",
     "default_pixel_grid",
+    "edge_preservation",
+    "edge_ratio",
+    "enl",
     "label_components",
     "merged_grid",
     "object_counts",
     "pixel_counts",
+    "psnr",
+    "ratio_moments",
+    "ssim",
 ]

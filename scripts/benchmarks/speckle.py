@@ -1,0 +1,68 @@
+"""Benchmark cases: speckle filters against a scipy.ndimage.uniform_filter Lee filter.
+
+Every torchsar filter (1024x1024 float32, 7x7 window) is timed against the same reference,
+a straightforward Lee filter built from two ``uniform_filter`` calls, so the printed ratio
+(reference / ours) reads as "speed relative to a box-filter Lee". Targets (issue 3): ``lee``
+at most 1.5x the reference time (ratio >= 0.67), ``enhanced_frost`` at most 10x (>= 0.1).
+
+Run alone: ``PYTHONPATH=. python scripts/benchmarks/speckle.py`` (or via scripts/benchmark.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+import torchsar as ts
+
+WINDOW, LOOKS = 7, 1.0
+
+
+def scipy_lee(a: np.ndarray, window: int = WINDOW, looks: float = LOOKS) -> np.ndarray:
+    """Lee filter from box means (reflect borders): ``mu + W (I - mu)``."""
+    mu = ndimage.uniform_filter(a, window, mode="reflect")
+    m2 = ndimage.uniform_filter(a * a, window, mode="reflect")
+    ci2 = np.maximum(m2 - mu * mu, 0) / np.maximum(mu * mu, np.finfo(a.dtype).tiny)
+    w = np.clip(1 - (1 / looks) / np.maximum(ci2, np.finfo(a.dtype).tiny), 0, 1)
+    return mu + w * (a - mu)
+
+
+def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
+    gen = torch.Generator().manual_seed(0)
+    x = torch.empty(1, 1, 1024, 1024).exponential_(generator=gen)
+    a = x[0, 0].numpy()
+    out = []
+    for name, fn in ts.speckle.FILTERS.items():
+        out.append(
+            (
+                f"speckle.{name} 1024x1024 f32 w={WINDOW} vs scipy uniform_filter Lee",
+                lambda fn=fn: fn(x, window=WINDOW, looks=LOOKS),
+                lambda: scipy_lee(a),
+            )
+        )
+    return out
+
+
+if __name__ == "__main__":
+    import time
+
+    torch.set_num_threads(1)
+
+    def best(fn: Callable[[], object], repeat: int = 5) -> float:
+        fn()
+        times = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        return min(times)
+
+    for case, ours, ref in cases():
+        t_ours, t_ref = best(ours), best(ref)
+        print(
+            f"{case:<62s} ours {t_ours * 1e3:8.2f} ms  ref {t_ref * 1e3:8.2f} ms  "
+            f"time ratio ours/ref {t_ours / t_ref:5.2f}"
+        )

@@ -1,0 +1,133 @@
+"""Shared machinery of the speckle filters: entry checks, the speckle model constants and
+the local statistics (box mean and coefficient of variation) of every filter.
+
+Border rule: the window statistics (mean, population variance, ``Ci``) are taken over the
+window cells that lie inside the image (:func:`torchsar.windows.windowed` counting), so a
+border pixel gets the textbook statistic of its truncated window and interior pixels are
+exact. ``Ci = sigma / mu`` with the population standard deviation; a window with zero mean
+(all zeros, since intensity is non-negative) has ``Ci = 0``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from torchsar._checks import (
+    OptionError,
+    check_image,
+    check_odd,
+    check_positive,
+    check_window_fits,
+    float_dtype,
+)
+from torchsar.windows import Rect, Sums, windowed
+
+__all__ = [
+    "Request",
+    "Speckle",
+    "decay_map",
+    "filter_intensity",
+    "finish",
+    "local_moments",
+    "prepare",
+]
+
+
+@dataclass(frozen=True)
+class Speckle:
+    """Fully developed L-look speckle: ``Cu^2 = 1 / L`` and ``Cmax^2 = 1 + 2 / L``."""
+
+    looks: float
+
+    @property
+    def cu2(self) -> float:
+        """Squared coefficient of variation of the speckle, ``1 / L``."""
+        return 1.0 / self.looks
+
+    @property
+    def cmax2(self) -> float:
+        """Squared upper heterogeneity bound (Lopes et al. 1990), ``1 + 2 / L``."""
+        return 1.0 + 2.0 / self.looks
+
+
+@dataclass(frozen=True)
+class Request:
+    """A validated filter call: intensity image, window radius, speckle model, output form."""
+
+    intensity: Tensor
+    radius: int
+    speckle: Speckle
+    amplitude: bool
+    dtype: torch.dtype
+
+
+def prepare(x: Tensor, window: int, looks: float, amplitude: bool) -> Request:
+    """Validate the common filter arguments and convert amplitude to intensity."""
+    check_image(x, "x")
+    window = check_odd(window, "window", minimum=3)
+    check_window_fits(x, window, "speckle filter")
+    looks = check_positive(looks, "looks")
+    if not isinstance(amplitude, bool):
+        raise OptionError(f"amplitude must be a bool, got {amplitude!r}")
+    dtype = float_dtype(x.dtype)
+    xi = x.to(dtype)
+    return Request(xi.square() if amplitude else xi, window // 2, Speckle(looks), amplitude, dtype)
+
+
+def finish(req: Request, intensity: Tensor) -> Tensor:
+    """The filtered image in the caller's form (square root back to amplitude if asked)."""
+    out = intensity.clamp_min_(0)
+    return out.sqrt_() if req.amplitude else out
+
+
+def local_moments(s: Sums, dtype: torch.dtype = torch.float64) -> tuple[Tensor, Tensor]:
+    """Window mean ``mu`` (clamped >= 0) and ``Ci^2 = var / mu^2`` (0 where ``mu = 0``),
+    computed in float64 from the window sums (which it consumes: ``s.s1`` and ``s.s2`` are
+    overwritten) and returned in ``dtype``.
+
+    ``Ci^2`` is clamped to ``count - 1``, its mathematical bound for non-negative data, so
+    rounding in windows of (near-)zero mean can never produce Inf or NaN downstream.
+    """
+    if s.s2 is None:
+        raise ValueError("local_moments needs second moments (moments=2)")
+    inv = s.count.clamp_min(1).reciprocal()
+    m1 = s.s1.mul_(inv)
+    var = s.s2.mul_(inv).addcmul_(m1, m1, value=-1.0).clamp_min_(0)
+    mu = m1.add_(s.shift).clamp_min_(0)
+    ci2 = var.div_(mu.square()).nan_to_num_(nan=0.0)
+    ci2 = torch.minimum(ci2, (s.count - 1).clamp_min(0), out=ci2)
+    return mu.to(dtype), ci2.to(dtype)
+
+
+Formula = Callable[[Tensor, Tensor, Tensor], Tensor]
+
+
+def filter_intensity(req: Request, formula: Formula) -> Tensor:
+    """Run ``formula(I, mu, Ci^2)`` over the image, strip by strip, in ``req.dtype``.
+
+    This is the whole pipeline of the box-statistics filters (Lee, Kuan, enhanced Lee,
+    Gamma-MAP): one :func:`~torchsar.windows.windowed` pass computes the window moments from
+    float64 integral images (mean and ``Ci^2`` in float64, then cast) and applies the
+    per-pixel formula in the output dtype.
+    """
+
+    def apply(xs: Tensor, sums: list[Sums]) -> Tensor:
+        mu, ci2 = local_moments(sums[0], req.dtype)
+        return formula(xs, mu, ci2)
+
+    out = windowed(req.intensity, [Rect.box(req.radius)], apply, moments=2)
+    return finish(req, out)
+
+
+def decay_map(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:
+    """Full-size ``decay(Ci^2)`` in ``req.dtype``, evaluated strip by strip (for the
+    Frost-type filters' per-pixel weight decay)."""
+
+    def apply(_xs: Tensor, sums: list[Sums]) -> Tensor:
+        return decay(local_moments(sums[0], req.dtype)[1])
+
+    return windowed(req.intensity, [Rect.box(req.radius)], apply, moments=2)
