@@ -64,6 +64,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--guards", type=_ints, default=[2, 6, 16, 32], help="guard sweep")
     p.add_argument("--trains", type=_ints, default=[2, 6, 12], help="train sweep")
     p.add_argument("--pfas", type=_floats, default=[1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
+    p.add_argument(
+        "--max-ring",
+        type=int,
+        default=1000,
+        help="skip OS-CFAR windows with more training cells than this (its cost grows with "
+        "the ring; the other detectors cost the same for every window)",
+    )
     p.add_argument("--batch-size", type=int, default=4)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
@@ -86,6 +93,10 @@ def _datasets(args: argparse.Namespace, notes: list[str]) -> dict[str, tuple[obj
     return out
 
 
+def _ring(q: dict) -> int:
+    return (2 * (q["guard"] + q["train"]) + 1) ** 2 - (2 * q["guard"] + 1) ** 2
+
+
 def _region_specs() -> list[DetectorSpec]:
     return [
         DetectorSpec("region-paper", ts.region.region_cfar, {"preset": "paper"}),
@@ -102,7 +113,11 @@ def _tuned(tune, args, notes: list[str], name: str) -> tuple[list[DetectorSpec],
         if det not in DETECTORS:
             notes.append(f"{name}: window CFAR {det!r} is not registered yet: skipped")
             continue
-        c = best_setting(DETECTORS[det], grid, tb)
+        g = grid if det != "os" else [q for q in grid if _ring(q) <= args.max_ring]
+        if not g:
+            notes.append(f"{name}: no OS window within --max-ring {args.max_ring}: skipped")
+            continue
+        c = best_setting(DETECTORS[det], g, tb)
         specs.append(DetectorSpec(det, DETECTORS[det].fn, c.params))
         chosen.append({"dataset": name, "detector": det, **c.params, "tuning_fom": c.counts.fom})
     return specs, chosen
