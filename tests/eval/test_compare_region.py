@@ -13,7 +13,7 @@ def test_compare_region_tiny(tmp_path, capsys):
     out = tmp_path / "out"
     code = main(
         [
-            "compare-region", "--out", str(out), "--n", "1", "--n-tune", "1",
+            "compare-region", "--out", str(out), "--sim", "sim-chips", "--n", "2", "--n-tune", "1",
             "--mstar", str(tmp_path / "absent"), "--guards", "4", "--trains", "4",
             "--pfas", "1e-4", "--no-progress",
         ]
@@ -21,9 +21,9 @@ def test_compare_region_tiny(tmp_path, capsys):
     assert code == 0
     summary = pd.read_csv(out / "summary.csv")
     assert {"region-paper", "region", "ca", "two_parameter"} <= set(summary.detector)
-    assert set(summary.dataset) == {"sim-scenes"}
+    assert set(summary.dataset) == {"sim-chips"}
     chosen = pd.read_csv(out / "chosen.csv")
     assert set(chosen.guard) == {4}
-    assert (out / "panel_sim-scenes.png").stat().st_size > 0
+    assert (out / "panel_sim-chips.png").stat().st_size > 0
     text = capsys.readouterr().out
     assert "not found: skipped" in text
