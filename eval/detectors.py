@@ -36,12 +36,23 @@ class DetectorSpec:
 
 
 WINDOW = {"guard": 2, "train": 4, "pfa": 1e-3}
+LOOKS = {**WINDOW, "looks": 1.0}
 
 DETECTORS: dict[str, DetectorSpec] = {
     s.name: s
     for s in [
         DetectorSpec("ca", ts.cfar.ca, WINDOW),
         DetectorSpec("two_parameter", ts.cfar.two_parameter, WINDOW),
+        DetectorSpec("go", ts.cfar.go, WINDOW),
+        DetectorSpec("so", ts.cfar.so, WINDOW),
+        DetectorSpec("os", ts.cfar.os, {**WINDOW, "rank": None}),
+        DetectorSpec("vi", ts.cfar.vi, {**WINDOW, "k_vi": 4.76, "k_mr": 1.806}),
+        DetectorSpec("ac", ts.cfar.ac, {**WINDOW, "censor_pfa": None, "iterations": 3}),
+        DetectorSpec("lognormal", ts.cfar.lognormal, WINDOW),
+        DetectorSpec("weibull", ts.cfar.weibull, WINDOW),
+        DetectorSpec("gamma", ts.cfar.gamma, LOOKS),
+        DetectorSpec("k", ts.cfar.k, LOOKS),
+        DetectorSpec("g0", ts.cfar.g0, LOOKS),
         DetectorSpec("region", ts.region.region_cfar, {}),
     ]
 }

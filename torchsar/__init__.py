@@ -1,7 +1,18 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, metrics, region, simulate, speckle, windows
+from torchsar import cfar, imaging, io, metrics, motion, region, simulate, speckle, windows
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "cfar", "metrics", "region", "simulate", "speckle", "windows"]
+__all__ = [
+    "__version__",
+    "cfar",
+    "imaging",
+    "io",
+    "metrics",
+    "motion",
+    "region",
+    "simulate",
+    "speckle",
+    "windows",
+]

@@ -41,6 +41,7 @@ __all__ = [
     "exp_distance_mean",
     "pinwheel_rects",
     "rect_sums",
+    "region_count",
     "ring_sums",
     "windowed",
 ]
@@ -200,6 +201,20 @@ def _region_count(region: Region, n_rows: int, n_cols: int, r: int, rr: int, dev
         cols = _axis_counts(n_cols, rect.c0, rect.c1, 0, n_cols, device)
         out += sign * rows[:, None] * cols[None, :]
     return out
+
+
+def region_count(
+    h: int, w: int, shape: Rect | Region, device: torch.device | None = None
+) -> Tensor:
+    """In-image cell count of a rectangle or region at every pixel of an ``h x w`` image,
+    float64 ``(h, w)`` (no mask: the counts only depend on the geometry).
+
+    Example:
+        >>> n = region_count(9, 9, Ring(1, 2).region)
+        >>> n[4, 4].item(), n[0, 0].item()  # full ring; corner: 4x4 box minus 2x2 guard
+        (40.0, 12.0)
+    """
+    return _region_count(_as_region(shape), h, w, 0, h, device)
 
 
 def _as_region(shape: Rect | Region) -> Region:

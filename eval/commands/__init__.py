@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "speckle", "compare-region"]
+COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region"]
 
 
 def load(name: str):

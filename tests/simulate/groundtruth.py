@@ -3,8 +3,20 @@
 from __future__ import annotations
 
 import torch
+from torch import Tensor
+from torch.nn import functional as nnf
 
 from torchsar.simulate import SimBatch
+
+
+def assert_separated(instances: Tensor) -> None:
+    """No two instances touch (not even diagonally): each 3x3 neighbourhood of a target pixel
+    holds only its own id and background."""
+    x = instances.float()
+    high = nnf.max_pool2d(x, 3, stride=1, padding=1)
+    low = -nnf.max_pool2d(torch.where(x > 0, -x, -1e9), 3, stride=1, padding=1)
+    on = instances > 0
+    assert torch.equal(high[on], x[on]) and torch.equal(low[on], x[on])
 
 
 def assert_ground_truth(batch: SimBatch, target_db: tuple[float, float]) -> None:
@@ -12,6 +24,7 @@ def assert_ground_truth(batch: SimBatch, target_db: tuple[float, float]) -> None
     assert torch.equal(batch.mask, batch.instances > 0)
     assert not (batch.ignore & batch.mask).any()
     assert (batch.clean >= 0).all() and (batch.image >= 0).all()
+    assert_separated(batch.instances)
     for i, meta in enumerate(batch.meta):
         inst, clean = batch.instances[i, 0], batch.clean[i, 0]
         k = int(inst.max())

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from torchsar._checks import OptionError
 from torchsar.simulate import SimBatch, chips, image_seed
@@ -117,3 +119,23 @@ def test_errors(kwargs, match):
     n = kwargs.pop("n")
     with pytest.raises(OptionError, match=match):
         chips(n, **kwargs)
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    seed=st.integers(0, 2**63 - 1),
+    size=st.integers(48, 80),
+    low=st.floats(8.0, 30.0),
+    db=st.tuples(st.floats(3.0, 20.0), st.floats(0.0, 20.0)),
+)
+def test_ground_truth_property(seed, size, low, db):
+    """Any seed, chip size and level range gives consistent ground truth inside the chip."""
+    target_db = (db[0], db[0] + db[1])
+    length = (low, min(low * 1.5, (size - 6) / 1.15))
+    if length[1] < length[0]:
+        with pytest.raises(OptionError, match="size must be"):
+            chips(1, size=size, length_px=(low, low * 1.5), seed=seed)
+        return
+    b = chips(2, size=size, length_px=length, seed=seed, target_db=target_db)
+    assert_ground_truth(b, target_db)
+    assert b.ignore.any()

@@ -10,7 +10,7 @@ from torchsar.simulate import SimBatch, image_seed, scenes
 
 from .groundtruth import assert_ground_truth
 
-KW = {"size": 256, "building_px": (30, 60), "vehicle_px": (10, 24)}
+KW = {"size": 256, "building_px": (30, 60), "vehicle_px": (10, 24), "n_targets": (5, 15)}
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def batch() -> SimBatch:
 def test_shapes_and_counts(batch):
     assert batch.image.shape == (3, 1, 256, 256) and batch.instances.dtype == torch.int32
     for m in batch.meta:
-        assert 5 <= len(m["boxes"]) <= 30
+        assert 5 <= len(m["boxes"]) <= 15
         assert "building" in m["classes"] and "vehicle" in m["classes"]
         assert m["region_map"].shape == (256, 256)
 
@@ -51,12 +51,38 @@ def test_regions_differ_within_10db(batch):
         assert max(dbs) - min(dbs) <= 10.0
 
 
+def _gap(a: torch.Tensor, b: torch.Tensor) -> float:
+    """Smallest Euclidean distance between the pixels of two masks."""
+    pa, pb = torch.nonzero(a).float(), torch.nonzero(b).float()
+    return float(torch.cdist(pa, pb).min())
+
+
 def test_groups_are_tight(batch):
+    seen = 0
+    for i, m in enumerate(batch.meta):
+        inst = batch.instances[i, 0]
+        for g in {t["group"] for t in m["targets"] if t["group"] >= 0}:
+            ids = [j + 1 for j, t in enumerate(m["targets"]) if t["group"] == g]
+            assert len(ids) >= 2
+            for a in ids:  # each member has a neighbour 2-6 px (+ raster rounding) away
+                gaps = [_gap(inst == a, inst == b) for b in ids if b != a]
+                assert 2.0 <= min(gaps) <= 7.5
+            seen += 1
+    assert seen >= 1
+
+
+def test_near_edge_targets(batch):
+    seen = 0
     for m in batch.meta:
-        groups = {t["group"] for t in m["targets"] if t["group"] >= 0}
-        for g in groups:
-            members = [t for t in m["targets"] if t["group"] == g]
-            assert len(members) >= 2
+        labels = m["region_map"]
+        for t in m["targets"]:
+            if not t["near_edge"]:
+                continue
+            r, c = (round(v) for v in t["center_rc"])
+            win = labels[max(0, r - 12) : r + 13, max(0, c - 12) : c + 13]
+            assert len(torch.unique(win)) >= 2  # a region boundary within 12 px
+            seen += 1
+    assert seen >= 1
 
 
 def test_deterministic_and_batch_independent(batch):

@@ -3,8 +3,33 @@
 Every variant returns a :class:`Detection` with ``mask == statistic > threshold``.
 """
 
+from torchsar.cfar.ac import ac
 from torchsar.cfar.ca import ca
 from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.g0 import g0
+from torchsar.cfar.gamma import gamma
+from torchsar.cfar.go import go
+from torchsar.cfar.k import k
+from torchsar.cfar.lognormal import lognormal
+from torchsar.cfar.order_statistic import os
+from torchsar.cfar.so import so
 from torchsar.cfar.two_parameter import two_parameter
+from torchsar.cfar.vi import vi
+from torchsar.cfar.weibull import weibull
 
-__all__ = ["Detection", "ca", "detection_from", "two_parameter"]
+__all__ = [
+    "Detection",
+    "ac",
+    "ca",
+    "detection_from",
+    "g0",
+    "gamma",
+    "go",
+    "k",
+    "lognormal",
+    "os",
+    "so",
+    "two_parameter",
+    "vi",
+    "weibull",
+]

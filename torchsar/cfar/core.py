@@ -41,13 +41,18 @@ def ratio(num: Tensor, den: Tensor) -> Tensor:
 
 
 def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tensor | None:
-    """``factor(n) / factor(count)`` where ``count != n``; ``None`` when every count is ``n``."""
+    """``factor(n) / factor(count)`` where ``count != n``; ``None`` when every count is ``n``.
+
+    Factors are evaluated only on the pixels whose count differs (the border frame and
+    no-data neighbourhoods), so the interior costs one comparison per pixel."""
     if count.dim() >= 2 and count.shape[:-2].numel() > 1 and count.stride()[0] == 0:
         count = count[(0,) * (count.dim() - 2)]  # a broadcast (H, W) count: work on one copy
-    if bool(count.min() == n):
+    other = count != n
+    if count.numel() == 0 or not bool(other.any()):
         return None
-    f = factor_map(count, factor)
-    return torch.where(count == n, torch.ones_like(f), factor(n) / f)
+    scale = torch.ones(count.shape, dtype=torch.float64, device=count.device)
+    scale[other] = factor(n) / factor_map(count[other], factor)
+    return scale
 
 
 def finish(statistic: Tensor, count: Tensor, vmask: Tensor | None, dtype: torch.dtype) -> Tensor:

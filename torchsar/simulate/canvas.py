@@ -132,4 +132,6 @@ def _describe(target: Placed, box: Box) -> dict:
         "peak_db": float(target.level_db[target.body].max()),
         "shadow_px": target.shadow_px,
         "shadow_gain": target.shadow_gain,
+        "group": -1,
+        "near_edge": False,
     }

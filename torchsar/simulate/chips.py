@@ -170,6 +170,10 @@ def chips(
     Raises:
         OptionError: invalid count, size, model name, looks, ranges or seed.
 
+    References:
+        Ross, T. D. et al. (1998). Standard SAR ATR evaluation experiments using the MSTAR
+        public release data set. Proc. SPIE 3370. DOI: 10.1117/12.321859
+
     Example:
         >>> b = chips(3, size=96, length_px=(20, 40), seed=1)
         >>> b.image.shape, b.instances.max().item()

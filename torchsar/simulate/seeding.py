@@ -74,28 +74,39 @@ def make_generator(seed: int, device: torch.device | str | None = None) -> torch
 class Draws:
     """Scalar random draws (Python numbers) from one generator, for per-target geometry.
 
+    Uniforms are drawn from ``generator`` in blocks of ``block`` (float64) and handed out in
+    order, so scalar draws cost one generator call per block; the sequence is deterministic
+    for a given seed, and tensor draws made directly from ``generator`` (clutter, facets)
+    interleave deterministically with the block refills.
+
     Args:
         generator: the per-image generator; every draw advances it.
+        block: number of uniforms fetched per refill.
     """
 
-    def __init__(self, generator: torch.Generator) -> None:
+    def __init__(self, generator: torch.Generator, block: int = 64) -> None:
         self.generator = generator
+        self._block = block
+        self._buffer: list[float] = []
+
+    def _next(self, n: int) -> list[float]:
+        """The next ``n`` uniforms in ``[0, 1)``."""
+        while len(self._buffer) < n:
+            u = torch.rand(
+                self._block,
+                generator=self.generator,
+                dtype=torch.float64,
+                device=self.generator.device,
+            )
+            self._buffer.extend(u.cpu().tolist())
+        out, self._buffer = self._buffer[:n], self._buffer[n:]
+        return out
 
     def uniform(self, low: float, high: float, n: int | None = None) -> float | list[float]:
         """One float (or a list of ``n``) uniform in ``[low, high)``."""
-        u = torch.rand(
-            1 if n is None else n,
-            generator=self.generator,
-            dtype=torch.float64,
-            device=self.generator.device,
-        )
-        values = (low + (high - low) * u.cpu()).tolist()
+        values = [low + (high - low) * u for u in self._next(1 if n is None else n)]
         return values[0] if n is None else values
 
     def integer(self, low: int, high: int) -> int:
         """One int uniform in ``[low, high]`` (both ends included)."""
-        return int(
-            torch.randint(
-                low, high + 1, (1,), generator=self.generator, device=self.generator.device
-            ).item()
-        )
+        return min(high, low + int(self._next(1)[0] * (high - low + 1)))

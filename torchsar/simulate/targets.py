@@ -24,7 +24,7 @@ from torchsar.simulate.canvas import Placed
 from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import Box, RotatedRect
 
-__all__ = ["Raster", "building_levels", "place", "rasterise", "vehicle_levels"]
+__all__ = ["Raster", "building_levels", "place", "random_heading", "rasterise", "vehicle_levels"]
 
 
 @dataclass(frozen=True)

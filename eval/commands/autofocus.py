@@ -1,0 +1,197 @@
+"""``torchsar-eval autofocus``: the sparse-autofocus experiment table, figures and detection.
+
+Writes ``autofocus.csv`` (mean and spread per method x error type), ``autofocus_scenes.csv``
+(one row per scene), ``autofocus.md``, ``detection.csv`` (Pd / Pfa after each imaging method),
+``panel_<error>.png`` (the seed's figures: conventional / L_p / proposed, with and without
+error) and ``config.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import pandas as pd
+import torch
+from tqdm import tqdm
+
+import torchsar.imaging as ti
+from eval.autofocus_experiment import (
+    DEFAULT_METHODS,
+    ERROR_CASES,
+    METHODS,
+    Config,
+    run_error_case,
+)
+from eval.gotcha_experiment import run_gotcha
+from eval.output import default_out, result_dir, write_config
+from eval.plots import slug
+from eval.tables import markdown
+
+METRICS = [
+    "corr",
+    "success",
+    "phase_rmse",
+    "mag_nmse",
+    "entropy",
+    "tbr_db",
+    "iterations",
+    "seconds",
+]
+DEFAULT_GOTCHA = Path("../shared/data/gotcha")
+DETECTION = ["pd_ca", "pfa_ca", "pd_global", "pfa_global"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "autofocus",
+        help="sparse autofocus vs conventional / L_p / PGA / min-entropy on simulated scenes",
+        description=__doc__.splitlines()[0],
+    )
+    d = Config()
+    p.add_argument("--out", type=Path, default=None, help="output folder")
+    p.add_argument("--scenes", type=int, default=d.scenes, help="random scenes per error type")
+    p.add_argument("--size", type=int, default=d.size, help="image size (pixels, square)")
+    p.add_argument("--density", type=float, default=d.density, help="fraction of bright pixels")
+    p.add_argument("--snr", type=float, default=d.snr_db, help="phase-history SNR in dB")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument(
+        "--errors",
+        default=",".join(ERROR_CASES),
+        help=f"comma-separated error types: {','.join(ERROR_CASES)}",
+    )
+    p.add_argument(
+        "--methods",
+        default=",".join(DEFAULT_METHODS),
+        help=f"comma-separated methods (default: all but sparse-keep-restarts): "
+        f"{','.join(METHODS)}",
+    )
+    p.add_argument("--pfa", type=float, default=d.pfa, help="CA-CFAR design Pfa")
+    p.add_argument(
+        "--gotcha",
+        type=Path,
+        default=DEFAULT_GOTCHA,
+        help="GOTCHA folder for the real-data injected-error experiment "
+        f"(default: {DEFAULT_GOTCHA}, skipped when absent)",
+    )
+    p.add_argument("--gotcha-trials", type=int, default=3, help="injected errors per type")
+    p.add_argument("--no-gotcha", action="store_true", help="skip the GOTCHA experiment")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=run)
+
+
+def _names(text: str, allowed: dict, what: str) -> list[str]:
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [n for n in names if n not in allowed]
+    if bad:
+        raise SystemExit(f"torchsar-eval: error: unknown {what} {bad}; choose from {list(allowed)}")
+    return names
+
+
+def summarise(rows: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """Mean and standard deviation per (error, method), in the run order."""
+    g = rows.groupby(["error", "method"], sort=False)[columns]
+    mean, std = g.mean().add_suffix("_mean"), g.std().add_suffix("_std")
+    out = pd.concat([mean, std], axis=1)
+    order = [c + s for c in columns for s in ("_mean", "_std")]
+    out = out[order].reset_index()
+    out.insert(2, "scenes", g.size().to_numpy())
+    return out
+
+
+def _db(x: torch.Tensor) -> torch.Tensor:
+    a = x.abs()
+    return 20 * torch.log10(a / a.max().clamp_min(1e-30) + 1e-6).clamp_min(-40)
+
+
+def plot_panel(name: str, data: dict, formed: dict, path: Path) -> None:
+    """Seed figure layout for scene 0: truth, clean conventional / L_p, corrupted, proposed."""
+    clean = data["clean"][:1]
+    panels = [
+        ("true scene", data["f"][0, 0]),
+        ("conventional, no error", ti.ifft2c(clean)[0]),
+        ("L_p, no error", ti.lp_image(clean)[0, 0]),
+    ]
+    for method, title in [
+        ("conventional", "conventional, with error"),
+        ("lp", "L_p, with error"),
+        ("sparse-autofocus", "proposed (sparse autofocus)"),
+    ]:
+        if method in formed:
+            panels.append((title, formed[method].image[0, 0]))
+    fig, axes = plt.subplots(1, len(panels), figsize=(2.6 * len(panels), 2.9))
+    for ax, (title, img) in zip(axes, panels, strict=True):
+        ax.imshow(_db(img).numpy(), cmap="gray", vmin=-40, vmax=0)
+        ax.set_title(title, fontsize=8)
+        ax.axis("off")
+    fig.suptitle(f"phase error {name} (dB, 40 dB range)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def gotcha_table(args: argparse.Namespace, tmp: Path) -> None:
+    """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
+    rows, panel = run_gotcha(Path(args.gotcha), trials=args.gotcha_trials, seed=args.seed)
+    trials = pd.DataFrame(rows)
+    trials.to_csv(tmp / "gotcha_trials.csv", index=False)
+    cols = ["phase_rmse", "entropy", "reference_entropy", "reflector_peak_ratio", "seconds"]
+    summarise(trials, cols).to_csv(tmp / "gotcha.csv", index=False)
+    names = list(panel)
+    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 2.9))
+    for ax, name in zip(axes, names, strict=True):
+        ax.imshow(_db(panel[name].sqrt()).numpy(), cmap="gray", vmin=-40, vmax=0, origin="lower")
+        ax.set_title(name, fontsize=6)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(tmp / "gotcha.png", dpi=110)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    errors = _names(args.errors, ERROR_CASES, "error types")
+    methods = _names(args.methods, METHODS, "methods")
+    if args.scenes < 1 or args.size < 8:
+        raise SystemExit("torchsar-eval: error: need --scenes >= 1 and --size >= 8")
+    cfg = Config(
+        scenes=args.scenes,
+        size=args.size,
+        density=args.density,
+        snr_db=args.snr,
+        seed=args.seed,
+        pfa=args.pfa,
+    )
+    out = args.out or default_out("autofocus")
+    rows = []
+    with result_dir(out) as tmp:
+        for name in tqdm(errors, desc="autofocus", disable=args.no_progress):
+            r, data, formed = run_error_case(name, cfg, methods)
+            rows += r
+            plot_panel(name, data, formed, tmp / f"panel_{slug(name)}.png")
+        scenes = pd.DataFrame(rows)
+        scenes.to_csv(tmp / "autofocus_scenes.csv", index=False)
+        table = summarise(scenes, METRICS)
+        table.to_csv(tmp / "autofocus.csv", index=False)
+        detection = summarise(scenes, DETECTION)
+        detection.to_csv(tmp / "detection.csv", index=False)
+        shown = ["error", "method", "scenes"] + [c + "_mean" for c in METRICS]
+        (tmp / "autofocus.md").write_text(
+            markdown(table[shown])
+            + "\n"
+            + markdown(detection[["error", "method"] + [c + "_mean" for c in DETECTION]])
+        )
+        if not args.no_gotcha and args.gotcha is not None and Path(args.gotcha).is_dir():
+            gotcha_table(args, tmp)
+        options = {**dataclasses.asdict(cfg), "errors": errors, "methods": methods}
+        options.update(
+            gotcha=str(args.gotcha), gotcha_trials=args.gotcha_trials, no_gotcha=args.no_gotcha
+        )
+        write_config(tmp, "autofocus", options)
+    print(markdown(table[shown]))
+    print(f"results in {out}")
+    return 0

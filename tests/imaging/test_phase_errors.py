@@ -1,0 +1,91 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from torchsar._checks import OptionError, ShapeError
+from torchsar.imaging.phase_errors import (
+    apply_phase_error,
+    nonseparable_phase_error,
+    polynomial_phase_error,
+    quadratic_phase_error,
+    separable_phase_error,
+    sinusoidal_phase_error,
+    uniform_phase_error,
+)
+
+
+def _gen(seed=0):
+    return torch.Generator().manual_seed(seed)
+
+
+class TestGenerators:
+    @pytest.mark.parametrize(
+        "fn",
+        [
+            uniform_phase_error,
+            quadratic_phase_error,
+            polynomial_phase_error,
+            sinusoidal_phase_error,
+        ],
+    )
+    def test_1d_shape_range(self, fn):
+        for b in (0, 1, 3):
+            phi = fn(b, 16, amplitude=2.0, generator=_gen())
+            assert phi.shape == (b, 16)
+            assert (phi.abs() <= 2.0 + 1e-6).all()
+
+    @pytest.mark.parametrize("fn", [separable_phase_error, nonseparable_phase_error])
+    def test_2d_shape_range(self, fn):
+        phi = fn(2, 8, 6, amplitude=1.0, generator=_gen())
+        assert phi.shape == (2, 8, 6)
+        bound = 2.0 if fn is separable_phase_error else 1.0
+        assert (phi.abs() <= bound + 1e-6).all()
+
+    def test_separable_is_rank_one_sum(self):
+        phi = separable_phase_error(1, 8, 6, generator=_gen())[0]
+        # phi_mk - phi_m0 - phi_0k + phi_00 == 0 for a sum of row and column terms
+        resid = phi - phi[:, :1] - phi[:1, :] + phi[0, 0]
+        assert resid.abs().max() < 1e-5
+
+    def test_uniform_fills_range(self):
+        phi = uniform_phase_error(1, 4000, generator=_gen())
+        assert phi.min() < -0.99 * math.pi and phi.max() > 0.99 * math.pi
+
+    def test_quadratic_is_quadratic(self):
+        phi = quadratic_phase_error(2, 9, generator=_gen(), dtype=torch.float64)
+        t = torch.linspace(-1, 1, 9, dtype=torch.float64)
+        coef = phi[:, -1:]
+        torch.testing.assert_close(phi, coef * t**2)
+
+    def test_seeded(self):
+        a = nonseparable_phase_error(2, 4, 4, generator=_gen(5))
+        b = nonseparable_phase_error(2, 4, 4, generator=_gen(5))
+        assert torch.equal(a, b)
+
+    def test_invalid(self):
+        with pytest.raises(OptionError, match="amplitude"):
+            uniform_phase_error(1, 4, amplitude=-1.0)
+        with pytest.raises(OptionError, match="order"):
+            polynomial_phase_error(1, 4, order=1)
+
+
+class TestApply:
+    def test_roundtrip_1d_and_2d(self):
+        g = torch.randn(2, 4, 5, dtype=torch.complex128, generator=_gen())
+        for phi in (
+            torch.randn(2, 4, dtype=torch.float64),
+            torch.randn(2, 4, 5, dtype=torch.float64),
+        ):
+            torch.testing.assert_close(apply_phase_error(apply_phase_error(g, phi), -phi), g)
+
+    def test_1d_broadcasts_over_samples(self):
+        g = torch.ones(1, 2, 3, dtype=torch.complex64)
+        out = apply_phase_error(g, torch.tensor([[0.0, math.pi / 2]]))
+        torch.testing.assert_close(out[0, 1], torch.full((3,), 1j, dtype=torch.complex64))
+
+    def test_shape_error(self):
+        with pytest.raises(ShapeError, match=r"\(B, M\)"):
+            apply_phase_error(torch.ones(1, 2, 3, dtype=torch.complex64), torch.zeros(1, 3))

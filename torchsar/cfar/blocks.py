@@ -1,0 +1,67 @@
+"""Shared machinery of the pinwheel-block CFARs (GO, SO): block means, their max / min, and
+the exact threshold factor for each pixel's block sizes."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import torch
+from torch import Tensor
+
+from torchsar.cfar.core import finish, out_dtype, prepare, ratio
+from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.thresholds import block_factor, keyed_factor_map
+from torchsar.windows import Sums, pinwheel_rects, windowed
+
+__all__ = ["block_cfar", "block_scale", "extreme_mean"]
+
+
+def extreme_mean(sums: list[Sums], reduce: str) -> Tensor:
+    """``max`` or ``min`` over the non-empty blocks of the block means (float64)."""
+    fill = -torch.inf if reduce == "max" else torch.inf
+    means = [torch.where(s.count > 0, s.mean(), fill) for s in sums]
+    stacked = torch.stack(torch.broadcast_tensors(*means), dim=0)
+    out = stacked.amax(0) if reduce == "max" else stacked.amin(0)
+    return out.clamp_min(0.0) if reduce == "max" else torch.where(out.isinf(), 0.0, out)
+
+
+def block_scale(counts: list[Tensor], interior: tuple[int, ...], factor) -> Tensor | None:
+    """``factor(interior) / factor(counts)`` per pixel where the block sizes differ from the
+    interior ones (``None`` when every pixel has the interior sizes)."""
+    c = torch.stack(torch.broadcast_tensors(*counts), dim=-1)
+    full = torch.tensor(interior, dtype=c.dtype, device=c.device)
+    other = (c != full).any(-1)
+    if not bool(other.any()):
+        return None
+    scale = torch.ones(other.shape, dtype=torch.float64, device=c.device)
+    scale[other] = factor(interior) / keyed_factor_map(c[other], factor)
+    return scale
+
+
+def block_cfar(
+    x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None, reduce: str
+) -> Detection:
+    """GO (``reduce="max"``) or SO (``"min"``) CFAR on the 4 pinwheel blocks."""
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    rects = pinwheel_rects(ring.guard, ring.train)
+    interior = tuple(r.area for r in rects)
+    factor = partial(_factor, pfa=pfa, reduce=reduce)
+    dtype = out_dtype(x)
+
+    def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
+        est = extreme_mean(sums, reduce)
+        stat = ratio(xs.to(est.dtype), est)
+        scale = block_scale([s.count for s in sums], interior, factor)
+        if scale is not None:
+            stat = stat * scale
+        total = sum(s.count for s in sums)
+        return finish(stat, total, None, dtype)
+
+    stat = windowed(x, rects, statistic, valid=vmask, moments=1)
+    if vmask is not None:
+        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
+    return detection_from(stat, factor(interior))
+
+
+def _factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:
+    return block_factor(tuple(sorted(sizes)), pfa, reduce)

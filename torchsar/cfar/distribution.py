@@ -1,0 +1,99 @@
+"""Shared machinery of the distribution CFARs: per-pixel ring log-cumulants (or moments),
+the fitted clutter law's ``(1 - pfa)`` quantile, and the statistic ``I / quantile``.
+
+Statistic convention (all distribution CFARs): ``statistic = I / q``, where ``q`` is the
+``(1 - pfa)`` quantile of the clutter law fitted to the pixel's ring; ``threshold = 1``.
+So ``mask == statistic > 1`` is the design test, and sweeping the threshold ``tau`` scales
+every pixel's fitted quantile by ``tau`` (monotone per pixel), which keeps ROC sweeps
+meaningful.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from torch import Tensor
+
+from torchsar.cfar.core import finish, out_dtype, prepare, ratio
+from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
+from torchsar.windows import Sums, windowed
+
+__all__ = ["distribution_cfar", "log_cumulants", "log_t_quantile", "shape_from_spread"]
+
+
+def distribution_cfar(
+    x: Tensor,
+    guard: int,
+    train: int,
+    pfa: float,
+    valid: Tensor | None,
+    quantile: Callable[[Sums, float], Tensor],  # (ring sums, pfa) -> float64 quantile
+    *,
+    log_domain: bool,
+) -> Detection:
+    """Run a distribution CFAR: ring sums of ``ln I`` (``log_domain``) or ``I``, the fitted
+    quantile per pixel, statistic ``I / q``, threshold 1. Rings with fewer than 2 cells
+    cannot be fitted and give ``-inf``."""
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    dtype = out_dtype(x)
+    src = _safe_log(x) if log_domain else x
+
+    def statistic(_src: Tensor, sums: list[Sums], xs: Tensor) -> Tensor:
+        q = quantile(sums[0], pfa)
+        stat = ratio(xs.to(torch.float64), q)
+        return finish(stat, sums[0].count - 1, None, dtype)
+
+    stat = windowed(src, [ring.region], statistic, valid=vmask, moments=2, extras=(x,))
+    if vmask is not None:
+        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
+    return detection_from(stat, 1.0)
+
+
+def _safe_log(x: Tensor) -> Tensor:
+    """``ln I`` with zeros clamped to the dtype's smallest normal number (finite)."""
+    return torch.log(x.clamp_min(torch.finfo(x.dtype).tiny))
+
+
+def log_cumulants(s: Sums) -> tuple[Tensor, Tensor]:
+    """First two sample log-cumulants of the ring: mean and unbiased variance of ``ln I``."""
+    return s.mean(), s.var(unbiased=True)
+
+
+def shape_from_spread(y: Tensor) -> Tensor:
+    """Solve ``psi_1(shape) = y`` (inverse trigamma) on the log-t shape range, clamped to it:
+    a spread at or below ``psi_1(max)`` gives the largest shape (the speckle-only limit).
+    Vectorised interpolation of a fine ``log psi_1`` table (relative error < 1e-5)."""
+    s_tab, l_tab = (torch.tensor(v, dtype=torch.float64, device=y.device) for v in trigamma_table())
+    inc, s_inc = l_tab.flip(0), s_tab.flip(0)  # log psi_1 increases as the shape decreases
+    ly = y.to(torch.float64).clamp_min(1e-300).log().clamp(inc[0], inc[-1])
+    i = torch.searchsorted(inc, ly.contiguous()).clamp(1, inc.numel() - 1)
+    frac = (ly - inc[i - 1]) / (inc[i] - inc[i - 1])
+    return (s_inc[i - 1] + frac * (s_inc[i] - s_inc[i - 1])).exp()
+
+
+def log_t_quantile(s: Sums, pfa: float, law: str, looks: float) -> Tensor:
+    """``q = exp(k1 + t sqrt(k2))`` with the calibrated ``t`` of
+    :func:`~torchsar.cfar.log_t.log_t_table` for each pixel's ring size and (K / G0) its
+    shape, estimated from ``k2 - psi_1(L)`` by inverse trigamma and interpolated in
+    ``log shape``."""
+    k1, k2 = log_cumulants(s)
+    n = s.count.round().long().clamp_min(2)
+    present = torch.unique(n).tolist()  # one cached table per ring size
+    rows = torch.tensor(
+        [log_t_table(law, looks, pfa, m) for m in present], dtype=torch.float64, device=k1.device
+    )
+    row_of = torch.zeros(max(present) + 1, dtype=torch.long, device=k1.device)
+    row_of[present] = torch.arange(len(present), device=k1.device)
+    r = row_of[n]
+    if law == "weibull":
+        t = rows[r, 0]
+    else:
+        start, stop, pts = LOG_T_SHAPES
+        speckle = float(torch.polygamma(1, torch.tensor(float(looks), dtype=torch.float64)))
+        shape = shape_from_spread(k2 - speckle)
+        pos = ((shape.log() - start) / ((stop - start) / (pts - 1))).clamp(0, pts - 1)
+        i0 = pos.floor().long().clamp(max=pts - 2)
+        t = rows[r, i0] * (1 - (pos - i0)) + rows[r, i0 + 1] * (pos - i0)
+    return (k1 + t * k2.sqrt()).exp()

@@ -1,0 +1,99 @@
+"""Ordered-statistic CFAR (the module is not named ``os`` to keep the standard library's)."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import torch
+from torch import Tensor
+
+from torchsar._checks import OptionError, check_int
+from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
+from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
+from torchsar.order_statistics import ring_order_statistic
+from torchsar.windows import Ring, Sums, region_count, windowed
+
+__all__ = ["os"]
+
+
+def os(
+    x: Tensor,
+    *,
+    guard: int = 2,
+    train: int = 4,
+    pfa: float = 1e-3,
+    rank: int | None = None,
+    valid: Tensor | None = None,
+) -> Detection:
+    """Ordered-statistic CFAR: statistic ``I / x_(r)``, the exact r-th smallest ring value.
+
+    The threshold factor solves Rohling's ``pfa = prod_{i=0}^{r-1} (N-i)/(N-i+alpha)`` by
+    bisection (exponential clutter; :func:`~torchsar.cfar.thresholds.os_factor`). The order
+    statistic is exact at every pixel (:func:`~torchsar.order_statistics.ring_order_statistic`).
+
+    Border rule: a pixel with ``n < N`` counted ring cells uses rank
+    ``round(r n / N)`` (at least 1) and its statistic is rescaled by
+    ``alpha(N, r) / alpha(n, r_n)``, so one global threshold keeps the design ``pfa``.
+
+    Args:
+        x: intensity ``(B, C, H, W)``, non-negative and finite.
+        guard: guard half-width g.
+        train: training-band width t; ``N = (2(g+t)+1)^2 - (2g+1)^2``.
+        pfa: design probability of false alarm.
+        rank: r in ``[1, N]`` (default ``round(3N/4)``, Rohling's recommendation).
+        valid: optional bool mask of usable cells.
+
+    Returns:
+        :class:`Detection` with ``threshold = alpha(N, r)``.
+
+    Raises:
+        InputTypeError, ShapeError, InputValueError, WindowSizeError, OptionError: bad input.
+
+    Shape:
+        ``(B, C, H, W)`` in, ``(B, C, H, W)`` out.
+
+    References:
+        Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350.
+
+    Example:
+        >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
+        >>> os(x, guard=1, train=2).mask.sum().item()
+        1
+    """
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    r = _check_rank(rank, ring)
+    counts = _ring_counts(x, ring, vmask)
+    ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=r)).long()
+    est = ring_order_statistic(x, ring, ranks, valid=vmask)
+    factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
+    stat = ratio(x.to(torch.float64), est.to(torch.float64))
+    scale = border_scale(counts, ring.n, factor)
+    if scale is not None:
+        stat = stat * scale
+    stat = finish(stat, counts, vmask, out_dtype(x))
+    return detection_from(stat, factor(ring.n))
+
+
+def _check_rank(rank: int | None, ring: Ring) -> int:
+    if rank is None:
+        return max(1, round(3 * ring.n / 4))
+    r = check_int(rank, "rank", minimum=1)
+    if r > ring.n:
+        raise OptionError(f"rank must be in [1, N={ring.n}] (the ring's cell count), got {rank}")
+    return r
+
+
+def _ring_counts(x: Tensor, ring: Ring, vmask: Tensor | None) -> Tensor:
+    """Counted ring cells per pixel, float64: ``(H, W)`` without a mask, else ``(B, C, H, W)``."""
+    if vmask is None:
+        return region_count(*x.shape[-2:], ring.region, x.device)
+
+    def count(_xs: Tensor, sums: list[Sums]) -> Tensor:
+        return sums[0].count.clone()
+
+    return windowed(x, [ring.region], count, valid=vmask, moments=1)
+
+
+def _factor(n: int, n_full: int, rank: int, pfa: float) -> float:
+    return os_factor(n, os_rank(n, n_full, rank), pfa)

@@ -1,0 +1,73 @@
+"""Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics."""
+
+from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
+from torchsar.imaging.backprojection import BackprojectionOperator
+from torchsar.imaging.fourier import fft2c, ifft2c
+from torchsar.imaging.geometry import SpotlightGeometry
+from torchsar.imaging.lp import default_lam, lp_image
+from torchsar.imaging.metrics import (
+    align,
+    contrast,
+    entropy,
+    magnitude_correlation,
+    phase_rmse,
+    sharpness,
+    target_to_background,
+)
+from torchsar.imaging.min_entropy import MinEntropyResult, min_entropy_autofocus
+from torchsar.imaging.operators import FourierOperator, LinearOperator
+from torchsar.imaging.pga import PGAResult, pga
+from torchsar.imaging.phase_errors import (
+    apply_phase_error,
+    nonseparable_phase_error,
+    polynomial_phase_error,
+    quadratic_phase_error,
+    separable_phase_error,
+    sinusoidal_phase_error,
+    uniform_phase_error,
+)
+from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
+from torchsar.imaging.phase_step import phase_step_1d, phase_step_2d, phase_step_separable
+from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
+from torchsar.imaging.scenes import point_scene, speckled_scene
+
+__all__ = [
+    "AutofocusResult",
+    "BackprojectionOperator",
+    "FourierOperator",
+    "LinearOperator",
+    "MinEntropyResult",
+    "PGAResult",
+    "SpotlightGeometry",
+    "add_noise",
+    "align",
+    "apply_phase_error",
+    "contrast",
+    "default_lam",
+    "entropy",
+    "fft2c",
+    "ifft2c",
+    "lp_image",
+    "magnitude_correlation",
+    "min_entropy_autofocus",
+    "nonseparable_phase_error",
+    "pga",
+    "phase_history",
+    "phase_rmse",
+    "phase_step_1d",
+    "phase_step_2d",
+    "phase_step_separable",
+    "point_phase_history",
+    "point_scene",
+    "polynomial_phase_error",
+    "pulse_autofocus",
+    "pulse_min_entropy",
+    "quadratic_phase_error",
+    "separable_phase_error",
+    "sharpness",
+    "sinusoidal_phase_error",
+    "sparse_autofocus",
+    "speckled_scene",
+    "target_to_background",
+    "uniform_phase_error",
+]

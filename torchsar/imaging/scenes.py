@@ -1,0 +1,124 @@
+"""Random reflectivity scenes for imaging experiments: sparse points, speckled extended scenes."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from torchsar._checks import OptionError, check_int, check_positive
+
+__all__ = ["point_scene", "speckled_scene"]
+
+
+def _dtype(dtype: torch.dtype) -> torch.dtype:
+    if dtype not in (torch.complex64, torch.complex128):
+        raise OptionError(f"dtype must be torch.complex64 or torch.complex128, got {dtype}")
+    return dtype
+
+
+def point_scene(
+    batch: int,
+    *,
+    size: tuple[int, int] = (64, 64),
+    points: int = 20,
+    margin: int = 0,
+    generator: torch.Generator | None = None,
+    dtype: torch.dtype = torch.complex64,
+    device=None,
+) -> tuple[Tensor, Tensor]:
+    """Sparse scenes of point scatterers on distinct pixels.
+
+    Amplitudes are uniform in ``[0.5, 1]`` with uniform random phase.
+
+    Args:
+        batch: number of scenes ``B``.
+        size: ``(H, W)``.
+        points: scatterers per scene.
+        margin: keep scatterers this many pixels away from the border.
+        generator: torch random generator.
+        dtype: complex64 or complex128.
+        device: output device.
+
+    Returns:
+        ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool support ``(B, 1, H, W)``.
+
+    Example:
+        >>> gen = torch.Generator().manual_seed(0)
+        >>> f, m = point_scene(2, size=(16, 16), points=5, generator=gen)
+        >>> f.shape, int(m.sum())
+        (torch.Size([2, 1, 16, 16]), 10)
+    """
+    check_int(batch, "batch", minimum=0)
+    h, w = size
+    check_int(margin, "margin", minimum=0)
+    inner = (h - 2 * margin) * (w - 2 * margin)
+    check_int(points, "points", minimum=0)
+    if points > inner:
+        raise OptionError(f"points must be <= {inner} free pixels, got {points}")
+    dtype = _dtype(dtype)
+    real = torch.float64 if dtype == torch.complex128 else torch.float32
+    keys = torch.rand(batch, inner, generator=generator, dtype=real).argsort(dim=1)[:, :points]
+    rows = keys // (w - 2 * margin) + margin
+    cols = keys % (w - 2 * margin) + margin
+    amp = 0.5 + 0.5 * torch.rand(batch, points, generator=generator, dtype=real)
+    phase = (2 * torch.rand(batch, points, generator=generator, dtype=real) - 1) * math.pi
+    f = torch.zeros(batch, h * w, dtype=dtype)
+    f.scatter_(1, rows * w + cols, torch.polar(amp, phase).to(dtype))
+    f = f.reshape(batch, 1, h, w).to(device)
+    return f, f != 0
+
+
+def speckled_scene(
+    batch: int,
+    *,
+    size: tuple[int, int] = (64, 64),
+    targets: int = 3,
+    target_size: tuple[int, int] = (3, 6),
+    contrast: float = 20.0,
+    generator: torch.Generator | None = None,
+    dtype: torch.dtype = torch.complex64,
+    device=None,
+) -> tuple[Tensor, Tensor]:
+    """Extended scenes: rectangles ``contrast`` times brighter than clutter, fully speckled.
+
+    The mean intensity is 1 on clutter and ``contrast`` on targets; the reflectivity is
+    circular complex Gaussian with that variance (single-look speckle).
+
+    Args:
+        batch: number of scenes.
+        size: ``(H, W)``.
+        targets: rectangles per scene.
+        target_size: ``(min, max)`` side length in pixels.
+        contrast: target-to-clutter mean intensity ratio.
+        generator: torch random generator.
+        dtype: complex64 or complex128.
+        device: output device.
+
+    Returns:
+        ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool target mask ``(B, 1, H, W)``.
+
+    Example:
+        >>> f, m = speckled_scene(1, size=(32, 32), generator=torch.Generator().manual_seed(0))
+        >>> f.shape, bool(m.any())
+        (torch.Size([1, 1, 32, 32]), True)
+    """
+    check_int(batch, "batch", minimum=0)
+    check_positive(contrast, "contrast")
+    dtype = _dtype(dtype)
+    real = torch.float64 if dtype == torch.complex128 else torch.float32
+    h, w = size
+    lo, hi = target_size
+    mask = torch.zeros(batch, 1, h, w, dtype=torch.bool)
+    for b in range(batch):
+        for _ in range(targets):
+            th, tw = (int(v) for v in torch.randint(lo, hi + 1, (2,), generator=generator))
+            r = int(torch.randint(0, max(1, h - th), (1,), generator=generator))
+            c = int(torch.randint(0, max(1, w - tw), (1,), generator=generator))
+            mask[b, 0, r : r + th, c : c + tw] = True
+    mean = torch.where(mask, torch.tensor(contrast, dtype=real), torch.tensor(1.0, dtype=real))
+    re = torch.randn(mask.shape, generator=generator, dtype=real)
+    im = torch.randn(mask.shape, generator=generator, dtype=real)
+    f = (mean / 2).sqrt() * torch.complex(re, im)
+    return f.to(dtype).to(device), mask.to(device)
