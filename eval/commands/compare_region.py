@@ -65,6 +65,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--trains", type=_ints, default=[2, 6, 12], help="train sweep")
     p.add_argument("--pfas", type=_floats, default=[1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
     p.add_argument(
+        "--window-cfars",
+        default=",".join(WINDOW_CFARS),
+        help="comma-separated window CFARs to compare (default: all; GO/SO solve their exact "
+        "threshold per window, pfa and border count: seconds each for large windows)",
+    )
+    p.add_argument(
         "--max-ring",
         type=int,
         default=1000,
@@ -109,7 +115,7 @@ def _tuned(tune, args, notes: list[str], name: str) -> tuple[list[DetectorSpec],
     tb = list(batches(tune, args.batch_size))
     grid = window_grid(args.guards, args.trains, args.pfas)
     specs, chosen = [], []
-    for det in WINDOW_CFARS:
+    for det in [d.strip() for d in args.window_cfars.split(",") if d.strip()]:
         if det not in DETECTORS:
             notes.append(f"{name}: window CFAR {det!r} is not registered yet: skipped")
             continue
