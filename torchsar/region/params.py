@@ -54,7 +54,7 @@ class RegionParams:
 PRESETS: dict[str, RegionParams] = {
     "paper": RegionParams(),
     "torchsar": RegionParams(
-        tau=0.5, k=2.0, max_size=10_000, min_size=30, merge=0, fill_holes=True
+        tau=0.5, k=2.0, max_size=20_000, min_size=30, merge=0, fill_holes=True
     ),
 }
 

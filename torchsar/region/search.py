@@ -210,7 +210,7 @@ def region_cfar(
     tau           0.3      0.5
     k             0.25     2.0
     min_size      1        30
-    max_size      None     10000
+    max_size      None     20000
     merge         None     0
     fill_holes    False    True
     ============  =======  ==========
@@ -218,8 +218,8 @@ def region_cfar(
     Every other option is the same in both (the paper's values and the readings above).
     The torchsar values are the best of a sweep on simulated scenes and chips and on MSTAR
     chips (``torchsar-eval compare-region``, ``scripts/region_ablation.py``); sizes are in
-    pixels (0.3 m pixels: 30 px is 2.7 m², 10000 px is 900 m²), scale them with the pixel
-    area. ``tau`` 0.5 is near a cliff on the simulated scenes: at 0.6 target regions chain
+    pixels (0.3 m pixels: 30 px is 2.7 m², 20000 px is 1800 m², above the largest simulated
+    building of 120 x 120 px), scale them with the pixel area. ``tau`` 0.5 is near a cliff on the simulated scenes: at 0.6 target regions chain
     through the filter-blurred target edges into the clutter, exceed ``max_size`` and are
     all rejected.
 
