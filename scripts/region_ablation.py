@@ -49,9 +49,9 @@ class BenchScenes(torch.utils.data.Dataset):
 STEPS = [
     ("paper", {}),
     ("+ max_size 20000", {"max_size": 20_000}),
-    ("+ min_size 50", {"min_size": 50}),
+    ("+ min_size 30", {"min_size": 30}),
     ("+ k 2", {"k": 2.0}),
-    ("+ tau 0.4", {"tau": 0.4}),
+    ("+ tau 0.5", {"tau": 0.5}),
     ("+ fill_holes (= torchsar)", {"fill_holes": True, "merge": 0}),
 ]
 
