@@ -53,6 +53,7 @@ DETECTORS: dict[str, DetectorSpec] = {
         DetectorSpec("gamma", ts.cfar.gamma, LOOKS),
         DetectorSpec("k", ts.cfar.k, LOOKS),
         DetectorSpec("g0", ts.cfar.g0, LOOKS),
+        DetectorSpec("region", ts.region.region_cfar, {}),
     ]
 }
 

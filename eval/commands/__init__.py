@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers"]
+COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region"]
 
 
 def load(name: str):

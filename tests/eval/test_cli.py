@@ -194,16 +194,46 @@ def test_variant_images(tmp_path, capsys):
 
 def test_despeckle_stage_recorded(tiny_folder, tmp_path):
     out = tmp_path / "d"
-    assert main(["run", "--dataset", f"folder:{tiny_folder}", "--detectors", "ca", "--despeckle",
-                 "enhanced_frost", "--despeckle-param", "window=3", "--out", str(out),
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                f"folder:{tiny_folder}",
+                "--detectors",
+                "ca",
+                "--despeckle",
+                "enhanced_frost",
+                "--despeckle-param",
+                "window=3",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["despeckle"] == {"filter": "enhanced_frost", "window": 3}
 
 
 def test_bad_despeckle_option_fails_before_output(tiny_folder, tmp_path, capsys):
     out = tmp_path / "d"
-    assert main(["run", "--dataset", f"folder:{tiny_folder}", "--despeckle", "lee",
-                 "--despeckle-param", "window=4", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                f"folder:{tiny_folder}",
+                "--despeckle",
+                "lee",
+                "--despeckle-param",
+                "window=4",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "window" in capsys.readouterr().err
     assert not out.exists()

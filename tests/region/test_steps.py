@@ -1,0 +1,182 @@
+"""Unit tests of the steps of the region-growing CFAR on tiny hand-made images."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.reference import region as ref
+from torchsar.region.grow import Grid, grow
+from torchsar.region.rings import crop_around, dilate, ring_masks, ring_stats
+from torchsar.region.seeds import local_maxima, seed_order
+
+
+class TestSeeds:
+    def test_local_maxima_5x5(self):
+        f = torch.zeros(1, 1, 7, 7)
+        f[0, 0, 1, 1], f[0, 0, 3, 4], f[0, 0, 6, 6] = 5.0, 4.0, 3.0
+        got = local_maxima(f - 0.01 * torch.arange(49.0).reshape(1, 1, 7, 7))[0, 0]
+        # (1, 1) and (3, 4) are 3 columns apart: both are maxima of their 5x5 windows
+        assert got[1, 1] and got[3, 4] and got[6, 6]
+
+    def test_equal_to_reference(self):
+        g = torch.Generator().manual_seed(0)
+        f = torch.rand(1, 1, 13, 17, generator=g, dtype=torch.float64)
+        got = seed_order(f[0, 0], local_maxima(f)[0, 0]).tolist()
+        assert got == ref.seeds(f[0, 0].numpy())
+
+    def test_brightest_first_ties_by_index(self):
+        f = torch.tensor([[2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0]])
+        order = seed_order(f, local_maxima(f[None, None])[0, 0]).tolist()
+        assert order == [10, 0, 6]  # the 3 first, then the two tied 2's by flat index
+
+    def test_window(self):
+        f = torch.tensor([[[[3.0, 0.0, 2.0]]]])
+        assert local_maxima(f, 3)[0, 0, 0].tolist() == [True, False, True]
+        assert local_maxima(f, 5)[0, 0, 0].tolist() == [True, False, False]
+
+
+def _grid(a) -> Grid:
+    return Grid.new(np.asarray(a, dtype=np.float64))
+
+
+class TestGrow:
+    def test_order_most_similar_first(self):
+        # a row: the seed 10, then 9.5 (left) and 8 (right): N=1 -> mu_N = 10
+        g = _grid([[7.5, 9.5, 10.0, 8.0, 9.9]])
+        out = grow(g, 2, 1, tau=0.3, n_init=1, budget=None).tolist()
+        assert out == [2, 1, 3, 4, 0]  # |9.5-10| < |8-10|; then 9.9 (0.1) before 7.5 (2.5)
+
+    def test_stops_when_psi_exceeds_tau(self):
+        g = _grid([[10.0, 7.1, 6.9, 10.0]])  # tau * beta = 3: 7.1 passes, 6.9 does not
+        assert grow(g, 0, 1, tau=0.3, n_init=1, budget=None).tolist() == [0, 1]
+
+    def test_mu_n_is_mean_of_first_n(self):
+        # first pixels 10, 7.2 (n_init=2 -> mu_N = 8.6); then 5.9 passes (|5.9-8.6| = 2.7 <= 3)
+        g = _grid([[10.0, 7.2, 5.9]])
+        assert grow(g, 0, 1, tau=0.3, n_init=2, budget=None).tolist() == [0, 1, 2]
+        # with n_init=1 the reference stays 10 and 5.9 fails (4.1 > 3)
+        g = _grid([[10.0, 7.2, 5.9]])
+        assert grow(g, 0, 1, tau=0.3, n_init=1, budget=None).tolist() == [0, 1]
+
+    def test_beta_grows(self):
+        # beta becomes 12 after adding 12, which widens the tolerance to 3.6 for 6.5
+        g = _grid([[10.0, 12.0, 6.5]])
+        assert grow(g, 0, 1, tau=0.3, n_init=1, budget=None).tolist() == [0, 1, 2]
+
+    def test_four_connectivity(self):
+        a = [[10.0, 0.0], [0.0, 10.0]]
+        assert grow(_grid(a), 0, 1, tau=0.3, n_init=1).tolist() == [0]
+        g8 = Grid.new(np.asarray(a), connectivity=8)
+        assert sorted(grow(g8, 0, 1, tau=0.3, n_init=1).tolist()) == [0, 3]
+
+    def test_blocked_pixels_are_not_entered(self):
+        g = _grid([[10.0, 10.0, 10.0]])
+        g.free[1] = 0
+        assert grow(g, 0, 1, tau=0.3, n_init=1).tolist() == [0]
+
+    @given(st.integers(0, 10_000), st.sampled_from([4, 8]), st.integers(1, 6))
+    def test_flood_finish_equals_heap(self, seed, conn, n_init):
+        rng = np.random.default_rng(seed)
+        f = rng.gamma(2.0, 1.0, size=(20, 23))
+        f[5:12, 6:15] += 6.0
+        blocked = rng.random(f.shape) < 0.1
+        start = int(np.argmax(f))
+        out = []
+        for budget in (None, 1, 5):
+            g = Grid.new(f, connectivity=conn)
+            g.free2d()[blocked] = 0
+            out.append(np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget)))
+        np.testing.assert_array_equal(out[0], out[1])
+        np.testing.assert_array_equal(out[0], out[2])
+
+    @given(st.integers(0, 10_000))
+    def test_equal_to_reference(self, seed):
+        rng = np.random.default_rng(seed)
+        f = rng.gamma(3.0, 1.0, size=(9, 11))
+        free = rng.random(f.size) > 0.1
+        start = int(np.argmax(np.where(free, f.reshape(-1), -1)))
+        g = Grid.new(f)
+        g.free[:] = free.astype(np.uint8).tobytes()
+        got = grow(g, start, 1, tau=0.3, n_init=4, budget=None).tolist()
+        assert got == ref.grow(f, start, free, 0.3, 4)
+
+
+class TestRings:
+    def test_single_pixel_shapes(self):
+        t = np.zeros((15, 15), dtype=bool)
+        t[7, 7] = True
+        k, c = ring_masks(t, 3, 3)
+        assert int(k.sum()) == 7 * 7 and k[4:11, 4:11].all()
+        assert int(c.sum()) == 13 * 13 - 7 * 7 and not (c & k).any()
+        assert c[1, 1] and c[13, 13] and not c[0, 0]
+
+    def test_follow_region_shape(self):
+        t = np.zeros((12, 12), dtype=bool)
+        t[5, 2:10] = True  # a horizontal bar
+        k, c = ring_masks(t, 1, 1)
+        assert int(k.sum()) == 3 * 10
+        assert int(c.sum()) == 5 * 12 - 3 * 10
+        assert not c[5, 5] and c[3, 5] and c[7, 5] and not c[2, 5]
+
+    def test_equal_to_reference(self):
+        rng = np.random.default_rng(1)
+        t = rng.random((14, 16)) > 0.85
+        k, c = ring_masks(t, 2, 3)
+        rk, rc = ref.rings(np.flatnonzero(t).tolist(), t.shape, 2, 3)
+        np.testing.assert_array_equal(k, rk)
+        np.testing.assert_array_equal(c, rc)
+
+    def test_dilate_zero_radius(self):
+        m = np.eye(3, dtype=bool)
+        np.testing.assert_array_equal(dilate(m, 0), m)
+
+    def test_crop_is_clipped_to_image(self):
+        crop = crop_around(np.array([0, 1]), (10, 10), 4)
+        assert (crop.r0, crop.r1, crop.c0, crop.c1) == (0, 5, 0, 6)
+        assert crop.region[0, :2].all() and int(crop.region.sum()) == 2
+
+
+def _stats_case():
+    raw = np.ones((11, 11))
+    raw[::2] = 3.0  # background alternates 3 / 1 by rows
+    raw[5, 5] = 20.0
+    t = np.array([5 * 11 + 5])
+    return raw, crop_around(t, (11, 11), 3)
+
+
+class TestRingStats:
+    def test_hand_computed(self):
+        raw, crop = _stats_case()
+        none = np.zeros((11, 11), dtype=bool)
+        low = np.zeros((11, 11))
+        rs = ring_stats(crop, raw, raw, low, none, 1, 2)
+        # ring of Chebyshev distance 2..3 around (5, 5): rows 2,8 (dist 3, row even -> 3)...
+        ii, jj = np.mgrid[:11, :11]
+        d = np.maximum(abs(ii - 5), abs(jj - 5))
+        vals = raw[(d >= 2) & (d <= 3)]
+        assert rs.mu_t == 20.0 and rs.n_background == vals.size == 40
+        assert rs.mu_c == pytest.approx(vals.mean()) and rs.sigma_c == pytest.approx(vals.std())
+
+    def test_lowpass_censoring(self):
+        raw, crop = _stats_case()
+        none = np.zeros((11, 11), dtype=bool)
+        low = raw.copy()
+        low[8] = 25.0  # row 8 looks brighter than the target after low-pass: censored
+        rs = ring_stats(crop, raw, raw, low, none, 1, 2)
+        assert rs.n_background == 40 - 7
+        ii, jj = np.mgrid[:11, :11]
+        d = np.maximum(abs(ii - 5), abs(jj - 5))
+        kept = raw[(d >= 2) & (d <= 3) & (ii != 8)]
+        assert rs.mu_c == pytest.approx(kept.mean())
+
+    def test_taken_censoring(self):
+        raw, crop = _stats_case()
+        taken = np.zeros((11, 11), dtype=bool)
+        taken[2, :] = True  # an earlier target: never part of this background
+        low = np.zeros((11, 11))
+        rs = ring_stats(crop, raw, raw, low, taken, 1, 2)
+        assert rs.n_background == 40 - 7

@@ -1,0 +1,177 @@
+"""Region-growing CFAR (seed paper section 3, steps a–j; DESIGN §4.3).
+
+Pipeline per image: despeckle (tensor) → 5x5 local-maximum seeds (tensor) → for each seed,
+brightest first, skipping seeds already inside a grown region: grow T on the despeckled
+image F (CPU heap, :mod:`torchsar.region.grow`) → guard area K and background ring C by
+dilation on a crop → censor C → ``mu_C``, ``sigma_C`` on the unfiltered image → accept T iff
+``(mu_T - mu_C) / sigma_C > k``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+from torch import Tensor
+
+from torchsar.region.grow import Grid, grow
+from torchsar.region.params import RegionParams
+from torchsar.region.rings import crop_around, ring_stats
+from torchsar.region.seeds import local_maxima, seed_order
+from torchsar.region.table import RegionRow, RegionTable
+
+__all__ = ["detect_image"]
+
+
+class _ImageState:
+    """Mutable state of one image while its seeds are visited."""
+
+    def __init__(self, f: Tensor, p: RegionParams) -> None:
+        h, w = f.shape
+        self.shape = (h, w)
+        self.grid = Grid.new(f.numpy(), p.connectivity)
+        self.free = np.frombuffer(self.grid.free, dtype=np.uint8)
+        self.covered = np.zeros(h * w, dtype=bool)
+        self.taken = np.zeros((h, w), dtype=bool)
+        self.stat = np.full(h * w, -np.inf)
+        self.region_id = np.zeros(h * w, dtype=np.int32)
+        self.table = RegionTable()
+        self.k = p.k
+
+
+def _statistic(mu_t: float, mu_c: float, sigma_c: float) -> float:
+    """``(mu_t - mu_c) / sigma_c``; a zero ``sigma_c`` gives ``±inf`` by the sign (0 if equal)."""
+    diff = mu_t - mu_c
+    if sigma_c > 0:
+        return diff / sigma_c
+    return math.copysign(math.inf, diff) if diff else 0.0
+
+
+def _test_region(
+    st: _ImageState, idx: np.ndarray, imgs: tuple[np.ndarray, ...], p: RegionParams
+) -> RegionRow:
+    """Steps d–i for one grown region; returns its table row (label filled in later)."""
+    h, w = st.shape
+    seed = (int(idx[0]) // w, int(idx[0]) % w)
+    nan = float("nan")
+    if p.max_size is not None and idx.size > p.max_size:
+        return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, "too_large")
+    crop = crop_around(idx, (h, w), p.guard + p.background)
+    raw, target_img, low = imgs
+    rs = ring_stats(crop, raw, target_img, low, st.taken, p.guard, p.background)
+    if rs.n_background < p.min_background:
+        return RegionRow(
+            seed, int(idx.size), rs.mu_t, rs.mu_c, rs.sigma_c, rs.n_background, -math.inf,
+            False, "few_background",
+        )  # fmt: skip
+    z = _statistic(rs.mu_t, rs.mu_c, rs.sigma_c)
+    ok = z > p.k
+    return RegionRow(
+        seed, int(idx.size), rs.mu_t, rs.mu_c, rs.sigma_c, rs.n_background, z, ok,
+        "" if ok else "below_k",
+    )  # fmt: skip
+
+
+def _visit(st: _ImageState, seed: int, imgs: tuple[np.ndarray, ...], p: RegionParams) -> None:
+    """Grow, test and record the region of one seed (steps c–i)."""
+    tag = len(st.table) + 1
+    idx = grow(st.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget)
+    st.covered[idx] = True
+    if p.blocking == "all":
+        st.free[idx] = 0
+    row = _test_region(st, idx, imgs, p)
+    if row.accepted:
+        st.taken.reshape(-1)[idx] = True
+        st.free[idx] = 0
+    better = st.stat[idx] < row.statistic
+    st.stat[idx[better]] = row.statistic
+    st.region_id[idx[better]] = tag
+    st.table.rows.append(row)
+
+
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+def _drop_small_objects(st: _ImageState, min_size: int) -> None:
+    """Reject accepted regions whose object (the 8-connected union of touching accepted
+    regions) has fewer than ``min_size`` pixels: statistic ``-inf``, reason "too_small"."""
+    if min_size <= 1:
+        return
+    h, w = st.shape
+    lab, n = ndimage.label((st.stat > st.k).reshape(h, w), structure=_EIGHT)
+    if n == 0:
+        return
+    small = np.flatnonzero(np.bincount(lab.reshape(-1), minlength=n + 1)[1:] < min_size) + 1
+    drop = np.isin(lab.reshape(-1), small)
+    tags = np.unique(st.region_id[drop])
+    st.stat[drop] = -np.inf
+    for t in tags[tags > 0]:
+        r = st.table.rows[t - 1]
+        st.table.rows[t - 1] = RegionRow(**{**r.__dict__, "accepted": False, "reason": "too_small"})
+
+
+def _fill_holes(st: _ImageState) -> None:
+    """Give the pixels enclosed by accepted regions (holes, e.g. bright scatterers whose ring
+    lay on the target itself and were rejected) to an adjacent accepted region: its statistic
+    and its id. The table keeps each region's own decision."""
+    h, w = st.shape
+    mask = (st.stat > st.k).reshape(h, w)
+    holes = ndimage.binary_fill_holes(mask) & ~mask
+    lab, n = ndimage.label(holes)
+    if n == 0:
+        return
+    acc = np.where(mask, st.region_id.reshape(h, w), 0)
+    owner = ndimage.maximum(ndimage.maximum_filter(acc, 3), labels=lab, index=np.arange(1, n + 1))
+    owner = np.asarray(owner, dtype=np.int64)[lab[holes] - 1]
+    flat = np.flatnonzero(holes.reshape(-1))
+    st.region_id[flat] = owner
+    st.stat[flat] = np.array([st.table.rows[t - 1].statistic for t in owner.tolist()])
+
+
+def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
+    """Region ids of the accepted regions: 1..n in acceptance order, or, with ``merge = d``,
+    one id per group of accepted regions closer than ``d`` pixels (0: touching, including
+    diagonally, like the evaluator's 8-connected objects)."""
+    h, w = st.shape
+    if merge is None:
+        tags = np.array([i + 1 for i, r in enumerate(st.table.rows) if r.accepted], dtype=np.int64)
+        lut = np.zeros(len(st.table) + 1, dtype=np.int64)
+        lut[tags] = np.arange(1, tags.size + 1)
+        return np.where(mask, lut[st.region_id], 0).reshape(h, w)
+    m2 = mask.reshape(h, w)
+    grown = ndimage.binary_dilation(m2, np.ones((2 * merge + 1,) * 2)) if merge else m2
+    lab, _ = ndimage.label(grown, structure=_EIGHT)
+    return np.where(m2, lab, 0)
+
+
+def _finish_table(st: _ImageState, labels: np.ndarray) -> None:
+    """Write each accepted region's final label into its table row."""
+    rows = st.table.rows
+    for i, r in enumerate(rows):
+        if r.accepted:
+            rows[i] = RegionRow(**{**r.__dict__, "label": int(labels[r.seed])})
+
+
+def detect_image(
+    raw: Tensor, f: Tensor, target_img: Tensor, low: Tensor, p: RegionParams, dtype: np.dtype
+) -> tuple[np.ndarray, np.ndarray, RegionTable]:
+    """Run steps a–j on one image (``(H, W)`` float64 CPU tensors).
+
+    Returns the painted statistic ``(H, W)`` in ``dtype``, the labels ``(H, W)`` int64 (of
+    the pixels where ``statistic > k`` in that dtype) and the region table.
+    """
+    st = _ImageState(f, p)
+    seeds = seed_order(f, local_maxima(f[None, None], p.seed_window)[0, 0])
+    imgs = (raw.numpy(), target_img.numpy(), low.numpy())
+    for s in seeds.tolist():
+        if not st.covered[s]:
+            _visit(st, s, imgs, p)
+    if p.fill_holes:
+        _fill_holes(st)
+    _drop_small_objects(st, p.min_size)
+    stat = st.stat.astype(dtype)
+    mask = stat > dtype.type(p.k)
+    labels = _labels(st, mask, p.merge)
+    _finish_table(st, labels)
+    return stat.reshape(st.shape), labels, st.table

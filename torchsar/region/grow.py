@@ -1,0 +1,255 @@
+"""Step c: grow one region from a seed on the despeckled image (the CPU heap).
+
+The paper grows region T from the seed by always adding the boundary pixel most similar to
+the region, accepting it while ``psi = |F(p) - mu_N| / beta <= tau``, where ``mu_N`` is the
+mean of the first ``N`` pixels added and ``beta`` the maximum of F over T.
+
+Implementation: flat (row-major) pixel indices, the image as a Python list of floats (fast
+scalar access), a ``bytearray`` of growable pixels shared by every region of the image, and
+an integer stamp array so nothing is cleared between regions. Until ``N`` pixels are in T
+the reference mean changes with every addition, so the few candidates are rescanned; after
+that the key ``|F(p) - mu_N|`` of a pixel never changes and a binary heap (``heapq``) orders
+the boundary. Since ``beta`` only grows and the heap top has the smallest key, growth stops
+exactly when the heap top fails the test. Ties are broken by the smaller flat index, so the
+result is deterministic.
+
+Large regions (clutter floods, big targets) would make the pure-Python heap the bottleneck,
+so after ``budget`` pixels the growth is finished by a compiled flood fill
+(:func:`skimage.segmentation.flood`) on a crop. This is exact, not an approximation: the
+region the heap ends with is the connected component, containing the region so far, of the
+growable pixels with ``|F - mu_N| <= tau * beta`` for its final ``beta``, and iterating
+"flood with ``tau * beta``, update ``beta`` to the maximum of F over the flood" from any
+partial heap region converges to that same component (``beta`` only grows, every flood is
+contained in the final region). Only the order in which pixels join is lost, and nothing
+downstream depends on it.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, MutableSequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from skimage.segmentation import flood
+
+__all__ = ["Grid", "grow"]
+
+
+@dataclass
+class Grid:
+    """Per-image state shared by every region grown on that image.
+
+    Attributes:
+        f: the despeckled image, flattened row-major, as Python floats.
+        width: image width W (rows are ``len(f) // width``).
+        free: 1 where a region may grow into the pixel, 0 where it is taken.
+        stamp: per-pixel id of the last region that queued the pixel.
+        connectivity: 4 (the paper's eq. 4) or 8.
+    """
+
+    f: list[float]
+    width: int
+    free: bytearray
+    stamp: MutableSequence[int]
+    connectivity: int = 4
+    f2d: np.ndarray | None = None
+
+    @staticmethod
+    def new(f: np.ndarray, connectivity: int = 4) -> Grid:
+        """The state of a fresh image: ``f`` is the ``(H, W)`` float64 despeckled image."""
+        n = f.size
+        flat = f.reshape(-1).tolist()
+        return Grid(flat, f.shape[1], bytearray(b"\x01") * n, [0] * n, connectivity, f)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (len(self.f) // self.width, self.width)
+
+    def free2d(self) -> np.ndarray:
+        """The ``free`` flags as an ``(H, W)`` uint8 array sharing memory."""
+        return np.frombuffer(self.free, dtype=np.uint8).reshape(self.shape)
+
+    def neighbours(self) -> Callable[[int], list[int]]:
+        """A function returning the in-image 4- or 8-neighbours of a flat index."""
+        w, n = self.width, len(self.f)
+
+        def four(p: int) -> list[int]:
+            col = p % w
+            out = []
+            if p >= w:
+                out.append(p - w)
+            if p + w < n:
+                out.append(p + w)
+            if col:
+                out.append(p - 1)
+            if col + 1 < w:
+                out.append(p + 1)
+            return out
+
+        def eight(p: int) -> list[int]:
+            col = p % w
+            out = four(p)
+            for q in (p - w, p + w):
+                if 0 <= q < n:
+                    if col:
+                        out.append(q - 1)
+                    if col + 1 < w:
+                        out.append(q + 1)
+            return out
+
+        return four if self.connectivity == 4 else eight
+
+
+def _first_n(
+    grid: Grid, seed: int, tag: int, tau: float, n_init: int, nbrs: Callable[[int], list[int]]
+) -> tuple[list[int], list[int], float, bool]:
+    """Grow the first ``n_init`` pixels with the running mean as reference.
+
+    Returns the region, the queued candidates, ``beta`` and whether growth may continue.
+    """
+    f, free, stamp = grid.f, grid.free, grid.stamp
+    region, total, beta = [seed], f[seed], f[seed]
+    stamp[seed] = tag
+    cand: list[int] = []
+    _queue(seed, cand, nbrs, free, stamp, tag)
+    while len(region) < n_init and cand:
+        mu = total / len(region)
+        j = min(range(len(cand)), key=lambda i: (abs(f[cand[i]] - mu), cand[i]))
+        p = cand[j]
+        if abs(f[p] - mu) > tau * beta:
+            return region, cand, beta, False
+        cand.pop(j)
+        region.append(p)
+        total += f[p]
+        beta = max(beta, f[p])
+        _queue(p, cand, nbrs, free, stamp, tag)
+    return region, cand, beta, True
+
+
+def _queue(
+    p: int,
+    out: list[int],
+    nbrs: Callable[[int], list[int]],
+    free: bytearray,
+    stamp: MutableSequence[int],
+    tag: int,
+) -> None:
+    """Append the growable, not yet queued neighbours of ``p`` to ``out``."""
+    for q in nbrs(p):
+        if free[q] and stamp[q] != tag:
+            stamp[q] = tag
+            out.append(q)
+
+
+def grow(
+    grid: Grid, seed: int, tag: int, *, tau: float, n_init: int, budget: int | None = 512
+) -> np.ndarray:
+    """Grow one region from ``seed`` (seed step c).
+
+    Args:
+        grid: the image state; pixels with ``grid.free == 0`` are never entered (the seed is
+            taken even so). ``grid.stamp`` is updated with ``tag``.
+        seed: flat index of the seed.
+        tag: a stamp unique to this region (> every earlier tag on this grid).
+        tau: similarity tolerance.
+        n_init: N, the number of first pixels whose mean is the reference ``mu_N``.
+        budget: pixels grown by the Python heap before the flood fill finishes the region
+            (None: heap only, pixels in order of joining).
+
+    Returns:
+        int64 flat indices of the region, the seed first.
+
+    Example:
+        >>> g = Grid.new(np.array([[9.0, 8.0], [1.0, 8.5]]))
+        >>> grow(g, 0, 1, tau=0.3, n_init=2).tolist()
+        [0, 1, 3]
+    """
+    f = grid.f
+    nbrs = grid.neighbours()
+    region, cand, beta, go_on = _first_n(grid, seed, tag, tau, n_init, nbrs)
+    if not go_on:
+        return np.asarray(region, dtype=np.int64)
+    mu_n = sum(f[p] for p in region) / len(region)
+    heap = [(abs(f[q] - mu_n), q) for q in cand]
+    heapq.heapify(heap)
+    limit = tau * beta
+    free, stamp = grid.free, grid.stamp
+    push, pop = heapq.heappush, heapq.heappop
+    cap = len(f) + 1 if budget is None else budget
+    while heap and heap[0][0] <= limit:
+        p = pop(heap)[1]
+        region.append(p)
+        fp = f[p]
+        if fp > beta:
+            beta = fp
+            limit = tau * beta
+        if len(region) >= cap:
+            return _flood_rest(grid, np.asarray(region, dtype=np.int64), mu_n, beta, tau)
+        for q in nbrs(p):
+            if free[q] and stamp[q] != tag:
+                stamp[q] = tag
+                push(heap, (abs(f[q] - mu_n), q))
+    return np.asarray(region, dtype=np.int64)
+
+
+_LABEL_MAX = 1 << 16  # crops up to this many pixels: scipy labelling beats flood's overhead
+
+
+def _component(
+    dist: np.ndarray, seed: tuple[int, int], tol: float, connectivity: int
+) -> np.ndarray:
+    """The connected component of ``dist <= tol`` containing ``seed`` (bool mask)."""
+    if dist.size <= _LABEL_MAX:
+        structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
+        lab, _ = ndimage.label(dist <= tol, structure=structure)
+        return lab == lab[seed]
+    return flood(dist, seed, tolerance=tol, connectivity=1 if connectivity == 4 else 2)
+
+
+def _flood_crop(
+    grid: Grid, idx: np.ndarray, box: tuple[int, int, int, int], mu_n: float, beta: float,
+    tau: float,
+) -> tuple[np.ndarray, float]:  # fmt: skip
+    """Iterate flood fills on one crop until ``beta`` is stable; return the crop mask."""
+    r0, r1, c0, c1 = box
+    w = grid.width
+    sub = grid.f2d[r0:r1, c0:c1]
+    dist = np.abs(sub - mu_n)
+    dist[grid.free2d()[r0:r1, c0:c1] == 0] = np.inf
+    rows, cols = idx // w - r0, idx % w - c0
+    dist[rows, cols] = 0.0
+    while True:
+        m = _component(dist, (int(rows[0]), int(cols[0])), tau * beta, grid.connectivity)
+        top = float(sub[m].max())
+        if top <= beta:
+            return m, beta
+        beta = top
+
+
+def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: float) -> np.ndarray:
+    """Finish a region from its partial heap region ``idx`` with flood fills on a crop around
+    it; while the flood touches a crop edge inside the image, the flood so far (contained in
+    the final region) becomes the new partial region and the margin doubles."""
+    h, w = grid.shape
+    seed = idx[0]
+    margin = 16
+    while True:
+        rows, cols = idx // w, idx % w
+        box = (
+            max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h),
+            max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w),
+        )  # fmt: skip
+        m, beta = _flood_crop(grid, idx, box, mu_n, beta, tau)
+        r0, r1, c0, c1 = box
+        rr, cc = np.nonzero(m)
+        flat = (rr + r0) * w + (cc + c0)
+        idx = np.concatenate([idx[:1], flat[flat != seed]])
+        edge = (
+            (r0 > 0 and m[0].any()) or (r1 < h and m[-1].any())
+            or (c0 > 0 and m[:, 0].any()) or (c1 < w and m[:, -1].any())
+        )  # fmt: skip
+        if not edge:
+            return idx
+        margin *= 2
