@@ -156,3 +156,18 @@ class TestExceptions:
     def test_options(self, kw, msg):
         with pytest.raises(OptionError, match=msg):
             region_cfar(torch.ones(1, 1, 8, 8), **{"despeckle": None, **kw})
+
+
+def test_max_fraction_rejects_a_flood_covering_most_of_the_image():
+    # A bright plateau covering 60 % of the image next to darker clutter: with max_fraction
+    # it is a flood (rejected untested), without it the region test may accept it.
+    import torch
+
+    import torchsar as ts
+
+    x = torch.ones(1, 1, 40, 40)
+    x[..., :, :24] = 20.0
+    det = ts.region.region_cfar(x, despeckle=None, max_fraction=0.25, min_size=1)
+    assert not det.mask[..., :, :24].any()
+    with pytest.raises(ts._checks.OptionError, match="max_fraction"):
+        ts.region.region_cfar(x, max_fraction=1.5)

@@ -48,6 +48,15 @@ def _statistic(mu_t: float, mu_c: float, sigma_c: float) -> float:
     return math.copysign(math.inf, diff) if diff else 0.0
 
 
+def _too_large(size: int, image_area: int, p: RegionParams) -> bool:
+    """A flood: more than ``max_size`` pixels, or more than ``max_fraction`` of the image
+    (a CFAR test assumes clutter dominates the scene; a region covering a large part of the
+    image leaves no representative background, e.g. a 128x128 chip grown almost entirely)."""
+    if p.max_size is not None and size > p.max_size:
+        return True
+    return p.max_fraction is not None and size > p.max_fraction * image_area
+
+
 def _test_region(
     st: _ImageState, idx: np.ndarray, imgs: tuple[np.ndarray, ...], p: RegionParams
 ) -> RegionRow:
@@ -55,7 +64,7 @@ def _test_region(
     h, w = st.shape
     seed = (int(idx[0]) // w, int(idx[0]) % w)
     nan = float("nan")
-    if p.max_size is not None and idx.size > p.max_size:
+    if _too_large(idx.size, h * w, p):
         return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, "too_large")
     crop = crop_around(idx, (h, w), p.guard + p.background)
     raw, target_img, low = imgs

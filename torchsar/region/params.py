@@ -44,6 +44,7 @@ class RegionParams:
     lowpass: str | int | None = "despeckled"
     blocking: str = "all"
     max_size: int | None = None
+    max_fraction: float | None = None
     min_size: int = 1
     merge: int | None = None
     fill_holes: bool = False
@@ -54,7 +55,13 @@ class RegionParams:
 PRESETS: dict[str, RegionParams] = {
     "paper": RegionParams(),
     "torchsar": RegionParams(
-        tau=0.5, k=2.0, max_size=20_000, min_size=30, merge=0, fill_holes=True
+        tau=0.5,
+        k=2.0,
+        max_size=20_000,
+        max_fraction=0.25,
+        min_size=30,
+        merge=0,
+        fill_holes=True,
     ),
 }
 
@@ -79,6 +86,14 @@ def _check_lowpass(value: object) -> str | int | None:
 def _check_k(value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or value != value:
         raise OptionError(f"k must be a real number, got {value!r}")
+    return float(value)
+
+
+def _check_fraction(value: object) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= 1:
+        raise OptionError(f"max_fraction must be None or in (0, 1], got {value!r}")
     return float(value)
 
 
@@ -108,6 +123,7 @@ def _validate(p: RegionParams) -> RegionParams:
         lowpass=_check_lowpass(p.lowpass),
         blocking=check_choice(p.blocking, "blocking", ("all", "targets")),
         max_size=max_size,
+        max_fraction=_check_fraction(p.max_fraction),
         min_size=check_int(p.min_size, "min_size", minimum=1),
         merge=merge,
         fill_holes=_check_bool(p.fill_holes, "fill_holes"),

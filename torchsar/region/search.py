@@ -130,7 +130,7 @@ def region_search(x: Tensor, *, preset: str = "torchsar", **options: object) -> 
         >>> x[0, 0, ::2, ::2] += 0.1  # mild clutter texture: grown into one flat region
         >>> r = region_search(x, despeckle=None)
         >>> [(t.seed, t.size, t.accepted, t.reason) for t in r.tables[0].rows]
-        [((10, 10), 64, True, ''), ((0, 0), 960, False, 'few_background')]
+        [((10, 10), 64, True, ''), ((0, 0), 960, False, 'too_large')]
     """
     check_image(x, "x")
     p = resolve_params(preset, **options)
@@ -190,8 +190,10 @@ def region_cfar(
     grown from a local maximum is brighter than its ring, and censoring the ring pixels above
     ``mu_T`` truncates a clutter ring to its darker part, biasing ``mu_C`` and ``sigma_C``
     down), and floods grown across a homogeneous area are accepted at clutter edges. Fixes:
-    ``max_size`` (regions larger are rejected untested as clutter floods, "too_large"; no
-    object of interest is that large), ``min_size`` (after all seeds, accepted regions whose
+    ``max_size`` and ``max_fraction`` (regions larger than ``max_size`` pixels or than that
+    fraction of the image are rejected untested as clutter floods, "too_large"; no object of
+    interest is that large, and a CFAR test needs clutter to dominate the image),
+    ``min_size`` (after all seeds, accepted regions whose
     object — the 8-connected union of touching accepted regions — is smaller are rejected,
     "too_small": single speckle peaks pass the region test as easily as a pixel CFAR with
     threshold ``k`` does, while a target covers many resolution cells; applying the rule to
@@ -211,6 +213,7 @@ def region_cfar(
     k             0.25     2.0
     min_size      1        30
     max_size      None     20000
+    max_fraction  None     0.25
     merge         None     0
     fill_holes    False    True
     ============  =======  ==========
@@ -219,7 +222,9 @@ def region_cfar(
     The torchsar values are the best of a sweep on simulated scenes and chips and on MSTAR
     chips (``torchsar-eval compare-region``, ``scripts/region_ablation.py``); sizes are in
     pixels (0.3 m pixels: 30 px is 2.7 m², 20000 px is 1800 m², above the largest simulated
-    building of 120 x 120 px), scale them with the pixel area. ``tau`` 0.5 is near a cliff on the simulated scenes: at 0.6 target regions chain
+    building of 120 x 120 px), scale them with the pixel area. ``max_fraction`` 0.25 keeps a
+    128 x 128 chip from being grown almost whole and accepted. ``tau`` 0.5 is near a cliff
+    on the simulated scenes: at 0.6 target regions chain
     through the filter-blurred target edges into the clutter, exceed ``max_size`` and are
     all rejected.
 
@@ -244,7 +249,8 @@ def region_cfar(
             (``"enhanced_frost"``), a callable ``x -> F`` or None (grow on ``x``).
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
         **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
-            ``blocking``, ``max_size``, ``min_size``, ``merge``, ``fill_holes`` (see above),
+            ``blocking``, ``max_size``, ``max_fraction``, ``min_size``, ``merge``,
+            ``fill_holes`` (see above),
             ``budget`` (64: pixels grown by the Python heap before the exact flood-fill
             finish; None = heap only), ``workers`` (1; > 1 runs the images of a batch in a
             process pool; same result).

@@ -15,7 +15,8 @@ REASONS = ("", "below_k", "few_background", "too_large", "too_small")
 class RegionRow:
     """One grown region. ``reason`` is ``""`` for an accepted region, else one of
     ``"below_k"`` (statistic <= k), ``"few_background"`` (censored ring smaller than
-    ``min_background``), ``"too_large"`` (more than ``max_size`` pixels), ``"too_small"``
+    ``min_background``), ``"too_large"`` (more than ``max_size`` pixels or than
+    ``max_fraction`` of the image), ``"too_small"``
     (passed the test but its object has fewer than ``min_size`` pixels). Untested quantities
     are NaN."""
 
