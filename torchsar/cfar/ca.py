@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
+import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive
 from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
 from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.thresholds import ca_factor
-from torchsar.windows import Sums, windowed
+from torchsar.windows import Ring, Sums, region_count, windowed
 
 __all__ = ["ca"]
 
@@ -61,6 +63,10 @@ def ca(
     factor = partial(ca_factor, pfa=pfa, looks=looks)
     dtype = out_dtype(x)
 
+    if vmask is None:
+        stat = _unmasked(x, ring, factor, dtype)
+        return detection_from(stat, factor(ring.n))
+
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         s = sums[0]
         stat = ratio(xs.to(s.s1.dtype), s.mean())
@@ -70,6 +76,41 @@ def ca(
         return finish(stat, s.count, None, dtype)
 
     stat = windowed(x, [ring.region], statistic, valid=vmask, moments=1)
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -float("inf"))
+    stat = stat.masked_fill(~vmask.expand_as(stat), -float("inf"))
     return detection_from(stat, factor(ring.n))
+
+
+def _unmasked(x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype) -> Tensor:
+    """The statistic without a ``valid`` mask: every ring holds at least one cell (the ring
+    fits the image), so the mean needs no guard and the sums are reused in place; the ring
+    counts depend on the geometry only, so the border rescaling touches just the frame of
+    pixels within ``guard + train`` of an edge (:func:`_scale_frame`)."""
+
+    def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
+        s = sums[0]
+        return ratio(xs, s.s1.div_(s.count).add_(s.shift)).to(dtype)  # float64 by promotion
+
+    stat = windowed(x, [ring.region], statistic, moments=1)
+    _scale_frame(stat, ring, factor)
+    return stat
+
+
+def _scale_frame(stat: Tensor, ring: Ring, factor: Callable[[int], float]) -> None:
+    """Multiply the frame pixels (cut rings) by ``factor(N) / factor(n_pixel)`` in place
+    (in float64, then rounded to the statistic's dtype); interior pixels are untouched."""
+    h, w = stat.shape[-2:]
+    o = ring.outer
+    count = region_count(h, w, ring.region, stat.device)
+    top, bot = min(o, h), max(h - o, o)
+    left, right = min(o, w), max(w - o, o)
+    frame = (
+        (slice(0, top), slice(None)),
+        (slice(bot, h), slice(None)),
+        (slice(top, bot), slice(0, left)),
+        (slice(top, bot), slice(right, w)),
+    )
+    for rows, cols in frame:
+        scale = border_scale(count[rows, cols], ring.n, factor)
+        if scale is not None:
+            part = stat[..., rows, cols]
+            part.copy_(part.to(torch.float64) * scale)
