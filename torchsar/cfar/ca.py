@@ -12,7 +12,7 @@ from torchsar._checks import check_positive
 from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
 from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.thresholds import ca_factor
-from torchsar.windows import Ring, Sums, region_count, windowed
+from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["ca"]
 
@@ -81,36 +81,40 @@ def ca(
 
 
 def _unmasked(x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype) -> Tensor:
-    """The statistic without a ``valid`` mask: every ring holds at least one cell (the ring
-    fits the image), so the mean needs no guard and the sums are reused in place; the ring
-    counts depend on the geometry only, so the border rescaling touches just the frame of
-    pixels within ``guard + train`` of an edge (:func:`_scale_frame`)."""
+    """The statistic without a ``valid`` mask (bit-identical to the masked path's rule):
+    every ring holds at least one cell (the ring fits the image), so the mean needs no
+    guard and the sums are reused in place; the ring counts depend on the geometry only, so
+    the border rescaling touches just the frame of pixels within ``guard + train`` of an
+    edge (:func:`_scale_frame`)."""
+    h = x.shape[-2]
+    row = torch.arange(h, device=x.device).view(h, 1)  # sliced with the strip: its rows
 
-    def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
+    def statistic(xs: Tensor, sums: list[Sums], rows: Tensor) -> Tensor:
         s = sums[0]
-        return ratio(xs, s.s1.div_(s.count).add_(s.shift)).to(dtype)  # float64 by promotion
+        stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
+        r0 = int(rows[0, 0]) if rows.numel() else 0
+        _scale_frame(stat, s.count, r0, h, ring, factor)
+        return stat.to(dtype)
 
-    stat = windowed(x, [ring.region], statistic, moments=1)
-    _scale_frame(stat, ring, factor)
-    return stat
+    return windowed(x, [ring.region], statistic, moments=1, extras=(row,))
 
 
-def _scale_frame(stat: Tensor, ring: Ring, factor: Callable[[int], float]) -> None:
-    """Multiply the frame pixels (cut rings) by ``factor(N) / factor(n_pixel)`` in place
-    (in float64, then rounded to the statistic's dtype); interior pixels are untouched."""
-    h, w = stat.shape[-2:]
+def _scale_frame(
+    stat: Tensor, count: Tensor, r0: int, h: int, ring: Ring, factor: Callable[[int], float]
+) -> None:
+    """Multiply, in place, the strip's frame pixels (rows ``r0 + i`` or columns within
+    ``guard + train`` of an edge: cut rings) by ``factor(N) / factor(n_pixel)``; interior
+    pixels are untouched. ``count`` is the strip's geometric ring count ``(rr, W)``."""
+    rr, w = stat.shape[-2:]
     o = ring.outer
-    count = region_count(h, w, ring.region, stat.device)
-    top, bot = min(o, h), max(h - o, o)
     left, right = min(o, w), max(w - o, o)
-    frame = (
-        (slice(0, top), slice(None)),
-        (slice(bot, h), slice(None)),
-        (slice(top, bot), slice(0, left)),
-        (slice(top, bot), slice(right, w)),
-    )
-    for rows, cols in frame:
+    lo, hi = max(0, min(o, h) - r0), min(rr, max(h - o, o) - r0)  # strip rows not in the frame
+    pieces = [(slice(None), slice(0, left)), (slice(None), slice(right, w))]
+    pieces += [
+        (slice(0, max(lo, 0)), slice(left, right)),
+        (slice(max(hi, 0), rr), slice(left, right)),
+    ]
+    for rows, cols in pieces:
         scale = border_scale(count[rows, cols], ring.n, factor)
         if scale is not None:
-            part = stat[..., rows, cols]
-            part.copy_(part.to(torch.float64) * scale)
+            stat[..., rows, cols] *= scale
