@@ -1,5 +1,7 @@
 """The false-alarm promise, measured: homogeneous clutter of each detector's model at design
-Pfa 1e-3 (guard 2, train 4) over ~0.5 M pixels, every pixel counted (border rule included)."""
+Pfa 1e-3 (guard 2, train 4) over ~0.5 M pixels, every pixel counted (border rule included).
+K (nu = 2) and G0 (a = 3) at one look are the hard cases: a 144-cell ring barely tells
+their shape from the speckle-only limit (:mod:`torchsar.cfar.log_t`)."""
 
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ def test_measured_pfa_exponential(exponential, name):
         ("weibull", "weibull", {}),
         ("gamma", "gamma", {"looks": 4.0}),
         ("k", "k", {}),
-        ("g0", "g0", {"looks": 4.0}),
+        ("g0", "g0", {}),  # the simulator's default single look, roughness a = 3
     ],
 )
 def test_measured_pfa_own_model(name, model, kw):

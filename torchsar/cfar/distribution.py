@@ -1,6 +1,20 @@
 """Shared machinery of the distribution CFARs: per-pixel ring log-cumulants (or moments),
 the fitted clutter law's ``(1 - pfa)`` quantile, and the statistic ``I / quantile``.
 
+Zeros (log-domain laws: lognormal, Weibull, K, G0): ``ln 0 = -inf`` carries no information on
+the clutter law, and on quantised data (8-bit magnitude: every value below half a grey level
+reads 0) an exact zero stands for "below the quantisation step", not for a value. A single
+zero clamped to any finite floor dominates the ring's log-variance (one cell at ``ln 1e-38``
+among values near ``ln 1e-2`` inflates ``k2`` a hundredfold, so nothing is ever detected).
+Zero cells are therefore left out of the ring's log-cumulant fit through the ``valid``
+mechanism (censored, like no-data cells; the fit uses the ring's positive cells and the
+tables of its own cell count ``n``). A zero cell under test is still tested: its statistic
+is ``0 / q = 0``. A ring with fewer than 2 positive cells cannot be fitted and gives
+``-inf``. Images without zeros (any continuous clutter) are processed exactly as before.
+The censoring biases the fit slightly towards the positive cells (a fraction ``p0`` of zeros
+shifts ``k1`` by about ``p0 (k1 - ln q0)``, ``q0`` the quantisation step), which is
+negligible when zeros are rare and conservative (fewer alarms) otherwise.
+
 Statistic convention (all distribution CFARs): ``statistic = I / q``, where ``q`` is the
 ``(1 - pfa)`` quantile of the clutter law fitted to the pixel's ring; ``threshold = 1``.
 So ``mask == statistic > 1`` is the design test, and sweeping the threshold ``tau`` scales
@@ -39,21 +53,32 @@ def distribution_cfar(
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
     dtype = out_dtype(x)
     src = _safe_log(x) if log_domain else x
+    fit = _positive_cells(x, vmask) if log_domain else vmask
 
     def statistic(_src: Tensor, sums: list[Sums], xs: Tensor) -> Tensor:
         q = quantile(sums[0], pfa)
         stat = ratio(xs.to(torch.float64), q)
         return finish(stat, sums[0].count - 1, None, dtype)
 
-    stat = windowed(src, [ring.region], statistic, valid=vmask, moments=2, extras=(x,))
+    stat = windowed(src, [ring.region], statistic, valid=fit, moments=2, extras=(x,))
     if vmask is not None:
         stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
     return detection_from(stat, 1.0)
 
 
 def _safe_log(x: Tensor) -> Tensor:
-    """``ln I`` with zeros clamped to the dtype's smallest normal number (finite)."""
+    """``ln I`` with zeros clamped to the dtype's smallest normal number (finite; zero cells
+    never enter a fit, see :func:`_positive_cells`)."""
     return torch.log(x.clamp_min(torch.finfo(x.dtype).tiny))
+
+
+def _positive_cells(x: Tensor, vmask: Tensor | None) -> Tensor | None:
+    """The cells a log-domain ring fit may use: valid and ``> 0`` (zeros are censored, see
+    the module docstring); ``vmask`` unchanged when ``x`` has no zero."""
+    zero = x == 0
+    if not bool(zero.any()):
+        return vmask
+    return ~zero if vmask is None else vmask.expand_as(x) & ~zero
 
 
 def log_cumulants(s: Sums) -> tuple[Tensor, Tensor]:

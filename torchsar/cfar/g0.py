@@ -33,9 +33,10 @@ def g0(
     ``k2 = psi_1(L) + psi_1(a)`` (inverse trigamma, clamped to ``[0.05, 1000]``), and the
     quantile ``q = exp(k1 + t(a, n) sqrt(k2))`` with the log-t factor ``t`` calibrated for
     the G0 law of that roughness (survival ``F(2L, 2a)``) and the ring size ``n``, including
-    the estimation noise of ``k1`` and ``k2`` (:mod:`torchsar.cfar.log_t`). The realised
-    false-alarm rate on G0 clutter is close to ``pfa`` (measured in the tests and by
-    ``torchsar-eval pfa``).
+    the estimation noise of ``k1``, ``k2`` and of the shape itself
+    (:mod:`torchsar.cfar.log_t`). The realised false-alarm rate on G0 clutter is close to
+    ``pfa`` (measured in the tests and by ``torchsar-eval pfa``; at L = 1, a = 3 it holds at
+    1e-2 and 1e-3 but runs ~3x high at 1e-4).
 
     Statistic ``I / q``, threshold 1 (see :mod:`torchsar.cfar.distribution`).
 

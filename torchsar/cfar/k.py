@@ -31,10 +31,11 @@ def k(
     the shape from ``k2 = psi_1(L) + psi_1(nu)`` (inverse trigamma, clamped to
     ``[0.05, 1000]``; a ring less spread than pure speckle gets ``nu = 1000``, the gamma
     limit), and the quantile ``q = exp(k1 + t(nu, n) sqrt(k2))`` with the log-t factor ``t``
-    calibrated for the K law of that shape and the ring size ``n``, including the estimation
-    noise of ``k1`` and ``k2`` (:mod:`torchsar.cfar.log_t`; the K survival function by
-    quadrature over the texture, cached per ``(L, pfa, n)``). The realised false-alarm rate
-    on K clutter is close to ``pfa`` (measured in the tests and by ``torchsar-eval pfa``).
+    calibrated for the K law of that shape and the ring size ``n``, including the
+    estimation noise of ``k1``, ``k2`` and of the shape itself (:mod:`torchsar.cfar.log_t`;
+    the K survival function by quadrature over the texture, cached per ``(L, pfa, n)``). The
+    realised false-alarm rate on K clutter is close to ``pfa`` (measured in the tests and by
+    ``torchsar-eval pfa``).
 
     Statistic ``I / q``, threshold 1 (see :mod:`torchsar.cfar.distribution`).
 
