@@ -77,3 +77,10 @@ class TestTwoParameter:
     def test_errors(self):
         with pytest.raises(OptionError, match="k must be"):
             ts.cfar.two_parameter(torch.ones(1, 1, 20, 20), k=-1.0)
+
+
+def test_input_is_not_modified():
+    x = _expo(9, (1, 1, 30, 30))
+    before = x.clone()
+    ts.cfar.two_parameter(x)
+    assert torch.equal(x, before)

@@ -19,7 +19,7 @@ from torchsar._checks import check_image, check_mask, check_probability, float_d
 from torchsar.cfar.thresholds import factor_map
 from torchsar.windows import Ring
 
-__all__ = ["border_scale", "finish", "prepare", "ratio"]
+__all__ = ["border_scale", "finish", "prepare", "ratio", "ratio_"]
 
 
 def prepare(
@@ -38,6 +38,11 @@ def ratio(num: Tensor, den: Tensor) -> Tensor:
     """``num / den`` for ``den >= 0``: ``±inf`` by the sign of ``num`` where ``den == 0`` and
     ``0 / 0 = 0`` (never NaN)."""
     return torch.nan_to_num_(num / den, nan=0.0, posinf=torch.inf, neginf=-torch.inf)
+
+
+def ratio_(num: Tensor, den: Tensor) -> Tensor:
+    """:func:`ratio` computed in place in ``num`` (which must not be needed afterwards)."""
+    return torch.nan_to_num_(num.div_(den), nan=0.0, posinf=torch.inf, neginf=-torch.inf)
 
 
 def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tensor | None:
@@ -61,6 +66,8 @@ def finish(statistic: Tensor, count: Tensor, vmask: Tensor | None, dtype: torch.
     bad = count <= 0
     if vmask is not None:
         bad = bad | ~vmask
+    elif not bool(bad.any()):  # the usual case: nothing to mark, skip a full-size pass
+        return out
     return out.masked_fill(bad, -torch.inf)
 
 

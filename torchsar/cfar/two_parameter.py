@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.core import finish, out_dtype, prepare, ratio
+from torchsar.cfar.core import finish, out_dtype, prepare, ratio_
 from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.thresholds import gaussian_factor
 from torchsar.windows import Sums, windowed
@@ -59,12 +60,12 @@ def two_parameter(
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        s = sums[0]
+        s = sums[0]  # float64 strip sums of (x - shift), consumed in place below
         c = s.count.clamp_min(1)
-        mean_c = s.s1 / c  # mean of (x - shift)
-        var = ((s.s2 - mean_c * s.s1) / c).clamp_min_(0)
-        dev = xs.to(var.dtype) - s.shift - mean_c
-        return finish(ratio(dev, var.sqrt_()), s.count, None, dtype)
+        mean_c = s.s1.div_(c)  # ring mean of (x - shift)
+        sigma = s.s2.div_(c).addcmul_(mean_c, mean_c, value=-1).clamp_min_(0).sqrt_()
+        dev = xs.to(torch.float64, copy=True).sub_(s.shift).sub_(mean_c)
+        return finish(ratio_(dev, sigma), s.count, None, dtype)
 
     stat = windowed(x, [ring.region], statistic, valid=vmask, moments=2)
     if vmask is not None:
