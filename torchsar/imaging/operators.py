@@ -8,6 +8,8 @@ conjugate gradient. Every operator passes the adjoint test ``<C f, g> == <f, C^H
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import torch
 from torch import Tensor
 
@@ -18,7 +20,7 @@ from torchsar.imaging.fourier import fft2c, ifft2c
 __all__ = ["FourierOperator", "LinearOperator"]
 
 
-class LinearOperator:
+class LinearOperator(ABC):
     """Base class of observation operators (image ``(B,1,H,W)`` <-> data ``(B,M,K)``).
 
     Subclasses set ``image_shape`` ``(H, W)``, ``data_shape`` ``(M, K)`` and
@@ -29,13 +31,13 @@ class LinearOperator:
     data_shape: tuple[int, int]
     gram_is_identity: bool = False
 
-    def forward(self, f: Tensor) -> Tensor:  # pragma: no cover - abstract
+    @abstractmethod
+    def forward(self, f: Tensor) -> Tensor:
         """Return ``C f``: image ``(B, 1, H, W)`` -> phase history ``(B, M, K)``."""
-        raise NotImplementedError
 
-    def adjoint(self, g: Tensor) -> Tensor:  # pragma: no cover - abstract
+    @abstractmethod
+    def adjoint(self, g: Tensor) -> Tensor:
         """Return ``C^H g``: phase history ``(B, M, K)`` -> image ``(B, 1, H, W)``."""
-        raise NotImplementedError
 
     def normal(self, f: Tensor) -> Tensor:
         """Return ``C^H C f``."""
