@@ -52,4 +52,9 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             lambda: ts.cfar.ca(x, guard=GUARD, train=TRAIN),
             lambda: scipy_ca(a),
         ),
+        (
+            "go 1024x1024 f32 (g=2,t=4) vs scipy ca (uniform_filter; not like for like)",
+            lambda: ts.cfar.go(x, guard=GUARD, train=TRAIN),
+            lambda: scipy_ca(a),
+        ),
     ]

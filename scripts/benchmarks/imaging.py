@@ -2,7 +2,7 @@
 
 The acceptance criterion of the batched solver: ``B`` scenes in one call are no slower than
 ``B`` separate calls (items stop individually, so batching costs no extra iterations).
-Run alone with ``python scripts/benchmarks/imaging.py`` or through ``scripts/benchmark.py``.
+Run: ``python scripts/benchmark.py --topic imaging``.
 """
 
 from __future__ import annotations
@@ -57,20 +57,3 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             lambda: [ti.pga(img[i : i + 1]) for i in range(32)],
         ),
     ]
-
-
-if __name__ == "__main__":
-    import time
-
-    torch.set_num_threads(1)
-    for name, ours, ref in cases():
-        times = []
-        for fn in (ours, ref):
-            fn()
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        print(
-            f"{name:<60s} ours {times[0] * 1e3:9.1f} ms  ref {times[1] * 1e3:9.1f} ms  "
-            f"ratio {times[1] / times[0]:5.2f}x"
-        )

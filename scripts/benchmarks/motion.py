@@ -4,12 +4,11 @@
 - chirp-z transform with one frequency step per row vs a loop of scipy.signal.czt;
 - the circular window maximum of the peak suppression vs scipy.ndimage.maximum_filter.
 
-Runnable alone: ``python scripts/benchmarks/motion.py`` prints the ratios (1 thread).
+Run: ``python scripts/benchmark.py --topic motion`` (1 thread).
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -69,23 +68,3 @@ def _window_max_case():
 
 def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     return [_registration_case(), _czt_case(), _window_max_case()]
-
-
-def _best(fn: Callable[[], object], repeat: int = 3) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
-if __name__ == "__main__":
-    torch.set_num_threads(1)
-    for name, ours, ref in cases():
-        t_o, t_r = _best(ours), _best(ref)
-        print(
-            f"{name:<78s} ours {t_o * 1e3:8.2f} ms  ref {t_r * 1e3:8.2f} ms  "
-            f"ratio {t_r / t_o:6.2f}x"
-        )

@@ -5,12 +5,11 @@ included; heap, then an exact compiled flood fill for large regions); ``referenc
 same detector with the pure-Python heap only (``budget=None``), i.e. the literal
 priority-queue growth. Targets: 512x512 < 1.5 s and
 1024x1024 with ~50 targets < 5 s on one thread (the printed ``ours`` times).
-Run alone: ``PYTHONPATH=. python scripts/benchmarks/region.py``.
+Run: ``python scripts/benchmark.py --topic region``.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -61,17 +60,3 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             )
         )
     return out
-
-
-if __name__ == "__main__":
-    torch.set_num_threads(1)
-    for name, ours, ref in cases():  # wall and CPU time (CPU time is robust to a busy host)
-        times = []
-        for fn in (ours, ref):
-            t0, c0 = time.perf_counter(), time.process_time()
-            fn()
-            times += [time.perf_counter() - t0, time.process_time() - c0]
-        print(
-            f"{name:<60s} ours {times[0]:6.2f} s (cpu {times[1]:6.2f} s)  "
-            f"ref {times[2]:6.2f} s (cpu {times[3]:6.2f} s)  {times[3] / times[1]:5.2f}x"
-        )

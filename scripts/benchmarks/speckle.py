@@ -5,7 +5,7 @@ a straightforward Lee filter built from two ``uniform_filter`` calls, so the pri
 (reference / ours) reads as "speed relative to a box-filter Lee". Targets (issue 3): ``lee``
 at most 1.5x the reference time (ratio >= 0.67), ``enhanced_frost`` at most 10x (>= 0.1).
 
-Run alone: ``PYTHONPATH=. python scripts/benchmarks/speckle.py`` (or via scripts/benchmark.py).
+Run: ``python scripts/benchmark.py --topic speckle``.
 """
 
 from __future__ import annotations
@@ -44,25 +44,3 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             )
         )
     return out
-
-
-if __name__ == "__main__":
-    import time
-
-    torch.set_num_threads(1)
-
-    def best(fn: Callable[[], object], repeat: int = 5) -> float:
-        fn()
-        times = []
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        return min(times)
-
-    for case, ours, ref in cases():
-        t_ours, t_ref = best(ours), best(ref)
-        print(
-            f"{case:<62s} ours {t_ours * 1e3:8.2f} ms  ref {t_ref * 1e3:8.2f} ms  "
-            f"time ratio ours/ref {t_ours / t_ref:5.2f}"
-        )
