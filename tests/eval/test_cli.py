@@ -10,7 +10,7 @@ import pytest
 from skimage import io
 
 from eval.cli import main
-from eval.tables import ROC_COLUMNS, SUMMARY_COLUMNS
+from eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
 
 
 def _write_pair(folder, stem, image, labels, ext="png"):
@@ -55,13 +55,16 @@ def test_run_on_folder_known_answers(tiny_folder, tmp_path, capsys):
     assert (row.images, row.pd_pixel, row.pfa_pixel) == (2, 1.0, 0.0)
     assert (row.pd_object, row.false_alarms, row.fragmentation, row.mean_iou) == (1, 0, 1, 1)
     assert row.fom == 1.0
+    assert (row.tp, row.fp, row.fn, row.precision, row.recall, row.f1) == (2, 0, 0, 1, 1, 1)
+    assert (row.ap50, row.ap50_95, row.pd_at_1_fa_per_image) == (1, 1, 1)
     roc = pd.read_csv(out / "roc.csv")
-    assert list(roc.columns) == ROC_COLUMNS and len(roc) > 0
-    assert roc.pd_pixel.is_monotonic_decreasing
+    assert list(roc.columns) == FROC_COLUMNS and len(roc) > 0
+    assert roc.pd_object.is_monotonic_increasing
+    assert roc.false_alarms_per_image.is_monotonic_increasing
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["detectors"]["ca"]["guard"] == 2
     assert cfg["torchsar_version"]
-    assert (out / "summary.md").read_text().startswith("| dataset")
+    assert (out / "summary.md").read_text().startswith("# Run summary")
     assert (out / "roc_folder_data.png").stat().st_size > 0
     assert "ca" in capsys.readouterr().out
 
