@@ -111,11 +111,9 @@ def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
         iou, crowd = ov.mask_iou(obj, gt, d, g)
     ap = greedy_match(iou, crowd, COCO_IOUS)
     if rule.kind == "centroid":
-        c = np.rint(obj.centroid[d]).astype(np.int64)
-        h, w = gt.ignore.shape[-2:]
-        hit_ig = gt.ignore[p][np.clip(c[:, 0], 0, h - 1), np.clip(c[:, 1], 0, w - 1)]
         quality = _centroid_quality(obj, gt, d, g, rule)
-        op = greedy_match(quality, hit_ig.astype(float), np.array([1e-12]))[0]
+        mostly_ignored = (crowd >= 0.5).astype(np.float64)  # COCO's crowd rule at 0.5
+        op = greedy_match(quality, mostly_ignored, np.array([1e-12]))[0]
     elif rule.iou == COCO_IOUS[0]:
         op = ap[0]
     else:

@@ -103,6 +103,8 @@ class GroundTruth:
 def _boxes_from_ids(ids: np.ndarray, n: int) -> np.ndarray:
     from scipy import ndimage
 
+    if n == 0:
+        return np.zeros((0, 4))
     sl = ndimage.find_objects(ids, max_label=n)
     return np.array(
         [(s[1].start, s[2].start, s[1].stop, s[2].stop) for s in sl], dtype=np.float64
@@ -130,11 +132,11 @@ def ground_truth(
     """
     inst = np.asarray(instances).astype(np.int64)
     n_planes = inst.shape[0]
-    per_plane = inst.reshape(n_planes, -1).max(axis=1, initial=0)
+    per_plane = inst.reshape(n_planes, int(np.prod(inst.shape[1:]))).max(axis=1, initial=0)
     offset = np.concatenate([[0], np.cumsum(per_plane)[:-1]])
     raw = np.where(inst > 0, inst + offset[:, None, None], 0)
     present, dense = np.unique(raw, return_inverse=True)
-    ids = dense.reshape(raw.shape) if present[0] == 0 else dense.reshape(raw.shape) + 1
+    ids = dense.reshape(raw.shape) + (0 if present.size and present[0] == 0 else 1)
     gids = present[present > 0]
     plane = np.searchsorted(offset, gids, side="left") - 1  # offset[p] < id <= offset[p+1]
     local = gids - offset[plane]

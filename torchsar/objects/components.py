@@ -35,6 +35,8 @@ def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarra
         raise OptionError(
             f"connectivity must be 1 (4-connected) or 2 (8-connected), got {connectivity!r}"
         )
+    if mask.size == 0:
+        return np.zeros(mask.shape, np.int32), 0
     plane = _STRUCTURES[connectivity]
     structure = np.zeros((3,) * (mask.ndim - 2) + (3, 3), bool)
     structure[(1,) * (mask.ndim - 2)] = plane

@@ -10,6 +10,8 @@ __all__ = ["measure"]
 
 def _boxes(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Plane index ``(n,)`` and end-exclusive boxes ``(n, 4)`` ``(r0, c0, r1, c1)``."""
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 4))
     slices = ndimage.find_objects(labels, max_label=n)
     plane = np.array([s[0].start for s in slices], dtype=np.int64)
     box = np.array(
