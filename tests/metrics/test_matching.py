@@ -60,7 +60,7 @@ def test_one_blob_over_two_targets_is_one_tp_and_one_fn(kind):
     inst = _two_targets()
     stat = np.zeros((1, 40, 40))
     stat[0, 5:25, 5:28] = 3.0  # one blob covering both
-    m, obj, gt = _score(stat, inst, Matching(kind=kind))
+    m, obj, _ = _score(stat, inst, Matching(kind=kind))
     assert len(obj) == 1 and (m.op >= 0).sum() == 1 and m.op[0] == 0
     assert np.isfinite(m.gt_score).sum() == 1  # the small target is missed
 

@@ -76,8 +76,8 @@ def test_batch_invariance_empty_batch_and_errors():
     stat = torch.rand(3, 1, 16, 16, generator=g) * 3
     whole = discriminate(stat, 2.0)
     parts = [discriminate(stat[i : i + 1], 2.0) for i in range(3)]
-    assert whole.area.tolist() == sum((p.area.tolist() for p in parts), [])
-    assert whole.score.tolist() == sum((p.score.tolist() for p in parts), [])
+    assert whole.area.tolist() == np.concatenate([p.area for p in parts]).tolist()
+    assert whole.score.tolist() == np.concatenate([p.score for p in parts]).tolist()
     assert len(discriminate(torch.zeros(0, 1, 8, 8), 1.0)) == 0
     full = discriminate(torch.full((1, 1, 8, 8), 5.0), 1.0)
     assert len(full) == 1 and full.area[0] == 64  # a flood is one object
