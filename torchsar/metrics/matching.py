@@ -135,9 +135,11 @@ def ground_truth(
     per_plane = inst.reshape(n_planes, int(np.prod(inst.shape[1:]))).max(axis=1, initial=0)
     offset = np.concatenate([[0], np.cumsum(per_plane)[:-1]])
     raw = np.where(inst > 0, inst + offset[:, None, None], 0)
-    present, dense = np.unique(raw, return_inverse=True)
-    ids = dense.reshape(raw.shape) + (0 if present.size and present[0] == 0 else 1)
-    gids = present[present > 0]
+    used = np.bincount(raw.reshape(-1), minlength=1) > 0
+    used[0] = False
+    lut = np.cumsum(used)
+    ids = np.where(raw > 0, lut[raw], 0)
+    gids = np.flatnonzero(used)
     plane = np.searchsorted(offset, gids, side="left") - 1  # offset[p] < id <= offset[p+1]
     local = gids - offset[plane]
     n = int(gids.size)

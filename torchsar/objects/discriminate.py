@@ -15,9 +15,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 import torch
-from scipy import ndimage
+import torch.nn.functional as F
 from torch import Tensor
 
 from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
@@ -75,16 +77,59 @@ def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
     return torch.where(t > 0, s / torch.where(t > 0, t, 1.0), 1.0 + s - t)
 
 
-def _close(mask: np.ndarray, radius: int) -> np.ndarray:
-    """Binary closing of each plane with a disk of ``radius`` (extensive: never removes a
-    pixel, also at the image border)."""
-    if radius == 0 or not mask.any():
+def _disk_rectangles(radius: int) -> list[tuple[int, int]]:
+    """Half-sizes ``(dy, dx)`` of rectangles whose union is the digital disk of ``radius``
+    (pixels with ``dy^2 + dx^2 <= radius^2``)."""
+    return [(dy, math.isqrt(radius * radius - dy * dy)) for dy in range(radius + 1)]
+
+
+def _spread(x: Tensor, d: int, dim: int) -> Tensor:
+    """OR of ``x`` shifted by ``-d..d`` along ``dim`` (values beyond the edge count as 0)."""
+    out = x.clone()
+    n = x.shape[dim]
+    for k in range(1, min(d, n - 1) + 1):
+        out.narrow(dim, k, n - k).logical_or_(x.narrow(dim, 0, n - k))
+        out.narrow(dim, 0, n - k).logical_or_(x.narrow(dim, k, n - k))
+    return out
+
+
+def _dilate(x: Tensor, rects: list[tuple[int, int]]) -> Tensor:
+    """Dilation of bool planes ``(N, H, W)`` by a union of rectangles (separable shifts;
+    outside the planes counts as unset)."""
+    out = torch.zeros_like(x)
+    for dy, dx in rects:
+        out |= _spread(_spread(x, dy, -2), dx, -1)
+    return out
+
+
+def _close(mask: Tensor, radius: int) -> Tensor:
+    """Binary closing of bool planes ``(N, H, W)`` with a disk of ``radius``, extensive (never
+    removes a pixel) also at the image border: dilation of the zero-padded mask, then
+    erosion as the complement of the dilated complement (the outside counting as set)."""
+    if radius == 0 or not bool(mask.any()):
         return mask
-    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    disk = (yy * yy + xx * xx <= radius * radius)[None]
-    padded = np.pad(mask, ((0, 0), (radius, radius), (radius, radius)))
-    closed = ndimage.binary_erosion(ndimage.binary_dilation(padded, disk), disk, border_value=1)
+    rects = _disk_rectangles(radius)
+    x = F.pad(mask, (radius,) * 4)
+    closed = ~_dilate(~_dilate(x, rects), rects)
     return closed[:, radius:-radius, radius:-radius] | mask
+
+
+def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[Tensor, Tensor]:
+    """Mask ``score > floor`` and the score (float64) on the mask's pixels only: a float32
+    pre-filter keeps the full-size work cheap, the exact test runs on the candidates."""
+    b, c, h, w = statistic.shape
+    thr = torch.as_tensor(threshold, dtype=statistic.dtype, device=statistic.device)
+    thr = thr.expand(b, c, h, w)
+    loose = torch.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
+    cand = (statistic >= loose).reshape(-1)
+    idx = torch.nonzero(cand).squeeze(1)
+    score = normalised_score(statistic.reshape(-1)[idx], thr.reshape(-1)[idx])
+    keep = score > floor
+    mask = torch.zeros(b * c * h * w, dtype=torch.bool, device=statistic.device)
+    mask[idx[keep]] = True
+    full = torch.full((b * c * h * w,), -torch.inf, dtype=torch.float64, device=statistic.device)
+    full[idx] = score
+    return mask.reshape(b * c, h, w), full.reshape(b * c, h, w)
 
 
 def _check(statistic: object, pixel_area: object, rules: ObjectRules) -> None:
@@ -143,9 +188,9 @@ def discriminate(
     rules = ObjectRules() if rules is None else rules
     _check(statistic, pixel_area, rules)
     b, c, h, w = statistic.shape
-    score = normalised_score(statistic, threshold).expand(b, c, h, w).reshape(-1, h, w)
-    score = score.detach().cpu().numpy()
-    mask = _close(score > rules.floor, rules.closing)
+    mask, score = _score_map(statistic.detach(), threshold, rules.floor)
+    mask = _close(mask, rules.closing).cpu().numpy()
+    score = score.cpu().numpy()
     labels, n = label_components(mask, 2 if rules.connectivity == 8 else 1)
     props = measure(labels, n, score)
     keep = _keep(props["area"], props["plane"], rules, pixel_area)
