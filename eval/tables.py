@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from eval.calibrate import threshold_of
 from eval.runner import DetectorResult
 from torchsar.metrics.curves import SCORE_GRID, suffix
 from torchsar.metrics.object_state import operating_point
@@ -52,6 +53,7 @@ SUMMARY_COLUMNS = [
     "pauc",
     "fa_per_km2",
     *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
+    "score_threshold",
     "ms_per_image",
     "object_ms_per_image",
 ]
@@ -79,6 +81,7 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         "false_alarms": m["fp"],
         "false_alarms_per_image": m["fa_per_image"],
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
+        "score_threshold": threshold_of(r.op_bin),
         "ms_per_image": 1e3 * r.seconds / r.images if r.images else float("nan"),
         "object_ms_per_image": 1e3 * r.object_seconds / r.images if r.images else float("nan"),
     }

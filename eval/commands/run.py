@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 import torch
+from torch.utils.data import Subset
 
+from eval.calibrate import choose_bin, parse_target, split_indices
 from eval.coco import CocoExport
 from eval.datasets import DATASETS, make_dataset
 from eval.detectors import DETECTORS, parse_params, resolve
@@ -147,8 +149,22 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         f"{DEFAULT_MATCH.kind}); AP always uses IoU",
     )
     g.add_argument("--iou", type=float, default=0.5, help="IoU threshold of --match mask|box")
-    g.add_argument("--bootstrap", type=int, default=100,
-                   help="bootstrap replicates for the intervals (0: none)")  # fmt: skip
+    g.add_argument(
+        "--bootstrap",
+        type=int,
+        default=100,
+        help="bootstrap replicates for the intervals (0: none)",
+    )
+    g.add_argument(
+        "--calibrate-on",
+        metavar="TARGET",
+        default=None,
+        help="choose each detector's score threshold on a calibration split for "
+        "TARGET ('fa=1': at most 1 false alarm per image; 'f1': best F1) and "
+        "report on the disjoint rest",
+    )
+    g.add_argument("--calibration-fraction", type=float, default=0.3,
+                   help="share of each dataset's images in the calibration split")  # fmt: skip
 
 
 def scoring_from(args: argparse.Namespace) -> Scoring:
@@ -196,22 +212,10 @@ def run(args: argparse.Namespace) -> int:
     scoring = scoring_from(args)
     out = args.out or default_out("run")
     with result_dir(out) as tmp:
-        results = {}
-        for name, ds in datasets.items():
-            exporter = CocoExport(name) if args.export_coco else None
-            results[name] = evaluate(
-                ds,
-                specs,
-                batch_size=args.batch_size,
-                preprocess=preprocess,
-                scoring=scoring,
-                name=name,
-                progress=not args.no_progress,
-                desc=name,
-                on_batch=exporter.add if exporter else None,
-            )
-            if exporter:
-                exporter.write(tmp / "coco", slug(name))
+        results = {
+            name: evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp)
+            for name, ds in datasets.items()
+        }
         files = write_tables(tmp, results, scoring)
         write_config(
             tmp,
@@ -223,6 +227,9 @@ def run(args: argparse.Namespace) -> int:
                 if args.despeckle is None
                 else {"filter": args.despeckle, **despeckle_opts},
                 "scoring": scoring.as_dict(),
+                "calibration": None
+                if args.calibrate_on is None
+                else {"target": args.calibrate_on, "fraction": args.calibration_fraction},
                 "batch_size": args.batch_size,
                 "seed": args.seed,
                 "out": str(out),
@@ -232,6 +239,31 @@ def run(args: argparse.Namespace) -> int:
     print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
+
+
+def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path) -> list:
+    """Score one dataset; with ``--calibrate-on`` the operating point of each detector is
+    chosen on the calibration split and the returned results are the disjoint test split's."""
+    common = dict(batch_size=args.batch_size, preprocess=preprocess, scoring=scoring, name=name,
+                  progress=not args.no_progress)  # fmt: skip
+    target = None if args.calibrate_on is None else parse_target(args.calibrate_on)
+    chosen = None
+    if target is not None:
+        cal, test = split_indices(len(ds), name, args.calibration_fraction)
+        if not cal or not test:
+            raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
+                            f"split of {args.calibration_fraction:g}")  # fmt: skip
+        tuned = evaluate(Subset(ds, cal), specs, desc=f"{name} (calibration)", **common)
+        chosen = [choose_bin(r.objects, target) for r in tuned]
+        ds = Subset(ds, test)
+    exporter = CocoExport(name) if args.export_coco else None
+    results = evaluate(ds, specs, desc=name, on_batch=exporter.add if exporter else None,
+                       **common)  # fmt: skip
+    if exporter:
+        exporter.write(tmp / "coco", slug(name))
+    for r, b in zip(results, chosen or [], strict=False):
+        r.op_bin = b
+    return results
 
 
 def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
