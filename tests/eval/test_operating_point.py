@@ -51,7 +51,7 @@ def test_run_with_calibration_and_coco_export(tmp_path):
             "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     s = pd.read_csv(out / "summary.csv")
-    cal, test = split_indices(10, "sim-chips", 0.3)
+    test = split_indices(10, "sim-chips", 0.3)[1]
     assert (s["images"] == len(test)).all()
     assert not s["score_threshold"].isna().any()
     cfg = json.loads((out / "config.json").read_text())
