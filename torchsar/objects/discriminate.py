@@ -13,13 +13,12 @@ For a threshold ``<= 0`` (a z-score detector at ``pfa >= 0.5``) the ratio is mea
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
-import torch.nn.functional as F
+from torch.nn.functional import pad
 from torch import Tensor
 
 from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
@@ -109,7 +108,7 @@ def _close(mask: Tensor, radius: int) -> Tensor:
     if radius == 0 or not bool(mask.any()):
         return mask
     rects = _disk_rectangles(radius)
-    x = F.pad(mask, (radius,) * 4)
+    x = pad(mask, (radius,) * 4)
     closed = ~_dilate(~_dilate(x, rects), rects)
     return closed[:, radius:-radius, radius:-radius] | mask
 
@@ -187,7 +186,7 @@ def discriminate(
     """
     rules = ObjectRules() if rules is None else rules
     _check(statistic, pixel_area, rules)
-    b, c, h, w = statistic.shape
+    b, c = statistic.shape[:2]
     mask, score = _score_map(statistic.detach(), threshold, rules.floor)
     mask = _close(mask, rules.closing).cpu().numpy()
     score = score.cpu().numpy()
