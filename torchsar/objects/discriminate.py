@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torch.nn.functional import pad
 from torch import Tensor
+from torch.nn.functional import pad
 
 from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.objects.components import label_components
