@@ -85,6 +85,19 @@ class DetectorResult:
         self.rows += image_rows(m, obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
 
+    def __add__(self, other: DetectorResult) -> DetectorResult:
+        """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
+        if self.spec.name != other.spec.name or self.scoring != other.scoring:
+            raise ValueError("cannot add results of different detectors or scoring settings")
+        out = DetectorResult(self.spec, self.scoring, self.pixels + other.pixels,
+                             self.roc + other.roc, op_bin=self.op_bin)  # fmt: skip
+        out.objects = self.objects + other.objects
+        out.seconds = self.seconds + other.seconds
+        out.object_seconds = self.object_seconds + other.object_seconds
+        out.images = self.images + other.images
+        out.rows = self.rows + other.rows
+        return out
+
     def objects_of(self, statistic: Tensor, threshold: Tensor, batch: dict) -> Objects:
         """The discrimination stage of this run on one batch."""
         rules = self.scoring.rules

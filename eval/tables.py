@@ -16,6 +16,7 @@ __all__ = [
     "PER_IMAGE_COLUMNS",
     "PR_COLUMNS",
     "SUMMARY_COLUMNS",
+    "TIMING_COLUMNS",
     "breakdown_table",
     "froc_table",
     "markdown",
@@ -23,6 +24,7 @@ __all__ = [
     "pixel_roc_table",
     "pr_table",
     "summary_table",
+    "timing_table",
 ]
 
 HEADLINE = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image"]
@@ -54,9 +56,9 @@ SUMMARY_COLUMNS = [
     "fa_per_km2",
     *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
     "score_threshold",
-    "ms_per_image",
-    "object_ms_per_image",
 ]
+TIMING_COLUMNS = ["dataset", "detector", "images", "ms_per_image", "object_ms_per_image",
+                  "images_per_s"]  # fmt: skip
 FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_per_image",
                 "pd_object", "precision"]  # fmt: skip
 PR_COLUMNS = ["dataset", "detector", "threshold", "recall", "precision"]
@@ -82,12 +84,23 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         "false_alarms_per_image": m["fa_per_image"],
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
         "score_threshold": threshold_of(r.op_bin),
-        "ms_per_image": 1e3 * r.seconds / r.images if r.images else float("nan"),
-        "object_ms_per_image": 1e3 * r.object_seconds / r.images if r.images else float("nan"),
     }
     for k in HEADLINE:
         row[f"{k}_lo"], row[f"{k}_hi"] = ci.get(k, (float("nan"), float("nan")))
     return row
+
+
+def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
+    nan = float("nan")
+    ms = 1e3 * r.seconds / r.images if r.images else nan
+    obj = 1e3 * r.object_seconds / r.images if r.images else nan
+    return [[ds, r.spec.name, r.images, ms, obj, 1e3 / (ms + obj) if r.images else nan]]
+
+
+def timing_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """Detector and object-stage time per image, and images per second for both (timing
+    is kept out of ``summary.csv`` so that the summary is identical across runs)."""
+    return _frame(results, _timing_rows, TIMING_COLUMNS)
 
 
 def _frame(results: dict[str, list[DetectorResult]], rows_of, columns: list[str]) -> pd.DataFrame:

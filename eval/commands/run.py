@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
 import pandas as pd
 import torch
-from torch.utils.data import Subset
 
 from eval.calibrate import choose_bin, parse_target, split_indices
 from eval.coco import CocoExport
@@ -19,7 +19,8 @@ from eval.errors import EvalError
 from eval.glossary import glossary
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
-from eval.runner import Scoring, evaluate
+from eval.runner import Scoring
+from eval.shards import ShardJob, run_shards
 from eval.tables import (
     breakdown_table,
     froc_table,
@@ -28,6 +29,7 @@ from eval.tables import (
     pixel_roc_table,
     pr_table,
     summary_table,
+    timing_table,
 )
 from torchsar._checks import TorchSARError
 from torchsar.metrics import Matching
@@ -107,6 +109,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also write coco/<dataset>__gt.json and coco/<dataset>__<detector>.json (COCO "
         "ground truth and results with scores) for re-scoring with pycocotools",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="worker processes (each gets cores // workers torch threads); default 1",
+    )
+    p.add_argument(
+        "--shard-size",
+        type=int,
+        default=256,
+        help="images per shard, the unit of work and of resume (default 256)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
@@ -205,6 +219,10 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("torchsar-eval: error: --batch-size must be >= 1")
     if args.n is not None and args.n < 0:
         raise SystemExit("torchsar-eval: error: --n must be >= 0")
+    if args.workers < 1 or args.shard_size < 1:
+        raise EvalError("--workers and --shard-size must be >= 1")
+    if args.export_coco and args.workers > 1:
+        raise EvalError("--export-coco collects detections in this process: use --workers 1")
     datasets = {
         name: make_dataset(name, n=args.n, seed=args.seed)
         for name in (args.dataset or DEFAULT_DATASETS)
@@ -212,10 +230,11 @@ def run(args: argparse.Namespace) -> int:
     scoring = scoring_from(args)
     out = args.out or default_out("run")
     with result_dir(out) as tmp:
-        results = {
-            name: evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp)
-            for name, ds in datasets.items()
-        }
+        results, stats = {}, {}
+        for name, ds in datasets.items():
+            results[name], stats[name] = evaluate_dataset(
+                name, ds, specs, args, scoring, preprocess, tmp
+            )
         files = write_tables(tmp, results, scoring)
         write_config(
             tmp,
@@ -227,6 +246,9 @@ def run(args: argparse.Namespace) -> int:
                 if args.despeckle is None
                 else {"filter": args.despeckle, **despeckle_opts},
                 "scoring": scoring.as_dict(),
+                "workers": args.workers,
+                "shard_size": args.shard_size,
+                "throughput": stats,
                 "calibration": None
                 if args.calibrate_on is None
                 else {"target": args.calibrate_on, "fraction": args.calibration_fraction},
@@ -235,35 +257,51 @@ def run(args: argparse.Namespace) -> int:
                 "out": str(out),
             },
         )
-    summary = pd.read_csv(out / "summary.csv")
+    summary = pd.read_csv(out / "summary.csv").merge(
+        pd.read_csv(out / "timing.csv"), on=["dataset", "detector", "images"]
+    )
     print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for name, st in stats.items():
+        print(f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
+              f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
+              f"(done {st['done']}, resumed {st['skipped']})")  # fmt: skip
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
 
 
-def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path) -> list:
-    """Score one dataset; with ``--calibrate-on`` the operating point of each detector is
-    chosen on the calibration split and the returned results are the disjoint test split's."""
-    common = dict(batch_size=args.batch_size, preprocess=preprocess, scoring=scoring, name=name,
-                  progress=not args.no_progress)  # fmt: skip
-    target = None if args.calibrate_on is None else parse_target(args.calibrate_on)
+def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
+    """Score one dataset shard by shard; with ``--calibrate-on`` each detector's operating
+    point is chosen on the calibration split and the results are the disjoint test split's.
+    Returns the merged results and the dataset's run statistics (wall time, shards)."""
+    t0 = time.perf_counter()
+    state = tmp / "shards" / slug(name)
+    indices = list(range(len(ds)))
+
+    def shards(idx: list[int], folder: Path, on_batch=None):
+        job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
+                       args.shard_size)  # fmt: skip
+        return run_shards(job, folder, workers=args.workers, progress=not args.no_progress,
+                          on_batch=on_batch)  # fmt: skip
+
     chosen = None
-    if target is not None:
-        cal, test = split_indices(len(ds), name, args.calibration_fraction)
-        if not cal or not test:
+    if args.calibrate_on is not None:
+        target = parse_target(args.calibrate_on)
+        cal, indices = split_indices(len(ds), name, args.calibration_fraction)
+        if not cal or not indices:
             raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
                             f"split of {args.calibration_fraction:g}")  # fmt: skip
-        tuned = evaluate(Subset(ds, cal), specs, desc=f"{name} (calibration)", **common)
+        tuned, _ = shards(cal, state / "calibration")
         chosen = [choose_bin(r.objects, target) for r in tuned]
-        ds = Subset(ds, test)
     exporter = CocoExport(name) if args.export_coco else None
-    results = evaluate(ds, specs, desc=name, on_batch=exporter.add if exporter else None,
-                       **common)  # fmt: skip
+    results, counts = shards(indices, state / "test", exporter.add if exporter else None)
     if exporter:
         exporter.write(tmp / "coco", slug(name))
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b
-    return results
+    wall = time.perf_counter() - t0
+    stats = {"images": len(indices), "wall_s": wall, **counts,
+             "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
+    return results, stats
 
 
 def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
@@ -275,11 +313,14 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
         "pr.csv": pr_table(results),
         "roc_pixel.csv": pixel_roc_table(results),
         "breakdown.csv": breakdown_table(results),
+        "timing.csv": timing_table(results),
         "per_image.csv": per_image_table(results),
     }
     for fname, df in tables.items():
         df.to_csv(tmp / fname, index=False)
-    (tmp / "summary.md").write_text(glossary(summary, scoring) + "\n" + markdown(summary))
+    text = glossary(summary, scoring) + "\n" + markdown(summary)
+    text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
+    (tmp / "summary.md").write_text(text)
     files = [*tables, "summary.md"]
     for name in results:
         sel = {k: df[df.dataset == name] for k, df in tables.items()}

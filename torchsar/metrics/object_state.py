@@ -58,8 +58,18 @@ def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
     return np.searchsorted(np.asarray(edges, dtype=np.float64), area, side="right")
 
 
-def _hist(bins: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    return np.bincount(bins, weights=weights, minlength=N_BINS)
+IOU_UNIT = 10**9
+"""IoUs are summed as integers in units of 1e-9, so sums are exact whatever the order."""
+
+
+def _hist(bins: np.ndarray) -> np.ndarray:
+    return np.bincount(bins, minlength=N_BINS)
+
+
+def _iou_units(bins: np.ndarray, iou: np.ndarray) -> np.ndarray:
+    out = np.zeros(N_BINS, np.int64)
+    np.add.at(out, bins, np.rint(iou * IOU_UNIT).astype(np.int64))
+    return out
 
 
 @dataclass(eq=False)
@@ -95,14 +105,14 @@ class ObjectState:
     size_edges: tuple[float, ...] = (32.0**2, 96.0**2)
     size_names: tuple[str, ...] = ("small", "medium", "large")
     images: int = 0
-    km2: float = 0.0
+    area_mm2: int = 0
     images_km2: int = 0
     n_gt: int = 0
     ap_tp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
     ap_fp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
     tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
     fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-    iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS))
+    iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
     fragments: int = 0
     fragmented: int = 0
     keys: dict[str, KeyCounts] = field(default_factory=dict)
@@ -125,7 +135,7 @@ class ObjectState:
         hit, false = m.op >= 0, m.op == -1
         self.images += len(info)
         spaced = [i.km2 for i in info if i.km2 is not None]
-        self.km2 += float(sum(spaced))
+        self.area_mm2 += sum(round(a * 1e12) for a in spaced)  # integers: exact in any order
         self.images_km2 += len(spaced)
         self.n_gt += len(gt)
         for t in range(m.ap.shape[0]):
@@ -133,7 +143,7 @@ class ObjectState:
             self.ap_fp[t] += _hist(bins[m.ap[t] == -1])
         self.tp += _hist(bins[hit])
         self.fp += _hist(bins[false])
-        self.iou_sum += _hist(bins[hit], m.op_iou[hit])
+        self.iou_sum += _iou_units(bins[hit], m.op_iou[hit])
         found = score_bins(m.gt_score) >= OP_BIN
         self.fragments += int(m.overlaps[found].sum())
         self.fragmented += int(found.sum())
@@ -198,7 +208,7 @@ class ObjectState:
             keys[k] = keys.get(k, KeyCounts()) + v
         return ObjectState(
             self.replicates, self.seed, self.size_edges, self.size_names,
-            self.images + other.images, self.km2 + other.km2,
+            self.images + other.images, self.area_mm2 + other.area_mm2,
             self.images_km2 + other.images_km2, self.n_gt + other.n_gt,
             self.ap_tp + other.ap_tp, self.ap_fp + other.ap_fp, self.tp + other.tp,
             self.fp + other.fp, self.iou_sum + other.iou_sum,
@@ -219,11 +229,12 @@ class ObjectState:
         out = operating_point(self.tp, self.fp, self.n_gt, self.images, at)
         tp = out["tp"]
         fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
-        full = self.images_km2 == self.images and self.km2 > 0
+        km2 = self.area_mm2 / 1e12
+        full = self.images_km2 == self.images and km2 > 0
         out.update(
             fom=tp / (out["fp"] + self.n_gt) if self.n_gt + out["fp"] else float("nan"),
-            fa_per_km2=out["fp"] / self.km2 if full else float("nan"),
-            mean_iou=float(self.iou_sum[at:].sum() / tp) if tp else float("nan"),
+            fa_per_km2=out["fp"] / km2 if full else float("nan"),
+            mean_iou=float(self.iou_sum[at:].sum() / IOU_UNIT / tp) if tp else float("nan"),
             fragmentation=self.fragments / self.fragmented if self.fragmented else float("nan"),
             ap50=coco_ap(self.ap_tp[0], self.ap_fp[0], self.n_gt),
             ap50_95=float(np.mean([coco_ap(t, f, self.n_gt)
