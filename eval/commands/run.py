@@ -122,6 +122,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=256,
         help="images per shard, the unit of work and of resume (default 256)",
     )
+    p.add_argument(
+        "--engine",
+        choices=["local", "ray"],
+        default="local",
+        help="run shards locally (--workers processes) or as Ray tasks (pip install "
+        "'torchsar[ray]')",
+    )
+    p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="continue past a failing shard and name it in the summary (default: stop, "
+        "writing no tables)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
 
@@ -221,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("torchsar-eval: error: --n must be >= 0")
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
-    if args.export_coco and args.workers > 1:
+    if args.export_coco and (args.workers > 1 or args.engine != "local"):
         raise EvalError("--export-coco collects detections in this process: use --workers 1")
     datasets = {
         name: make_dataset(name, n=args.n, seed=args.seed)
@@ -235,7 +249,7 @@ def run(args: argparse.Namespace) -> int:
             results[name], stats[name] = evaluate_dataset(
                 name, ds, specs, args, scoring, preprocess, tmp
             )
-        files = write_tables(tmp, results, scoring)
+        files = write_tables(tmp, results, scoring, stats)
         write_config(
             tmp,
             "run",
@@ -262,9 +276,13 @@ def run(args: argparse.Namespace) -> int:
     )
     print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for name, st in stats.items():
-        print(f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
-              f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
-              f"(done {st['done']}, resumed {st['skipped']})")  # fmt: skip
+        print(
+            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
+            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
+            f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
+        )
+        for f in st["failed"]:
+            print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
 
@@ -280,8 +298,9 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     def shards(idx: list[int], folder: Path, on_batch=None):
         job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
                        args.shard_size)  # fmt: skip
-        return run_shards(job, folder, workers=args.workers, progress=not args.no_progress,
-                          on_batch=on_batch)  # fmt: skip
+        return run_shards(job, folder, workers=args.workers, engine=args.engine,
+                          address=args.address, skip_bad=args.skip_bad,
+                          progress=not args.no_progress, on_batch=on_batch)  # fmt: skip
 
     chosen = None
     if args.calibrate_on is not None:
@@ -304,7 +323,7 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     return results, stats
 
 
-def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
+def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names."""
     summary = summary_table(results)
     tables = {
@@ -320,6 +339,13 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
         df.to_csv(tmp / fname, index=False)
     text = glossary(summary, scoring) + "\n" + markdown(summary)
     text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
+    text += "".join(
+        f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
+        f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
+        f"resumed {st['skipped']}, failed {len(st['failed'])}"
+        + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        for name, st in stats.items()
+    )
     (tmp / "summary.md").write_text(text)
     files = [*tables, "summary.md"]
     for name in results:

@@ -62,7 +62,7 @@ def test_shard_ranges_cover_every_item_once():
 def test_any_shard_size_gives_the_same_tables(tmp_path, size):
     whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
     parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
-    assert counts == {"shards": 1, "done": 1, "skipped": 0}
+    assert counts == {"shards": 1, "done": 1, "skipped": 0, "failed": []}
     assert counts_p["shards"] == -(-9 // size)
     _assert_same(whole, parts)
 
@@ -71,7 +71,7 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
     (tmp_path / "shard-000001.pkl").unlink()  # as if killed before shard 1 was saved
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
-    assert counts == {"shards": 3, "done": 1, "skipped": 2}
+    assert counts == {"shards": 3, "done": 1, "skipped": 2, "failed": []}
     _assert_same(first, again)
 
 
@@ -79,3 +79,41 @@ def test_two_workers_equal_one(tmp_path):
     one, _ = run_shards(_job(6, 2), tmp_path / "one", progress=False)
     two, _ = run_shards(_job(6, 2), tmp_path / "two", workers=2, progress=False)
     _assert_same(one, two)
+
+
+def _explode_on_big(x):
+    if float(x.max()) > 1e30:
+        raise RuntimeError("corrupt shard")
+    return DETECTORS["ca"](x)
+
+
+class Poisoned(Chips):
+    """Chips whose item 4 is corrupt."""
+
+    def __getitem__(self, i: int) -> dict:
+        item = super().__getitem__(i)
+        if i == 4:
+            item["image"] = item["image"] * 0 + 1e38
+        return item
+
+
+def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
+    from eval.detectors import DetectorSpec
+    from eval.errors import EvalError
+
+    job = _job(6, 2)
+    job = ShardJob("chips", Poisoned(6), job.indices, [DetectorSpec("x", _explode_on_big)],
+                   job.scoring, 2, None, 2)  # fmt: skip
+    with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
+        run_shards(job, tmp_path / "a", progress=False)
+    merged, counts = run_shards(job, tmp_path / "b", skip_bad=True, progress=False)
+    assert counts["failed"] == [{"shard": 2, "error": "RuntimeError: corrupt shard"}]
+    assert merged[0].images == 4  # the other shards, merged
+
+
+def test_ray_engine_equals_local(tmp_path):
+    pytest.importorskip("ray")
+    local, _ = run_shards(_job(6, 2), tmp_path / "local", progress=False)
+    remote, counts = run_shards(_job(6, 2), tmp_path / "ray", engine="ray", progress=False)
+    assert counts["done"] == 3
+    _assert_same(local, remote)
