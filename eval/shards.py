@@ -15,7 +15,7 @@ import multiprocessing
 import os
 import pickle
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 from eval.errors import EvalError
 from eval.runner import DetectorResult, Scoring, evaluate
 
-__all__ = ["ShardJob", "merge", "run_shards", "shard_ranges"]
+__all__ = ["ShardJob", "merge", "run_shards", "shard_files", "shard_ranges", "shard_rows"]
 
 
 @dataclass(frozen=True)
@@ -75,12 +75,27 @@ def _load(path: Path) -> list[DetectorResult]:
         return pickle.loads(zlib.decompress(f.read()))
 
 
-def merge(parts: Sequence[list[DetectorResult]]) -> list[DetectorResult]:
-    """Add shard results detector by detector, in shard order."""
+def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
+    """Add shard results detector by detector, in shard order (one shard in memory at a
+    time; the per-image rows are dropped: :func:`shard_rows` streams them from disk)."""
     out = None
     for part in parts:
+        for r in part:
+            r.rows = []
         out = part if out is None else [a + b for a, b in zip(out, part, strict=True)]
     return out or []
+
+
+def shard_files(folder: Path) -> list[Path]:
+    """The saved shard states of a folder, in shard order."""
+    return sorted(folder.glob("shard-*.pkl"))
+
+
+def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
+    """``(detector, per-image rows)`` of every saved shard, in shard order."""
+    for path in shard_files(folder):
+        for r in _load(path):
+            yield r.spec.name, r.rows
 
 
 def _init_worker(threads: int) -> None:
@@ -216,8 +231,7 @@ def run_shards(
             _processes(job, todo, bar, sizes, fail, workers)
     finally:
         bar.close()
-    saved = [k for k in range(len(sizes)) if (folder / f"shard-{k:06d}.pkl").exists()]
-    merged = merge([_load(folder / f"shard-{k:06d}.pkl") for k in saved])
+    merged = merge(_load(p) for p in shard_files(folder))
     merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
               "skipped": len(sizes) - len(todo), "failed": fail.failed}  # fmt: skip

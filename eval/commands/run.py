@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import csv
 import time
 from collections.abc import Callable
 from functools import partial
@@ -20,12 +21,12 @@ from eval.glossary import glossary
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
 from eval.runner import Scoring
-from eval.shards import ShardJob, run_shards
+from eval.shards import ShardJob, run_shards, shard_rows
 from eval.tables import (
+    PER_IMAGE_COLUMNS,
     breakdown_table,
     froc_table,
     markdown,
-    per_image_table,
     pixel_roc_table,
     pr_table,
     summary_table,
@@ -323,6 +324,17 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     return results, stats
 
 
+def write_per_image(path: Path, folders: dict[str, Path]) -> None:
+    """``per_image.csv`` streamed from the saved shards (memory independent of the dataset
+    size): one row per image and detector, datasets and shards in order."""
+    with open(path, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(PER_IMAGE_COLUMNS)
+        for name, folder in folders.items():
+            for det, rows in shard_rows(folder):
+                out.writerows([name, det, *row] for row in rows)
+
+
 def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names."""
     summary = summary_table(results)
@@ -333,10 +345,10 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
         "roc_pixel.csv": pixel_roc_table(results),
         "breakdown.csv": breakdown_table(results),
         "timing.csv": timing_table(results),
-        "per_image.csv": per_image_table(results),
     }
     for fname, df in tables.items():
         df.to_csv(tmp / fname, index=False)
+    write_per_image(tmp / "per_image.csv", {n: tmp / "shards" / slug(n) / "test" for n in results})
     text = glossary(summary, scoring) + "\n" + markdown(summary)
     text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
     text += "".join(
@@ -347,7 +359,7 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
         for name, st in stats.items()
     )
     (tmp / "summary.md").write_text(text)
-    files = [*tables, "summary.md"]
+    files = [*tables, "per_image.csv", "summary.md"]
     for name in results:
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(

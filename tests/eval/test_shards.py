@@ -10,11 +10,10 @@ import torchsar as ts
 from eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from eval.detectors import DETECTORS
 from eval.runner import Scoring
-from eval.shards import ShardJob, run_shards, shard_ranges
+from eval.shards import ShardJob, run_shards, shard_ranges, shard_rows
 from eval.tables import (
     breakdown_table,
     froc_table,
-    per_image_table,
     pixel_roc_table,
     pr_table,
     summary_table,
@@ -39,7 +38,7 @@ class Chips(torch.utils.data.Dataset):
 def _tables(results) -> list[pd.DataFrame]:
     r = {"chips": results}
     return [f(r) for f in (summary_table, froc_table, pr_table, pixel_roc_table,
-                           breakdown_table, per_image_table)]  # fmt: skip
+                           breakdown_table)]  # fmt: skip
 
 
 def _job(n: int, shard_size: int) -> ShardJob:
@@ -48,9 +47,19 @@ def _job(n: int, shard_size: int) -> ShardJob:
     return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size)
 
 
-def _assert_same(a, b) -> None:
+def _rows(folder) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for det, rows in shard_rows(folder):
+        out.setdefault(det, []).extend(rows)
+    return out
+
+
+def _assert_same(a, b, folder_a=None, folder_b=None) -> None:
     for x, y in zip(_tables(a), _tables(b), strict=True):
         pd.testing.assert_frame_equal(x, y)
+    if folder_a is not None:
+        rows = _rows(folder_a)
+        assert rows == _rows(folder_b) and all(len(v) == a[0].images for v in rows.values())
 
 
 def test_shard_ranges_cover_every_item_once():
@@ -64,7 +73,7 @@ def test_any_shard_size_gives_the_same_tables(tmp_path, size):
     parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
     assert counts == {"shards": 1, "done": 1, "skipped": 0, "failed": []}
     assert counts_p["shards"] == -(-9 // size)
-    _assert_same(whole, parts)
+    _assert_same(whole, parts, tmp_path / "a", tmp_path / "b")
 
 
 def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
@@ -78,7 +87,7 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
 def test_two_workers_equal_one(tmp_path):
     one, _ = run_shards(_job(6, 2), tmp_path / "one", progress=False)
     two, _ = run_shards(_job(6, 2), tmp_path / "two", workers=2, progress=False)
-    _assert_same(one, two)
+    _assert_same(one, two, tmp_path / "one", tmp_path / "two")
 
 
 def _explode_on_big(x):
