@@ -70,7 +70,7 @@ def g0(
     """
     looks = check_positive(looks, "looks")
     return distribution_cfar(
-        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True
+        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True, detector="g0"
     )
 
 

@@ -62,7 +62,9 @@ def gamma(
     """
     looks = check_positive(looks, "looks")
     quantile = partial(_quantile, looks=looks)
-    return distribution_cfar(x, guard, train, pfa, valid, quantile, log_domain=False)
+    return distribution_cfar(
+        x, guard, train, pfa, valid, quantile, log_domain=False, detector="gamma"
+    )
 
 
 def _quantile(s: Sums, pfa: float, looks: float) -> Tensor:

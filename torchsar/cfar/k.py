@@ -68,7 +68,7 @@ def k(
     """
     looks = check_positive(looks, "looks")
     return distribution_cfar(
-        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True
+        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True, detector="k"
     )
 
 

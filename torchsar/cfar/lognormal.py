@@ -58,7 +58,9 @@ def lognormal(
         >>> lognormal(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True
     """
-    return distribution_cfar(x, guard, train, pfa, valid, _quantile, log_domain=True)
+    return distribution_cfar(
+        x, guard, train, pfa, valid, _quantile, log_domain=True, detector="lognormal"
+    )
 
 
 def _quantile(s: Sums, pfa: float) -> Tensor:

@@ -132,7 +132,7 @@ def region_search(x: Tensor, *, preset: str = "torchsar", **options: object) -> 
         >>> [(t.seed, t.size, t.accepted, t.reason) for t in r.tables[0].rows]
         [((10, 10), 64, True, ''), ((0, 0), 960, False, 'too_large')]
     """
-    check_image(x, "x")
+    check_image(x, "x", not_differentiable="region_cfar")
     p = resolve_params(preset, **options)
     det, tables = _run(x, p)
     return RegionResult(det, tables, p)
