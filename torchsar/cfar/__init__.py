@@ -7,7 +7,6 @@ Every variant returns a :class:`Detection` with ``mask == statistic > threshold`
 from torchsar.cfar.ac import ac
 from torchsar.cfar.ca import ca
 from torchsar.cfar.design import threshold
-from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.g0 import g0
 from torchsar.cfar.gamma import gamma
 from torchsar.cfar.go import go
@@ -18,6 +17,7 @@ from torchsar.cfar.so import so
 from torchsar.cfar.two_parameter import two_parameter
 from torchsar.cfar.vi import vi
 from torchsar.cfar.weibull import weibull
+from torchsar.detection import Detection, detection_from
 
 __all__ = [
     "Detection",

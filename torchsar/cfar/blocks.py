@@ -10,8 +10,8 @@ from torch import Tensor
 
 from torchsar._checks import check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
+from torchsar.detection import Detection
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
 __all__ = ["block_cfar", "block_scale", "block_threshold", "extreme_mean"]

@@ -8,9 +8,9 @@ from torch import Tensor
 
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import conclude, out_dtype, prepare
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.ring_mean import ring_mean_ratio
 from torchsar.cfar.thresholds import ca_factor
+from torchsar.detection import Detection
 from torchsar.windows import Ring
 
 __all__ = ["ca", "ca_threshold"]

@@ -10,7 +10,7 @@ under test is invalid, or whose ring has no valid cell, get statistic ``-inf``.
 Every detector begins with :func:`prepare` and ends with :func:`conclude`: the ring
 statistic is cast and its untestable pixels marked by :func:`finish` (inside the strip
 callback of :func:`~torchsar.windows.windowed`), and :func:`conclude` marks the invalid
-cells under test and builds the :class:`~torchsar.cfar.detection.Detection`.
+cells under test and builds the :class:`~torchsar.detection.Detection`.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_image, check_mask, check_probability, float_dtype
-from torchsar.cfar.detection import Detection, detection_from
 from torchsar.cfar.thresholds import factor_map
+from torchsar.detection import Detection, detection_from
 from torchsar.windows import Ring
 
 __all__ = ["border_scale", "conclude", "finish", "out_dtype", "prepare", "ratio", "ratio_"]

@@ -4,7 +4,7 @@ Every CFAR's threshold depends on its options only (window, ``pfa`` and the vari
 parameters), never on the image, so it can be asked for directly, e.g. to sweep a
 statistic computed once against the thresholds of many ``pfa`` values. Each variant module
 owns its ``<name>_threshold`` function, which the detector itself uses for its
-:class:`~torchsar.cfar.detection.Detection`; :func:`threshold` looks it up by detector.
+:class:`~torchsar.detection.Detection`; :func:`threshold` looks it up by detector.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from typing import Any
 from torchsar._checks import OptionError
 from torchsar.cfar.ac import ac, ac_threshold
 from torchsar.cfar.ca import ca, ca_threshold
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_threshold
 from torchsar.cfar.g0 import g0
 from torchsar.cfar.gamma import gamma
@@ -28,6 +27,7 @@ from torchsar.cfar.so import so, so_threshold
 from torchsar.cfar.two_parameter import two_parameter, two_parameter_threshold
 from torchsar.cfar.vi import vi, vi_threshold
 from torchsar.cfar.weibull import weibull
+from torchsar.detection import Detection
 
 __all__ = ["THRESHOLDS", "threshold"]
 

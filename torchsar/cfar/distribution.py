@@ -31,8 +31,8 @@ from torch import Tensor
 
 from torchsar._checks import check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
+from torchsar.detection import Detection
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = [

@@ -7,9 +7,9 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar
 from torchsar.cfar.thresholds import ca_factor, factor_map
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["gamma"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from torch import Tensor
 
 from torchsar.cfar.blocks import block_cfar, block_threshold
-from torchsar.cfar.detection import Detection
+from torchsar.detection import Detection
 
 __all__ = ["go", "go_threshold"]
 

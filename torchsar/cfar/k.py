@@ -7,8 +7,8 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["k"]

@@ -6,9 +6,9 @@ from functools import partial
 
 from torch import Tensor
 
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_cumulants
 from torchsar.cfar.thresholds import factor_map, student_factor
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["lognormal"]

@@ -10,8 +10,8 @@ from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_probability
 from torchsar.cfar.core import border_scale, conclude, finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
+from torchsar.detection import Detection
 from torchsar.order_statistics import ring_order_statistic
 from torchsar.windows import Ring, Sums, region_count, windowed
 

@@ -7,8 +7,8 @@ from torch import Tensor
 
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.thresholds import gaussian_factor
+from torchsar.detection import Detection
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["two_parameter", "two_parameter_threshold"]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from torch import Tensor
 
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["weibull"]

@@ -13,7 +13,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_image, float_dtype
-from torchsar.cfar.detection import Detection
+from torchsar.detection import Detection
 from torchsar.region.detector import detect_image
 from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
 from torchsar.region.table import RegionTable
