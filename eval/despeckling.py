@@ -138,7 +138,7 @@ def apply_filter(name: str, s: Sample, window: int, looks: float) -> tuple[Tenso
 
 
 def _image_metrics(s: Sample, f: Tensor) -> dict[str, float]:
-    r_mean, r_var = ratio_moments(s.image, f)
+    r_mean, r_var = ratio_moments(f, s.image)
     row = {
         "ratio_mean": r_mean.mean().item(),
         "ratio_var": r_var.mean().item(),
