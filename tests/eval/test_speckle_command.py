@@ -1,4 +1,4 @@
-"""``torchsar-eval speckle`` and :mod:`eval.despeckling` on tiny datasets."""
+"""``torchsar-eval speckle`` (:mod:`eval.commands.speckle`) on tiny datasets."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ import pytest
 import torch
 from skimage import io
 
+from eval.commands import load
 from eval.commands import speckle as command
-from eval.despeckling import COLUMNS, homogeneous_tiles, samples, score_dataset
+from eval.commands.speckle.scoring import COLUMNS, homogeneous_tiles, samples, score_dataset
 from eval.errors import EvalError
 
 
@@ -136,3 +137,20 @@ def test_command_on_simulated_scenes(tmp_path):
     none, filt = df.iloc[0], df.iloc[1]
     assert filt.enl > 5 * none.enl and filt.psnr_db > none.psnr_db
     assert (out / "speckle_sim-scenes.png").exists()
+
+
+def test_one_home_and_a_typed_entry(tiny_folder, tmp_path):
+    """``load("speckle")`` is the package; below the argparse edge, plain typed options."""
+    assert load("speckle") is command
+    opts = command.SpeckleOptions(
+        datasets=[f"folder:{tiny_folder}"],
+        filters=["lee"],
+        windows=[3],
+        looks=None,
+        n=None,
+        seed=0,
+        tile=16,
+        out=tmp_path / "typed",
+    )
+    assert command.evaluate(opts) == 0
+    assert len(pd.read_csv(tmp_path / "typed" / "speckle.csv")) == 2

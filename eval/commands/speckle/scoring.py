@@ -1,4 +1,4 @@
-"""Speckle-filter evaluation: quality metrics per filter and window, and a crop panel.
+"""Scoring of ``torchsar-eval speckle``: quality metrics per filter and window.
 
 For every filter of :data:`torchsar.speckle.FILTERS` (and the unfiltered image as the
 ``none`` baseline) at every window size, each image of a dataset is filtered and scored:
@@ -25,27 +25,26 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import numpy as np
 import pandas as pd
 import torch
 from torch import Tensor
 
 import torchsar as ts
-from torchsar.metrics.despeckling import edge_preservation, edge_ratio, enl, psnr, ratio_moments
-from torchsar.metrics.despeckling import ssim as ssim_metric
+from torchsar.metrics.despeckling import (
+    edge_preservation,
+    edge_ratio,
+    enl,
+    psnr,
+    ratio_moments,
+    ssim,
+)
 
 __all__ = [
     "COLUMNS",
     "Sample",
     "apply_filter",
     "homogeneous_tiles",
-    "plot_panel",
     "samples",
     "score_dataset",
 ]
@@ -148,7 +147,7 @@ def _image_metrics(s: Sample, f: Tensor) -> dict[str, float]:
         fa, ca = f.sqrt(), s.clean.sqrt()
         row["epi"] = edge_preservation(fa, ca).mean().item()
         row["psnr_db"] = psnr(fa, ca).mean().item()
-        row["ssim"] = ssim_metric(fa, ca).mean().item() if min(ca.shape[-2:]) >= 11 else math.nan
+        row["ssim"] = ssim(fa, ca).mean().item() if min(ca.shape[-2:]) >= 11 else math.nan
     return row
 
 
@@ -194,39 +193,3 @@ def score_dataset(
         row.update(score_filter(items, name, window, looks, tile))
         rows.append(row)
     return pd.DataFrame(rows, columns=COLUMNS)
-
-
-def _crop(s: Sample, size: int) -> tuple[slice, slice]:
-    h, w = s.image.shape[-2:]
-    if s.box is not None:
-        cr, cc = (s.box[0] + s.box[2]) // 2, (s.box[1] + s.box[3]) // 2
-    else:
-        cr, cc = h // 2, w // 2
-    r0 = min(max(cr - size // 2, 0), max(h - size, 0))
-    c0 = min(max(cc - size // 2, 0), max(w - size, 0))
-    return slice(r0, r0 + size), slice(c0, c0 + size)
-
-
-def plot_panel(
-    s: Sample, filters: list[str], window: int, looks: float, path: Path, *, size: int = 160
-) -> None:
-    """Before/after crops in dB (clean if known, noisy, every filter) on one colour scale."""
-    rows, cols = _crop(s, size)
-    shown = ([("clean", s.clean)] if s.clean is not None else []) + [("noisy", s.image)]
-    shown += [(f"{n} {window}x{window}", apply_filter(n, s, window, looks)[0]) for n in filters]
-    db = [(t, 10 * np.log10(x[0, 0, rows, cols].double().numpy() + 1e-10)) for t, x in shown]
-    ref = db[0][1] if s.clean is not None else db[-1][1]  # clean, else a filtered crop
-    vmin, vmax = np.percentile(ref, [1, 99.8])
-    ncol = 4
-    nrow = math.ceil(len(db) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 3.3 * nrow), squeeze=False)
-    for ax in axes.flat:
-        ax.axis("off")
-    for ax, (title, img) in zip(axes.flat, db, strict=False):
-        ax.imshow(img, cmap="gray", vmin=vmin, vmax=vmax)
-        ax.set_title(title, fontsize=9)
-    h, w = db[0][1].shape
-    fig.suptitle(f"intensity (dB), crop {h}x{w}, looks {looks:g}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
