@@ -110,7 +110,7 @@ class BatchOptions:
             check_int(n, "n", minimum=0),
             check_seed(seed),
             check_int(start, "start", minimum=0),
-            clutter_spec(model, looks, shape_param),
+            clutter_spec(model, looks=looks, shape_param=shape_param),
             check_positive(pixel_m, "pixel_m"),
             check_device(device),
         )

@@ -126,7 +126,7 @@ class ClutterSpec:
         return {"model": self.model, "looks": self.looks, "shape_param": self.shape_param}
 
 
-def clutter_spec(model: object, looks: object = 1.0, shape_param: object = None) -> ClutterSpec:
+def clutter_spec(model: object, *, looks: object = 1.0, shape_param: object = None) -> ClutterSpec:
     """Validate a clutter model and resolve its default ``shape_param``.
 
     Raises:
@@ -233,7 +233,7 @@ def clutter(
         True
     """
     dims = _check_shape(shape)
-    spec = clutter_spec(model, looks, shape_param)
+    spec = clutter_spec(model, looks=looks, shape_param=shape_param)
     if dtype not in (torch.float32, torch.float64):
         raise InputTypeError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
     generator = make_generator(check_seed(seed), check_device(device))

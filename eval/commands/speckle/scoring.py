@@ -31,14 +31,7 @@ import torch
 from torch import Tensor
 
 import torchsar as ts
-from torchsar.metrics.despeckling import (
-    edge_preservation,
-    edge_ratio,
-    enl,
-    psnr,
-    ratio_moments,
-    ssim,
-)
+from torchsar.metrics import edge_preservation, edge_ratio, enl, psnr, ratio_moments, ssim
 
 __all__ = [
     "COLUMNS",
