@@ -96,7 +96,6 @@ class BatchOptions:
     @staticmethod
     def check(
         n: object,
-        *,
         seed: object,
         start: object,
         model: object,
@@ -105,7 +104,7 @@ class BatchOptions:
         pixel_m: object,
         device: object,
     ) -> BatchOptions:
-        """Validate the shared options (see :func:`~torchsar.simulate.chips`)."""
+        """Validate the shared options, in this order (see :func:`~torchsar.simulate.chips`)."""
         return BatchOptions(
             check_int(n, "n", minimum=0),
             check_seed(seed),

@@ -157,16 +157,7 @@ def chips(
         >>> b.image.shape, b.instances.max().item()
         (torch.Size([3, 1, 96, 96]), 1)
     """
-    common = BatchOptions.check(
-        n,
-        seed=seed,
-        start=start,
-        model=model,
-        looks=looks,
-        shape_param=shape_param,
-        pixel_m=pixel_m,
-        device=device,
-    )
+    common = BatchOptions.check(n, seed, start, model, looks, shape_param, pixel_m, device)
     opts = ChipOptions.check(target_db, length_px, width_ratio, shadow_ratio, shadow_gain)
     size = check_int(size, "size", minimum=1)
     if size < _min_size(opts):

@@ -283,16 +283,7 @@ def scenes(
         >>> b.image.shape, 1 <= int(b.instances.max()) <= 8
         (torch.Size([1, 1, 256, 256]), True)
     """
-    common = BatchOptions.check(
-        n,
-        seed=seed,
-        start=start,
-        model=model,
-        looks=looks,
-        shape_param=shape_param,
-        pixel_m=pixel_m,
-        device=device,
-    )
+    common = BatchOptions.check(n, seed, start, model, looks, shape_param, pixel_m, device)
     opts = SceneOptions(
         _check_count_range(n_targets, "n_targets", 0),
         _check_count_range(regions, "regions", 1),
