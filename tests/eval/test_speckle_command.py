@@ -70,7 +70,7 @@ def test_score_dataset_on_simulated_like_data():
 
 def test_homogeneous_tiles_avoid_targets_and_edges():
     s = next(samples(FakeSim(n=1)))
-    sel = homogeneous_tiles(s, 16).reshape(6, 6)
+    sel = homogeneous_tiles(s, tile=16).reshape(6, 6)
     assert not sel[2, 1]  # the target's tile
     assert not sel[:, 3].any()  # the tiles across the edge
     assert sel.sum() == 36 - 1 - 6

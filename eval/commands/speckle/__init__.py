@@ -137,7 +137,7 @@ def evaluate(opts: SpeckleOptions) -> int:
             looks = opts.looks if opts.looks is not None else (items[0].looks or 1.0)
             panel_window = 7 if 7 in opts.windows else opts.windows[0]
             path = tmp / f"speckle_{slug(name)}.png"
-            plot_panel(items[0], opts.filters, panel_window, looks, path)
+            plot_panel(items[0], opts.filters, path, window=panel_window, looks=looks)
         table = pd.concat(tables, ignore_index=True)
         table.to_csv(tmp / "speckle.csv", index=False)
         (tmp / "speckle.md").write_text(markdown(table))

@@ -28,12 +28,14 @@ def _crop(s: Sample, size: int) -> tuple[slice, slice]:
 
 
 def plot_panel(
-    s: Sample, filters: list[str], window: int, looks: float, path: Path, *, size: int = 160
+    s: Sample, filters: list[str], path: Path, *, window: int, looks: float, size: int = 160
 ) -> None:
-    """Before/after crops in dB (clean if known, noisy, every filter) on one colour scale."""
+    """Before/after crops in dB (clean if known, noisy, every filter) on one colour scale,
+    written to ``path``."""
     rows, cols = _crop(s, size)
     shown = ([("clean", s.clean)] if s.clean is not None else []) + [("noisy", s.image)]
-    shown += [(f"{n} {window}x{window}", apply_filter(n, s, window, looks)[0]) for n in filters]
+    for n in filters:
+        shown.append((f"{n} {window}x{window}", apply_filter(n, s, window=window, looks=looks)[0]))
     db = [(t, 10 * np.log10(x[0, 0, rows, cols].double().numpy() + 1e-10)) for t, x in shown]
     ref = db[0][1] if s.clean is not None else db[-1][1]  # clean, else a filtered crop
     vmin, vmax = np.percentile(ref, [1, 99.8])

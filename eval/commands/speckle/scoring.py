@@ -109,7 +109,7 @@ def _cv(t: Tensor) -> Tensor:
     return flat.std(1, correction=0) / torch.where(mean > 0, mean, torch.ones_like(mean))
 
 
-def homogeneous_tiles(s: Sample, tile: int) -> Tensor:
+def homogeneous_tiles(s: Sample, *, tile: int) -> Tensor:
     """Bool ``(N,)`` selection of homogeneous tiles (see the module docstring)."""
     free = ~_tiles(s.exclude, tile).flatten(1).any(1)
     if s.clean is not None:
@@ -120,7 +120,7 @@ def homogeneous_tiles(s: Sample, tile: int) -> Tensor:
     return free & (cv <= torch.quantile(cv[free], 0.25))
 
 
-def apply_filter(name: str, s: Sample, window: int, looks: float) -> tuple[Tensor, float]:
+def apply_filter(name: str, s: Sample, *, window: int, looks: float) -> tuple[Tensor, float]:
     """Filtered intensity and the wall time in seconds (``none``: the image itself)."""
     if name == "none":
         return s.image.float(), 0.0
@@ -145,19 +145,19 @@ def _image_metrics(s: Sample, f: Tensor) -> dict[str, float]:
 
 
 def score_filter(
-    items: list[Sample], name: str, window: int, looks: float | None, tile: int
+    items: list[Sample], name: str, *, window: int, looks: float | None, tile: int
 ) -> dict[str, float]:
     """Metrics of one filter at one window over the images (see the module docstring)."""
     rows, enls, seconds, pixels = [], [], 0.0, 0
     if items:  # untimed warm-up call (first-call allocations are not the filter's cost)
-        apply_filter(name, items[0], window, looks or items[0].looks or 1.0)
+        apply_filter(name, items[0], window=window, looks=looks or items[0].looks or 1.0)
     for s in items:
         lk = looks if looks is not None else (s.looks or 1.0)
-        f, dt = apply_filter(name, s, window, lk)
+        f, dt = apply_filter(name, s, window=window, looks=lk)
         seconds += dt
         pixels += s.image.numel()
         rows.append(_image_metrics(s, f))
-        sel = homogeneous_tiles(s, tile)
+        sel = homogeneous_tiles(s, tile=tile)
         if bool(sel.any()):
             enls.append(enl(_tiles(f, tile)[sel]).flatten())
     df = pd.DataFrame(rows)
@@ -183,6 +183,6 @@ def score_dataset(
     for name, window in [("none", 0), *[(f, w) for f in filters for w in windows]]:
         row = {"dataset": dataset_name, "filter": name, "window": window}
         row.update(looks=shown if shown is not None else 1.0, images=len(items))
-        row.update(score_filter(items, name, window, looks, tile))
+        row.update(score_filter(items, name, window=window, looks=looks, tile=tile))
         rows.append(row)
     return pd.DataFrame(rows, columns=COLUMNS)
