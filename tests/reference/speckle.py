@@ -1,4 +1,4 @@
-"""Slow, obvious speckle filters: a per-pixel loop over the window, literally DESIGN §4.4.
+"""Slow, obvious speckle filters: a per-pixel loop over the window, the textbook formulas.
 
 Border rule (the library's): statistics and weighted means over the window cells inside the
 image. Works on one 2-D float64 numpy plane at a time.

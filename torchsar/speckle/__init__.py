@@ -1,4 +1,4 @@
-"""Speckle filters (DESIGN §4.4): Lee, Kuan, enhanced Lee, Frost, enhanced Frost, Gamma-MAP.
+"""Speckle filters: Lee, Kuan, enhanced Lee, Frost, enhanced Frost, Gamma-MAP.
 
 All take intensity ``(B, C, H, W)`` (amplitude with ``amplitude=True``), an odd ``window``
 and the number of ``looks``; window statistics over in-image cells, interior pixels exact.

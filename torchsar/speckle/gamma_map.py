@@ -42,7 +42,7 @@ def gamma_map(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool
 
     ``Ci <= Cu``: ``mu``; ``Ci >= Cmax``: ``I``; otherwise
     ``(b mu + sqrt(b^2 mu^2 + 4 a L mu I)) / (2 a)``, ``a = (1 + Cu^2) / (Ci^2 - Cu^2)``,
-    ``b = a - L - 1`` (DESIGN §4.4). Window statistics and border rule as in
+    ``b = a - L - 1`` (Lopes et al. 1990). Window statistics and border rule as in
     :func:`~torchsar.speckle.lee`.
 
     Args:

@@ -1,7 +1,7 @@
 """Lee, Kuan and enhanced Lee filters: ``R = mu + W (I - mu)`` with an adaptive weight ``W``.
 
 The three filters differ only in how the weight is computed from the local coefficient of
-variation ``Ci`` (DESIGN §4.4); the window statistics and the border rule are those of
+variation ``Ci``; the window statistics and the border rule are those of
 :mod:`torchsar.speckle._local`.
 """
 
