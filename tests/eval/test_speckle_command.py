@@ -12,10 +12,12 @@ import pytest
 import torch
 from skimage import io
 
+from eval.cli import main
 from eval.commands import load
 from eval.commands import speckle as command
 from eval.commands.speckle.scoring import COLUMNS, homogeneous_tiles, samples, score_dataset
 from eval.errors import EvalError
+from torchsar._checks import OptionError
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
@@ -114,10 +116,13 @@ def test_command_on_folder(tiny_folder, tmp_path, capsys):
         (["--windows", "4"], "odd integers"),
         (["--windows", "a"], "comma-separated"),
         (["--looks", "0"], "looks"),
+        (["--looks", "inf"], "looks must be finite"),
+        (["--filters", ","], "at least one filter"),
+        (["--n", "-1"], "n must be >= 0"),
     ],
 )
 def test_command_errors(argv, match, tmp_path):
-    with pytest.raises(EvalError, match=match):
+    with pytest.raises((EvalError, OptionError), match=match):
         command.run(_parse([*argv, "--out", str(tmp_path / "o")]))
     assert not (tmp_path / "o").exists()
 
@@ -154,3 +159,12 @@ def test_one_home_and_a_typed_entry(tiny_folder, tmp_path):
     )
     assert command.evaluate(opts) == 0
     assert len(pd.read_csv(tmp_path / "typed" / "speckle.csv")) == 2
+
+
+@pytest.mark.parametrize("argv", [["--n", "-1"], ["--looks", "inf"], ["--filters", "median"]])
+def test_cli_user_errors_exit_2_with_one_line(argv, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["speckle", "--dataset", "sim-chips", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("torchsar-eval: error: ")
+    assert not out.exists()

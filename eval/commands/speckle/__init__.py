@@ -13,6 +13,7 @@ below takes plain typed values.
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -88,9 +89,12 @@ class SpeckleOptions:
 def parse_options(args: argparse.Namespace) -> SpeckleOptions:
     """Check the parsed command line and turn it into :class:`SpeckleOptions`."""
     filters = _csv_list(args.filters)
+    valid = ", ".join(ts.speckle.FILTERS)
+    if not filters:
+        raise EvalError(f"--filters must name at least one filter of: {valid}")
     unknown = [f for f in filters if f not in ts.speckle.FILTERS]
-    if unknown or not filters:
-        raise EvalError(f"unknown filter(s) {unknown}; valid: {', '.join(ts.speckle.FILTERS)}")
+    if unknown:
+        raise EvalError(f"unknown filter(s) {unknown}; valid: {valid}")
     try:
         windows = _csv_list(args.windows, int)
     except ValueError:
@@ -99,8 +103,8 @@ def parse_options(args: argparse.Namespace) -> SpeckleOptions:
         ) from None
     if not windows or any(w < 3 or w % 2 == 0 for w in windows):
         raise EvalError(f"--windows must be odd integers >= 3, got {args.windows!r}")
-    if args.looks is not None and not args.looks > 0:
-        raise EvalError(f"--looks must be > 0, got {args.looks}")
+    if args.looks is not None and not 0 < args.looks < math.inf:
+        raise EvalError(f"--looks must be finite and > 0, got {args.looks}")
     if args.tile < 4:
         raise EvalError(f"--tile must be >= 4, got {args.tile}")
     return SpeckleOptions(
