@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import special, stats
 
 from torchsar._checks import InputTypeError, OptionError
@@ -219,3 +221,23 @@ def test_fields_at_the_range_edges_are_finite_and_correct(model, looks, p, outsi
     # s.e. of the mean of ln I is sqrt(var / n); of the variance, ~ var * sqrt(kurtosis / n)
     assert abs(float(logs.mean()) - mean) < 5 * math.sqrt(var / n)
     assert float(logs.var()) == pytest.approx(var, rel=0.05)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    model=st.sampled_from(["gamma", "k", "g0", "lognormal", "weibull"]),
+    u=st.floats(0.0, 1.0),
+    v=st.floats(0.0, 1.0),
+    seed=st.integers(0, 2**32),
+)
+def test_every_accepted_parameter_gives_a_finite_field(model, u, v, seed):
+    """Any looks / shape_param inside the documented ranges (log-uniform up to 1e4):
+    a finite, non-negative float32 field with positive values."""
+    looks = GAMMA_SHAPE_MIN * 10 ** (4.8 * u) if model in ("gamma", "k", "g0") else 1.0
+    p = None
+    if model != "gamma":
+        low, closed, high = SHAPE_RANGE[model]
+        low = low if closed else (low + 1e-3 if model == "g0" else 1e-3)
+        p = low * (min(high, 1e4) / low) ** v
+    x = clutter((2_000,), model=model, looks=looks, shape_param=p, seed=seed)
+    assert bool(torch.isfinite(x).all()) and bool((x >= 0).all()) and bool((x > 0).any())
