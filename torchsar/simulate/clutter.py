@@ -69,8 +69,10 @@ __all__ = [
     "CLUTTER_MODELS",
     "DEFAULT_SHAPE_PARAM",
     "GAMMA_SHAPE_MIN",
+    "LOOKS_RANGE",
     "SHAPE_RANGE",
     "ClutterSpec",
+    "ParamRange",
     "clutter",
     "clutter_spec",
 ]
@@ -93,24 +95,37 @@ _SPECKLED = ("gamma", "k", "g0")
 GAMMA_SHAPE_MIN = 0.16
 """Smallest shape of a gamma variate (``looks``, K's ``nu``) whose law float32 holds."""
 
-SHAPE_RANGE: dict[str, tuple[float, bool, float]] = {
-    "k": (GAMMA_SHAPE_MIN, True, math.inf),
-    "g0": (1.0, False, math.inf),
-    "lognormal": (0.0, False, 9.0),
-    "weibull": (0.18, True, math.inf),
+_FLOAT32 = "outside, float32 cannot hold the law: samples would underflow to 0 or overflow"
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """The accepted values ``low <(=) value <= high`` of a parameter, and why."""
+
+    low: float
+    closed: bool
+    high: float = math.inf
+    why: str = _FLOAT32
+
+    def check(self, value: float, name: str, model: str) -> float:
+        """Return ``value``, or raise :class:`OptionError` naming ``name`` and the range."""
+        if (value >= self.low if self.closed else value > self.low) and value <= self.high:
+            return value
+        bound = f"{'>=' if self.closed else '>'} {self.low:g}"
+        bound += f" and <= {self.high:g}" if self.high < math.inf else ""
+        raise OptionError(f"{name} must be {bound} for model {model!r} ({self.why}), got {value!r}")
+
+
+LOOKS_RANGE = ParamRange(GAMMA_SHAPE_MIN, True)
+"""Accepted ``looks`` of the speckled models (gamma, k, g0)."""
+
+SHAPE_RANGE: dict[str, ParamRange] = {
+    "k": ParamRange(GAMMA_SHAPE_MIN, True),
+    "g0": ParamRange(1.0, False, why="for a <= 1 the law has no finite mean"),
+    "lognormal": ParamRange(0.0, False, 9.0),
+    "weibull": ParamRange(0.18, True),
 }
-"""``(low, low included, high)`` of each model's ``shape_param`` (see the module docstring)."""
-
-
-def _check_range(value: float, name: str, model: str, low: float, closed: bool, high: float):
-    """Raise :class:`OptionError` unless ``low <(=) value <= high``."""
-    if (value >= low if closed else value > low) and value <= high:
-        return
-    bound = f"{'>=' if closed else '>'} {low:g}" + (f" and <= {high:g}" if high < math.inf else "")
-    raise OptionError(
-        f"{name} must be {bound} for model {model!r} (outside, float32 cannot hold the law: "
-        f"samples would underflow to 0 or overflow), got {value!r}"
-    )
+"""The accepted ``shape_param`` of each model (see the module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -137,7 +152,7 @@ def clutter_spec(model: object, *, looks: object = 1.0, shape_param: object = No
     name = check_choice(model, "model", CLUTTER_MODELS)
     L = check_positive(looks, "looks")
     if name in _SPECKLED:
-        _check_range(L, "looks", name, GAMMA_SHAPE_MIN, True, math.inf)
+        LOOKS_RANGE.check(L, "looks", name)
     if name not in _SPECKLED and L != 1.0:
         raise OptionError(
             f"looks must be 1 for model {name!r} (a complete intensity law), got {looks!r}; "
@@ -149,7 +164,7 @@ def clutter_spec(model: object, *, looks: object = 1.0, shape_param: object = No
         return ClutterSpec(name, L, None)
     value = DEFAULT_SHAPE_PARAM[name] if shape_param is None else shape_param
     p = check_positive(value, "shape_param")
-    _check_range(p, "shape_param", name, *SHAPE_RANGE[name])
+    SHAPE_RANGE[name].check(p, "shape_param", name)
     return ClutterSpec(name, L, p)
 
 
