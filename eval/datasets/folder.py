@@ -1,0 +1,167 @@
+"""``folder:PATH``: image files beside ``<stem>.mask.png`` label maps (MSTAR SARBake layout).
+
+Pairing: every ``<stem>.mask.png`` needs exactly one image ``<stem>.<ext>`` (or
+``<stem>.<variant>.<ext>`` with ``?variant=``), ``ext`` one of png, jpg, jpeg, tif, tiff.
+A mask without an image, an image without a mask, and two images sharing one mask are
+errors naming the files; FIFOs and devices are refused without being opened.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from eval.datasets.images import check_same_size, read_labels, read_samples
+from eval.datasets.semantics import INSTANCE_MODES, SHADOW_MODES, form_instances, split_labels
+from eval.datasets.spec import DatasetSpec
+from eval.errors import EvalError
+from torchsar.io import (
+    DEFAULT_MAX_PIXELS,
+    RASTER_EXTS,
+    check_regular_file,
+    decode_id_map,
+    read_raster,
+)
+
+__all__ = ["FOLDER_OPTIONS", "FolderDataset"]
+
+FOLDER_OPTIONS = ("variant", "type", "spacing", "shadow", "instances", "max_pixels")
+MASK, IDS, BOX = ".mask.png", ".instances.png", ".box.txt"
+
+
+def _stem_and_variant(img: Path, stems: set[Path]) -> tuple[Path, str | None] | None:
+    """The mask stem an image belongs to and its variant, or ``None`` for an orphan."""
+    base = img.with_suffix("")
+    if base in stems:
+        return base, None
+    if base.suffix and base.with_suffix("") in stems:
+        return base.with_suffix(""), base.suffix[1:]
+    return None
+
+
+def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
+    """``(image, mask)`` pairs in sorted order; every rule of the module docstring checked."""
+    files = walk_files(root)
+    masks = [f for f in files if f.name.endswith(MASK)]
+    stems = {m.with_name(m.name[: -len(MASK)]) for m in masks}
+    chosen: dict[Path, list[Path]] = {s: [] for s in stems}
+    for f in files:
+        if f.suffix.lower() not in RASTER_EXTS or f.name.endswith((MASK, IDS)):
+            continue
+        check_regular_file(f)
+        found = _stem_and_variant(f, stems)
+        if found is None:
+            raise EvalError(f"image {f} has no mask {f.with_suffix('')}{MASK}")
+        if found[1] == variant:
+            chosen[found[0]].append(f)
+    pairs = []
+    for stem in sorted(chosen):
+        mask = stem.with_name(stem.name + MASK)
+        imgs = chosen[stem]
+        if len(imgs) > 1:
+            raise EvalError(
+                f"mask {mask} is shared by {len(imgs)} images: {', '.join(map(str, imgs))}"
+            )
+        if not imgs:
+            what = f" of variant {variant!r}" if variant else ""
+            raise EvalError(f"mask {mask} has no image{what} ({stem.name}.<png|jpeg|tif>)")
+        pairs.append((imgs[0], mask))
+    if not pairs:
+        raise EvalError(f"no images with <stem>{MASK} masks found in {root}")
+    return pairs
+
+
+def _default_type(image: Path, variant: str | None, max_pixels: int) -> str:
+    """complex / float TIFF -> complex / intensity; 8/16-bit -> display (``linear`` variant:
+    amplitude, as MSTAR SARBake's linear magnitude renderings)."""
+    if image.suffix.lower() in (".tif", ".tiff"):
+        import tifffile
+
+        with tifffile.TiffFile(image) as tif:
+            kind = tif.series[0].dtype.kind
+        if kind in "cf":
+            return "complex" if kind == "c" else "intensity"
+    return "amplitude" if variant == "linear" else "display"
+
+
+def _default_instances(pairs: list[tuple[Path, Path]]) -> str:
+    """``idmap`` when id maps exist; ``one-per-image`` when every mask has a ``.box.txt``
+    (one target box per chip, the MSTAR SARBake layout); else ``components``."""
+    stems = [m.with_name(m.name[: -len(MASK)]) for _, m in pairs]
+    if any(s.with_name(s.name + IDS).exists() for s in stems):
+        return "idmap"
+    if all(s.with_name(s.name + BOX).exists() for s in stems):
+        return "one-per-image"
+    return "components"
+
+
+class FolderDataset(FileDataset):
+    """Image / mask pairs from a folder (recursively); see the module docstring."""
+
+    scheme = "folder"
+
+    def __init__(
+        self,
+        root: str | Path,
+        *,
+        variant: str | None = None,
+        limit: int | None = None,
+        sample_type: str | None = None,
+        spacing: tuple[float, float] | None = None,
+        shadow: str = "ignore",
+        instances: str | None = None,
+        max_pixels: int = DEFAULT_MAX_PIXELS,
+    ) -> None:
+        require_dir(Path(root), self.scheme)
+        self.items = pair_files(Path(root), variant)
+        sample_type = sample_type or _default_type(self.items[0][0], variant, max_pixels)
+        super().__init__(root, sample_type=sample_type, spacing=spacing, max_pixels=max_pixels)
+        self.variant, self.shadow = variant, shadow
+        self.mode = instances or _default_instances(self.items)
+        self.files = [p for pair in self.items for p in pair] + self._id_maps()
+        self.options.update(variant=variant, shadow=shadow, labels="0 clutter, 1 target, 2 shadow")
+        self.finish(self.mode, limit)
+
+    def _id_maps(self) -> list[Path]:
+        return [ids for _, m in self.items if (ids := self._id_map(m)).exists()]
+
+    @staticmethod
+    def _id_map(mask: Path) -> Path:
+        return mask.with_name(mask.name[: -len(MASK)] + IDS)
+
+    def _class(self, img: Path) -> str | None:
+        """The image-level class: the parent folder's name below the root (MSTAR layout)."""
+        return img.parent.name if img.parent != self.root else None
+
+    def load(self, i: int) -> dict:
+        img_path, mask_path = self.items[i]
+        check_same_size(img_path, mask_path)
+        samples = read_samples(img_path, self.sample_type, max_pixels=self.max_pixels)
+        target, ignore = split_labels(
+            read_labels(mask_path, max_pixels=self.max_pixels), self.shadow
+        )
+        idmap = None
+        if self.mode == "idmap":
+            ids_path = self._id_map(mask_path)
+            check_same_size(img_path, ids_path)
+            idmap = decode_id_map(read_raster(ids_path, max_pixels=self.max_pixels), str(ids_path))
+        inst = form_instances(target, self.mode, idmap)
+        cls = self._class(img_path)
+        meta = self.base_meta(str(img_path.relative_to(self.root)), img_path, cls)
+        meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
+        return make_item(self.intensity(samples, img_path), inst, ignore, meta)
+
+
+def folder_from_spec(spec: DatasetSpec, limit: int | None) -> FolderDataset:
+    """Build a :class:`FolderDataset` from ``folder:PATH?options``."""
+    spec.check_keys(FOLDER_OPTIONS)
+    return FolderDataset(
+        spec.path,
+        variant=spec.options.get("variant"),
+        limit=limit,
+        sample_type=spec.options.get("type") and spec.sample_type("display"),
+        spacing=spec.spacing(),
+        shadow=spec.choice("shadow", SHADOW_MODES, "ignore"),
+        instances=spec.choice("instances", INSTANCE_MODES, None),
+        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+    )
