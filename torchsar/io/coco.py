@@ -8,6 +8,7 @@ Crowd annotations (``iscrowd=1``) are kept apart so callers can make them don't-
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -154,5 +155,7 @@ def annotation_mask(ann: CocoAnnotation, height: int, width: int) -> np.ndarray:
         rle = dict(
             seg, counts=seg["counts"].encode() if isinstance(seg["counts"], str) else seg["counts"]
         )
-    m = mask_utils.decode(rle)
+    with warnings.catch_warnings():  # pycocotools' decoder predates numpy 2's copy keyword
+        warnings.simplefilter("ignore", DeprecationWarning)
+        m = mask_utils.decode(rle)
     return np.asarray(m if m.ndim == 2 else m.any(axis=2), dtype=bool)
