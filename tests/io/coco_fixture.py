@@ -12,16 +12,10 @@ H, W = 8, 10
 
 def rle_counts(mask: np.ndarray) -> list[int]:
     """Uncompressed COCO RLE by hand: run lengths over the column-major pixels, zeros first."""
-    flat = mask.T.ravel().astype(int)
-    counts, value, run = [], 0, 0
-    for v in flat:
-        if v == value:
-            run += 1
-        else:
-            counts.append(run)
-            value, run = v, 1
-    counts.append(run)
-    return counts
+    flat = mask.T.ravel().astype(np.int8)
+    edges = np.flatnonzero(np.diff(flat)) + 1
+    runs = np.diff(np.concatenate([[0], edges, [flat.size]])).tolist()
+    return [0, *runs] if flat.size and flat[0] else runs
 
 
 def truth() -> dict[str, np.ndarray]:

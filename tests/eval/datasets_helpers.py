@@ -1,0 +1,72 @@
+"""Shared checks and writers of the dataset tests."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tests.io.coco_fixture import rle_counts
+from tests.io.writers import write_png
+
+META_KEYS = {"name", "classes", "boxes", "gt", "class", "pixel_spacing", "sample_type"}
+
+
+def check_contract(item: dict) -> None:
+    """Every item: the documented keys, dtypes, shapes and meta consistency."""
+    image, mask, inst, ignore = (item[k] for k in ("image", "mask", "instances", "ignore"))
+    assert image.dtype == torch.float32 and image.ndim == 3
+    assert mask.dtype == torch.bool and inst.dtype == torch.int32 and ignore.dtype == torch.bool
+    assert image.shape == mask.shape == inst.shape == ignore.shape
+    assert torch.equal(mask, inst > 0)
+    assert bool((image >= 0).all())
+    meta = item["meta"]
+    assert set(meta) >= META_KEYS, META_KEYS - set(meta)
+    k = int(inst.max())
+    assert len(meta["classes"]) == len(meta["boxes"]) == k
+    assert meta["gt"] in ("mask", "box")
+    for i, (r0, c0, r1, c1) in enumerate(meta["boxes"], start=1):
+        rr, cc = np.nonzero(inst[0].numpy() == i)
+        if rr.size:
+            assert r0 <= rr.min() and rr.max() < r1 and c0 <= cc.min() and cc.max() < c1
+
+
+def write_pair(folder: Path, stem: str, image: np.ndarray, labels: np.ndarray, ext="png") -> None:
+    """``<stem>.<ext>`` image and ``<stem>.mask.png`` labels (uint8)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_png(folder / f"{stem}.{ext}", image.astype(np.uint8))
+    write_png(folder / f"{stem}.mask.png", labels.astype(np.uint8))
+
+
+def instance_masks(item: dict) -> list[np.ndarray]:
+    """The instances of an item as a list of bool masks, sorted (order-free comparison)."""
+    inst = item["instances"][0].numpy()
+    masks = [inst == i for i in range(1, int(inst.max()) + 1)]
+    return sorted(masks, key=lambda m: m.tobytes())
+
+
+def coco_from_id_maps(images: list[Path], id_maps: list[np.ndarray], out: Path) -> Path:
+    """A COCO file (uncompressed RLE per instance) converted from decoded id maps."""
+    anns, recs = [], []
+    for k, (img, ids) in enumerate(zip(images, id_maps, strict=True), start=1):
+        h, w = ids.shape
+        recs.append({"id": k, "file_name": img.name, "height": h, "width": w})
+        for i in range(1, int(ids.max()) + 1):
+            m = ids == i
+            rr, cc = np.nonzero(m)
+            bbox = [int(cc.min()), int(rr.min()), int(np.ptp(cc) + 1), int(np.ptp(rr) + 1)]
+            seg = {"size": [h, w], "counts": rle_counts(m)}
+            anns.append(
+                {
+                    "id": len(anns) + 1,
+                    "image_id": k,
+                    "category_id": 1,
+                    "bbox": bbox,
+                    "segmentation": seg,
+                }
+            )
+    data = {"images": recs, "annotations": anns, "categories": [{"id": 1, "name": "ship"}]}
+    out.write_text(json.dumps(data))
+    return out
