@@ -7,6 +7,7 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.ndimage import find_objects
 from skimage.measure import label
 
 __all__ = [
@@ -46,16 +47,11 @@ def form_instances(target: np.ndarray, mode: str, idmap: np.ndarray | None = Non
 
 def boxes_of(instances: np.ndarray) -> list[tuple[int, int, int, int]]:
     """End-exclusive ``(r0, c0, r1, c1)`` of each id ``1..K`` (empty ids get ``(0,0,0,0)``)."""
-    k = int(instances.max(initial=0))
-    boxes = []
-    for i in range(1, k + 1):
-        rr, cc = np.nonzero(instances == i)
-        boxes.append(
-            (int(rr.min()), int(cc.min()), int(rr.max()) + 1, int(cc.max()) + 1)
-            if rr.size
-            else (0, 0, 0, 0)
-        )
-    return boxes
+    slices = find_objects(instances, max_label=int(instances.max(initial=0)))
+    return [
+        (s[0].start, s[1].start, s[0].stop, s[1].stop) if s is not None else (0, 0, 0, 0)
+        for s in slices
+    ]
 
 
 def _clusters(boxes: Sequence[tuple[float, float, float, float]], gap: float) -> int:
@@ -83,8 +79,10 @@ def looks_split(boxes: Sequence[tuple[float, float, float, float]]) -> bool:
 def looks_merged(instances: np.ndarray) -> bool:
     """An instance made of pieces far apart (more than 10 % of the image side): merged?"""
     gap = max(8, 0.1 * max(instances.shape))
-    for i in range(1, int(instances.max(initial=0)) + 1):
-        parts = label(instances == i, connectivity=2)
+    for i, box in enumerate(find_objects(instances), start=1):
+        if box is None:
+            continue
+        parts = label(instances[box] == i, connectivity=2)
         if parts.max() > 1 and _clusters(boxes_of(parts), gap) > 1:
             return True
     return False
