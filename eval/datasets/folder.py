@@ -21,6 +21,7 @@ from torchsar.io import (
     check_regular_file,
     decode_id_map,
     read_raster,
+    tiff_dtype,
 )
 
 __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
@@ -75,10 +76,7 @@ def _default_type(image: Path, variant: str | None, max_pixels: int) -> str:
     """complex / float TIFF -> complex / intensity; 8/16-bit -> display (``linear`` variant:
     amplitude, as MSTAR SARBake's linear magnitude renderings)."""
     if image.suffix.lower() in (".tif", ".tiff"):
-        import tifffile
-
-        with tifffile.TiffFile(image) as tif:
-            kind = tif.series[0].dtype.kind
+        kind = tiff_dtype(image).kind
         if kind in "cf":
             return "complex" if kind == "c" else "intensity"
     return "amplitude" if variant == "linear" else "display"

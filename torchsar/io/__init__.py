@@ -13,6 +13,7 @@ from torchsar.io.raster import (
     check_regular_file,
     raster_shape,
     read_raster,
+    tiff_dtype,
 )
 from torchsar.io.scaling import SAMPLE_TYPES, to_intensity
 from torchsar.io.sicd import SicdChip, read_sicd, sicd_shape
@@ -47,5 +48,6 @@ __all__ = [
     "read_voc",
     "sicd_shape",
     "single_channel",
+    "tiff_dtype",
     "to_intensity",
 ]

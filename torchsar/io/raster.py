@@ -24,6 +24,7 @@ __all__ = [
     "check_regular_file",
     "raster_shape",
     "read_raster",
+    "tiff_dtype",
 ]
 
 DEFAULT_MAX_PIXELS = 100_000_000
@@ -68,6 +69,22 @@ def raster_shape(path: str | Path) -> tuple[int, ...]:
     except Exception as exc:  # any decoder complaint: name the file
         raise FileFormatError(path, f"cannot read image header ({exc})") from exc
     return (h, w) if bands == 1 else (h, w, bands)
+
+
+def tiff_dtype(path: str | Path) -> np.dtype:
+    """The sample dtype of a TIFF, read from its header only.
+
+    Raises:
+        FileFormatError: not a regular file, or a header that cannot be parsed.
+    """
+    check_regular_file(path)
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(path) as tif:
+            return np.dtype(tif.series[0].dtype)
+    except Exception as exc:  # any decoder complaint: name the file
+        raise FileFormatError(path, f"cannot read image header ({exc})") from exc
 
 
 def _channels_last(shape: tuple[int, ...]) -> tuple[int, ...]:
