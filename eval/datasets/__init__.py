@@ -1,5 +1,5 @@
 """Datasets of the harness: simulated chips and scenes, image folders, COCO, VOC, HRSID and
-MSTAR Phoenix files.
+MSTAR Phoenix files and SICD products.
 
 Every dataset yields dicts with ``image`` ``(C, H, W)`` float32 intensity (converted once
 from the declared sample type by :func:`torchsar.io.to_intensity`), ``mask`` ``(C, H, W)``
@@ -20,6 +20,8 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
   ``JPEGImages`` or beside the XML.
 - ``hrsid:DIR``: HRSID ``<name>.png`` with ``<name>_instance_id_RGB.png`` colour ids.
 - ``phoenix:DIR``: MSTAR raw Phoenix files (pixel spacing from the header).
+- ``sicd:FILE``: a SICD/NITF complex product cut into ``chip=N`` (512) chips, no ground
+  truth (needs the optional ``sar`` extra: ``pip install 'torchsar[sar]'``).
 
 Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-bit images
 ``display``, folder ``variant=linear`` ``amplitude``, float TIFF ``intensity``, complex TIFF

@@ -4,6 +4,8 @@ Pairing: every ``<stem>.mask.png`` needs exactly one image ``<stem>.<ext>`` (or
 ``<stem>.<variant>.<ext>`` with ``?variant=``), ``ext`` one of png, jpg, jpeg, tif, tiff.
 A mask without an image, an image without a mask, and two images sharing one mask are
 errors naming the files; FIFOs and devices are refused without being opened.
+Pixel spacing: ``?spacing=ROW[,COL]``, else a ``<stem>.spacing.txt`` sidecar holding
+``ROW [COL]`` in metres, else unknown (``None``).
 """
 
 from __future__ import annotations
@@ -13,11 +15,12 @@ from pathlib import Path
 from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from eval.datasets.images import check_same_size, read_labels, read_samples
 from eval.datasets.semantics import INSTANCE_MODES, SHADOW_MODES, form_instances, split_labels
-from eval.datasets.spec import DatasetSpec
+from eval.datasets.spec import DatasetSpec, parse_spacing
 from eval.errors import EvalError
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     RASTER_EXTS,
+    FileFormatError,
     check_regular_file,
     decode_id_map,
     read_raster,
@@ -27,7 +30,7 @@ from torchsar.io import (
 __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
 
 FOLDER_OPTIONS = ("variant", "type", "spacing", "shadow", "instances", "max_pixels")
-MASK, IDS, BOX = ".mask.png", ".instances.png", ".box.txt"
+MASK, IDS, BOX, SPACING = ".mask.png", ".instances.png", ".box.txt", ".spacing.txt"
 
 
 def _stem_and_variant(img: Path, stems: set[Path]) -> tuple[Path, str | None] | None:
@@ -72,7 +75,7 @@ def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
     return pairs
 
 
-def _default_type(image: Path, variant: str | None, max_pixels: int) -> str:
+def _default_type(image: Path, variant: str | None) -> str:
     """complex / float TIFF -> complex / intensity; 8/16-bit -> display (``linear`` variant:
     amplitude, as MSTAR SARBake's linear magnitude renderings)."""
     if image.suffix.lower() in (".tif", ".tiff"):
@@ -112,20 +115,36 @@ class FolderDataset(FileDataset):
     ) -> None:
         require_dir(Path(root), self.scheme)
         self.items = pair_files(Path(root), variant)
-        sample_type = sample_type or _default_type(self.items[0][0], variant, max_pixels)
+        sample_type = sample_type or _default_type(self.items[0][0], variant)
         super().__init__(root, sample_type=sample_type, spacing=spacing, max_pixels=max_pixels)
         self.variant, self.shadow = variant, shadow
         self.mode = instances or _default_instances(self.items)
-        self.files = [p for pair in self.items for p in pair] + self._id_maps()
+        self.files = [p for pair in self.items for p in pair] + self._sidecars()
         self.options.update(variant=variant, shadow=shadow, labels="0 clutter, 1 target, 2 shadow")
+        self.options["spacing_source"] = "option" if spacing else f"<stem>{SPACING} when present"
         self.finish(self.mode, limit)
 
-    def _id_maps(self) -> list[Path]:
-        return [ids for _, m in self.items if (ids := self._id_map(m)).exists()]
+    def _sidecars(self) -> list[Path]:
+        """Id maps and spacing files that exist beside the masks (for the manifest)."""
+        found = [self._beside(m, IDS) for _, m in self.items]
+        found += [self._beside(m, SPACING) for _, m in self.items]
+        return [p for p in found if p.exists()]
 
     @staticmethod
-    def _id_map(mask: Path) -> Path:
-        return mask.with_name(mask.name[: -len(MASK)] + IDS)
+    def _beside(mask: Path, suffix: str) -> Path:
+        """``<stem><suffix>`` next to ``<stem>.mask.png``."""
+        return mask.with_name(mask.name[: -len(MASK)] + suffix)
+
+    def _spacing(self, mask: Path) -> tuple[float, float] | None:
+        """``?spacing=``, else a ``<stem>.spacing.txt`` sidecar (``ROW [COL]`` metres)."""
+        sidecar = self._beside(mask, SPACING)
+        if self.spacing is not None or not sidecar.exists():
+            return self.spacing
+        text = ",".join(sidecar.read_text().replace(",", " ").split())
+        try:
+            return parse_spacing(text)
+        except EvalError as exc:
+            raise FileFormatError(sidecar, str(exc)) from exc
 
     def _class(self, img: Path) -> str | None:
         """The image-level class: the parent folder's name below the root (MSTAR layout)."""
@@ -140,13 +159,14 @@ class FolderDataset(FileDataset):
         )
         idmap = None
         if self.mode == "idmap":
-            ids_path = self._id_map(mask_path)
+            ids_path = self._beside(mask_path, IDS)
             check_same_size(img_path, ids_path)
             idmap = decode_id_map(read_raster(ids_path, max_pixels=self.max_pixels), str(ids_path))
         inst = form_instances(target, self.mode, idmap)
         cls = self._class(img_path)
         meta = self.base_meta(str(img_path.relative_to(self.root)), img_path, cls)
         meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
+        meta["pixel_spacing"] = self._spacing(mask_path)
         return make_item(self.intensity(samples, img_path), inst, ignore, meta)
 
 

@@ -11,6 +11,7 @@ from eval.datasets.base import BadItemError
 from eval.datasets.folder import folder_from_spec
 from eval.datasets.hrsid import hrsid_from_spec
 from eval.datasets.phoenix import phoenix_from_spec
+from eval.datasets.sicd import sicd_from_spec
 from eval.datasets.sim import DEFAULT_N, SimDataset
 from eval.datasets.spec import DatasetSpec, parse_spec
 from eval.errors import EvalError
@@ -26,6 +27,7 @@ DATASETS = (
     "voc:DIR",
     "hrsid:DIR",
     "phoenix:DIR",
+    "sicd:FILE",
 )
 
 _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
@@ -34,6 +36,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "voc": voc_from_spec,
     "hrsid": hrsid_from_spec,
     "phoenix": phoenix_from_spec,
+    "sicd": sicd_from_spec,
 }
 
 

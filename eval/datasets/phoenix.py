@@ -84,10 +84,6 @@ class PhoenixDataset(FileDataset):
         meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
         return make_item(self.intensity(samples, path), inst, ignore, meta)
 
-    def finish(self, mode: str, limit: int | None) -> None:
-        self.options["instances"] = mode
-        super().finish(mode, limit)
-
 
 def phoenix_from_spec(spec: DatasetSpec, limit: int | None) -> PhoenixDataset:
     """``phoenix:DIR?options``."""

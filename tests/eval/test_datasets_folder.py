@@ -112,6 +112,19 @@ def test_spacing_option_and_errors(tmp_path):
         make_dataset(f"folder:{tmp_path}?type=linear")
 
 
+def test_spacing_sidecar(tmp_path):
+    write_pair(tmp_path, "a", np.full((16, 16), 9), _labels())
+    write_pair(tmp_path, "b", np.full((16, 16), 9), _labels())
+    (tmp_path / "a.spacing.txt").write_text("0.25 0.5\n")
+    ds = _quiet(f"folder:{tmp_path}")
+    assert [ds[i]["meta"]["pixel_spacing"] for i in range(2)] == [(0.25, 0.5), None]
+    assert ds.manifest()["files"] == 5
+    assert _quiet(f"folder:{tmp_path}?spacing=1")[0]["meta"]["pixel_spacing"] == (1.0, 1.0)
+    (tmp_path / "a.spacing.txt").write_text("fast")
+    with pytest.raises(BadItemError, match="a.spacing.txt: spacing="):
+        _quiet(f"folder:{tmp_path}")
+
+
 def test_mask_without_image_and_shared_mask(tmp_path):
     write_pair(tmp_path, "a", np.zeros((16, 16)), _labels())
     write_png(tmp_path / "b.mask.png", _labels())
