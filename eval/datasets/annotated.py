@@ -41,7 +41,10 @@ class AnnotatedDataset(FileDataset):
             raise EvalError(
                 f"{scheme} annotations refer to missing image {missing[0]} ({len(missing)} missing)"
             )
-        self.files = [e[0] for e in entries] + annotation_files
+        self.shared_files = list(annotation_files)
+
+    def item_files(self, i: int) -> list[Path]:
+        return [self.items[i][0]]
 
     def load(self, i: int) -> dict:
         path, size, objects, name = self.items[i]

@@ -70,8 +70,12 @@ def make_item(
 
 
 class FileDataset(Dataset):
-    """Base of the file-backed datasets. Subclasses set ``self.files`` (manifest), and
-    implement ``__len__`` and ``load(i) -> (item, path)``; errors become :class:`BadItemError`.
+    """Base of the file-backed datasets.
+
+    Subclasses fill ``self.items`` (one entry per item), implement ``load(i) -> item`` and
+    ``item_files(i)`` (the files item ``i`` reads, for the manifest), may list files every
+    item shares in ``self.shared_files`` (an annotation file), then call :meth:`finish`.
+    A :class:`~torchsar.io.FileFormatError` while loading becomes :class:`BadItemError`.
     """
 
     scheme = ""
@@ -82,7 +86,7 @@ class FileDataset(Dataset):
         self.spacing = spacing
         self.max_pixels = max_pixels
         self.name = f"{self.scheme}:{root}"
-        self.files: list[Path] = []
+        self.shared_files: list[Path] = []
         self.options: dict = {
             "scheme": self.scheme,
             "root": str(self.root),
@@ -101,7 +105,7 @@ class FileDataset(Dataset):
                 "transfer): detectors' design Pfa is not meaningful on it; declare "
                 "?type=amplitude|intensity|db if the samples are calibrated",
                 DisplayScalingWarning,
-                stacklevel=3,
+                stacklevel=2,
             )
         if len(self):
             sample = [self[i] for i in range(min(len(self), SANITY_ITEMS))]
@@ -118,7 +122,8 @@ class FileDataset(Dataset):
 
     def manifest(self) -> dict:
         """File count, bytes and hash of the files behind this dataset (see file_manifest)."""
-        return file_manifest(self.root, self.files)
+        files = {f for i in range(len(self)) for f in self.item_files(i)}
+        return file_manifest(self.root, sorted(files | set(self.shared_files)))
 
     def intensity(self, samples: np.ndarray, path: Path) -> np.ndarray:
         """The one conversion of this dataset's samples to intensity."""
@@ -147,6 +152,11 @@ class FileDataset(Dataset):
             raise BadItemError(exc.path, str(exc)) from exc
 
     def load(self, i: int) -> dict:
+        """Item ``i`` (may raise FileFormatError)."""
+        raise NotImplementedError
+
+    def item_files(self, i: int) -> list[Path]:
+        """The files item ``i`` reads."""
         raise NotImplementedError
 
 

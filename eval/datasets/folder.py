@@ -119,16 +119,15 @@ class FolderDataset(FileDataset):
         super().__init__(root, sample_type=sample_type, spacing=spacing, max_pixels=max_pixels)
         self.variant, self.shadow = variant, shadow
         self.mode = instances or _default_instances(self.items)
-        self.files = [p for pair in self.items for p in pair] + self._sidecars()
         self.options.update(variant=variant, shadow=shadow, labels="0 clutter, 1 target, 2 shadow")
         self.options["spacing_source"] = "option" if spacing else f"<stem>{SPACING} when present"
         self.finish(self.mode, limit)
 
-    def _sidecars(self) -> list[Path]:
-        """Id maps and spacing files that exist beside the masks (for the manifest)."""
-        found = [self._beside(m, IDS) for _, m in self.items]
-        found += [self._beside(m, SPACING) for _, m in self.items]
-        return [p for p in found if p.exists()]
+    def item_files(self, i: int) -> list[Path]:
+        """Image, mask, and the id map / spacing sidecar when present."""
+        img, mask = self.items[i]
+        sidecars = [self._beside(mask, IDS), self._beside(mask, SPACING)]
+        return [img, mask, *(p for p in sidecars if p.exists())]
 
     @staticmethod
     def _beside(mask: Path, suffix: str) -> Path:

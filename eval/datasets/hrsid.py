@@ -45,9 +45,11 @@ class HrsidDataset(FileDataset):
             raise EvalError(f"id map(s) without image: {missing[0]} missing ({len(missing)})")
         if not self.items:
             raise EvalError(f"no <name>{ID_SUFFIX} id maps found in {self.root}")
-        self.files = [p for pair in self.items for p in pair]
         self.options["labels"] = "one colour per ship (black = sea)"
         self.finish("idmap", limit)
+
+    def item_files(self, i: int) -> list[Path]:
+        return list(self.items[i])
 
     def load(self, i: int) -> dict:
         img_path, ids_path = self.items[i]

@@ -53,7 +53,6 @@ class PhoenixDataset(FileDataset):
         ]
         if not self.items:
             raise EvalError(f"no MSTAR Phoenix files found in {self.root}")
-        self.files = self.items + [m for f in self.items if (m := self._mask(f)).exists()]
         self.shadow = shadow
         self.options.update(shadow=shadow, spacing_source="option" if spacing else "header")
         self.finish(instances, limit)
@@ -71,6 +70,10 @@ class PhoenixDataset(FileDataset):
         if lab.shape != shape:
             raise FileFormatError(mask, f"is {lab.shape[1]}x{lab.shape[0]}, chip is {shape}")
         return split_labels(lab, self.shadow)
+
+    def item_files(self, i: int) -> list[Path]:
+        mask = self._mask(self.items[i])
+        return [self.items[i], mask] if mask.exists() else [self.items[i]]
 
     def load(self, i: int) -> dict:
         path = self.items[i]

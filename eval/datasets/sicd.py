@@ -51,9 +51,11 @@ class SicdDataset(FileDataset):
             self.items = chip_regions(*sicd_shape(path), chip)
         except ImportError as exc:
             raise EvalError(str(exc)) from exc
-        self.files = [self.root]
         self.options.update(chip=chip, labels="none (clutter only)")
         self.finish("none", limit)
+
+    def item_files(self, i: int) -> list[Path]:
+        return [self.root]
 
     def load(self, i: int) -> dict:
         region = self.items[i]

@@ -252,6 +252,10 @@ def test_id_maps_are_used_when_present(tmp_path):
 def test_manifest_and_symlinks_leaving_the_folder(tmp_path):
     root = tmp_path / "d"
     write_pair(root, "a", np.zeros((16, 16)), _labels())
+    write_pair(root, "z", np.zeros((16, 16)), _labels())
+    assert _quiet(f"folder:{root}", n=1).manifest()["files"] == 2  # only the files used
+    (root / "z.png").unlink()
+    (root / "z.mask.png").unlink()
     m1 = _quiet(f"folder:{root}").manifest()
     sizes = sum(p.stat().st_size for p in root.iterdir())
     assert (m1["files"], m1["bytes"], m1["symlinks_outside"]) == (2, sizes, [])
