@@ -5,7 +5,7 @@ Pairing: every ``<stem>.mask.png`` needs exactly one image ``<stem>.<ext>`` (or
 A mask without an image, an image without a mask, and two images sharing one mask are
 errors naming the files; FIFOs and devices are refused without being opened.
 Pixel spacing: ``?spacing=ROW[,COL]``, else a ``<stem>.spacing.txt`` sidecar holding
-``ROW [COL]`` in metres, else unknown (``None``).
+``ROW [COL]`` in metres, else a projected GeoTIFF's pixel scale, else unknown (``None``).
 """
 
 from __future__ import annotations
@@ -20,9 +20,11 @@ from eval.errors import EvalError
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     RASTER_EXTS,
+    TIFF_EXTS,
     FileFormatError,
     check_regular_file,
     decode_id_map,
+    geotiff_pixel_spacing,
     read_raster,
     tiff_dtype,
 )
@@ -120,7 +122,9 @@ class FolderDataset(FileDataset):
         self.variant, self.shadow = variant, shadow
         self.mode = instances or _default_instances(self.items)
         self.options.update(variant=variant, shadow=shadow, labels="0 clutter, 1 target, 2 shadow")
-        self.options["spacing_source"] = "option" if spacing else f"<stem>{SPACING} when present"
+        self.options["spacing_source"] = (
+            "option" if spacing else f"<stem>{SPACING}, else GeoTIFF pixel scale, when present"
+        )
         self.finish(self.mode, limit)
 
     def item_files(self, i: int) -> list[Path]:
@@ -134,11 +138,15 @@ class FolderDataset(FileDataset):
         """``<stem><suffix>`` next to ``<stem>.mask.png``."""
         return mask.with_name(mask.name[: -len(MASK)] + suffix)
 
-    def _spacing(self, mask: Path) -> tuple[float, float] | None:
-        """``?spacing=``, else a ``<stem>.spacing.txt`` sidecar (``ROW [COL]`` metres)."""
+    def _spacing(self, img: Path, mask: Path) -> tuple[float, float] | None:
+        """``?spacing=``, else a ``<stem>.spacing.txt`` sidecar (``ROW [COL]`` metres), else
+        a projected GeoTIFF's pixel scale."""
         sidecar = self._beside(mask, SPACING)
-        if self.spacing is not None or not sidecar.exists():
+        if self.spacing is not None:
             return self.spacing
+        if not sidecar.exists():
+            tiff = img.suffix.lower() in TIFF_EXTS
+            return geotiff_pixel_spacing(img) if tiff else None
         text = ",".join(sidecar.read_text().replace(",", " ").split())
         try:
             return parse_spacing(text)
@@ -165,7 +173,7 @@ class FolderDataset(FileDataset):
         cls = self._class(img_path)
         meta = self.base_meta(str(img_path.relative_to(self.root)), img_path, cls)
         meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
-        meta["pixel_spacing"] = self._spacing(mask_path)
+        meta["pixel_spacing"] = self._spacing(img_path, mask_path)
         return make_item(self.intensity(samples, img_path), inst, ignore, meta)
 
 

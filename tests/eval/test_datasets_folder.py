@@ -13,7 +13,7 @@ import torchsar.io.raster as raster
 from eval.datasets import BadItemError, DisplayScalingWarning, make_dataset
 from eval.errors import EvalError
 from tests.eval.datasets_helpers import check_contract, write_pair
-from tests.io.writers import write_png, write_tiff
+from tests.io.writers import write_geotiff, write_png, write_tiff
 
 rng = np.random.default_rng(3)
 
@@ -123,6 +123,14 @@ def test_spacing_sidecar(tmp_path):
     (tmp_path / "a.spacing.txt").write_text("fast")
     with pytest.raises(BadItemError, match="a.spacing.txt: spacing="):
         _quiet(f"folder:{tmp_path}")
+
+
+def test_geotiff_spacing_from_metadata(tmp_path):
+    write_geotiff(tmp_path / "g.tif")
+    write_png(tmp_path / "g.mask.png", _labels((4, 6), ()))
+    ds = _quiet(f"folder:{tmp_path}")
+    assert ds[0]["meta"]["pixel_spacing"] == (0.5, 0.75)
+    assert _quiet(f"folder:{tmp_path}?spacing=2")[0]["meta"]["pixel_spacing"] == (2.0, 2.0)
 
 
 def test_mask_without_image_and_shared_mask(tmp_path):

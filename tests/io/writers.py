@@ -69,6 +69,17 @@ def write_tiff(path: Path, a: np.ndarray) -> Path:
     return path
 
 
+def write_geotiff(path: Path, model_type=1, units=9001, scale=(0.75, 0.5, 0.0)) -> Path:
+    """A 4x6 float TIFF with GeoTIFF ModelPixelScale (x, y, z) and a two-key GeoKeyDirectory
+    (GTModelType, ProjLinearUnits; 1 = projected, 9001 = metre)."""
+    import tifffile
+
+    keys = [1, 1, 0, 2, 1024, 0, 1, model_type, 3076, 0, 1, units]
+    tags = [(33550, "d", 3, scale, False), (34735, "H", len(keys), keys, False)]
+    tifffile.imwrite(path, np.zeros((4, 6), np.float32), extratags=tags)
+    return path
+
+
 def voc_xml(filename: str, size: tuple[int, int], objects: list[tuple[str, tuple, int]]) -> str:
     """A VOC annotation: ``objects`` as ``(name, (xmin, ymin, xmax, ymax), difficult)``."""
     objs = "".join(

@@ -3,6 +3,7 @@
 from torchsar.io.channels import single_channel
 from torchsar.io.coco import CocoAnnotation, CocoImage, CocoSet, annotation_mask, read_coco
 from torchsar.io.errors import FileFormatError
+from torchsar.io.geotiff import geotiff_pixel_spacing
 from torchsar.io.gotcha import GotchaPass, gotcha_files, read_gotcha
 from torchsar.io.idmap import decode_id_map
 from torchsar.io.phoenix import PhoenixChip, is_phoenix, read_phoenix, read_phoenix_header
@@ -36,6 +37,7 @@ __all__ = [
     "annotation_mask",
     "check_regular_file",
     "decode_id_map",
+    "geotiff_pixel_spacing",
     "gotcha_files",
     "is_phoenix",
     "raster_shape",
