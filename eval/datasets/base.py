@@ -107,9 +107,18 @@ class FileDataset(Dataset):
                 DisplayScalingWarning,
                 stacklevel=2,
             )
-        if len(self):
-            sample = [self[i] for i in range(min(len(self), SANITY_ITEMS))]
-            check_instance_counts(self.name, sample, mode)
+        check_instance_counts(self.name, self._sample(), mode)
+
+    def _sample(self) -> list[dict]:
+        """The first readable items (up to SANITY_ITEMS); bad files are left for the run to
+        report (or skip), so building a dataset never fails on one unreadable item."""
+        items = []
+        for i in range(min(len(self), SANITY_ITEMS)):
+            try:
+                items.append(self[i])
+            except BadItemError:
+                continue
+        return items
 
     def limit(self, n: int | None) -> None:
         """Keep the first ``n`` items (subclasses hold their item list in ``self.items``)."""

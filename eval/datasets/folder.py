@@ -184,7 +184,7 @@ def folder_from_spec(spec: DatasetSpec, limit: int | None) -> FolderDataset:
         spec.path,
         variant=spec.options.get("variant"),
         limit=limit,
-        sample_type=spec.options.get("type") and spec.sample_type("display"),
+        sample_type=spec.sample_type(None),  # None: decided from the first image
         spacing=spec.spacing(),
         shadow=spec.choice("shadow", SHADOW_MODES, "ignore"),
         instances=spec.choice("instances", INSTANCE_MODES, None),

@@ -33,7 +33,7 @@ class DatasetSpec:
             raise EvalError(f"{self.scheme} option {key}={value!r}; allowed: {', '.join(allowed)}")
         return value
 
-    def sample_type(self, default: str) -> str:
+    def sample_type(self, default: str | None) -> str | None:
         """The declared ``type`` (one of the sample types) or the scheme's default."""
         return self.choice("type", SAMPLE_TYPES, default)
 

@@ -122,7 +122,7 @@ def test_spacing_sidecar(tmp_path):
     assert _quiet(f"folder:{tmp_path}?spacing=1")[0]["meta"]["pixel_spacing"] == (1.0, 1.0)
     (tmp_path / "a.spacing.txt").write_text("fast")
     with pytest.raises(BadItemError, match="a.spacing.txt: spacing="):
-        _quiet(f"folder:{tmp_path}")
+        _quiet(f"folder:{tmp_path}")[0]
 
 
 def test_geotiff_spacing_from_metadata(tmp_path):
@@ -155,7 +155,7 @@ def test_fifo_image_and_mask_are_refused_not_opened(tmp_path):
     write_png(tmp_path / "q.png", np.zeros((16, 16), np.uint8))
     os.mkfifo(tmp_path / "q.mask.png")
     with pytest.raises(BadItemError, match="q.mask.png: is not a regular file") as info:
-        _quiet(f"folder:{tmp_path}")
+        _quiet(f"folder:{tmp_path}")[1]
     assert info.value.path.endswith("q.mask.png")
 
 
@@ -164,7 +164,7 @@ def test_label_in_one_channel_is_an_error_not_clutter(tmp_path):
     lab = _labels()
     write_png(tmp_path / "a.mask.png", np.dstack([lab, lab * 0, lab * 0]))
     with pytest.raises(BadItemError, match="a.mask.png: has 3 channels that differ"):
-        _quiet(f"folder:{tmp_path}")
+        _quiet(f"folder:{tmp_path}")[0]
 
 
 def test_grey_as_rgb_and_palette_masks_keep_their_labels(tmp_path):
@@ -179,20 +179,31 @@ def test_grey_as_rgb_and_palette_masks_keep_their_labels(tmp_path):
         np.testing.assert_array_equal(item["ignore"][0].numpy(), lab == 2)
 
 
+def test_one_bad_item_does_not_stop_building(tmp_path):
+    write_pair(tmp_path, "a", np.zeros((16, 16)), _labels())
+    write_pair(tmp_path, "b", np.zeros((16, 16)), _labels() * 3)
+    write_pair(tmp_path, "c", np.zeros((16, 16)), _labels())
+    ds = _quiet(f"folder:{tmp_path}")
+    assert int(ds[0]["mask"].sum()) == int(ds[2]["mask"].sum()) == 9
+    with pytest.raises(BadItemError, match="b.mask.png") as info:
+        ds[1]
+    assert info.value.path.endswith("b.mask.png")
+
+
 def test_labels_outside_0_1_2_are_named(tmp_path):
     write_pair(tmp_path, "a", np.zeros((16, 16)), _labels() * 3)
     with pytest.raises(BadItemError, match=r"a.mask.png: has labels \[3\]"):
-        _quiet(f"folder:{tmp_path}")
+        _quiet(f"folder:{tmp_path}")[0]
 
 
 def test_pixel_limit_and_huge_mask_refused_before_decoding(tmp_path, monkeypatch):
     write_pair(tmp_path, "a", np.zeros((16, 16)), _labels())
     with pytest.raises(BadItemError, match="a.png: is 16x16 = 256 pixels, over the limit of 255"):
-        _quiet(f"folder:{tmp_path}?max_pixels=255")
+        _quiet(f"folder:{tmp_path}?max_pixels=255")[0]
     write_png(tmp_path / "a.mask.png", np.zeros((1200, 1000), np.uint8))
     monkeypatch.setattr(raster, "_decode", lambda p: pytest.fail(f"decoded {p}"))
     with pytest.raises(BadItemError, match=r"a.mask.png: is 1000x1200 but image .*a.png is 16x16"):
-        _quiet(f"folder:{tmp_path}")
+        _quiet(f"folder:{tmp_path}")[0]
 
 
 @pytest.mark.parametrize(

@@ -75,7 +75,7 @@ def test_coco_bad_annotations_are_named(tmp_path):
         make_dataset(f"coco:{path}")
     path = write_coco(tmp_path, images=[{"id": 7, "file_name": "a.png", "height": H, "width": 20}])
     with pytest.raises(BadItemError, match=r"a.png: is 10x8 but its annotation says 20x8"):
-        _quiet(f"coco:{path}")
+        _quiet(f"coco:{path}")[0]
 
 
 # --- VOC --------------------------------------------------------------------------------
@@ -227,7 +227,7 @@ def test_phoenix_lying_header_is_a_bad_item(tmp_path):
         tmp_path / "HB1.015", np.ones((4, 4), np.float32), np.zeros((4, 4), np.float32), rows=5
     )
     with pytest.raises(BadItemError, match="HB1.015: Phoenix header says 5x4"):
-        _quiet(f"phoenix:{tmp_path}")
+        _quiet(f"phoenix:{tmp_path}")[0]
 
 
 def test_real_phoenix(data_dir):
