@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import os
 import stat
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +64,7 @@ def raster_shape(path: str | Path) -> tuple[int, ...]:
                 return _channels_last(tuple(int(s) for s in tif.series[0].shape))
         from PIL import Image
 
-        with Image.open(path) as im:
+        with _pillow_quiet(), Image.open(path) as im:
             w, h = im.size
             bands = len(im.getbands())
     except FileFormatError:
@@ -85,6 +88,17 @@ def tiff_dtype(path: str | Path) -> np.dtype:
             return np.dtype(tif.series[0].dtype)
     except Exception as exc:  # any decoder complaint: name the file
         raise FileFormatError(path, f"cannot read image header ({exc})") from exc
+
+
+@contextmanager
+def _pillow_quiet() -> Iterator[None]:
+    """Silence Pillow's decompression-bomb warning: ``max_pixels`` is the limit here
+    (Pillow still refuses images over twice its own ``Image.MAX_IMAGE_PIXELS``)."""
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        yield
 
 
 def _channels_last(shape: tuple[int, ...]) -> tuple[int, ...]:
@@ -135,7 +149,7 @@ def _decode(path: str | Path) -> np.ndarray:
         return np.moveaxis(a, 0, -1) if _channels_last(a.shape) != a.shape else a
     from PIL import Image
 
-    with Image.open(path) as im:
+    with _pillow_quiet(), Image.open(path) as im:
         im.load()
         a = np.asarray(im)
     return a.astype(np.uint8) if a.dtype == bool else a
