@@ -70,3 +70,18 @@ def coco_from_id_maps(images: list[Path], id_maps: list[np.ndarray], out: Path) 
     data = {"images": recs, "annotations": anns, "categories": [{"id": 1, "name": "ship"}]}
     out.write_text(json.dumps(data))
     return out
+
+
+def write_hrsid_folder(root: Path) -> Path:
+    """Two synthetic chips: touching ships of different colours, and a lone ship."""
+    root.mkdir(parents=True, exist_ok=True)
+    ids = np.zeros((2, 24, 24, 3), np.uint8)
+    ids[0, 2:6, 2:12] = (128, 0, 0)
+    ids[0, 6:10, 2:12] = (0, 128, 0)  # touches the first ship
+    ids[0, 15:20, 15:18] = (128, 128, 0)
+    ids[1, 10:14, 3:20] = (0, 0, 128)
+    for k in range(2):
+        write_png(root / f"P{k}.png", np.dstack([np.full((24, 24), 30 + k, np.uint8)] * 3))
+        write_png(root / f"P{k}_instance_id_RGB.png", ids[k])
+        write_png(root / f"P{k}_instance_color_RGB.png", (ids[k].any(2) * 128).astype(np.uint8))
+    return root

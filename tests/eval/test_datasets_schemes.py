@@ -12,7 +12,12 @@ import torch
 import torchsar as ts
 from eval.datasets import BadItemError, SimDataset, make_dataset
 from eval.errors import EvalError
-from tests.eval.datasets_helpers import check_contract, coco_from_id_maps, instance_masks
+from tests.eval.datasets_helpers import (
+    check_contract,
+    coco_from_id_maps,
+    instance_masks,
+    write_hrsid_folder,
+)
 from tests.io.coco_fixture import H, W, truth, write_coco
 from tests.io.writers import voc_xml, write_phoenix, write_png
 from torchsar.io import decode_id_map, read_raster
@@ -116,23 +121,8 @@ def test_voc_missing_image_and_no_xml(tmp_path):
 # --- HRSID ------------------------------------------------------------------------------
 
 
-def _hrsid_folder(root):
-    """Two synthetic chips: touching ships of different colours, and a lone ship."""
-    root.mkdir(parents=True, exist_ok=True)
-    ids = np.zeros((2, 24, 24, 3), np.uint8)
-    ids[0, 2:6, 2:12] = (128, 0, 0)
-    ids[0, 6:10, 2:12] = (0, 128, 0)  # touches the first ship
-    ids[0, 15:20, 15:18] = (128, 128, 0)
-    ids[1, 10:14, 3:20] = (0, 0, 128)
-    for k in range(2):
-        write_png(root / f"P{k}.png", np.dstack([np.full((24, 24), 30 + k, np.uint8)] * 3))
-        write_png(root / f"P{k}_instance_id_RGB.png", ids[k])
-        write_png(root / f"P{k}_instance_color_RGB.png", (ids[k].any(2) * 128).astype(np.uint8))
-    return root
-
-
 def test_hrsid_colours_become_instances(tmp_path):
-    ds = _quiet(f"hrsid:{_hrsid_folder(tmp_path / 'h')}")
+    ds = _quiet(f"hrsid:{write_hrsid_folder(tmp_path / 'h')}")
     counts = [int(ds[i]["instances"].max()) for i in range(len(ds))]
     assert counts == [3, 1]
     item = ds[0]
@@ -142,7 +132,7 @@ def test_hrsid_colours_become_instances(tmp_path):
 
 
 def test_hrsid_equals_its_coco_conversion(tmp_path):
-    root = _hrsid_folder(tmp_path / "h")
+    root = write_hrsid_folder(tmp_path / "h")
     _same_as_coco(root, tmp_path)
 
 
