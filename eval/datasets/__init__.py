@@ -25,12 +25,20 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
 
 Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-bit images
 ``display``, folder ``variant=linear`` ``amplitude``, float TIFF ``intensity``, complex TIFF
-``complex``, Phoenix ``amplitude``); ``spacing=ROW[,COL]`` metres; ``max_pixels=N`` (default
-100,000,000, checked from the header before decoding). Folder and Phoenix: ``shadow=ignore|
-clutter|target`` (label 2; default ``ignore``), ``instances=components|one-per-image|idmap``
+``complex``, Phoenix ``amplitude``; ``display`` data get a :class:`DisplayScalingWarning`);
+``spacing=ROW[,COL]`` metres (else from the files: Phoenix header, SICD grid, folder
+``<stem>.spacing.txt`` sidecar or projected GeoTIFF; else ``None``); ``max_pixels=N``
+(default 100,000,000, checked from the header before decoding).
+
+Folder and Phoenix: ``shadow=ignore|clutter|target`` (what label 2 means; default
+``ignore``), ``instances=components|one-per-image|idmap``
 (folder default: ``idmap`` when ``<stem>.instances.png`` exist, ``one-per-image`` when every
 mask has a ``<stem>.box.txt`` target box as in MSTAR SARBake, else 8-connected
 ``components``). The image-level class of a folder item is its parent folder's name.
+
+Building a dataset checks its structure (pairing, annotations) and warns when the
+instances of its first readable items look split or merged; an unreadable item raises
+:class:`BadItemError` (naming the file, ``.path``) when it is accessed.
 """
 
 from eval.datasets.base import BadItemError, DisplayScalingWarning, FileDataset
