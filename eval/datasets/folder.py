@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from eval.datasets.images import check_same_size, read_labels, read_samples
 from eval.datasets.semantics import INSTANCE_MODES, SHADOW_MODES, form_instances, split_labels
@@ -153,6 +155,16 @@ class FolderDataset(FileDataset):
         except EvalError as exc:
             raise FileFormatError(sidecar, str(exc)) from exc
 
+    def _id_map(self, img: Path, mask: Path, target: np.ndarray) -> np.ndarray:
+        """The decoded ``<stem>.instances.png``; every target pixel must have an id."""
+        path = self._beside(mask, IDS)
+        check_same_size(img, path)
+        ids = decode_id_map(read_raster(path, max_pixels=self.max_pixels), str(path))
+        missing = int((target & (ids == 0)).sum())
+        if missing:
+            raise FileFormatError(path, f"gives no instance id to {missing} target pixels")
+        return ids
+
     def _class(self, img: Path) -> str | None:
         """The image-level class: the parent folder's name below the root (MSTAR layout)."""
         return img.parent.name if img.parent != self.root else None
@@ -164,11 +176,7 @@ class FolderDataset(FileDataset):
         target, ignore = split_labels(
             read_labels(mask_path, max_pixels=self.max_pixels), self.shadow
         )
-        idmap = None
-        if self.mode == "idmap":
-            ids_path = self._beside(mask_path, IDS)
-            check_same_size(img_path, ids_path)
-            idmap = decode_id_map(read_raster(ids_path, max_pixels=self.max_pixels), str(ids_path))
+        idmap = self._id_map(img_path, mask_path, target) if self.mode == "idmap" else None
         inst = form_instances(target, self.mode, idmap)
         cls = self._class(img_path)
         meta = self.base_meta(str(img_path.relative_to(self.root)), img_path, cls)

@@ -266,6 +266,10 @@ def test_id_maps_are_used_when_present(tmp_path):
     assert ds.options["instances"] == "idmap"
     inst = ds[0]["instances"][0].numpy()
     assert int(inst.max()) == 2 and (inst[2:6, 2:6] == 1).all() and (inst[2:6, 6:10] == 2).all()
+    ids[2, 2] = 0  # a target pixel without an id would silently vanish: refused
+    write_png(tmp_path / "a.instances.png", ids)
+    with pytest.raises(BadItemError, match="a.instances.png: gives no instance id to 1 target"):
+        ds[0]
 
 
 def test_manifest_and_symlinks_leaving_the_folder(tmp_path):
