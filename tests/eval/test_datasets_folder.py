@@ -95,6 +95,10 @@ def test_eight_bit_png_is_display_and_warns_once(tmp_path):
     display = [w for w in caught if issubclass(w.category, DisplayScalingWarning)]
     assert len(display) == 1 and "design Pfa is not meaningful" in str(display[0].message)
     np.testing.assert_allclose(items[1]["image"].numpy(), 0.4**2, rtol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DisplayScalingWarning)
+        declared = make_dataset(f"folder:{tmp_path}?type=amplitude")
+    np.testing.assert_allclose(declared[1]["image"].numpy(), 102.0**2)
 
 
 def test_spacing_option_and_errors(tmp_path):
