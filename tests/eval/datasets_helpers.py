@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.ndimage import find_objects
 
 from tests.io.coco_fixture import rle_counts
 from tests.io.writers import write_png
@@ -40,11 +41,13 @@ def write_pair(folder: Path, stem: str, image: np.ndarray, labels: np.ndarray, e
     write_png(folder / f"{stem}.mask.png", labels.astype(np.uint8))
 
 
-def instance_masks(item: dict) -> list[np.ndarray]:
-    """The instances of an item as a list of bool masks, sorted (order-free comparison)."""
+def canonical_instances(item: dict) -> np.ndarray:
+    """Instance ids renumbered by first appearance in raster order (order-free comparison)."""
     inst = item["instances"][0].numpy()
-    masks = [inst == i for i in range(1, int(inst.max()) + 1)]
-    return sorted(masks, key=lambda m: m.tobytes())
+    values, first, inverse = np.unique(inst, return_index=True, return_inverse=True)
+    rank = np.empty(values.size, np.int64)
+    rank[np.argsort(np.where(values == 0, -1, first), kind="stable")] = np.arange(values.size)
+    return rank[inverse].reshape(inst.shape)
 
 
 def coco_from_id_maps(images: list[Path], id_maps: list[np.ndarray], out: Path) -> Path:
@@ -53,11 +56,9 @@ def coco_from_id_maps(images: list[Path], id_maps: list[np.ndarray], out: Path) 
     for k, (img, ids) in enumerate(zip(images, id_maps, strict=True), start=1):
         h, w = ids.shape
         recs.append({"id": k, "file_name": img.name, "height": h, "width": w})
-        for i in range(1, int(ids.max()) + 1):
-            m = ids == i
-            rr, cc = np.nonzero(m)
-            bbox = [int(cc.min()), int(rr.min()), int(np.ptp(cc) + 1), int(np.ptp(rr) + 1)]
-            seg = {"size": [h, w], "counts": rle_counts(m)}
+        for i, (rs, cs) in enumerate(find_objects(ids), start=1):
+            bbox = [cs.start, rs.start, cs.stop - cs.start, rs.stop - rs.start]
+            seg = {"size": [h, w], "counts": rle_counts(ids == i)}
             anns.append(
                 {
                     "id": len(anns) + 1,
