@@ -91,7 +91,8 @@ def _user_error(message: object) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     out = args.out if getattr(args, "out", None) is not None else default_out(args.command)
-    with claim(Path(out), overwrite=args.overwrite) as args.out:
+    with claim(Path(out), overwrite=args.overwrite) as claimed:
+        args.out = claimed
         return int(args.func(args))
 
 

@@ -22,6 +22,7 @@ import shutil
 import socket
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ import torchsar
 from eval.errors import EvalError
 
 __all__ = [
+    "HOST",
     "Hidden",
     "claim",
     "default_out",
@@ -47,7 +49,8 @@ __all__ = [
 RUN_MARKER = "config.json"
 """Every published run folder holds this file; only such folders are ever replaced."""
 
-_HOST = re.sub(r"[^A-Za-z0-9.-]+", "_", socket.gethostname()) or "host"
+HOST = re.sub(r"[^A-Za-z0-9.-]+", "_", socket.gethostname()) or "host"
+"""This host's name as written in the names of hidden folders."""
 _HIDDEN = re.compile(
     r"^\.(?P<name>.+)\.torchsar-(?P<kind>partial|replaced)-(?P<pid>\d+)-[0-9a-f]{8}@(?P<host>.+)$"
 )
@@ -81,9 +84,7 @@ def default_out(command: str) -> Path:
 
 
 def _hidden_name(out: Path, kind: str) -> Path:
-    return out.with_name(
-        f".{out.name}.torchsar-{kind}-{os.getpid()}-{secrets.token_hex(4)}@{_HOST}"
-    )
+    return out.with_name(f".{out.name}.torchsar-{kind}-{os.getpid()}-{secrets.token_hex(4)}@{HOST}")
 
 
 def hidden_folders(parent: Path) -> list[Hidden]:
@@ -132,9 +133,11 @@ def recover(parent: Path, *, keep: str | None = None) -> list[Hidden]:
     stale = [
         h
         for h in hidden_folders(Path(parent))
-        if h.host == _HOST and h.pid != os.getpid() and not _alive(h.pid)
+        if h.host == HOST
+        and h.pid != os.getpid()
+        and not _alive(h.pid)
+        and not (h.kind == "partial" and h.name == keep)
     ]
-    stale = [h for h in stale if not (h.kind == "partial" and h.name == keep)]
     for h in sorted(stale, key=lambda h: h.kind != "replaced"):  # restore before deleting
         _settle(h)
     return stale
@@ -194,7 +197,7 @@ def claim(out: Path, *, overwrite: bool = False, resume: bool = False) -> Iterat
         yield out
     finally:
         if aside is not None:
-            _settle(Hidden(aside, out.name, "replaced", os.getpid(), _HOST))
+            _settle(Hidden(aside, out.name, "replaced", os.getpid(), HOST))
 
 
 @contextmanager
@@ -226,7 +229,7 @@ def result_dir(out: Path, *, resume: bool = False) -> Iterator[Path]:
 
 
 def _resumable(h: Hidden, out: Path) -> bool:
-    return h.kind == "partial" and h.name == out.name and h.host == _HOST and not _alive(h.pid)
+    return h.kind == "partial" and h.name == out.name and h.host == HOST and not _alive(h.pid)
 
 
 def _publish(tmp: Path, out: Path) -> None:
@@ -249,13 +252,12 @@ def file_slugs(names: Iterable[str], slug: Callable[[str], str]) -> dict[str, st
         >>> file_slugs(["folder:a/x", "folder:b/x", "sim"], short)
         {'folder:a/x': 'folder_a_x', 'folder:b/x': 'folder_b_x', 'sim': 'sim'}
     """
-    names = list(dict.fromkeys(names))
-    short = {n: slug(n) for n in names}
+    short = {n: slug(n) for n in dict.fromkeys(names)}
+    uses = Counter(short.values())
     taken: set[str] = set()
     out = {}
-    for n in names:
-        s = short[n]
-        if list(short.values()).count(s) > 1:
+    for n, s in short.items():
+        if uses[s] > 1:
             s = re.sub(r"[^A-Za-z0-9_.-]+", "_", n)
         base, i = s, 2
         while s in taken:

@@ -129,7 +129,7 @@ def _folder_error(tmp_path, capsys, prepare):
     )
     assert code == 2
     assert not out.exists()
-    assert not list(tmp_path.glob(".out.partial-*"))
+    assert not list(tmp_path.glob(".out.torchsar-*"))
     return capsys.readouterr().err
 
 

@@ -10,9 +10,7 @@ import sys
 import pytest
 
 from eval.errors import EvalError
-from eval.output import claim, file_slugs, hidden_folders, recover, result_dir
-
-HOST = hidden_folders.__globals__["_HOST"]
+from eval.output import HOST, claim, file_slugs, recover, result_dir
 
 
 def _write_run(folder, files):
