@@ -6,7 +6,8 @@ default simulated chips and scenes.
 One error policy for every command: a user error (a bad option, dataset or output folder)
 exits with status 2 and one line ``torchsar-eval: error: ...``; Ctrl-C exits with 130 and
 SIGTERM with 143, each with one line, after the run's temporary folders are removed. Any
-other exception is a bug and shows its traceback.
+other exception is a bug and shows its traceback. The heavy imports (torch, the commands)
+happen inside :func:`main`, so even an early Ctrl-C gets the one line.
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from typing import NoReturn
 
 from eval.commands import COMMANDS, load
 from eval.errors import EvalError
-from eval.output import claim, default_out
-from torchsar._checks import TorchSARError
 
 __all__ = ["Terminated", "build_parser", "main"]
 
@@ -90,6 +89,8 @@ def _user_error(message: object) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    from eval.output import claim, default_out
+
     out = args.out if getattr(args, "out", None) is not None else default_out(args.command)
     with claim(Path(out), overwrite=args.overwrite) as claimed:
         args.out = claimed
@@ -102,8 +103,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with _sigterm_raises():
             return _dispatch(_parse(argv))
-    except (EvalError, TorchSARError) as exc:
-        return _user_error(exc)
+    except Exception as exc:
+        from torchsar._checks import TorchSARError
+
+        if isinstance(exc, (EvalError, TorchSARError)):
+            return _user_error(exc)
+        raise  # a bug: show the traceback
     except SystemExit as exc:
         if isinstance(exc.code, str):  # commands still raising SystemExit(message)
             raise
