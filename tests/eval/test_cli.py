@@ -374,11 +374,13 @@ def test_datasets_with_the_same_basename_keep_their_files(tiny_folder, tmp_path)
         (["--guards", "4,x"], "--guards must be comma-separated integers"),
         (["--pfas", "0.5,2"], "--pfas values must be > 0 and < 1"),
         (["--window-cfars", "ca,nope"], "unknown window CFAR 'nope'"),
+        (["--guards", "100", "--window-cfars", "ca"], "no window of the grid fits"),
     ],
 )
 def test_compare_region_user_errors(tmp_path, capsys, args, message):
     out = tmp_path / "never"
-    assert main(["compare-region", "--out", str(out), "--no-progress", *args]) == 2
+    tiny = ["--sim", "sim-chips", "--n", "1", "--n-tune", "1", "--mstar", str(tmp_path / "no")]
+    assert main(["compare-region", "--out", str(out), "--no-progress", *tiny, *args]) == 2
     assert message in _one_error_line(capsys)
     _nothing_left(tmp_path, out)
 
