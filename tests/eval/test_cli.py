@@ -401,3 +401,13 @@ def test_compare_region_reports_mstar_on_chips_it_did_not_tune_on(tmp_path, caps
     summary = pd.read_csv(out / "summary.csv")
     assert set(summary[summary.dataset == "mstar_sarbake"].images) == {4}  # 6 chips - c0, c5
     assert "tuned on 2 chips (every 5th), reported on the other 4" in capsys.readouterr().out
+
+
+def test_every_command_has_out_and_overwrite():
+    from eval.cli import build_parser
+    from eval.commands import COMMANDS
+
+    parser = build_parser()
+    for name in COMMANDS:
+        args = parser.parse_args([name, "--out", "x", "--overwrite"])
+        assert (str(args.out), args.overwrite) == ("x", True), name
