@@ -45,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG,
         description="Evaluate SAR detectors, filters and imaging at dataset scale.",
+        epilog="Exit status: 0 done, 2 user error (one line on stderr), 130 interrupted, "
+        "143 terminated; --out then holds nothing new.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
