@@ -5,9 +5,9 @@ the folder is absent), the region CFAR with the paper's preset and with ours is 
 every registered window CFAR (CA, OS, GO, SO, VI, AC, two-parameter) at its best setting:
 ``guard x train x pfa`` swept on a tuning set (simulated: other scenes, different seed;
 MSTAR: every 5th chip, and the summary reports on the other chips only) and chosen by FoM.
-The region CFAR is *not* tuned per dataset. Writes ``summary.csv`` / ``summary.md`` (object
-Pd, false alarms per image, fragmentation, mean IoU, FoM, ms per image), ``chosen.csv`` (the
-chosen settings), ``panel_<dataset>.png`` and ``config.json``.
+The region CFAR is *not* tuned per dataset. Writes ``summary.csv`` (object Pd, false alarms
+per image, fragmentation, mean IoU, FoM), ``timing.csv`` (ms per image), ``summary.md`` (both,
+and the chosen settings), ``chosen.csv``, ``panel_<dataset>.png`` and ``config.json``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from eval.panel import detection_panel
 from eval.plots import slug
 from eval.runner import batches, evaluate
 from eval.sweep import best_setting, window_grid
-from eval.tables import markdown, summary_table
+from eval.tables import markdown, summary_table, timing_table
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
 TUNE_EVERY = 5
@@ -183,8 +183,11 @@ def run(args: argparse.Namespace) -> int:
             detection_panel(
                 [ds[i] for i in range(min(3, len(ds)))], specs, tmp / f"panel_{slugs[name]}.png"
             )
-        summary = summary_table(results)
-        summary.to_csv(tmp / "summary.csv", index=False)
+        summary_table(results).to_csv(tmp / "summary.csv", index=False)
+        timing_table(results).to_csv(tmp / "timing.csv", index=False)
+        summary = summary_table(results).merge(
+            timing_table(results), on=["dataset", "detector", "images"]
+        )
         pd.DataFrame(chosen).to_csv(tmp / "chosen.csv", index=False)
         text = markdown(summary[SHOWN]) + "\n\nChosen window settings:\n\n"
         text += markdown(pd.DataFrame(chosen)) + "\n" + "".join(f"\n- {n}" for n in notes)
@@ -194,5 +197,5 @@ def run(args: argparse.Namespace) -> int:
     print(summary[SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for n in notes:
         print(f"note: {n}")
-    print(f"\nwrote {out}/: summary.csv summary.md chosen.csv panel_*.png config.json")
+    print(f"\nwrote {out}/: summary.csv timing.csv summary.md chosen.csv panel_*.png config.json")
     return 0

@@ -14,7 +14,7 @@ import pytest
 from skimage import io
 
 from eval.cli import main
-from eval.tables import ROC_COLUMNS, SUMMARY_COLUMNS
+from eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
 
 
 def _write_pair(folder, stem, image, labels, ext="png"):
@@ -59,13 +59,16 @@ def test_run_on_folder_known_answers(tiny_folder, tmp_path, capsys):
     assert (row.images, row.pd_pixel, row.pfa_pixel) == (2, 1.0, 0.0)
     assert (row.pd_object, row.false_alarms, row.fragmentation, row.mean_iou) == (1, 0, 1, 1)
     assert row.fom == 1.0
+    assert (row.tp, row.fp, row.fn, row.precision, row.recall, row.f1) == (2, 0, 0, 1, 1, 1)
+    assert (row.ap50, row.ap50_95, row.pd_at_1_fa_per_image) == (1, 1, 1)
     roc = pd.read_csv(out / "roc.csv")
-    assert list(roc.columns) == ROC_COLUMNS and len(roc) > 0
-    assert roc.pd_pixel.is_monotonic_decreasing
+    assert list(roc.columns) == FROC_COLUMNS and len(roc) > 0
+    assert roc.pd_object.is_monotonic_increasing
+    assert roc.false_alarms_per_image.is_monotonic_increasing
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["detectors"]["ca"]["guard"] == 2
     assert cfg["torchsar_version"]
-    assert (out / "summary.md").read_text().startswith("| dataset")
+    assert (out / "summary.md").read_text().startswith("# Run summary")
     assert (out / "roc_folder_data.png").stat().st_size > 0
     assert "ca" in capsys.readouterr().out
 
@@ -288,6 +291,10 @@ def test_run_user_errors_before_any_work(tiny_folder, tmp_path, capsys, monkeypa
     _nothing_left(tmp_path, out)
 
 
+def _snapshot(folder) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
 def _tiny_run(tiny_folder, out, *extra):
     argv = ["run", "--dataset", f"folder:{tiny_folder}", "--detectors", "ca", "--no-progress"]
     return main([*argv, "--out", str(out), *extra])
@@ -316,11 +323,11 @@ def test_previous_run_needs_overwrite_which_leaves_no_stale_file(tiny_folder, tm
     out = tmp_path / "out"
     assert _tiny_run(tiny_folder, out) == 0
     (out / "stale.csv").write_text("from an older run")
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = _snapshot(out)
     capsys.readouterr()
     assert _tiny_run(tiny_folder, out) == 2
     assert "pass --overwrite" in _one_error_line(capsys)
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _snapshot(out) == before
     assert _tiny_run(tiny_folder, out, "--overwrite") == 0
     assert not (out / "stale.csv").exists() and (out / "config.json").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
@@ -344,25 +351,31 @@ def test_interrupted_run_leaves_the_previous_one_intact(
 ):
     out = tmp_path / "out"
     assert _tiny_run(tiny_folder, out) == 0
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = _snapshot(out)
     capsys.readouterr()
-    monkeypatch.setattr("eval.commands.run.evaluate", interrupt)
+    monkeypatch.setattr("eval.commands.run.run_shards", interrupt)
     handler = signal.getsignal(signal.SIGTERM)
     assert _tiny_run(tiny_folder, out, "--overwrite") == code
     assert [x for x in capsys.readouterr().err.splitlines() if x.strip()] == [line]
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _snapshot(out) == before
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     assert signal.getsignal(signal.SIGTERM) is handler
 
 
-@pytest.mark.xfail(reason="run.py names its plots with plots.slug; switch to output.file_slugs")
-def test_datasets_with_the_same_basename_keep_their_files(tiny_folder, tmp_path):
+def test_datasets_with_the_same_basename_are_never_mixed(tiny_folder, tmp_path, capsys):
     other = tmp_path / "elsewhere" / tiny_folder.name
     shutil.copytree(tiny_folder, other)
+    shutil.rmtree(other / "sub")  # one chip here, two there
     out = tmp_path / "out"
     argv = ["--dataset", f"folder:{tiny_folder}", "--dataset", f"folder:{other}"]
-    assert main(["run", *argv, "--detectors", "ca", "--no-progress", "--out", str(out)]) == 0
-    assert len(list(out.glob("roc_*.png"))) == 2
+    code = main(["run", *argv, "--detectors", "ca", "--no-progress", "--out", str(out)])
+    if code == 2:  # refused before any work, naming both
+        assert "would share the file label" in _one_error_line(capsys)
+        _nothing_left(tmp_path, out)
+    else:  # or each keeps its own files and results
+        assert code == 0 and len(list(out.glob("roc_*.png"))) == 2
+        summary = pd.read_csv(out / "summary.csv")
+        assert summary.images.tolist() == [2, 1]
 
 
 @pytest.mark.parametrize(
