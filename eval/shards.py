@@ -3,8 +3,9 @@ scored into mergeable detector states saved atomically beside the results, and t
 tables are the merge of the shard states (in shard order, so any split, worker count or
 resume gives identical tables).
 
-Engines: shards run in this process (``workers=1``) or in ``workers`` spawned processes,
-each with ``cores // workers`` torch threads so workers never oversubscribe the machine.
+Engines: shards run in this process (``workers=1``), in ``workers`` spawned processes, each
+with ``cores // workers`` torch threads so workers never oversubscribe the machine, or as
+Ray tasks (one CPU and one torch thread each; a failed task is retried once).
 A saved shard is never recomputed, which is what ``--resume`` relies on.
 """
 
@@ -14,7 +15,7 @@ import multiprocessing
 import os
 import pickle
 import zlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,9 +24,10 @@ import torch
 from torch.utils.data import Dataset, Subset
 from tqdm.auto import tqdm
 
+from eval.errors import EvalError
 from eval.runner import DetectorResult, Scoring, evaluate
 
-__all__ = ["ShardJob", "merge", "run_shards", "shard_ranges"]
+__all__ = ["ShardJob", "merge", "run_shards", "shard_files", "shard_ranges", "shard_rows"]
 
 
 @dataclass(frozen=True)
@@ -64,13 +66,8 @@ def _score_shard(job: ShardJob, k: int, on_batch=None) -> list[DetectorResult]:
 
 
 def _save(path: Path, results: list[DetectorResult]) -> None:
-    """Write a shard state atomically: a temporary name in the same folder, then rename."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(zlib.compress(pickle.dumps(results, protocol=pickle.HIGHEST_PROTOCOL), 1))
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    """Write a shard state atomically (see :func:`_write`)."""
+    _write(path, zlib.compress(pickle.dumps(results, protocol=pickle.HIGHEST_PROTOCOL), 1))
 
 
 def _load(path: Path) -> list[DetectorResult]:
@@ -78,28 +75,118 @@ def _load(path: Path) -> list[DetectorResult]:
         return pickle.loads(zlib.decompress(f.read()))
 
 
-def merge(parts: Sequence[list[DetectorResult]]) -> list[DetectorResult]:
-    """Add shard results detector by detector, in shard order."""
+def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
+    """Add shard results detector by detector, in shard order (one shard in memory at a
+    time; the per-image rows are dropped: :func:`shard_rows` streams them from disk)."""
     out = None
     for part in parts:
+        for r in part:
+            r.rows = []
         out = part if out is None else [a + b for a, b in zip(out, part, strict=True)]
     return out or []
+
+
+def shard_files(folder: Path) -> list[Path]:
+    """The saved shard states of a folder, in shard order."""
+    return sorted(folder.glob("shard-*.pkl"))
+
+
+def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
+    """``(detector, per-image rows)`` of every saved shard, in shard order."""
+    for path in shard_files(folder):
+        for r in _load(path):
+            yield r.spec.name, r.rows
 
 
 def _init_worker(threads: int) -> None:
     torch.set_num_threads(threads)
 
 
-def _worker(job: ShardJob, k: int, path: Path) -> int:
-    _save(path, _score_shard(job, k))
-    return len(shard_ranges(len(job.indices), job.shard_size)[k])
+def _scored(job: ShardJob, k: int) -> bytes:
+    """A shard's state as compressed bytes (what a worker sends back)."""
+    return zlib.compress(pickle.dumps(_score_shard(job, k), pickle.HIGHEST_PROTOCOL), 1)
 
 
-def _pending(job: ShardJob, folder: Path) -> Iterator[tuple[int, Path]]:
-    for k in range(len(shard_ranges(len(job.indices), job.shard_size))):
-        path = folder / f"shard-{k:06d}.pkl"
-        if not path.exists():
-            yield k, path
+def _write(path: Path, data: bytes) -> None:
+    """Save shard bytes atomically: a temporary name in the same folder, then rename."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
+    n_shards = len(shard_ranges(len(job.indices), job.shard_size))
+    paths = [(k, folder / f"shard-{k:06d}.pkl") for k in range(n_shards)]
+    return [(k, p) for k, p in paths if not p.exists()]
+
+
+class _Failures:
+    """Shards that failed (after the engine's retry): fatal, or recorded with ``skip_bad``."""
+
+    def __init__(self, skip_bad: bool) -> None:
+        self.skip_bad = skip_bad
+        self.failed: list[dict] = []
+
+    def __call__(self, k: int, exc: BaseException) -> None:
+        if isinstance(exc, KeyboardInterrupt):
+            raise exc
+        if not self.skip_bad:
+            raise EvalError(
+                f"shard {k} failed: {exc} (use --skip-bad to continue past it)"
+            ) from exc
+        self.failed.append({"shard": k, "error": f"{type(exc).__name__}: {exc}"})
+
+
+def _local(job, todo, bar, sizes, fail, on_batch) -> None:
+    for k, path in todo:
+        try:
+            _save(path, _score_shard(job, k, on_batch))
+        except (Exception, KeyboardInterrupt) as exc:
+            fail(k, exc)
+        bar.update(sizes[k])
+
+
+def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(threads,)) as pool:  # fmt: skip
+        futures = {pool.submit(_scored, job, k): (k, path) for k, path in todo}
+        for f in as_completed(futures):
+            k, path = futures[f]
+            try:
+                _write(path, f.result())
+            except Exception as exc:
+                fail(k, exc)
+            bar.update(sizes[k])
+
+
+def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise EvalError("--engine ray needs Ray: pip install 'torchsar[ray]'") from None
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False,
+                 configure_logging=False)  # fmt: skip
+    task = ray.remote(num_cpus=1, max_retries=1, retry_exceptions=True)(_scored_one_thread)
+    refs = {task.remote(job, k): (k, path) for k, path in todo}
+    while refs:
+        done, _ = ray.wait(list(refs), num_returns=1)
+        k, path = refs.pop(done[0])
+        try:
+            _write(path, ray.get(done[0]))
+        except Exception as exc:
+            fail(k, exc)
+        bar.update(sizes[k])
+
+
+def _scored_one_thread(job: ShardJob, k: int) -> bytes:
+    torch.set_num_threads(1)  # one Ray CPU per task: never oversubscribe a node
+    return _scored(job, k)
 
 
 def run_shards(
@@ -107,33 +194,45 @@ def run_shards(
     folder: Path,
     *,
     workers: int = 1,
+    engine: str = "local",
+    address: str | None = None,
+    skip_bad: bool = False,
     progress: bool = True,
     on_batch=None,
 ) -> tuple[list[DetectorResult], dict]:
     """Score every shard not yet saved in ``folder``, then merge all saved shards.
 
-    Returns the merged results (``rows`` read back shard by shard) and counts
-    ``{"shards", "done", "skipped"}`` (skipped = found already saved, e.g. on resume).
+    Args:
+        job: the dataset, detectors and scoring.
+        folder: where shard states are saved (and found again on resume).
+        workers: local worker processes (``engine="local"``).
+        engine: ``"local"`` (this process or ``workers`` processes) or ``"ray"``.
+        address: Ray cluster address (default: a local Ray instance).
+        skip_bad: record failed shards and merge the rest instead of stopping.
+        progress: one progress bar over images.
+        on_batch: per-batch callback (in-process engine only).
+
+    Returns:
+        The merged results and counts ``{"shards", "done", "skipped", "failed"}``
+        (skipped = found saved already, e.g. on resume; failed = list of failed shards).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    n_shards = len(shard_ranges(len(job.indices), job.shard_size))
-    todo = list(_pending(job, folder))
-    bar = tqdm(total=len(job.indices), desc=job.name, disable=not progress, unit="img")
     sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
+    todo = _pending(job, folder)
+    fail = _Failures(skip_bad)
+    bar = tqdm(total=len(job.indices), desc=job.name, disable=not progress, unit="img")
     bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
-    if workers == 1:
-        for k, path in todo:
-            _save(path, _score_shard(job, k, on_batch))
-            bar.update(sizes[k])
-    else:
-        threads = max(1, (os.cpu_count() or 1) // workers)
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(threads,)) as pool:  # fmt: skip
-            futures = [pool.submit(_worker, job, k, path) for k, path in todo]
-            for f in as_completed(futures):
-                bar.update(f.result())
-    bar.close()
-    parts = [_load(folder / f"shard-{k:06d}.pkl") for k in range(n_shards)]
-    merged = merge(parts) if parts else [DetectorResult(s, job.scoring) for s in job.specs]
-    return merged, {"shards": n_shards, "done": len(todo), "skipped": n_shards - len(todo)}
+    try:
+        if engine == "ray":
+            _ray(job, todo, bar, sizes, fail, address)
+        elif workers == 1:
+            _local(job, todo, bar, sizes, fail, on_batch)
+        else:
+            _processes(job, todo, bar, sizes, fail, workers)
+    finally:
+        bar.close()
+    merged = merge(_load(p) for p in shard_files(folder))
+    merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
+    counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
+              "skipped": len(sizes) - len(todo), "failed": fail.failed}  # fmt: skip
+    return merged, counts

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import csv
 import time
 from pathlib import Path
 
@@ -18,12 +19,12 @@ from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
 from eval.runner import Scoring
-from eval.shards import ShardJob, run_shards
+from eval.shards import ShardJob, run_shards, shard_rows
 from eval.tables import (
+    PER_IMAGE_COLUMNS,
     breakdown_table,
     froc_table,
     markdown,
-    per_image_table,
     pixel_roc_table,
     pr_table,
     summary_table,
@@ -120,6 +121,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=256,
         help="images per shard, the unit of work and of resume (default 256)",
     )
+    p.add_argument(
+        "--engine",
+        choices=["local", "ray"],
+        default="local",
+        help="run shards locally (--workers processes) or as Ray tasks (pip install "
+        "'torchsar[ray]')",
+    )
+    p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="continue past a failing shard and name it in the summary (default: stop, "
+        "writing no tables)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
 
@@ -198,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
     specs, preprocess, despeckle_opts = check_run_args(args)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
-    if args.export_coco and args.workers > 1:
+    if args.export_coco and (args.workers > 1 or args.engine != "local"):
         raise EvalError("--export-coco collects detections in this process: use --workers 1")
     datasets = {
         name: make_dataset(name, n=args.n, seed=args.seed)
@@ -212,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
             results[name], stats[name] = evaluate_dataset(
                 name, ds, specs, args, scoring, preprocess, tmp
             )
-        files = write_tables(tmp, results, scoring)
+        files = write_tables(tmp, results, scoring, stats)
         write_config(
             tmp,
             "run",
@@ -239,9 +254,13 @@ def run(args: argparse.Namespace) -> int:
     )
     print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for name, st in stats.items():
-        print(f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
-              f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
-              f"(done {st['done']}, resumed {st['skipped']})")  # fmt: skip
+        print(
+            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
+            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
+            f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
+        )
+        for f in st["failed"]:
+            print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
 
@@ -257,8 +276,9 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     def shards(idx: list[int], folder: Path, on_batch=None):
         job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
                        args.shard_size)  # fmt: skip
-        return run_shards(job, folder, workers=args.workers, progress=not args.no_progress,
-                          on_batch=on_batch)  # fmt: skip
+        return run_shards(job, folder, workers=args.workers, engine=args.engine,
+                          address=args.address, skip_bad=args.skip_bad,
+                          progress=not args.no_progress, on_batch=on_batch)  # fmt: skip
 
     chosen = None
     if args.calibrate_on is not None:
@@ -281,7 +301,18 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     return results, stats
 
 
-def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
+def write_per_image(path: Path, folders: dict[str, Path]) -> None:
+    """``per_image.csv`` streamed from the saved shards (memory independent of the dataset
+    size): one row per image and detector, datasets and shards in order."""
+    with open(path, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(PER_IMAGE_COLUMNS)
+        for name, folder in folders.items():
+            for det, rows in shard_rows(folder):
+                out.writerows([name, det, *row] for row in rows)
+
+
+def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names."""
     summary = summary_table(results)
     tables = {
@@ -291,14 +322,21 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring) -> list[str]:
         "roc_pixel.csv": pixel_roc_table(results),
         "breakdown.csv": breakdown_table(results),
         "timing.csv": timing_table(results),
-        "per_image.csv": per_image_table(results),
     }
     for fname, df in tables.items():
         df.to_csv(tmp / fname, index=False)
+    write_per_image(tmp / "per_image.csv", {n: tmp / "shards" / slug(n) / "test" for n in results})
     text = glossary(summary, scoring) + "\n" + markdown(summary)
     text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
+    text += "".join(
+        f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
+        f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
+        f"resumed {st['skipped']}, failed {len(st['failed'])}"
+        + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        for name, st in stats.items()
+    )
     (tmp / "summary.md").write_text(text)
-    files = [*tables, "summary.md"]
+    files = [*tables, "per_image.csv", "summary.md"]
     for name in results:
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(

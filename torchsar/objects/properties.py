@@ -3,21 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 __all__ = ["measure"]
 
 
-def _boxes(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Plane index ``(n,)`` and end-exclusive boxes ``(n, 4)`` ``(r0, c0, r1, c1)``."""
-    if n == 0:
-        return np.zeros(0, np.int64), np.zeros((0, 4))
-    slices = ndimage.find_objects(labels, max_label=n)
-    plane = np.array([s[0].start for s in slices], dtype=np.int64)
-    box = np.array(
-        [(s[1].start, s[2].start, s[1].stop, s[2].stop) for s in slices], dtype=np.float64
-    ).reshape(n, 4)
-    return plane, box
+def _extent(lab: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-label minimum and maximum of ``values`` (labels ``1..n``)."""
+    lo = np.full(n + 1, np.iinfo(np.int64).max)
+    hi = np.full(n + 1, -1)
+    np.minimum.at(lo, lab, values)
+    np.maximum.at(hi, lab, values)
+    return lo[1:], hi[1:]
 
 
 def _moments(lab: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int, area: np.ndarray):
@@ -49,10 +45,12 @@ def measure(labels: np.ndarray, n: int, score: np.ndarray) -> dict[str, np.ndarr
     idx = np.flatnonzero(flat)
     lab = flat[idx].astype(np.int64)
     h, w = labels.shape[-2:]
-    rows = ((idx // w) % h).astype(np.float64)
-    cols = (idx % w).astype(np.float64)
+    r, c = (idx // w) % h, idx % w
+    rows, cols = r.astype(np.float64), c.astype(np.float64)
     area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
-    plane, box = _boxes(labels, n)
+    plane = _extent(lab, idx // (h * w), n)[0]
+    (r0, r1), (c0, c1) = _extent(lab, r, n), _extent(lab, c, n)
+    box = np.stack([r0, c0, r1 + 1, c1 + 1], axis=1).astype(np.float64).reshape(n, 4)
     centroid, length, width = _moments(lab, rows, cols, n, np.maximum(area, 1))
     peak = np.full(n + 1, -np.inf)
     np.maximum.at(peak, lab, score.reshape(-1)[idx])
