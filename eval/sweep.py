@@ -20,6 +20,7 @@ from torch import Tensor
 
 import torchsar as ts
 from eval.detectors import DetectorSpec
+from eval.errors import EvalError
 from torchsar.metrics import ObjectCounts, object_counts
 
 __all__ = ["Choice", "best_setting", "window_grid"]
@@ -77,5 +78,5 @@ def best_setting(spec: DetectorSpec, grid: list[dict[str, Any]], batches: list[d
             if best is None or c.key > best.key:
                 best = c
     if best is None:
-        raise ValueError(f"no window of the grid fits the images for {spec.name}")
+        raise EvalError(f"no window of the grid fits the tuning images for {spec.name}")
     return best

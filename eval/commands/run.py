@@ -5,19 +5,17 @@ from __future__ import annotations
 import argparse
 import csv
 import time
-from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
 import pandas as pd
-import torch
 
 from eval.calibrate import choose_bin, parse_target, split_indices
 from eval.coco import CocoExport
 from eval.datasets import DATASETS, make_dataset
-from eval.detectors import DETECTORS, parse_params, resolve
+from eval.detectors import DETECTORS
 from eval.errors import EvalError
 from eval.glossary import glossary
+from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
 from eval.runner import Scoring
@@ -212,29 +210,8 @@ def scoring_from(args: argparse.Namespace) -> Scoring:
     return Scoring(rules, matching, args.bootstrap, args.seed)
 
 
-def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict]:
-    """The optional speckle-filter stage and its resolved options (validated up front)."""
-    if name is None:
-        if items:
-            raise EvalError("--despeckle-param given without --despeckle")
-        return None, {}
-    opts = parse_params([f"{name}.{item}" for item in items]).get(name, {})
-    FILTERS[name](torch.ones(1, 1, 16, 16), **opts)  # fail now on a bad option, not mid-run
-    return partial(FILTERS[name], **opts), opts
-
-
 def run(args: argparse.Namespace) -> int:
-    names = (
-        list(DETECTORS)
-        if args.detectors is None
-        else [d.strip() for d in args.detectors.split(",") if d.strip()]
-    )
-    specs = resolve(names, parse_params(args.param))
-    preprocess, despeckle_opts = despeckler(args.despeckle, args.despeckle_param)
-    if args.batch_size < 1:
-        raise SystemExit("torchsar-eval: error: --batch-size must be >= 1")
-    if args.n is not None and args.n < 0:
-        raise SystemExit("torchsar-eval: error: --n must be >= 0")
+    specs, preprocess, despeckle_opts = check_run_args(args)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
     if args.export_coco and (args.workers > 1 or args.engine != "local"):
