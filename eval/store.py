@@ -30,7 +30,7 @@ from torch.utils.data import Dataset
 
 from eval.errors import EvalError
 
-__all__ = ["FIELDS", "StoreDataset", "write_store"]
+__all__ = ["FIELDS", "StoreDataset", "store_from_spec", "write_store"]
 
 FIELDS = ("image", "mask", "instances", "ignore")
 FORMAT = "torchsar-store"
@@ -142,7 +142,19 @@ class StoreDataset(Dataset):
         out["meta"] = json.loads(parts[-1])
         return out
 
+    def manifest(self) -> dict:
+        """Files, bytes and the store header (the store is the data's identity)."""
+        files = sorted(p for p in self.root.iterdir() if p.is_file())
+        return {"files": len(files), "bytes": sum(p.stat().st_size for p in files),
+                "header": self.header}  # fmt: skip
+
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state["_index"] = None  # never ship the memory map to a worker
         return state
+
+
+def store_from_spec(spec, n: int | None) -> StoreDataset:
+    """``store:PATH`` (no options)."""
+    spec.check_keys(())
+    return StoreDataset(spec.path, limit=n)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import time
 from pathlib import Path
 
@@ -123,6 +124,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="images per shard, the unit of work and of resume (default 256)",
     )
     p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the interrupted run in --out: its saved shards are kept, the rest is "
+        "scored (the options must be the same)",
+    )
+    p.add_argument(
         "--engine",
         choices=["local", "ray"],
         default="local",
@@ -222,7 +229,8 @@ def run(args: argparse.Namespace) -> int:
     }
     scoring = scoring_from(args)
     out = args.out or default_out("run")
-    with result_dir(out) as tmp:
+    with result_dir(out, resume=args.resume, keep_interrupted=True) as tmp:
+        check_resumable(tmp / "resume.json", fingerprint(args, datasets, specs, scoring))
         results, stats = {}, {}
         for name, ds in datasets.items():
             results[name], stats[name] = evaluate_dataset(
@@ -264,6 +272,27 @@ def run(args: argparse.Namespace) -> int:
             print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
+
+
+def fingerprint(args, datasets: dict, specs: list, scoring: Scoring) -> dict:
+    """Everything a saved shard depends on (a resumed run must match it exactly)."""
+    return json.loads(json.dumps({
+        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+        "detectors": {s.name: dict(s.params) for s in specs},
+        "despeckle": [args.despeckle, sorted(args.despeckle_param)],
+        "scoring": scoring.as_dict(), "shard_size": args.shard_size,
+        "calibration": [args.calibrate_on, args.calibration_fraction],
+    }, default=str))  # fmt: skip
+
+
+def check_resumable(path: Path, expected: dict) -> None:
+    """Record the run's fingerprint, or check it against the one of the run being resumed."""
+    if path.exists():
+        if json.loads(path.read_text()) != expected:
+            raise EvalError(f"--resume: the options differ from those of the interrupted run "
+                            f"(see {path.name} in its folder); rerun without --resume")  # fmt: skip
+        return
+    path.write_text(json.dumps(expected, indent=2) + "\n")
 
 
 def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):

@@ -15,6 +15,7 @@ from eval.datasets.sicd import sicd_from_spec
 from eval.datasets.sim import DEFAULT_N, SimDataset
 from eval.datasets.spec import DatasetSpec, parse_spec
 from eval.errors import EvalError
+from eval.store import store_from_spec
 from torchsar.io import FileFormatError
 
 __all__ = ["DATASETS", "make_dataset"]
@@ -28,6 +29,7 @@ DATASETS = (
     "hrsid:DIR",
     "phoenix:DIR",
     "sicd:FILE",
+    "store:PATH",
 )
 
 _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
@@ -37,6 +39,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "hrsid": hrsid_from_spec,
     "phoenix": phoenix_from_spec,
     "sicd": sicd_from_spec,
+    "store": store_from_spec,
 }
 
 
@@ -47,6 +50,8 @@ def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
         EvalError: unknown scheme or option, missing folder, unpairable files; a file that
             cannot be read while building raises :class:`BadItemError` naming it.
     """
+    if n is not None and n < 0:
+        raise EvalError(f"--n must be >= 0, got {n}")
     if spec in DEFAULT_N:
         return SimDataset(spec, DEFAULT_N[spec] if n is None else n, seed)
     build = _SCHEMES.get(spec.partition(":")[0]) if ":" in spec else None
