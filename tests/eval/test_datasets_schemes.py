@@ -108,6 +108,14 @@ def test_voc_boxes_in_voc_layout(tmp_path):
     np.testing.assert_array_equal(item["ignore"][0].numpy(), ignore)
 
 
+def test_image_annotated_twice(tmp_path):
+    write_png(tmp_path / "s1.png", np.zeros((20, 30), np.uint8))
+    for name in ("a.xml", "b.xml"):
+        (tmp_path / name).write_text(voc_xml("s1.png", (20, 30), []))
+    with pytest.raises(EvalError, match=r"voc annotations describe image .*s1.png more than once"):
+        make_dataset(f"voc:{tmp_path}")
+
+
 def test_voc_missing_image_and_no_xml(tmp_path):
     (tmp_path / "x.xml").write_text(voc_xml("gone.jpg", (20, 30), []))
     with pytest.raises(EvalError, match=r"voc annotations refer to missing image .*gone.jpg"):
