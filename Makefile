@@ -14,12 +14,17 @@ $(BIN)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@
 
+# The Ray engine is an optional extra; the tests exercise it, so `make test` installs it.
+$(BIN)/.ray: $(BIN)/.installed
+	$(BIN)/python -m pip install --quiet -e ".[dev,ray]"
+	touch $@
+
 setup: $(BIN)/.installed
 
 eval: setup
 	$(BIN)/torchsar-eval run
 
-test: setup
+test: setup $(BIN)/.ray
 	$(BIN)/python -m pytest -q
 
 lint: setup

@@ -2,43 +2,125 @@
 
 ``torchsar-eval`` with no arguments is ``torchsar-eval run``: every registered detector on the
 default simulated chips and scenes.
+
+One error policy for every command: a user error (a bad option, dataset or output folder)
+exits with status 2 and one line ``torchsar-eval: error: ...``; Ctrl-C exits with 130 and
+SIGTERM with 143, each with one line, after the run's temporary folders are removed. Any
+other exception is a bug and shows its traceback. The heavy imports (torch, the commands)
+happen inside :func:`main`, so even an early Ctrl-C gets the one line.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import NoReturn
 
 from eval.commands import COMMANDS, load
 from eval.errors import EvalError
-from torchsar._checks import TorchSARError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["Terminated", "build_parser", "main"]
+
+PROG = "torchsar-eval"
+
+
+class Terminated(BaseException):
+    """Raised in the main thread when the process receives SIGTERM."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """Argument errors as one line (no usage block), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        print(f"{PROG}: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="torchsar-eval",
+    parser = _Parser(
+        prog=PROG,
         description="Evaluate SAR detectors, filters and imaging at dataset scale.",
+        epilog="Exit status: 0 done, 2 user error (one line on stderr), 130 interrupted, "
+        "143 terminated; --out then holds nothing new.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         load(name).add_parser(sub)
+        sub.choices[name].add_argument(
+            "--overwrite",
+            action="store_true",
+            help="replace the previous run in --out (refused otherwise)",
+        )
     return parser
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    parser = build_parser()
+    args = parser.parse_args(argv or ["run"])
+    if args.command is None:
+        args = parser.parse_args(["run", *argv])
+    return args
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+@contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """Turn SIGTERM into :class:`Terminated` (so temporary folders are cleaned up)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _user_error(message: object) -> int:
+    text = " ".join(line.strip() for line in str(message).strip().splitlines())
+    print(f"{PROG}: error: {text}", file=sys.stderr)
+    return 2
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    from eval.output import claim, default_out
+
+    out = args.out if getattr(args, "out", None) is not None else default_out(args.command)
+    with claim(Path(out), overwrite=args.overwrite) as claimed:
+        args.out = claimed
+        return int(args.func(args))
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 for user errors, with a one-line message)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser()
-    args = parser.parse_args(argv or ["run"])
-    if args.command is None:
-        args = parser.parse_args(["run", *argv])
     try:
-        return int(args.func(args))
-    except (EvalError, TorchSARError) as exc:
-        print(f"torchsar-eval: error: {exc}", file=sys.stderr)
-        return 2
+        with _sigterm_raises():
+            return _dispatch(_parse(argv))
+    except Exception as exc:
+        from torchsar._checks import TorchSARError
+
+        if isinstance(exc, (EvalError, TorchSARError)):
+            return _user_error(exc)
+        raise  # a bug: show the traceback
+    except SystemExit as exc:
+        if isinstance(exc.code, str):  # commands still raising SystemExit(message)
+            raise
+        return 0 if exc.code is None else int(exc.code)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f"{PROG}: terminated", file=sys.stderr)
+        return 143
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ parameters; the CLI overrides them with ``--param NAME.KEY=VALUE``.
 from __future__ import annotations
 
 import ast
+import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,8 +17,9 @@ from torch import Tensor
 import torchsar as ts
 from eval.errors import EvalError
 from torchsar.cfar import Detection
+from torchsar.simulate import clutter
 
-__all__ = ["DETECTORS", "DetectorSpec", "parse_params", "resolve"]
+__all__ = ["DETECTORS", "DetectorSpec", "check_options", "dry_run", "parse_params", "resolve"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,40 @@ def parse_params(items: list[str]) -> dict[str, dict[str, Any]]:
     return out
 
 
+def check_options(fn: Callable, options: Mapping[str, Any], what: str) -> None:
+    """Every key of ``options`` must be a keyword option of ``fn`` (unless it takes
+    ``**options``, which the function checks itself)."""
+    params = list(inspect.signature(fn).parameters.values())[1:]  # after the image
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return
+    valid = [p.name for p in params if p.kind is not inspect.Parameter.POSITIONAL_ONLY]
+    unknown = [k for k in options if k not in valid]
+    if unknown:
+        raise EvalError(f"{what} has no option {unknown[0]!r}; valid: {', '.join(valid)}")
+
+
+DRY_SIDE = 257
+"""Largest side of the image of :func:`dry_run` (a larger window is checked by the run)."""
+
+
+def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
+    """Call ``fn(image, **options)`` once on a small clutter image, so a bad option value
+    (out of range, wrong type, a threshold that cannot be computed) fails before any
+    work, as an :class:`EvalError` naming ``what`` and the options."""
+    try:
+        reach = 2 * (int(options.get("guard") or 0) + int(options.get("train") or 0))
+        side = max(32, reach + int(options.get("window") or 0) + 1)
+    except (TypeError, ValueError):
+        side = 32  # a malformed window option: the call names it
+    if side > DRY_SIDE:
+        return
+    try:
+        fn(clutter((1, 1, side, side), seed=0), **options)
+    except Exception as exc:  # whatever the library raises for these options
+        shown = ", ".join(f"{k}={v!r}" for k, v in options.items())
+        raise EvalError(f"{what} rejects its options ({shown}): {exc}") from exc
+
+
 def resolve(names: list[str], params: Mapping[str, Mapping[str, Any]]) -> list[DetectorSpec]:
     """Look detectors up by name and apply parameter overrides (all checked first)."""
     unknown = [n for n in list(names) + list(params) if n not in DETECTORS]
@@ -82,4 +118,6 @@ def resolve(names: list[str], params: Mapping[str, Mapping[str, Any]]) -> list[D
     stray = set(params) - set(names)
     if stray:
         raise EvalError(f"--param given for detector(s) not being run: {sorted(stray)}")
+    for n, over in params.items():
+        check_options(DETECTORS[n].fn, over, f"detector {n}")
     return [DETECTORS[n].with_params(params.get(n, {})) for n in names]

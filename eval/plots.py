@@ -1,4 +1,5 @@
-"""ROC plots (matplotlib, headless)."""
+"""Plots (matplotlib, headless) in one style: every detector keeps one colour and line style
+in every figure, distinct for 20+ detectors; figures are saved as PNG and PDF."""
 
 from __future__ import annotations
 
@@ -11,48 +12,71 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
-__all__ = ["plot_roc", "slug"]
+__all__ = ["detector_style", "plot_roc", "save", "slug"]
+
+_COLOURS = [plt.cm.tab10(i) for i in range(10)]
+_LINES = ["-", "--", "-.", ":"]
+
+
+def detector_style(i: int) -> dict:
+    """Colour and line style of the ``i``-th detector: both change from one detector to the
+    next (ten colours x four line styles: 20 distinct pairs before one repeats)."""
+    return {"color": _COLOURS[i % 10], "linestyle": _LINES[i % len(_LINES)]}
 
 
 def slug(name: str) -> str:
     """A file-name-safe form of a dataset name (``folder:../a/b`` -> ``folder_b``)."""
-    if name.startswith("folder:"):
-        name = "folder_" + Path(name[len("folder:") :].split("?")[0].rstrip("/")).name
+    if ":" in name:
+        scheme, _, rest = name.partition(":")
+        name = scheme + "_" + Path(rest.split("?")[0].rstrip("/")).name
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def plot_roc(
-    pixel: pd.DataFrame, objects: pd.DataFrame, summary: pd.DataFrame, path: Path, title: str
-) -> None:
-    """Pixel ROC (Pd vs Pfa, log Pfa axis) and object ROC (Pd vs false alarms per image),
-    with each detector's design operating point marked."""
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
-    for i, (name, df) in enumerate(pixel.groupby("detector", sort=False)):
-        color = f"C{i % 10}"
-        ok = df["pfa_pixel"] > 0
-        ax1.plot(df.loc[ok, "pfa_pixel"], df.loc[ok, "pd_pixel"], color=color, label=name)
-        op = summary[summary["detector"] == name]
-        ax1.plot(op["pfa_pixel"], op["pd_pixel"], "o", color=color)
-        ob = objects[objects["detector"] == name]
-        ax2.plot(ob["false_alarms_per_image"], ob["pd_object"], ".-", color=color, label=name)
-        ax2.plot(op["false_alarms_per_image"], op["pd_object"], "o", color=color)
-    ax1.set(
-        xscale="log",
-        xlabel="Pfa (pixel)",
-        ylabel="Pd (pixel)",
-        title=f"{title}: pixel ROC",
-        ylim=(0, 1.02),
-    )
-    ax2.set(
-        xscale="symlog",
-        xlabel="false alarms per image",
-        ylabel="Pd (object)",
-        title=f"{title}: object ROC",
-        ylim=(0, 1.02),
-    )
-    for ax in (ax1, ax2):
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+def save(fig: plt.Figure, path: Path) -> list[str]:
+    """Save ``fig`` as ``path`` (PNG) and beside it as PDF; return the file names."""
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    fig.savefig(path.with_suffix(".pdf"))
     plt.close(fig)
+    return [path.name, path.with_suffix(".pdf").name]
+
+
+def _short(name: str) -> str:
+    return slug(name) if len(name) > 24 else name
+
+
+def plot_roc(
+    pixel: pd.DataFrame,
+    froc: pd.DataFrame,
+    pr: pd.DataFrame,
+    summary: pd.DataFrame,
+    path: Path,
+    title: str,
+) -> list[str]:
+    """Three panels for one dataset: pixel ROC (Pd vs Pfa), FROC (Pd vs false alarms per
+    image, matching rule) and precision-recall at IoU 0.5; a filled marker on each curve is
+    the detector's design operating point."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
+    names = list(dict.fromkeys(summary["detector"]))
+    for i, name in enumerate(names):
+        st = detector_style(i)
+        op = summary[summary["detector"] == name]
+        px = pixel[(pixel["detector"] == name) & (pixel["pfa_pixel"] > 0)]
+        axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=name, **st)
+        axes[0].plot(op["pfa_pixel"], op["pd_pixel"], "o", color=st["color"])
+        fr = froc[froc["detector"] == name]
+        axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post", label=name, **st)
+        axes[1].plot(op["false_alarms_per_image"], op["pd_object"], "o", color=st["color"])
+        p = pr[pr["detector"] == name]
+        axes[2].plot(p["recall"], p["precision"], label=name, **st)
+    axes[0].set(xscale="log", xlabel="Pfa (pixel)", ylabel="Pd (pixel)", title="pixel ROC")
+    axes[1].set(xscale="symlog", xlabel="false alarms per image", ylabel="Pd (object)",
+                title="FROC (matching rule)")  # fmt: skip
+    axes[2].set(xlabel="recall", ylabel="precision", title="precision-recall, IoU 0.5")
+    for ax in axes:
+        ax.set_ylim(0, 1.02)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].plot([], [], "o", color="grey", label="design operating point")
+    axes[0].legend(fontsize=7, ncol=2 if len(names) > 8 else 1)
+    fig.suptitle(_short(title))
+    return save(fig, path)

@@ -1,9 +1,11 @@
-"""The dataset-scale runner: one pass per detector over batches, counts merged by addition.
+"""The dataset-scale runner: one pass per detector over batches, states merged by addition.
 
-Each batch is loaded once and given to every detector; per detector the runner accumulates
-pixel counts and object counts at the design operating point (``Detection.mask``) and a
-:class:`~torchsar.metrics.RocAccumulator` over ``Detection.statistic``, so one pass gives a
-detector's summary and its whole ROC. Images of different sizes (folder datasets) are
+Each batch is loaded once and given to every detector. Per detector the runner accumulates
+pixel counts and the pixel ROC (:class:`~torchsar.metrics.RocAccumulator` over
+``Detection.statistic``), then sends the detection through the shared discrimination stage
+(:func:`torchsar.objects.discriminate`, the same rules for every detector), matches the
+objects one-to-one to the ground truth and adds them to an
+:class:`~torchsar.metrics.ObjectState`. Images of different sizes (folder datasets) are
 grouped into same-size sub-batches.
 """
 
@@ -19,18 +21,37 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
 from eval.detectors import DetectorSpec
+from eval.scoring import batch_truth, image_rows, pixel_areas
 from torchsar.metrics import (
-    ObjectCounts,
+    Matching,
+    ObjectState,
     PixelCounts,
     RocAccumulator,
-    default_object_grid,
-    default_pixel_grid,
-    merged_grid,
-    object_counts,
+    match_batch,
     pixel_counts,
 )
+from torchsar.metrics.curves import OP_BIN
+from torchsar.objects import ObjectRules, Objects, discriminate
 
-__all__ = ["DetectorResult", "batches", "evaluate"]
+__all__ = ["DetectorResult", "Scoring", "batches", "evaluate"]
+
+
+@dataclass(frozen=True)
+class Scoring:
+    """How detections are scored: the discrimination rules, the matching rule and the
+    bootstrap (the same for every detector of a run)."""
+
+    rules: ObjectRules = field(default_factory=ObjectRules)
+    matching: Matching = field(default_factory=Matching)
+    replicates: int = 100
+    seed: int = 0
+
+    def as_dict(self) -> dict:
+        return {
+            "objects": self.rules.as_dict(),
+            "matching": self.matching.as_dict(),
+            "bootstrap": {"replicates": self.replicates, "seed": self.seed},
+        }
 
 
 @dataclass
@@ -38,21 +59,50 @@ class DetectorResult:
     """Everything measured for one detector on one dataset."""
 
     spec: DetectorSpec
+    scoring: Scoring = field(default_factory=Scoring)
     pixels: PixelCounts = field(default_factory=PixelCounts)
-    objects: ObjectCounts = field(default_factory=ObjectCounts)
-    roc: RocAccumulator | None = None
+    roc: RocAccumulator = field(default_factory=RocAccumulator)
+    objects: ObjectState = field(init=False)
     seconds: float = 0.0
+    object_seconds: float = 0.0
     images: int = 0
+    rows: list = field(default_factory=list)
+    op_bin: int = OP_BIN
 
-    def add(self, det_mask: Tensor, statistic: Tensor, threshold: Tensor, batch: dict) -> None:
-        """Accumulate one batch's detections."""
-        mask, inst, ignore = batch["mask"], batch["instances"], batch["ignore"]
-        self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore)
-        self.objects = self.objects + object_counts(det_mask, inst, ignore)
-        if self.roc is None:
-            obj = default_object_grid(float(threshold.max()))
-            self.roc = RocAccumulator(merged_grid(default_pixel_grid(), obj), obj)
-        self.roc.update(statistic, mask, inst, ignore)
+    def __post_init__(self) -> None:
+        self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
+
+    def add(self, statistic: Tensor, threshold: Tensor, det_mask: Tensor, batch: dict, truth):
+        """Accumulate one batch's detections (``truth``: :func:`eval.scoring.batch_truth`)."""
+        mask, ignore = batch["mask"], batch["ignore"]
+        self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
+        self.roc.update(statistic, mask, ignore)
+        t0 = time.perf_counter()
+        obj = self.objects_of(statistic, threshold, batch)
+        gt, info = truth
+        m = match_batch(obj, gt, self.scoring.matching)
+        self.objects.update(m, obj, gt, info)
+        self.rows += image_rows(m, obj, gt, info)
+        self.object_seconds += time.perf_counter() - t0
+
+    def __add__(self, other: DetectorResult) -> DetectorResult:
+        """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
+        if self.spec.name != other.spec.name or self.scoring != other.scoring:
+            raise ValueError("cannot add results of different detectors or scoring settings")
+        out = DetectorResult(self.spec, self.scoring, self.pixels + other.pixels,
+                             self.roc + other.roc, op_bin=self.op_bin)  # fmt: skip
+        out.objects = self.objects + other.objects
+        out.seconds = self.seconds + other.seconds
+        out.object_seconds = self.object_seconds + other.object_seconds
+        out.images = self.images + other.images
+        out.rows = self.rows + other.rows
+        return out
+
+    def objects_of(self, statistic: Tensor, threshold: Tensor, batch: dict) -> Objects:
+        """The discrimination stage of this run on one batch."""
+        rules = self.scoring.rules
+        area = pixel_areas(batch) if rules.units == "m2" else None
+        return discriminate(statistic, threshold, rules=rules, pixel_area=area)
 
 
 def _stack(items: list[dict]) -> dict:
@@ -83,10 +133,13 @@ def evaluate(
     *,
     batch_size: int = 16,
     preprocess: Callable[[Tensor], Tensor] | None = None,
+    scoring: Scoring | None = None,
+    name: str = "",
     progress: bool = True,
     desc: str = "",
+    on_batch: Callable[[dict, dict], None] | None = None,
 ) -> list[DetectorResult]:
-    """Run every detector over the dataset and accumulate its counts and ROC.
+    """Run every detector over the dataset and accumulate its pixel and object states.
 
     Args:
         dataset: yields dicts with ``image``, ``mask``, ``instances``, ``ignore``, ``meta``.
@@ -94,10 +147,15 @@ def evaluate(
         batch_size: images per batch.
         preprocess: optional image stage applied once per batch before every detector (e.g. a
             speckle filter); its time is charged to every detector's ``ms_per_image``.
+        scoring: discrimination, matching and bootstrap settings (default :class:`Scoring`).
+        name: dataset name (part of each image's bootstrap key).
         progress: show a progress bar.
         desc: progress-bar label.
+        on_batch: called as ``on_batch(batch, {detector: Objects})`` after each batch (e.g.
+            a COCO exporter).
     """
-    results = [DetectorResult(spec) for spec in detectors]
+    scoring = Scoring() if scoring is None else scoring
+    results = [DetectorResult(spec, scoring) for spec in detectors]
     n_batches = -(-len(dataset) // batch_size) if len(dataset) else 0
     for batch in tqdm(
         batches(dataset, batch_size), total=n_batches, desc=desc, disable=not progress, leave=False
@@ -107,10 +165,16 @@ def evaluate(
         if preprocess is not None:
             x = preprocess(x)
         t_pre = time.perf_counter() - t0
+        truth = batch_truth(batch, name or desc)
+        found = {}
         for res in results:
             t0 = time.perf_counter()
             det = res.spec(x)
             res.seconds += time.perf_counter() - t0 + t_pre
             res.images += x.shape[0]
-            res.add(det.mask, det.statistic, det.threshold, batch)
+            res.add(det.statistic, det.threshold, det.mask, batch, truth)
+            if on_batch is not None:
+                found[res.spec.name] = res.objects_of(det.statistic, det.threshold, batch)
+        if on_batch is not None:
+            on_batch(batch, found)
     return results

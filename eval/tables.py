@@ -1,17 +1,39 @@
-"""Result tables (pandas): the run summary and the ROC points."""
+"""Result tables (pandas): the run summary, breakdowns, per-image rows and the curves."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
+from eval.calibrate import threshold_of
 from eval.runner import DetectorResult
+from torchsar.metrics.curves import SCORE_GRID, suffix
+from torchsar.metrics.object_state import operating_point
 
-__all__ = ["ROC_COLUMNS", "SUMMARY_COLUMNS", "pixel_roc_table", "roc_table", "summary_table"]
+__all__ = [
+    "BREAKDOWN_COLUMNS",
+    "FROC_COLUMNS",
+    "PER_IMAGE_COLUMNS",
+    "PR_COLUMNS",
+    "SUMMARY_COLUMNS",
+    "TIMING_COLUMNS",
+    "breakdown_table",
+    "froc_table",
+    "headline_table",
+    "markdown",
+    "per_image_table",
+    "pixel_roc_table",
+    "pr_table",
+    "summary_table",
+    "timing_table",
+]
 
+HEADLINE = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image"]
 SUMMARY_COLUMNS = [
     "dataset",
     "detector",
     "images",
+    "targets",
     "pd_pixel",
     "pfa_pixel",
     "pd_object",
@@ -20,56 +42,150 @@ SUMMARY_COLUMNS = [
     "fragmentation",
     "fom",
     "mean_iou",
-    "ms_per_image",
+    "tp",
+    "fp",
+    "fn",
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "ap50_95",
+    "pd_at_0.1_fa_per_image",
+    "pd_at_1_fa_per_image",
+    "pd_at_10_fa_per_image",
+    "pauc",
+    "fa_per_km2",
+    *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
+    "score_threshold",
 ]
-ROC_COLUMNS = [
-    "dataset",
-    "detector",
-    "threshold",
-    "pd_pixel",
-    "pfa_pixel",
-    "pd_object",
-    "false_alarms_per_image",
-]
+TIMING_COLUMNS = ["dataset", "detector", "images", "ms_per_image", "object_ms_per_image",
+                  "images_per_s"]  # fmt: skip
+FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_per_image",
+                "pd_object", "precision"]  # fmt: skip
+PR_COLUMNS = ["dataset", "detector", "threshold", "recall", "precision"]
+BREAKDOWN_COLUMNS = ["dataset", "detector", "by", "key", "images", "targets", "tp", "fp",
+                     "fn", "precision", "recall", "f1"]  # fmt: skip
+PER_IMAGE_COLUMNS = ["dataset", "detector", "image", "targets", "tp", "fp", "fn", "objects",
+                     "max_score"]  # fmt: skip
 
 
 def summary_row(dataset: str, r: DetectorResult) -> dict:
     """One summary row at the detector's design operating point."""
-    o = r.objects
-    return {
+    m = r.objects.metrics(r.op_bin)
+    ci = r.objects.intervals(r.op_bin) if r.objects.replicates else {}
+    row = {
         "dataset": dataset,
         "detector": r.spec.name,
         "images": r.images,
+        "targets": r.objects.n_gt,
         "pd_pixel": r.pixels.pd,
         "pfa_pixel": r.pixels.pfa,
-        "pd_object": o.pd,
-        "false_alarms": o.false_alarms,
-        "false_alarms_per_image": o.false_alarms_per_image,
-        "fragmentation": o.fragmentation,
-        "fom": o.fom,
-        "mean_iou": o.mean_iou,
-        "ms_per_image": 1e3 * r.seconds / r.images if r.images else float("nan"),
+        "pd_object": m["recall"],
+        "false_alarms": m["fp"],
+        "false_alarms_per_image": m["fa_per_image"],
+        **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
+        "score_threshold": threshold_of(r.op_bin),
     }
+    for k in HEADLINE:
+        row[f"{k}_lo"], row[f"{k}_hi"] = ci.get(k, (float("nan"), float("nan")))
+    return row
+
+
+def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
+    nan = float("nan")
+    ms = 1e3 * r.seconds / r.images if r.images else nan
+    obj = 1e3 * r.object_seconds / r.images if r.images else nan
+    return [[ds, r.spec.name, r.images, ms, obj, 1e3 / (ms + obj) if r.images else nan]]
+
+
+def timing_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """Detector and object-stage time per image, and images per second for both (timing
+    is kept out of ``summary.csv`` so that the summary is identical across runs)."""
+    return _frame(results, _timing_rows, TIMING_COLUMNS)
+
+
+def _frame(results: dict[str, list[DetectorResult]], rows_of, columns: list[str]) -> pd.DataFrame:
+    rows = [row for ds, rs in results.items() for r in rs for row in rows_of(ds, r)]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def summary_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """Summary over datasets (``{dataset: results}``), columns :data:`SUMMARY_COLUMNS`."""
-    rows = [summary_row(ds, r) for ds, rs in results.items() for r in rs]
-    return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+    return _frame(results, lambda ds, r: [summary_row(ds, r)], SUMMARY_COLUMNS)
 
 
-def roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
-    """Pixel and object ROC at the object-level thresholds, columns :data:`ROC_COLUMNS`."""
-    frames = []
-    for ds, rs in results.items():
-        for r in rs:
-            if r.roc is None:
-                continue
-            df = pd.DataFrame(r.roc.object_curve())
-            df.insert(0, "detector", r.spec.name)
-            df.insert(0, "dataset", ds)
-            frames.append(df)
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=ROC_COLUMNS)
+def _changes(tp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """Grid levels (indices into the suffix arrays) where the detections above change."""
+    ct, cf = suffix(tp), suffix(fp)
+    keep = np.ones(ct.size, bool)
+    keep[1:] = (ct[1:] != ct[:-1]) | (cf[1:] != cf[:-1])
+    return np.flatnonzero(keep)
+
+
+def _froc_rows(ds: str, r: DetectorResult) -> list[list]:
+    o = r.objects
+    ct, cf = suffix(o.tp), suffix(o.fp)
+    thr = np.concatenate([[-np.inf], SCORE_GRID])  # level j: scores > thr[j]
+    rows = []
+    for j in _changes(o.tp, o.fp)[::-1]:
+        t, f = int(ct[j]), int(cf[j])
+        prec = t / (t + f) if t + f else float("nan")
+        pd_ = t / o.n_gt if o.n_gt else float("nan")
+        rows.append([ds, r.spec.name, thr[j], t, f, f / max(o.images, 1), pd_, prec])
+    return rows
+
+
+def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """The dense FROC under the matching rule: one row per score level where the detections
+    change (highest first), monotone in the threshold by construction."""
+    return _frame(results, _froc_rows, FROC_COLUMNS)
+
+
+def _pr_rows(ds: str, r: DetectorResult) -> list[list]:
+    o = r.objects
+    ct, cf = suffix(o.ap_tp[0]), suffix(o.ap_fp[0])
+    thr = np.concatenate([[-np.inf], SCORE_GRID])
+    rows = []
+    for j in _changes(o.ap_tp[0], o.ap_fp[0])[::-1]:
+        t, f = int(ct[j]), int(cf[j])
+        if t + f and o.n_gt:
+            rows.append([ds, r.spec.name, thr[j], t / o.n_gt, t / (t + f)])
+    return rows
+
+
+def pr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """Precision-recall points at IoU 0.5 (the curve behind AP50)."""
+    return _frame(results, _pr_rows, PR_COLUMNS)
+
+
+def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
+    """Per key; ground-truth classes carry false alarms (and so precision) only when the
+    images have a class of their own, to which the false alarms are attributed."""
+    rows = []
+    has_image_class = any(k.startswith("image_class:") for k in r.objects.keys)
+    nan = float("nan")
+    for key in sorted(r.objects.keys):
+        by, _, name = key.partition(":")
+        k = r.objects.keys[key]
+        op = operating_point(k.tp, k.fp, k.n_gt, k.images, r.op_bin)
+        if by == "class" and not has_image_class:
+            if k.n_gt == 0:
+                continue  # the sink of unattributed false alarms
+            op.update(fp=nan, precision=nan, f1=nan)
+        rows.append([ds, r.spec.name, by, name, k.images or None, k.n_gt, op["tp"], op["fp"],
+                     op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
+    return rows
+
+
+def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """Operating-point counts per ground-truth class, size bin, image class and group."""
+    return _frame(results, _breakdown_rows, BREAKDOWN_COLUMNS)
+
+
+def per_image_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """One row per image and detector at the design operating point."""
+    return _frame(results, lambda ds, r: [[ds, r.spec.name, *row] for row in r.rows],
+                  PER_IMAGE_COLUMNS)  # fmt: skip
 
 
 def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
@@ -77,13 +193,27 @@ def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     frames = []
     for ds, rs in results.items():
         for r in rs:
-            if r.roc is not None:
-                df = pd.DataFrame(r.roc.pixel_curve())
-                df.insert(0, "detector", r.spec.name)
-                df.insert(0, "dataset", ds)
-                frames.append(df)
+            df = pd.DataFrame(r.roc.pixel_curve())
+            df.insert(0, "detector", r.spec.name)
+            df.insert(0, "dataset", ds)
+            frames.append(df)
     cols = ["dataset", "detector", "threshold", "pd_pixel", "pfa_pixel"]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols)
+
+
+HEADLINE_SHOWN = ["dataset", "detector", "images", "targets", "tp", "fp", "fn", "fom",
+                  "false_alarms_per_image"]  # fmt: skip
+
+
+def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """The compact table of ``summary.md``: counts, then the headline metrics with their
+    bootstrap intervals as ``value [lo, hi]``."""
+    out = summary[HEADLINE_SHOWN].copy()
+    for m in HEADLINE:
+        out[m] = [f"{v:.3g} [{lo:.3g}, {hi:.3g}]" for v, lo, hi in
+                  zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)]  # fmt: skip
+    out["ap50_95"] = summary["ap50_95"]
+    return out
 
 
 def markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:

@@ -1,6 +1,6 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, imaging, io, metrics, motion, region, simulate, speckle, windows
+from torchsar import cfar, imaging, io, metrics, motion, objects, region, simulate, speckle, windows
 
 __version__ = "0.1.0"
 
@@ -11,6 +11,7 @@ __all__ = [
     "io",
     "metrics",
     "motion",
+    "objects",
     "region",
     "simulate",
     "speckle",

@@ -7,7 +7,7 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region"]
+COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset"]
 
 
 def load(name: str):

@@ -4,15 +4,16 @@ On the default simulated scenes and on the MSTAR SARBake chips (skipped with a n
 the folder is absent), the region CFAR with the paper's preset and with ours is compared with
 every registered window CFAR (CA, OS, GO, SO, VI, AC, two-parameter) at its best setting:
 ``guard x train x pfa`` swept on a tuning set (simulated: other scenes, different seed;
-MSTAR: every 5th chip, which favours the window CFARs) and chosen by FoM. The region CFAR is
-*not* tuned per dataset. Writes ``summary.csv`` / ``summary.md`` (object Pd, false alarms per
-image, fragmentation, mean IoU, FoM, ms per image), ``chosen.csv`` (the chosen settings),
-``panel_<dataset>.png`` and ``config.json``.
+MSTAR: every 5th chip, and the summary reports on the other chips only) and chosen by FoM.
+The region CFAR is *not* tuned per dataset. Writes ``summary.csv`` (object Pd, false alarms
+per image, fragmentation, mean IoU, FoM), ``timing.csv`` (ms per image), ``summary.md`` (both,
+and the chosen settings), ``chosen.csv``, ``panel_<dataset>.png`` and ``config.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from torch.utils.data import Subset
@@ -20,14 +21,18 @@ from torch.utils.data import Subset
 import torchsar as ts
 from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, DetectorSpec
-from eval.output import default_out, result_dir, write_config
+from eval.errors import EvalError
+from eval.options import at_least, floats, ints, names
+from eval.output import default_out, file_slugs, result_dir, write_config
 from eval.panel import detection_panel
 from eval.plots import slug
 from eval.runner import batches, evaluate
 from eval.sweep import best_setting, window_grid
-from eval.tables import markdown, summary_table
+from eval.tables import markdown, summary_table, timing_table
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
+TUNE_EVERY = 5
+"""MSTAR: every 5th chip tunes the window CFARs; the summary reports on the others."""
 MSTAR = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "mstar_sarbake"
 SHOWN = [
     "dataset", "detector", "images", "pd_object", "false_alarms_per_image", "fragmentation",
@@ -35,12 +40,34 @@ SHOWN = [
 ]  # fmt: skip
 
 
-def _ints(text: str) -> list[int]:
-    return [int(v) for v in text.split(",") if v.strip()]
+@dataclass(frozen=True)
+class Sweep:
+    """The tuning grid and how to run it (parsed from the command line)."""
+
+    guards: list[int]
+    trains: list[int]
+    pfas: list[float]
+    window_cfars: list[str]
+    max_ring: int
+    batch_size: int
 
 
-def _floats(text: str) -> list[float]:
-    return [float(v) for v in text.split(",") if v.strip()]
+def _sweep(args: argparse.Namespace) -> Sweep:
+    """Check every option before any work; the parsed sweep."""
+    at_least(args.n, "--n", 1)
+    at_least(args.n_tune, "--n-tune", 1)
+    at_least(args.mstar_n, "--mstar-n", 2)
+    at_least(args.batch_size, "--batch-size", 1)
+    at_least(args.max_ring, "--max-ring", 1)
+    window_cfars = [d for d in DETECTORS if d != "region"]
+    return Sweep(
+        guards=ints(args.guards, "--guards", minimum=0),
+        trains=ints(args.trains, "--trains", minimum=1),
+        pfas=floats(args.pfas, "--pfas", above=0, below=1),
+        window_cfars=names(args.window_cfars, "--window-cfars", window_cfars, what="window CFAR"),
+        max_ring=args.max_ring,
+        batch_size=args.batch_size,
+    )
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -60,12 +87,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--n-tune", type=int, default=2, help="simulated tuning images")
     p.add_argument("--seed", type=int, default=0, help="seed of the evaluation scenes")
     p.add_argument("--mstar", type=Path, default=MSTAR, help="MSTAR SARBake folder")
-    p.add_argument("--mstar-n", type=int, default=None, help="use only the first N chips")
+    p.add_argument("--mstar-n", type=int, default=None, help="use only the first N chips (N >= 2)")
     # The default sweep is the one behind the published evidence table; widen it with these
     # options on an idle machine (GO/SO threshold solves dominate large grids).
-    p.add_argument("--guards", type=_ints, default=[4, 16, 32], help="guard sweep")
-    p.add_argument("--trains", type=_ints, default=[4, 12], help="train sweep")
-    p.add_argument("--pfas", type=_floats, default=[1e-3, 1e-5, 1e-7, 1e-9], help="pfa sweep")
+    p.add_argument("--guards", default="4,16,32", help="guard sweep (default 4,16,32)")
+    p.add_argument("--trains", default="4,12", help="train sweep (default 4,12)")
+    p.add_argument("--pfas", default="1e-3,1e-5,1e-7,1e-9", help="pfa sweep")
     p.add_argument(
         "--window-cfars",
         default=",".join(WINDOW_CFARS),
@@ -95,7 +122,15 @@ def _datasets(args: argparse.Namespace, notes: list[str]) -> dict[str, tuple[obj
     }
     if args.mstar.is_dir():
         ds = make_dataset(f"folder:{args.mstar}", n=args.mstar_n)
-        out["mstar_sarbake"] = (Subset(ds, range(0, len(ds), 5)), ds)
+        tune = range(0, len(ds), TUNE_EVERY)
+        report = [i for i in range(len(ds)) if i % TUNE_EVERY]
+        if not report:
+            raise EvalError(f"MSTAR: {len(ds)} chip(s) leave none to report on after tuning")
+        out["mstar_sarbake"] = (Subset(ds, tune), Subset(ds, report))
+        notes.append(
+            f"mstar_sarbake: window CFARs tuned on {len(tune)} chips (every {TUNE_EVERY}th), "
+            f"reported on the other {len(report)}"
+        )
     else:
         notes.append(f"MSTAR folder {args.mstar} not found: skipped")
     return out
@@ -112,18 +147,15 @@ def _region_specs() -> list[DetectorSpec]:
     ]
 
 
-def _tuned(tune, args, notes: list[str], name: str) -> tuple[list[DetectorSpec], list[dict]]:
-    """Each registered window CFAR at its best grid point on the tuning set."""
-    tb = list(batches(tune, args.batch_size))
-    grid = window_grid(args.guards, args.trains, args.pfas)
+def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[DetectorSpec], list]:
+    """Each requested window CFAR at its best grid point on the tuning set."""
+    tb = list(batches(tune, sweep.batch_size))
+    grid = window_grid(sweep.guards, sweep.trains, sweep.pfas)
     specs, chosen = [], []
-    for det in [d.strip() for d in args.window_cfars.split(",") if d.strip()]:
-        if det not in DETECTORS:
-            notes.append(f"{name}: window CFAR {det!r} is not registered yet: skipped")
-            continue
-        g = grid if det != "os" else [q for q in grid if _ring(q) <= args.max_ring]
+    for det in sweep.window_cfars:
+        g = grid if det != "os" else [q for q in grid if _ring(q) <= sweep.max_ring]
         if not g:
-            notes.append(f"{name}: no OS window within --max-ring {args.max_ring}: skipped")
+            notes.append(f"{name}: no OS window within --max-ring {sweep.max_ring}: skipped")
             continue
         c = best_setting(DETECTORS[det], g, tb)
         specs.append(DetectorSpec(det, DETECTORS[det].fn, c.params))
@@ -134,29 +166,36 @@ def _tuned(tune, args, notes: list[str], name: str) -> tuple[list[DetectorSpec],
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
+    sweep = _sweep(args)
     notes: list[str] = []
     out = args.out or default_out("compare-region")
     results, chosen = {}, []
     with result_dir(out) as tmp:
-        for name, (tune, ds) in _datasets(args, notes).items():
-            specs, rows = _tuned(tune, args, notes, name)
+        datasets = _datasets(args, notes)
+        slugs = file_slugs(datasets, slug)
+        for name, (tune, ds) in datasets.items():
+            specs, rows = _tuned(tune, sweep, notes, name)
             specs = _region_specs() + specs
             chosen += rows
             results[name] = evaluate(
-                ds, specs, batch_size=args.batch_size, progress=not args.no_progress, desc=name
+                ds, specs, batch_size=sweep.batch_size, progress=not args.no_progress, desc=name
             )
             detection_panel(
-                [ds[i] for i in range(min(3, len(ds)))], specs, tmp / f"panel_{slug(name)}.png"
+                [ds[i] for i in range(min(3, len(ds)))], specs, tmp / f"panel_{slugs[name]}.png"
             )
-        summary = summary_table(results)
-        summary.to_csv(tmp / "summary.csv", index=False)
+        summary_table(results).to_csv(tmp / "summary.csv", index=False)
+        timing_table(results).to_csv(tmp / "timing.csv", index=False)
+        summary = summary_table(results).merge(
+            timing_table(results), on=["dataset", "detector", "images"]
+        )
         pd.DataFrame(chosen).to_csv(tmp / "chosen.csv", index=False)
         text = markdown(summary[SHOWN]) + "\n\nChosen window settings:\n\n"
         text += markdown(pd.DataFrame(chosen)) + "\n" + "".join(f"\n- {n}" for n in notes)
         (tmp / "summary.md").write_text(text + "\n")
-        write_config(tmp, "compare-region", {k: v for k, v in vars(args).items() if k != "func"})
+        options = {k: v for k, v in vars(args).items() if k != "func"}
+        write_config(tmp, "compare-region", {**options, **asdict(sweep)})
     print(summary[SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for n in notes:
         print(f"note: {n}")
-    print(f"\nwrote {out}/: summary.csv summary.md chosen.csv panel_*.png config.json")
+    print(f"\nwrote {out}/: summary.csv timing.csv summary.md chosen.csv panel_*.png config.json")
     return 0

@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from eval.calibration import CLUTTER, measure
 from eval.detectors import DETECTORS, resolve
-from eval.errors import EvalError
+from eval.options import at_least, floats, names
 from eval.output import default_out, result_dir, write_config
 from eval.tables import markdown
 
@@ -45,22 +45,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _pfas(text: str) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError as exc:
-        raise EvalError(f"--pfa must be comma-separated numbers, got {text!r}") from exc
-    if not vals or not all(0 < v < 1 for v in vals):
-        raise EvalError(f"--pfa values must lie in (0, 1), got {text!r}")
-    return vals
-
-
 def run(args: argparse.Namespace) -> int:
-    names = DEFAULT_DETECTORS if args.detectors is None else args.detectors.split(",")
-    specs = resolve([n.strip() for n in names if n.strip()], {})
-    pfas = _pfas(args.pfa)
-    if args.size < 16 or args.images < 1:
-        raise EvalError(f"--size must be >= 16 and --images >= 1, got {args.size}, {args.images}")
+    wanted = ",".join(DEFAULT_DETECTORS) if args.detectors is None else args.detectors
+    specs = resolve(names(wanted, "--detectors", DETECTORS, what="detector"), {})
+    pfas = floats(args.pfa, "--pfa", above=0, below=1)
+    at_least(args.size, "--size", 16)
+    at_least(args.images, "--images", 1)
     out = args.out or default_out("pfa")
     tables = []
     with result_dir(out) as tmp:

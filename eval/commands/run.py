@@ -3,22 +3,42 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
-from functools import partial
+import csv
+import time
 from pathlib import Path
 
-import torch
+import pandas as pd
 
+from eval.calibrate import choose_bin, parse_target, split_indices
+from eval.coco import CocoExport
 from eval.datasets import DATASETS, make_dataset
-from eval.detectors import DETECTORS, parse_params, resolve
+from eval.detectors import DETECTORS
 from eval.errors import EvalError
+from eval.glossary import glossary
+from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
-from eval.runner import evaluate
-from eval.tables import markdown, pixel_roc_table, roc_table, summary_table
+from eval.runner import Scoring
+from eval.shards import ShardJob, run_shards, shard_rows
+from eval.tables import (
+    PER_IMAGE_COLUMNS,
+    breakdown_table,
+    froc_table,
+    headline_table,
+    markdown,
+    pixel_roc_table,
+    pr_table,
+    summary_table,
+    timing_table,
+)
+from torchsar._checks import TorchSARError
+from torchsar.metrics import Matching
+from torchsar.objects import ObjectRules
 from torchsar.speckle import FILTERS
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
+DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
+DEFAULT_MATCH = Matching(kind="centroid")
 
 SUMMARY_SHOWN = [
     "dataset",
@@ -26,10 +46,15 @@ SUMMARY_SHOWN = [
     "images",
     "pd_pixel",
     "pfa_pixel",
-    "pd_object",
+    "tp",
+    "fp",
+    "fn",
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "pd_at_1_fa_per_image",
     "false_alarms_per_image",
-    "fragmentation",
-    "fom",
     "mean_iou",
     "ms_per_image",
 ]
@@ -78,65 +103,132 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="KEY=VALUE",
         help="speckle filter option, e.g. window=7 or looks=4 (repeatable)",
     )
+    add_scoring_options(p)
+    p.add_argument(
+        "--export-coco",
+        action="store_true",
+        help="also write coco/<dataset>__gt.json and coco/<dataset>__<detector>.json (COCO "
+        "ground truth and results with scores) for re-scoring with pycocotools",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="worker processes (each gets cores // workers torch threads); default 1",
+    )
+    p.add_argument(
+        "--shard-size",
+        type=int,
+        default=256,
+        help="images per shard, the unit of work and of resume (default 256)",
+    )
+    p.add_argument(
+        "--engine",
+        choices=["local", "ray"],
+        default="local",
+        help="run shards locally (--workers processes) or as Ray tasks (pip install "
+        "'torchsar[ray]')",
+    )
+    p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="continue past a failing shard and name it in the summary (default: stop, "
+        "writing no tables)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
 
 
-def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict]:
-    """The optional speckle-filter stage and its resolved options (validated up front)."""
-    if name is None:
-        if items:
-            raise EvalError("--despeckle-param given without --despeckle")
-        return None, {}
-    opts = parse_params([f"{name}.{item}" for item in items]).get(name, {})
-    FILTERS[name](torch.ones(1, 1, 16, 16), **opts)  # fail now on a bad option, not mid-run
-    return partial(FILTERS[name], **opts), opts
+def add_scoring_options(p: argparse.ArgumentParser) -> None:
+    """The discrimination and matching options shared by every detector of a run."""
+    g = p.add_argument_group("objects and matching (the same for every detector)")
+    g.add_argument(
+        "--closing",
+        type=int,
+        default=DEFAULT_RULES.closing,
+        help=f"closing radius in px before labelling (default {DEFAULT_RULES.closing})",
+    )
+    g.add_argument(
+        "--min-area",
+        type=float,
+        default=DEFAULT_RULES.min_area,
+        help=f"smallest object, in --area-units (default {DEFAULT_RULES.min_area:g})",
+    )
+    g.add_argument(
+        "--max-area",
+        type=float,
+        default=DEFAULT_RULES.max_area,
+        help="largest object, in --area-units (default: no limit)",
+    )
+    g.add_argument("--area-units", choices=["px", "m2"], default="px")
+    g.add_argument(
+        "--floor",
+        type=float,
+        default=1.0,
+        help="objects are components of score > FLOOR (1 = design mask; lower "
+        "extends the curves past the design point)",
+    )
+    g.add_argument(
+        "--match",
+        choices=["centroid", "mask", "box"],
+        default=DEFAULT_MATCH.kind,
+        help=f"matching rule of the operating point and FROC (default "
+        f"{DEFAULT_MATCH.kind}); AP always uses IoU",
+    )
+    g.add_argument("--iou", type=float, default=0.5, help="IoU threshold of --match mask|box")
+    g.add_argument(
+        "--bootstrap",
+        type=int,
+        default=100,
+        help="bootstrap replicates for the intervals (0: none)",
+    )
+    g.add_argument(
+        "--calibrate-on",
+        metavar="TARGET",
+        default=None,
+        help="choose each detector's score threshold on a calibration split for "
+        "TARGET ('fa=1': at most 1 false alarm per image; 'f1': best F1) and "
+        "report on the disjoint rest",
+    )
+    g.add_argument("--calibration-fraction", type=float, default=0.3,
+                   help="share of each dataset's images in the calibration split")  # fmt: skip
+
+
+def scoring_from(args: argparse.Namespace) -> Scoring:
+    """The run's :class:`Scoring` from the parsed options (validated here, before any work)."""
+    if args.bootstrap < 0:
+        raise EvalError(f"--bootstrap must be >= 0, got {args.bootstrap}")
+    try:
+        rules = ObjectRules(
+            closing=args.closing, min_area=args.min_area, max_area=args.max_area,
+            units=args.area_units, floor=args.floor,
+        )  # fmt: skip
+        matching = Matching(kind=args.match, iou=args.iou)
+    except TorchSARError as exc:
+        raise EvalError(f"bad object/matching option: {exc}") from exc
+    return Scoring(rules, matching, args.bootstrap, args.seed)
 
 
 def run(args: argparse.Namespace) -> int:
-    names = (
-        list(DETECTORS)
-        if args.detectors is None
-        else [d.strip() for d in args.detectors.split(",") if d.strip()]
-    )
-    specs = resolve(names, parse_params(args.param))
-    preprocess, despeckle_opts = despeckler(args.despeckle, args.despeckle_param)
-    if args.batch_size < 1:
-        raise SystemExit("torchsar-eval: error: --batch-size must be >= 1")
-    if args.n is not None and args.n < 0:
-        raise SystemExit("torchsar-eval: error: --n must be >= 0")
+    specs, preprocess, despeckle_opts = check_run_args(args)
+    if args.workers < 1 or args.shard_size < 1:
+        raise EvalError("--workers and --shard-size must be >= 1")
+    if args.export_coco and (args.workers > 1 or args.engine != "local"):
+        raise EvalError("--export-coco collects detections in this process: use --workers 1")
     datasets = {
         name: make_dataset(name, n=args.n, seed=args.seed)
         for name in (args.dataset or DEFAULT_DATASETS)
     }
+    scoring = scoring_from(args)
     out = args.out or default_out("run")
     with result_dir(out) as tmp:
-        results = {
-            name: evaluate(
-                ds,
-                specs,
-                batch_size=args.batch_size,
-                preprocess=preprocess,
-                progress=not args.no_progress,
-                desc=name,
+        results, stats = {}, {}
+        for name, ds in datasets.items():
+            results[name], stats[name] = evaluate_dataset(
+                name, ds, specs, args, scoring, preprocess, tmp
             )
-            for name, ds in datasets.items()
-        }
-        summary = summary_table(results)
-        summary.to_csv(tmp / "summary.csv", index=False)
-        roc = roc_table(results)
-        roc.to_csv(tmp / "roc.csv", index=False)
-        pixel = pixel_roc_table(results)
-        pixel.to_csv(tmp / "roc_pixel.csv", index=False)
-        (tmp / "summary.md").write_text(markdown(summary))
-        for name in datasets:
-            plot_roc(
-                pixel[pixel.dataset == name],
-                roc[roc.dataset == name],
-                summary[summary.dataset == name],
-                tmp / f"roc_{slug(name)}.png",
-                name,
-            )
+        files = write_tables(tmp, results, scoring, stats)
         write_config(
             tmp,
             "run",
@@ -146,14 +238,111 @@ def run(args: argparse.Namespace) -> int:
                 "despeckle": None
                 if args.despeckle is None
                 else {"filter": args.despeckle, **despeckle_opts},
+                "scoring": scoring.as_dict(),
+                "workers": args.workers,
+                "shard_size": args.shard_size,
+                "throughput": stats,
+                "calibration": None
+                if args.calibrate_on is None
+                else {"target": args.calibrate_on, "fraction": args.calibration_fraction},
                 "batch_size": args.batch_size,
                 "seed": args.seed,
                 "out": str(out),
             },
         )
-    print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-    print(
-        f"\nwrote {out}/: summary.csv roc.csv roc_pixel.csv summary.md config.json "
-        + " ".join(f"roc_{slug(n)}.png" for n in datasets)
+    summary = pd.read_csv(out / "summary.csv").merge(
+        pd.read_csv(out / "timing.csv"), on=["dataset", "detector", "images"]
     )
+    print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for name, st in stats.items():
+        print(
+            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
+            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
+            f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
+        )
+        for f in st["failed"]:
+            print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
+    print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
+
+
+def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
+    """Score one dataset shard by shard; with ``--calibrate-on`` each detector's operating
+    point is chosen on the calibration split and the results are the disjoint test split's.
+    Returns the merged results and the dataset's run statistics (wall time, shards)."""
+    t0 = time.perf_counter()
+    state = tmp / "shards" / slug(name)
+    indices = list(range(len(ds)))
+
+    def shards(idx: list[int], folder: Path, on_batch=None):
+        job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
+                       args.shard_size)  # fmt: skip
+        return run_shards(job, folder, workers=args.workers, engine=args.engine,
+                          address=args.address, skip_bad=args.skip_bad,
+                          progress=not args.no_progress, on_batch=on_batch)  # fmt: skip
+
+    chosen = None
+    if args.calibrate_on is not None:
+        target = parse_target(args.calibrate_on)
+        cal, indices = split_indices(len(ds), name, args.calibration_fraction)
+        if not cal or not indices:
+            raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
+                            f"split of {args.calibration_fraction:g}")  # fmt: skip
+        tuned, _ = shards(cal, state / "calibration")
+        chosen = [choose_bin(r.objects, target) for r in tuned]
+    exporter = CocoExport(name) if args.export_coco else None
+    results, counts = shards(indices, state / "test", exporter.add if exporter else None)
+    if exporter:
+        exporter.write(tmp / "coco", slug(name))
+    for r, b in zip(results, chosen or [], strict=False):
+        r.op_bin = b
+    wall = time.perf_counter() - t0
+    stats = {"images": len(indices), "wall_s": wall, **counts,
+             "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
+    return results, stats
+
+
+def write_per_image(path: Path, folders: dict[str, Path]) -> None:
+    """``per_image.csv`` streamed from the saved shards (memory independent of the dataset
+    size): one row per image and detector, datasets and shards in order."""
+    with open(path, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(PER_IMAGE_COLUMNS)
+        for name, folder in folders.items():
+            for det, rows in shard_rows(folder):
+                out.writerows([name, det, *row] for row in rows)
+
+
+def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> list[str]:
+    """Every table and plot of a run into ``tmp``; returns the file names."""
+    summary = summary_table(results)
+    tables = {
+        "summary.csv": summary,
+        "roc.csv": froc_table(results),
+        "pr.csv": pr_table(results),
+        "roc_pixel.csv": pixel_roc_table(results),
+        "breakdown.csv": breakdown_table(results),
+        "timing.csv": timing_table(results),
+    }
+    for fname, df in tables.items():
+        df.to_csv(tmp / fname, index=False)
+    write_per_image(tmp / "per_image.csv", {n: tmp / "shards" / slug(n) / "test" for n in results})
+    text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
+    text += "\nEvery column, for every detector, is in `summary.csv`.\n"
+    text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
+    text += "".join(
+        f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
+        f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
+        f"resumed {st['skipped']}, failed {len(st['failed'])}"
+        + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        for name, st in stats.items()
+    )
+    (tmp / "summary.md").write_text(text)
+    files = [*tables, "per_image.csv", "summary.md"]
+    for name in results:
+        sel = {k: df[df.dataset == name] for k, df in tables.items()}
+        files += plot_roc(
+            sel["roc_pixel.csv"], sel["roc.csv"], sel["pr.csv"], sel["summary.csv"],
+            tmp / f"roc_{slug(name)}.png", name,
+        )  # fmt: skip
+    return files

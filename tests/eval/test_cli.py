@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import signal
+import time
 
 import numpy as np
 import pandas as pd
@@ -10,7 +14,7 @@ import pytest
 from skimage import io
 
 from eval.cli import main
-from eval.tables import ROC_COLUMNS, SUMMARY_COLUMNS
+from eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
 
 
 def _write_pair(folder, stem, image, labels, ext="png"):
@@ -55,13 +59,16 @@ def test_run_on_folder_known_answers(tiny_folder, tmp_path, capsys):
     assert (row.images, row.pd_pixel, row.pfa_pixel) == (2, 1.0, 0.0)
     assert (row.pd_object, row.false_alarms, row.fragmentation, row.mean_iou) == (1, 0, 1, 1)
     assert row.fom == 1.0
+    assert (row.tp, row.fp, row.fn, row.precision, row.recall, row.f1) == (2, 0, 0, 1, 1, 1)
+    assert (row.ap50, row.ap50_95, row.pd_at_1_fa_per_image) == (1, 1, 1)
     roc = pd.read_csv(out / "roc.csv")
-    assert list(roc.columns) == ROC_COLUMNS and len(roc) > 0
-    assert roc.pd_pixel.is_monotonic_decreasing
+    assert list(roc.columns) == FROC_COLUMNS and len(roc) > 0
+    assert roc.pd_object.is_monotonic_increasing
+    assert roc.false_alarms_per_image.is_monotonic_increasing
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["detectors"]["ca"]["guard"] == 2
     assert cfg["torchsar_version"]
-    assert (out / "summary.md").read_text().startswith("| dataset")
+    assert (out / "summary.md").read_text().startswith("# Run summary")
     assert (out / "roc_folder_data.png").stat().st_size > 0
     assert "ca" in capsys.readouterr().out
 
@@ -125,7 +132,7 @@ def _folder_error(tmp_path, capsys, prepare):
     )
     assert code == 2
     assert not out.exists()
-    assert not list(tmp_path.glob(".out.partial-*"))
+    assert not list(tmp_path.glob(".out.torchsar-*"))
     return capsys.readouterr().err
 
 
@@ -237,3 +244,183 @@ def test_bad_despeckle_option_fails_before_output(tiny_folder, tmp_path, capsys)
     )
     assert "window" in capsys.readouterr().err
     assert not out.exists()
+
+
+# --- one error policy: exit 2, one line, --out untouched ------------------------------
+
+
+def _one_error_line(capsys) -> str:
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("torchsar-eval: error: ")
+    return lines[0]
+
+
+def _nothing_left(tmp_path, out):
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if ".torchsar-" in p.name]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--param", "ca.bogus=1"], "detector ca has no option 'bogus'; valid: guard"),
+        (["--param", "ca.guardd=3"], "has no option 'guardd'"),
+        (["--despeckle", "lee", "--despeckle-param", "bogus=5"], "lee has no option 'bogus'"),
+        (["--despeckle", "lee", "--despeckle-param", "window"], "KEY=VALUE"),
+        (["--param", "go.pfa=1.5"], "detector go rejects its options"),
+        (["--param", "ca.looks=-1"], "detector ca rejects its options"),
+        (["--param", "region.bogus=1"], "bogus"),
+        (["--n", "-1"], "--n must be >= 1, got -1"),
+        (["--n", "0"], "--n must be >= 1, got 0"),
+        (["--n", "abc"], "argument --n: invalid int value"),
+        (["--batch-size", "0"], "--batch-size must be >= 1, got 0"),
+        (["--detectors", ","], "--detectors is empty"),
+        (["--detectors", "ca,ca"], "more than once"),
+    ],
+)
+def test_run_user_errors_before_any_work(tiny_folder, tmp_path, capsys, monkeypatch, args, message):
+    def no_dataset(*a, **k):
+        raise AssertionError("a dataset was built before the options were checked")
+
+    monkeypatch.setattr("eval.commands.run.make_dataset", no_dataset)
+    out = tmp_path / "never"
+    base = ["run", "--dataset", f"folder:{tiny_folder}", "--out", str(out), "--no-progress"]
+    assert main(base + args) == 2
+    assert message in _one_error_line(capsys)
+    _nothing_left(tmp_path, out)
+
+
+def _snapshot(folder) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def _tiny_run(tiny_folder, out, *extra):
+    argv = ["run", "--dataset", f"folder:{tiny_folder}", "--detectors", "ca", "--no-progress"]
+    return main([*argv, "--out", str(out), *extra])
+
+
+@pytest.mark.parametrize(
+    ("prepare", "message"),
+    [
+        (lambda p: p.write_text("x"), "exists and is not a folder"),
+        (lambda p: (p.mkdir(), (p / "mine.txt").write_text("x")), "not a run"),
+        (lambda p: (p.parent / "f").write_text("x"), "is not a folder"),
+    ],
+)
+def test_bad_out_is_refused_at_once(tiny_folder, tmp_path, capsys, monkeypatch, prepare, message):
+    monkeypatch.setattr("eval.commands.run.check_run_args", pytest.fail)  # no work at all
+    out = tmp_path / "out"
+    prepare(out)
+    target = out if out.exists() else tmp_path / "f" / "out"
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert _tiny_run(tiny_folder, target) == 2
+    assert message in _one_error_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_previous_run_needs_overwrite_which_leaves_no_stale_file(tiny_folder, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert _tiny_run(tiny_folder, out) == 0
+    (out / "stale.csv").write_text("from an older run")
+    before = _snapshot(out)
+    capsys.readouterr()
+    assert _tiny_run(tiny_folder, out) == 2
+    assert "pass --overwrite" in _one_error_line(capsys)
+    assert _snapshot(out) == before
+    assert _tiny_run(tiny_folder, out, "--overwrite") == 0
+    assert not (out / "stale.csv").exists() and (out / "config.json").exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def _ctrl_c(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+def _sigterm(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(5)  # the handler interrupts this
+
+
+@pytest.mark.parametrize(
+    ("interrupt", "code", "line"),
+    [(_ctrl_c, 130, "torchsar-eval: interrupted"), (_sigterm, 143, "torchsar-eval: terminated")],
+)
+def test_interrupted_run_leaves_the_previous_one_intact(
+    tiny_folder, tmp_path, capsys, monkeypatch, interrupt, code, line
+):
+    out = tmp_path / "out"
+    assert _tiny_run(tiny_folder, out) == 0
+    before = _snapshot(out)
+    capsys.readouterr()
+    monkeypatch.setattr("eval.commands.run.run_shards", interrupt)
+    handler = signal.getsignal(signal.SIGTERM)
+    assert _tiny_run(tiny_folder, out, "--overwrite") == code
+    assert [x for x in capsys.readouterr().err.splitlines() if x.strip()] == [line]
+    assert _snapshot(out) == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert signal.getsignal(signal.SIGTERM) is handler
+
+
+def test_datasets_with_the_same_basename_are_never_mixed(tiny_folder, tmp_path, capsys):
+    other = tmp_path / "elsewhere" / tiny_folder.name
+    shutil.copytree(tiny_folder, other)
+    shutil.rmtree(other / "sub")  # one chip here, two there
+    out = tmp_path / "out"
+    argv = ["--dataset", f"folder:{tiny_folder}", "--dataset", f"folder:{other}"]
+    code = main(["run", *argv, "--detectors", "ca", "--no-progress", "--out", str(out)])
+    if code == 2:  # refused before any work, naming both
+        assert "would share the file label" in _one_error_line(capsys)
+        _nothing_left(tmp_path, out)
+    else:  # or each keeps its own files and results
+        assert code == 0 and len(list(out.glob("roc_*.png"))) == 2
+        summary = pd.read_csv(out / "summary.csv")
+        assert summary.images.tolist() == [2, 1]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--n", "0"], "--n must be >= 1"),
+        (["--mstar-n", "0"], "--mstar-n must be >= 2"),
+        (["--batch-size", "0"], "--batch-size must be >= 1"),
+        (["--guards", "4,x"], "--guards must be comma-separated integers"),
+        (["--pfas", "0.5,2"], "--pfas values must be > 0 and < 1"),
+        (["--window-cfars", "ca,nope"], "unknown window CFAR 'nope'"),
+        (["--guards", "100", "--window-cfars", "ca"], "no window of the grid fits"),
+    ],
+)
+def test_compare_region_user_errors(tmp_path, capsys, args, message):
+    out = tmp_path / "never"
+    tiny = ["--sim", "sim-chips", "--n", "1", "--n-tune", "1", "--mstar", str(tmp_path / "no")]
+    assert main(["compare-region", "--out", str(out), "--no-progress", *tiny, *args]) == 2
+    assert message in _one_error_line(capsys)
+    _nothing_left(tmp_path, out)
+
+
+def test_compare_region_reports_mstar_on_chips_it_did_not_tune_on(tmp_path, capsys):
+    root = tmp_path / "chips"
+    root.mkdir()
+    for k in range(6):
+        img = np.full((32, 32), 20)
+        img[10 + k : 13 + k, 12:15] = 255
+        lab = np.zeros((32, 32))
+        lab[10 + k : 13 + k, 12:15] = 1
+        _write_pair(root, f"c{k}", img, lab)
+    out = tmp_path / "out"
+    argv = ["compare-region", "--out", str(out), "--sim", "sim-chips", "--n", "1", "--n-tune", "1"]
+    argv += ["--mstar", str(root), "--guards", "2", "--trains", "4", "--pfas", "1e-3"]
+    assert main([*argv, "--window-cfars", "ca", "--no-progress"]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary[summary.dataset == "mstar_sarbake"].images) == {4}  # 6 chips - c0, c5
+    assert "tuned on 2 chips (every 5th), reported on the other 4" in capsys.readouterr().out
+
+
+def test_every_command_has_out_and_overwrite():
+    from eval.cli import build_parser
+    from eval.commands import COMMANDS
+
+    parser = build_parser()
+    for name in COMMANDS:
+        args = parser.parse_args([name, "--out", "x", "--overwrite"])
+        assert (str(args.out), args.overwrite) == ("x", True), name

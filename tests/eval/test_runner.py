@@ -50,7 +50,8 @@ def test_results_do_not_depend_on_batch_size():
 
 def test_empty_dataset():
     (res,) = evaluate(ListDataset([]), [DETECTORS["ca"]], progress=False)
-    assert res.images == 0 and res.roc is None
+    assert res.images == 0 and res.roc.targets == 0 and res.objects.images == 0
+    assert res.objects.metrics()["tp"] == 0
 
 
 def test_preprocess_runs_before_detectors():

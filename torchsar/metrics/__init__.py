@@ -1,5 +1,8 @@
-"""Pure scoring functions: detection counts, ROC accumulation, despeckling quality."""
+"""Pure scoring: pixel counts, one-to-one object matching, additive object states (AP, FROC,
+P/R/F1, breakdowns, bootstrap), the pixel ROC, and despeckling quality."""
 
+from torchsar.metrics.assign import BatchMatch, match_batch
+from torchsar.metrics.curves import SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa
 from torchsar.metrics.despeckling import (
     edge_preservation,
     edge_ratio,
@@ -15,25 +18,34 @@ from torchsar.metrics.detection import (
     object_counts,
     pixel_counts,
 )
-from torchsar.metrics.roc import (
-    RocAccumulator,
-    default_object_grid,
-    default_pixel_grid,
-    merged_grid,
-)
+from torchsar.metrics.matching import GroundTruth, Matching, box_iou, greedy_match, ground_truth
+from torchsar.metrics.object_state import ImageInfo, ObjectState
+from torchsar.metrics.roc import RocAccumulator, default_pixel_grid
 
 __all__ = [
+    "SCORE_GRID",
+    "BatchMatch",
+    "GroundTruth",
+    "ImageInfo",
+    "Matching",
     "ObjectCounts",
+    "ObjectState",
     "PixelCounts",
     "RocAccumulator",
-    "default_object_grid",
+    "box_iou",
+    "coco_ap",
     "default_pixel_grid",
     "edge_preservation",
     "edge_ratio",
     "enl",
+    "froc",
+    "greedy_match",
+    "ground_truth",
     "label_components",
-    "merged_grid",
+    "match_batch",
     "object_counts",
+    "partial_auc",
+    "pd_at_fa",
     "pixel_counts",
     "psnr",
     "ratio_moments",

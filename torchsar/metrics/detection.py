@@ -21,10 +21,10 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
-from scipy import ndimage
 from torch import Tensor
 
 from torchsar._checks import InputTypeError, check_same_shape
+from torchsar.objects.components import label_components
 
 __all__ = ["ObjectCounts", "PixelCounts", "label_components", "object_counts", "pixel_counts"]
 
@@ -133,20 +133,6 @@ def pixel_counts(pred: Tensor, target: Tensor, ignore: Tensor | None = None) -> 
         targets=int(tgt.sum()),
         clutter=int(clu.sum()),
     )
-
-
-_STRUCTURES = {1: ndimage.generate_binary_structure(2, 1), 2: np.ones((3, 3), bool)}
-
-
-def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarray, int]:
-    """Connected components of a bool array; the last two axes are the image plane, leading
-    axes index separate images (labels are unique across the whole array).
-    ``connectivity``: 1 = 4-connected, 2 = 8-connected."""
-    plane = _STRUCTURES[connectivity]
-    structure = np.zeros((3,) * (mask.ndim - 2) + (3, 3), bool)
-    structure[(1,) * (mask.ndim - 2)] = plane
-    labels, n = ndimage.label(mask, structure=structure)
-    return labels, int(n)
 
 
 def _global_ids(inst: np.ndarray) -> np.ndarray:

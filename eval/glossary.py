@@ -1,0 +1,65 @@
+"""The glossary that opens ``summary.md``: what each column means, under which rule."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+__all__ = ["glossary"]
+
+_RULES = {
+    "centroid": "prescreening rule: a detection hits a target when its centroid lies in the "
+    "target box grown by {margin:g} x its larger side and its box is at most "
+    "{max_size_ratio:g}x the target box",
+    "mask": "mask IoU >= {iou:g}",
+    "box": "box IoU >= {iou:g}",
+}
+
+_TERMS = [
+    ("images, targets", "images scored; ground-truth instances (ignore regions excluded)"),
+    ("pd_pixel, pfa_pixel", "detected target pixels / target pixels; detected clutter pixels / "
+     "clutter pixels (ignore pixels excluded)"),
+    ("tp, fp, fn", "objects matched one-to-one to targets (each target at most once, "
+     "detections in descending score order); unmatched objects; missed targets"),
+    ("precision, recall (= pd_object), f1", "tp/(tp+fp), tp/targets, 2tp/(2tp+fp+fn)"),
+    ("fom", "figure of merit tp/(fp+targets)"),
+    ("false_alarms_per_image, fa_per_km2", "fp per image; fp per km² of scored image area "
+     "(only when every image has a pixel spacing)"),
+    ("ap50, ap50_95", "COCO average precision (101-point) at mask IoU 0.5 (box IoU for "
+     "box-only ground truth or --match box), and averaged over IoU 0.50:0.05:0.95; "
+     "class-agnostic (pycocotools useCats=0), no per-image detection cap"),
+    ("pd_at_F_fa_per_image", "FROC read at F false alarms per image: best recall with at "
+     "most F false alarms per image, objects ranked by score"),
+    ("pauc", "mean recall over 0-1 false alarms per image (area under the FROC, normalised)"),
+    ("X_lo, X_hi", "95 % Poisson-bootstrap interval over images"),
+    ("mean_iou, fragmentation", "mean IoU of the matched pairs; objects touching each "
+     "found target"),
+    ("ms_per_image, object_ms_per_image", "detector time (incl. despeckling); object "
+     "stage + matching time"),
+]  # fmt: skip
+
+
+def glossary(summary: pd.DataFrame, scoring) -> str:
+    """Markdown glossary for a run's summary (the matching rule and the N targets)."""
+    m = scoring.matching
+    rule = _RULES[m.kind].format(**m.as_dict())
+    r = scoring.rules
+    stage = (
+        f"closing radius {r.closing} px, {r.connectivity}-connected components of score > "
+        f"{r.floor:g}, area {r.min_area:g}–{'∞' if r.max_area is None else f'{r.max_area:g}'} "
+        f"{r.units}"
+    )
+    lines = [
+        "# Run summary",
+        "",
+        "Every detector goes through the same discrimination stage: " + stage + ". An "
+        "object's score is the peak of statistic / threshold over its pixels (1 = the "
+        "detector's design threshold). Operating point = every object (score > 1); "
+        f"matching rule: {rule}.",
+        "",
+    ]
+    for ds, df in summary.groupby("dataset", sort=False):
+        lines.append(f"- {ds}: {int(df['images'].iloc[0])} images, "
+                     f"{int(df['targets'].iloc[0])} targets")  # fmt: skip
+    lines += ["", "| column | meaning |", "|---|---|"]
+    lines += [f"| {k} | {v} |" for k, v in _TERMS]
+    return "\n".join(lines) + "\n"

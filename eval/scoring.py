@@ -1,0 +1,86 @@
+"""From a dataset batch to what the object scorer needs: ground truth, per-image facts and the
+per-image rows of ``per_image.csv``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from torchsar.metrics.assign import BatchMatch
+from torchsar.metrics.curves import OP_BIN, score_bins
+from torchsar.metrics.matching import GroundTruth, ground_truth
+from torchsar.metrics.object_state import ImageInfo
+from torchsar.objects import Objects
+
+__all__ = ["batch_truth", "image_rows", "pixel_areas"]
+
+
+def _planes(batch: dict) -> tuple[int, int]:
+    b, c = batch["instances"].shape[:2]
+    return b, c
+
+
+def _spacing(meta: dict) -> tuple[float, float] | None:
+    sp = meta.get("pixel_spacing")
+    if sp is None and meta.get("pixel_m") is not None:
+        sp = (meta["pixel_m"], meta["pixel_m"])
+    return None if sp is None else (float(sp[0]), float(sp[1]))
+
+
+def _group(meta: dict) -> str | None:
+    clutter = meta.get("clutter")
+    return f"clutter={clutter['model']}" if isinstance(clutter, dict) else meta.get("group")
+
+
+def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]]:
+    """Ground truth of a batch (one plane per image channel) and each plane's facts: the
+    bootstrap key (dataset + image name), image-level class, group and area in km^2."""
+    b, c = _planes(batch)
+    h, w = batch["instances"].shape[-2:]
+    metas = [m for m in batch["meta"] for _ in range(c)]
+    inst = batch["instances"].reshape(b * c, h, w).cpu().numpy()
+    ignore = batch["ignore"].reshape(b * c, h, w).cpu().numpy()
+    box_only = np.array([m.get("gt") == "box" for m in metas])
+    gt = ground_truth(
+        inst,
+        ignore,
+        classes=[list(m.get("classes") or []) for m in metas],
+        boxes=[list(m.get("boxes") or []) if m.get("gt") == "box" else [] for m in metas],
+        box_only=box_only,
+    )
+    info = []
+    for k, m in enumerate(metas):
+        sp = _spacing(m)
+        name = f"{dataset}/{m.get('name', k)}" + (f"#{k % c}" if c > 1 else "")
+        km2 = None if sp is None else h * w * sp[0] * sp[1] / 1e6
+        info.append(ImageInfo(name, m.get("class"), _group(m), km2))
+    return gt, info
+
+
+def pixel_areas(batch: dict) -> np.ndarray | None:
+    """Square metres per pixel for each plane, or ``None`` when any image lacks a spacing."""
+    c = _planes(batch)[1]
+    out = []
+    for m in batch["meta"]:
+        sp = _spacing(m)
+        if sp is None:
+            return None
+        out += [sp[0] * sp[1]] * c
+    return np.array(out)
+
+
+def image_rows(m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInfo]) -> list:
+    """One row per plane at the design operating point:
+    ``(image, n_gt, tp, fp, fn, objects, max_score)``."""
+    n = len(info)
+    at_op = score_bins(obj.score) >= OP_BIN
+    tp = np.bincount(obj.plane[at_op & (m.op >= 0)], minlength=n)
+    fp = np.bincount(obj.plane[at_op & (m.op == -1)], minlength=n)
+    n_gt = np.bincount(gt.plane, minlength=n)
+    count = np.bincount(obj.plane, minlength=n)
+    best = np.full(n, -np.inf)
+    np.maximum.at(best, obj.plane, obj.score)
+    return [
+        (i.key, int(n_gt[p]), int(tp[p]), int(fp[p]), int(n_gt[p] - tp[p]), int(count[p]),
+         float(best[p]))
+        for p, i in enumerate(info)
+    ]  # fmt: skip

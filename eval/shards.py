@@ -1,0 +1,238 @@
+"""Shards as the unit of work: a dataset's items are cut into fixed-size shards, each shard is
+scored into mergeable detector states saved atomically beside the results, and the final
+tables are the merge of the shard states (in shard order, so any split, worker count or
+resume gives identical tables).
+
+Engines: shards run in this process (``workers=1``), in ``workers`` spawned processes, each
+with ``cores // workers`` torch threads so workers never oversubscribe the machine, or as
+Ray tasks (one CPU and one torch thread each; a failed task is retried once).
+A saved shard is never recomputed, which is what ``--resume`` relies on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+import zlib
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from torch.utils.data import Dataset, Subset
+from tqdm.auto import tqdm
+
+from eval.errors import EvalError
+from eval.runner import DetectorResult, Scoring, evaluate
+
+__all__ = ["ShardJob", "merge", "run_shards", "shard_files", "shard_ranges", "shard_rows"]
+
+
+@dataclass(frozen=True)
+class ShardJob:
+    """Everything a worker needs to score shards of one dataset (picklable: the dataset
+    object holds paths and options, never open files)."""
+
+    name: str
+    dataset: Dataset
+    indices: Sequence[int]
+    specs: list
+    scoring: Scoring
+    batch_size: int = 16
+    preprocess: Callable | None = None
+    shard_size: int = 256
+
+
+def shard_ranges(n: int, size: int) -> list[range]:
+    """Consecutive positions ``[k * size, (k + 1) * size)`` covering ``0 .. n - 1``."""
+    return [range(k, min(k + size, n)) for k in range(0, n, size)]
+
+
+def _score_shard(job: ShardJob, k: int, on_batch=None) -> list[DetectorResult]:
+    rng = shard_ranges(len(job.indices), job.shard_size)[k]
+    part = Subset(job.dataset, [job.indices[i] for i in rng])
+    return evaluate(
+        part,
+        job.specs,
+        batch_size=job.batch_size,
+        preprocess=job.preprocess,
+        scoring=job.scoring,
+        name=job.name,
+        progress=False,
+        on_batch=on_batch,
+    )
+
+
+def _save(path: Path, results: list[DetectorResult]) -> None:
+    """Write a shard state atomically (see :func:`_write`)."""
+    _write(path, zlib.compress(pickle.dumps(results, protocol=pickle.HIGHEST_PROTOCOL), 1))
+
+
+def _load(path: Path) -> list[DetectorResult]:
+    with open(path, "rb") as f:
+        return pickle.loads(zlib.decompress(f.read()))
+
+
+def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
+    """Add shard results detector by detector, in shard order (one shard in memory at a
+    time; the per-image rows are dropped: :func:`shard_rows` streams them from disk)."""
+    out = None
+    for part in parts:
+        for r in part:
+            r.rows = []
+        out = part if out is None else [a + b for a, b in zip(out, part, strict=True)]
+    return out or []
+
+
+def shard_files(folder: Path) -> list[Path]:
+    """The saved shard states of a folder, in shard order."""
+    return sorted(folder.glob("shard-*.pkl"))
+
+
+def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
+    """``(detector, per-image rows)`` of every saved shard, in shard order."""
+    for path in shard_files(folder):
+        for r in _load(path):
+            yield r.spec.name, r.rows
+
+
+def _init_worker(threads: int) -> None:
+    torch.set_num_threads(threads)
+
+
+def _scored(job: ShardJob, k: int) -> bytes:
+    """A shard's state as compressed bytes (what a worker sends back)."""
+    return zlib.compress(pickle.dumps(_score_shard(job, k), pickle.HIGHEST_PROTOCOL), 1)
+
+
+def _write(path: Path, data: bytes) -> None:
+    """Save shard bytes atomically: a temporary name in the same folder, then rename."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
+    n_shards = len(shard_ranges(len(job.indices), job.shard_size))
+    paths = [(k, folder / f"shard-{k:06d}.pkl") for k in range(n_shards)]
+    return [(k, p) for k, p in paths if not p.exists()]
+
+
+class _Failures:
+    """Shards that failed (after the engine's retry): fatal, or recorded with ``skip_bad``."""
+
+    def __init__(self, skip_bad: bool) -> None:
+        self.skip_bad = skip_bad
+        self.failed: list[dict] = []
+
+    def __call__(self, k: int, exc: BaseException) -> None:
+        if isinstance(exc, KeyboardInterrupt):
+            raise exc
+        if not self.skip_bad:
+            raise EvalError(
+                f"shard {k} failed: {exc} (use --skip-bad to continue past it)"
+            ) from exc
+        self.failed.append({"shard": k, "error": f"{type(exc).__name__}: {exc}"})
+
+
+def _local(job, todo, bar, sizes, fail, on_batch) -> None:
+    for k, path in todo:
+        try:
+            _save(path, _score_shard(job, k, on_batch))
+        except (Exception, KeyboardInterrupt) as exc:
+            fail(k, exc)
+        bar.update(sizes[k])
+
+
+def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(threads,)) as pool:  # fmt: skip
+        futures = {pool.submit(_scored, job, k): (k, path) for k, path in todo}
+        for f in as_completed(futures):
+            k, path = futures[f]
+            try:
+                _write(path, f.result())
+            except Exception as exc:
+                fail(k, exc)
+            bar.update(sizes[k])
+
+
+def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise EvalError("--engine ray needs Ray: pip install 'torchsar[ray]'") from None
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False,
+                 configure_logging=False)  # fmt: skip
+    task = ray.remote(num_cpus=1, max_retries=1, retry_exceptions=True)(_scored_one_thread)
+    refs = {task.remote(job, k): (k, path) for k, path in todo}
+    while refs:
+        done, _ = ray.wait(list(refs), num_returns=1)
+        k, path = refs.pop(done[0])
+        try:
+            _write(path, ray.get(done[0]))
+        except Exception as exc:
+            fail(k, exc)
+        bar.update(sizes[k])
+
+
+def _scored_one_thread(job: ShardJob, k: int) -> bytes:
+    torch.set_num_threads(1)  # one Ray CPU per task: never oversubscribe a node
+    return _scored(job, k)
+
+
+def run_shards(
+    job: ShardJob,
+    folder: Path,
+    *,
+    workers: int = 1,
+    engine: str = "local",
+    address: str | None = None,
+    skip_bad: bool = False,
+    progress: bool = True,
+    on_batch=None,
+) -> tuple[list[DetectorResult], dict]:
+    """Score every shard not yet saved in ``folder``, then merge all saved shards.
+
+    Args:
+        job: the dataset, detectors and scoring.
+        folder: where shard states are saved (and found again on resume).
+        workers: local worker processes (``engine="local"``).
+        engine: ``"local"`` (this process or ``workers`` processes) or ``"ray"``.
+        address: Ray cluster address (default: a local Ray instance).
+        skip_bad: record failed shards and merge the rest instead of stopping.
+        progress: one progress bar over images.
+        on_batch: per-batch callback (in-process engine only).
+
+    Returns:
+        The merged results and counts ``{"shards", "done", "skipped", "failed"}``
+        (skipped = found saved already, e.g. on resume; failed = list of failed shards).
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
+    todo = _pending(job, folder)
+    fail = _Failures(skip_bad)
+    bar = tqdm(total=len(job.indices), desc=job.name, disable=not progress, unit="img")
+    bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
+    try:
+        if engine == "ray":
+            _ray(job, todo, bar, sizes, fail, address)
+        elif workers == 1:
+            _local(job, todo, bar, sizes, fail, on_batch)
+        else:
+            _processes(job, todo, bar, sizes, fail, workers)
+    finally:
+        bar.close()
+    merged = merge(_load(p) for p in shard_files(folder))
+    merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
+    counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
+              "skipped": len(sizes) - len(todo), "failed": fail.failed}  # fmt: skip
+    return merged, counts

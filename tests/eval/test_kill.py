@@ -1,0 +1,87 @@
+"""Kill test: SIGKILL or SIGTERM at a random point of a real run leaves ``--out`` empty, or
+holding a complete run (the old one or the new one), once the next start has settled what
+a killed run left behind."""
+
+from __future__ import annotations
+
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from eval.cli import main
+
+RUN_FILES = {"summary.csv", "roc.csv", "roc_pixel.csv", "summary.md", "config.json"}
+OLD_RUN = {"config.json": "old", "stale.csv": "old"}
+
+
+def _start(out, old: bool) -> subprocess.Popen:
+    if old:
+        out.mkdir()
+        for name, text in OLD_RUN.items():
+            (out / name).write_text(text)
+    argv = ["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca", "--no-progress"]
+    argv += ["--out", str(out)] + (["--overwrite"] if old else [])
+    cmd = [sys.executable, "-m", "eval.cli", *argv]
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _hidden(parent):
+    return [p for p in parent.iterdir() if ".torchsar-" in p.name]
+
+
+def _kill_when_writing(proc: subprocess.Popen, parent, sig: int, delay: float) -> None:
+    """Send ``sig`` ``delay`` seconds after the run's first hidden folder appears."""
+    deadline = time.monotonic() + 60
+    while not _hidden(parent) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    time.sleep(delay)
+    proc.send_signal(sig)
+
+
+def _state(out) -> str:
+    if not out.exists():
+        return "none"
+    names = {p.name for p in out.iterdir()}
+    if names == set(OLD_RUN):
+        return "old"
+    assert names >= RUN_FILES and any(n.startswith("roc_") and n.endswith(".png") for n in names)
+    assert "stale.csv" not in names
+    return "new"
+
+
+def _kill_cases(tmp_path, cases, seed: int) -> None:
+    """Start one run per case at once (``--overwrite`` of an old run or into a new folder),
+    kill each at a random point while it writes, then check what is left."""
+    rng = random.Random(seed)
+    parents = [tmp_path / f"case{i}" for i in range(len(cases))]
+    procs = []
+    for parent, (_sig, old) in zip(parents, cases, strict=True):
+        parent.mkdir()
+        procs.append(_start(parent / "out", old))
+    for proc, parent, (sig, _old) in zip(procs, parents, cases, strict=True):
+        _kill_when_writing(proc, parent, sig, rng.uniform(0.0, 1.5))
+    for proc, parent, (sig, old) in zip(procs, parents, cases, strict=True):
+        code = proc.wait(timeout=60)
+        if sig == signal.SIGTERM:  # the run cleans up itself and says so in one line
+            err = proc.stderr.read().strip()
+            assert code in (0, 143, -signal.SIGTERM), err  # -15: after main() returned
+            assert err == ("torchsar-eval: terminated" if code == 143 else ""), err
+            assert _hidden(parent) == []
+        assert main(["run", "--n", "0", "--out", str(parent / "next")]) == 2  # the next start
+        assert _hidden(parent) == []
+        assert _state(parent / "out") in (("old", "new") if old else ("none", "new"))
+
+
+needs_signals = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+
+
+@needs_signals
+def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
+    # SIGKILL while replacing an old run (the hardest case: an old run aside, a staging
+    # folder, nothing cleaned by the run itself); SIGTERM while writing a new one. Every
+    # step of the publishing protocol is killed deterministically in test_output.py.
+    _kill_cases(tmp_path, [(signal.SIGKILL, True), (signal.SIGTERM, False)], seed=14)

@@ -1,0 +1,67 @@
+"""Operating points without peeking (--calibrate-on) and the run's object outputs."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+
+from eval.calibrate import Target, choose_bin, parse_target, split_indices, threshold_of
+from eval.cli import main
+from eval.errors import EvalError
+from torchsar.metrics import ObjectState
+from torchsar.metrics.curves import OP_BIN, SCORE_GRID
+
+
+def test_split_is_disjoint_deterministic_and_near_the_fraction():
+    cal, test = split_indices(1000, "sim-chips", 0.3)
+    assert set(cal).isdisjoint(test) and sorted(cal + test) == list(range(1000))
+    assert (cal, test) == split_indices(1000, "sim-chips", 0.3)
+    assert 250 < len(cal) < 350
+    assert split_indices(10, "sim-chips", 0.3)[0] == [i for i in cal if i < 10]  # prefix-stable
+    with pytest.raises(EvalError):
+        split_indices(10, "x", 1.5)
+
+
+def test_choose_bin_by_hand():
+    st = ObjectState(replicates=0)
+    st.images, st.n_gt = 2, 2
+    st.tp[300] = st.tp[100] = 1  # TP, FP, FP, TP from the top
+    st.fp[200] = st.fp[150] = 1
+    assert choose_bin(st, Target("fa", 0.0)) == 201  # only the top TP
+    assert choose_bin(st, Target("fa", 0.5)) == 151  # one false alarm in 2 images
+    assert choose_bin(st, Target("fa", 5.0)) == 0  # everything
+    # F1: top TP alone 2/3, everything 2*2/(4+2+0) = 2/3: ties go to the highest level
+    assert choose_bin(st, Target("f1")) == 300
+    assert threshold_of(OP_BIN) == 1.0 and threshold_of(201) == SCORE_GRID[200]
+
+
+def test_parse_target():
+    assert parse_target("f1") == Target("f1") and parse_target("fa=0.1") == Target("fa", 0.1)
+    for bad in ("fa=-1", "fa=x", "recall=1"):
+        with pytest.raises(EvalError, match="calibrate-on"):
+            parse_target(bad)
+
+
+def test_run_with_calibration_and_coco_export(tmp_path):
+    out = tmp_path / "out"
+    argv = ["run", "--dataset", "sim-chips", "--n", "10", "--detectors", "ca,region",
+            "--calibrate-on", "fa=1", "--export-coco", "--bootstrap", "20", "--no-progress",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    s = pd.read_csv(out / "summary.csv")
+    test = split_indices(10, "sim-chips", 0.3)[1]
+    assert (s["images"] == len(test)).all()
+    assert not s["score_threshold"].isna().any()
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["options"]["calibration"] == {"target": "fa=1", "fraction": 0.3}
+    assert cfg["options"]["scoring"]["matching"]["kind"] == "centroid"
+    gt = json.loads((out / "coco" / "sim-chips__gt.json").read_text())
+    assert len(gt["images"]) == len(test)
+    dets = json.loads((out / "coco" / "sim-chips__region.json").read_text())
+    assert all({"image_id", "bbox", "score", "segmentation"} <= set(d) for d in dets)
+    for name in ("breakdown.csv", "per_image.csv", "pr.csv", "roc_sim-chips.pdf"):
+        assert (out / name).stat().st_size > 0
+    per_image = pd.read_csv(out / "per_image.csv")
+    assert len(per_image) == 2 * len(test)

@@ -1,0 +1,218 @@
+"""Run folders: published whole or not at all, never mixed with an older run."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from eval.errors import EvalError
+from eval.output import HOST, claim, file_slugs, recover, result_dir
+
+
+def _write_run(folder, files):
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    (folder / "config.json").write_text("{}\n")
+
+
+def _contents(folder):
+    return {p.name: p.read_text() for p in folder.iterdir()}
+
+
+def _dead_pid():
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_published_whole_with_nothing_left_beside(tmp_path):
+    out = tmp_path / "run"
+    with result_dir(out) as tmp:
+        assert tmp.parent == tmp_path and not out.exists()
+        _write_run(tmp, {"a.csv": "1"})
+    assert _contents(out) == {"a.csv": "1", "config.json": "{}\n"}
+    assert list(tmp_path.iterdir()) == [out]
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
+def test_failed_run_leaves_nothing(tmp_path, error):
+    out = tmp_path / "run"
+    with pytest.raises(error), result_dir(out) as tmp:
+        _write_run(tmp, {"a.csv": "1"})
+        raise error
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_empty_folder_is_replaced_and_a_full_one_refused(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    with result_dir(out) as tmp:
+        _write_run(tmp, {})
+    assert _contents(out) == {"config.json": "{}\n"}
+    with pytest.raises(EvalError, match="not an empty folder"), result_dir(out):
+        pass
+    assert _contents(out) == {"config.json": "{}\n"}
+
+
+@pytest.mark.parametrize(
+    ("prepare", "message"),
+    [
+        (lambda p: p.write_text("x"), "exists and is not a folder"),
+        (lambda p: (p.mkdir(), (p / "notes.txt").write_text("x")), "not a run"),
+        (lambda p: (p.mkdir(), _write_run(p, {})), "pass --overwrite"),
+    ],
+)
+def test_claim_refuses_before_any_work(tmp_path, prepare, message):
+    out = tmp_path / "out"
+    prepare(out)
+    before = sorted(os.listdir(tmp_path))
+    with pytest.raises(EvalError, match=message), claim(out):
+        raise AssertionError("the body must not run")
+    assert sorted(os.listdir(tmp_path)) == before
+
+
+def test_claim_refuses_a_folder_under_a_file(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(EvalError, match="is not a folder"), claim(tmp_path / "f" / "out"):
+        pass
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs a read-only /proc")
+def test_claim_refuses_an_unwritable_place():
+    with pytest.raises(EvalError, match="cannot write in /proc"), claim("/proc/torchsar-out"):
+        pass
+
+
+def test_overwrite_leaves_no_stale_file(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    _write_run(out, {"old.csv": "old", "a.csv": "old"})
+    with claim(out, overwrite=True), result_dir(out) as tmp:
+        assert not out.exists()  # the old run is aside, not mixed
+        _write_run(tmp, {"a.csv": "new"})
+    assert _contents(out) == {"a.csv": "new", "config.json": "{}\n"}
+    assert list(tmp_path.iterdir()) == [out]
+
+
+def test_overwrite_keeps_the_old_run_when_the_new_one_fails(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    _write_run(out, {"a.csv": "old"})
+    with pytest.raises(RuntimeError), claim(out, overwrite=True), result_dir(out) as tmp:
+        _write_run(tmp, {"a.csv": "new"})
+        raise RuntimeError
+    assert _contents(out) == {"a.csv": "old", "config.json": "{}\n"}
+    assert list(tmp_path.iterdir()) == [out]
+
+
+def _hidden(parent, name, kind, pid, host=None):
+    path = parent / f".{name}.torchsar-{kind}-{pid}-0123abcd@{host or HOST}"
+    path.mkdir()
+    (path / "config.json").write_text(kind)
+    return path
+
+
+def test_recover_settles_only_what_dead_runs_of_this_host_left(tmp_path):
+    dead, alive = _dead_pid(), os.getppid()
+    _hidden(tmp_path, "a", "partial", dead)  # staging of a killed run: deleted
+    _hidden(tmp_path, "b", "replaced", dead)  # old run aside, no new run: put back
+    (tmp_path / "c").mkdir()
+    _hidden(tmp_path, "c", "replaced", dead)  # old run aside, new one published: deleted
+    keep = [
+        _hidden(tmp_path, "d", "partial", alive),
+        _hidden(tmp_path, "e", "partial", dead, host="elsewhere"),
+        tmp_path / ".f.partial-123-abc",  # not named by us
+    ]
+    keep[-1].mkdir()
+    settled = recover(tmp_path)
+    assert sorted(h.name for h in settled) == ["a", "b", "c"]
+    assert (tmp_path / "b" / "config.json").read_text() == "replaced"
+    assert sorted(os.listdir(tmp_path)) == sorted(["b", "c", *(p.name for p in keep)])
+
+
+def test_resume_adopts_the_staging_folder_of_a_dead_run(tmp_path):
+    out = tmp_path / "out"
+    left = _hidden(tmp_path, "out", "partial", _dead_pid())
+    (left / "shard-0.pt").write_text("state")
+    with claim(out, resume=True), result_dir(out, resume=True) as tmp:
+        assert (tmp / "shard-0.pt").read_text() == "state"
+        (tmp / "summary.csv").write_text("x")
+    assert sorted(os.listdir(out)) == ["config.json", "shard-0.pt", "summary.csv"]
+    assert list(tmp_path.iterdir()) == [out]
+
+
+# --- crash consistency: a process killed before any single file-system step -------------
+
+
+def _overwrite_run(out):
+    with claim(out, overwrite=True), result_dir(out) as tmp:
+        for name in ("a.csv", "b.csv", "config.json"):
+            _step("write")
+            (tmp / name).write_text("new")
+
+
+def _step(kind):
+    """Count one file-system step; die like SIGKILL (no clean-up) at the chosen one."""
+    _step.count += 1
+    if _step.count == _step.kill_at:
+        os._exit(9)
+
+
+def _counted(name, real):
+    def call(*args, **kwargs):
+        _step(name)
+        return real(*args, **kwargs)
+
+    return call
+
+
+def _killed_at(out, k):
+    """Run ``_overwrite_run`` in a child killed at step ``k``; True if it finished first."""
+    pid = os.fork()
+    if pid == 0:  # child: patches its own copy of os and shutil, never returns into pytest
+        try:
+            _step.count, _step.kill_at = 0, k
+            for mod, name in ((os, "rename"), (os, "mkdir"), (shutil, "rmtree")):
+                setattr(mod, name, _counted(name, getattr(mod, name)))
+            _overwrite_run(out)
+        finally:
+            os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    return os.waitstatus_to_exitcode(status) == 0
+
+
+def test_a_kill_at_any_step_leaves_the_old_or_the_new_run(tmp_path):
+    out = tmp_path / "out"
+    outcomes = set()
+    for k in range(1, 40):
+        shutil.rmtree(out, ignore_errors=True)
+        out.mkdir()
+        for name in ("a.csv", "stale.csv", "config.json"):
+            (out / name).write_text("old")
+        finished = _killed_at(out, k)
+        recover(tmp_path)
+        contents = _contents(out)
+        assert contents in (
+            {"a.csv": "old", "stale.csv": "old", "config.json": "old"},
+            {"a.csv": "new", "b.csv": "new", "config.json": "new"},
+        ), k
+        assert list(tmp_path.iterdir()) == [out], k
+        outcomes.add(contents["a.csv"])
+        if finished:
+            break
+    assert finished and outcomes == {"old", "new"}
+
+
+def test_file_slugs_are_unique_per_run():
+    names = ["sim", "folder:a/x", "folder:b/x", "folder:b/x", "folder_a_x"]
+    slugs = file_slugs(names, lambda n: n.rsplit("/", 1)[-1])
+    assert slugs == {
+        "sim": "sim",  # unique: unchanged
+        "folder:a/x": "folder_a_x",
+        "folder:b/x": "folder_b_x",
+        "folder_a_x": "folder_a_x-2",
+    }

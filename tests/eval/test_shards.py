@@ -1,0 +1,128 @@
+"""Shards: any shard size, worker count or resumed run gives identical tables."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+import torch
+
+import torchsar as ts
+from eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
+from eval.detectors import DETECTORS
+from eval.runner import Scoring
+from eval.shards import ShardJob, run_shards, shard_ranges, shard_rows
+from eval.tables import (
+    breakdown_table,
+    froc_table,
+    pixel_roc_table,
+    pr_table,
+    summary_table,
+)
+
+
+class Chips(torch.utils.data.Dataset):
+    """Simulated chips generated on demand (picklable: no tensors held)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, i: int) -> dict:
+        item = ts.simulate.chips(1, size=64, length_px=(12, 24), seed=3, start=i)[0]
+        item["meta"] = {"name": str(i), **item["meta"]}
+        return item
+
+
+def _tables(results) -> list[pd.DataFrame]:
+    r = {"chips": results}
+    return [f(r) for f in (summary_table, froc_table, pr_table, pixel_roc_table,
+                           breakdown_table)]  # fmt: skip
+
+
+def _job(n: int, shard_size: int) -> ShardJob:
+    specs = [DETECTORS["ca"], DETECTORS["so"]]
+    scoring = Scoring(DEFAULT_RULES, DEFAULT_MATCH, replicates=10)
+    return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size)
+
+
+def _rows(folder) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for det, rows in shard_rows(folder):
+        out.setdefault(det, []).extend(rows)
+    return out
+
+
+def _assert_same(a, b, folder_a=None, folder_b=None) -> None:
+    for x, y in zip(_tables(a), _tables(b), strict=True):
+        pd.testing.assert_frame_equal(x, y)
+    if folder_a is not None:
+        rows = _rows(folder_a)
+        assert rows == _rows(folder_b) and all(len(v) == a[0].images for v in rows.values())
+
+
+def test_shard_ranges_cover_every_item_once():
+    assert [list(r) for r in shard_ranges(7, 3)] == [[0, 1, 2], [3, 4, 5], [6]]
+    assert shard_ranges(0, 5) == []
+
+
+@pytest.mark.parametrize("size", [1, 4])
+def test_any_shard_size_gives_the_same_tables(tmp_path, size):
+    whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
+    parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
+    assert counts == {"shards": 1, "done": 1, "skipped": 0, "failed": []}
+    assert counts_p["shards"] == -(-9 // size)
+    _assert_same(whole, parts, tmp_path / "a", tmp_path / "b")
+
+
+def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
+    first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
+    (tmp_path / "shard-000001.pkl").unlink()  # as if killed before shard 1 was saved
+    again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
+    assert counts == {"shards": 3, "done": 1, "skipped": 2, "failed": []}
+    _assert_same(first, again)
+
+
+def test_two_workers_equal_one(tmp_path):
+    one, _ = run_shards(_job(6, 2), tmp_path / "one", progress=False)
+    two, _ = run_shards(_job(6, 2), tmp_path / "two", workers=2, progress=False)
+    _assert_same(one, two, tmp_path / "one", tmp_path / "two")
+
+
+def _explode_on_big(x):
+    if float(x.max()) > 1e30:
+        raise RuntimeError("corrupt shard")
+    return DETECTORS["ca"](x)
+
+
+class Poisoned(Chips):
+    """Chips whose item 4 is corrupt."""
+
+    def __getitem__(self, i: int) -> dict:
+        item = super().__getitem__(i)
+        if i == 4:
+            item["image"] = item["image"] * 0 + 1e38
+        return item
+
+
+def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
+    from eval.detectors import DetectorSpec
+    from eval.errors import EvalError
+
+    job = _job(6, 2)
+    job = ShardJob("chips", Poisoned(6), job.indices, [DetectorSpec("x", _explode_on_big)],
+                   job.scoring, 2, None, 2)  # fmt: skip
+    with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
+        run_shards(job, tmp_path / "a", progress=False)
+    merged, counts = run_shards(job, tmp_path / "b", skip_bad=True, progress=False)
+    assert counts["failed"] == [{"shard": 2, "error": "RuntimeError: corrupt shard"}]
+    assert merged[0].images == 4  # the other shards, merged
+
+
+def test_ray_engine_equals_local(tmp_path):
+    pytest.importorskip("ray")
+    local, _ = run_shards(_job(6, 2), tmp_path / "local", progress=False)
+    remote, counts = run_shards(_job(6, 2), tmp_path / "ray", engine="ray", progress=False)
+    assert counts["done"] == 3
+    _assert_same(local, remote)

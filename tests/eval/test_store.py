@@ -1,0 +1,58 @@
+"""Stored datasets: item i of a store is item i of its source, read lazily."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import tarfile
+
+import pytest
+import torch
+
+import torchsar as ts
+from eval.cli import main
+from eval.commands.make_dataset import sim_items
+from eval.errors import EvalError
+from eval.store import StoreDataset, write_store
+
+
+def test_sim_items_equal_the_batch_generation():
+    batch = ts.simulate.chips(5, seed=2)
+    items = list(sim_items("sim-chips", 5, 2, block=2))
+    for i, it in enumerate(items):
+        for k in ("image", "mask", "instances", "ignore"):
+            assert torch.equal(it[k], batch[i][k])
+        assert it["meta"]["name"] == f"sim-chips/{i}"
+
+
+def test_make_dataset_round_trip_and_lazy_reads(tmp_path):
+    out = tmp_path / "store"
+    argv = ["make-dataset", "--kind", "sim-chips", "--n", "7", "--seed", "4",
+            "--shard-size", "3", "--out", str(out), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    assert sorted(p.name for p in out.glob("*.tar")) == [f"shard-00000{k}.tar" for k in range(3)]
+    ds = StoreDataset(out)
+    batch = ts.simulate.chips(7, seed=4)
+    assert len(ds) == 7 and ds._index is None  # nothing opened before the first read
+    for i in (6, 0, 3):  # any order
+        for k in ("image", "mask", "instances", "ignore"):
+            assert torch.equal(ds[i][k], batch[i][k])
+        assert ds[i]["meta"]["boxes"] == [list(b) for b in batch.meta[i]["boxes"]]
+    assert pickle.loads(pickle.dumps(ds))._index is None  # workers get no open map
+    with tarfile.open(out / "shard-000001.tar") as tar:  # the WebDataset layout
+        assert tar.getnames()[:5] == [f"000000003.{f}" for f in
+                                      ("image.npy", "mask.npy", "instances.npy", "ignore.npy", "json")]  # fmt: skip
+    header = json.loads((out / "store.json").read_text())
+    assert (header["n"], header["source"], header["seed"]) == (7, "sim-chips", 4)
+    assert main(argv) == 2  # the store exists: refused
+
+
+def test_truncated_or_foreign_store_is_a_clear_error(tmp_path):
+    b = ts.simulate.chips(2, seed=0)
+    out = write_store(({**b[i], "meta": {"name": str(i)}} for i in range(2)), 2, tmp_path / "s")
+    shard = out / "shard-000000.tar"
+    shard.write_bytes(shard.read_bytes()[:2000])
+    with pytest.raises(EvalError, match="truncated"):
+        StoreDataset(out)[1]
+    with pytest.raises(EvalError, match="not a torchsar store"):
+        StoreDataset(tmp_path)

@@ -1,0 +1,119 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.reference.coco import coco_match
+from torchsar._checks import OptionError
+from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
+from torchsar.metrics.matching import COCO_IOUS
+from torchsar.objects import ObjectRules, discriminate
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), d=st.integers(0, 7), g=st.integers(0, 5))
+def test_greedy_equals_the_pycocotools_loop(seed, d, g):
+    rng = np.random.default_rng(seed)
+    q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))  # ties on purpose
+    crowd = rng.choice([0.0, 0.5, 0.8], size=d)
+    got = greedy_match(q, crowd, COCO_IOUS)
+    ref = coco_match(np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
+                     COCO_IOUS)  # fmt: skip
+    assert np.array_equal(got, np.where(ref == g, -2, ref))
+
+
+def test_box_iou_hand_computed():
+    a = np.array([[0, 0, 4, 4.0]])
+    b = np.array([[2, 2, 6, 6.0], [10, 10, 12, 12.0]])
+    assert box_iou(a, b).tolist() == [[4 / 28, 0.0]]
+    assert box_iou(a, b, crowd=True).tolist() == [[4 / 16, 0.0]]
+
+
+def test_matching_options_are_validated():
+    with pytest.raises(OptionError, match="kind"):
+        Matching(kind="touch")
+    with pytest.raises(OptionError, match="iou"):
+        Matching(iou=1.5)
+    with pytest.raises(OptionError, match="max_size_ratio"):
+        Matching(kind="centroid", max_size_ratio=0.5)
+
+
+def _score(stat: np.ndarray, inst: np.ndarray, rule: Matching, ignore=None, closing=0):
+    s = torch.as_tensor(stat, dtype=torch.float64)[:, None]
+    obj = discriminate(s, 1.0, rules=ObjectRules(closing=closing))
+    gt = ground_truth(inst, ignore)
+    return match_batch(obj, gt, rule), obj, gt
+
+
+def _two_targets():
+    inst = np.zeros((1, 40, 40), int)
+    inst[0, 5:25, 5:20] = 1  # a large target ...
+    inst[0, 10:16, 22:28] = 2  # ... and a small one beside it
+    return inst
+
+
+@pytest.mark.parametrize("kind", ["mask", "box", "centroid"])
+def test_one_blob_over_two_targets_is_one_tp_and_one_fn(kind):
+    inst = _two_targets()
+    stat = np.zeros((1, 40, 40))
+    stat[0, 5:25, 5:28] = 3.0  # one blob covering both
+    m, obj, _ = _score(stat, inst, Matching(kind=kind))
+    assert len(obj) == 1 and (m.op >= 0).sum() == 1 and m.op[0] == 0
+    assert np.isfinite(m.gt_score).sum() == 1  # the small target is missed
+
+
+@pytest.mark.parametrize("kind", ["mask", "centroid"])
+def test_flood_is_one_false_alarm(kind):
+    inst = _two_targets()
+    m, obj, _ = _score(np.full((1, 40, 40), 5.0), inst, Matching(kind=kind))
+    assert len(obj) == 1 and m.op.tolist() == [-1]
+
+
+def test_split_target_one_tp_rest_false_unless_closed():
+    inst = np.zeros((1, 30, 30), int)
+    inst[0, 5:15, 5:15] = 1
+    stat = np.zeros((1, 30, 30))
+    stat[0, 5:15, 5:9] = 2.0
+    stat[0, 5:15, 11:15] = 4.0  # two fragments two pixels apart
+    m, obj, _ = _score(stat, inst, Matching(kind="centroid"))
+    assert len(obj) == 2 and sorted(m.op.tolist()) == [-1, 0]
+    m, obj, _ = _score(stat, inst, Matching(kind="mask"), closing=2)
+    assert len(obj) == 1 and m.op.tolist() == [0]
+
+
+def test_detection_in_ignore_region_is_neither_tp_nor_fp():
+    inst = np.zeros((1, 20, 20), int)
+    inst[0, 2:6, 2:6] = 1
+    ignore = np.zeros((1, 20, 20), bool)
+    ignore[0, 12:18, 12:18] = True
+    stat = np.zeros((1, 20, 20))
+    stat[0, 13:16, 13:16] = 2.0
+    for kind in ("mask", "box", "centroid"):
+        m, _, _ = _score(stat, inst, Matching(kind=kind), ignore=ignore)
+        assert m.op.tolist() == [-2]
+
+
+def test_higher_score_wins_the_target():
+    inst = np.zeros((1, 20, 20), int)
+    inst[0, 2:12, 2:12] = 1
+    stat = np.zeros((1, 20, 20))
+    stat[0, 2:12, 2:6] = 2.0  # weaker, smaller overlap
+    stat[0, 2:12, 8:12] = 9.0
+    m, obj, _ = _score(stat, inst, Matching(kind="centroid"))
+    strong = int(np.argmax(obj.score))
+    assert m.op[strong] == 0 and m.op[1 - strong] == -1
+
+
+def test_ground_truth_ids_classes_and_empty_planes():
+    inst = np.zeros((3, 6, 6), int)
+    inst[0, 1:3, 1:3] = 1
+    inst[0, 4:6, 4:6] = 2
+    inst[2, 0:2, 0:2] = 5
+    gt = ground_truth(inst, classes=[["a", "b"], [], [None, None, None, None, "c"]])
+    assert gt.plane.tolist() == [0, 0, 2]
+    assert list(gt.classes) == ["a", "b", "c"]
+    assert gt.box.tolist() == [[1, 1, 3, 3], [4, 4, 6, 6], [0, 0, 2, 2]]
+    assert gt.area.tolist() == [4, 4, 4]

@@ -1,0 +1,93 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from skimage.measure import label, regionprops
+
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar.objects import ObjectRules, discriminate, normalised_score
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), density=st.floats(0.02, 0.5), conn=st.sampled_from([4, 8]))
+def test_objects_match_skimage_regionprops(seed, density, conn):
+    rng = np.random.default_rng(seed)
+    stat = rng.random((2, 1, 12, 15)) * (rng.random((2, 1, 12, 15)) < density) * 10
+    obj = discriminate(torch.as_tensor(stat), 0.5, rules=ObjectRules(connectivity=conn))
+    k = 0
+    for p in range(2):
+        lab = label(stat[p, 0] > 0.5, connectivity=2 if conn == 8 else 1)
+        for r in regionprops(lab, intensity_image=stat[p, 0] / 0.5):
+            assert obj.plane[k] == p and obj.area[k] == r.area
+            assert obj.box[k].tolist() == list(r.bbox)
+            np.testing.assert_allclose(obj.centroid[k], r.centroid, atol=1e-9)
+            np.testing.assert_allclose(
+                [obj.length[k], obj.width[k]],
+                [r.axis_major_length, r.axis_minor_length], atol=1e-6)  # fmt: skip
+            assert obj.score[k] == pytest.approx(r.intensity_max)
+            assert np.array_equal(obj.labels[p] == k + 1, lab == r.label)
+            k += 1
+    assert k == len(obj)
+
+
+def test_closing_is_extensive_and_joins_fragments():
+    stat = torch.zeros(1, 1, 20, 20)
+    stat[0, 0, 5:10, 5:8] = 3.0
+    stat[0, 0, 5:10, 10:13] = 3.0  # two pixels apart
+    open_ = discriminate(stat, 1.0)
+    closed = discriminate(stat, 1.0, rules=ObjectRules(closing=2))
+    assert len(open_) == 2 and len(closed) == 1
+    assert closed.area[0] >= open_.area.sum()
+    assert bool(((open_.labels > 0) <= (closed.labels > 0)).all())  # nothing removed
+    edge = torch.zeros(1, 1, 10, 10)
+    edge[0, 0, 0, :] = 2.0  # a line on the border survives closing unchanged in extent
+    assert discriminate(edge, 1.0, rules=ObjectRules(closing=3)).area[0] >= 10
+
+
+def test_size_rules_in_pixels_and_square_metres():
+    stat = torch.zeros(2, 1, 16, 16)
+    stat[:, 0, 1:3, 1:3] = 2.0  # 4 px
+    stat[:, 0, 8:14, 8:14] = 2.0  # 36 px
+    assert discriminate(stat, 1.0, rules=ObjectRules(min_area=5)).area.tolist() == [36, 36]
+    assert discriminate(stat, 1.0, rules=ObjectRules(max_area=10)).area.tolist() == [4, 4]
+    m2 = ObjectRules(min_area=10.0, units="m2")  # plane 0: 1 m2/px; plane 1: 4 m2/px
+    got = discriminate(stat, 1.0, rules=m2, pixel_area=np.array([1.0, 4.0]))
+    assert got.plane.tolist() == [0, 1, 1] and got.area.tolist() == [36, 4, 36]
+    with pytest.raises(OptionError, match="pixel_area"):
+        discriminate(stat, 1.0, rules=m2)
+
+
+def test_floor_and_score_normalisation():
+    stat = torch.zeros(1, 1, 8, 8, dtype=torch.float64)
+    stat[0, 0, 2, 2] = 6.0
+    stat[0, 0, 2, 3] = 3.0  # below threshold 4 but above floor 0.5
+    assert discriminate(stat, 4.0).area.tolist() == [1]
+    low = discriminate(stat, 4.0, rules=ObjectRules(floor=0.5))
+    assert low.area.tolist() == [2] and low.score.tolist() == [1.5]
+    z = normalised_score(torch.tensor([-1.0, 0.5]), torch.tensor(-0.5))
+    assert z.tolist() == [0.5, 2.0]  # non-positive threshold: 1 + s - t
+
+
+def test_batch_invariance_empty_batch_and_errors():
+    g = torch.Generator().manual_seed(0)
+    stat = torch.rand(3, 1, 16, 16, generator=g) * 3
+    whole = discriminate(stat, 2.0)
+    parts = [discriminate(stat[i : i + 1], 2.0) for i in range(3)]
+    assert whole.area.tolist() == np.concatenate([p.area for p in parts]).tolist()
+    assert whole.score.tolist() == np.concatenate([p.score for p in parts]).tolist()
+    assert len(discriminate(torch.zeros(0, 1, 8, 8), 1.0)) == 0
+    full = discriminate(torch.full((1, 1, 8, 8), 5.0), 1.0)
+    assert len(full) == 1 and full.area[0] == 64  # a flood is one object
+    with pytest.raises(InputValueError):
+        discriminate(torch.full((1, 1, 4, 4), float("nan")), 1.0)
+    with pytest.raises(ShapeError):
+        discriminate(torch.zeros(4, 4), 1.0)
+    with pytest.raises(InputTypeError):
+        discriminate(torch.zeros(1, 1, 4, 4, dtype=torch.int32), 1.0)
+    for bad in ({"closing": -1}, {"connectivity": 6}, {"floor": 0}, {"min_area": 5, "max_area": 2},
+                {"units": "acres"}):  # fmt: skip
+        with pytest.raises(OptionError):
+            ObjectRules(**bad)

@@ -1,0 +1,219 @@
+"""One-to-one matching of scored objects to ground-truth instances.
+
+The COCO rule (Lin et al., "Microsoft COCO: Common Objects in Context", ECCV 2014,
+doi:10.1007/978-3-319-10602-1_48; the ``pycocotools`` evaluator): detections are visited in
+descending score order; each takes the still-unmatched ground-truth instance of highest
+quality (mask or box IoU) at or above the threshold; an instance is matched at most once; a
+detection matching nothing real but overlapping the image's ignore region (COCO "crowd":
+intersection over the detection's own area) is ignored, neither true nor false. So one blob
+over two targets is at most one true positive, and a flood of the whole image is one false
+alarm. Because the visit is greedy by score, the matches among the detections scoring above
+any level are exactly those of the full pass: one pass gives every point of a PR / FROC curve.
+
+The prescreening rule (``kind="centroid"``), common for SAR vehicle prescreeners: a detection
+hits an instance when its centroid lies inside the instance's box grown by ``margin`` (a
+fraction of the box's larger side) and its box is at most ``max_size_ratio`` times the
+instance's box area; among several, the nearest box centre; the same greedy one-to-one visit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from torchsar._checks import OptionError, check_choice
+
+__all__ = [
+    "COCO_IOUS",
+    "GroundTruth",
+    "Matching",
+    "box_iou",
+    "greedy_match",
+    "ground_truth",
+    "mask_overlaps",
+]
+
+COCO_IOUS = np.round(np.linspace(0.5, 0.95, 10), 2)
+"""The IoU thresholds of COCO's AP@[.5:.95]."""
+
+UNMATCHED, IGNORED = -1, -2
+
+
+@dataclass(frozen=True)
+class Matching:
+    """The matching rule of the operating-point metrics and the FROC.
+
+    Attributes:
+        kind: ``"mask"`` (mask IoU), ``"box"`` (box IoU) or ``"centroid"`` (prescreening).
+        iou: IoU threshold of ``mask`` / ``box`` (0.5: PASCAL VOC / COCO AP50).
+        margin: ``centroid`` rule: box growth, as a fraction of the box's larger side.
+        max_size_ratio: ``centroid`` rule: largest detection-box / instance-box area ratio.
+    """
+
+    kind: str = "mask"
+    iou: float = 0.5
+    margin: float = 0.25
+    max_size_ratio: float = 4.0
+
+    def __post_init__(self) -> None:
+        check_choice(self.kind, "kind", ("mask", "box", "centroid"))
+        for name, lo, hi in (("iou", 0.0, 1.0), ("margin", 0.0, 10.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+                raise OptionError(f"{name} must be in [{lo:g}, {hi:g}], got {v!r}")
+        r = self.max_size_ratio
+        if isinstance(r, bool) or not isinstance(r, int | float) or not r >= 1:
+            raise OptionError(f"max_size_ratio must be >= 1, got {r!r}")
+
+    @property
+    def iou_kind(self) -> str:
+        """The IoU used for AP: box IoU under the box rule, mask IoU otherwise."""
+        return "box" if self.kind == "box" else "mask"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Ground-truth instances of a stack of planes (ids unique across the stack).
+
+    Attributes:
+        ids: int64 ``(N, H, W)`` instance ids ``1..G`` (0 = none); instance ``k`` has id
+            ``k + 1``.
+        plane: int64 ``(G,)``; area: int64 ``(G,)`` pixels; box: float64 ``(G, 4)``
+            ``(r0, c0, r1, c1)`` end-exclusive; classes: ``(G,)`` object array of str.
+        ignore: bool ``(N, H, W)`` don't-care pixels.
+        box_only: bool ``(N,)`` planes whose ground truth is boxes only (box IoU there).
+    """
+
+    ids: np.ndarray
+    plane: np.ndarray
+    area: np.ndarray
+    box: np.ndarray
+    classes: np.ndarray
+    ignore: np.ndarray
+    box_only: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.plane.shape[0])
+
+
+def _boxes_from_ids(ids: np.ndarray, n: int) -> np.ndarray:
+    from scipy import ndimage
+
+    if n == 0:
+        return np.zeros((0, 4))
+    sl = ndimage.find_objects(ids, max_label=n)
+    return np.array(
+        [(s[1].start, s[2].start, s[1].stop, s[2].stop) for s in sl], dtype=np.float64
+    ).reshape(n, 4)
+
+
+def ground_truth(
+    instances: np.ndarray,
+    ignore: np.ndarray | None = None,
+    *,
+    classes: list[list[str]] | None = None,
+    boxes: list[list] | None = None,
+    box_only: np.ndarray | None = None,
+) -> GroundTruth:
+    """Build :class:`GroundTruth` from instance-id planes ``(N, H, W)``.
+
+    Args:
+        instances: int ids per plane (0 = none; any positive ids).
+        ignore: bool don't-care pixels, same shape (default none).
+        classes: per plane, the class of local id ``k`` at position ``k - 1`` (default
+            ``"target"``).
+        boxes: per plane, the box of local id ``k`` at position ``k - 1`` (default: the
+            bounding box of the id's pixels); required to be exact for box-only planes.
+        box_only: bool per plane (default all False).
+    """
+    inst = np.asarray(instances).astype(np.int64)
+    n_planes = inst.shape[0]
+    per_plane = inst.reshape(n_planes, int(np.prod(inst.shape[1:]))).max(axis=1, initial=0)
+    offset = np.concatenate([[0], np.cumsum(per_plane)[:-1]])
+    raw = np.where(inst > 0, inst + offset[:, None, None], 0)
+    used = np.bincount(raw.reshape(-1), minlength=1) > 0
+    used[0] = False
+    lut = np.cumsum(used)
+    ids = np.where(raw > 0, lut[raw], 0)
+    gids = np.flatnonzero(used)
+    plane = np.searchsorted(offset, gids, side="left") - 1  # offset[p] < id <= offset[p+1]
+    local = gids - offset[plane]
+    n = int(gids.size)
+    area = np.bincount(ids.reshape(-1), minlength=n + 1)[1:].astype(np.int64)
+    box = _boxes_from_ids(ids, n)
+    cls = np.array(["target"] * n, dtype=object)
+    for k in range(n):
+        p, i = int(plane[k]), int(local[k]) - 1
+        if classes is not None and i < len(classes[p]):
+            cls[k] = str(classes[p][i])
+        if boxes is not None and i < len(boxes[p]):
+            box[k] = np.asarray(boxes[p][i], dtype=np.float64)
+    ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
+    bo = np.zeros(n_planes, bool) if box_only is None else np.asarray(box_only, bool)
+    return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo)
+
+
+def mask_overlaps(
+    det: np.ndarray, n_det: int, gt: np.ndarray, n_gt: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sparse pixel intersections of two label stacks: ``(det_index, gt_index, pixels)``
+    for every overlapping pair (0-based indices)."""
+    d, g = det.reshape(-1), gt.reshape(-1)
+    both = (d > 0) & (g > 0)
+    key = d[both].astype(np.int64) * (n_gt + 1) + g[both]
+    pairs, inter = np.unique(key, return_counts=True)
+    return pairs // (n_gt + 1) - 1, pairs % (n_gt + 1) - 1, inter
+
+
+def box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
+    """IoU matrix ``(len(a), len(b))`` of end-exclusive boxes ``(r0, c0, r1, c1)``; with
+    ``crowd`` the intersection over the area of ``a`` (COCO's crowd rule).
+
+    Example:
+        >>> box_iou(np.array([[0, 0, 2, 2.]]), np.array([[0, 1, 2, 3.]])).tolist()
+        [[0.3333333333333333]]
+    """
+    a, b = a[:, None, :], b[None, :, :]
+    ih = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
+    iw = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
+    inter = ih * iw
+    area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
+    area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+    den = area_a if crowd else area_a + area_b - inter
+    return np.where(den > 0, inter / np.where(den > 0, den, 1.0), 0.0)
+
+
+def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """COCO's greedy one-to-one assignment at several thresholds at once.
+
+    Args:
+        quality: ``(D, G)`` pair quality (IoU), detections already in descending score order.
+        crowd: ``(D,)`` quality against the ignore region (used only when no instance matches).
+        thresholds: ``(T,)`` minimum quality (a pair at exactly the threshold matches).
+
+    Returns:
+        int ``(T, D)``: the matched instance column, ``-1`` unmatched, ``-2`` ignored.
+        Among instances of equal quality the last one wins, as in ``pycocotools``.
+    """
+    n_t, (n_d, n_g) = len(thresholds), quality.shape
+    out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
+    thr = np.minimum(np.asarray(thresholds, dtype=np.float64), 1 - 1e-10)
+    best = quality.max(axis=1, initial=0.0) if n_g else np.zeros(n_d)
+    cand = np.flatnonzero((best >= thr.min()) | (crowd >= thr.min()))
+    taken = np.zeros((n_t, n_g), bool)
+    rows = np.arange(n_t)
+    for d in cand:
+        if n_g:
+            q = np.where(~taken & (quality[d][None, :] >= thr[:, None]), quality[d][None, :], -1.0)
+            j = n_g - 1 - np.argmax(q[:, ::-1], axis=1)
+            hit = q[rows, j] >= 0
+            out[hit, d] = j[hit]
+            taken[rows[hit], j[hit]] = True
+        else:
+            hit = np.zeros(n_t, bool)
+        out[~hit & (crowd[d] >= thr), d] = IGNORED
+    return out

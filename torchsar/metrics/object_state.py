@@ -1,0 +1,296 @@
+"""Additive object-level scoring state: fixed-size histograms that merge by addition.
+
+One :class:`ObjectState` per detector and dataset holds, over a fixed score grid
+(:data:`~torchsar.metrics.curves.SCORE_GRID`):
+
+- TP / FP histograms at the ten COCO IoU thresholds (AP50, AP50:95);
+- TP / FP histograms and the summed IoU of matches under the matching rule (operating point,
+  precision / recall / F1, FoM, FROC, Pd at fixed false alarms per image);
+- the same TP / FP histograms per breakdown key: ground-truth class (false alarms go to the
+  image's class when it has one), size bin (instances by their area, false alarms by theirs)
+  and image group (e.g. the clutter model of a simulated image);
+- Poisson-bootstrap replicates of the rule's and the IoU-0.5 histograms (see
+  :mod:`torchsar.metrics.bootstrap`) for intervals over images.
+
+Nothing grows with the number of images or detections, and any split of a dataset into
+batches, shards or workers gives identical states once added up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from torchsar.metrics.assign import BatchMatch
+from torchsar.metrics.bootstrap import interval, poisson_weights
+from torchsar.metrics.curves import (
+    OP_BIN,
+    SCORE_GRID,
+    coco_ap,
+    froc,
+    partial_auc,
+    pd_at_fa,
+    score_bins,
+)
+from torchsar.metrics.matching import GroundTruth
+from torchsar.objects import Objects
+
+__all__ = ["FA_LEVELS", "ImageInfo", "KeyCounts", "ObjectState", "operating_point", "size_bin"]
+
+N_BINS = SCORE_GRID.size + 1
+FA_LEVELS = (0.1, 1.0, 10.0)
+NO_CLASS = "(no image class)"
+
+
+@dataclass(frozen=True)
+class ImageInfo:
+    """What the scorer needs to know about one plane beyond its pixels."""
+
+    key: str
+    cls: str | None = None
+    group: str | None = None
+    km2: float | None = None
+
+
+def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
+    """Size bin index of each area: bin ``i`` is ``[edges[i-1], edges[i])`` (half-open)."""
+    return np.searchsorted(np.asarray(edges, dtype=np.float64), area, side="right")
+
+
+IOU_UNIT = 10**9
+"""IoUs are summed as integers in units of 1e-9, so sums are exact whatever the order."""
+
+
+def _hist(bins: np.ndarray) -> np.ndarray:
+    return np.bincount(bins, minlength=N_BINS)
+
+
+def _iou_units(bins: np.ndarray, iou: np.ndarray) -> np.ndarray:
+    out = np.zeros(N_BINS, np.int64)
+    np.add.at(out, bins, np.rint(iou * IOU_UNIT).astype(np.int64))
+    return out
+
+
+@dataclass(eq=False)
+class KeyCounts:
+    """Per breakdown key: instances, images and TP / FP score histograms (additive)."""
+
+    n_gt: int = 0
+    images: int = 0
+    tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+    fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+
+    def __add__(self, other: KeyCounts) -> KeyCounts:
+        return KeyCounts(
+            self.n_gt + other.n_gt, self.images + other.images,
+            self.tp + other.tp, self.fp + other.fp,
+        )  # fmt: skip
+
+
+@dataclass(eq=False)
+class ObjectState:
+    """Object-level state of one detector on one dataset (see the module docstring).
+
+    Args:
+        replicates: bootstrap replicates (0: no intervals).
+        seed: bootstrap seed.
+        size_edges: size-bin edges in pixels (default COCO's 32^2 and 96^2, half-open bins
+            ``small``, ``medium``, ``large``).
+        size_names: one name per bin.
+    """
+
+    replicates: int = 100
+    seed: int = 0
+    size_edges: tuple[float, ...] = (32.0**2, 96.0**2)
+    size_names: tuple[str, ...] = ("small", "medium", "large")
+    images: int = 0
+    area_mm2: int = 0
+    images_km2: int = 0
+    n_gt: int = 0
+    ap_tp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
+    ap_fp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
+    tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+    fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+    iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+    fragments: int = 0
+    fragmented: int = 0
+    keys: dict[str, KeyCounts] = field(default_factory=dict)
+    boot: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if len(self.size_names) != len(self.size_edges) + 1:
+            raise ValueError("size_names needs one name more than size_edges")
+        if not self.boot:
+            r = self.replicates
+            self.boot = {k: np.zeros((r, N_BINS), np.int64) for k in ("tp", "fp", "tp50", "fp50")}
+            self.boot["n_gt"] = np.zeros(r, np.int64)
+            self.boot["images"] = np.zeros(r, np.int64)
+
+    # -- accumulation ------------------------------------------------------------------------
+
+    def update(self, m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInfo]) -> None:
+        """Add one matched batch (``info``: one entry per plane)."""
+        bins = score_bins(obj.score)
+        hit, false = m.op >= 0, m.op == -1
+        self.images += len(info)
+        spaced = [i.km2 for i in info if i.km2 is not None]
+        self.area_mm2 += sum(round(a * 1e12) for a in spaced)  # integers: exact in any order
+        self.images_km2 += len(spaced)
+        self.n_gt += len(gt)
+        for t in range(m.ap.shape[0]):
+            self.ap_tp[t] += _hist(bins[m.ap[t] >= 0])
+            self.ap_fp[t] += _hist(bins[m.ap[t] == -1])
+        self.tp += _hist(bins[hit])
+        self.fp += _hist(bins[false])
+        self.iou_sum += _iou_units(bins[hit], m.op_iou[hit])
+        found = score_bins(m.gt_score) >= OP_BIN
+        self.fragments += int(m.overlaps[found].sum())
+        self.fragmented += int(found.sum())
+        self._update_keys(m, obj, gt, info, bins)
+        if self.replicates:
+            self._update_boot(m, obj, gt, info, bins)
+
+    def _add_key(self, key: str, **parts) -> None:
+        self.keys[key] = self.keys.get(key, KeyCounts()) + KeyCounts(**parts)
+
+    def _update_keys(self, m, obj, gt, info, bins) -> None:
+        gt_bins = score_bins(m.gt_score)
+        false = m.op == -1
+        image_cls = np.array([i.cls or NO_CLASS for i in info], dtype=object)
+        fp_size = self._size_names(obj.area[false])
+        groups = [
+            ("class", gt.classes, image_cls[obj.plane[false]]),
+            ("size", self._size_names(gt.area), fp_size),
+        ]
+        for prefix, gt_keys, fp_keys in groups:
+            for k in set(gt_keys.tolist()) | set(fp_keys.tolist()):
+                mine = gt_keys == k
+                self._add_key(
+                    f"{prefix}:{k}", n_gt=int(mine.sum()),
+                    tp=_hist(gt_bins[mine & np.isfinite(m.gt_score)]),
+                    fp=_hist(bins[false][fp_keys == k]),
+                )  # fmt: skip
+        for p, i in enumerate(info):
+            for key in (
+                f"group:{i.group}" if i.group else None,
+                f"image_class:{i.cls}" if i.cls else None,
+            ):
+                if key is None:
+                    continue
+                d, g = obj.plane == p, gt.plane == p
+                self._add_key(
+                    key, n_gt=int(g.sum()), images=1,
+                    tp=_hist(bins[d & (m.op >= 0)]), fp=_hist(bins[d & false]),
+                )  # fmt: skip
+
+    def _size_names(self, area: np.ndarray) -> np.ndarray:
+        names = np.array(self.size_names, dtype=object)
+        return names[size_bin(area, self.size_edges)]
+
+    def _update_boot(self, m, obj, gt, info, bins) -> None:
+        w = poisson_weights([i.key for i in info], self.replicates, self.seed)
+        for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
+                          ("tp50", m.ap[0] >= 0), ("fp50", m.ap[0] == -1)):  # fmt: skip
+            np.add.at(self.boot[name].T, bins[sel], w[:, obj.plane[sel]].T)
+        per_plane = np.bincount(gt.plane, minlength=len(info))
+        self.boot["n_gt"] += w @ per_plane
+        self.boot["images"] += w.sum(axis=1)
+
+    # -- merging -----------------------------------------------------------------------------
+
+    def __add__(self, other: ObjectState) -> ObjectState:
+        same = (self.replicates, self.seed, self.size_edges, self.size_names)
+        if same != (other.replicates, other.seed, other.size_edges, other.size_names):
+            raise ValueError("cannot add ObjectStates with different settings")
+        keys = dict(self.keys)
+        for k, v in other.keys.items():
+            keys[k] = keys.get(k, KeyCounts()) + v
+        return ObjectState(
+            self.replicates, self.seed, self.size_edges, self.size_names,
+            self.images + other.images, self.area_mm2 + other.area_mm2,
+            self.images_km2 + other.images_km2, self.n_gt + other.n_gt,
+            self.ap_tp + other.ap_tp, self.ap_fp + other.ap_fp, self.tp + other.tp,
+            self.fp + other.fp, self.iou_sum + other.iou_sum,
+            self.fragments + other.fragments, self.fragmented + other.fragmented, keys,
+            {k: self.boot[k] + other.boot[k] for k in self.boot},
+        )  # fmt: skip
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ObjectState):
+            return NotImplemented
+        return _same(self.__dict__, other.__dict__)
+
+    # -- results -----------------------------------------------------------------------------
+
+    def metrics(self, at: int = OP_BIN) -> dict[str, float]:
+        """Every object metric with the operating point at score bin ``at`` (default: the
+        design point, score > 1)."""
+        out = operating_point(self.tp, self.fp, self.n_gt, self.images, at)
+        tp = out["tp"]
+        fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
+        km2 = self.area_mm2 / 1e12
+        full = self.images_km2 == self.images and km2 > 0
+        out.update(
+            fom=tp / (out["fp"] + self.n_gt) if self.n_gt + out["fp"] else float("nan"),
+            fa_per_km2=out["fp"] / km2 if full else float("nan"),
+            mean_iou=float(self.iou_sum[at:].sum() / IOU_UNIT / tp) if tp else float("nan"),
+            fragmentation=self.fragments / self.fragmented if self.fragmented else float("nan"),
+            ap50=coco_ap(self.ap_tp[0], self.ap_fp[0], self.n_gt),
+            ap50_95=float(np.mean([coco_ap(t, f, self.n_gt)
+                                   for t, f in zip(self.ap_tp, self.ap_fp, strict=True)])),
+            pauc=partial_auc(fa, pd, 1.0) if self.n_gt else float("nan"),
+        )  # fmt: skip
+        for level in FA_LEVELS:
+            out[f"pd_at_{level:g}_fa_per_image"] = (
+                pd_at_fa(fa, pd, level) if self.n_gt else float("nan")
+            )
+        return out
+
+    def intervals(self, at: int = OP_BIN, level: float = 0.95) -> dict[str, tuple[float, float]]:
+        """Bootstrap percentile intervals of the headline metrics."""
+        b = self.boot
+        reps = {"precision": [], "recall": [], "f1": [], "ap50": [], "pd_at_1_fa_per_image": []}
+        for r in range(self.replicates):
+            n_gt, images = int(b["n_gt"][r]), int(b["images"][r])
+            op = operating_point(b["tp"][r], b["fp"][r], n_gt, images, at)
+            fa, pd = froc(b["tp"][r], b["fp"][r], n_gt, images)
+            reps["precision"].append(op["precision"])
+            reps["recall"].append(op["recall"])
+            reps["f1"].append(op["f1"])
+            reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt))
+            reps["pd_at_1_fa_per_image"].append(pd_at_fa(fa, pd, 1.0) if n_gt else float("nan"))
+        return {k: interval(np.array(v), level) for k, v in reps.items()}
+
+    def froc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(score threshold, false alarms per image, Pd)``, highest threshold first."""
+        fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
+        thr = np.concatenate([[np.inf], SCORE_GRID[::-1], [-np.inf]])
+        return thr[: fa.size], fa, pd
+
+
+def _same(a: object, b: object) -> bool:
+    """Deep equality of states (arrays, dicts, dataclasses, scalars)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.array_equal(a, b)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, KeyCounts) and isinstance(b, KeyCounts):
+        return _same(a.__dict__, b.__dict__)
+    return a == b
+
+
+def operating_point(tp: np.ndarray, fp: np.ndarray, n_gt: int, images: int, at: int) -> dict:
+    """TP, FP, FN, precision, recall, F1 and false alarms per image of the detections in
+    score bins ``>= at``."""
+    t, f = int(tp[at:].sum()), int(fp[at:].sum())
+    nan = float("nan")
+    return {
+        "tp": t,
+        "fp": f,
+        "fn": n_gt - t,
+        "precision": t / (t + f) if t + f else nan,
+        "recall": t / n_gt if n_gt else nan,
+        "f1": 2 * t / (2 * t + f + (n_gt - t)) if (t + f + n_gt) else nan,
+        "fa_per_image": f / images if images else nan,
+    }

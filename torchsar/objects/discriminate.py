@@ -1,0 +1,211 @@
+"""The discrimination stage: a detector's output -> scored objects, the same for every detector.
+
+detection statistic -> normalised score -> mask ``score > floor`` -> optional closing ->
+connected components -> size rules -> :class:`Objects` (score, area, box, centroid,
+length / width, and a label map for mask overlaps).
+
+Score: ``statistic / threshold`` for a positive design threshold (every CFAR factor and the
+region CFAR's ``k``), so 1 is the design operating point for every detector and the peak
+over an object says by how much its strongest pixel exceeds its detector's own threshold.
+For a threshold ``<= 0`` (a z-score detector at ``pfa >= 0.5``) the ratio is meaningless, and
+``1 + statistic - threshold`` is used instead (still 1 at the threshold, increasing).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar.objects.components import label_components
+from torchsar.objects.properties import measure
+from torchsar.objects.rules import ObjectRules
+
+__all__ = ["Objects", "discriminate", "normalised_score"]
+
+
+@dataclass(frozen=True)
+class Objects:
+    """Objects of a batch ``(B, C, H, W)``; each ``(b, c)`` plane is one image.
+
+    Attributes:
+        labels: int32 ``(B * C, H, W)`` object ids, unique across the batch (0 = none);
+            object ``k`` (0-based in the arrays below) has id ``k + 1``.
+        plane: int64 ``(M,)`` plane index ``b * C + c`` of each object.
+        score: float64 ``(M,)`` peak normalised score (> ``floor``; > 1 at the design point).
+        area: int64 ``(M,)`` pixels.
+        box: float64 ``(M, 4)`` ``(r0, c0, r1, c1)``, end-exclusive.
+        centroid: float64 ``(M, 2)`` (row, col).
+        length, width: float64 ``(M,)`` major / minor axis lengths in pixels.
+        planes: number of planes ``B * C``.
+    """
+
+    labels: np.ndarray
+    plane: np.ndarray
+    score: np.ndarray
+    area: np.ndarray
+    box: np.ndarray
+    centroid: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    planes: int
+
+    def __len__(self) -> int:
+        return int(self.score.shape[0])
+
+    def in_plane(self, p: int) -> np.ndarray:
+        """Indices (0-based) of the objects of plane ``p``."""
+        return np.flatnonzero(self.plane == p)
+
+
+def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
+    """The detector-independent score: ``statistic / threshold`` (threshold > 0), else
+    ``1 + statistic - threshold``; float64, ``-inf`` stays ``-inf``.
+
+    Example:
+        >>> normalised_score(torch.tensor([2.0, 8.0]), torch.tensor(4.0)).tolist()
+        [0.5, 2.0]
+    """
+    s = statistic.to(torch.float64)
+    t = torch.as_tensor(threshold, dtype=torch.float64, device=s.device)
+    return torch.where(t > 0, s / torch.where(t > 0, t, 1.0), 1.0 + s - t)
+
+
+def _disk_rectangles(radius: int) -> list[tuple[int, int]]:
+    """Half-sizes ``(dy, dx)`` of rectangles whose union is the digital disk of ``radius``
+    (pixels with ``dy^2 + dx^2 <= radius^2``)."""
+    return [(dy, math.isqrt(radius * radius - dy * dy)) for dy in range(radius + 1)]
+
+
+def _spread(x: np.ndarray, d: int, axis: int) -> np.ndarray:
+    """OR of ``x`` shifted by ``-d..d`` along ``axis`` (values beyond the edge count as 0)."""
+    out = x.copy()
+    n = x.shape[axis]
+    for k in range(1, min(d, n - 1) + 1):
+        lo = [slice(None)] * x.ndim
+        hi = [slice(None)] * x.ndim
+        lo[axis], hi[axis] = slice(0, n - k), slice(k, n)
+        out[tuple(hi)] |= x[tuple(lo)]
+        out[tuple(lo)] |= x[tuple(hi)]
+    return out
+
+
+def _dilate(x: np.ndarray, rects: list[tuple[int, int]]) -> np.ndarray:
+    """Dilation of bool planes ``(N, H, W)`` by a union of rectangles (separable shifts;
+    outside the planes counts as unset)."""
+    out = np.zeros_like(x)
+    for dy, dx in rects:
+        out |= _spread(_spread(x, dy, -2), dx, -1)
+    return out
+
+
+def _close(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Binary closing of bool planes ``(N, H, W)`` with a disk of ``radius``, extensive (never
+    removes a pixel) also at the image border: dilation of the zero-padded mask, then
+    erosion as the complement of the dilated complement (the outside counting as set).
+    Plain NumPy: many small passes, which intra-op threading only slows down."""
+    if radius == 0 or not mask.any():
+        return mask
+    rects = _disk_rectangles(radius)
+    x = np.pad(mask, ((0, 0), (radius, radius), (radius, radius)))
+    closed = ~_dilate(~_dilate(x, rects), rects)
+    return closed[:, radius:-radius, radius:-radius] | mask
+
+
+def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mask ``score > floor`` ``(N, H, W)`` and the float64 score, computed only on candidate
+    pixels (a loose float32 pre-filter; the exact test on the candidates). NumPy, single
+    threaded: a handful of full-size passes."""
+    b, c, h, w = statistic.shape
+    stat = statistic.detach().cpu().numpy().reshape(-1)
+    thr = torch.as_tensor(threshold).detach().cpu().to(torch.float64).numpy()
+    thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
+    if thr.size and np.all(thr == thr[0]):  # the usual scalar threshold
+        t = float(thr[0])
+        loose = floor * t * (1 - 1e-5) - 1e-30 if t > 0 else t + floor - 1.0 - 1e-5
+        idx = np.flatnonzero(stat >= loose)
+    else:
+        loose = np.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
+        idx = np.flatnonzero(stat >= loose)
+    s, t = stat[idx].astype(np.float64), thr[idx]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = np.where(t > 0, s / np.where(t > 0, t, 1.0), 1.0 + s - t)
+    mask = np.zeros(stat.size, dtype=bool)
+    mask[idx[score > floor]] = True
+    full = np.full(stat.size, -np.inf)
+    full[idx] = score
+    return mask.reshape(b * c, h, w), full.reshape(b * c, h, w)
+
+
+def _check(statistic: object, pixel_area: object, rules: ObjectRules) -> None:
+    if not isinstance(statistic, Tensor) or not statistic.is_floating_point():
+        got = statistic.dtype if isinstance(statistic, Tensor) else type(statistic).__name__
+        raise InputTypeError(f"statistic must be a floating torch.Tensor, got {got}")
+    if statistic.dim() != 4:
+        raise ShapeError(f"statistic must have shape (B, C, H, W), got {tuple(statistic.shape)}")
+    if bool(torch.isnan(statistic).any()):
+        raise InputValueError("statistic must not hold NaN values")
+    if rules.units == "m2" and pixel_area is None:
+        raise OptionError("object areas in m2 need the pixel spacing: pass pixel_area")
+
+
+def _keep(area: np.ndarray, plane: np.ndarray, rules: ObjectRules, pixel_area) -> np.ndarray:
+    """Objects within ``[min_area, max_area]`` (pixels, or m^2 via each plane's pixel area)."""
+    size = area.astype(np.float64)
+    if rules.units == "m2":
+        size = size * np.asarray(pixel_area, dtype=np.float64).reshape(-1)[plane]
+    keep = size >= rules.min_area
+    if rules.max_area is not None:
+        keep &= size <= rules.max_area
+    return keep
+
+
+def discriminate(
+    statistic: Tensor,
+    threshold: Tensor | float,
+    *,
+    rules: ObjectRules | None = None,
+    pixel_area: np.ndarray | float | None = None,
+) -> Objects:
+    """Turn a detector's statistic into scored objects (see the module docstring).
+
+    Args:
+        statistic: float ``(B, C, H, W)``, the detector's ``Detection.statistic``
+            (``-inf`` allowed for untestable pixels, NaN refused).
+        threshold: the design threshold, broadcastable to ``statistic``.
+        rules: closing, size and connectivity rules (default :class:`ObjectRules`).
+        pixel_area: square metres per pixel, a scalar or one value per plane; needed when
+            ``rules.units == "m2"``.
+
+    Returns:
+        :class:`Objects` in id order (planes in order, then label order).
+
+    Raises:
+        InputTypeError, ShapeError, InputValueError: bad ``statistic``.
+        OptionError: areas in m^2 without ``pixel_area``.
+
+    Example:
+        >>> s = torch.zeros(1, 1, 8, 8); s[0, 0, 1:3, 1:3] = 5.0; s[0, 0, 6, 6] = 3.0
+        >>> o = discriminate(s, 2.0, rules=ObjectRules(min_area=2))
+        >>> len(o), o.area.tolist(), o.score.tolist()
+        (1, [4], [2.5])
+    """
+    rules = ObjectRules() if rules is None else rules
+    _check(statistic, pixel_area, rules)
+    b, c = statistic.shape[:2]
+    mask, score = _score_map(statistic, threshold, rules.floor)
+    mask = _close(mask, rules.closing)
+    labels, n = label_components(mask, 2 if rules.connectivity == 8 else 1)
+    props = measure(labels, n, score)
+    keep = _keep(props["area"], props["plane"], rules, pixel_area)
+    lut = np.zeros(n + 1, dtype=np.int32)
+    lut[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
+    return Objects(
+        labels=lut[labels],
+        **{k: v[keep] for k, v in props.items()},
+        planes=b * c,
+    )

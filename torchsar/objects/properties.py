@@ -1,0 +1,65 @@
+"""Per-object measurements from a label stack: area, box, centroid, length / width, peak."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["measure"]
+
+
+def _extent(lab: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-label minimum and maximum of ``values`` (labels ``1..n``)."""
+    lo = np.full(n + 1, np.iinfo(np.int64).max)
+    hi = np.full(n + 1, -1)
+    np.minimum.at(lo, lab, values)
+    np.maximum.at(hi, lab, values)
+    return lo[1:], hi[1:]
+
+
+def _moments(lab: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int, area: np.ndarray):
+    """Centroids ``(n, 2)`` and major / minor axis lengths (``4 sqrt(eigenvalue)`` of the
+    central second moments, the convention of ``skimage.measure.regionprops``)."""
+
+    def mean(w: np.ndarray) -> np.ndarray:
+        return np.bincount(lab, weights=w, minlength=n + 1)[1:] / area
+
+    r, c = mean(rows), mean(cols)
+    mrr = mean(rows * rows) - r * r
+    mcc = mean(cols * cols) - c * c
+    mrc = mean(rows * cols) - r * c
+    half = 0.5 * (mrr + mcc)
+    root = np.sqrt(np.maximum(0.25 * (mrr - mcc) ** 2 + mrc**2, 0.0))
+    length = 4 * np.sqrt(np.maximum(half + root, 0.0))
+    width = 4 * np.sqrt(np.maximum(half - root, 0.0))
+    return np.stack([r, c], axis=1), length, width
+
+
+def measure(labels: np.ndarray, n: int, score: np.ndarray) -> dict[str, np.ndarray]:
+    """Measure objects ``1..n`` of a label stack ``(N, H, W)`` (ids unique across planes).
+
+    Returns a dict of arrays, one entry per object in id order: ``plane``, ``area``,
+    ``box``, ``centroid`` (row, col), ``length``, ``width`` and ``score`` (the maximum of
+    ``score`` over the object's pixels).
+    """
+    flat = labels.reshape(-1)
+    idx = np.flatnonzero(flat)
+    lab = flat[idx].astype(np.int64)
+    h, w = labels.shape[-2:]
+    r, c = (idx // w) % h, idx % w
+    rows, cols = r.astype(np.float64), c.astype(np.float64)
+    area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
+    plane = _extent(lab, idx // (h * w), n)[0]
+    (r0, r1), (c0, c1) = _extent(lab, r, n), _extent(lab, c, n)
+    box = np.stack([r0, c0, r1 + 1, c1 + 1], axis=1).astype(np.float64).reshape(n, 4)
+    centroid, length, width = _moments(lab, rows, cols, n, np.maximum(area, 1))
+    peak = np.full(n + 1, -np.inf)
+    np.maximum.at(peak, lab, score.reshape(-1)[idx])
+    return {
+        "plane": plane,
+        "area": area,
+        "box": box,
+        "centroid": centroid,
+        "length": length,
+        "width": width,
+        "score": peak[1:],
+    }
