@@ -28,7 +28,17 @@ DATASETS = (
     "hrsid:DIR",
     "phoenix:DIR",
     "sicd:FILE",
+    "store:DIR",
 )
+
+
+def store_from_spec(spec: DatasetSpec, limit: int | None) -> Dataset:
+    """``store:DIR``: a store written by ``torchsar-eval make-dataset`` (no options)."""
+    from eval.store import StoreDataset  # the store writer builds on make_dataset
+
+    spec.check_keys(())
+    return StoreDataset(spec.path, limit=limit)
+
 
 _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "folder": folder_from_spec,
@@ -37,6 +47,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "hrsid": hrsid_from_spec,
     "phoenix": phoenix_from_spec,
     "sicd": sicd_from_spec,
+    "store": store_from_spec,
 }
 
 
