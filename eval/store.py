@@ -30,7 +30,7 @@ from torch.utils.data import Dataset
 
 from eval.errors import EvalError
 
-__all__ = ["FIELDS", "StoreDataset", "store_from_spec", "write_store"]
+__all__ = ["FIELDS", "StoreDataset", "write_store"]
 
 FIELDS = ("image", "mask", "instances", "ignore")
 FORMAT = "torchsar-store"
@@ -153,8 +153,3 @@ class StoreDataset(Dataset):
         state["_index"] = None  # never ship the memory map to a worker
         return state
 
-
-def store_from_spec(spec, n: int | None) -> StoreDataset:
-    """``store:PATH`` (no options)."""
-    spec.check_keys(())
-    return StoreDataset(spec.path, limit=n)

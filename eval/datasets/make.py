@@ -15,7 +15,6 @@ from eval.datasets.sicd import sicd_from_spec
 from eval.datasets.sim import DEFAULT_N, SimDataset
 from eval.datasets.spec import DatasetSpec, parse_spec
 from eval.errors import EvalError
-from eval.store import store_from_spec
 from torchsar.io import FileFormatError
 
 __all__ = ["DATASETS", "make_dataset"]
@@ -29,8 +28,17 @@ DATASETS = (
     "hrsid:DIR",
     "phoenix:DIR",
     "sicd:FILE",
-    "store:PATH",
+    "store:DIR",
 )
+
+
+def store_from_spec(spec: DatasetSpec, limit: int | None) -> Dataset:
+    """``store:DIR``: a store written by ``torchsar-eval make-dataset`` (no options)."""
+    from eval.store import StoreDataset  # the store writer builds on make_dataset
+
+    spec.check_keys(())
+    return StoreDataset(spec.path, limit=limit)
+
 
 _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "folder": folder_from_spec,
