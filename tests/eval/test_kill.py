@@ -72,7 +72,7 @@ def _kill_cases(tmp_path, cases, seed: int) -> None:
             hint = "torchsar-eval: terminated; continue with the same command plus --resume"
             assert err == (hint if code == 143 else ""), err
             # only its staging folder may stay (kept for --resume); the next start settles it
-            assert all(".torchsar-partial-" in h for h in _hidden(parent))
+            assert all(".torchsar-partial-" in h.name for h in _hidden(parent))
         assert main(["run", "--n", "0", "--out", str(parent / "next")]) == 2  # the next start
         assert _hidden(parent) == []
         assert _state(parent / "out") in (("old", "new") if old else ("none", "new"))
