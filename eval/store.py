@@ -152,4 +152,3 @@ class StoreDataset(Dataset):
         state = dict(self.__dict__)
         state["_index"] = None  # never ship the memory map to a worker
         return state
-

@@ -19,7 +19,7 @@ from eval.glossary import glossary
 from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
-from eval.runner import Scoring
+from eval.runner import Scoring, SkipBad
 from eval.shards import ShardJob, run_shards, shard_rows
 from eval.tables import (
     PER_IMAGE_COLUMNS,
@@ -140,8 +140,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--skip-bad",
         action="store_true",
-        help="continue past a failing shard and name it in the summary (default: stop, "
-        "writing no tables)",
+        help="skip unreadable files and failing shards, counting and naming them in the "
+        "summary (default: stop at the first, naming it, and write no tables)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
@@ -242,6 +242,9 @@ def run(args: argparse.Namespace) -> int:
             "run",
             {
                 "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+                "manifests": {
+                    n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")
+                },
                 "detectors": {s.name: dict(s.params) for s in specs},
                 "despeckle": None
                 if args.despeckle is None
@@ -269,7 +272,9 @@ def run(args: argparse.Namespace) -> int:
             f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
         )
         for f in st["failed"]:
-            print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
+            print(f"  FAILED shard {f['shard']}: {f['error']}")
+        for b in st["skipped_items"]:
+            print(f"  skipped unreadable {b['file']}")
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
 
@@ -302,6 +307,8 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     t0 = time.perf_counter()
     state = tmp / "shards" / slug(name)
     indices = list(range(len(ds)))
+    if args.skip_bad:
+        ds = SkipBad(ds)
 
     def shards(idx: list[int], folder: Path, on_batch=None):
         job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
@@ -326,7 +333,9 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b
     wall = time.perf_counter() - t0
+    bad = results[0].skipped if results else []
     stats = {"images": len(indices), "wall_s": wall, **counts,
+             "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
     return results, stats
 
@@ -364,6 +373,12 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
         f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
         f"resumed {st['skipped']}, failed {len(st['failed'])}"
         + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        + (
+            f"\n  - skipped {len(st['skipped_items'])} unreadable file(s)"
+            if st["skipped_items"]
+            else ""
+        )
+        + "".join(f"\n    - {b['file']}: {b['error']}" for b in st["skipped_items"])
         for name, st in stats.items()
     )
     (tmp / "summary.md").write_text(text)
