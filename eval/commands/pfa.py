@@ -17,7 +17,8 @@ import matplotlib.pyplot as plt
 import pandas as pd
 from tqdm import tqdm
 
-from eval.calibration import CLUTTER, measure
+from eval.calibration import CLUTTER, measure, measure_dataset
+from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, resolve
 from eval.options import at_least, floats, names
 from eval.output import default_out, result_dir, write_config
@@ -41,6 +42,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pfa", default=",".join(map(str, DEFAULT_PFAS)), help="design Pfa list")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/pfa-*)")
+    p.add_argument(
+        "--dataset",
+        action="append",
+        metavar="NAME",
+        help="measure on this dataset's clutter pixels instead of simulated homogeneous "
+        "clutter (repeatable; e.g. folder:PATH, hrsid:DIR): real clutter vs the models",
+    )
+    p.add_argument("--n", type=int, default=None, help="images per --dataset (default: all)")
+    p.add_argument("--batch-size", type=int, default=8)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
@@ -53,8 +63,13 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.images, "--images", 1)
     out = args.out or default_out("pfa")
     tables = []
+    datasets = {d: make_dataset(d, n=args.n, seed=args.seed) for d in args.dataset or []}
+    at_least(args.batch_size, "--batch-size", 1)
     with result_dir(out) as tmp:
-        for i, case in enumerate(tqdm(CLUTTER, desc="clutter", disable=args.no_progress)):
+        for name, ds in tqdm(datasets.items(), desc="datasets", disable=args.no_progress):
+            tables.append(measure_dataset(specs, name, ds, pfas, args.batch_size))
+        cases = [] if datasets else CLUTTER
+        for i, case in enumerate(tqdm(cases, desc="clutter", disable=args.no_progress)):
             x = case.sample(args.images, args.size, args.seed + i)
             tables.append(measure(specs, case, x, pfas))
         table = pd.concat(tables, ignore_index=True)
@@ -66,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
             "pfa",
             {
                 "detectors": {s.name: dict(s.params) for s in specs},
-                "clutter": [c.__dict__ for c in CLUTTER],
+                "clutter": [c.__dict__ for c in CLUTTER] if not datasets else None,
+                "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
                 "design_pfa": pfas,
                 "size": args.size,
                 "images": args.images,
