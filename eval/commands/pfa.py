@@ -22,6 +22,7 @@ from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, resolve
 from eval.options import at_least, floats, names
 from eval.output import default_out, result_dir, write_config
+from eval.plots import detector_style, save, slug
 from eval.tables import markdown
 
 DEFAULT_DETECTORS = [n for n in DETECTORS if n != "region"]
@@ -115,22 +116,21 @@ def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     for ax, case in zip(axes.flat, cases, strict=False):
         sub = table[table["clutter"] == case]
         for i, (name, df) in enumerate(sub.groupby("detector", sort=False)):
-            color = plt.cm.tab20(i % 20)
+            st = detector_style(i)
+            color = st["color"]
             seen = df[df["false_alarms"] > 0]
             y = seen["measured_pfa"]
             err = [y - seen["ci_low"], seen["ci_high"] - y]
-            ax.errorbar(
-                seen["design_pfa"], y, yerr=err, fmt="o-", ms=3, color=color, label=name, capsize=2
-            )
+            ax.errorbar(seen["design_pfa"], y, yerr=err, marker="o", ms=3, label=name, capsize=2,
+                        **st)  # fmt: skip
             none = df[df["false_alarms"] == 0]  # no false alarm: mark the 95 % upper bound
             ax.plot(none["design_pfa"], none["ci_high"], "v", ms=5, color=color, mfc="none")
         lim = [sub["design_pfa"].min() / 3, sub["design_pfa"].max() * 3]
         ax.plot(lim, lim, "k--", lw=0.8)
-        ax.set(xscale="log", yscale="log", title=case, xlabel="design Pfa", ylabel="measured Pfa")
+        ax.set(xscale="log", yscale="log", title=slug(case) if len(case) > 30 else case,
+               xlabel="design Pfa", ylabel="measured Pfa")  # fmt: skip
         ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
