@@ -34,16 +34,31 @@ from torchsar.metrics import (
 from torchsar.metrics.curves import OP_BIN
 from torchsar.objects import ObjectRules, Objects, discriminate
 
-__all__ = ["DetectorResult", "Scoring", "SkipBad", "batches", "evaluate"]
+__all__ = [
+    "DEFAULT_MATCH",
+    "DEFAULT_RULES",
+    "DetectorResult",
+    "Scoring",
+    "SkipBad",
+    "batches",
+    "evaluate",
+]
+
+
+DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
+"""The harness's discrimination defaults: a closing that joins a vehicle's scatterer
+fragments, and no object smaller than 5 px."""
+DEFAULT_MATCH = Matching(kind="centroid")
+"""The harness's matching default: the prescreening rule (see the README)."""
 
 
 @dataclass(frozen=True)
 class Scoring:
     """How detections are scored: the discrimination rules, the matching rule and the
-    bootstrap (the same for every detector of a run)."""
+    bootstrap (the same for every detector of a run; defaults: the harness's)."""
 
-    rules: ObjectRules = field(default_factory=ObjectRules)
-    matching: Matching = field(default_factory=Matching)
+    rules: ObjectRules = DEFAULT_RULES
+    matching: Matching = DEFAULT_MATCH
     replicates: int = 100
     seed: int = 0
 

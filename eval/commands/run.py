@@ -19,7 +19,7 @@ from eval.glossary import glossary
 from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
-from eval.runner import Scoring, SkipBad
+from eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring, SkipBad
 from eval.shards import ShardJob, run_shards, shard_rows
 from eval.tables import (
     PER_IMAGE_COLUMNS,
@@ -38,8 +38,6 @@ from torchsar.objects import ObjectRules
 from torchsar.speckle import FILTERS
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
-DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
-DEFAULT_MATCH = Matching(kind="centroid")
 
 SUMMARY_SHOWN = [
     "dataset",
