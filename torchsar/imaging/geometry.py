@@ -9,6 +9,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_positive
+from torchsar.imaging.items import check_device
 
 __all__ = ["SPEED_OF_LIGHT", "SpotlightGeometry"]
 
@@ -97,13 +98,13 @@ class SpotlightGeometry:
 
     def wavenumbers(self, *, dtype: torch.dtype = torch.float64, device=None) -> Tensor:
         """``U_k = 4 pi f_k / c`` for the ``K`` samples, shape ``(K,)``."""
-        k = torch.arange(self.samples, dtype=dtype, device=device) - self.samples // 2
+        k = torch.arange(self.samples, dtype=dtype, device=check_device(device)) - self.samples // 2
         freq = self.center_frequency + k * (self.bandwidth / self.samples)
         return 4 * math.pi * freq / SPEED_OF_LIGHT
 
     def angles(self, *, dtype: torch.dtype = torch.float64, device=None) -> Tensor:
         """Pulse azimuths ``th_m`` in radians, shape ``(M,)``."""
-        m = torch.arange(self.pulses, dtype=dtype, device=device) - self.pulses // 2
+        m = torch.arange(self.pulses, dtype=dtype, device=check_device(device)) - self.pulses // 2
         return m * (self.aperture / self.pulses)
 
     def pixel_positions(
