@@ -15,9 +15,10 @@ from dataclasses import dataclass
 
 from torchsar._checks import OptionError, check_int, check_positive
 
-__all__ = ["SPEED_OF_LIGHT", "SpotlightConsistencyWarning", "SpotlightParams"]
+__all__ = ["HANN_BROADENING", "SPEED_OF_LIGHT", "SpotlightConsistencyWarning", "SpotlightParams"]
 
 SPEED_OF_LIGHT = 299_792_458.0
+HANN_BROADENING = 1.44  # 3 dB width of the Hann-weighted impulse response / unweighted
 
 
 class SpotlightConsistencyWarning(UserWarning):
