@@ -30,9 +30,11 @@ SCOPE = """\
 Scope (single-channel SAR): along-track motion changes the azimuth FM rate, so a mover is
 displaced between time sub-aperture looks by (2 v_a - v_a^2/V) dt and focuses best at v_a:
 both tests measure it. Radial (range) motion is, to first order, a stationary target at a
-displaced position (azimuth offset R v_r / V, aliased by PRF 200 Hz beyond 0.75 m/s): no
-single-channel test can reveal it; the rows 'range' show what the looks and the focus test
-see of it (second order). The subpatch test responds to azimuth ambiguity, not to motion."""
+displaced position (azimuth offset R v_r / V, aliased by the PRF beyond +-lambda PRF / 4):
+no single-channel test measures it. When the Doppler is aliased, the replica shown keeps an
+uncompensated part of the range walk, which the looks and the focus test may read as a
+spurious along-track speed (the 'range' rows say where; the velocity reported is then not
+the target's). The subpatch test responds to azimuth ambiguity, not to motion."""
 
 
 @dataclass(frozen=True)
@@ -155,6 +157,11 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
         for t in ("look", "focus", "subpatch", "combined")
     }
     controls = table[table.kind == "control"]
+    radial = table[(table.direction == "range") & table.combined_detected]
+    flagged = ", ".join(
+        f"{r.speed_mps:g} m/s (read as {r.velocity_mps:.2g} m/s along track)"
+        for r in radial.itertuples()
+    )
     lines = [
         shown.to_string(index=False, float_format=lambda v: f"{v:.3g}"),
         "",
@@ -163,6 +170,7 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
         "",
         "false movers over all scenes: " + ", ".join(f"{k} {v}" for k, v in false.items()),
         f"control scenes: {len(controls)}, clutter peaks tested {int(table.clutter_peaks.sum())}",
+        f"range movers flagged by the combined decision: {flagged or 'none'}",
         "",
         SCOPE,
     ]
