@@ -13,7 +13,7 @@ from torchsar.imaging.items import check_device
 
 __all__ = ["SPEED_OF_LIGHT", "SpotlightGeometry"]
 
-SPEED_OF_LIGHT = 299_792_458.0
+SPEED_OF_LIGHT = 299_792_458.0  # m/s; the one definition (torchsar.motion imports it)
 
 
 @dataclass(frozen=True)
@@ -37,8 +37,10 @@ class SpotlightGeometry:
         aperture: total azimuth aperture in radians.
         pulses: number of pulses ``M``.
         samples: number of frequency samples ``K``.
-        chirp_rate: ``alpha`` in rad/s^2 of the transmitted chirp ``exp(1j (w0 t + alpha t^2))``;
-            used only for the residual video phase (RVP).
+        chirp_rate: sweep rate ``gamma`` of the transmitted chirp in Hz/s (instantaneous
+            frequency ``f0 + gamma t``, i.e. ``exp(1j (w0 t + pi gamma t^2))``; the same unit
+            as :class:`torchsar.motion.SpotlightParams`); used only for the residual video
+            phase (RVP).
 
     Example:
         >>> geo = SpotlightGeometry.for_image((32, 32), pixel=1.0)
