@@ -104,8 +104,8 @@ def settings(
 
 def lp_image(
     g: Tensor,
-    operator: LinearOperator | None = None,
     *,
+    operator: LinearOperator | None = None,
     p: float = 1.0,
     lam: float | Tensor | None = None,
     eps: float | None = None,

@@ -94,7 +94,7 @@ def subpatch_movers(
         >>> r.decision.mover.sum().item(), r.tracks.position.shape[1]
         (1, 4)
     """
-    images = subpatch_images(phase_history, params, grid, window=window)
+    images = subpatch_images(phase_history, params, grid=grid, window=window)
     centers = subpatch_centers(params, grid)
     tracks = measure_displacements(
         images, params, centers, detector=detector, chip=chip, gate=gate, window=window
