@@ -9,9 +9,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_int, check_probability
-from torchsar.cfar.ca import ca_threshold
+from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
 from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
-from torchsar.cfar.ring_mean import ring_mean_ratio
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import Detection
 
