@@ -13,7 +13,7 @@ import pandas as pd
 from eval.calibrate import choose_bin, parse_target, split_indices
 from eval.coco import CocoExport
 from eval.datasets import DATASETS, make_dataset
-from eval.detectors import DETECTORS
+from eval.detectors import DETECTORS, dry_run
 from eval.errors import EvalError
 from eval.glossary import glossary
 from eval.options import check_run_args
@@ -120,6 +120,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         type=int,
         default=256,
         help="images per shard, the unit of work and of resume (default 256)",
+    )
+    p.add_argument(
+        "--window-units",
+        choices=["px", "m"],
+        default="px",
+        help="units of the detectors' guard and train options: pixels, or metres converted "
+        "per dataset with its pixel spacing (recorded in config.json)",
     )
     p.add_argument(
         "--resume",
@@ -229,10 +236,12 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or default_out("run")
     with result_dir(out, resume=args.resume, keep_interrupted=True) as tmp:
         check_resumable(tmp / "resume.json", fingerprint(args, datasets, specs, scoring))
-        results, stats = {}, {}
+        results, stats, windows = {}, {}, {}
         for name, ds in datasets.items():
+            ds_specs = specs if args.window_units == "px" else windows_in_pixels(name, ds, specs)
+            windows[name] = {s.name: dict(s.params) for s in ds_specs}
             results[name], stats[name] = evaluate_dataset(
-                name, ds, specs, args, scoring, preprocess, tmp
+                name, ds, ds_specs, args, scoring, preprocess, tmp
             )
         files = write_tables(tmp, results, scoring, stats)
         write_config(
@@ -244,6 +253,8 @@ def run(args: argparse.Namespace) -> int:
                     n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")
                 },
                 "detectors": {s.name: dict(s.params) for s in specs},
+                "window_units": args.window_units,
+                "detectors_in_pixels": windows,
                 "despeckle": None
                 if args.despeckle is None
                 else {"filter": args.despeckle, **despeckle_opts},
@@ -275,6 +286,27 @@ def run(args: argparse.Namespace) -> int:
             print(f"  skipped unreadable {b['file']}")
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
+
+
+def windows_in_pixels(name: str, ds, specs: list) -> list:
+    """Detectors with ``guard`` / ``train`` given in metres converted to pixels with the
+    dataset's pixel spacing (the mean of its row and column spacing, read from item 0)."""
+    spacing = ds[0]["meta"].get("pixel_spacing") if len(ds) else None
+    if spacing is None:
+        raise EvalError(f"--window-units m needs the pixel spacing of {name}: declare it with "
+                        f"?spacing=METRES")  # fmt: skip
+    step = (float(spacing[0]) + float(spacing[1])) / 2
+    out = []
+    for spec in specs:
+        conv = {k: round(float(spec.params[k]) / step) for k in ("guard", "train")
+                if k in spec.params}  # fmt: skip
+        if conv.get("train", 1) < 1:
+            raise EvalError(f"{spec.name}: train {spec.params['train']} m is less than one "
+                            f"pixel of {name} ({step:g} m)")  # fmt: skip
+        spec = spec.with_params(conv)
+        dry_run(spec.fn, spec.params, f"detector {spec.name} on {name}")
+        out.append(spec)
+    return out
 
 
 def fingerprint(args, datasets: dict, specs: list, scoring: Scoring) -> dict:

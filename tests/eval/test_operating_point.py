@@ -90,3 +90,16 @@ def test_an_unreadable_file_stops_the_run_or_is_skipped_and_counted(tmp_path, ca
     assert "skipped 1 unreadable file(s)" in (tmp_path / "b" / "summary.md").read_text()
     cfg = json.loads((tmp_path / "b" / "config.json").read_text())
     assert cfg["options"]["manifests"][f"folder:{root}"]["files"] >= 4
+
+
+def test_windows_in_metres_are_converted_with_the_pixel_spacing(tmp_path):
+    out = tmp_path / "m"
+    argv = ["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca", "--window-units",
+            "m", "--param", "ca.guard=0.9", "--param", "ca.train=1.2", "--bootstrap", "0",
+            "--no-progress", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0  # simulated chips: 0.3 m pixels
+    cfg = json.loads((out / "config.json").read_text())["options"]
+    assert cfg["detectors_in_pixels"]["sim-chips"]["ca"]["guard"] == 3
+    assert cfg["detectors_in_pixels"]["sim-chips"]["ca"]["train"] == 4
+    bad = [a if a != "ca.train=1.2" else "ca.train=0.1" for a in argv]
+    assert main([*bad[:-1], str(tmp_path / "n")]) == 2
