@@ -421,6 +421,7 @@ def test_every_command_has_out_and_overwrite():
     from eval.commands import COMMANDS
 
     parser = build_parser()
+    required = {"make-dataset": ["--kind", "sim-chips"]}
     for name in COMMANDS:
-        args = parser.parse_args([name, "--out", "x", "--overwrite"])
+        args = parser.parse_args([name, *required.get(name, []), "--out", "x", "--overwrite"])
         assert (str(args.out), args.overwrite) == ("x", True), name
