@@ -16,9 +16,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import torch
 from torch import Tensor
 
+import torchsar as ts
 from eval.detectors import DetectorSpec
 from eval.errors import EvalError
 from torchsar.metrics import ObjectCounts, object_counts
@@ -57,9 +57,8 @@ def _counts(det_stat: Tensor, thr: float, batches: list[dict]) -> ObjectCounts:
 
 
 def _threshold(spec: DetectorSpec, params: Mapping[str, Any]) -> float:
-    """The detector's design threshold for ``params`` (read on a small dummy image)."""
-    side = 2 * (params["guard"] + params["train"]) + 1
-    return float(spec.fn(torch.ones(1, 1, side, side), **params).threshold)
+    """The detector's design threshold for ``params`` (no image needed)."""
+    return ts.cfar.threshold(spec.fn, **params)
 
 
 def best_setting(spec: DetectorSpec, grid: list[dict[str, Any]], batches: list[dict]) -> Choice:

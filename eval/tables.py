@@ -19,6 +19,7 @@ __all__ = [
     "TIMING_COLUMNS",
     "breakdown_table",
     "froc_table",
+    "headline_table",
     "markdown",
     "per_image_table",
     "pixel_roc_table",
@@ -158,11 +159,19 @@ def pr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 
 def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
+    """Per key; ground-truth classes carry false alarms (and so precision) only when the
+    images have a class of their own, to which the false alarms are attributed."""
     rows = []
+    has_image_class = any(k.startswith("image_class:") for k in r.objects.keys)
+    nan = float("nan")
     for key in sorted(r.objects.keys):
         by, _, name = key.partition(":")
         k = r.objects.keys[key]
         op = operating_point(k.tp, k.fp, k.n_gt, k.images, r.op_bin)
+        if by == "class" and not has_image_class:
+            if k.n_gt == 0:
+                continue  # the sink of unattributed false alarms
+            op.update(fp=nan, precision=nan, f1=nan)
         rows.append([ds, r.spec.name, by, name, k.images or None, k.n_gt, op["tp"], op["fp"],
                      op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
     return rows
@@ -190,6 +199,21 @@ def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
             frames.append(df)
     cols = ["dataset", "detector", "threshold", "pd_pixel", "pfa_pixel"]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols)
+
+
+HEADLINE_SHOWN = ["dataset", "detector", "images", "targets", "tp", "fp", "fn", "fom",
+                  "false_alarms_per_image"]  # fmt: skip
+
+
+def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """The compact table of ``summary.md``: counts, then the headline metrics with their
+    bootstrap intervals as ``value [lo, hi]``."""
+    out = summary[HEADLINE_SHOWN].copy()
+    for m in HEADLINE:
+        out[m] = [f"{v:.3g} [{lo:.3g}, {hi:.3g}]" for v, lo, hi in
+                  zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)]  # fmt: skip
+    out["ap50_95"] = summary["ap50_95"]
+    return out
 
 
 def markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:

@@ -48,6 +48,13 @@ class TestCheckImage:
         with pytest.raises(C.InputValueError, match="non-negative.*-0.5"):
             C.check_image(x)
 
+    def test_grad_refused_only_where_not_differentiable(self):
+        x = torch.rand(1, 1, 3, 3, requires_grad=True)
+        assert C.check_image(x) is x
+        with pytest.raises(C.InputTypeError, match=r"x requires grad; os is not .* x.detach\(\)"):
+            C.check_image(x, not_differentiable="os")
+        assert C.check_image(x.detach(), not_differentiable="os") is not None
+
     def test_errors_are_builtin_subclasses(self):
         assert issubclass(C.InputTypeError, TypeError)
         assert issubclass(C.InputValueError, ValueError)

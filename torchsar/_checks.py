@@ -87,8 +87,14 @@ def check_image(
     complex_ok: bool = False,
     real_ok: bool = True,
     nonnegative: bool = True,
+    not_differentiable: str | None = None,
 ) -> Tensor:
     """Validate an image batch and return it unchanged.
+
+    Autograd policy (the library's one rule): functions whose output is a decision (CFAR
+    detectors, region growing) are not differentiable and pass their own name as
+    ``not_differentiable``, so an input that requires grad is refused with the fix in the
+    message, instead of failing deep inside or returning gradients that ignore the decision.
 
     Args:
         x: the candidate tensor.
@@ -97,12 +103,15 @@ def check_image(
         complex_ok: accept complex dtypes.
         real_ok: accept real floating dtypes.
         nonnegative: require every value >= 0 (intensity/amplitude). Ignored for complex.
+        not_differentiable: the calling function's name if it does not support autograd:
+            then ``x.requires_grad`` is an error.
 
     Returns:
         ``x`` itself (no copy).
 
     Raises:
-        InputTypeError: not a tensor, integer/bool dtype, or complex/real where not allowed.
+        InputTypeError: not a tensor, integer/bool dtype, complex/real where not allowed, or
+            requires grad where ``not_differentiable`` is given.
         ShapeError: wrong number of dimensions.
         InputValueError: NaN, Inf, or negative values where forbidden.
 
@@ -128,6 +137,11 @@ def check_image(
     if not is_complex and not x.is_floating_point():
         raise InputTypeError(
             f"{name} must have a floating dtype, got {x.dtype}; use {name}.float()"
+        )
+    if not_differentiable is not None and x.requires_grad:
+        raise InputTypeError(
+            f"{name} requires grad; {not_differentiable} is not differentiable: "
+            f"pass {name}.detach()"
         )
     if x.numel() == 0:
         return x

@@ -279,7 +279,7 @@ def _strip_sums(
         buf.mul_(vbuf)
         cnt = _integral(vbuf)
     s2 = _integral(buf * buf) if moments >= 2 else None
-    s1 = _integral(buf)
+    s1 = _integral(buf.clone() if buf.requires_grad else buf)  # autograd saved buf (buf * buf)
     out = []
     for rect in rects:
         if cnt is None:

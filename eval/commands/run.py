@@ -24,6 +24,7 @@ from eval.tables import (
     PER_IMAGE_COLUMNS,
     breakdown_table,
     froc_table,
+    headline_table,
     markdown,
     pixel_roc_table,
     pr_table,
@@ -326,7 +327,8 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
     for fname, df in tables.items():
         df.to_csv(tmp / fname, index=False)
     write_per_image(tmp / "per_image.csv", {n: tmp / "shards" / slug(n) / "test" for n in results})
-    text = glossary(summary, scoring) + "\n" + markdown(summary)
+    text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
+    text += "\nEvery column, for every detector, is in `summary.csv`.\n"
     text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
     text += "".join(
         f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "

@@ -3,6 +3,9 @@
 - ``os``: the exact ring order statistic (``torchsar.order_statistics.ring_order_statistic``)
   and the whole OS-CFAR vs ``scipy.ndimage.rank_filter`` with the same ring footprint (equal
   on every interior pixel; checked here before timing).
+- ``os cost curve``: the ring order statistic on 256x256 for ``train`` = 4, 10, 15, 20, 25,
+  40 (g=2): its cost must grow with the ring side, not with the ring area (the reference's
+  does), so the ratio grows with ``train``. Run just the curve with ``--only "os curve"``.
 
 CA, two-parameter and GO against ``uniform_filter`` references are in ``cfar_window.py``.
 Run with ``python scripts/benchmark.py --topic cfar_family``.
@@ -12,6 +15,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -43,13 +47,33 @@ def _image(size: int) -> torch.Tensor:
     return torch.empty(1, 1, size, size).exponential_(generator=torch.Generator().manual_seed(0))
 
 
-def _check_os_exact(x: torch.Tensor, rank: int) -> None:
+def _check_os_exact(x: torch.Tensor, rank: int, train: int = TRAIN) -> None:
     """The benchmark is only meaningful if both compute the same thing: assert equality."""
-    ring, o = Ring(GUARD, TRAIN), GUARD + TRAIN
+    ring, o = Ring(GUARD, train), GUARD + train
     ours = ring_order_statistic(x, ring, torch.full(x.shape, rank))[0, 0].numpy()
-    ref = ndimage.rank_filter(x[0, 0].numpy(), rank - 1, footprint=ring_footprint(GUARD, TRAIN))
+    ref = ndimage.rank_filter(x[0, 0].numpy(), rank - 1, footprint=ring_footprint(GUARD, train))
     if not np.array_equal(ours[o:-o, o:-o], ref[o:-o, o:-o]):
         raise AssertionError("ring_order_statistic differs from scipy.ndimage.rank_filter")
+
+
+def curve_cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
+    """The OS cost curve: one case per training-band width on a 256x256 image."""
+    x = _image(256)
+    a = x[0, 0].numpy()
+    out = []
+    for train in (4, 10, 15, 20, 25, 40):
+        ring = Ring(GUARD, train)
+        rank = round(3 * ring.n / 4)
+        _check_os_exact(x, rank, train)
+        k, fp = torch.full(x.shape, rank), ring_footprint(GUARD, train)
+        out.append(
+            (
+                f"os curve 256x256 (g={GUARD},t={train},N={ring.n}) vs scipy rank_filter",
+                partial(ring_order_statistic, x, ring, k),
+                partial(ndimage.rank_filter, a, rank - 1, footprint=fp),
+            )
+        )
+    return out
 
 
 def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
@@ -61,6 +85,7 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     a512 = x512[0, 0].numpy()
     fp = ring_footprint(GUARD, TRAIN)
     return [
+        *curve_cases(),
         (
             "os ring order statistic 512x512 (g=2,t=4,r=108) vs scipy rank_filter",
             lambda: ring_order_statistic(x512, ring, k512),

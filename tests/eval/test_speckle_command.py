@@ -1,4 +1,4 @@
-"""``torchsar-eval speckle`` and :mod:`eval.despeckling` on tiny datasets."""
+"""``torchsar-eval speckle`` (:mod:`eval.commands.speckle`) on tiny datasets."""
 
 from __future__ import annotations
 
@@ -12,9 +12,12 @@ import pytest
 import torch
 from skimage import io
 
+from eval.cli import main
+from eval.commands import load
 from eval.commands import speckle as command
-from eval.despeckling import COLUMNS, homogeneous_tiles, samples, score_dataset
+from eval.commands.speckle.scoring import COLUMNS, homogeneous_tiles, samples, score_dataset
 from eval.errors import EvalError
+from torchsar._checks import OptionError
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
@@ -69,7 +72,7 @@ def test_score_dataset_on_simulated_like_data():
 
 def test_homogeneous_tiles_avoid_targets_and_edges():
     s = next(samples(FakeSim(n=1)))
-    sel = homogeneous_tiles(s, 16).reshape(6, 6)
+    sel = homogeneous_tiles(s, tile=16).reshape(6, 6)
     assert not sel[2, 1]  # the target's tile
     assert not sel[:, 3].any()  # the tiles across the edge
     assert sel.sum() == 36 - 1 - 6
@@ -113,10 +116,13 @@ def test_command_on_folder(tiny_folder, tmp_path, capsys):
         (["--windows", "4"], "odd integers"),
         (["--windows", "a"], "comma-separated"),
         (["--looks", "0"], "looks"),
+        (["--looks", "inf"], "looks must be finite"),
+        (["--filters", ","], "at least one filter"),
+        (["--n", "-1"], "n must be >= 0"),
     ],
 )
 def test_command_errors(argv, match, tmp_path):
-    with pytest.raises(EvalError, match=match):
+    with pytest.raises((EvalError, OptionError), match=match):
         command.run(_parse([*argv, "--out", str(tmp_path / "o")]))
     assert not (tmp_path / "o").exists()
 
@@ -136,3 +142,29 @@ def test_command_on_simulated_scenes(tmp_path):
     none, filt = df.iloc[0], df.iloc[1]
     assert filt.enl > 5 * none.enl and filt.psnr_db > none.psnr_db
     assert (out / "speckle_sim-scenes.png").exists()
+
+
+def test_one_home_and_a_typed_entry(tiny_folder, tmp_path):
+    """``load("speckle")`` is the package; below the argparse edge, plain typed options."""
+    assert load("speckle") is command
+    opts = command.SpeckleOptions(
+        datasets=[f"folder:{tiny_folder}"],
+        filters=["lee"],
+        windows=[3],
+        looks=None,
+        n=None,
+        seed=0,
+        tile=16,
+        out=tmp_path / "typed",
+    )
+    assert command.evaluate(opts) == 0
+    assert len(pd.read_csv(tmp_path / "typed" / "speckle.csv")) == 2
+
+
+@pytest.mark.parametrize("argv", [["--n", "-1"], ["--looks", "inf"], ["--filters", "median"]])
+def test_cli_user_errors_exit_2_with_one_line(argv, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["speckle", "--dataset", "sim-chips", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("torchsar-eval: error: ")
+    assert not out.exists()

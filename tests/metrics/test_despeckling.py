@@ -61,7 +61,7 @@ class TestRatio:
         clean, noisy = _pair(2)
         filt = clean.clone()
         filt[0, 0, :2] = 0.0  # excluded pixels
-        mean, var = ratio_moments(noisy, filt)
+        mean, var = ratio_moments(filt, noisy)
         f, n = filt[0, 0].numpy(), noisy[0, 0].numpy()
         r = n[f > 0] / f[f > 0]
         assert mean[0, 0].item() == pytest.approx(r.mean(), rel=1e-12)
@@ -71,7 +71,7 @@ class TestRatio:
         g = torch.Generator().manual_seed(3)
         clean = torch.rand(1, 1, 256, 256, generator=g) + 0.5
         noisy = clean * torch.empty_like(clean).exponential_(generator=g)
-        mean, var = ratio_moments(noisy, clean)
+        mean, var = ratio_moments(clean, noisy)
         assert mean.item() == pytest.approx(1.0, abs=0.02)
         assert var.item() == pytest.approx(1.0, abs=0.05)  # 1 / L for L = 1
 
@@ -104,6 +104,54 @@ class TestEdges:
         got = edge_ratio(ts.speckle.kuan(noisy, window=3), noisy)[1, 2].item()
         assert got == pytest.approx(tv(f) / tv(n), rel=1e-12)
         assert edge_ratio(noisy / 2 + 1, noisy)[0, 0].item() == pytest.approx(0.5)
+
+
+class TestConstantAndZeroImages:
+    """One rule: a ratio's limit where it has one, NaN where the quantity has no value, an
+    error when the caller can fix the cause (see the module docstring)."""
+
+    zero = torch.zeros(2, 1, 16, 16, dtype=torch.float64)
+    const = torch.full((2, 1, 16, 16), 3.0, dtype=torch.float64)
+
+    def test_enl(self):
+        assert torch.isinf(enl(self.const)).all()  # no speckle left
+        assert torch.isnan(enl(self.zero)).all()  # no signal
+        assert torch.isnan(enl(self.const, mask=torch.zeros(16, 16, dtype=torch.bool))).all()
+
+    def test_ratio_moments(self):
+        mean, var = ratio_moments(self.const, self.const)
+        assert (mean == 1).all() and (var == 0).all()
+        mean, var = ratio_moments(self.zero, self.const)  # no pixel with estimate > 0
+        assert torch.isnan(mean).all() and torch.isnan(var).all()
+        mean, _ = ratio_moments(self.const, self.zero)
+        assert (mean == 0).all()
+
+    def test_edge_ratio(self):
+        _, noisy = _pair(8, shape=(2, 1, 16, 16))
+        assert (edge_ratio(self.const, self.zero) == 1).all()  # no edges in either
+        assert (edge_ratio(self.zero, self.zero) == 1).all()
+        assert (edge_ratio(self.const, noisy) == 0).all()
+        assert torch.isinf(edge_ratio(noisy, self.const)).all()
+
+    def test_edge_preservation(self):
+        clean, _ = _pair(9, shape=(2, 1, 16, 16))
+        assert torch.isnan(edge_preservation(self.const, clean)).all()
+        assert torch.isnan(edge_preservation(clean, self.zero)).all()
+
+    @pytest.mark.parametrize("metric", [psnr, ssim])
+    def test_psnr_ssim_need_a_data_range_for_a_constant_clean_image(self, metric):
+        clean, _ = _pair(10, shape=(2, 1, 16, 16))
+        clean[1] = 3.0
+        with pytest.raises(
+            InputValueError, match="clean image 1 channel 0 is constant.*data_range"
+        ):
+            metric(clean, clean)
+        assert torch.isfinite(ssim(self.const, self.zero, data_range=1.0)).all()
+        assert torch.isinf(psnr(self.const, self.const, data_range=1.0)).all()
+        assert psnr(self.zero, self.const, data_range=3.0).eq(0.0).all()  # MSE 9, range 3
+        torch.testing.assert_close(
+            ssim(self.const, self.const, data_range=1.0), torch.ones(2, 1, dtype=torch.float64)
+        )
 
 
 class TestFidelity:

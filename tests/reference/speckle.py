@@ -1,4 +1,4 @@
-"""Slow, obvious speckle filters: a per-pixel loop over the window, literally DESIGN §4.4.
+"""Slow, obvious speckle filters: a per-pixel loop over the window, the textbook formulas.
 
 Border rule (the library's): statistics and weighted means over the window cells inside the
 image. Works on one 2-D float64 numpy plane at a time.
@@ -42,14 +42,23 @@ def kuan_pixel(obs, mu, ci, vals, dists, L, K):
     return mu + w * (obs - mu)
 
 
-def enhanced_lee_pixel(obs, mu, ci, vals, dists, L, K):
+def three_classes(obs, mu, ci, L, textured):
+    """The enhanced filters' classes: homogeneous (Ci <= Cu) -> mu, point (Ci >= Cmax) ->
+    obs, textured -> ``textured(cu, cmax)``."""
     cu, cmax = 1 / math.sqrt(L), math.sqrt(1 + 2 / L)
     if ci <= cu:
         return mu
     if ci >= cmax:
         return obs
-    w = math.exp(-K * (ci - cu) / (cmax - ci))
-    return mu * w + obs * (1 - w)
+    return textured(cu, cmax)
+
+
+def enhanced_lee_pixel(obs, mu, ci, vals, dists, L, K):
+    def textured(cu, cmax):
+        w = math.exp(-K * (ci - cu) / (cmax - ci))
+        return mu * w + obs * (1 - w)
+
+    return three_classes(obs, mu, ci, L, textured)
 
 
 def weighted_mean(vals, dists, a):
@@ -62,23 +71,19 @@ def frost_pixel(obs, mu, ci, vals, dists, L, K):
 
 
 def enhanced_frost_pixel(obs, mu, ci, vals, dists, L, K):
-    cu, cmax = 1 / math.sqrt(L), math.sqrt(1 + 2 / L)
-    if ci <= cu:
-        return mu
-    if ci >= cmax:
-        return obs
-    return weighted_mean(vals, dists, K * (ci - cu) / (cmax - ci))
+    def textured(cu, cmax):
+        return weighted_mean(vals, dists, K * (ci - cu) / (cmax - ci))
+
+    return three_classes(obs, mu, ci, L, textured)
 
 
 def gamma_map_pixel(obs, mu, ci, vals, dists, L, K):
-    cu, cmax = 1 / math.sqrt(L), math.sqrt(1 + 2 / L)
-    if ci <= cu:
-        return mu
-    if ci >= cmax:
-        return obs
-    a = (1 + cu**2) / (ci**2 - cu**2)
-    b = a - L - 1
-    return (b * mu + math.sqrt(b * b * mu * mu + 4 * a * L * mu * obs)) / (2 * a)
+    def textured(cu, cmax):
+        a = (1 + cu**2) / (ci**2 - cu**2)
+        b = a - L - 1
+        return (b * mu + math.sqrt(b * b * mu * mu + 4 * a * L * mu * obs)) / (2 * a)
+
+    return three_classes(obs, mu, ci, L, textured)
 
 
 PIXEL = {

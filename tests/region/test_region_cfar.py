@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
+import typing
+
 import numpy as np
 import pytest
 import torch
@@ -11,7 +15,8 @@ from hypothesis import strategies as st
 import torchsar as ts
 from tests.reference import region as ref
 from torchsar._checks import InputTypeError, OptionError, ShapeError
-from torchsar.region import PRESETS, region_cfar, region_search
+from torchsar.region import PRESETS, RegionOptions, RegionParams, region_cfar, region_search
+from torchsar.region.grow import grow
 
 PAPER = {"preset": "paper", "despeckle": None}
 
@@ -151,6 +156,9 @@ class TestExceptions:
             ({"despeckle": 3}, "despeckle must be a filter name"),
             ({"despeckle": "no_such_filter"}, "not a filter of torchsar.speckle"),
             ({"colour": 1}, "unknown region_cfar option"),
+            ({"k": -0.5}, "k must be finite and >= 0"),
+            ({"k": float("inf")}, "k must be finite and >= 0"),
+            ({"k": float("nan")}, "k must be finite and >= 0"),
         ],
     )
     def test_options(self, kw, msg):
@@ -171,3 +179,28 @@ def test_max_fraction_rejects_a_flood_covering_most_of_the_image():
     assert not det.mask[..., :, :24].any()
     with pytest.raises(ts._checks.OptionError, match="max_fraction"):
         ts.region.region_cfar(x, max_fraction=1.5)
+
+
+class TestOptionsInTheOpen:
+    def test_typed_options_are_exactly_the_parameters(self):
+        fields = {f.name for f in dataclasses.fields(RegionParams)}
+        assert set(typing.get_type_hints(RegionOptions)) == fields
+
+    def test_one_budget_default(self):
+        assert RegionParams().budget == inspect.signature(grow).parameters["budget"].default
+        assert PRESETS["paper"].budget == PRESETS["torchsar"].budget == RegionParams().budget
+
+    def test_despeckle_by_name_uses_the_filter_registry(self, monkeypatch):
+        x = _speckle_scene(3)
+        monkeypatch.setitem(ts.speckle.FILTERS, "box3", _box3)
+        by_name = region_cfar(x, despeckle="box3")
+        by_callable = region_cfar(x, despeckle=_box3)
+        assert torch.equal(by_name.statistic, by_callable.statistic)
+
+    def test_preset_supplies_what_is_not_given(self):
+        x = _speckle_scene(5)
+        explicit = dataclasses.asdict(PRESETS["paper"]) | {"despeckle": _box3}
+        a = region_search(x, preset="paper", despeckle=_box3)
+        b = region_search(x, preset="torchsar", **explicit)
+        assert a.params == b.params
+        assert torch.equal(a.detection.statistic, b.detection.statistic)

@@ -46,9 +46,9 @@ def test_empty():
 
 
 def test_deterministic():
-    a = chips(3, size=64, length_px=(16, 30), clutter="k", seed=9)
-    b = chips(3, size=64, length_px=(16, 30), clutter="k", seed=9)
-    c = chips(3, size=64, length_px=(16, 30), clutter="k", seed=10)
+    a = chips(3, size=64, length_px=(16, 30), model="k", seed=9)
+    b = chips(3, size=64, length_px=(16, 30), model="k", seed=9)
+    c = chips(3, size=64, length_px=(16, 30), model="k", seed=10)
     assert all(torch.equal(getattr(a, k), getattr(b, k)) for k in ("image", "clean", "instances"))
     assert not torch.equal(a.image, c.image)
 
@@ -87,7 +87,7 @@ def test_target_size_in_range(batch):
 
 
 def test_clutter_background_statistics():
-    b = chips(40, size=128, clutter="gamma", looks=4.0, seed=2)
+    b = chips(40, size=128, model="gamma", looks=4.0, seed=2)
     bg = b.image[(~b.mask) & (~b.ignore)]
     assert float(bg.mean()) == pytest.approx(1.0, abs=0.01)  # ~6e5 px, s.e. 6e-4
     assert float(bg.mean() ** 2 / bg.var()) == pytest.approx(4.0, rel=0.03)
@@ -96,7 +96,7 @@ def test_clutter_background_statistics():
 @pytest.mark.parametrize("model", ["exponential", "k", "g0", "lognormal", "weibull"])
 def test_models_run(model):
     looks = 1.0
-    b = chips(2, size=80, length_px=(16, 32), clutter=model, looks=looks)
+    b = chips(2, size=80, length_px=(16, 32), model=model, looks=looks)
     assert b.meta[0]["clutter"]["model"] == model
     assert torch.isfinite(b.image).all() and (b.image >= 0).all()
 
@@ -107,11 +107,15 @@ def test_models_run(model):
         ({"n": -1}, "n must be >= 0"),
         ({"n": 2.0}, "n must be an int"),
         ({"size": 40}, "size must be >= "),
-        ({"clutter": "rice"}, "'gamma'"),
+        ({"model": "rice"}, "'gamma'"),
         ({"target_db": (30, 10)}, "target_db"),
         ({"length_px": (2, 10)}, "length_px"),
         ({"seed": 2**63}, "seed"),
         ({"looks": -1.0}, "looks"),
+        ({"model": "weibull", "shape_param": 0.01}, "shape_param must be >= 0.18"),
+        ({"model": "lognormal", "shape_param": 12.0}, "shape_param must be > 0 and <= 9"),
+        ({"model": "k", "looks": 0.1}, "looks must be >= 0.16"),
+        ({"device": "nodevice"}, "device must be a torch.device"),
     ],
 )
 def test_errors(kwargs, match):

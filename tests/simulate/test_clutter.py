@@ -7,10 +7,13 @@ import math
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import special, stats
 
 from torchsar._checks import InputTypeError, OptionError
 from torchsar.simulate import CLUTTER_MODELS, DEFAULT_SHAPE_PARAM, clutter
+from torchsar.simulate.clutter import GAMMA_SHAPE_MIN, SHAPE_RANGE
 
 N = 400_000  # samples per moment check
 
@@ -103,13 +106,16 @@ def test_defaults_listed():
     assert set(DEFAULT_SHAPE_PARAM) == set(CLUTTER_MODELS)
 
 
-def test_deterministic_and_generator():
+def test_deterministic():
     a = clutter((3, 5), model="k", seed=11)
     b = clutter((3, 5), model="k", seed=11)
     assert torch.equal(a, b)
-    g = torch.Generator().manual_seed(11)
-    assert torch.equal(clutter((3, 5), model="k", generator=g), a)
     assert not torch.equal(clutter((3, 5), model="k", seed=12), a)
+
+
+def test_seed_is_the_only_randomness_option():
+    with pytest.raises(TypeError):
+        clutter((3, 5), generator=torch.Generator())  # type: ignore[call-arg]
 
 
 def test_empty_and_float64():
@@ -123,7 +129,12 @@ def test_empty_and_float64():
         ({"model": "rayleigh"}, "'exponential', 'gamma', 'k', 'g0', 'lognormal', 'weibull'"),
         ({"model": "gamma", "looks": 0.0}, "looks"),
         ({"model": "weibull", "looks": 4.0}, "looks must be 1"),
-        ({"model": "g0", "shape_param": 1.0}, "shape_param must be > 1"),
+        ({"model": "g0", "shape_param": 1.0}, "shape_param must be > 1 .*no finite mean"),
+        ({"model": "weibull", "shape_param": 0.01}, "shape_param must be >= 0.18 .*float32"),
+        ({"model": "lognormal", "shape_param": 9.5}, "shape_param must be > 0 and <= 9"),
+        ({"model": "k", "shape_param": 0.1}, "shape_param must be >= 0.16"),
+        ({"model": "gamma", "looks": 0.1}, "looks must be >= 0.16"),
+        ({"model": "g0", "looks": 0.15}, "looks must be >= 0.16"),
         ({"model": "k", "shape_param": -1.0}, "shape_param"),
         ({"model": "gamma", "shape_param": 2.0}, "shape_param must be None"),
         ({"seed": -1}, "seed"),
@@ -139,3 +150,94 @@ def test_bad_shape_and_dtype():
         clutter((4, -1))
     with pytest.raises(InputTypeError, match="dtype"):
         clutter((4,), dtype=torch.int32)
+
+
+# --- parameter ranges: one rule for every model ----------------------------------------------
+
+_P = 1e-6  # the rule's tail probability
+_LOG_TINY, _LOG_MAX = math.log(np.finfo(np.float32).tiny), math.log(np.finfo(np.float32).max)
+
+
+def _factors(model: str, looks: float, p: float | None) -> list:
+    """The model's random factors as frozen scipy laws (each unit mean, or (a-1)/G_a)."""
+    speckle = stats.gamma(looks, scale=1.0 / looks)
+    if model == "k":
+        return [speckle, stats.gamma(p, scale=1.0 / p)]
+    if model == "g0":
+        return [speckle, stats.invgamma(p, scale=p - 1.0)]
+    return [_reference(model, looks, p)] if model != "gamma" else [speckle]
+
+
+def _holds(model: str, looks: float, p: float | None) -> bool:
+    """Every factor keeps its 1e-6 and 1 - 1e-6 quantiles in the normal float32 range."""
+    for law in _factors(model, looks, p):
+        lo, hi = law.ppf(_P), law.isf(_P)
+        if not (lo > 0 and math.log(lo) >= _LOG_TINY and math.log(hi) <= _LOG_MAX):
+            return False
+    return True
+
+
+# (model, looks, shape_param) at the edges of the documented ranges, and just outside
+EDGES = [
+    ("gamma", GAMMA_SHAPE_MIN, None, ("gamma", 0.15, None)),
+    ("k", GAMMA_SHAPE_MIN, GAMMA_SHAPE_MIN, ("k", 1.0, 0.15)),
+    ("g0", GAMMA_SHAPE_MIN, 1.05, ("g0", 0.15, 3.0)),
+    ("lognormal", 1.0, SHAPE_RANGE["lognormal"].high, ("lognormal", 1.0, 9.4)),
+    ("weibull", 1.0, SHAPE_RANGE["weibull"].low, ("weibull", 1.0, 0.17)),
+]
+
+
+@pytest.mark.parametrize(("model", "looks", "p", "outside"), EDGES)
+def test_documented_ranges_follow_the_float32_rule(model, looks, p, outside):
+    assert _holds(model, looks, p)
+    assert not _holds(*outside)
+    with pytest.raises(OptionError, match="float32 cannot hold"):
+        clutter((4,), model=outside[0], looks=outside[1], shape_param=outside[2])
+
+
+def _log_moments(model: str, looks: float, p: float | None) -> tuple[float, float]:
+    """Analytic mean and variance of ln I: sums over the independent factors."""
+    mean, var = special.digamma(looks) - math.log(looks), special.polygamma(1, looks)
+    if model == "weibull":  # ln I = -lgamma(1 + 1/c) + ln(E) / c, E[ln E] = -euler_gamma
+        return -math.lgamma(1 + 1 / p) - np.euler_gamma / p, math.pi**2 / (6 * p * p)
+    if model == "lognormal":
+        return -0.5 * p * p, p * p
+    if model == "k":
+        return mean + special.digamma(p) - math.log(p), var + special.polygamma(1, p)
+    if model == "g0":
+        return mean + math.log(p - 1) - special.digamma(p), var + special.polygamma(1, p)
+    return mean, var
+
+
+@pytest.mark.parametrize(("model", "looks", "p", "outside"), EDGES)
+def test_fields_at_the_range_edges_are_finite_and_correct(model, looks, p, outside):
+    """float32 fields at the most extreme accepted parameters: finite, positive, and the
+    log-moments (finite for every law, unlike the plain moments of heavy tails) match."""
+    n = 200_000
+    x = clutter((n,), model=model, looks=looks, shape_param=p, seed=7).double()
+    assert bool(torch.isfinite(x).all()) and bool((x > 0).all())
+    logs = x.log()
+    mean, var = _log_moments(model, looks, p)
+    # s.e. of the mean of ln I is sqrt(var / n); of the variance, ~ var * sqrt(kurtosis / n)
+    assert abs(float(logs.mean()) - mean) < 5 * math.sqrt(var / n)
+    assert float(logs.var()) == pytest.approx(var, rel=0.05)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    model=st.sampled_from(["gamma", "k", "g0", "lognormal", "weibull"]),
+    u=st.floats(0.0, 1.0),
+    v=st.floats(0.0, 1.0),
+    seed=st.integers(0, 2**32),
+)
+def test_every_accepted_parameter_gives_a_finite_field(model, u, v, seed):
+    """Any looks / shape_param inside the documented ranges (log-uniform up to 1e4):
+    a finite, non-negative float32 field with positive values."""
+    looks = GAMMA_SHAPE_MIN * 10 ** (4.8 * u) if model in ("gamma", "k", "g0") else 1.0
+    p = None
+    if model != "gamma":
+        r = SHAPE_RANGE[model]
+        low = r.low if r.closed else (r.low + 1e-3 if model == "g0" else 1e-3)
+        p = low * (min(r.high, 1e4) / low) ** v
+    x = clutter((2_000,), model=model, looks=looks, shape_param=p, seed=seed)
+    assert bool(torch.isfinite(x).all()) and bool((x >= 0).all()) and bool((x > 0).any())

@@ -109,7 +109,7 @@ def test_options():
         ({"n_targets": (5, 2)}, "n_targets"),
         ({"regions": (0, 2)}, "regions"),
         ({"road": 1}, "road must be True or False"),
-        ({"clutter": "foo"}, "'weibull'"),
+        ({"model": "foo"}, "'weibull'"),
     ],
 )
 def test_errors(kwargs, match):

@@ -1,4 +1,4 @@
-"""Speckle filters on real MSTAR chips (skipped when ../shared/data is absent)."""
+"""Speckle filters on real MSTAR chips (skipped when the real-data folder is absent)."""
 
 from __future__ import annotations
 

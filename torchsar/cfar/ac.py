@@ -9,12 +9,13 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_int, check_probability
-from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.ca import ca_threshold
+from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
+from torchsar.cfar.ring_mean import ring_mean_ratio
 from torchsar.cfar.thresholds import ca_factor
-from torchsar.windows import Sums, windowed
+from torchsar.detection import Detection
 
-__all__ = ["ac", "global_censor_threshold"]
+__all__ = ["ac", "ac_threshold", "global_censor_threshold"]
 
 
 def ac(
@@ -79,28 +80,22 @@ def ac(
         >>> ts.cfar.ca(x, guard=1, train=2).mask[0, 0, 8, 8].item()  # CA is masked by it
         False
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ac")
     p_c = pfa if censor_pfa is None else check_probability(censor_pfa, "censor_pfa")
     iterations = check_int(iterations, "iterations", minimum=0)
     mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
     keep = x <= thr if vmask is None else vmask & (x <= thr)
-    factor = partial(ca_factor, pfa=pfa)
-    fallback = factor(ring.n) / math.log(1.0 / pfa)
+    alpha = ac_threshold(guard=guard, train=train, pfa=pfa)
     dtype = out_dtype(x)
+    stat = ring_mean_ratio(x, ring, partial(ca_factor, pfa=pfa), keep, dtype)
+    glob = ratio(x.to(torch.float64), mu) * (alpha / math.log(1.0 / pfa))
+    stat = torch.where(stat == -torch.inf, glob.to(dtype), stat)  # fully censored rings
+    return conclude(stat, vmask, alpha)
 
-    def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        s = sums[0]
-        stat = ratio(xs.to(torch.float64), s.mean())
-        scale = border_scale(s.count, ring.n, factor)
-        if scale is not None:
-            stat = stat * scale
-        glob = ratio(xs.to(torch.float64), mu.expand_as(stat)) * fallback
-        return finish(torch.where(s.count > 0, stat, glob), torch.ones_like(s.count), None, dtype)
 
-    stat = windowed(x, [ring.region], statistic, valid=keep, moments=1)
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
-    return detection_from(stat, factor(ring.n))
+def ac_threshold(*, guard: int, train: int, pfa: float) -> float:
+    """The design threshold of :func:`ac` for these options: the interior CA factor."""
+    return ca_threshold(guard=guard, train=train, pfa=pfa, looks=1.0)
 
 
 def global_censor_threshold(

@@ -8,12 +8,15 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar.cfar.core import finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar._checks import check_probability
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
-from torchsar.windows import Sums, pinwheel_rects, windowed
+from torchsar.detection import Detection
+from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
-__all__ = ["block_cfar", "block_scale", "extreme_mean"]
+__all__ = ["block_cfar", "block_scale", "block_threshold", "extreme_mean"]
+
+_NAMES = {"max": "go", "min": "so"}
 
 
 def extreme_mean(sums: list[Sums], reduce: str) -> Tensor:
@@ -42,7 +45,7 @@ def block_cfar(
     x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None, reduce: str
 ) -> Detection:
     """GO (``reduce="max"``) or SO (``"min"``) CFAR on the 4 pinwheel blocks."""
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=_NAMES[reduce])
     rects = pinwheel_rects(ring.guard, ring.train)
     interior = tuple(r.area for r in rects)
     factor = partial(_factor, pfa=pfa, reduce=reduce)
@@ -54,13 +57,17 @@ def block_cfar(
         scale = block_scale([s.count for s in sums], interior, factor)
         if scale is not None:
             stat = stat * scale
-        total = sum(s.count for s in sums)
-        return finish(stat, total, None, dtype)
+        return finish(stat, sum(s.count for s in sums), dtype)
 
     stat = windowed(x, rects, statistic, valid=vmask, moments=1)
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
-    return detection_from(stat, factor(interior))
+    return conclude(stat, vmask, factor(interior))
+
+
+def block_threshold(guard: int, train: int, pfa: float, reduce: str) -> float:
+    """The design threshold of GO (``reduce="max"``) / SO (``"min"``) for these options:
+    the factor of the interior block sizes (no image needed)."""
+    rects = pinwheel_rects(Ring(guard, train).guard, train)
+    return _factor(tuple(r.area for r in rects), check_probability(pfa, "pfa"), reduce)
 
 
 def _factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:

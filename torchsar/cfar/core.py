@@ -6,6 +6,11 @@ invalid by ``valid`` are not counted. A pixel with fewer training cells than the
 ``factor(N) / factor(n_pixel)``, so one global threshold (the interior factor) is exact at
 every pixel and ROC sweeps stay consistent. Interior pixels are untouched. Pixels whose cell
 under test is invalid, or whose ring has no valid cell, get statistic ``-inf``.
+
+Every detector begins with :func:`prepare` and ends with :func:`conclude`: the ring
+statistic is cast and its untestable pixels marked by :func:`finish` (inside the strip
+callback of :func:`~torchsar.windows.windowed`), and :func:`conclude` marks the invalid
+cells under test and builds the :class:`~torchsar.detection.Detection`.
 """
 
 from __future__ import annotations
@@ -17,16 +22,18 @@ from torch import Tensor
 
 from torchsar._checks import check_image, check_mask, check_probability, float_dtype
 from torchsar.cfar.thresholds import factor_map
+from torchsar.detection import Detection, detection_from
 from torchsar.windows import Ring
 
-__all__ = ["border_scale", "finish", "prepare", "ratio", "ratio_"]
+__all__ = ["border_scale", "conclude", "finish", "out_dtype", "prepare", "ratio", "ratio_"]
 
 
 def prepare(
-    x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None
+    x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None, *, detector: str
 ) -> tuple[Ring, float, Tensor | None]:
-    """Validate the common CFAR arguments; return the ring, ``pfa`` and the bool mask."""
-    check_image(x, "x")
+    """Validate the common CFAR arguments of ``detector`` (its name, for messages); return
+    the ring, ``pfa`` and the bool mask."""
+    check_image(x, "x", not_differentiable=detector)
     ring = Ring(guard, train)
     ring.check_fits(x)
     pfa = check_probability(pfa, "pfa")
@@ -60,15 +67,22 @@ def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tenso
     return scale
 
 
-def finish(statistic: Tensor, count: Tensor, vmask: Tensor | None, dtype: torch.dtype) -> Tensor:
-    """Cast the statistic to the output dtype and mark untestable pixels ``-inf``."""
+def finish(statistic: Tensor, count: Tensor, dtype: torch.dtype) -> Tensor:
+    """Cast the statistic to the output dtype and mark pixels without training cells
+    (``count <= 0``) ``-inf``."""
     out = statistic.to(dtype)
     bad = count <= 0
-    if vmask is not None:
-        bad = bad | ~vmask
-    elif not bool(bad.any()):  # the usual case: nothing to mark, skip a full-size pass
+    if not bool(bad.any()):  # the usual case: nothing to mark, skip a full-size pass
         return out
     return out.masked_fill(bad, -torch.inf)
+
+
+def conclude(statistic: Tensor, vmask: Tensor | None, threshold: float) -> Detection:
+    """The one ending of every CFAR: invalid cells under test get ``-inf``, then
+    ``mask = statistic > threshold``."""
+    if vmask is not None:
+        statistic = statistic.masked_fill(~vmask.expand_as(statistic), -torch.inf)
+    return detection_from(statistic, threshold)
 
 
 def out_dtype(x: Tensor) -> torch.dtype:

@@ -29,12 +29,19 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar.cfar.core import finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar._checks import check_probability
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
-from torchsar.windows import Sums, windowed
+from torchsar.detection import Detection
+from torchsar.windows import Ring, Sums, windowed
 
-__all__ = ["distribution_cfar", "log_cumulants", "log_t_quantile", "shape_from_spread"]
+__all__ = [
+    "distribution_cfar",
+    "distribution_threshold",
+    "log_cumulants",
+    "log_t_quantile",
+    "shape_from_spread",
+]
 
 
 def distribution_cfar(
@@ -46,11 +53,12 @@ def distribution_cfar(
     quantile: Callable[[Sums, float], Tensor],  # (ring sums, pfa) -> float64 quantile
     *,
     log_domain: bool,
+    detector: str,
 ) -> Detection:
-    """Run a distribution CFAR: ring sums of ``ln I`` (``log_domain``) or ``I``, the fitted
-    quantile per pixel, statistic ``I / q``, threshold 1. Rings with fewer than 2 cells
-    cannot be fitted and give ``-inf``."""
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    """Run the distribution CFAR ``detector`` (its name, for messages): ring sums of
+    ``ln I`` (``log_domain``) or ``I``, the fitted quantile per pixel, statistic ``I / q``,
+    threshold 1. Rings with fewer than 2 cells cannot be fitted and give ``-inf``."""
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=detector)
     dtype = out_dtype(x)
     src = _safe_log(x) if log_domain else x
     fit = _positive_cells(x, vmask) if log_domain else vmask
@@ -58,12 +66,18 @@ def distribution_cfar(
     def statistic(_src: Tensor, sums: list[Sums], xs: Tensor) -> Tensor:
         q = quantile(sums[0], pfa)
         stat = ratio(xs.to(torch.float64), q)
-        return finish(stat, sums[0].count - 1, None, dtype)
+        return finish(stat, sums[0].count - 1, dtype)
 
     stat = windowed(src, [ring.region], statistic, valid=fit, moments=2, extras=(x,))
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
-    return detection_from(stat, 1.0)
+    return conclude(stat, vmask, distribution_threshold(guard=guard, train=train, pfa=pfa))
+
+
+def distribution_threshold(*, guard: int, train: int, pfa: float) -> float:
+    """The design threshold of every distribution CFAR: 1 (the fitted quantile is in the
+    statistic), whatever the valid options."""
+    Ring(guard, train)
+    check_probability(pfa, "pfa")
+    return 1.0
 
 
 def _safe_log(x: Tensor) -> Tensor:

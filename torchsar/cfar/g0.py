@@ -7,8 +7,8 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["g0"]
@@ -70,7 +70,7 @@ def g0(
     """
     looks = check_positive(looks, "looks")
     return distribution_cfar(
-        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True
+        x, guard, train, pfa, valid, partial(_quantile, looks=looks), log_domain=True, detector="g0"
     )
 
 

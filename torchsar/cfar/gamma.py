@@ -7,9 +7,9 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar
 from torchsar.cfar.thresholds import ca_factor, factor_map
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["gamma"]
@@ -62,7 +62,9 @@ def gamma(
     """
     looks = check_positive(looks, "looks")
     quantile = partial(_quantile, looks=looks)
-    return distribution_cfar(x, guard, train, pfa, valid, quantile, log_domain=False)
+    return distribution_cfar(
+        x, guard, train, pfa, valid, quantile, log_domain=False, detector="gamma"
+    )
 
 
 def _quantile(s: Sums, pfa: float, looks: float) -> Tensor:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from torch import Tensor
 
-from torchsar.cfar.blocks import block_cfar
-from torchsar.cfar.detection import Detection
+from torchsar.cfar.blocks import block_cfar, block_threshold
+from torchsar.detection import Detection
 
-__all__ = ["go"]
+__all__ = ["go", "go_threshold"]
 
 
 def go(
@@ -58,3 +58,8 @@ def go(
         1
     """
     return block_cfar(x, guard, train, pfa, valid, "max")
+
+
+def go_threshold(*, guard: int, train: int, pfa: float) -> float:
+    """The design threshold of :func:`go` for these options (no image needed)."""
+    return block_threshold(guard, train, pfa, "max")

@@ -6,9 +6,9 @@ from functools import partial
 
 from torch import Tensor
 
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_cumulants
 from torchsar.cfar.thresholds import factor_map, student_factor
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["lognormal"]
@@ -58,7 +58,9 @@ def lognormal(
         >>> lognormal(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True
     """
-    return distribution_cfar(x, guard, train, pfa, valid, _quantile, log_domain=True)
+    return distribution_cfar(
+        x, guard, train, pfa, valid, _quantile, log_domain=True, detector="lognormal"
+    )
 
 
 def _quantile(s: Sums, pfa: float) -> Tensor:

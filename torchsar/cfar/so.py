@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from torch import Tensor
 
-from torchsar.cfar.blocks import block_cfar
-from torchsar.cfar.detection import Detection
+from torchsar.cfar.blocks import block_cfar, block_threshold
+from torchsar.detection import Detection
 
-__all__ = ["so"]
+__all__ = ["so", "so_threshold"]
 
 
 def so(
@@ -58,3 +58,8 @@ def so(
         1
     """
     return block_cfar(x, guard, train, pfa, valid, "min")
+
+
+def so_threshold(*, guard: int, train: int, pfa: float) -> float:
+    """The design threshold of :func:`so` for these options (no image needed)."""
+    return block_threshold(guard, train, pfa, "min")

@@ -16,6 +16,8 @@ import torch
 from scipy import optimize, special
 from torch import Tensor
 
+from torchsar._checks import OptionError
+
 __all__ = [
     "block_factor",
     "ca_factor",
@@ -34,8 +36,12 @@ def ca_factor(n: int, pfa: float, looks: float = 1.0) -> float:
 
     With ``L`` looks, ``I / mean_ring`` follows an F distribution with ``(2L, 2NL)`` degrees of
     freedom, so ``alpha`` is its ``1 - pfa`` quantile, computed through the regularised
-    incomplete beta inverse. For ``L = 1`` (exponential clutter) this is the closed form
-    ``alpha = N (pfa^(-1/N) - 1)``.
+    incomplete beta inverse on the complementary side (``1 - B = I^-1(NL, L; pfa)``, so tiny
+    ``pfa`` keeps full precision). For ``L = 1`` (exponential clutter) this is the closed
+    form ``alpha = N (pfa^(-1/N) - 1)``.
+
+    Raises:
+        OptionError: ``looks`` so small that the quantile overflows (no finite threshold).
 
     References:
         Finn & Johnson (1968); Gandhi & Kassam, IEEE TAES 24(4), 1988, doi:10.1109/7.7181.
@@ -48,14 +54,26 @@ def ca_factor(n: int, pfa: float, looks: float = 1.0) -> float:
         return math.inf
     if looks == 1.0:
         return n * (pfa ** (-1.0 / n) - 1.0)
-    b = float(special.betaincinv(looks, n * looks, 1.0 - pfa))
-    return n * b / (1.0 - b)
+    c = float(special.betaincinv(n * looks, looks, pfa))  # 1 - the beta quantile
+    alpha = n * (1.0 - c) / c if c > 0 else math.inf
+    if not math.isfinite(alpha):
+        raise OptionError(
+            f"looks={looks:g} gives no finite threshold at pfa={pfa:g} with {n} training "
+            f"cells: the clutter law is too heavy-tailed; use a larger looks"
+        )
+    return alpha
 
 
 @lru_cache(maxsize=64)
 def gaussian_factor(pfa: float) -> float:
-    """``K = Phi^-1(1 - pfa)``, the two-parameter CFAR threshold (seed eq. 1)."""
-    return float(special.ndtri(1.0 - pfa))
+    """``K = Phi^-1(1 - pfa) = -Phi^-1(pfa)``, the two-parameter CFAR threshold (seed eq. 1),
+    computed on the lower tail so that any ``pfa`` in ``(0, 1)`` gives a finite ``K``.
+
+    Example:
+        >>> round(gaussian_factor(1e-20), 4)
+        9.2623
+    """
+    return float(-special.ndtri(pfa))
 
 
 def factor_map(count: Tensor, factor: Callable[[int], float]) -> Tensor:
@@ -114,10 +132,13 @@ def os_factor(n: int, rank: int, pfa: float) -> float:
     return float(optimize.bisect(log_pfa, 0.0, hi, xtol=1e-14 * hi, rtol=1e-15, maxiter=400))
 
 
+_GRID_FLOOR = 1e-12  # smallest block mean on the integration grid
+
+
 def _log_grid(sizes: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Log-spaced nodes and trapezoid weights (in ``dz``) covering the block-mean laws."""
     m = min(s for s in sizes if s > 0)
-    lo, hi = 1e-12, 12.0 + 40.0 / math.sqrt(m)
+    lo, hi = _GRID_FLOOR, 12.0 + 40.0 / math.sqrt(m)
     u = np.linspace(math.log(lo), math.log(hi), 6001)
     z = np.exp(u)
     w = np.full_like(z, u[1] - u[0]) * z
@@ -155,6 +176,9 @@ def block_factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:
     fine logarithmic grid (relative error far below 1e-6) and solved for ``alpha`` by Brent's
     method. Empty blocks (``m_j = 0``) are left out; a single block gives the CA factor.
 
+    Raises:
+        OptionError: ``pfa`` so small that the integration grid cannot resolve its factor.
+
     References:
         Hansen & Sawyers, IEEE TAES 16(5), 1980 (GO); Trunk, IEEE TAES 14(5), 1978 (SO);
         Gandhi & Kassam, IEEE TAES 24(4), 1988, doi:10.1109/7.7181.
@@ -166,14 +190,25 @@ def block_factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:
     if sum(sizes) <= 0:
         return math.inf
     z, wd = _block_density(sizes, reduce)
+    keep = wd > 0
+    z, log_w = z[keep], np.log(wd[keep])
 
-    def log_pfa(a: float) -> float:
-        return math.log(float(np.dot(wd, np.exp(-a * z)))) - math.log(pfa)
+    def log_pfa(a: float) -> float:  # log E[exp(-a Z)], in logs so that tiny pfa stay finite
+        v = log_w - a * z
+        top = float(v.max())
+        return top + math.log(float(np.exp(v - top).sum())) - math.log(pfa)
 
     hi = 1.0
     while log_pfa(hi) > 0:
         hi *= 2.0
-    return float(optimize.brentq(log_pfa, 0.0, hi, xtol=1e-13, rtol=1e-14, maxiter=500))
+    alpha = float(optimize.brentq(log_pfa, 0.0, hi, xtol=1e-13, rtol=1e-14, maxiter=500))
+    if min(m for m in sizes if m > 0) / alpha < _GRID_FLOOR * 1e3:  # mass below the grid
+        raise OptionError(
+            f"pfa={pfa:g} is too small for the {'GO' if reduce == 'max' else 'SO'} threshold "
+            f"with blocks of {sorted(sizes)} cells (the factor would exceed {alpha:.3g}); "
+            f"use a larger pfa"
+        )
+    return alpha
 
 
 def keyed_factor_map(keys: Tensor, factor: Callable[[tuple[int, ...]], float]) -> Tensor:

@@ -5,13 +5,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_positive
-from torchsar.cfar.core import finish, out_dtype, prepare, ratio_
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar._checks import check_positive, check_probability
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_
 from torchsar.cfar.thresholds import gaussian_factor
-from torchsar.windows import Sums, windowed
+from torchsar.detection import Detection
+from torchsar.windows import Ring, Sums, windowed
 
-__all__ = ["two_parameter"]
+__all__ = ["two_parameter", "two_parameter_threshold"]
 
 
 def two_parameter(
@@ -55,8 +55,8 @@ def two_parameter(
         >>> two_parameter(x, guard=1, train=2, k=3.0).mask[0, 0, 8, 8].item()
         True
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
-    thr = gaussian_factor(pfa) if k is None else check_positive(k, "k", allow_zero=True)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="two_parameter")
+    thr = two_parameter_threshold(guard=guard, train=train, pfa=pfa, k=k)
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
@@ -65,9 +65,16 @@ def two_parameter(
         mean_c = s.s1.div_(c)  # ring mean of (x - shift)
         sigma = s.s2.div_(c).addcmul_(mean_c, mean_c, value=-1).clamp_min_(0).sqrt_()
         dev = xs.to(torch.float64, copy=True).sub_(s.shift).sub_(mean_c)
-        return finish(ratio_(dev, sigma), s.count, None, dtype)
+        return finish(ratio_(dev, sigma), s.count, dtype)
 
     stat = windowed(x, [ring.region], statistic, valid=vmask, moments=2)
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -float("inf"))
-    return detection_from(stat, thr)
+    return conclude(stat, vmask, thr)
+
+
+def two_parameter_threshold(*, guard: int, train: int, pfa: float, k: float | None) -> float:
+    """The design threshold ``K`` of :func:`two_parameter` for these options (no image
+    needed): ``k`` when given, else ``Phi^-1(1 - pfa)``."""
+    Ring(guard, train)
+    if k is not None:
+        return check_positive(k, "k", allow_zero=True)
+    return gaussian_factor(check_probability(pfa, "pfa"))

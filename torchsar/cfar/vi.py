@@ -8,12 +8,13 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.core import finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar.cfar.ca import ca_threshold
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
+from torchsar.detection import Detection
 from torchsar.windows import Sums, pinwheel_rects, windowed
 
-__all__ = ["vi"]
+__all__ = ["vi", "vi_threshold"]
 
 # the clutter estimate each decision uses (codes of the per-pixel rule)
 _CA, _GO, _SO, _CA_A, _CA_B = range(5)
@@ -73,11 +74,11 @@ def vi(
         >>> vi(x, guard=1, train=2).mask.sum().item()
         1
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="vi")
     k_vi = check_positive(k_vi, "k_vi")
     k_mr = check_positive(k_mr, "k_mr")
     factor = partial(_rule_factor, pfa=pfa)
-    full = ca_factor(ring.n, pfa)
+    full = vi_threshold(guard=guard, train=train, pfa=pfa)
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
@@ -88,13 +89,16 @@ def vi(
         keys = torch.stack(torch.broadcast_tensors(rule.double(), a.count, b.count), dim=-1)
         same = (rule == _CA) & (a.count + b.count == ring.n)
         scale = torch.where(same, 1.0, full / keyed_factor_map(keys, factor))
-        return finish(stat * scale, a.count + b.count, None, dtype)
+        return finish(stat * scale, a.count + b.count, dtype)
 
     rects = [*pinwheel_rects(ring.guard, ring.train), ring.region]
     stat = windowed(x, rects, statistic, valid=vmask, moments=2)
-    if vmask is not None:
-        stat = stat.masked_fill(~vmask.expand_as(stat), -torch.inf)
-    return detection_from(stat, full)
+    return conclude(stat, vmask, full)
+
+
+def vi_threshold(*, guard: int, train: int, pfa: float) -> float:
+    """The design threshold of :func:`vi` for these options: the interior CA factor."""
+    return ca_threshold(guard=guard, train=train, pfa=pfa, looks=1.0)
 
 
 def _merge(p: Sums, q: Sums) -> Sums:

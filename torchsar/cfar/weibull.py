@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from torch import Tensor
 
-from torchsar.cfar.detection import Detection
 from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
+from torchsar.detection import Detection
 from torchsar.windows import Sums
 
 __all__ = ["weibull"]
@@ -57,7 +57,9 @@ def weibull(
         >>> weibull(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True
     """
-    return distribution_cfar(x, guard, train, pfa, valid, _quantile, log_domain=True)
+    return distribution_cfar(
+        x, guard, train, pfa, valid, _quantile, log_domain=True, detector="weibull"
+    )
 
 
 def _quantile(s: Sums, pfa: float) -> Tensor:

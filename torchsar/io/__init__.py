@@ -1,5 +1,55 @@
-"""Readers of SAR data files."""
+"""Readers of SAR data files: rasters, annotations, MSTAR Phoenix, SICD, GOTCHA."""
 
+from torchsar.io.channels import single_channel
+from torchsar.io.coco import CocoAnnotation, CocoImage, CocoSet, annotation_mask, read_coco
+from torchsar.io.errors import FileFormatError
+from torchsar.io.geotiff import geotiff_pixel_spacing
 from torchsar.io.gotcha import GotchaPass, gotcha_files, read_gotcha
+from torchsar.io.idmap import decode_id_map
+from torchsar.io.phoenix import PhoenixChip, is_phoenix, read_phoenix, read_phoenix_header
+from torchsar.io.raster import (
+    DEFAULT_MAX_PIXELS,
+    RASTER_EXTS,
+    TIFF_EXTS,
+    check_regular_file,
+    raster_shape,
+    read_raster,
+    tiff_dtype,
+)
+from torchsar.io.scaling import SAMPLE_TYPES, to_intensity
+from torchsar.io.sicd import SicdChip, read_sicd, sicd_shape
+from torchsar.io.voc import VocAnnotation, VocObject, read_voc
 
-__all__ = ["GotchaPass", "gotcha_files", "read_gotcha"]
+__all__ = [
+    "DEFAULT_MAX_PIXELS",
+    "RASTER_EXTS",
+    "SAMPLE_TYPES",
+    "TIFF_EXTS",
+    "CocoAnnotation",
+    "CocoImage",
+    "CocoSet",
+    "FileFormatError",
+    "GotchaPass",
+    "PhoenixChip",
+    "SicdChip",
+    "VocAnnotation",
+    "VocObject",
+    "annotation_mask",
+    "check_regular_file",
+    "decode_id_map",
+    "geotiff_pixel_spacing",
+    "gotcha_files",
+    "is_phoenix",
+    "raster_shape",
+    "read_coco",
+    "read_gotcha",
+    "read_phoenix",
+    "read_phoenix_header",
+    "read_raster",
+    "read_sicd",
+    "read_voc",
+    "sicd_shape",
+    "single_channel",
+    "tiff_dtype",
+    "to_intensity",
+]

@@ -3,10 +3,12 @@
 Every metric takes images ``(B, C, H, W)`` and returns one value per image and channel,
 ``(B, C)``, in the library's float dtype (float64 for float64 input, else float32). Region
 metrics take an optional bool ``mask`` broadcastable to the images (``None``: every pixel).
+Metrics that compare two images take them in one order, ``(estimate, reference)``: the
+despeckled image first, then the clean or noisy image it is judged against.
 
 - :func:`enl` — equivalent number of looks ``mean^2 / var`` of an intensity region
   (no reference image needed).
-- :func:`ratio_moments` — mean and variance of the ratio image ``noisy / filtered``; ideal
+- :func:`ratio_moments` — mean and variance of the ratio image ``noisy / estimate``; ideal
   filtering of L-look intensity speckle leaves pure speckle: mean 1, variance ``1 / L``.
 - :func:`edge_preservation` — Sattar et al.'s EPI: the correlation of the Laplacians of the
   filtered and the clean image (1 = edges kept exactly). Needs the clean image.
@@ -15,6 +17,15 @@ metrics take an optional bool ``mask`` broadcastable to the images (``None``: ev
   smoothing, so read it next to ENL).
 - :func:`psnr`, :func:`ssim` — fidelity to the clean reflectivity (SSIM as in Wang et al.
   2004 / scikit-image with Gaussian weights, sigma 1.5, 11x11 window, valid region only).
+
+Constant and zero images (one rule for every metric): when a denominator vanishes, the
+value is the ratio's limit where it has one (``inf`` ENL of a constant non-zero region,
+``inf`` PSNR of equal images, edge ratio 1 of two images without edges and ``inf`` of an
+image with edges over one without); NaN where the quantity has no value (ENL of an all-zero
+or empty region, ratio moments with no pixel of ``estimate > 0``, EPI when either Laplacian
+is identically zero: a correlation with a constant); and an :class:`InputValueError` when
+the caller can fix the cause (PSNR and SSIM of a constant clean image with the default data
+range ``max - min = 0``: pass ``data_range``).
 """
 
 from __future__ import annotations
@@ -64,7 +75,8 @@ def enl(x: Tensor, *, mask: Tensor | None = None) -> Tensor:
         mask: bool region, broadcastable to ``x`` (default: the whole image).
 
     Returns:
-        ``(B, C)``; ``inf`` for a constant non-zero region, NaN for an empty or zero region.
+        ``(B, C)``; ``inf`` for a constant non-zero region (no speckle left), NaN for an
+        all-zero or empty region (no signal to measure).
 
     Raises:
         InputTypeError, ShapeError, InputValueError: bad input.
@@ -84,19 +96,20 @@ def enl(x: Tensor, *, mask: Tensor | None = None) -> Tensor:
 
 
 def ratio_moments(
-    noisy: Tensor, filtered: Tensor, *, mask: Tensor | None = None
+    estimate: Tensor, noisy: Tensor, *, mask: Tensor | None = None
 ) -> tuple[Tensor, Tensor]:
-    """Mean and variance of the ratio image ``noisy / filtered`` (intensities).
+    """Mean and variance of the ratio image ``noisy / estimate`` (intensities).
 
-    Pixels where ``filtered == 0`` are left out (the ratio is undefined there).
+    Pixels where ``estimate == 0`` are left out (the ratio is undefined there).
 
     Args:
-        noisy: speckled intensity ``(B, C, H, W)``.
-        filtered: despeckled intensity, same shape.
+        estimate: despeckled intensity ``(B, C, H, W)``.
+        noisy: the speckled intensity it was computed from, same shape.
         mask: bool region, broadcastable (default: every pixel).
 
     Returns:
-        ``(mean, variance)``, each ``(B, C)``; ideally 1 and ``1 / L``.
+        ``(mean, variance)``, each ``(B, C)``; ideally 1 and ``1 / L``. NaN for an image
+        with no pixel where ``estimate > 0`` (an all-zero estimate), inside ``mask``.
 
     Raises:
         InputTypeError, ShapeError, InputValueError: bad input.
@@ -107,14 +120,14 @@ def ratio_moments(
 
     Example:
         >>> x = torch.tensor([[[[1.0, 3.0]]]]); f = torch.tensor([[[[2.0, 2.0]]]])
-        >>> [t.item() for t in ratio_moments(x, f)]
+        >>> [t.item() for t in ratio_moments(f, x)]
         [1.0, 0.25]
     """
-    _pair(noisy, filtered, "noisy", "filtered")
-    keep = filtered > 0
+    _pair(estimate, noisy, "estimate", "noisy")
+    keep = estimate > 0
     m = _mask(mask, noisy)
     keep = keep if m is None else keep & m
-    r = noisy.to(torch.float64) / torch.where(keep, filtered.to(torch.float64), 1.0)
+    r = noisy.to(torch.float64) / torch.where(keep, estimate.to(torch.float64), 1.0)
     mean, var = _masked_moments(r, keep)
     dtype = float_dtype(noisy.dtype)
     return mean.to(dtype), var.to(dtype)
@@ -127,21 +140,22 @@ def _laplacian(x: Tensor) -> Tensor:
     return x[..., :-2, 1:-1] + x[..., 2:, 1:-1] + x[..., 1:-1, :-2] + x[..., 1:-1, 2:] - 4 * c
 
 
-def edge_preservation(filtered: Tensor, clean: Tensor) -> Tensor:
+def edge_preservation(estimate: Tensor, clean: Tensor) -> Tensor:
     """Edge preservation index (Sattar et al. 1997): correlation of the Laplacians.
 
     ``EPI = sum (dF - mean dF)(dS - mean dS) / sqrt(sum (dF - mean dF)^2 sum (dS - mean dS)^2)``
     with ``dF``, ``dS`` the 4-neighbour Laplacians (kernel ``[[0,1,0],[1,-4,1],[0,1,0]]``) of
-    the filtered and the clean image over the interior pixels. 1 means the edges of the clean
+    the estimate and the clean image over the interior pixels. 1 means the edges of the clean
     image are kept exactly; compute it on whichever representation (intensity, amplitude)
     the comparison is about.
 
     Args:
-        filtered: despeckled image ``(B, C, H, W)``, H, W >= 3.
+        estimate: despeckled image ``(B, C, H, W)``, H, W >= 3.
         clean: clean reflectivity, same shape.
 
     Returns:
-        ``(B, C)`` in ``[-1, 1]`` (NaN if either Laplacian is identically zero).
+        ``(B, C)`` in ``[-1, 1]``; NaN when either Laplacian is identically zero (a constant
+        or planar image: the correlation with a constant has no value).
 
     Raises:
         InputTypeError, ShapeError, InputValueError: bad input.
@@ -155,10 +169,10 @@ def edge_preservation(filtered: Tensor, clean: Tensor) -> Tensor:
         >>> edge_preservation(2 * s + 1, s).item()
         1.0
     """
-    _pair(filtered, clean, "filtered", "clean", nonnegative=False)
+    _pair(estimate, clean, "estimate", "clean", nonnegative=False)
     if min(clean.shape[-2:]) < 3:
         raise InputValueError(f"images must be at least 3x3, got {tuple(clean.shape[-2:])}")
-    df, ds = _laplacian(filtered), _laplacian(clean)
+    df, ds = _laplacian(estimate), _laplacian(clean)
     df = df - df.mean(dim=(-2, -1), keepdim=True)
     ds = ds - ds.mean(dim=(-2, -1), keepdim=True)
     num = (df * ds).sum(dim=(-2, -1))
@@ -166,19 +180,28 @@ def edge_preservation(filtered: Tensor, clean: Tensor) -> Tensor:
     return (num / den).to(float_dtype(clean.dtype))
 
 
-def edge_ratio(filtered: Tensor, noisy: Tensor) -> Tensor:
+def _total_variation(x: Tensor) -> Tensor:
+    """Sum of absolute horizontal and vertical neighbour differences, ``(B, C)`` float64."""
+    x = x.to(torch.float64)
+    dh = (x[..., :, 1:] - x[..., :, :-1]).abs().sum(dim=(-2, -1))
+    dv = (x[..., 1:, :] - x[..., :-1, :]).abs().sum(dim=(-2, -1))
+    return dh + dv
+
+
+def edge_ratio(estimate: Tensor, noisy: Tensor) -> Tensor:
     """No-reference edge measure: ``sum |grad F| / sum |grad I|`` over neighbour pairs.
 
-    Sums of absolute horizontal and vertical neighbour differences of the filtered image
+    Sums of absolute horizontal and vertical neighbour differences of the despeckled image
     divided by those of the noisy image (the gradient-ratio "EPI" of many despeckling
     studies). 1 = as much local contrast as the input; it drops with any smoothing.
 
     Args:
-        filtered: despeckled image ``(B, C, H, W)``.
+        estimate: despeckled image ``(B, C, H, W)``.
         noisy: the filter's input, same shape.
 
     Returns:
-        ``(B, C)``.
+        ``(B, C)``; 1 when neither image has any edge (both constant: nothing was smoothed
+        away), ``inf`` when only the estimate has edges.
 
     Raises:
         InputTypeError, ShapeError, InputValueError: bad input.
@@ -188,24 +211,28 @@ def edge_ratio(filtered: Tensor, noisy: Tensor) -> Tensor:
         >>> edge_ratio(x / 2, x).item()
         0.5
     """
-    _pair(filtered, noisy, "filtered", "noisy", nonnegative=False)
-
-    def total_variation(x: Tensor) -> Tensor:
-        x = x.to(torch.float64)
-        dh = (x[..., :, 1:] - x[..., :, :-1]).abs().sum(dim=(-2, -1))
-        dv = (x[..., 1:, :] - x[..., :-1, :]).abs().sum(dim=(-2, -1))
-        return dh + dv
-
-    return (total_variation(filtered) / total_variation(noisy)).to(float_dtype(noisy.dtype))
+    _pair(estimate, noisy, "estimate", "noisy", nonnegative=False)
+    num, den = _total_variation(estimate), _total_variation(noisy)
+    ratio = torch.where(num == den, 1.0, num / den)  # 0 / 0: no edges in either image
+    return ratio.to(float_dtype(noisy.dtype))
 
 
 def _data_range(clean: Tensor, data_range: float | None) -> Tensor:
-    """Per-image ``(B, C)`` data range: given, or ``max - min`` of the clean image."""
+    """Per-image ``(B, C)`` data range: given, or ``max - min`` of the clean image (which
+    must then not be constant)."""
     if data_range is not None:
         v = check_positive(data_range, "data_range")
         return torch.full(clean.shape[:2], v, dtype=torch.float64, device=clean.device)
     flat = clean.to(torch.float64).flatten(-2)
-    return flat.amax(-1) - flat.amin(-1)
+    rng = flat.amax(-1) - flat.amin(-1)
+    flat_images = (rng == 0).nonzero().tolist()
+    if flat_images:
+        b, c = flat_images[0]
+        raise InputValueError(
+            f"clean image {b} channel {c} is constant, so its data range max - min is 0 and "
+            f"the score is undefined; pass data_range (e.g. the sensor's peak value)"
+        )
+    return rng
 
 
 def psnr(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) -> Tensor:
@@ -221,6 +248,7 @@ def psnr(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
 
     Raises:
         InputTypeError, ShapeError, InputValueError, OptionError: bad input.
+        InputValueError: a clean image is constant and ``data_range`` is not given.
 
     Example:
         >>> c = torch.zeros(1, 1, 2, 2); c[..., 0, 0] = 1.0
@@ -252,6 +280,7 @@ def ssim(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
 
     Raises:
         InputTypeError, ShapeError, InputValueError, OptionError: bad input.
+        InputValueError: a clean image is constant and ``data_range`` is not given.
 
     References:
         Z. Wang, A. C. Bovik, H. R. Sheikh, E. P. Simoncelli, "Image quality assessment: from
@@ -266,8 +295,7 @@ def ssim(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
     _pair(estimate, clean, "estimate", "clean", nonnegative=False)
     if min(clean.shape[-2:]) < 11:
         raise InputValueError(f"ssim needs images of at least 11x11, got {tuple(clean.shape)}")
-    scale = _data_range(clean, data_range).clamp_min(torch.finfo(torch.float64).tiny)
-    scale = scale.reciprocal()[..., None, None]
+    scale = _data_range(clean, data_range).reciprocal()[..., None, None]
     e = estimate.to(torch.float64) * scale
     c = clean.to(torch.float64) * scale
     smap = kornia.metrics.ssim(e, c, 11, max_val=1.0, eps=0.0, padding="valid")

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import Tensor
-from torch.nn.functional import pad
 
 from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.objects.components import label_components
@@ -82,51 +81,62 @@ def _disk_rectangles(radius: int) -> list[tuple[int, int]]:
     return [(dy, math.isqrt(radius * radius - dy * dy)) for dy in range(radius + 1)]
 
 
-def _spread(x: Tensor, d: int, dim: int) -> Tensor:
-    """OR of ``x`` shifted by ``-d..d`` along ``dim`` (values beyond the edge count as 0)."""
-    out = x.clone()
-    n = x.shape[dim]
+def _spread(x: np.ndarray, d: int, axis: int) -> np.ndarray:
+    """OR of ``x`` shifted by ``-d..d`` along ``axis`` (values beyond the edge count as 0)."""
+    out = x.copy()
+    n = x.shape[axis]
     for k in range(1, min(d, n - 1) + 1):
-        out.narrow(dim, k, n - k).logical_or_(x.narrow(dim, 0, n - k))
-        out.narrow(dim, 0, n - k).logical_or_(x.narrow(dim, k, n - k))
+        lo = [slice(None)] * x.ndim
+        hi = [slice(None)] * x.ndim
+        lo[axis], hi[axis] = slice(0, n - k), slice(k, n)
+        out[tuple(hi)] |= x[tuple(lo)]
+        out[tuple(lo)] |= x[tuple(hi)]
     return out
 
 
-def _dilate(x: Tensor, rects: list[tuple[int, int]]) -> Tensor:
+def _dilate(x: np.ndarray, rects: list[tuple[int, int]]) -> np.ndarray:
     """Dilation of bool planes ``(N, H, W)`` by a union of rectangles (separable shifts;
     outside the planes counts as unset)."""
-    out = torch.zeros_like(x)
+    out = np.zeros_like(x)
     for dy, dx in rects:
         out |= _spread(_spread(x, dy, -2), dx, -1)
     return out
 
 
-def _close(mask: Tensor, radius: int) -> Tensor:
+def _close(mask: np.ndarray, radius: int) -> np.ndarray:
     """Binary closing of bool planes ``(N, H, W)`` with a disk of ``radius``, extensive (never
     removes a pixel) also at the image border: dilation of the zero-padded mask, then
-    erosion as the complement of the dilated complement (the outside counting as set)."""
-    if radius == 0 or not bool(mask.any()):
+    erosion as the complement of the dilated complement (the outside counting as set).
+    Plain NumPy: many small passes, which intra-op threading only slows down."""
+    if radius == 0 or not mask.any():
         return mask
     rects = _disk_rectangles(radius)
-    x = pad(mask, (radius,) * 4)
+    x = np.pad(mask, ((0, 0), (radius, radius), (radius, radius)))
     closed = ~_dilate(~_dilate(x, rects), rects)
     return closed[:, radius:-radius, radius:-radius] | mask
 
 
-def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[Tensor, Tensor]:
-    """Mask ``score > floor`` and the score (float64) on the mask's pixels only: a float32
-    pre-filter keeps the full-size work cheap, the exact test runs on the candidates."""
+def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mask ``score > floor`` ``(N, H, W)`` and the float64 score, computed only on candidate
+    pixels (a loose float32 pre-filter; the exact test on the candidates). NumPy, single
+    threaded: a handful of full-size passes."""
     b, c, h, w = statistic.shape
-    thr = torch.as_tensor(threshold, dtype=statistic.dtype, device=statistic.device)
-    thr = thr.expand(b, c, h, w)
-    loose = torch.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
-    cand = (statistic >= loose).reshape(-1)
-    idx = torch.nonzero(cand).squeeze(1)
-    score = normalised_score(statistic.reshape(-1)[idx], thr.reshape(-1)[idx])
-    keep = score > floor
-    mask = torch.zeros(b * c * h * w, dtype=torch.bool, device=statistic.device)
-    mask[idx[keep]] = True
-    full = torch.full((b * c * h * w,), -torch.inf, dtype=torch.float64, device=statistic.device)
+    stat = statistic.detach().cpu().numpy().reshape(-1)
+    thr = torch.as_tensor(threshold).detach().cpu().to(torch.float64).numpy()
+    thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
+    if thr.size and np.all(thr == thr[0]):  # the usual scalar threshold
+        t = float(thr[0])
+        loose = floor * t * (1 - 1e-5) - 1e-30 if t > 0 else t + floor - 1.0 - 1e-5
+        idx = np.flatnonzero(stat >= loose)
+    else:
+        loose = np.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
+        idx = np.flatnonzero(stat >= loose)
+    s, t = stat[idx].astype(np.float64), thr[idx]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = np.where(t > 0, s / np.where(t > 0, t, 1.0), 1.0 + s - t)
+    mask = np.zeros(stat.size, dtype=bool)
+    mask[idx[score > floor]] = True
+    full = np.full(stat.size, -np.inf)
     full[idx] = score
     return mask.reshape(b * c, h, w), full.reshape(b * c, h, w)
 
@@ -187,9 +197,8 @@ def discriminate(
     rules = ObjectRules() if rules is None else rules
     _check(statistic, pixel_area, rules)
     b, c = statistic.shape[:2]
-    mask, score = _score_map(statistic.detach(), threshold, rules.floor)
-    mask = _close(mask, rules.closing).cpu().numpy()
-    score = score.cpu().numpy()
+    mask, score = _score_map(statistic, threshold, rules.floor)
+    mask = _close(mask, rules.closing)
     labels, n = label_components(mask, 2 if rules.connectivity == 8 else 1)
     props = measure(labels, n, score)
     keep = _keep(props["area"], props["plane"], rules, pixel_area)

@@ -143,8 +143,17 @@ def _queue(
             out.append(q)
 
 
+DEFAULT_BUDGET = 64  # heap pixels before the flood fill: the one default of every caller
+
+
 def grow(
-    grid: Grid, seed: int, tag: int, *, tau: float, n_init: int, budget: int | None = 512
+    grid: Grid,
+    seed: int,
+    tag: int,
+    *,
+    tau: float,
+    n_init: int,
+    budget: int | None = DEFAULT_BUDGET,
 ) -> np.ndarray:
     """Grow one region from ``seed`` (seed step c).
 

@@ -1,16 +1,18 @@
 """Options of the region-growing CFAR: the paper's preset, ours, and their validation.
 
 Every option of :func:`~torchsar.region.region_cfar` lives in one frozen dataclass,
-:class:`RegionParams`. A *preset* gives the defaults; explicit keyword arguments override
-them. ``"paper"`` is the seed paper read literally (section 3, steps a–j, section 4 values);
-``"torchsar"`` keeps the paper's growth and ring geometry and adds the fixes for the failure
-modes measured on simulated speckle (see :mod:`torchsar.region.detector`).
+:class:`RegionParams`; :class:`RegionOptions` types the same options as keyword arguments.
+A *preset* gives the defaults; the keyword arguments given override them. ``"paper"`` is the
+seed paper read literally (section 3, steps a–j, section 4 values); ``"torchsar"`` keeps the
+paper's growth and ring geometry and adds the fixes for the failure modes measured on
+simulated speckle (see :mod:`torchsar.region.detector`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
+from typing import TypedDict, Unpack
 
 from torch import Tensor
 
@@ -21,8 +23,10 @@ from torchsar._checks import (
     check_odd,
     check_positive,
 )
+from torchsar.region.grow import DEFAULT_BUDGET
+from torchsar.speckle import FILTERS
 
-__all__ = ["PRESETS", "RegionParams", "resolve_params"]
+__all__ = ["PRESETS", "RegionOptions", "RegionParams", "resolve_params"]
 
 Despeckle = str | Callable[[Tensor], Tensor] | None
 
@@ -48,8 +52,34 @@ class RegionParams:
     min_size: int = 1
     merge: int | None = None
     fill_holes: bool = False
-    budget: int | None = 64
+    budget: int | None = DEFAULT_BUDGET
     workers: int = 1
+
+
+class RegionOptions(TypedDict, total=False):
+    """The keyword options of :func:`~torchsar.region.region_cfar`, typed (each optional:
+    an option not given comes from the preset). Same names and types as
+    :class:`RegionParams`."""
+
+    tau: float
+    n_init: int
+    guard: int
+    background: int
+    k: float
+    min_background: int
+    despeckle: Despeckle
+    seed_window: int
+    connectivity: int
+    target_on: str
+    lowpass: str | int | None
+    blocking: str
+    max_size: int | None
+    max_fraction: float | None
+    min_size: int
+    merge: int | None
+    fill_holes: bool
+    budget: int | None
+    workers: int
 
 
 PRESETS: dict[str, RegionParams] = {
@@ -66,27 +96,28 @@ PRESETS: dict[str, RegionParams] = {
 }
 
 
-def _check_despeckle(value: object) -> Despeckle:
-    if value is None or callable(value) or isinstance(value, str):
-        return value  # type: ignore[return-value]
+def _check_despeckle(value: Despeckle) -> Despeckle:
+    if isinstance(value, str):
+        if value not in FILTERS:
+            raise OptionError(
+                f"despeckle={value!r} is not a filter of torchsar.speckle (one of "
+                f"{', '.join(sorted(FILTERS))}); pass a filter name, a callable or None"
+            )
+        return value
+    if value is None or callable(value):
+        return value
     raise OptionError(
         f"despeckle must be a filter name (e.g. 'enhanced_frost'), a callable or None, "
         f"got {value!r}"
     )
 
 
-def _check_lowpass(value: object) -> str | int | None:
+def _check_lowpass(value: str | int | None) -> str | int | None:
     if value is None or value == "despeckled":
-        return value  # type: ignore[return-value]
+        return value
     if isinstance(value, int) and not isinstance(value, bool):
         return check_odd(value, "lowpass")
     raise OptionError(f"lowpass must be 'despeckled', None or an odd box width, got {value!r}")
-
-
-def _check_k(value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or value != value:
-        raise OptionError(f"k must be a real number, got {value!r}")
-    return float(value)
 
 
 def _check_fraction(value: object) -> float | None:
@@ -114,7 +145,7 @@ def _validate(p: RegionParams) -> RegionParams:
         n_init=check_int(p.n_init, "n_init", minimum=1),
         guard=check_int(p.guard, "guard", minimum=0),
         background=check_int(p.background, "background", minimum=1),
-        k=_check_k(p.k),
+        k=check_positive(p.k, "k", allow_zero=True),
         min_background=check_int(p.min_background, "min_background", minimum=1),
         despeckle=_check_despeckle(p.despeckle),
         seed_window=check_odd(p.seed_window, "seed_window"),
@@ -132,7 +163,7 @@ def _validate(p: RegionParams) -> RegionParams:
     )
 
 
-def resolve_params(preset: str, **overrides: object) -> RegionParams:
+def resolve_params(preset: str, **overrides: Unpack[RegionOptions]) -> RegionParams:
     """The preset's options with every non-``None`` override applied, validated.
 
     Callers pass only the keywords the user gave, so ``None`` is a real value here (e.g.

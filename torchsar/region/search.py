@@ -3,33 +3,24 @@
 
 from __future__ import annotations
 
-import importlib
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
+from typing import Unpack
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_image, float_dtype
-from torchsar.cfar.detection import Detection
+from torchsar.detection import Detection
 from torchsar.region.detector import detect_image
-from torchsar.region.params import RegionParams, resolve_params
+from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
 from torchsar.region.table import RegionTable
+from torchsar.speckle import FILTERS
 from torchsar.windows import box_sums
 
-__all__ = ["PRESET", "RegionResult", "region_cfar", "region_search"]
-
-
-class _FromPreset:
-    """Default marker: take the option's value from the chosen preset."""
-
-    def __repr__(self) -> str:
-        return "PRESET"
-
-
-PRESET = _FromPreset()
+__all__ = ["RegionResult", "region_cfar", "region_search"]
 
 
 @dataclass(frozen=True)
@@ -42,21 +33,15 @@ class RegionResult:
     params: RegionParams
 
 
-def _despeckle(x: Tensor, how: object) -> Tensor:
+def _despeckle(x: Tensor, how: Despeckle) -> Tensor:
     """The image F the regions grow on: ``x`` itself (None), a callable's output or a named
-    :mod:`torchsar.speckle` filter with its default options."""
+    filter of :data:`torchsar.speckle.FILTERS` with its default options (names are checked
+    with the other options)."""
     if how is None:
         return x
     if isinstance(how, str):
-        try:
-            fn = getattr(importlib.import_module("torchsar.speckle"), how)
-        except (ImportError, AttributeError):
-            raise OptionError(
-                f"despeckle={how!r} is not a filter of torchsar.speckle; pass a filter name, "
-                f"a callable or None"
-            ) from None
-        return fn(x)
-    out = how(x)  # type: ignore[operator]
+        return FILTERS[how](x)
+    out = how(x)
     if not isinstance(out, Tensor) or out.shape != x.shape:
         raise OptionError(f"despeckle callable must return a tensor of shape {tuple(x.shape)}")
     return out
@@ -120,10 +105,13 @@ def _run(x: Tensor, p: RegionParams) -> tuple[Detection, list[RegionTable]]:
     return det, tables
 
 
-def region_search(x: Tensor, *, preset: str = "torchsar", **options: object) -> RegionResult:
+def region_search(
+    x: Tensor, *, preset: str = "torchsar", **options: Unpack[RegionOptions]
+) -> RegionResult:
     """:func:`region_cfar` returning the per-region tables and resolved options too.
 
-    Takes the same keyword options as :func:`region_cfar`.
+    Takes the same keyword options as :func:`region_cfar` (typed by
+    :class:`~torchsar.region.params.RegionOptions`).
 
     Example:
         >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10:18, 10:18] = 10.0
@@ -132,24 +120,14 @@ def region_search(x: Tensor, *, preset: str = "torchsar", **options: object) -> 
         >>> [(t.seed, t.size, t.accepted, t.reason) for t in r.tables[0].rows]
         [((10, 10), 64, True, ''), ((0, 0), 960, False, 'too_large')]
     """
-    check_image(x, "x")
+    check_image(x, "x", not_differentiable="region_cfar")
     p = resolve_params(preset, **options)
     det, tables = _run(x, p)
     return RegionResult(det, tables, p)
 
 
 def region_cfar(
-    x: Tensor,
-    *,
-    tau: float = PRESET,  # type: ignore[assignment]
-    n_init: int = PRESET,  # type: ignore[assignment]
-    guard: int = PRESET,  # type: ignore[assignment]
-    background: int = PRESET,  # type: ignore[assignment]
-    k: float = PRESET,  # type: ignore[assignment]
-    min_background: int = PRESET,  # type: ignore[assignment]
-    despeckle: object = PRESET,
-    preset: str = "torchsar",
-    **options: object,
+    x: Tensor, *, preset: str = "torchsar", **options: Unpack[RegionOptions]
 ) -> Detection:
     """Region-growing CFAR (Nar et al. 2011): grow each candidate target as a region, take
     its background as a ring around the region, and apply the two-parameter test to the
@@ -243,17 +221,29 @@ def region_cfar(
         n_init: N, the number of first pixels whose mean is ``mu_N`` (4).
         guard: R_G, guard-ring width in pixels (3).
         background: R_C, background-ring width in pixels (3).
-        k: K_CFAR, the threshold on ``(mu_T - mu_C) / sigma_C`` (paper 0.25, torchsar 2).
+        k: K_CFAR, the threshold on ``(mu_T - mu_C) / sigma_C``, finite and ``>= 0`` (paper
+            0.25, torchsar 2).
         min_background: minimum number of background pixels left after censoring (15).
         despeckle: the image F regions grow on: a :mod:`torchsar.speckle` filter name
             (``"enhanced_frost"``), a callable ``x -> F`` or None (grow on ``x``).
         preset: ``"torchsar"`` (default) or ``"paper"``; supplies every option not given.
-        **options: ``seed_window`` (5), ``connectivity``, ``target_on``, ``lowpass``,
-            ``blocking``, ``max_size``, ``max_fraction``, ``min_size``, ``merge``,
-            ``fill_holes`` (see above),
-            ``budget`` (64: pixels grown by the Python heap before the exact flood-fill
-            finish; None = heap only), ``workers`` (1; > 1 runs the images of a batch in a
-            process pool; same result).
+        seed_window: side of the local-maximum window of step a (5, odd).
+        connectivity: 4 or 8 (4), see above.
+        target_on: ``"raw"`` or ``"despeckled"`` (``"raw"``), see above.
+        lowpass: ``"despeckled"``, an odd box width or None (``"despeckled"``), see above.
+        blocking: ``"all"`` or ``"targets"`` (``"all"``), see above.
+        max_size: regions larger than this many pixels are floods (paper None, torchsar
+            20000).
+        max_fraction: regions larger than this fraction of the image are floods, in
+            ``(0, 1]`` (paper None, torchsar 0.25).
+        min_size: smallest accepted object in pixels (paper 1, torchsar 30).
+        merge: one label per group of accepted regions closer than this (paper None,
+            torchsar 0).
+        fill_holes: give enclosed pixels to an adjacent accepted region (paper False,
+            torchsar True).
+        budget: pixels grown by the Python heap before the exact flood-fill finish (64;
+            None = heap only; same result).
+        workers: > 1 runs the images of a batch in a process pool (1; same result).
 
     Returns:
         :class:`~torchsar.cfar.Detection` with ``threshold = k`` and ``labels`` (0 = none,
@@ -278,12 +268,4 @@ def region_cfar(
         >>> int(d.mask.sum()), int(d.labels.max())
         (64, 1)
     """
-    given = {
-        name: value
-        for name, value in dict(
-            tau=tau, n_init=n_init, guard=guard, background=background, k=k,
-            min_background=min_background, despeckle=despeckle, **options,
-        ).items()
-        if value is not PRESET
-    }  # fmt: skip
-    return region_search(x, preset=preset, **given).detection
+    return region_search(x, preset=preset, **options).detection

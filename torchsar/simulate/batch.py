@@ -1,4 +1,5 @@
-"""The simulated batch: speckled image, clean reflectivity and ground truth."""
+"""The simulated batch: speckled image, clean reflectivity and ground truth, and what every
+simulator shares (batch options, the speckled image of a painted canvas, the batch loop)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar.simulate.seeding import image_seed, make_generator
+from torchsar._checks import check_int, check_positive
+from torchsar.simulate.canvas import Canvas
+from torchsar.simulate.clutter import ClutterSpec, clutter_spec, sample_clutter
+from torchsar.simulate.seeding import check_device, check_seed, image_seed, make_generator
 
-__all__ = ["SimBatch", "build_batch"]
+__all__ = ["BatchOptions", "SimBatch", "build_batch", "speckle_canvas"]
 
 _FIELDS = ("image", "clean", "mask", "instances", "ignore")
 
@@ -78,14 +82,60 @@ class SimBatch:
         return SimBatch(**fields, meta=[p["meta"] for p in parts])
 
 
+@dataclass(frozen=True)
+class BatchOptions:
+    """The validated options every simulator takes: which images, clutter, pixel, device."""
+
+    n: int
+    seed: int
+    start: int
+    clutter: ClutterSpec
+    pixel_m: float
+    device: torch.device
+
+    @staticmethod
+    def check(
+        n: object,
+        seed: object,
+        start: object,
+        model: object,
+        looks: object,
+        shape_param: object,
+        pixel_m: object,
+        device: object,
+    ) -> BatchOptions:
+        """Validate the shared options, in this order (see :func:`~torchsar.simulate.chips`)."""
+        return BatchOptions(
+            check_int(n, "n", minimum=0),
+            check_seed(seed),
+            check_int(start, "start", minimum=0),
+            clutter_spec(model, looks=looks, shape_param=shape_param),
+            check_positive(pixel_m, "pixel_m"),
+            check_device(device),
+        )
+
+
+def speckle_canvas(
+    canvas: Canvas, gen: torch.Generator, opts: BatchOptions, **meta: object
+) -> dict:
+    """The image of a painted canvas: ``clean * clutter`` drawn from ``gen``, with its ground
+    truth and ``meta`` (boxes, classes, targets, clutter, pixel_m, then ``meta``)."""
+    clean, mask, instances, ignore = canvas.finish()
+    image = clean * sample_clutter(opts.clutter, tuple(clean.shape), gen, torch.float32)
+    info = {
+        "boxes": [t["box"] for t in canvas.targets],
+        "classes": [t["class"] for t in canvas.targets],
+        "targets": canvas.targets,
+        "clutter": opts.clutter.as_dict(),
+        "pixel_m": opts.pixel_m,
+        **meta,
+    }
+    fields = (image, clean, mask, instances, ignore)
+    return {**dict(zip(_FIELDS, fields, strict=True)), "meta": info}
+
+
 def build_batch(
-    n: int,
-    *,
-    seed: int,
-    start: int,
-    size: tuple[int, int],
-    device: torch.device,
-    render: Callable[[torch.Generator], dict],
+    opts: BatchOptions, size: tuple[int, int], render: Callable[[torch.Generator], dict]
 ) -> SimBatch:
     """Render images ``start .. start + n - 1``, each from its own seeded generator.
 
@@ -93,9 +143,9 @@ def build_batch(
     bookkeeping (``index``, ``seed``, ``batch_seed``) is added here.
     """
     parts = []
-    for index in range(start, start + n):
-        s = image_seed(seed, index)
-        part = render(make_generator(s, device))
-        part["meta"] = {"index": index, "seed": s, "batch_seed": seed, **part["meta"]}
+    for index in range(opts.start, opts.start + opts.n):
+        s = image_seed(opts.seed, index)
+        part = render(make_generator(s, opts.device))
+        part["meta"] = {"index": index, "seed": s, "batch_seed": opts.seed, **part["meta"]}
         parts.append(part)
-    return SimBatch.stack(parts, size, device)
+    return SimBatch.stack(parts, size, opts.device)

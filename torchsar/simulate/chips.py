@@ -9,10 +9,9 @@ from functools import partial
 import torch
 
 from torchsar._checks import OptionError, check_int, check_positive, check_range
-from torchsar.simulate.batch import SimBatch, build_batch
+from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
-from torchsar.simulate.clutter import ClutterSpec, clutter_spec, sample_clutter
-from torchsar.simulate.seeding import Draws, check_seed
+from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import RotatedRect
 from torchsar.simulate.targets import place, random_heading, rasterise
 
@@ -71,13 +70,7 @@ def _chip_target(size: int, opts: ChipOptions, offset: float, draws: Draws) -> d
 
 
 def _render_chip(
-    gen: torch.Generator,
-    *,
-    size: int,
-    spec: ClutterSpec,
-    opts: ChipOptions,
-    offset: float,
-    pixel_m: float,
+    gen: torch.Generator, *, size: int, opts: ChipOptions, offset: float, common: BatchOptions
 ) -> dict:
     """Render one chip from its generator (geometry, levels, then clutter)."""
     draws = Draws(gen)
@@ -96,31 +89,14 @@ def _render_chip(
             draws=draws,
         )
     )
-    clean, mask, instances, ignore = canvas.finish()
-    image = clean * sample_clutter(spec, (size, size), gen, torch.float32)
-    meta = {
-        "boxes": [t["box"] for t in canvas.targets],
-        "classes": [t["class"] for t in canvas.targets],
-        "targets": canvas.targets,
-        "clutter": spec.as_dict(),
-        "pixel_m": pixel_m,
-        "regions": {"kind": "homogeneous", "mean_db": 0.0},
-    }
-    return {
-        "image": image,
-        "clean": clean,
-        "mask": mask,
-        "instances": instances,
-        "ignore": ignore,
-        "meta": meta,
-    }
+    return speckle_canvas(canvas, gen, common, regions={"kind": "homogeneous", "mean_db": 0.0})
 
 
 def chips(
     n: int,
     *,
     size: int = 128,
-    clutter: str = "gamma",
+    model: str = "gamma",
     looks: float = 1.0,
     shape_param: float | None = None,
     seed: int = 0,
@@ -149,10 +125,11 @@ def chips(
     Args:
         n: number of chips, >= 0.
         size: chip side in pixels; must hold the longest target at any heading.
-        clutter: clutter model name (``"exponential"``, ``"gamma"``, ``"k"``, ``"g0"``,
-            ``"lognormal"``, ``"weibull"``).
+        model: clutter model name (``"exponential"``, ``"gamma"``, ``"k"``, ``"g0"``,
+            ``"lognormal"``, ``"weibull"``), as in :func:`torchsar.simulate.clutter`.
         looks: speckle looks (gamma/k/g0).
-        shape_param: clutter shape parameter (model default when ``None``).
+        shape_param: clutter shape parameter (model default when ``None``; the allowed
+            range of each model is in :mod:`torchsar.simulate.clutter`).
         seed: batch seed in ``[0, 2**63)``.
         start: index of the first image (``chips(1, start=i)[0] == chips(n)[i]``).
         pixel_m: pixel spacing in metres (recorded in ``meta``).
@@ -162,13 +139,14 @@ def chips(
         shadow_ratio: shadow length / target length range.
         shadow_gain: shadow intensity / clutter mean range.
         offset_px: maximum displacement of the target centre from the chip centre.
-        device: output device (default CPU).
+        device: output device (default CPU); it must be available.
 
     Returns:
         A :class:`SimBatch` of ``n`` images ``(n, 1, size, size)``, one instance each.
 
     Raises:
-        OptionError: invalid count, size, model name, looks, ranges or seed.
+        OptionError: invalid count, size, model name, looks, shape_param, ranges, seed or
+            device (e.g. ``"cuda"`` on a machine without a GPU).
 
     References:
         Ross, T. D. et al. (1998). Standard SAR ATR evaluation experiments using the MSTAR
@@ -179,10 +157,7 @@ def chips(
         >>> b.image.shape, b.instances.max().item()
         (torch.Size([3, 1, 96, 96]), 1)
     """
-    check_int(n, "n", minimum=0)
-    check_seed(seed)
-    check_int(start, "start", minimum=0)
-    spec = clutter_spec(clutter, looks, shape_param)
+    common = BatchOptions.check(n, seed, start, model, looks, shape_param, pixel_m, device)
     opts = ChipOptions.check(target_db, length_px, width_ratio, shadow_ratio, shadow_gain)
     size = check_int(size, "size", minimum=1)
     if size < _min_size(opts):
@@ -190,13 +165,6 @@ def chips(
             f"size must be >= {_min_size(opts)} to hold a target of length {opts.length_px[1]:g} "
             f"px at any heading, got {size}; use a larger size or smaller length_px"
         )
-    render = partial(
-        _render_chip,
-        size=size,
-        spec=spec,
-        opts=opts,
-        offset=check_positive(offset_px, "offset_px", allow_zero=True),
-        pixel_m=check_positive(pixel_m, "pixel_m"),
-    )
-    dev = torch.device(device or "cpu")
-    return build_batch(n, seed=seed, start=start, size=(size, size), device=dev, render=render)
+    offset = check_positive(offset_px, "offset_px", allow_zero=True)
+    render = partial(_render_chip, size=size, opts=opts, offset=offset, common=common)
+    return build_batch(common, (size, size), render)

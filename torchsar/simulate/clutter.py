@@ -40,6 +40,13 @@ Exact laws for thresholds (all unit mean):
 ``looks`` applies to ``gamma``, ``k`` and ``g0``; ``exponential``, ``lognormal`` and
 ``weibull`` are complete intensity laws and require ``looks == 1``.
 
+Parameter ranges (one rule for every model): a parameter is accepted when every random
+factor of the model keeps its ``1e-6`` and ``1 - 1e-6`` quantiles inside the normal float32
+range ``[1.2e-38, 3.4e38]``, so a field holds no spurious zeros, infinities or NaN:
+``looks`` and K's ``nu`` >= 0.16 (a gamma variate of smaller shape underflows), Weibull
+``c`` >= 0.18, log-normal ``s`` <= 9, G0 ``a > 1`` (any). Outside, :class:`OptionError`
+names the parameter and its range.
+
 References:
     Oliver, C., Quegan, S. (2004). Understanding Synthetic Aperture Radar Images. SciTech.
     Frery, A. C. et al. (1997). A model for extremely heterogeneous clutter. IEEE TGRS 35(3),
@@ -56,9 +63,19 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import InputTypeError, OptionError, check_choice, check_int, check_positive
-from torchsar.simulate.seeding import check_seed, make_generator
+from torchsar.simulate.seeding import check_device, check_seed, make_generator
 
-__all__ = ["CLUTTER_MODELS", "DEFAULT_SHAPE_PARAM", "ClutterSpec", "clutter", "clutter_spec"]
+__all__ = [
+    "CLUTTER_MODELS",
+    "DEFAULT_SHAPE_PARAM",
+    "GAMMA_SHAPE_MIN",
+    "LOOKS_RANGE",
+    "SHAPE_RANGE",
+    "ClutterSpec",
+    "ParamRange",
+    "clutter",
+    "clutter_spec",
+]
 
 CLUTTER_MODELS = ("exponential", "gamma", "k", "g0", "lognormal", "weibull")
 """The allowed ``model`` names."""
@@ -74,7 +91,41 @@ DEFAULT_SHAPE_PARAM: dict[str, float | None] = {
 """``shape_param`` used when ``None`` is given (``None``: the model has no shape parameter)."""
 
 _SPECKLED = ("gamma", "k", "g0")
-_SHAPE_MIN = {"k": 0.0, "g0": 1.0, "lognormal": 0.0, "weibull": 0.0}
+
+GAMMA_SHAPE_MIN = 0.16
+"""Smallest shape of a gamma variate (``looks``, K's ``nu``) whose law float32 holds."""
+
+_FLOAT32 = "outside, float32 cannot hold the law: samples would underflow to 0 or overflow"
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """The accepted values ``low <(=) value <= high`` of a parameter, and why."""
+
+    low: float
+    closed: bool
+    high: float = math.inf
+    why: str = _FLOAT32
+
+    def check(self, value: float, name: str, model: str) -> float:
+        """Return ``value``, or raise :class:`OptionError` naming ``name`` and the range."""
+        if (value >= self.low if self.closed else value > self.low) and value <= self.high:
+            return value
+        bound = f"{'>=' if self.closed else '>'} {self.low:g}"
+        bound += f" and <= {self.high:g}" if self.high < math.inf else ""
+        raise OptionError(f"{name} must be {bound} for model {model!r} ({self.why}), got {value!r}")
+
+
+LOOKS_RANGE = ParamRange(GAMMA_SHAPE_MIN, True)
+"""Accepted ``looks`` of the speckled models (gamma, k, g0)."""
+
+SHAPE_RANGE: dict[str, ParamRange] = {
+    "k": ParamRange(GAMMA_SHAPE_MIN, True),
+    "g0": ParamRange(1.0, False, why="for a <= 1 the law has no finite mean"),
+    "lognormal": ParamRange(0.0, False, 9.0),
+    "weibull": ParamRange(0.18, True),
+}
+"""The accepted ``shape_param`` of each model (see the module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +141,7 @@ class ClutterSpec:
         return {"model": self.model, "looks": self.looks, "shape_param": self.shape_param}
 
 
-def clutter_spec(model: object, looks: object = 1.0, shape_param: object = None) -> ClutterSpec:
+def clutter_spec(model: object, *, looks: object = 1.0, shape_param: object = None) -> ClutterSpec:
     """Validate a clutter model and resolve its default ``shape_param``.
 
     Raises:
@@ -100,6 +151,8 @@ def clutter_spec(model: object, looks: object = 1.0, shape_param: object = None)
     """
     name = check_choice(model, "model", CLUTTER_MODELS)
     L = check_positive(looks, "looks")
+    if name in _SPECKLED:
+        LOOKS_RANGE.check(L, "looks", name)
     if name not in _SPECKLED and L != 1.0:
         raise OptionError(
             f"looks must be 1 for model {name!r} (a complete intensity law), got {looks!r}; "
@@ -111,10 +164,7 @@ def clutter_spec(model: object, looks: object = 1.0, shape_param: object = None)
         return ClutterSpec(name, L, None)
     value = DEFAULT_SHAPE_PARAM[name] if shape_param is None else shape_param
     p = check_positive(value, "shape_param")
-    if p <= _SHAPE_MIN[name]:
-        raise OptionError(
-            f"shape_param must be > {_SHAPE_MIN[name]:g} for model {name!r}, got {shape_param!r}"
-        )
+    SHAPE_RANGE[name].check(p, "shape_param", name)
     return ClutterSpec(name, L, p)
 
 
@@ -162,7 +212,6 @@ def clutter(
     looks: float = 1.0,
     shape_param: float | None = None,
     seed: int = 0,
-    generator: torch.Generator | None = None,
     device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
 ) -> Tensor:
@@ -179,16 +228,16 @@ def clutter(
         shape_param: K: texture shape ``nu`` (default 2.0); G0: roughness ``a > 1`` (intensity
             G0 with ``alpha = -a``, default 3.0); lognormal: std ``s`` of ``ln I`` (default
             1.0); Weibull: shape ``c`` (default 0.8). Must be ``None`` for exponential/gamma.
-        seed: seed of a fresh generator (ignored when ``generator`` is given).
-        generator: draw from this generator instead (its device is used).
-        device: output device when no generator is given (default CPU).
+        seed: seed in ``[0, 2**63)``; the same seed gives the same field.
+        device: output device (default CPU); it must be available.
         dtype: ``torch.float32`` or ``torch.float64``.
 
     Returns:
         Tensor of ``shape``, non-negative, unit mean.
 
     Raises:
-        OptionError: unknown model, invalid looks / shape_param / shape / seed.
+        OptionError: unknown model, invalid looks / shape_param / shape / seed, or a device
+            that is not available.
         InputTypeError: unsupported dtype.
 
     Example:
@@ -199,11 +248,8 @@ def clutter(
         True
     """
     dims = _check_shape(shape)
-    spec = clutter_spec(model, looks, shape_param)
+    spec = clutter_spec(model, looks=looks, shape_param=shape_param)
     if dtype not in (torch.float32, torch.float64):
         raise InputTypeError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
-    if generator is None:
-        generator = make_generator(check_seed(seed), device)
-    elif not isinstance(generator, torch.Generator):
-        raise OptionError(f"generator must be a torch.Generator, got {type(generator).__name__}")
+    generator = make_generator(check_seed(seed), check_device(device))
     return sample_clutter(spec, dims, generator, dtype)

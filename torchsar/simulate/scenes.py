@@ -23,12 +23,11 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int, check_positive, check_range
-from torchsar.simulate.batch import SimBatch, build_batch
+from torchsar._checks import OptionError, check_int, check_range
+from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
-from torchsar.simulate.clutter import ClutterSpec, clutter_spec, sample_clutter
 from torchsar.simulate.regions import background, edge_pixels
-from torchsar.simulate.seeding import Draws, check_seed
+from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import RotatedRect
 from torchsar.simulate.targets import place, random_heading, rasterise
 
@@ -191,32 +190,14 @@ def _populate(s: _Scene) -> None:
 
 
 def _render_scene(
-    gen: torch.Generator, *, size: int, spec: ClutterSpec, opts: SceneOptions, pixel_m: float
+    gen: torch.Generator, *, size: int, opts: SceneOptions, common: BatchOptions
 ) -> dict:
     """Render one scene from its generator: regions, targets, then clutter."""
     draws = Draws(gen)
     mean, labels, regions = background((size, size), opts.regions, opts.road, draws)
     s = _Scene(Canvas(mean), labels, edge_pixels(labels), opts, draws)
     _populate(s)
-    clean, mask, instances, ignore = s.canvas.finish()
-    image = clean * sample_clutter(spec, (size, size), gen, torch.float32)
-    meta = {
-        "boxes": [t["box"] for t in s.canvas.targets],
-        "classes": [t["class"] for t in s.canvas.targets],
-        "targets": s.canvas.targets,
-        "clutter": spec.as_dict(),
-        "pixel_m": pixel_m,
-        "regions": regions,
-        "region_map": labels,
-    }
-    return {
-        "image": image,
-        "clean": clean,
-        "mask": mask,
-        "instances": instances,
-        "ignore": ignore,
-        "meta": meta,
-    }
+    return speckle_canvas(s.canvas, gen, common, regions=regions, region_map=labels)
 
 
 def _check_count_range(value: object, name: str, minimum: int) -> tuple[int, int]:
@@ -241,7 +222,7 @@ def scenes(
     n: int,
     *,
     size: int = 512,
-    clutter: str = "gamma",
+    model: str = "gamma",
     looks: float = 1.0,
     shape_param: float | None = None,
     seed: int = 0,
@@ -275,7 +256,7 @@ def scenes(
     Args:
         n: number of scenes, >= 0.
         size: scene side in pixels; must hold the largest target.
-        clutter, looks, shape_param: clutter model (as in :func:`torchsar.simulate.clutter`).
+        model, looks, shape_param: clutter model (as in :func:`torchsar.simulate.clutter`).
         seed: batch seed in ``[0, 2**63)``.
         start: index of the first image.
         pixel_m: pixel spacing in metres (recorded in ``meta``).
@@ -288,23 +269,21 @@ def scenes(
         target_db: target levels in dB over the local clutter mean.
         vehicle_px: vehicle length range in pixels.
         building_px: building length range in pixels.
-        device: output device (default CPU).
+        device: output device (default CPU); it must be available.
 
     Returns:
         A :class:`SimBatch` of ``n`` images ``(n, 1, size, size)``.
 
     Raises:
-        OptionError: invalid count, size, model, looks, ranges, flags or seed.
+        OptionError: invalid count, size, model, looks, shape_param, ranges, flags, seed or
+            device (e.g. ``"cuda"`` on a machine without a GPU).
 
     Example:
         >>> b = scenes(1, size=256, n_targets=(5, 8), building_px=(30, 60))
         >>> b.image.shape, 1 <= int(b.instances.max()) <= 8
         (torch.Size([1, 1, 256, 256]), True)
     """
-    check_int(n, "n", minimum=0)
-    check_seed(seed)
-    check_int(start, "start", minimum=0)
-    spec = clutter_spec(clutter, looks, shape_param)
+    common = BatchOptions.check(n, seed, start, model, looks, shape_param, pixel_m, device)
     opts = SceneOptions(
         _check_count_range(n_targets, "n_targets", 0),
         _check_count_range(regions, "regions", 1),
@@ -324,8 +303,5 @@ def scenes(
             f"size must be >= {need} to hold the largest target, got {size}; "
             f"use a larger size or smaller vehicle_px / building_px"
         )
-    render = partial(
-        _render_scene, size=size, spec=spec, opts=opts, pixel_m=check_positive(pixel_m, "pixel_m")
-    )
-    dev = torch.device(device or "cpu")
-    return build_batch(n, seed=seed, start=start, size=(size, size), device=dev, render=render)
+    render = partial(_render_scene, size=size, opts=opts, common=common)
+    return build_batch(common, (size, size), render)

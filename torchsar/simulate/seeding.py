@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import torch
 
-from torchsar._checks import check_int
+from torchsar._checks import OptionError, check_int
 
-__all__ = ["Draws", "image_seed", "make_generator"]
+__all__ = ["Draws", "check_device", "check_seed", "image_seed", "make_generator"]
 
 _MASK64 = (1 << 64) - 1
 _MAX_SEED = (1 << 63) - 1
@@ -60,10 +60,33 @@ def check_seed(seed: object, name: str = "seed") -> int:
     """Validate a seed: an int in ``[0, 2**63)``."""
     value = check_int(seed, name, minimum=0)
     if value > _MAX_SEED:
-        from torchsar._checks import OptionError
-
         raise OptionError(f"{name} must be < 2**63, got {value}")
     return value
+
+
+def check_device(device: object) -> torch.device:
+    """Validate a device (``None``: CPU) and check that random numbers can be drawn on it.
+
+    Raises:
+        OptionError: not a device, or a device this machine or torch build does not have
+            (e.g. ``"cuda"`` without a GPU).
+    """
+    if device is None:
+        return torch.device("cpu")
+    try:
+        dev = torch.device(device)  # type: ignore[arg-type]
+    except (RuntimeError, TypeError):
+        raise OptionError(
+            f"device must be a torch.device or a name such as 'cpu' or 'cuda', got {device!r}"
+        ) from None
+    try:
+        torch.Generator(device=dev)
+    except RuntimeError as exc:
+        reason = str(exc).split(".")[0]
+        raise OptionError(
+            f"device {device!r} is not available here ({reason}); use device='cpu'"
+        ) from None
+    return dev
 
 
 def make_generator(seed: int, device: torch.device | str | None = None) -> torch.Generator:

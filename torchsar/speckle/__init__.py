@@ -1,9 +1,11 @@
-"""Speckle filters (DESIGN §4.4): Lee, Kuan, enhanced Lee, Frost, enhanced Frost, Gamma-MAP.
+"""Speckle filters: Lee, Kuan, enhanced Lee, Frost, enhanced Frost, Gamma-MAP.
 
 All take intensity ``(B, C, H, W)`` (amplitude with ``amplitude=True``), an odd ``window``
 and the number of ``looks``; window statistics over in-image cells, interior pixels exact.
 :data:`FILTERS` maps names to the functions (for command lines and pipelines). The filters
-are not autograd-differentiable (window sums are accumulated in place for speed).
+support autograd: they are differentiable almost everywhere (not on the class boundaries
+``Ci = Cu``, ``Ci = Cmax``), window sums are updated in place only when no gradient is
+recorded, and a constant or zero window gets a finite gradient.
 """
 
 from torchsar.speckle.frost import enhanced_frost, frost

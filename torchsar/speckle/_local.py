@@ -34,6 +34,8 @@ __all__ = [
     "finish",
     "local_moments",
     "prepare",
+    "scratch",
+    "sqrt",
 ]
 
 
@@ -53,6 +55,16 @@ class Speckle:
         """Squared upper heterogeneity bound (Lopes et al. 1990), ``1 + 2 / L``."""
         return 1.0 + 2.0 / self.looks
 
+    def heterogeneity(self, ci2: Tensor, damping: float) -> Tensor:
+        """The three classes of the enhanced filters as one number per pixel:
+        ``damping (Ci - Cu) / (Cmax - Ci)`` for ``Cu < Ci < Cmax`` (textured), 0 for
+        ``Ci <= Cu`` (homogeneous: the window mean) and ``inf`` for ``Ci >= Cmax`` (point
+        target: the observation). Consumes ``ci2``."""
+        cu, cmax = self.cu2**0.5, self.cmax2**0.5
+        ci = sqrt(ci2)
+        h = (ci - cu).clamp_min_(0).mul_(damping).div_(cmax - ci)
+        return h.masked_fill_(ci >= cmax, torch.inf)
+
 
 @dataclass(frozen=True)
 class Request:
@@ -63,25 +75,47 @@ class Request:
     speckle: Speckle
     amplitude: bool
     dtype: torch.dtype
+    damping: float | None = None
 
 
-def prepare(x: Tensor, window: int, looks: float, amplitude: bool) -> Request:
-    """Validate the common filter arguments and convert amplitude to intensity."""
-    check_image(x, "x")
+def prepare(
+    x: Tensor, window: int, looks: float, amplitude: bool, damping: float | None = None
+) -> Request:
+    """Validate the filter arguments (``damping`` only when given) and convert amplitude to
+    intensity."""
+    check_image(x.detach() if isinstance(x, Tensor) else x, "x")
     window = check_odd(window, "window", minimum=3)
     check_window_fits(x, window, "speckle filter")
     looks = check_positive(looks, "looks")
     if not isinstance(amplitude, bool):
         raise OptionError(f"amplitude must be a bool, got {amplitude!r}")
+    if damping is not None:
+        damping = check_positive(damping, "damping", allow_zero=True)
     dtype = float_dtype(x.dtype)
     xi = x.to(dtype)
-    return Request(xi.square() if amplitude else xi, window // 2, Speckle(looks), amplitude, dtype)
+    intensity = xi.square() if amplitude else xi
+    return Request(intensity, window // 2, Speckle(looks), amplitude, dtype, damping)
 
 
 def finish(req: Request, intensity: Tensor) -> Tensor:
     """The filtered image in the caller's form (square root back to amplitude if asked)."""
     out = intensity.clamp_min_(0)
-    return out.sqrt_() if req.amplitude else out
+    return sqrt(out) if req.amplitude else out
+
+
+def scratch(t: Tensor) -> Tensor:
+    """``t`` itself, free to be overwritten in place, or a copy of it when autograd records
+    ``t`` (its graph may have saved the values an in-place update would overwrite)."""
+    return t.clone() if t.requires_grad else t
+
+
+def sqrt(t: Tensor) -> Tensor:
+    """Square root of ``t >= 0``, in place unless autograd records ``t``; then its gradient
+    at 0 is 0 instead of ``inf`` (a constant window has no direction of steepest change)."""
+    if not t.requires_grad:
+        return t.sqrt_()
+    pos = t > 0
+    return torch.where(pos, torch.where(pos, t, 1.0).sqrt(), 0.0)
 
 
 def local_moments(s: Sums, dtype: torch.dtype = torch.float64) -> tuple[Tensor, Tensor]:
@@ -97,9 +131,12 @@ def local_moments(s: Sums, dtype: torch.dtype = torch.float64) -> tuple[Tensor, 
     inv = s.count.clamp_min(1).reciprocal()
     m1 = s.s1.mul_(inv)
     var = s.s2.mul_(inv).addcmul_(m1, m1, value=-1.0).clamp_min_(0)
-    mu = m1.add_(s.shift).clamp_min_(0)
-    ci2 = var.div_(mu.square()).nan_to_num_(nan=0.0)
-    ci2 = torch.minimum(ci2, (s.count - 1).clamp_min(0), out=ci2)
+    mu = scratch(m1).add_(s.shift).clamp_min_(0)
+    mu2 = mu.square()
+    if mu2.requires_grad:  # keep 0 / 0 out of the graph (its gradient would be NaN)
+        mu2 = torch.where(mu2 > 0, mu2, 1.0)
+    ci2 = var.div_(mu2).nan_to_num_(nan=0.0)
+    ci2 = ci2.clamp_max_((s.count - 1).clamp_min(0))
     return mu.to(dtype), ci2.to(dtype)
 
 

@@ -17,13 +17,12 @@ window mean ``mu`` (``Ci <= Cu``) and ``decay = inf`` gives the centre pixel ``I
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
-import torch
 from torch import Tensor
 
-from torchsar._checks import check_positive
-from torchsar.speckle._local import Speckle, decay_map, finish, prepare
+from torchsar.speckle._local import Request, decay_map, finish, prepare, scratch
 from torchsar.windows import exp_distance_mean
 
 __all__ = ["enhanced_frost", "frost"]
@@ -66,19 +65,13 @@ def frost(
         >>> frost(x, window=3).unique().tolist()
         [5.0]
     """
-    req = prepare(x, window, looks, amplitude)
-    damping = check_positive(damping, "damping", allow_zero=True)
-    decay = decay_map(req, lambda ci2: ci2.mul_(damping))
-    return finish(req, exp_distance_mean(req.intensity, req.radius, decay))
+    req = prepare(x, window, looks, amplitude, damping)
+    return _distance_weighted(req, lambda ci2: scratch(ci2).mul_(req.damping))
 
 
-def _enhanced_decay(ci2: Tensor, sp: Speckle, damping: float) -> Tensor:
-    """``damping (Ci - Cu) / (Cmax - Ci)`` for ``Cu < Ci < Cmax``; 0 for ``Ci <= Cu`` (window
-    mean) and ``inf`` for ``Ci >= Cmax`` (centre pixel only)."""
-    cu, cmax = sp.cu2**0.5, sp.cmax2**0.5
-    ci = ci2.sqrt()
-    decay = (ci - cu).clamp_min_(0).mul_(damping).div_(cmax - ci)
-    return decay.masked_fill_(ci >= cmax, torch.inf)
+def _distance_weighted(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:
+    """The Frost-type mean: window cells weighted by ``exp(-decay(Ci^2) d)``."""
+    return finish(req, exp_distance_mean(req.intensity, req.radius, decay_map(req, decay)))
 
 
 def enhanced_frost(
@@ -120,7 +113,5 @@ def enhanced_frost(
         >>> enhanced_frost(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0
     """
-    req = prepare(x, window, looks, amplitude)
-    damping = check_positive(damping, "damping", allow_zero=True)
-    decay = decay_map(req, partial(_enhanced_decay, sp=req.speckle, damping=damping))
-    return finish(req, exp_distance_mean(req.intensity, req.radius, decay))
+    req = prepare(x, window, looks, amplitude, damping)
+    return _distance_weighted(req, partial(req.speckle.heterogeneity, damping=req.damping))

@@ -26,12 +26,23 @@ def _map_estimate(i: Tensor, mu: Tensor, ci2: Tensor, sp: Speckle) -> Tensor:
     return torch.where(b >= 0, plus, minus)
 
 
+def _textured(i: Tensor, mu: Tensor, ci2: Tensor, sp: Speckle) -> tuple[Tensor, Tensor, Tensor]:
+    """The inputs of :func:`_map_estimate`; under autograd, pixels outside the textured band
+    (whose estimate is discarded) get harmless values, so no NaN gradient leaks through
+    ``torch.where``."""
+    if not (i.requires_grad or mu.requires_grad):
+        return i, mu, ci2
+    band = (ci2 > sp.cu2) & (ci2 < sp.cmax2)
+    mid = 0.5 * (sp.cu2 + sp.cmax2)
+    return torch.where(band, i, 1.0), torch.where(band, mu, 1.0), torch.where(band, ci2, mid)
+
+
 def gamma_map(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = False) -> Tensor:
     """Gamma-MAP filter: maximum a posteriori reflectivity under a gamma prior.
 
     ``Ci <= Cu``: ``mu``; ``Ci >= Cmax``: ``I``; otherwise
     ``(b mu + sqrt(b^2 mu^2 + 4 a L mu I)) / (2 a)``, ``a = (1 + Cu^2) / (Ci^2 - Cu^2)``,
-    ``b = a - L - 1`` (DESIGN §4.4). Window statistics and border rule as in
+    ``b = a - L - 1`` (Lopes et al. 1990). Window statistics and border rule as in
     :func:`~torchsar.speckle.lee`.
 
     Args:
@@ -63,7 +74,7 @@ def gamma_map(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool
     sp = req.speckle
 
     def formula(i: Tensor, mu: Tensor, ci2: Tensor) -> Tensor:
-        out = torch.where(ci2 <= sp.cu2, mu, _map_estimate(i, mu, ci2, sp))
+        out = torch.where(ci2 <= sp.cu2, mu, _map_estimate(*_textured(i, mu, ci2, sp), sp))
         return torch.where(ci2 >= sp.cmax2, i, out)
 
     return filter_intensity(req, formula)

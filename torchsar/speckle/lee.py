@@ -1,7 +1,7 @@
 """Lee, Kuan and enhanced Lee filters: ``R = mu + W (I - mu)`` with an adaptive weight ``W``.
 
 The three filters differ only in how the weight is computed from the local coefficient of
-variation ``Ci`` (DESIGN §4.4); the window statistics and the border rule are those of
+variation ``Ci``; the window statistics and the border rule are those of
 :mod:`torchsar.speckle._local`.
 """
 
@@ -10,25 +10,28 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_positive
-from torchsar.speckle._local import Speckle, filter_intensity, prepare
+from torchsar.speckle._local import filter_intensity, prepare, scratch
 
 __all__ = ["enhanced_lee", "kuan", "lee"]
 
 
 def _mmse_weight(ci2: Tensor, cu2: float, scale: float) -> Tensor:
-    """``clip((1 - Cu^2 / Ci^2) / scale, 0, 1)``; ``Ci = 0`` gives ``-inf`` clipped to 0."""
-    return ci2.reciprocal().mul_(-cu2).add_(1.0).div_(scale).clamp_(0.0, 1.0)
+    """``clip((1 - Cu^2 / Ci^2) / scale, 0, 1)``; ``Ci = 0`` gives ``-inf`` clipped to 0
+    (under autograd ``Ci^2`` is floored at the smallest normal float instead: same value,
+    finite gradient)."""
+    if ci2.requires_grad:
+        ci2 = ci2.clamp_min(torch.finfo(ci2.dtype).tiny)
+    return scratch(ci2.reciprocal()).mul_(-cu2).add_(1.0).div_(scale).clamp_(0.0, 1.0)
 
 
-def _enhanced_weight(ci2: Tensor, sp: Speckle, damping: float) -> Tensor:
-    """``W = exp(-damping (Ci - Cu) / (Cmax - Ci))`` in the heterogeneous band; 1 below
-    ``Cu`` (pure mean), 0 at or above ``Cmax`` (pure observation)."""
-    cu, cmax = sp.cu2**0.5, sp.cmax2**0.5
-    ci = ci2.sqrt().clamp(cu, cmax)
-    gap = torch.where(ci < cmax, cmax - ci, torch.ones_like(ci))
-    w = torch.exp(-damping * (ci - cu) / gap)
-    return torch.where(ci < cmax, w, torch.zeros_like(w))
+def _mmse(x: Tensor, window: int, looks: float, amplitude: bool, *, kuan: bool) -> Tensor:
+    """``R = mu + W (I - mu)`` with the Lee weight, or Kuan's (divided by ``1 + Cu^2``)."""
+    req = prepare(x, window, looks, amplitude)
+    cu2 = req.speckle.cu2
+    scale = 1.0 + cu2 if kuan else 1.0
+    return filter_intensity(
+        req, lambda i, mu, ci2: torch.lerp(mu, i, _mmse_weight(ci2, cu2, scale))
+    )
 
 
 def lee(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = False) -> Tensor:
@@ -64,9 +67,7 @@ def lee(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = Fal
         >>> lee(x, window=3).unique().tolist()
         [3.0]
     """
-    req = prepare(x, window, looks, amplitude)
-    cu2 = req.speckle.cu2
-    return filter_intensity(req, lambda i, mu, ci2: torch.lerp(mu, i, _mmse_weight(ci2, cu2, 1.0)))
+    return _mmse(x, window, looks, amplitude, kuan=False)
 
 
 def kuan(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = False) -> Tensor:
@@ -99,11 +100,7 @@ def kuan(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = Fa
         >>> kuan(x, window=3).abs().max().item()
         0.0
     """
-    req = prepare(x, window, looks, amplitude)
-    cu2 = req.speckle.cu2
-    return filter_intensity(
-        req, lambda i, mu, ci2: torch.lerp(mu, i, _mmse_weight(ci2, cu2, 1.0 + cu2))
-    )
+    return _mmse(x, window, looks, amplitude, kuan=True)
 
 
 def enhanced_lee(
@@ -145,11 +142,10 @@ def enhanced_lee(
         >>> enhanced_lee(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0
     """
-    req = prepare(x, window, looks, amplitude)
-    damping = check_positive(damping, "damping", allow_zero=True)
-    sp = req.speckle
+    req = prepare(x, window, looks, amplitude, damping)
+    sp, k = req.speckle, req.damping
 
     def formula(i: Tensor, mu: Tensor, ci2: Tensor) -> Tensor:
-        return torch.lerp(i, mu, _enhanced_weight(ci2, sp, damping))
+        return torch.lerp(i, mu, sp.heterogeneity(ci2, k).neg_().exp_())
 
     return filter_intensity(req, formula)

@@ -1,4 +1,4 @@
-"""Speckle-filter evaluation: quality metrics per filter and window, and a crop panel.
+"""Scoring of ``torchsar-eval speckle``: quality metrics per filter and window.
 
 For every filter of :data:`torchsar.speckle.FILTERS` (and the unfiltered image as the
 ``none`` baseline) at every window size, each image of a dataset is filtered and scored:
@@ -25,27 +25,19 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import numpy as np
 import pandas as pd
 import torch
 from torch import Tensor
 
 import torchsar as ts
-from torchsar.metrics.despeckling import edge_preservation, edge_ratio, enl, psnr, ratio_moments
-from torchsar.metrics.despeckling import ssim as ssim_metric
+from torchsar.metrics import edge_preservation, edge_ratio, enl, psnr, ratio_moments, ssim
 
 __all__ = [
     "COLUMNS",
     "Sample",
     "apply_filter",
     "homogeneous_tiles",
-    "plot_panel",
     "samples",
     "score_dataset",
 ]
@@ -117,7 +109,7 @@ def _cv(t: Tensor) -> Tensor:
     return flat.std(1, correction=0) / torch.where(mean > 0, mean, torch.ones_like(mean))
 
 
-def homogeneous_tiles(s: Sample, tile: int) -> Tensor:
+def homogeneous_tiles(s: Sample, *, tile: int) -> Tensor:
     """Bool ``(N,)`` selection of homogeneous tiles (see the module docstring)."""
     free = ~_tiles(s.exclude, tile).flatten(1).any(1)
     if s.clean is not None:
@@ -128,7 +120,7 @@ def homogeneous_tiles(s: Sample, tile: int) -> Tensor:
     return free & (cv <= torch.quantile(cv[free], 0.25))
 
 
-def apply_filter(name: str, s: Sample, window: int, looks: float) -> tuple[Tensor, float]:
+def apply_filter(name: str, s: Sample, *, window: int, looks: float) -> tuple[Tensor, float]:
     """Filtered intensity and the wall time in seconds (``none``: the image itself)."""
     if name == "none":
         return s.image.float(), 0.0
@@ -138,7 +130,7 @@ def apply_filter(name: str, s: Sample, window: int, looks: float) -> tuple[Tenso
 
 
 def _image_metrics(s: Sample, f: Tensor) -> dict[str, float]:
-    r_mean, r_var = ratio_moments(s.image, f)
+    r_mean, r_var = ratio_moments(f, s.image)
     row = {
         "ratio_mean": r_mean.mean().item(),
         "ratio_var": r_var.mean().item(),
@@ -148,24 +140,24 @@ def _image_metrics(s: Sample, f: Tensor) -> dict[str, float]:
         fa, ca = f.sqrt(), s.clean.sqrt()
         row["epi"] = edge_preservation(fa, ca).mean().item()
         row["psnr_db"] = psnr(fa, ca).mean().item()
-        row["ssim"] = ssim_metric(fa, ca).mean().item() if min(ca.shape[-2:]) >= 11 else math.nan
+        row["ssim"] = ssim(fa, ca).mean().item() if min(ca.shape[-2:]) >= 11 else math.nan
     return row
 
 
 def score_filter(
-    items: list[Sample], name: str, window: int, looks: float | None, tile: int
+    items: list[Sample], name: str, *, window: int, looks: float | None, tile: int
 ) -> dict[str, float]:
     """Metrics of one filter at one window over the images (see the module docstring)."""
     rows, enls, seconds, pixels = [], [], 0.0, 0
     if items:  # untimed warm-up call (first-call allocations are not the filter's cost)
-        apply_filter(name, items[0], window, looks or items[0].looks or 1.0)
+        apply_filter(name, items[0], window=window, looks=looks or items[0].looks or 1.0)
     for s in items:
         lk = looks if looks is not None else (s.looks or 1.0)
-        f, dt = apply_filter(name, s, window, lk)
+        f, dt = apply_filter(name, s, window=window, looks=lk)
         seconds += dt
         pixels += s.image.numel()
         rows.append(_image_metrics(s, f))
-        sel = homogeneous_tiles(s, tile)
+        sel = homogeneous_tiles(s, tile=tile)
         if bool(sel.any()):
             enls.append(enl(_tiles(f, tile)[sel]).flatten())
     df = pd.DataFrame(rows)
@@ -191,42 +183,6 @@ def score_dataset(
     for name, window in [("none", 0), *[(f, w) for f in filters for w in windows]]:
         row = {"dataset": dataset_name, "filter": name, "window": window}
         row.update(looks=shown if shown is not None else 1.0, images=len(items))
-        row.update(score_filter(items, name, window, looks, tile))
+        row.update(score_filter(items, name, window=window, looks=looks, tile=tile))
         rows.append(row)
     return pd.DataFrame(rows, columns=COLUMNS)
-
-
-def _crop(s: Sample, size: int) -> tuple[slice, slice]:
-    h, w = s.image.shape[-2:]
-    if s.box is not None:
-        cr, cc = (s.box[0] + s.box[2]) // 2, (s.box[1] + s.box[3]) // 2
-    else:
-        cr, cc = h // 2, w // 2
-    r0 = min(max(cr - size // 2, 0), max(h - size, 0))
-    c0 = min(max(cc - size // 2, 0), max(w - size, 0))
-    return slice(r0, r0 + size), slice(c0, c0 + size)
-
-
-def plot_panel(
-    s: Sample, filters: list[str], window: int, looks: float, path: Path, *, size: int = 160
-) -> None:
-    """Before/after crops in dB (clean if known, noisy, every filter) on one colour scale."""
-    rows, cols = _crop(s, size)
-    shown = ([("clean", s.clean)] if s.clean is not None else []) + [("noisy", s.image)]
-    shown += [(f"{n} {window}x{window}", apply_filter(n, s, window, looks)[0]) for n in filters]
-    db = [(t, 10 * np.log10(x[0, 0, rows, cols].double().numpy() + 1e-10)) for t, x in shown]
-    ref = db[0][1] if s.clean is not None else db[-1][1]  # clean, else a filtered crop
-    vmin, vmax = np.percentile(ref, [1, 99.8])
-    ncol = 4
-    nrow = math.ceil(len(db) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 3.3 * nrow), squeeze=False)
-    for ax in axes.flat:
-        ax.axis("off")
-    for ax, (title, img) in zip(axes.flat, db, strict=False):
-        ax.imshow(img, cmap="gray", vmin=vmin, vmax=vmax)
-        ax.set_title(title, fontsize=9)
-    h, w = db[0][1].shape
-    fig.suptitle(f"intensity (dB), crop {h}x{w}, looks {looks:g}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)

@@ -1,4 +1,5 @@
-"""Ordered-statistic CFAR (the module is not named ``os`` to keep the standard library's)."""
+"""Ordered-statistic CFAR (the module is not named ``os``: importing ``torchsar.cfar.os``
+would replace the function ``torchsar.cfar.os`` by the module)."""
 
 from __future__ import annotations
 
@@ -7,14 +8,14 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int
-from torchsar.cfar.core import border_scale, finish, out_dtype, prepare, ratio
-from torchsar.cfar.detection import Detection, detection_from
+from torchsar._checks import OptionError, check_int, check_probability
+from torchsar.cfar.core import border_scale, conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
+from torchsar.detection import Detection
 from torchsar.order_statistics import ring_order_statistic
 from torchsar.windows import Ring, Sums, region_count, windowed
 
-__all__ = ["os"]
+__all__ = ["os", "os_threshold"]
 
 
 def os(
@@ -61,7 +62,7 @@ def os(
         >>> os(x, guard=1, train=2).mask.sum().item()
         1
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="os")
     r = _check_rank(rank, ring)
     counts = _ring_counts(x, ring, vmask)
     ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=r)).long()
@@ -71,8 +72,15 @@ def os(
     scale = border_scale(counts, ring.n, factor)
     if scale is not None:
         stat = stat * scale
-    stat = finish(stat, counts, vmask, out_dtype(x))
-    return detection_from(stat, factor(ring.n))
+    stat = finish(stat, counts, out_dtype(x))
+    return conclude(stat, vmask, factor(ring.n))
+
+
+def os_threshold(*, guard: int, train: int, pfa: float, rank: int | None) -> float:
+    """The design threshold ``alpha(N, r)`` of :func:`os` for these options (no image
+    needed)."""
+    ring = Ring(guard, train)
+    return _factor(ring.n, ring.n, _check_rank(rank, ring), check_probability(pfa, "pfa"))
 
 
 def _check_rank(rank: int | None, ring: Ring) -> int:

@@ -1,9 +1,4 @@
-"""Exact order statistics over the CFAR training ring (the OS-CFAR clutter estimate).
-
-:func:`ring_order_statistic` returns, for every pixel, the exact ``k``-th smallest value of its
-training ring (cells outside the image or marked invalid are not counted). It is the window
-statistic that sums cannot give, so it lives beside :mod:`torchsar.windows` with the same
-geometry (:class:`~torchsar.windows.Ring`) and border semantics.
+"""Exact ring order statistic by bit-wise bisection of tile ranks (small rings).
 
 Algorithm (exact, memory bounded, no per-pixel Python loop):
 
@@ -23,12 +18,10 @@ Algorithm (exact, memory bounded, no per-pixel Python loop):
 3. The final rank indexes the tile's sorted values: the result is an input value, bit-exact.
 
 The work per pixel is ``B N`` byte compares and sums (``N`` ring cells), vectorised over the
-tile, independent of the data (on one thread, 512 x 512, g=2, t=4: 4.4x faster than
-``scipy.ndimage.rank_filter`` with the same footprint, 3.4x for the whole OS-CFAR; see
-``scripts/benchmarks/cfar_family.py``; the ratios drop to ~2.5x on a loaded machine).
-All per-step buffers are allocated once per call: on CPU, fresh large temporaries (page
-faults) cost more than the arithmetic. Rings wider than a 16-bit tile allows
-(``2(g+t)+1 > 181``) fall back to a gather + sort per row.
+tile and independent of the data: the fastest choice for small rings, but it grows with the
+ring's area, so large rings go to :mod:`torchsar.order_statistics.histogram`. All per-step
+buffers are allocated once per call: on CPU, fresh large temporaries (page faults) cost more
+than the arithmetic.
 
 References:
     Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350 (OS-CFAR).
@@ -36,83 +29,44 @@ References:
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 import torch
 from torch import Tensor
 
+from torchsar.order_statistics.sorting import argsort_rows
 from torchsar.windows import Ring
 
-__all__ = ["ring_order_statistic"]
+__all__ = ["CELL_BUDGET", "bisection_select", "fits"]
 
-_CELL_BUDGET = 65535  # cells per tile, so ranks fit 16 bits
+CELL_BUDGET = 65535  # cells per tile, so ranks fit 16 bits
 _COMPARE_BUDGET = 1 << 21  # bytes of the per-step compare buffer (N x tile)
 
 
-def ring_order_statistic(
-    x: Tensor, ring: Ring, k: Tensor, *, valid: Tensor | None = None
-) -> Tensor:
-    """The exact ``k``-th smallest in-image (and valid) ring value at every pixel.
+def bisection_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) -> Tensor:
+    """The ``kk``-th smallest counted ring value at every pixel of ``planes`` ``(P, H, W)``.
 
-    Args:
-        x: real tensor ``(B, C, H, W)`` (validated by the caller).
-        ring: the training-ring geometry.
-        k: integer tensor broadcastable to ``x``: the 1-based rank per pixel, at most the
-            pixel's number of counted ring cells; ``0`` gives ``0``.
-        valid: optional bool mask broadcastable to ``x``; invalid cells are never counted.
-
-    Returns:
-        Tensor like ``x``: the ``k``-th smallest ring value (an element of ``x``).
-
-    Example:
-        >>> x = torch.arange(49.0).reshape(1, 1, 7, 7)
-        >>> k = torch.full((1, 1, 7, 7), 16)  # the largest of the 16 cells of the 5x5 ring
-        >>> ring_order_statistic(x, Ring(1, 1), k)[0, 0, 3, 3].item()
-        40.0
+    ``kk`` ``(P, H, W)`` holds 1-based ranks, at most the pixel's counted ring cells (``0``
+    gives ``0``); ``vm`` an optional bool mask of counted cells, same shape. The ring must
+    fit a 16-bit tile: ``(2(g+t)+1)^2 <= 32767`` (see :func:`fits`).
     """
-    b, c, h, w = x.shape
-    kk = torch.as_tensor(k, device=x.device).expand(b, c, h, w).reshape(b * c, h, w)
-    planes = x.reshape(b * c, h, w)
-    vm = None if valid is None else valid.expand(b, c, h, w).reshape(b * c, h, w)
     out = torch.zeros_like(planes)
-    if out.numel() == 0:
-        return out.reshape(b, c, h, w)
+    p, h, w = planes.shape
     o = ring.outer
-    if (2 * o + 1) ** 2 > _CELL_BUDGET // 2:
-        _unfold_select(planes, ring, kk, vm, out)
-        return out.reshape(b, c, h, w)
-    tiles = _tiles(b * c, h, w, o, ring.n)
+    tiles = _tiles(p, h, w, o, ring.n)
     longest = max(_tile_length(t, o) for t in tiles)
-    ws = _Workspace(ring.n, longest, x.device)
-    with _one_cpu_thread(x.device):
-        for tile in tiles:
-            _select_tile(planes, ring, kk, vm, out, tile, ws)
-    return out.reshape(b, c, h, w)
+    ws = _Workspace(ring.n, longest, planes.device)
+    for tile in tiles:
+        _select_tile(planes, ring, kk, vm, out, tile, ws)
+    return out
 
 
-@contextmanager
-def _one_cpu_thread(device: torch.device) -> Iterator[None]:
-    """Run the bisection on one intra-op thread on CPU (restored afterwards).
-
-    Its steps are short, memory-bound uint8 passes over cache-sized tiles: OpenMP fork/join
-    per op costs more than it gains, and on a loaded machine it collapses (measured: 2
-    threads 6x slower than 1 for a 2 x 512 x 512 batch). Not thread-safe with respect to
-    other Python threads changing ``torch.set_num_threads`` concurrently."""
-    if device.type != "cpu":
-        yield
-        return
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
+def fits(ring: Ring) -> bool:
+    """Whether a tile with the ring's halo fits the 16-bit rank budget."""
+    return ring.extent**2 <= CELL_BUDGET // 2
 
 
 def _tiles(p: int, h: int, w: int, o: int, n: int) -> list[tuple[int, int, int, int, int, int]]:
     """Output tiles ``(p0, p1, y0, y1, x0, x1)`` whose padded input stays within budget."""
-    budget = max((2 * o + 1) ** 2 * 2, min(_CELL_BUDGET, _COMPARE_BUDGET // max(n, 1)))
+    budget = max((2 * o + 1) ** 2 * 2, min(CELL_BUDGET, _COMPARE_BUDGET // max(n, 1)))
     wp = w + 2 * o
     tw = w if wp * (2 * o + 2) <= budget else max(1, budget // (2 * (2 * o + 2)) - 2 * o)
     th = max(1, min(h, budget // (tw + 2 * o) - 2 * o))
@@ -153,7 +107,7 @@ def _tile_ranks(
     vals = planes[p0:p1, ya:yb, xa:xb]
     keep = None if vm is None else vm[p0:p1, ya:yb, xa:xb]
     flat = vals.reshape(-1) if keep is None else vals[keep]
-    order = _argsort(flat)
+    order = argsort_rows(flat)
     srt = flat[order]
     rank = torch.empty(flat.numel(), dtype=torch.int32, device=flat.device)
     rank[order] = torch.arange(flat.numel(), dtype=torch.int32, device=flat.device)
@@ -165,13 +119,6 @@ def _tile_ranks(
     else:
         region[keep] = rank
     return pad, srt
-
-
-def _argsort(v: Tensor) -> Tensor:
-    """Ascending argsort; numpy's on CPU (several times faster than ``torch.sort`` there)."""
-    if v.device.type == "cpu":
-        return torch.from_numpy(v.numpy().argsort())
-    return torch.sort(v, stable=True).indices
 
 
 def _ring_blocks(ring: Ring) -> list[tuple[int, int, int, int]]:
@@ -307,21 +254,3 @@ def _select_tile(
     vals = srt[sel] if srt.numel() else torch.zeros(sel.shape, dtype=out.dtype, device=out.device)
     kt = kk[p0:p1, y0:y1, x0:x1]
     out[p0:p1, y0:y1, x0:x1] = torch.where(kt > 0, vals, torch.zeros_like(vals))
-
-
-def _unfold_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None, out: Tensor) -> None:
-    """Fallback for very wide rings: gather the ring row by row and ``kthvalue`` it."""
-    o, (p, h, w) = ring.outer, planes.shape
-    offs = ring.offsets().to(planes.device)
-    inf = torch.tensor(torch.inf, dtype=planes.dtype, device=planes.device)
-    pad = torch.nn.functional.pad(planes, (o, o, o, o), value=torch.inf)
-    if vm is not None:
-        pad[:, o : o + h, o : o + w] = torch.where(vm, planes, inf)
-    for y in range(h):
-        rows = pad[:, y + o + offs[:, 0], :]  # (P, N, W + 2o)
-        cols = (torch.arange(w, device=planes.device)[None, :] + o + offs[:, 1:2]).expand(p, -1, -1)
-        cells = torch.gather(rows, 2, cols)  # (P, N, W)
-        srt = torch.sort(cells, dim=1).values
-        kidx = (kk[:, y, :].long() - 1).clamp_min(0)[:, None, :]
-        val = torch.gather(srt, 1, kidx)[:, 0, :]
-        out[:, y, :] = torch.where(kk[:, y, :] > 0, val, torch.zeros_like(val))

@@ -1,4 +1,6 @@
-"""The detector output type shared by every CFAR variant and the region-growing detector."""
+"""The detector output type: the contract of every CFAR variant, the region-growing detector
+and the moving-target pipeline (re-exported as ``torchsar.cfar.Detection`` and
+``torchsar.cfar.detection_from``)."""
 
 from __future__ import annotations
 

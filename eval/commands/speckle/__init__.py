@@ -1,28 +1,35 @@
 """``torchsar-eval speckle``: despeckling quality of every speckle filter on datasets.
 
 Writes ``speckle.csv`` / ``speckle.md`` (one row per dataset, filter and window; see
-:mod:`eval.despeckling` for the metrics), ``speckle_<dataset>.png`` (before/after crops)
-and ``config.json``. Simulated datasets have a clean reflectivity, so every metric is
-reported; on ``folder:`` datasets the clean-image metrics (EPI, PSNR, SSIM) are empty.
+:mod:`eval.commands.speckle.scoring` for the metrics), ``speckle_<dataset>.png``
+(before/after crops, :mod:`eval.commands.speckle.panel`) and ``config.json``. Simulated
+datasets have a clean reflectivity, so every metric is reported; on ``folder:`` datasets the
+clean-image metrics (EPI, PSNR, SSIM) are empty.
+
+The command line is parsed here, at the edge, into :class:`SpeckleOptions`; everything
+below takes plain typed values.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 import torch
 
 import torchsar as ts
+from eval.commands.speckle.panel import plot_panel
+from eval.commands.speckle.scoring import samples, score_dataset
 from eval.datasets import DATASETS, make_dataset
-from eval.despeckling import plot_panel, samples, score_dataset
 from eval.errors import EvalError
 from eval.output import default_out, result_dir, write_config
 from eval.plots import slug
 from eval.tables import markdown
 
-__all__ = ["add_parser", "run"]
+__all__ = ["SpeckleOptions", "add_parser", "evaluate", "parse_options", "run"]
 
 DEFAULT_DATASETS = ["sim-scenes"]
 
@@ -65,11 +72,29 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _check(args: argparse.Namespace) -> tuple[list[str], list[int]]:
+@dataclass(frozen=True)
+class SpeckleOptions:
+    """The validated options of one ``speckle`` run."""
+
+    datasets: list[str]
+    filters: list[str]
+    windows: list[int]
+    looks: float | None
+    n: int | None
+    seed: int
+    tile: int
+    out: Path
+
+
+def parse_options(args: argparse.Namespace) -> SpeckleOptions:
+    """Check the parsed command line and turn it into :class:`SpeckleOptions`."""
     filters = _csv_list(args.filters)
+    valid = ", ".join(ts.speckle.FILTERS)
+    if not filters:
+        raise EvalError(f"--filters must name at least one filter of: {valid}")
     unknown = [f for f in filters if f not in ts.speckle.FILTERS]
-    if unknown or not filters:
-        raise EvalError(f"unknown filter(s) {unknown}; valid: {', '.join(ts.speckle.FILTERS)}")
+    if unknown:
+        raise EvalError(f"unknown filter(s) {unknown}; valid: {valid}")
     try:
         windows = _csv_list(args.windows, int)
     except ValueError:
@@ -78,30 +103,45 @@ def _check(args: argparse.Namespace) -> tuple[list[str], list[int]]:
         ) from None
     if not windows or any(w < 3 or w % 2 == 0 for w in windows):
         raise EvalError(f"--windows must be odd integers >= 3, got {args.windows!r}")
-    if args.looks is not None and not args.looks > 0:
-        raise EvalError(f"--looks must be > 0, got {args.looks}")
+    if args.looks is not None and not 0 < args.looks < math.inf:
+        raise EvalError(f"--looks must be finite and > 0, got {args.looks}")
     if args.tile < 4:
         raise EvalError(f"--tile must be >= 4, got {args.tile}")
-    return filters, windows
+    return SpeckleOptions(
+        datasets=args.dataset or DEFAULT_DATASETS,
+        filters=filters,
+        windows=windows,
+        looks=args.looks,
+        n=args.n,
+        seed=args.seed,
+        tile=args.tile,
+        out=args.out or default_out("speckle"),
+    )
 
 
 def run(args: argparse.Namespace) -> int:
-    filters, windows = _check(args)
-    names = args.dataset or DEFAULT_DATASETS
-    datasets = {name: make_dataset(name, n=args.n, seed=args.seed) for name in names}
-    out = args.out or default_out("speckle")
-    with result_dir(out) as tmp:
+    """The command's edge: parse, then :func:`evaluate`."""
+    return evaluate(parse_options(args))
+
+
+def evaluate(opts: SpeckleOptions) -> int:
+    """Score every filter and window on every dataset; write the run folder; print the table."""
+    datasets = {name: make_dataset(name, n=opts.n, seed=opts.seed) for name in opts.datasets}
+    with result_dir(opts.out) as tmp:
         tables = []
         for name, ds in datasets.items():
             items = list(samples(ds))
             if not items:
                 raise EvalError(f"dataset {name} has no images")
             tables.append(
-                score_dataset(name, items, filters, windows, looks=args.looks, tile=args.tile)
+                score_dataset(
+                    name, items, opts.filters, opts.windows, looks=opts.looks, tile=opts.tile
+                )
             )
-            looks = args.looks if args.looks is not None else (items[0].looks or 1.0)
-            panel_window = 7 if 7 in windows else windows[0]
-            plot_panel(items[0], filters, panel_window, looks, tmp / f"speckle_{slug(name)}.png")
+            looks = opts.looks if opts.looks is not None else (items[0].looks or 1.0)
+            panel_window = 7 if 7 in opts.windows else opts.windows[0]
+            path = tmp / f"speckle_{slug(name)}.png"
+            plot_panel(items[0], opts.filters, path, window=panel_window, looks=looks)
         table = pd.concat(tables, ignore_index=True)
         table.to_csv(tmp / "speckle.csv", index=False)
         (tmp / "speckle.md").write_text(markdown(table))
@@ -110,18 +150,18 @@ def run(args: argparse.Namespace) -> int:
             "speckle",
             {
                 "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
-                "filters": filters,
-                "windows": windows,
-                "looks": args.looks,
-                "tile": args.tile,
-                "seed": args.seed,
+                "filters": opts.filters,
+                "windows": opts.windows,
+                "looks": opts.looks,
+                "tile": opts.tile,
+                "seed": opts.seed,
                 "threads": torch.get_num_threads(),
-                "out": str(out),
+                "out": str(opts.out),
             },
         )
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(
-        f"\nwrote {out}/: speckle.csv speckle.md config.json "
+        f"\nwrote {opts.out}/: speckle.csv speckle.md config.json "
         + " ".join(f"speckle_{slug(n)}.png" for n in datasets)
     )
     return 0

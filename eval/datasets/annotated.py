@@ -1,0 +1,160 @@
+"""Datasets whose ground truth is an annotation file: ``coco:FILE.json`` and ``voc:DIR``.
+
+Instances are painted in annotation order (a later object wins where two overlap); boxes
+come from the annotations. COCO crowd regions and VOC ``difficult`` objects are don't-care.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from eval.datasets.images import read_samples
+from eval.datasets.spec import DatasetSpec
+from eval.errors import EvalError
+from torchsar.io import (
+    DEFAULT_MAX_PIXELS,
+    FileFormatError,
+    annotation_mask,
+    raster_shape,
+    read_coco,
+    read_voc,
+)
+
+__all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
+
+ANNOTATED_OPTIONS = ("images", "type", "spacing", "max_pixels")
+
+
+class AnnotatedDataset(FileDataset):
+    """Images plus per-image object lists: ``(image path, records)`` with records
+    ``(class, box, mask or None, ignore)``; built by :func:`coco_dataset` / :func:`voc_dataset`."""
+
+    def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, **kw):
+        self.scheme = scheme
+        super().__init__(root, **kw)
+        self.items = entries
+        missing = [str(e[0]) for e in entries if not e[0].is_file()]
+        if missing:
+            raise EvalError(
+                f"{scheme} annotations refer to missing image {missing[0]} ({len(missing)} missing)"
+            )
+        self.shared_files = list(annotation_files)
+
+    def item_files(self, i: int) -> list[Path]:
+        return [self.items[i][0]]
+
+    def load(self, i: int) -> dict:
+        path, size, objects, name = self.items[i]
+        shape = raster_shape(path)[:2]
+        if size is not None and tuple(shape) != tuple(size):
+            raise FileFormatError(
+                path, f"is {shape[1]}x{shape[0]} but its annotation says {size[1]}x{size[0]}"
+            )
+        samples = read_samples(path, self.sample_type, max_pixels=self.max_pixels)
+        inst = np.zeros(shape, np.int32)
+        ignore = np.zeros(shape, bool)
+        classes, boxes, has_masks = [], [], True
+        for cls, box, mask, is_ignore in objects:
+            m = mask(*shape)
+            if is_ignore:
+                ignore |= m
+                continue
+            has_masks &= mask.segmented
+            classes.append(cls)
+            boxes.append(box)
+            inst[m] = len(classes)
+        meta = self.base_meta(name, path, None, gt="mask" if has_masks else "box")
+        meta["classes"] = classes
+        return make_item(self.intensity(samples, path), inst, ignore, meta, boxes=boxes)
+
+
+class _Painter:
+    """Deferred mask of one object: a decoded COCO segmentation or a filled box."""
+
+    def __init__(self, box, coco_annotation=None) -> None:
+        self.box, self.ann = box, coco_annotation
+        self.segmented = coco_annotation is not None and coco_annotation.segmentation is not None
+
+    def __call__(self, h: int, w: int) -> np.ndarray:
+        if self.ann is not None:
+            return annotation_mask(self.ann, h, w)
+        m = np.zeros((h, w), bool)
+        r0, c0, r1, c1 = (round(v) for v in self.box)
+        m[r0:r1, c0:c1] = True
+        return m
+
+
+def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> AnnotatedDataset:
+    """``coco:FILE.json``: images under ``images`` (default: the JSON's folder)."""
+    try:
+        coco = read_coco(path)
+    except FileFormatError as exc:
+        raise EvalError(str(exc)) from exc
+    folder = images or path.parent
+    entries = [
+        (
+            folder / im.file_name,
+            (im.height, im.width),
+            [(a.category, a.box, _Painter(a.box, a), a.iscrowd) for a in im.annotations],
+            im.file_name,
+        )
+        for im in coco.images
+    ]
+    ds = AnnotatedDataset("coco", path, entries, [path], **kw)
+    ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())))
+    ds.options["labels"] = "COCO segmentation (box when absent); iscrowd = ignore"
+    ds.finish("annotation", limit)
+    return ds
+
+
+def _voc_image(xml: Path, filename: str, images: Path | None) -> Path:
+    """The image of a VOC file: ``images/filename``, else VOC's ``../JPEGImages``, else beside."""
+    for folder in (images, xml.parent.parent / "JPEGImages", xml.parent):
+        if folder is not None and (folder / filename).exists():
+            return folder / filename
+    return (images or xml.parent.parent / "JPEGImages") / filename
+
+
+def voc_dataset(root: Path, images: Path | None, limit: int | None, **kw) -> AnnotatedDataset:
+    """``voc:DIR``: every ``*.xml`` under ``DIR`` (e.g. ``DIR/Annotations``)."""
+    require_dir(root, "voc")
+    xmls = [f for f in walk_files(root) if f.suffix.lower() == ".xml"]
+    if not xmls:
+        raise EvalError(f"no VOC *.xml annotation files found in {root}")
+    entries = []
+    for xml in xmls:
+        try:
+            ann = read_voc(xml)
+        except FileFormatError as exc:
+            raise EvalError(str(exc)) from exc
+        objs = [(o.name, o.box, _Painter(o.box), o.difficult) for o in ann.objects]
+        img = _voc_image(xml, ann.filename, images)
+        entries.append((img, (ann.height, ann.width), objs, str(xml.relative_to(root))))
+    ds = AnnotatedDataset("voc", root, entries, xmls, **kw)
+    ds.options["labels"] = "VOC boxes (gt=box); difficult = ignore"
+    ds.finish("annotation", limit)
+    return ds
+
+
+def _kw(spec: DatasetSpec) -> dict:
+    spec.check_keys(ANNOTATED_OPTIONS)
+    return {
+        "sample_type": spec.sample_type("display"),
+        "spacing": spec.spacing(),
+        "max_pixels": spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+    }
+
+
+def coco_from_spec(spec: DatasetSpec, limit: int | None) -> AnnotatedDataset:
+    """``coco:FILE.json[?images=DIR]``."""
+    images = spec.options.get("images")
+    return coco_dataset(Path(spec.path), images and Path(images), limit, **_kw(spec))
+
+
+def voc_from_spec(spec: DatasetSpec, limit: int | None) -> AnnotatedDataset:
+    """``voc:DIR[?images=DIR]``."""
+    images = spec.options.get("images")
+    return voc_dataset(Path(spec.path), images and Path(images), limit, **_kw(spec))

@@ -1,0 +1,58 @@
+"""``make_dataset``: a dataset from its name (scheme, path and options)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from torch.utils.data import Dataset
+
+from eval.datasets.annotated import coco_from_spec, voc_from_spec
+from eval.datasets.base import BadItemError
+from eval.datasets.folder import folder_from_spec
+from eval.datasets.hrsid import hrsid_from_spec
+from eval.datasets.phoenix import phoenix_from_spec
+from eval.datasets.sicd import sicd_from_spec
+from eval.datasets.sim import DEFAULT_N, SimDataset
+from eval.datasets.spec import DatasetSpec, parse_spec
+from eval.errors import EvalError
+from torchsar.io import FileFormatError
+
+__all__ = ["DATASETS", "make_dataset"]
+
+DATASETS = (
+    "sim-chips",
+    "sim-scenes",
+    "folder:PATH",
+    "coco:FILE.json",
+    "voc:DIR",
+    "hrsid:DIR",
+    "phoenix:DIR",
+    "sicd:FILE",
+)
+
+_SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
+    "folder": folder_from_spec,
+    "coco": coco_from_spec,
+    "voc": voc_from_spec,
+    "hrsid": hrsid_from_spec,
+    "phoenix": phoenix_from_spec,
+    "sicd": sicd_from_spec,
+}
+
+
+def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
+    """Build a dataset from its name (see :mod:`eval.datasets`); ``n`` limits its size.
+
+    Raises:
+        EvalError: unknown scheme or option, missing folder, unpairable files; a file that
+            cannot be read while building raises :class:`BadItemError` naming it.
+    """
+    if spec in DEFAULT_N:
+        return SimDataset(spec, DEFAULT_N[spec] if n is None else n, seed)
+    build = _SCHEMES.get(spec.partition(":")[0]) if ":" in spec else None
+    if build is None:
+        raise EvalError(f"unknown dataset {spec!r}; valid: {', '.join(DATASETS)}")
+    try:
+        return build(parse_spec(spec), n)
+    except FileFormatError as exc:
+        raise BadItemError(exc.path, str(exc)) from exc

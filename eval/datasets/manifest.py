@@ -1,0 +1,40 @@
+"""Dataset manifest: which files, how many bytes, and one hash that ties a table to them."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+__all__ = ["file_manifest"]
+
+
+def file_manifest(root: str | Path, files: Iterable[str | Path]) -> dict:
+    """File count, total bytes and a sha256 of the sorted ``relative-path<TAB>size`` list.
+
+    The hash covers names and sizes, not contents (reading every byte of a large dataset
+    would cost a full pass); symlinks that resolve outside ``root`` are listed.
+
+    Returns:
+        ``{"root", "files", "bytes", "sha256", "symlinks_outside"}``.
+    """
+    root = Path(root)
+    base = root if root.is_dir() else root.parent
+    inside = base.resolve()
+    rows, outside, total = [], [], 0
+    for f in sorted({Path(p) for p in files}):
+        size = os.stat(f).st_size
+        total += size
+        rel = os.path.relpath(f, base)
+        rows.append(f"{rel}\t{size}\n")
+        if f.is_symlink() and not f.resolve().is_relative_to(inside):
+            outside.append(rel)
+    digest = hashlib.sha256("".join(rows).encode()).hexdigest()
+    return {
+        "root": str(root),
+        "files": len(rows),
+        "bytes": total,
+        "sha256": digest,
+        "symlinks_outside": outside,
+    }

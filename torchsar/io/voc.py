@@ -1,0 +1,81 @@
+"""Pascal VOC XML annotations (boxes), as used by SSDD.
+
+VOC ``bndbox`` corners ``xmin, ymin, xmax, ymax`` are 1-based and inclusive; they are
+returned as 0-based end-exclusive ``(r0, c0, r1, c1) = (ymin - 1, xmin - 1, ymax, xmax)``.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from torchsar.io.errors import FileFormatError
+from torchsar.io.raster import check_regular_file
+
+__all__ = ["VocAnnotation", "VocObject", "read_voc"]
+
+
+@dataclass(frozen=True)
+class VocObject:
+    """One box: class ``name``, ``box`` ``(r0, c0, r1, c1)``, VOC ``difficult`` flag."""
+
+    name: str
+    box: tuple[float, float, float, float]
+    difficult: bool
+
+
+@dataclass(frozen=True)
+class VocAnnotation:
+    """One annotation file: the image it describes, its size and its objects."""
+
+    filename: str
+    height: int
+    width: int
+    objects: tuple[VocObject, ...]
+
+
+def _number(node: ET.Element, tag: str, path) -> float:
+    """A numeric child ``tag`` of ``node`` or an error naming the file and tag."""
+    try:
+        return float(node.findtext(tag))
+    except (TypeError, ValueError):
+        raise FileFormatError(path, f"<{node.tag}> has no numeric <{tag}>") from None
+
+
+def _object(node: ET.Element, height: int, width: int, path) -> VocObject:
+    """One ``<object>``: name, difficult flag, box checked against the image size."""
+    box = node.find("bndbox")
+    name = (node.findtext("name") or "").strip()
+    if box is None or not name:
+        raise FileFormatError(path, "an <object> lacks <name> or <bndbox>")
+    x0, y0, x1, y1 = (_number(box, t, path) for t in ("xmin", "ymin", "xmax", "ymax"))
+    r = (y0 - 1, x0 - 1, y1, x1)
+    if not (0 <= r[0] < r[2] <= height and 0 <= r[1] < r[3] <= width):
+        raise FileFormatError(
+            path,
+            f"box of {name!r} (xmin={x0:g}, ymin={y0:g}, xmax={x1:g}, ymax={y1:g}) lies "
+            f"outside the {width}x{height} image or is empty",
+        )
+    return VocObject(name, r, (node.findtext("difficult") or "0").strip() == "1")
+
+
+def read_voc(path: str | Path) -> VocAnnotation:
+    """Parse one VOC XML file.
+
+    Raises:
+        FileFormatError: unparsable XML, missing size, filename or box fields, a box outside
+            the image.
+    """
+    check_regular_file(path)
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise FileFormatError(path, f"is not a readable VOC XML file ({exc})") from exc
+    size = root.find("size")
+    filename = (root.findtext("filename") or "").strip()
+    if size is None or not filename:
+        raise FileFormatError(path, "VOC annotation lacks <filename> or <size>")
+    h, w = int(_number(size, "height", path)), int(_number(size, "width", path))
+    objects = tuple(_object(o, h, w, path) for o in root.iter("object"))
+    return VocAnnotation(filename, h, w, objects)
