@@ -16,7 +16,14 @@ from torch import Tensor
 
 from eval.detectors import DetectorSpec
 
-__all__ = ["CLUTTER", "PFA_COLUMNS", "ClutterCase", "binomial_interval", "measure"]
+__all__ = [
+    "CLUTTER",
+    "PFA_COLUMNS",
+    "ClutterCase",
+    "binomial_interval",
+    "measure",
+    "measure_dataset",
+]
 
 
 @dataclass(frozen=True)
@@ -119,4 +126,29 @@ def measure(
                     lo <= pfa <= hi,
                 ]
             )
+    return pd.DataFrame(rows, columns=PFA_COLUMNS)
+
+
+def measure_dataset(
+    specs: Sequence[DetectorSpec], name: str, dataset, pfas: Sequence[float], batch_size: int
+) -> pd.DataFrame:
+    """Measured Pfa of every detector at every design ``pfa`` on a dataset's clutter pixels
+    (neither target nor ignore): how far real clutter is from the detectors' models."""
+    from eval.runner import batches
+
+    counts = {(s.name, p): [0, 0] for s in specs for p in pfas}
+    for batch in batches(dataset, batch_size):
+        clutter = ~batch["mask"] & ~batch["ignore"]
+        for spec in specs:
+            for pfa in pfas:
+                det = spec.with_params({"pfa": pfa})(batch["image"])
+                c = counts[(spec.name, pfa)]
+                c[0] += int((det.mask & clutter).sum())
+                c[1] += int(clutter.sum())
+    rows = []
+    for (det, pfa), (k, n) in counts.items():
+        lo, hi = binomial_interval(k, n) if n else (float("nan"), float("nan"))
+        rate = k / n if n else float("nan")
+        rows.append([det, name, "real clutter", float("nan"), None, pfa, rate, lo, hi, k, n,
+                     rate / pfa, lo <= pfa <= hi])  # fmt: skip
     return pd.DataFrame(rows, columns=PFA_COLUMNS)

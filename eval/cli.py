@@ -68,7 +68,14 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return args
 
 
-def _raise_terminated(signum: int, frame: object) -> None:
+def _raise_terminated(signum: int, frame) -> None:
+    """Raise :class:`Terminated`, except inside a finaliser (a weakref callback or
+    ``__del__``), where Python would print and swallow it: there, deliver the signal again a
+    moment later, outside the finaliser."""
+    code = getattr(frame, "f_code", None)
+    if code is not None and (code.co_name == "__del__" or code.co_filename.endswith("weakref.py")):
+        threading.Timer(0.01, os.kill, (os.getpid(), signum)).start()
+        return
     raise Terminated
 
 
@@ -119,7 +126,10 @@ def _dispatch(args: argparse.Namespace) -> int:
     from eval.output import claim, default_out
 
     out = args.out if getattr(args, "out", None) is not None else default_out(args.command)
-    with claim(Path(out), overwrite=args.overwrite) as claimed:
+    resume = bool(getattr(args, "resume", False))
+    if resume and getattr(args, "out", None) is None:
+        raise EvalError("--resume needs --out naming the interrupted run's folder")
+    with claim(Path(out), overwrite=args.overwrite, resume=resume) as claimed:
         args.out = claimed
         return int(args.func(args))
 
@@ -141,11 +151,18 @@ def main(argv: list[str] | None = None) -> int:
             raise
         return 0 if exc.code is None else int(exc.code)
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+        print(f"{PROG}: interrupted{_resume_hint(argv)}", file=sys.stderr)
         return 130
     except Terminated:
-        print(f"{PROG}: terminated", file=sys.stderr)
+        print(f"{PROG}: terminated{_resume_hint(argv)}", file=sys.stderr)
         return 143
+
+
+def _resume_hint(argv: list[str]) -> str:
+    """How to continue an interrupted ``run`` (its saved shards are kept)."""
+    if not argv or argv[0] != "run" or "--out" not in argv:
+        return ""
+    return "; continue with the same command plus --resume" if "--resume" not in argv else ""
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 
 import torch
 from torch import Tensor
@@ -23,7 +22,7 @@ from torch import Tensor
 import torchsar.imaging as ti
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
-from torchsar.io import read_gotcha
+from torchsar.io.gotcha import GotchaPass
 
 __all__ = ["GOTCHA_ERRORS", "run_gotcha"]
 
@@ -52,10 +51,11 @@ METHODS = ["none", "pga-fft", "min-entropy-bp", "sparse-bp"]
 
 
 def run_gotcha(
-    folder: Path, *, trials: int = 3, seed: int = 0, pixels: int = 101, extent: float = 50.0
+    data: GotchaPass, *, trials: int = 3, seed: int = 0, pixels: int = 101, extent: float = 50.0
 ) -> tuple[list[dict], dict[str, Tensor]]:
-    """Run the injected-error experiment; returns per-trial rows and images for a panel."""
-    data = read_gotcha(folder).autofocused()
+    """Run the injected-error experiment on a read pass (:func:`torchsar.io.read_gotcha`);
+    returns per-trial rows and images for a panel."""
+    data = data.autofocused()
     axis = torch.linspace(-extent / 2, extent / 2, pixels, dtype=torch.float64)
     op = BackprojectionOperator(data.freq, data.antenna, data.r0, axis, axis)
     g0 = data.phase_history[None]

@@ -193,8 +193,9 @@ def check_run_args(args: Namespace) -> RunChoices:
     chosen = names(wanted, "--detectors", DETECTORS, what="detector")
     overrides = parse_params(args.param)
     specs = resolve(chosen, overrides)
+    in_metres = getattr(args, "window_units", "px") == "m"  # checked once converted
     for spec in specs:
-        if spec.name in overrides:  # the registered defaults are known to work
+        if spec.name in overrides and not in_metres:  # registered defaults are known to work
             dry_run(spec.fn, spec.params, f"detector {spec.name}")
     preprocess, despeckle = despeckler(args.despeckle, args.despeckle_param)
     return RunChoices(specs, preprocess, despeckle)

@@ -201,14 +201,18 @@ def claim(out: Path, *, overwrite: bool = False, resume: bool = False) -> Iterat
 
 
 @contextmanager
-def result_dir(out: Path, *, resume: bool = False) -> Iterator[Path]:
+def result_dir(
+    out: Path, *, resume: bool = False, keep_interrupted: bool = False
+) -> Iterator[Path]:
     """Yield a hidden staging folder beside ``out``; publish it as ``out`` by one rename.
 
     ``out`` must be absent or an empty folder (:func:`claim` moves a previous run aside
     first). On any error, Ctrl-C or termination the staging folder is deleted; after a kill,
     the next :func:`claim` in the same parent deletes it. Everything the run writes goes
     into the staging folder, state files included: with ``resume``, the newest staging
-    folder a dead run left for ``out`` is adopted (renamed to ours) with its files.
+    folder a dead run left for ``out`` is adopted (renamed to ours) with its files. With
+    ``keep_interrupted``, Ctrl-C and SIGTERM leave the staging folder for a later
+    ``resume`` (any other start settles it like a killed run's).
     """
     out = Path(out)
     if out.is_symlink() or (out.exists() and not _is_empty_dir(out)):
@@ -223,8 +227,13 @@ def result_dir(out: Path, *, resume: bool = False) -> Iterator[Path]:
     try:
         yield tmp
         _publish(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+    except (Exception, KeyboardInterrupt) as exc:
+        if not (keep_interrupted and isinstance(exc, KeyboardInterrupt)):
+            shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    except BaseException as exc:  # SIGTERM (raised as an exception by the CLI)
+        if not keep_interrupted or isinstance(exc, SystemExit | GeneratorExit):
+            shutil.rmtree(tmp, ignore_errors=True)
         raise
 
 

@@ -20,6 +20,7 @@ from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
+from eval.datasets.base import BadItemError
 from eval.detectors import DetectorSpec
 from eval.scoring import batch_truth, image_rows, pixel_areas
 from torchsar.metrics import (
@@ -33,16 +34,31 @@ from torchsar.metrics import (
 from torchsar.metrics.curves import OP_BIN
 from torchsar.objects import ObjectRules, Objects, discriminate
 
-__all__ = ["DetectorResult", "Scoring", "batches", "evaluate"]
+__all__ = [
+    "DEFAULT_MATCH",
+    "DEFAULT_RULES",
+    "DetectorResult",
+    "Scoring",
+    "SkipBad",
+    "batches",
+    "evaluate",
+]
+
+
+DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
+"""The harness's discrimination defaults: a closing that joins a vehicle's scatterer
+fragments, and no object smaller than 5 px."""
+DEFAULT_MATCH = Matching(kind="centroid")
+"""The harness's matching default: the prescreening rule (see the README)."""
 
 
 @dataclass(frozen=True)
 class Scoring:
     """How detections are scored: the discrimination rules, the matching rule and the
-    bootstrap (the same for every detector of a run)."""
+    bootstrap (the same for every detector of a run; defaults: the harness's)."""
 
-    rules: ObjectRules = field(default_factory=ObjectRules)
-    matching: Matching = field(default_factory=Matching)
+    rules: ObjectRules = DEFAULT_RULES
+    matching: Matching = DEFAULT_MATCH
     replicates: int = 100
     seed: int = 0
 
@@ -68,6 +84,7 @@ class DetectorResult:
     images: int = 0
     rows: list = field(default_factory=list)
     op_bin: int = OP_BIN
+    skipped: list = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
@@ -96,6 +113,7 @@ class DetectorResult:
         out.object_seconds = self.object_seconds + other.object_seconds
         out.images = self.images + other.images
         out.rows = self.rows + other.rows
+        out.skipped = self.skipped + other.skipped
         return out
 
     def objects_of(self, statistic: Tensor, threshold: Tensor, batch: dict) -> Objects:
@@ -113,12 +131,34 @@ def _stack(items: list[dict]) -> dict:
     return out
 
 
-def batches(dataset: Dataset, batch_size: int) -> Iterator[dict]:
-    """Yield stacked batches; consecutive images of different sizes split a batch."""
+class SkipBad(Dataset):
+    """A dataset whose unreadable items (:class:`~eval.datasets.BadItemError`) are returned
+    as ``{"bad": path, "error": message}`` markers instead of stopping the run."""
+
+    def __init__(self, dataset: Dataset) -> None:
+        self.dataset = dataset
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, i: int) -> dict:
+        try:
+            return self.dataset[i]
+        except BadItemError as exc:
+            return {"bad": str(exc.path), "error": str(exc)}
+
+
+def batches(dataset: Dataset, batch_size: int, skipped: list | None = None) -> Iterator[dict]:
+    """Yield stacked batches; consecutive images of different sizes split a batch; items
+    marked bad by :class:`SkipBad` are left out and listed in ``skipped``."""
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, collate_fn=list)
     for items in loader:
         group: list[dict] = []
         for it in items:
+            if "bad" in it:
+                if skipped is not None:
+                    skipped.append((it["bad"], it["error"]))
+                continue
             if group and it["image"].shape != group[0]["image"].shape:
                 yield _stack(group)
                 group = []
@@ -157,8 +197,13 @@ def evaluate(
     scoring = Scoring() if scoring is None else scoring
     results = [DetectorResult(spec, scoring) for spec in detectors]
     n_batches = -(-len(dataset) // batch_size) if len(dataset) else 0
+    skipped: list = []
     for batch in tqdm(
-        batches(dataset, batch_size), total=n_batches, desc=desc, disable=not progress, leave=False
+        batches(dataset, batch_size, skipped),
+        total=n_batches,
+        desc=desc,
+        disable=not progress,
+        leave=False,
     ):
         x = batch["image"]
         t0 = time.perf_counter()
@@ -177,4 +222,6 @@ def evaluate(
                 found[res.spec.name] = res.objects_of(det.statistic, det.threshold, batch)
         if on_batch is not None:
             on_batch(batch, found)
+    for res in results:
+        res.skipped = list(skipped)
     return results

@@ -33,7 +33,8 @@ def _group(meta: dict) -> str | None:
 
 def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]]:
     """Ground truth of a batch (one plane per image channel) and each plane's facts: the
-    bootstrap key (dataset + image name), image-level class, group and area in km^2."""
+    bootstrap key (the image name, so a store and its source agree), image-level class,
+    group and area in km^2."""
     b, c = _planes(batch)
     h, w = batch["instances"].shape[-2:]
     metas = [m for m in batch["meta"] for _ in range(c)]
@@ -50,7 +51,7 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
     info = []
     for k, m in enumerate(metas):
         sp = _spacing(m)
-        name = f"{dataset}/{m.get('name', k)}" + (f"#{k % c}" if c > 1 else "")
+        name = str(m.get("name", f"{dataset}/{k}")) + (f"#{k % c}" if c > 1 else "")
         km2 = None if sp is None else h * w * sp[0] * sp[1] / 1e6
         info.append(ImageInfo(name, m.get("class"), _group(m), km2))
     return gt, info

@@ -142,6 +142,12 @@ class StoreDataset(Dataset):
         out["meta"] = json.loads(parts[-1])
         return out
 
+    def manifest(self) -> dict:
+        """Files, bytes and the store header (the store is the data's identity)."""
+        files = sorted(p for p in self.root.iterdir() if p.is_file())
+        return {"files": len(files), "bytes": sum(p.stat().st_size for p in files),
+                "header": self.header}  # fmt: skip
+
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state["_index"] = None  # never ship the memory map to a worker

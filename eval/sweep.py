@@ -1,11 +1,12 @@
 """Choose a detector's best setting on a tuning set: a grid of parameters, scored by FoM.
 
 Window CFARs are swept over ``guard x train`` windows and design ``pfa`` values. One detector
-pass per window gives the statistic; the thresholds of the other ``pfa`` values are read
-from the detector itself on a small dummy image (the interior threshold; the border
-rescaling of the chosen setting is exact again in the final evaluation, which reruns the
-detector at the chosen ``pfa``). Scores are object-level counts from
-:func:`torchsar.metrics.object_counts`; the best setting maximises FoM, then mean IoU.
+pass per window gives the statistic; the thresholds of the other ``pfa`` values come from
+the detector's own threshold function (the interior threshold; the border rescaling of the
+chosen setting is exact again in the final evaluation, which reruns the detector at the
+chosen ``pfa``). Scores are the run's object scoring (the shared discrimination stage and
+one-to-one matching, :class:`eval.runner.Scoring`); the best setting maximises FoM, then
+mean IoU.
 """
 
 from __future__ import annotations
@@ -21,7 +22,10 @@ from torch import Tensor
 import torchsar as ts
 from eval.detectors import DetectorSpec
 from eval.errors import EvalError
-from torchsar.metrics import ObjectCounts, object_counts
+from eval.runner import Scoring
+from eval.scoring import batch_truth
+from torchsar.metrics import ObjectState, match_batch
+from torchsar.objects import discriminate
 
 __all__ = ["Choice", "best_setting", "window_grid"]
 
@@ -31,13 +35,15 @@ class Choice:
     """The chosen parameters of one detector and their tuning scores."""
 
     params: dict[str, Any]
-    counts: ObjectCounts
+    scores: dict[str, float]
     tried: int
 
     @property
     def key(self) -> tuple[float, float]:
         """Ranking key: FoM, then mean IoU (NaN counts as worst)."""
-        return tuple(-1.0 if math.isnan(v) else v for v in (self.counts.fom, self.counts.mean_iou))
+        return tuple(
+            -1.0 if math.isnan(v) else v for v in (self.scores["fom"], self.scores["mean_iou"])
+        )
 
 
 def window_grid(
@@ -49,11 +55,14 @@ def window_grid(
     ]
 
 
-def _counts(det_stat: Tensor, thr: float, batches: list[dict]) -> ObjectCounts:
-    total = ObjectCounts()
-    for stat, b in zip(det_stat, batches, strict=True):
-        total = total + object_counts(stat > thr, b["instances"], b["ignore"])
-    return total
+def _scores(stats: list[Tensor], thr: float, batches: list[dict], scoring: Scoring) -> dict:
+    """Object metrics of the statistics thresholded at ``thr`` under the run's scoring."""
+    state = ObjectState(replicates=0)
+    for stat, b in zip(stats, batches, strict=True):
+        obj = discriminate(stat, thr, rules=scoring.rules)
+        gt, info = batch_truth(b, "tuning")
+        state.update(match_batch(obj, gt, scoring.matching), obj, gt, info)
+    return state.metrics()
 
 
 def _threshold(spec: DetectorSpec, params: Mapping[str, Any]) -> float:
@@ -61,9 +70,15 @@ def _threshold(spec: DetectorSpec, params: Mapping[str, Any]) -> float:
     return ts.cfar.threshold(spec.fn, **params)
 
 
-def best_setting(spec: DetectorSpec, grid: list[dict[str, Any]], batches: list[dict]) -> Choice:
-    """The grid point with the best FoM on ``batches`` (dicts with ``image``,
-    ``instances``, ``ignore``), one detector pass per distinct window."""
+def best_setting(
+    spec: DetectorSpec,
+    grid: list[dict[str, Any]],
+    batches: list[dict],
+    scoring: Scoring | None = None,
+) -> Choice:
+    """The grid point with the best FoM on ``batches`` (stacked dataset batches), one
+    detector pass per distinct window."""
+    scoring = Scoring() if scoring is None else scoring
     best: Choice | None = None
     windows = {(p["guard"], p["train"]) for p in grid}
     for g, t in sorted(windows):
@@ -74,7 +89,8 @@ def best_setting(spec: DetectorSpec, grid: list[dict[str, Any]], batches: list[d
         stats = [spec.fn(b["image"], **fixed).statistic for b in batches]
         for p in sub:
             params = {**spec.params, **p}
-            c = Choice(params, _counts(stats, _threshold(spec, params), batches), len(grid))
+            scores = _scores(stats, _threshold(spec, params), batches, scoring)
+            c = Choice(params, scores, len(grid))
             if best is None or c.key > best.key:
                 best = c
     if best is None:

@@ -125,3 +125,15 @@ def test_empty_batch():
     x = torch.zeros(0, 1, 8, 8)
     s = ring_sums(x, 1, 1)
     assert s.s1.shape == (0, 1, 8, 8)
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_mean_in_place_equals_mean(masked):
+    x = _image(5, 12, 13, b=2)
+    valid = (
+        torch.rand(x.shape, generator=torch.Generator().manual_seed(1)) > 0.7 if masked else None
+    )
+    s = ring_sums(x, 1, 1, valid=valid)
+    want = s.mean()
+    assert masked == bool((s.count == 0).any())  # the masked case has empty rings
+    assert torch.equal(s.mean_(), want)

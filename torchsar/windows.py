@@ -152,6 +152,12 @@ class Sums:
         c = self.count.clamp_min(1)
         return torch.where(self.count > 0, self.s1 / c + self.shift, torch.zeros_like(self.s1))
 
+    def mean_(self) -> Tensor:
+        """:meth:`mean` computed in place in ``s1`` (which must not be needed afterwards)."""
+        m = self.s1.div_(self.count.clamp_min(1)).add_(self.shift)
+        empty = self.count <= 0
+        return m.masked_fill_(empty, 0.0) if bool(empty.any()) else m
+
     def var(self, *, unbiased: bool = False) -> Tensor:
         """Variance over the valid cells (population by default), float64, clamped >= 0."""
         if self.s2 is None:

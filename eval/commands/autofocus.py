@@ -28,10 +28,12 @@ from eval.autofocus_experiment import (
     Config,
     run_error_case,
 )
+from eval.errors import EvalError
 from eval.gotcha_experiment import run_gotcha
 from eval.output import default_out, result_dir, write_config
 from eval.plots import slug
 from eval.tables import markdown
+from torchsar.io.gotcha import GotchaPass, read_gotcha
 
 METRICS = [
     "corr",
@@ -75,9 +77,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--gotcha",
         type=Path,
-        default=DEFAULT_GOTCHA,
-        help="GOTCHA folder for the real-data injected-error experiment "
-        f"(default: {DEFAULT_GOTCHA}, skipped when absent)",
+        default=None,
+        help="GOTCHA folder for the real-data injected-error experiment (must hold the "
+        f"pass-1 HH files; default: {DEFAULT_GOTCHA}, skipped with a note when absent)",
     )
     p.add_argument("--gotcha-trials", type=int, default=3, help="injected errors per type")
     p.add_argument("--no-gotcha", action="store_true", help="skip the GOTCHA experiment")
@@ -89,7 +91,7 @@ def _names(text: str, allowed: dict, what: str) -> list[str]:
     names = [t.strip() for t in text.split(",") if t.strip()]
     bad = [n for n in names if n not in allowed]
     if bad:
-        raise SystemExit(f"torchsar-eval: error: unknown {what} {bad}; choose from {list(allowed)}")
+        raise EvalError(f"unknown {what} {bad}; choose from {list(allowed)}")
     return names
 
 
@@ -135,9 +137,28 @@ def plot_panel(name: str, data: dict, formed: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def gotcha_table(args: argparse.Namespace, tmp: Path) -> None:
+def gotcha_data(folder: Path | None, enabled: bool) -> tuple[GotchaPass | None, str]:
+    """Read the GOTCHA pass before any work: ``(data or None, note)``.
+
+    An explicit folder must exist and hold readable GOTCHA files (else :class:`EvalError`,
+    one line); the default folder is skipped with a note when absent.
+    """
+    if not enabled:
+        return None, "GOTCHA experiment skipped (--no-gotcha)"
+    path = DEFAULT_GOTCHA if folder is None else Path(folder)
+    if not path.is_dir():
+        if folder is None:
+            return None, f"GOTCHA experiment skipped: default folder {path} absent"
+        raise EvalError(f"--gotcha folder {path} does not exist or is not a folder")
+    try:
+        return read_gotcha(path), f"GOTCHA experiment on {path}"
+    except FileNotFoundError as exc:
+        raise EvalError(f"--gotcha: {exc}") from None
+
+
+def gotcha_table(data: GotchaPass, args: argparse.Namespace, tmp: Path) -> None:
     """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
-    rows, panel = run_gotcha(Path(args.gotcha), trials=args.gotcha_trials, seed=args.seed)
+    rows, panel = run_gotcha(data, trials=args.gotcha_trials, seed=args.seed)
     trials = pd.DataFrame(rows)
     trials.to_csv(tmp / "gotcha_trials.csv", index=False)
     cols = ["phase_rmse", "entropy", "reference_entropy", "reflector_peak_ratio", "seconds"]
@@ -157,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
     errors = _names(args.errors, ERROR_CASES, "error types")
     methods = _names(args.methods, METHODS, "methods")
     if args.scenes < 1 or args.size < 8:
-        raise SystemExit("torchsar-eval: error: need --scenes >= 1 and --size >= 8")
+        raise EvalError("need --scenes >= 1 and --size >= 8")
+    gotcha, gotcha_note = gotcha_data(args.gotcha, not args.no_gotcha)
     cfg = Config(
         scenes=args.scenes,
         size=args.size,
@@ -185,13 +207,14 @@ def run(args: argparse.Namespace) -> int:
             + "\n"
             + markdown(detection[["error", "method"] + [c + "_mean" for c in DETECTION]])
         )
-        if not args.no_gotcha and args.gotcha is not None and Path(args.gotcha).is_dir():
-            gotcha_table(args, tmp)
+        if gotcha is not None:
+            gotcha_table(gotcha, args, tmp)
         options = {**dataclasses.asdict(cfg), "errors": errors, "methods": methods}
         options.update(
-            gotcha=str(args.gotcha), gotcha_trials=args.gotcha_trials, no_gotcha=args.no_gotcha
+            gotcha=gotcha_note, gotcha_trials=args.gotcha_trials, no_gotcha=args.no_gotcha
         )
         write_config(tmp, "autofocus", options)
     print(markdown(table[shown]))
+    print(gotcha_note)
     print(f"results in {out}")
     return 0

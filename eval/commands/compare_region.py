@@ -35,8 +35,8 @@ TUNE_EVERY = 5
 """MSTAR: every 5th chip tunes the window CFARs; the summary reports on the others."""
 MSTAR = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "mstar_sarbake"
 SHOWN = [
-    "dataset", "detector", "images", "pd_object", "false_alarms_per_image", "fragmentation",
-    "mean_iou", "fom", "ms_per_image",
+    "dataset", "detector", "images", "pd_object", "false_alarms_per_image", "f1", "ap50",
+    "fragmentation", "mean_iou", "fom", "ms_per_image",
 ]  # fmt: skip
 
 
@@ -159,7 +159,7 @@ def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detect
             continue
         c = best_setting(DETECTORS[det], g, tb)
         specs.append(DetectorSpec(det, DETECTORS[det].fn, c.params))
-        chosen.append({"dataset": name, "detector": det, **c.params, "tuning_fom": c.counts.fom})
+        chosen.append({"dataset": name, "detector": det, **c.params, "tuning_fom": c.scores["fom"]})
     return specs, chosen
 
 

@@ -17,10 +17,12 @@ import matplotlib.pyplot as plt
 import pandas as pd
 from tqdm import tqdm
 
-from eval.calibration import CLUTTER, measure
+from eval.calibration import CLUTTER, measure, measure_dataset
+from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, resolve
 from eval.options import at_least, floats, names
 from eval.output import default_out, result_dir, write_config
+from eval.plots import detector_style, save, slug
 from eval.tables import markdown
 
 DEFAULT_DETECTORS = [n for n in DETECTORS if n != "region"]
@@ -41,6 +43,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pfa", default=",".join(map(str, DEFAULT_PFAS)), help="design Pfa list")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/pfa-*)")
+    p.add_argument(
+        "--dataset",
+        action="append",
+        metavar="NAME",
+        help="measure on this dataset's clutter pixels instead of simulated homogeneous "
+        "clutter (repeatable; e.g. folder:PATH, hrsid:DIR): real clutter vs the models",
+    )
+    p.add_argument("--n", type=int, default=None, help="images per --dataset (default: all)")
+    p.add_argument("--batch-size", type=int, default=8)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
@@ -53,8 +64,13 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.images, "--images", 1)
     out = args.out or default_out("pfa")
     tables = []
+    datasets = {d: make_dataset(d, n=args.n, seed=args.seed) for d in args.dataset or []}
+    at_least(args.batch_size, "--batch-size", 1)
     with result_dir(out) as tmp:
-        for i, case in enumerate(tqdm(CLUTTER, desc="clutter", disable=args.no_progress)):
+        for name, ds in tqdm(datasets.items(), desc="datasets", disable=args.no_progress):
+            tables.append(measure_dataset(specs, name, ds, pfas, args.batch_size))
+        cases = [] if datasets else CLUTTER
+        for i, case in enumerate(tqdm(cases, desc="clutter", disable=args.no_progress)):
             x = case.sample(args.images, args.size, args.seed + i)
             tables.append(measure(specs, case, x, pfas))
         table = pd.concat(tables, ignore_index=True)
@@ -66,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
             "pfa",
             {
                 "detectors": {s.name: dict(s.params) for s in specs},
-                "clutter": [c.__dict__ for c in CLUTTER],
+                "clutter": [c.__dict__ for c in CLUTTER] if not datasets else None,
+                "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
                 "design_pfa": pfas,
                 "size": args.size,
                 "images": args.images,
@@ -99,22 +116,21 @@ def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     for ax, case in zip(axes.flat, cases, strict=False):
         sub = table[table["clutter"] == case]
         for i, (name, df) in enumerate(sub.groupby("detector", sort=False)):
-            color = plt.cm.tab20(i % 20)
+            st = detector_style(i)
+            color = st["color"]
             seen = df[df["false_alarms"] > 0]
             y = seen["measured_pfa"]
             err = [y - seen["ci_low"], seen["ci_high"] - y]
-            ax.errorbar(
-                seen["design_pfa"], y, yerr=err, fmt="o-", ms=3, color=color, label=name, capsize=2
-            )
+            ax.errorbar(seen["design_pfa"], y, yerr=err, marker="o", ms=3, label=name, capsize=2,
+                        **st)  # fmt: skip
             none = df[df["false_alarms"] == 0]  # no false alarm: mark the 95 % upper bound
             ax.plot(none["design_pfa"], none["ci_high"], "v", ms=5, color=color, mfc="none")
         lim = [sub["design_pfa"].min() / 3, sub["design_pfa"].max() * 3]
         ax.plot(lim, lim, "k--", lw=0.8)
-        ax.set(xscale="log", yscale="log", title=case, xlabel="design Pfa", ylabel="measured Pfa")
+        ax.set(xscale="log", yscale="log", title=slug(case) if len(case) > 30 else case,
+               xlabel="design Pfa", ylabel="measured Pfa")  # fmt: skip
         ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)

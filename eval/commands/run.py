@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import time
 from pathlib import Path
 
@@ -12,13 +13,13 @@ import pandas as pd
 from eval.calibrate import choose_bin, parse_target, split_indices
 from eval.coco import CocoExport
 from eval.datasets import DATASETS, make_dataset
-from eval.detectors import DETECTORS
+from eval.detectors import DETECTORS, dry_run
 from eval.errors import EvalError
 from eval.glossary import glossary
 from eval.options import check_run_args
 from eval.output import default_out, result_dir, write_config
 from eval.plots import plot_roc, slug
-from eval.runner import Scoring
+from eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring, SkipBad
 from eval.shards import ShardJob, run_shards, shard_rows
 from eval.tables import (
     PER_IMAGE_COLUMNS,
@@ -37,8 +38,6 @@ from torchsar.objects import ObjectRules
 from torchsar.speckle import FILTERS
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
-DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
-DEFAULT_MATCH = Matching(kind="centroid")
 
 SUMMARY_SHOWN = [
     "dataset",
@@ -123,6 +122,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="images per shard, the unit of work and of resume (default 256)",
     )
     p.add_argument(
+        "--window-units",
+        choices=["px", "m"],
+        default="px",
+        help="units of the detectors' guard and train options: pixels, or metres converted "
+        "per dataset with its pixel spacing (recorded in config.json)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the interrupted run in --out: its saved shards are kept, the rest is "
+        "scored (the options must be the same)",
+    )
+    p.add_argument(
         "--engine",
         choices=["local", "ray"],
         default="local",
@@ -133,8 +145,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--skip-bad",
         action="store_true",
-        help="continue past a failing shard and name it in the summary (default: stop, "
-        "writing no tables)",
+        help="skip unreadable files and failing shards, counting and naming them in the "
+        "summary (default: stop at the first, naming it, and write no tables)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
@@ -222,11 +234,14 @@ def run(args: argparse.Namespace) -> int:
     }
     scoring = scoring_from(args)
     out = args.out or default_out("run")
-    with result_dir(out) as tmp:
-        results, stats = {}, {}
+    with result_dir(out, resume=args.resume, keep_interrupted=True) as tmp:
+        check_resumable(tmp / "resume.json", fingerprint(args, datasets, specs, scoring))
+        results, stats, windows = {}, {}, {}
         for name, ds in datasets.items():
+            ds_specs = specs if args.window_units == "px" else windows_in_pixels(name, ds, specs)
+            windows[name] = {s.name: dict(s.params) for s in ds_specs}
             results[name], stats[name] = evaluate_dataset(
-                name, ds, specs, args, scoring, preprocess, tmp
+                name, ds, ds_specs, args, scoring, preprocess, tmp
             )
         files = write_tables(tmp, results, scoring, stats)
         write_config(
@@ -234,7 +249,12 @@ def run(args: argparse.Namespace) -> int:
             "run",
             {
                 "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+                "manifests": {
+                    n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")
+                },
                 "detectors": {s.name: dict(s.params) for s in specs},
+                "window_units": args.window_units,
+                "detectors_in_pixels": windows,
                 "despeckle": None
                 if args.despeckle is None
                 else {"filter": args.despeckle, **despeckle_opts},
@@ -261,9 +281,53 @@ def run(args: argparse.Namespace) -> int:
             f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
         )
         for f in st["failed"]:
-            print(f"  FAILED shard {f['shard']}: {f['error']}")  # fmt: skip
+            print(f"  FAILED shard {f['shard']}: {f['error']}")
+        for b in st["skipped_items"]:
+            print(f"  skipped unreadable {b['file']}")
     print(f"\nwrote {out}/: " + " ".join([*files, "config.json"]))
     return 0
+
+
+def windows_in_pixels(name: str, ds, specs: list) -> list:
+    """Detectors with ``guard`` / ``train`` given in metres converted to pixels with the
+    dataset's pixel spacing (the mean of its row and column spacing, read from item 0)."""
+    spacing = ds[0]["meta"].get("pixel_spacing") if len(ds) else None
+    if spacing is None:
+        raise EvalError(f"--window-units m needs the pixel spacing of {name}: declare it with "
+                        f"?spacing=METRES")  # fmt: skip
+    step = (float(spacing[0]) + float(spacing[1])) / 2
+    out = []
+    for spec in specs:
+        conv = {k: round(float(spec.params[k]) / step) for k in ("guard", "train")
+                if k in spec.params}  # fmt: skip
+        if conv.get("train", 1) < 1:
+            raise EvalError(f"{spec.name}: train {spec.params['train']} m is less than one "
+                            f"pixel of {name} ({step:g} m)")  # fmt: skip
+        spec = spec.with_params(conv)
+        dry_run(spec.fn, spec.params, f"detector {spec.name} on {name}")
+        out.append(spec)
+    return out
+
+
+def fingerprint(args, datasets: dict, specs: list, scoring: Scoring) -> dict:
+    """Everything a saved shard depends on (a resumed run must match it exactly)."""
+    return json.loads(json.dumps({
+        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+        "detectors": {s.name: dict(s.params) for s in specs},
+        "despeckle": [args.despeckle, sorted(args.despeckle_param)],
+        "scoring": scoring.as_dict(), "shard_size": args.shard_size,
+        "calibration": [args.calibrate_on, args.calibration_fraction],
+    }, default=str))  # fmt: skip
+
+
+def check_resumable(path: Path, expected: dict) -> None:
+    """Record the run's fingerprint, or check it against the one of the run being resumed."""
+    if path.exists():
+        if json.loads(path.read_text()) != expected:
+            raise EvalError(f"--resume: the options differ from those of the interrupted run "
+                            f"(see {path.name} in its folder); rerun without --resume")  # fmt: skip
+        return
+    path.write_text(json.dumps(expected, indent=2) + "\n")
 
 
 def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
@@ -273,6 +337,8 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     t0 = time.perf_counter()
     state = tmp / "shards" / slug(name)
     indices = list(range(len(ds)))
+    if args.skip_bad:
+        ds = SkipBad(ds)
 
     def shards(idx: list[int], folder: Path, on_batch=None):
         job = ShardJob(name, ds, idx, specs, scoring, args.batch_size, preprocess,
@@ -297,7 +363,9 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b
     wall = time.perf_counter() - t0
+    bad = results[0].skipped if results else []
     stats = {"images": len(indices), "wall_s": wall, **counts,
+             "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
     return results, stats
 
@@ -335,6 +403,12 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
         f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
         f"resumed {st['skipped']}, failed {len(st['failed'])}"
         + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        + (
+            f"\n  - skipped {len(st['skipped_items'])} unreadable file(s)"
+            if st["skipped_items"]
+            else ""
+        )
+        + "".join(f"\n    - {b['file']}: {b['error']}" for b in st["skipped_items"])
         for name, st in stats.items()
     )
     (tmp / "summary.md").write_text(text)

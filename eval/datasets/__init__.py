@@ -22,6 +22,7 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
 - ``phoenix:DIR``: MSTAR raw Phoenix files (pixel spacing from the header).
 - ``sicd:FILE``: a SICD/NITF complex product cut into ``chip=N`` (512) chips, no ground
   truth (needs the optional ``sar`` extra: ``pip install 'torchsar[sar]'``).
+- ``store:DIR``: a store written by ``torchsar-eval make-dataset`` (see :mod:`eval.store`).
 
 Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-bit images
 ``display``, folder ``variant=linear`` ``amplitude``, float TIFF ``intensity``, complex TIFF

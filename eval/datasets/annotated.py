@@ -6,6 +6,7 @@ come from the annotations. COCO crowd regions and VOC ``difficult`` objects are 
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +30,10 @@ ANNOTATED_OPTIONS = ("images", "type", "spacing", "max_pixels")
 
 
 class AnnotatedDataset(FileDataset):
-    """Images plus per-image object lists: ``(image path, records)`` with records
-    ``(class, box, mask or None, ignore)``; built by :func:`coco_dataset` / :func:`voc_dataset`."""
+    """Images with their objects: entries ``(image path, (H, W), objects, name)``, objects
+    ``(class, box, painter, ignore)``; built by :func:`coco_dataset` / :func:`voc_dataset`.
+    Every image must exist and be annotated once (a second annotation would count it twice).
+    """
 
     def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, **kw):
         self.scheme = scheme
@@ -41,6 +44,9 @@ class AnnotatedDataset(FileDataset):
             raise EvalError(
                 f"{scheme} annotations refer to missing image {missing[0]} ({len(missing)} missing)"
             )
+        twice = [path for path, k in Counter(e[0] for e in entries).items() if k > 1]
+        if twice:
+            raise EvalError(f"{scheme} annotations describe image {twice[0]} more than once")
         self.shared_files = list(annotation_files)
 
     def item_files(self, i: int) -> list[Path]:

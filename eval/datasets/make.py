@@ -28,7 +28,17 @@ DATASETS = (
     "hrsid:DIR",
     "phoenix:DIR",
     "sicd:FILE",
+    "store:DIR",
 )
+
+
+def store_from_spec(spec: DatasetSpec, limit: int | None) -> Dataset:
+    """``store:DIR``: a store written by ``torchsar-eval make-dataset`` (no options)."""
+    from eval.store import StoreDataset  # the store writer builds on make_dataset
+
+    spec.check_keys(())
+    return StoreDataset(spec.path, limit=limit)
+
 
 _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "folder": folder_from_spec,
@@ -37,6 +47,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "hrsid": hrsid_from_spec,
     "phoenix": phoenix_from_spec,
     "sicd": sicd_from_spec,
+    "store": store_from_spec,
 }
 
 
@@ -47,6 +58,8 @@ def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
         EvalError: unknown scheme or option, missing folder, unpairable files; a file that
             cannot be read while building raises :class:`BadItemError` naming it.
     """
+    if n is not None and n < 0:
+        raise EvalError(f"--n must be >= 0, got {n}")
     if spec in DEFAULT_N:
         return SimDataset(spec, DEFAULT_N[spec] if n is None else n, seed)
     build = _SCHEMES.get(spec.partition(":")[0]) if ":" in spec else None

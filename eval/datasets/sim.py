@@ -10,6 +10,7 @@ from __future__ import annotations
 from torch.utils.data import Dataset
 
 import torchsar as ts
+from eval.errors import EvalError
 
 __all__ = ["DEFAULT_N", "SimDataset"]
 
@@ -20,6 +21,8 @@ class SimDataset(Dataset):
     """Simulated chips or scenes (seeded); every item carries the contract's meta keys."""
 
     def __init__(self, kind: str, n: int, seed: int, **options: object) -> None:
+        if n < 0:
+            raise EvalError(f"n must be >= 0, got {n}")
         self.make = ts.simulate.chips if kind == "sim-chips" else ts.simulate.scenes
         self.name, self.n, self.seed, self.kwargs = kind, n, seed, options
         self.options = {

@@ -17,7 +17,7 @@ from scipy import ndimage, signal
 from skimage.registration import phase_cross_correlation
 
 from torchsar.motion import czt, estimate_shift
-from torchsar.motion.peaks import _window_max
+from torchsar.motion.peaks import window_max
 
 
 def _registration_case():
@@ -61,7 +61,7 @@ def _window_max_case():
     a = x[0, 0].numpy()
     return (
         "peak window max 1024x1024 r=12 (circular) vs scipy.ndimage.maximum_filter",
-        lambda: _window_max(x, 12),
+        lambda: window_max(x, 12),
         lambda: ndimage.maximum_filter(a, size=25, mode="wrap"),
     )
 

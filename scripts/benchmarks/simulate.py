@@ -23,7 +23,7 @@ def cases() -> list[tuple[str, Callable, Callable]]:
         ),
         (
             "chips 200x128x128 k L=4",
-            lambda: chips(200, size=128, clutter="k", looks=4.0),
+            lambda: chips(200, size=128, model="k", looks=4.0),
             lambda: clutter((200, 1, 128, 128), model="k", looks=4.0),
         ),
         (

@@ -59,6 +59,10 @@ def test_defaults_come_from_the_detector():
         ("os", {"rank": 0}, "rank must be >= 1"),
         ("ca", {"pfa": 2.0}, "pfa must be a probability"),
         ("go", {"train": 0}, "train must be >= 1"),
+        ("vi", {"k_mr": 0}, "k_mr must be finite and > 0"),
+        ("ac", {"iterations": -1}, "iterations must be >= 0"),
+        ("ac", {"censor_pfa": 1.5}, "censor_pfa must be a probability"),
+        ("g0", {"looks": -1.0}, "looks must be finite and > 0"),
     ],
 )
 def test_bad_options(detector, options, match):

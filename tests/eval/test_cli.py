@@ -371,9 +371,11 @@ def test_interrupted_run_leaves_the_previous_one_intact(
     monkeypatch.setattr("eval.commands.run.run_shards", interrupt)
     handler = signal.getsignal(signal.SIGTERM)
     assert _tiny_run(tiny_folder, out, "--overwrite") == code
-    assert [x for x in capsys.readouterr().err.splitlines() if x.strip()] == [line]
+    hint = "; continue with the same command plus --resume"
+    assert [x for x in capsys.readouterr().err.splitlines() if x.strip()] == [line + hint]
     assert _snapshot(out) == before
-    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    hidden = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert all(".torchsar-partial-" in h for h in hidden)  # kept for --resume only
     assert signal.getsignal(signal.SIGTERM) is handler
 
 

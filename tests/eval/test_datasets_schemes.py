@@ -108,6 +108,14 @@ def test_voc_boxes_in_voc_layout(tmp_path):
     np.testing.assert_array_equal(item["ignore"][0].numpy(), ignore)
 
 
+def test_image_annotated_twice(tmp_path):
+    write_png(tmp_path / "s1.png", np.zeros((20, 30), np.uint8))
+    for name in ("a.xml", "b.xml"):
+        (tmp_path / name).write_text(voc_xml("s1.png", (20, 30), []))
+    with pytest.raises(EvalError, match=r"voc annotations describe image .*s1.png more than once"):
+        make_dataset(f"voc:{tmp_path}")
+
+
 def test_voc_missing_image_and_no_xml(tmp_path):
     (tmp_path / "x.xml").write_text(voc_xml("gone.jpg", (20, 30), []))
     with pytest.raises(EvalError, match=r"voc annotations refer to missing image .*gone.jpg"):
@@ -254,3 +262,16 @@ def test_sim_items_equal_batch_generation_in_any_order(kind, make, options):
     with pytest.raises(IndexError):
         ds[n]
     assert len(make_dataset(kind, n=5)) == 5
+    with pytest.raises(EvalError, match="n must be >= 0, got -1"):
+        make_dataset(kind, n=-1)
+
+
+def test_store_scheme_reads_a_written_store(tmp_path):
+    from eval.store import write_store
+
+    src = make_dataset("sim-chips", n=3, seed=2)
+    write_store((src[i] for i in range(3)), 3, tmp_path / "s", shard_size=2)
+    ds = make_dataset(f"store:{tmp_path / 's'}", n=2)
+    assert len(ds) == 2 and torch.equal(ds[1]["image"], src[1]["image"])
+    with pytest.raises(EvalError, match=r"unknown store option\(s\) \['x'\]"):
+        make_dataset(f"store:{tmp_path / 's'}?x=1")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -65,3 +66,40 @@ def test_run_with_calibration_and_coco_export(tmp_path):
         assert (out / name).stat().st_size > 0
     per_image = pd.read_csv(out / "per_image.csv")
     assert len(per_image) == 2 * len(test)
+
+
+def test_an_unreadable_file_stops_the_run_or_is_skipped_and_counted(tmp_path, capsys):
+    from skimage import io
+
+    root = tmp_path / "data"
+    root.mkdir()
+    for k in range(3):
+        img = np.full((32, 32), 20, np.uint8)
+        img[10:13, 10:13] = 255
+        lab = np.zeros((32, 32), np.uint8)
+        lab[10:13, 10:13] = 1
+        io.imsave(root / f"c{k}.png", img, check_contrast=False)
+        io.imsave(root / f"c{k}.mask.png", lab, check_contrast=False)
+    (root / "c1.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"garbage" * 10)
+    argv = ["run", "--dataset", f"folder:{root}", "--detectors", "ca", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 2
+    assert "c1.png" in capsys.readouterr().err and not (tmp_path / "a").exists()
+    assert main([*argv, "--out", str(tmp_path / "b"), "--skip-bad"]) == 0
+    s = pd.read_csv(tmp_path / "b" / "summary.csv")
+    assert s.images.iloc[0] == 2
+    assert "skipped 1 unreadable file(s)" in (tmp_path / "b" / "summary.md").read_text()
+    cfg = json.loads((tmp_path / "b" / "config.json").read_text())
+    assert cfg["options"]["manifests"][f"folder:{root}"]["files"] >= 4
+
+
+def test_windows_in_metres_are_converted_with_the_pixel_spacing(tmp_path):
+    out = tmp_path / "m"
+    argv = ["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca", "--window-units",
+            "m", "--param", "ca.guard=0.9", "--param", "ca.train=1.2", "--bootstrap", "0",
+            "--no-progress", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0  # simulated chips: 0.3 m pixels
+    cfg = json.loads((out / "config.json").read_text())["options"]
+    assert cfg["detectors_in_pixels"]["sim-chips"]["ca"]["guard"] == 3
+    assert cfg["detectors_in_pixels"]["sim-chips"]["ca"]["train"] == 4
+    bad = [a if a != "ca.train=1.2" else "ca.train=0.1" for a in argv]
+    assert main([*bad[:-1], str(tmp_path / "n")]) == 2

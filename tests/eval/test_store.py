@@ -56,3 +56,17 @@ def test_truncated_or_foreign_store_is_a_clear_error(tmp_path):
         StoreDataset(out)[1]
     with pytest.raises(EvalError, match="not a torchsar store"):
         StoreDataset(tmp_path)
+
+
+def test_run_on_a_store_equals_run_on_its_source(tmp_path):
+    store = tmp_path / "store"
+    make = ["make-dataset", "--kind", "sim-chips", "--n", "6", "--out", str(store), "--no-progress"]
+    assert main(make) == 0
+    common = ["--detectors", "ca", "--bootstrap", "10", "--no-progress"]
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(["run", "--dataset", "sim-chips", "--n", "6", "--out", str(a), *common]) == 0
+    assert main(["run", "--dataset", f"store:{store}", "--out", str(b), *common]) == 0
+    for name in ("summary.csv", "roc.csv", "pr.csv", "breakdown.csv"):
+        rows_a = [r.split(",", 1)[1] for r in (a / name).read_text().splitlines()]
+        rows_b = [r.split(",", 1)[1] for r in (b / name).read_text().splitlines()]
+        assert rows_a == rows_b, name  # all but the dataset label

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from eval.detectors import DETECTORS
+from eval.detectors import DETECTORS, DetectorSpec
+from eval.runner import evaluate
 from eval.sweep import best_setting, window_grid
-from torchsar.metrics import object_counts
 
 
 def _batch(seed: int) -> dict:
@@ -16,7 +16,9 @@ def _batch(seed: int) -> dict:
     for i, (r, c) in enumerate([(10, 12), (30, 25)]):
         x[i, 0, r : r + 6, c : c + 6] += 60.0
         inst[i, 0, r : r + 6, c : c + 6] = 1
-    return {"image": x, "instances": inst, "ignore": torch.zeros_like(inst, dtype=torch.bool)}
+    meta = [{"name": f"{seed}/{i}"} for i in range(2)]
+    zeros = torch.zeros_like(inst, dtype=torch.bool)
+    return {"image": x, "mask": inst > 0, "instances": inst, "ignore": zeros, "meta": meta}
 
 
 def test_window_grid_is_the_product():
@@ -29,13 +31,15 @@ def test_best_setting_scores_match_a_direct_run():
     grid = window_grid([1, 4], [2, 4], [1e-2, 1e-6])
     choice = best_setting(DETECTORS["ca"], grid, batches)
     assert {k: choice.params[k] for k in ("guard", "train", "pfa")} in grid
-    direct = sum(
-        (object_counts(DETECTORS["ca"].fn(b["image"], **choice.params).mask, b["instances"])
-         for b in batches),
-        start=type(choice.counts)(),
-    )  # fmt: skip
-    assert direct == choice.counts
-    assert choice.counts.fom > 0.5  # a 6x6 target 60x above the clutter is found
+    items = [{k: v[i] for k, v in b.items()} for b in batches for i in range(2)]
+    spec = DetectorSpec("ca", DETECTORS["ca"].fn, choice.params)
+    (direct,) = evaluate(items, [spec], batch_size=2, progress=False)
+    metrics = direct.objects.metrics()
+    assert (metrics["fom"], metrics["mean_iou"]) == (
+        choice.scores["fom"],
+        choice.scores["mean_iou"],
+    )
+    assert choice.scores["fom"] > 0.5  # a 6x6 target 60x above the clutter is found
 
 
 def test_windows_larger_than_the_images_are_skipped():

@@ -2,7 +2,9 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
+import pytest
 
 from eval.cli import main
 
@@ -67,11 +69,45 @@ def test_keep_restarts_only_for_2d(tmp_path):
     assert ("1d-uniform-pi", "sparse-keep-restarts") not in methods
 
 
+def _one_line_error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("torchsar-eval: error: ")
+    return err[0]
+
+
 def test_autofocus_command_rejects_unknown_method(tmp_path, capsys):
-    try:
-        main(["autofocus", "--out", str(tmp_path / "x"), "--methods", "magic"])
-    except SystemExit as exc:
-        assert "unknown methods" in str(exc)
-    else:  # pragma: no cover
-        raise AssertionError("expected SystemExit")
+    assert main(["autofocus", "--out", str(tmp_path / "x"), "--methods", "magic"]) == 2
+    assert "unknown methods" in _one_line_error(capsys)
     assert not (tmp_path / "x").exists()
+
+
+def _gotcha_folder(tmp_path, kind: str):
+    folder = tmp_path / kind
+    folder.mkdir()
+    name = folder / "data_3dsar_pass1_az001_HH.mat"
+    if kind == "garbage":
+        name.write_bytes(b"this is not a MATLAB file at all" * 10)
+    elif kind == "truncated":
+        from scipy.io import savemat
+
+        data = {"fp": np.ones((8, 4), complex), "freq": np.linspace(9e9, 9.1e9, 8)}
+        savemat(name, {"data": data})
+        name.write_bytes(name.read_bytes()[:100])
+    return folder
+
+
+@pytest.mark.parametrize(
+    "kind,message",
+    [
+        ("missing", "does not exist"),
+        ("empty", "no GOTCHA files"),
+        ("garbage", "cannot read GOTCHA file"),
+        ("truncated", "cannot read GOTCHA file"),
+    ],
+)
+def test_bad_gotcha_folder_exits_2_before_any_work(tmp_path, capsys, kind, message):
+    folder = tmp_path / "nowhere" if kind == "missing" else _gotcha_folder(tmp_path, kind)
+    out = tmp_path / "out"
+    assert main(["autofocus", "--gotcha", str(folder), "--out", str(out), "--no-progress"]) == 2
+    assert message in _one_line_error(capsys)
+    assert not out.exists()

@@ -24,7 +24,7 @@ class TestLpImage:
         gen = torch.Generator().manual_seed(0)
         mask = torch.rand(32, 32, generator=gen) > 0.4
         op = FourierOperator((32, 32), mask=mask)
-        img = lp_image(g[:2] * mask, op, max_iter=30, cg_iterations=10)
+        img = lp_image(g[:2] * mask, operator=op, max_iter=30, cg_iterations=10)
         conv = op.adjoint(g[:2] * mask)
         c_lp, c_conv = magnitude_correlation(img, f[:2]), magnitude_correlation(conv, f[:2])
         assert (c_lp > c_conv + 0.05).all()
@@ -34,7 +34,7 @@ class TestLpImage:
         _, _, g = sparse_data
         full = FourierOperator((32, 32), mask=torch.ones(32, 32, dtype=torch.bool))
         a = lp_image(g[:1], max_iter=5, tol=0.0)
-        b = lp_image(g[:1], full, max_iter=5, tol=0.0)
+        b = lp_image(g[:1], operator=full, max_iter=5, tol=0.0)
         torch.testing.assert_close(a, b, atol=1e-4, rtol=1e-3)
 
     def test_batch_invariance(self, sparse_data):
@@ -65,7 +65,7 @@ class TestLpImage:
         with pytest.raises(InputTypeError, match="complex"):
             lp_image(g.real)
         with pytest.raises(ShapeError, match=r"\(B, M, K\)"):
-            lp_image(g, FourierOperator((16, 16)))
+            lp_image(g, operator=FourierOperator((16, 16)))
         with pytest.raises(OptionError, match="LinearOperator"):
             lp_image(g, operator="fft")
 

@@ -61,8 +61,8 @@ class TestPhaseHistory:
         torch.testing.assert_close(phase_history(f, geo, rvp=True), phase_history(f, geo))
 
     def test_rvp_phase(self):
-        alpha = 1e17
-        geo = SpotlightGeometry.for_image((4, 4), chirp_rate=alpha)
+        alpha = 1e17  # rad/s^2, i.e. a sweep rate of alpha / pi Hz/s
+        geo = SpotlightGeometry.for_image((4, 4), chirp_rate=alpha / math.pi)
         pos = torch.tensor([[[3.0, 0.0]]], dtype=torch.float64)
         a = torch.ones(1, 1, dtype=torch.complex128)
         ratio = point_phase_history(a, pos, geo, rvp=True) / point_phase_history(a, pos, geo)

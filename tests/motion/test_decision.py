@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.motion import detect_movers, registration_sigma
 
 
@@ -66,6 +66,22 @@ class TestDetectMovers:
             detect_movers(torch.zeros(1, 4, 4, 2, dtype=torch.long))
         with pytest.raises(OptionError, match="n_sigma"):
             detect_movers(torch.zeros(1, 4, 4, 2), n_sigma=0)
+
+    @pytest.mark.parametrize("sigma", [0.0, -0.1, float("nan"), torch.tensor([0.1, 0.0])])
+    def test_sigma_must_be_positive(self, sigma):
+        with pytest.raises(InputValueError, match="sigma must be finite and > 0"):
+            detect_movers(torch.zeros(1, 4, 2, 2), sigma=sigma)
+
+    def test_sigma_must_broadcast(self):
+        with pytest.raises(ShapeError, match="sigma must broadcast"):
+            detect_movers(torch.zeros(1, 4, 2, 2), sigma=torch.ones(3))
+
+    @pytest.mark.parametrize("given", [None, 0.1])
+    def test_no_targets_is_an_empty_decision(self, given):
+        r = detect_movers(torch.zeros(3, 0, 4, 2), sigma=given)
+        assert r.mover.shape == (3, 0) and r.score.shape == (3, 0)
+        assert r.residual.shape == (3, 0, 4, 2) and r.pattern.shape == (3, 4, 2)
+        assert r.pattern.isnan().all()
 
 
 class TestRegistrationSigma:

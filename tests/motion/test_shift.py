@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.ndimage import fourier_shift
 from skimage.registration import phase_cross_correlation
 
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.motion import estimate_shift
 
 
@@ -86,3 +86,13 @@ class TestEstimateShift:
             estimate_shift(x, x, upsample=0)
         with pytest.raises(OptionError, match="normalization"):
             estimate_shift(x, x, normalization="cross")
+
+    @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+    def test_non_finite_input_is_refused(self, bad):
+        x = torch.rand(2, 8, 8, generator=torch.Generator().manual_seed(0))
+        y = x.clone()
+        y[1, 3, 4] = bad
+        with pytest.raises(InputValueError, match="mov must be finite"):
+            estimate_shift(x, y)
+        with pytest.raises(InputValueError, match="ref must be finite"):
+            estimate_shift(y.to(torch.complex64), x.to(torch.complex64))

@@ -9,9 +9,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_int, check_probability
-from torchsar.cfar.ca import ca_threshold
+from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
 from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
-from torchsar.cfar.ring_mean import ring_mean_ratio
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import Detection
 
@@ -85,7 +84,9 @@ def ac(
     iterations = check_int(iterations, "iterations", minimum=0)
     mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
     keep = x <= thr if vmask is None else vmask & (x <= thr)
-    alpha = ac_threshold(guard=guard, train=train, pfa=pfa)
+    alpha = ac_threshold(
+        guard=guard, train=train, pfa=pfa, censor_pfa=censor_pfa, iterations=iterations
+    )
     dtype = out_dtype(x)
     stat = ring_mean_ratio(x, ring, partial(ca_factor, pfa=pfa), keep, dtype)
     glob = ratio(x.to(torch.float64), mu) * (alpha / math.log(1.0 / pfa))
@@ -93,8 +94,14 @@ def ac(
     return conclude(stat, vmask, alpha)
 
 
-def ac_threshold(*, guard: int, train: int, pfa: float) -> float:
-    """The design threshold of :func:`ac` for these options: the interior CA factor."""
+def ac_threshold(
+    *, guard: int, train: int, pfa: float, censor_pfa: float | None, iterations: int
+) -> float:
+    """The design threshold of :func:`ac` for these options: the interior CA factor (the
+    censoring options are only validated)."""
+    if censor_pfa is not None:
+        check_probability(censor_pfa, "censor_pfa")
+    check_int(iterations, "iterations", minimum=0)
     return ca_threshold(guard=guard, train=train, pfa=pfa, looks=1.0)
 
 

@@ -2,18 +2,27 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
+import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive, check_probability
-from torchsar.cfar.core import conclude, out_dtype, prepare
-from torchsar.cfar.ring_mean import ring_mean_ratio
+from torchsar.cfar.core import (
+    conclude,
+    finish,
+    out_dtype,
+    prepare,
+    ratio,
+    rescale_border_,
+    rescale_frame_,
+)
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import Detection
-from torchsar.windows import Ring
+from torchsar.windows import Ring, Sums, windowed
 
-__all__ = ["ca", "ca_threshold"]
+__all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
 
 
 def ca(
@@ -61,6 +70,28 @@ def ca(
     factor = partial(ca_factor, pfa=pfa, looks=check_positive(looks, "looks"))
     stat = ring_mean_ratio(x, ring, factor, vmask, out_dtype(x))
     return conclude(stat, vmask, ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks))
+
+
+def ring_mean_ratio(
+    x: Tensor, ring: Ring, factor: Callable[[int], float], vmask: Tensor | None, dtype: torch.dtype
+) -> Tensor:
+    """``I / mean_ring`` over the counted ring cells, with the border rule of
+    :mod:`torchsar.cfar.core` for the factor ``factor(n)``, in ``dtype`` (CA's statistic;
+    AC uses it on its censored ring). Without a mask every ring holds cells and the counts
+    are geometric: the mean is formed in place and only the frame is rescaled."""
+    h = x.shape[-2]
+    row = torch.arange(h, device=x.device).view(h, 1)  # sliced with the strip: its rows
+
+    def statistic(xs: Tensor, sums: list[Sums], rows: Tensor) -> Tensor:
+        s = sums[0]
+        if vmask is None:
+            stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
+            r0 = int(rows[0, 0]) if rows.numel() else 0
+            return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
+        stat = ratio(xs, s.mean_())
+        return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)
+
+    return windowed(x, [ring.region], statistic, valid=vmask, moments=1, extras=(row,))
 
 
 def ca_threshold(*, guard: int, train: int, pfa: float, looks: float) -> float:

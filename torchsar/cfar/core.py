@@ -25,7 +25,16 @@ from torchsar.cfar.thresholds import factor_map
 from torchsar.detection import Detection, detection_from
 from torchsar.windows import Ring
 
-__all__ = ["border_scale", "conclude", "finish", "out_dtype", "prepare", "ratio", "ratio_"]
+__all__ = [
+    "conclude",
+    "finish",
+    "out_dtype",
+    "prepare",
+    "ratio",
+    "ratio_",
+    "rescale_border_",
+    "rescale_frame_",
+]
 
 
 def prepare(
@@ -52,19 +61,39 @@ def ratio_(num: Tensor, den: Tensor) -> Tensor:
     return torch.nan_to_num_(num.div_(den), nan=0.0, posinf=torch.inf, neginf=-torch.inf)
 
 
-def border_scale(count: Tensor, n: int, factor: Callable[[int], float]) -> Tensor | None:
-    """``factor(n) / factor(count)`` where ``count != n``; ``None`` when every count is ``n``.
-
-    Factors are evaluated only on the pixels whose count differs (the border frame and
-    no-data neighbourhoods), so the interior costs one comparison per pixel."""
-    if count.dim() >= 2 and count.shape[:-2].numel() > 1 and count.stride()[0] == 0:
+def rescale_border_(stat: Tensor, count: Tensor, n: int, factor: Callable[[int], float]) -> Tensor:
+    """Multiply ``stat`` in place by ``factor(n) / factor(count)`` where ``count != n`` (the
+    border frame and no-data neighbourhoods); factors are evaluated once per distinct
+    count. ``count`` broadcasts to ``stat``. Returns ``stat``."""
+    if count.dim() == stat.dim() and count.dim() > 2 and count.stride()[0] == 0:
         count = count[(0,) * (count.dim() - 2)]  # a broadcast (H, W) count: work on one copy
     other = count != n
     if count.numel() == 0 or not bool(other.any()):
-        return None
-    scale = torch.ones(count.shape, dtype=torch.float64, device=count.device)
-    scale[other] = factor(n) / factor_map(count[other], factor)
-    return scale
+        return stat
+    scale = torch.ones(count.shape, dtype=stat.dtype, device=stat.device)
+    scale[other] = (factor(n) / factor_map(count[other], factor)).to(stat.dtype)
+    return stat.mul_(scale)
+
+
+def rescale_frame_(
+    stat: Tensor, count: Tensor, r0: int, h: int, ring: Ring, factor: Callable[[int], float]
+) -> Tensor:
+    """:func:`rescale_border_` for a strip of rows ``r0 ..`` of an ``h``-row image without
+    no-data: the counts are geometric, so only the frame of pixels within ``guard + train``
+    of an edge (cut rings) is visited; ``count`` is the strip's ``(rows, W)`` ring count.
+    Returns ``stat``."""
+    rr, w = stat.shape[-2:]
+    o = ring.outer
+    left, right = min(o, w), max(w - o, o)
+    lo, hi = max(0, min(o, h) - r0), min(rr, max(h - o, o) - r0)  # strip rows not in the frame
+    pieces = [(slice(None), slice(0, left)), (slice(None), slice(right, w))]
+    pieces += [
+        (slice(0, max(lo, 0)), slice(left, right)),
+        (slice(max(hi, 0), rr), slice(left, right)),
+    ]
+    for rows, cols in pieces:
+        rescale_border_(stat[..., rows, cols], count[rows, cols], ring.n, factor)
+    return stat
 
 
 def finish(statistic: Tensor, count: Tensor, dtype: torch.dtype) -> Tensor:

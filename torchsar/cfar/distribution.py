@@ -29,7 +29,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_probability
+from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
 from torchsar.detection import Detection
@@ -72,11 +72,13 @@ def distribution_cfar(
     return conclude(stat, vmask, distribution_threshold(guard=guard, train=train, pfa=pfa))
 
 
-def distribution_threshold(*, guard: int, train: int, pfa: float) -> float:
+def distribution_threshold(*, guard: int, train: int, pfa: float, looks: float = 1.0) -> float:
     """The design threshold of every distribution CFAR: 1 (the fitted quantile is in the
-    statistic), whatever the valid options."""
+    statistic), whatever the valid options (``looks``, for the laws that have it, is only
+    validated)."""
     Ring(guard, train)
     check_probability(pfa, "pfa")
+    check_positive(looks, "looks")
     return 1.0
 
 

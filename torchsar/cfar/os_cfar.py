@@ -9,7 +9,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_probability
-from torchsar.cfar.core import border_scale, conclude, finish, out_dtype, prepare, ratio
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, rescale_border_
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.detection import Detection
 from torchsar.order_statistics import ring_order_statistic
@@ -69,9 +69,7 @@ def os(
     est = ring_order_statistic(x, ring, ranks, valid=vmask)
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
     stat = ratio(x.to(torch.float64), est.to(torch.float64))
-    scale = border_scale(counts, ring.n, factor)
-    if scale is not None:
-        stat = stat * scale
+    rescale_border_(stat, counts, ring.n, factor)
     stat = finish(stat, counts, out_dtype(x))
     return conclude(stat, vmask, factor(ring.n))
 

@@ -78,7 +78,7 @@ def vi(
     k_vi = check_positive(k_vi, "k_vi")
     k_mr = check_positive(k_mr, "k_mr")
     factor = partial(_rule_factor, pfa=pfa)
-    full = vi_threshold(guard=guard, train=train, pfa=pfa)
+    full = vi_threshold(guard=guard, train=train, pfa=pfa, k_vi=k_vi, k_mr=k_mr)
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
@@ -96,8 +96,11 @@ def vi(
     return conclude(stat, vmask, full)
 
 
-def vi_threshold(*, guard: int, train: int, pfa: float) -> float:
-    """The design threshold of :func:`vi` for these options: the interior CA factor."""
+def vi_threshold(*, guard: int, train: int, pfa: float, k_vi: float, k_mr: float) -> float:
+    """The design threshold of :func:`vi` for these options: the interior CA factor (the
+    decision thresholds ``k_vi``, ``k_mr`` are only validated)."""
+    check_positive(k_vi, "k_vi")
+    check_positive(k_mr, "k_mr")
     return ca_threshold(guard=guard, train=train, pfa=pfa, looks=1.0)
 
 

@@ -15,7 +15,7 @@ from torch import Tensor
 
 from torchsar._checks import check_choice, check_int
 from torchsar.imaging._solver import State, solve
-from torchsar.imaging.lp import _resolve, initial_state, lam_tensor, settings
+from torchsar.imaging.lp import initial_state, lam_tensor, resolve_operator, settings
 from torchsar.imaging.operators import LinearOperator
 
 __all__ = ["ERRORS", "AutofocusResult", "sparse_autofocus"]
@@ -114,7 +114,7 @@ def sparse_autofocus(
         True
     """
     error = check_choice(error, "error", ERRORS)
-    op, g = _resolve(g, operator)
+    op, g = resolve_operator(g, operator)
     cfg = settings(p, error, max_iter, tol, inner, cg_iterations)
     cfg = dataclasses.replace(
         cfg,

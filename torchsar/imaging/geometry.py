@@ -9,10 +9,11 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_positive
+from torchsar.imaging.items import check_device
 
 __all__ = ["SPEED_OF_LIGHT", "SpotlightGeometry"]
 
-SPEED_OF_LIGHT = 299_792_458.0
+SPEED_OF_LIGHT = 299_792_458.0  # m/s; the one definition (torchsar.motion imports it)
 
 
 @dataclass(frozen=True)
@@ -36,8 +37,10 @@ class SpotlightGeometry:
         aperture: total azimuth aperture in radians.
         pulses: number of pulses ``M``.
         samples: number of frequency samples ``K``.
-        chirp_rate: ``alpha`` in rad/s^2 of the transmitted chirp ``exp(1j (w0 t + alpha t^2))``;
-            used only for the residual video phase (RVP).
+        chirp_rate: sweep rate ``gamma`` of the transmitted chirp in Hz/s (instantaneous
+            frequency ``f0 + gamma t``, i.e. ``exp(1j (w0 t + pi gamma t^2))``; the same unit
+            as :class:`torchsar.motion.SpotlightParams`); used only for the residual video
+            phase (RVP).
 
     Example:
         >>> geo = SpotlightGeometry.for_image((32, 32), pixel=1.0)
@@ -97,13 +100,13 @@ class SpotlightGeometry:
 
     def wavenumbers(self, *, dtype: torch.dtype = torch.float64, device=None) -> Tensor:
         """``U_k = 4 pi f_k / c`` for the ``K`` samples, shape ``(K,)``."""
-        k = torch.arange(self.samples, dtype=dtype, device=device) - self.samples // 2
+        k = torch.arange(self.samples, dtype=dtype, device=check_device(device)) - self.samples // 2
         freq = self.center_frequency + k * (self.bandwidth / self.samples)
         return 4 * math.pi * freq / SPEED_OF_LIGHT
 
     def angles(self, *, dtype: torch.dtype = torch.float64, device=None) -> Tensor:
         """Pulse azimuths ``th_m`` in radians, shape ``(M,)``."""
-        m = torch.arange(self.pulses, dtype=dtype, device=device) - self.pulses // 2
+        m = torch.arange(self.pulses, dtype=dtype, device=check_device(device)) - self.pulses // 2
         return m * (self.aperture / self.pulses)
 
     def pixel_positions(

@@ -11,7 +11,7 @@ from torchsar._checks import OptionError, check_complex, check_int, check_positi
 from torchsar.imaging._solver import Settings, State, solve
 from torchsar.imaging.operators import FourierOperator, LinearOperator
 
-__all__ = ["default_lam", "lp_image"]
+__all__ = ["default_lam", "lp_image", "resolve_operator"]
 
 
 def default_lam(
@@ -104,8 +104,8 @@ def settings(
 
 def lp_image(
     g: Tensor,
-    operator: LinearOperator | None = None,
     *,
+    operator: LinearOperator | None = None,
     p: float = 1.0,
     lam: float | Tensor | None = None,
     eps: float | None = None,
@@ -148,15 +148,15 @@ def lp_image(
         >>> int(f.abs().flatten().argmax())  # the point at the image centre
         36
     """
-    op, g = _resolve(g, operator)
+    op, g = resolve_operator(g, operator)
     cfg = settings(p, None, max_iter, tol, 1, cg_iterations)
     state = initial_state(g, op, lam_tensor(lam, g, op, cfg.p), eps)
     state, _, _ = solve(g, state, op, cfg)
     return state.f
 
 
-def _resolve(g: Tensor, operator: LinearOperator | None) -> tuple[LinearOperator, Tensor]:
-    """Default operator and data validation."""
+def resolve_operator(g: Tensor, operator: LinearOperator | None) -> tuple[LinearOperator, Tensor]:
+    """The operator (default: unitary 2-D FFT of ``g``'s shape) and ``g`` validated for it."""
     if operator is None:
         g = check_complex(g, "g", ndim=3)
         operator = FourierOperator(tuple(g.shape[-2:]))

@@ -9,6 +9,7 @@ from torch import Tensor
 
 from torchsar._checks import check_complex, check_int
 from torchsar.imaging.fourier import ifft2c
+from torchsar.imaging.items import fill_items, nonzero_items
 
 __all__ = ["MinEntropyResult", "min_entropy_autofocus"]
 
@@ -45,6 +46,9 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     Returns:
         :class:`MinEntropyResult`.
 
+    An all-zero item has nothing to focus: it is left out and gets phase 0, a zero image
+    and entropy 0.
+
     Raises:
         InputTypeError, ShapeError: ``g`` is not a complex ``(B, M, K)`` tensor.
 
@@ -62,6 +66,12 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     g = check_complex(g, "g", ndim=3)
     check_int(max_iter, "max_iter", minimum=0)
     g = g.detach()
+    live = nonzero_items(g)
+    if not bool(live.all()):
+        part = min_entropy_autofocus(g[live], max_iter=max_iter)
+        return MinEntropyResult(
+            *(fill_items(live, x) for x in (part.image, part.phase, part.entropy))
+        )
     phi = torch.zeros(g.shape[:2], dtype=g.real.dtype, device=g.device, requires_grad=True)
     if g.shape[0] > 0 and max_iter > 0:
         opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")

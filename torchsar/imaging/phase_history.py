@@ -8,6 +8,8 @@ FFT operator that reconstructs them — optionally with the residual video phase
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -132,7 +134,8 @@ def point_phase_history(
         u = p[..., :1] * th.cos() + p[..., 1:] * th.sin()  # (B, n, M)
         phase = -u[..., None] * u_k
         if rvp:
-            phase = phase + (4 * geometry.chirp_rate / SPEED_OF_LIGHT**2) * u[..., None] ** 2
+            rvp_rate = 4 * math.pi * geometry.chirp_rate / SPEED_OF_LIGHT**2  # gamma in Hz/s
+            phase = phase + rvp_rate * u[..., None] ** 2
         terms = torch.polar(torch.ones_like(phase), phase)
         out += torch.einsum("bn,bnmk->bmk", amplitudes[:, n0 : n0 + step].to(out.dtype), terms)
     return out.to(complex_dtype(amplitudes.dtype))

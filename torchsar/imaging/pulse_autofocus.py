@@ -16,6 +16,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int, check_positive
+from torchsar.imaging.items import fill_items, nonzero_items
 
 __all__ = ["pulse_autofocus", "pulse_min_entropy"]
 
@@ -47,7 +48,8 @@ def pulse_autofocus(
         inner: image updates per phase step.
 
     Returns:
-        ``(image (B, 1, H, W), phase (B, M), iterations (B,))``.
+        ``(image (B, 1, H, W), phase (B, M), iterations (B,))``; an all-zero item has
+        nothing to focus and gets a zero image, phase 0 and 0 iterations.
 
     References:
         Önhon & Çetin 2012, doi:10.1109/TIP.2011.2174795; Ash, "An autofocus method for
@@ -63,6 +65,10 @@ def pulse_autofocus(
     b = check_complex(pulse_images, "pulse_images", ndim=4)
     check_int(max_iter, "max_iter", minimum=0)
     check_positive(p, "p")
+    live = nonzero_items(b)
+    if not bool(live.all()):
+        part = pulse_autofocus(b[live], p=p, kappa=kappa, max_iter=max_iter, tol=tol, inner=inner)
+        return tuple(fill_items(live, x) for x in part)  # type: ignore[return-value]
     phi = torch.zeros(b.shape[:2], dtype=b.real.dtype, device=b.device)
     f = _form(b, phi)
     rms = f.flatten(1).norm(dim=1) / math.sqrt(max(1, f[0, 0].numel()))
@@ -91,7 +97,8 @@ def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> tuple[Ten
     """Minimum-entropy 1-D autofocus of ``sum_m exp(-1j phi_m) b_m`` (L-BFGS, autograd).
 
     Returns:
-        ``(image (B, 1, H, W), phase (B, M))``.
+        ``(image (B, 1, H, W), phase (B, M))``; an all-zero item gets a zero image and
+        phase 0.
 
     Example:
         >>> b = torch.zeros(1, 3, 4, 4, dtype=torch.complex64); b[0, :, 1, 1] = 1
@@ -102,6 +109,10 @@ def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> tuple[Ten
     """
     b = check_complex(pulse_images, "pulse_images", ndim=4).detach()
     check_int(max_iter, "max_iter", minimum=0)
+    live = nonzero_items(b)
+    if not bool(live.all()):
+        img, phase = pulse_min_entropy(b[live], max_iter=max_iter)
+        return fill_items(live, img), fill_items(live, phase)
     phi = torch.zeros(b.shape[:2], dtype=b.real.dtype, device=b.device, requires_grad=True)
     if b.shape[0] > 0 and max_iter > 0:
         opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")

@@ -8,6 +8,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_positive
+from torchsar.imaging.items import check_device
 
 __all__ = ["point_scene", "speckled_scene"]
 
@@ -39,7 +40,7 @@ def point_scene(
         margin: keep scatterers this many pixels away from the border.
         generator: torch random generator.
         dtype: complex64 or complex128.
-        device: output device.
+        device: output device (an unavailable one raises :class:`OptionError`).
 
     Returns:
         ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool support ``(B, 1, H, W)``.
@@ -51,6 +52,7 @@ def point_scene(
         (torch.Size([2, 1, 16, 16]), 10)
     """
     check_int(batch, "batch", minimum=0)
+    device = check_device(device)
     h, w = size
     check_int(margin, "margin", minimum=0)
     inner = (h - 2 * margin) * (w - 2 * margin)
@@ -94,7 +96,7 @@ def speckled_scene(
         contrast: target-to-clutter mean intensity ratio.
         generator: torch random generator.
         dtype: complex64 or complex128.
-        device: output device.
+        device: output device (an unavailable one raises :class:`OptionError`).
 
     Returns:
         ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool target mask ``(B, 1, H, W)``.
@@ -105,6 +107,7 @@ def speckled_scene(
         (torch.Size([1, 1, 32, 32]), True)
     """
     check_int(batch, "batch", minimum=0)
+    device = check_device(device)
     check_positive(contrast, "contrast")
     dtype = _dtype(dtype)
     real = torch.float64 if dtype == torch.complex128 else torch.float32

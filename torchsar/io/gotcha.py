@@ -78,6 +78,18 @@ def gotcha_files(folder: str | Path, *, polarization: str = "HH", pass_: int = 1
 
 
 def _load_one(path: Path) -> dict[str, np.ndarray]:
+    """The fields of one file; :class:`InputValueError` naming the file if it is unreadable."""
+    if not path.is_file():
+        raise FileNotFoundError(f"GOTCHA file {path} does not exist")
+    try:
+        return _fields(path)
+    except Exception as exc:  # scipy raises many types on corrupt or foreign .mat files
+        raise InputValueError(
+            f"cannot read GOTCHA file {path}: {type(exc).__name__}: {exc}"
+        ) from exc
+
+
+def _fields(path: Path) -> dict[str, np.ndarray]:
     from scipy.io import loadmat
 
     d = loadmat(path, squeeze_me=True, struct_as_record=False)["data"]
@@ -104,16 +116,22 @@ def read_gotcha(paths: str | Path | Sequence[str | Path]) -> GotchaPass:
 
     Raises:
         FileNotFoundError: a path does not exist / a folder holds no GOTCHA file.
-        InputValueError: files with different frequency samplings.
+        InputValueError: an unreadable file (named), or files with different frequency
+            samplings.
 
     Example:
-        >>> import pathlib
-        >>> folder = pathlib.Path("../shared/data/gotcha")
-        >>> if folder.is_dir():
-        ...     print(read_gotcha(folder).phase_history.shape[1])
-        ... else:
-        ...     print(424)
-        424
+        A two-pulse, three-frequency file in the GOTCHA layout:
+
+        >>> import pathlib, tempfile
+        >>> from scipy.io import savemat
+        >>> af = {"r_correct": np.zeros(2), "ph_correct": np.zeros(2)}
+        >>> data = {"fp": np.ones((3, 2), complex), "freq": np.array([9e9, 9.1e9, 9.2e9]),
+        ...         "x": np.zeros(2), "y": np.zeros(2), "z": np.zeros(2), "r0": np.ones(2),
+        ...         "th": np.zeros(2), "phi": np.zeros(2), "af": af}
+        >>> folder = pathlib.Path(tempfile.mkdtemp())
+        >>> savemat(folder / "data_3dsar_pass1_az001_HH.mat", {"data": data})
+        >>> read_gotcha(folder).phase_history.shape
+        torch.Size([2, 3])
     """
     if isinstance(paths, str | Path):
         p = Path(paths)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError, check_positive
+from torchsar._checks import InputTypeError, InputValueError, ShapeError, check_positive
 
 __all__ = ["MoverDecision", "detect_movers", "registration_sigma"]
 
@@ -78,7 +78,8 @@ def detect_movers(
             relative to the reference image, in m (NaN = not measured). Padding targets are
             all-NaN.
         sigma: measurement standard deviation per residual (broadcastable to
-            ``displacements``, e.g. from :func:`registration_sigma`), or ``None`` to estimate
+            ``displacements``, e.g. from :func:`registration_sigma`; finite and > 0 where a
+            displacement is measured), or ``None`` to estimate
             it from the residuals (``1.4826 * MAD`` pooled over targets, subpatches and axes).
         n_sigma: decision threshold in standard deviations.
         min_sigma: floor on ``sigma`` (model error not covered by the noise, in m).
@@ -87,7 +88,8 @@ def detect_movers(
         :class:`MoverDecision`.
 
     Raises:
-        InputTypeError, ShapeError, OptionError: bad input.
+        InputTypeError, ShapeError, OptionError: bad input; InputValueError: a ``sigma``
+        that is not finite and positive. ``N = 0`` targets is valid (empty decision).
 
     Shape:
         ``(B, N, P, 2)`` -> ``(B, N)``.
@@ -105,12 +107,13 @@ def detect_movers(
     d = _check_displacements(displacements)
     n_sigma = check_positive(n_sigma, "n_sigma")
     min_sigma = check_positive(min_sigma, "min_sigma", allow_zero=True)
-    pattern = d.nanmedian(dim=1).values
-    residual = d - pattern[:, None]
-    if sigma is None:
-        sig = _pooled_mad(residual)[:, None, None, None].expand_as(residual)
+    given = None if sigma is None else _check_sigma(sigma, d)
+    if d.shape[1] == 0:  # no targets: an empty decision, the pattern undefined
+        pattern = torch.full((d.shape[0], *d.shape[2:]), torch.nan, dtype=d.dtype, device=d.device)
     else:
-        sig = torch.as_tensor(sigma, dtype=d.dtype, device=d.device).expand_as(residual)
+        pattern = d.nanmedian(dim=1).values
+    residual = d - pattern[:, None]
+    sig = _pooled_mad(residual)[:, None, None, None].expand_as(residual) if given is None else given
     sig = sig.clamp(min=max(min_sigma, torch.finfo(d.dtype).tiny))
     z = (residual / sig).abs().flatten(2)
     measured = (~torch.isnan(d[..., 0])).sum(-1) >= 2
@@ -118,7 +121,28 @@ def detect_movers(
     return MoverDecision(pattern, residual, sig, score, torch.nan_to_num(score, nan=0.0) > n_sigma)
 
 
+def _check_sigma(sigma: object, d: Tensor) -> Tensor:
+    """``sigma`` as a tensor broadcast to ``d``: finite and > 0 wherever ``d`` is measured."""
+    if isinstance(sigma, bool) or not isinstance(sigma, Tensor | int | float):
+        raise InputTypeError(f"sigma must be a number, a tensor or None, got {sigma!r:.60}")
+    sig = torch.as_tensor(sigma, dtype=d.dtype, device=d.device)
+    try:
+        sig = sig.expand_as(d)
+    except RuntimeError:
+        raise ShapeError(
+            f"sigma must broadcast to displacements {tuple(d.shape)}, got {tuple(sig.shape)}"
+        ) from None
+    bad = ~(torch.isfinite(sig) & (sig > 0)) & ~(torch.isnan(sig) & torch.isnan(d))
+    if bad.any():
+        raise InputValueError(
+            f"sigma must be finite and > 0 (a standard deviation), got {float(sig[bad][0])!r}"
+        )
+    return sig
+
+
 def _pooled_mad(residual: Tensor) -> Tensor:
     """``1.4826 * median |r|`` per scene over the non-reference residuals (``(B,)``)."""
     r = residual[:, :, 1:].flatten(1).abs()
+    if r.shape[1] == 0:
+        return torch.full((r.shape[0],), torch.nan, dtype=r.dtype, device=r.device)
     return 1.4826 * r.nanmedian(dim=1).values

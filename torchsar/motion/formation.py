@@ -26,17 +26,17 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import ShapeError, check_choice, check_complex, check_int
+from torchsar._checks import OptionError, ShapeError, check_choice, check_complex, check_int
 from torchsar.motion.czt import czt
 from torchsar.motion.geometry import look_tangents, pulse_times, slant_ranges, wavenumbers
 from torchsar.motion.params import SpotlightParams
 
-__all__ = ["polar_format", "rereference"]
+__all__ = ["polar_format", "rereference", "taper"]
 
 _WINDOWS = ("hann", "none")
 
 
-def _window(n: int, kind: str, like: Tensor) -> Tensor:
+def taper(n: int, kind: str, like: Tensor) -> Tensor:
     """Real taper of length ``n`` in ``like``'s real dtype ("hann" or all ones)."""
     if kind == "none":
         return torch.ones(n, dtype=like.real.dtype, device=like.device)
@@ -64,11 +64,30 @@ def rereference(g: Tensor, params: SpotlightParams, center: tuple[float, float])
         True
     """
     check_complex(g, "g", ndim=3)
-    t = pulse_times(params, device=g.device)
+    return _rereference(g, params, center, pulse_times(params, device=g.device))
+
+
+def _rereference(
+    g: Tensor, params: SpotlightParams, center: tuple[float, float], t: Tensor
+) -> Tensor:
+    """:func:`rereference` of pulses at slow times ``t (M,)``."""
     c = torch.tensor([center], dtype=torch.float64, device=g.device)
     dr = slant_ranges(c, params, t)[0] - slant_ranges(torch.zeros_like(c), params, t)[0]
     kappa = wavenumbers(params, device=g.device)
     return g * torch.polar(torch.ones_like(dr[:, None] * kappa), dr[:, None] * kappa).to(g.dtype)
+
+
+def _check_pulses(pulses: object, n_pulses: int) -> tuple[int, int]:
+    """``(start, stop)`` of a pulse range inside ``[0, n_pulses]`` with at least 2 pulses."""
+    if pulses is None:
+        return 0, n_pulses
+    if not (isinstance(pulses, tuple | list) and len(pulses) == 2):
+        raise OptionError(f"pulses must be (start, stop) or None, got {pulses!r}")
+    start = check_int(pulses[0], "pulses[0]", minimum=0)
+    stop = check_int(pulses[1], "pulses[1]", minimum=start + 2)
+    if stop > n_pulses:
+        raise OptionError(f"pulses[1] must be <= n_pulses = {n_pulses}, got {stop}")
+    return start, stop
 
 
 def _range_grid(kappa: Tensor, cos_t: Tensor) -> tuple[float, float, int]:
@@ -99,6 +118,7 @@ def polar_format(
     center: tuple[float, float] = (0.0, 0.0),
     size: tuple[int, int] | None = None,
     window: str = "hann",
+    pulses: tuple[int, int] | None = None,
 ) -> Tensor:
     """Form the complex image of deramped data, centred on (and referenced to) ``center``.
 
@@ -113,6 +133,9 @@ def polar_format(
         center: ``(range, azimuth)`` reference point in m.
         size: ``(H, W)`` pixels; default ``params.image_size``.
         window: taper applied in both k-space directions, ``"hann"`` or ``"none"``.
+        pulses: ``(start, stop)``: ``g`` holds only pulses ``start .. stop - 1`` of the
+            aperture (a time sub-aperture, see :func:`~torchsar.motion.looks.look_images`);
+            the taper then spans those pulses. Default: the whole aperture.
 
     Returns:
         complex ``(B, H, W)`` in ``g``'s dtype.
@@ -143,13 +166,14 @@ def polar_format(
     h, w = params.image_size if size is None else size
     check_int(h, "size[0]", minimum=1)
     check_int(w, "size[1]", minimum=1)
-    if g.shape[1:] != (params.n_pulses, params.n_samples):
+    start, stop = _check_pulses(pulses, params.n_pulses)
+    if g.shape[1:] != (stop - start, params.n_samples):
         raise ShapeError(
-            f"g must have shape (B, {params.n_pulses}, {params.n_samples}) for these params, "
-            f"got {tuple(g.shape)}"
+            f"g must have shape (B, {stop - start}, {params.n_samples}) for these params and "
+            f"pulses, got {tuple(g.shape)}"
         )
-    gc = rereference(g, params, center)
-    t = pulse_times(params, device=g.device)
+    t = pulse_times(params, device=g.device)[start:stop]
+    gc = _rereference(g, params, center, t)
     u = look_tangents(params, center, t)
     kappa = wavenumbers(params, device=g.device)
     ky0, dk, n_ky = _range_grid(kappa, 1 / torch.sqrt(1 + u * u))
@@ -157,8 +181,8 @@ def polar_format(
     q = (ky[None, :] * torch.sqrt(1 + u[:, None] ** 2) - float(kappa[0])) / dk
     rows = _sinc_resample(gc, q).transpose(1, 2)  # (B, K', M)
     dy, dx = params.image_extent[0] / h, params.image_extent[1] / w
-    img = _azimuth_transform(rows, ky, u, dx, w, _window(params.n_pulses, window, g))
-    return _range_transform(img, ky, dy, h, _window(n_ky, window, g))
+    img = _azimuth_transform(rows, ky, u, dx, w, taper(stop - start, window, g))
+    return _range_transform(img, ky, dy, h, taper(n_ky, window, g))
 
 
 def _phase(x: Tensor, dtype: torch.dtype) -> Tensor:

@@ -14,10 +14,11 @@ import warnings
 from dataclasses import dataclass
 
 from torchsar._checks import OptionError, check_int, check_positive
+from torchsar.imaging.geometry import SPEED_OF_LIGHT
 
-__all__ = ["SPEED_OF_LIGHT", "SpotlightConsistencyWarning", "SpotlightParams"]
+__all__ = ["HANN_BROADENING", "SPEED_OF_LIGHT", "SpotlightConsistencyWarning", "SpotlightParams"]
 
-SPEED_OF_LIGHT = 299_792_458.0
+HANN_BROADENING = 1.44  # 3 dB width of the Hann-weighted impulse response / unweighted
 
 
 class SpotlightConsistencyWarning(UserWarning):
@@ -40,7 +41,7 @@ class SpotlightParams:
         pulse_duration: chirp length ``Tp`` in s.
         prf: pulse repetition frequency in Hz.
         sampling_rate: complex (I/Q) fast-time sampling rate ``fs`` in Hz.
-        chirp_rate: ``gamma`` in Hz/s; bandwidth ``B = gamma * Tp``.
+        chirp_rate: sweep rate ``gamma`` in Hz/s; bandwidth ``B = gamma * Tp``.
         platform_speed: ``V`` in m/s.
         scene_range: slant range ``R0`` to the scene centre in m.
         scene_extent: ``(range, azimuth)`` size of the observed scene in m.

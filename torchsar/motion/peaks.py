@@ -12,7 +12,7 @@ from torch import Tensor
 from torchsar._checks import check_image, check_int
 from torchsar.cfar import Detection, ca
 
-__all__ = ["default_detector", "detect_peaks"]
+__all__ = ["default_detector", "detect_peaks", "intensity", "window_max"]
 
 
 def default_detector(
@@ -70,11 +70,22 @@ def detect_peaks(
         return mask
     b, c, h, w = intensity.shape
     flat = intensity.reshape(b * c, 1, h, w)
-    return mask & (flat == _window_max(flat, r)).reshape(b, c, h, w)
+    return mask & (flat == window_max(flat, r)).reshape(b, c, h, w)
 
 
-def _window_max(x: Tensor, r: int) -> Tensor:
-    """Maximum over the ``(2r+1)^2`` window with circular borders (separable, doubling)."""
+def intensity(x: Tensor) -> Tensor:
+    """``|x|^2`` of a complex tensor without the square root of ``abs``."""
+    return x.real.square() + x.imag.square()
+
+
+def window_max(x: Tensor, r: int) -> Tensor:
+    """Maximum over the ``(2r+1)^2`` window with circular borders (separable, doubling).
+
+    Example:
+        >>> x = torch.zeros(1, 1, 5, 7); x[0, 0, 2, 3] = 1.0
+        >>> window_max(x, 1)[0, 0, :, 3].tolist(), window_max(x, 1)[0, 0, 2].tolist()
+        ([0.0, 1.0, 1.0, 1.0, 0.0], [0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0])
+    """
     return _run_max(_run_max(x, r, -1), r, -2)
 
 

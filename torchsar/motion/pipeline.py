@@ -1,82 +1,116 @@
-"""The subpatch moving-target detector end to end: phase history -> movers."""
+"""Moving targets end to end: one detection, three tests (looks, focus, subpatches), one decision.
+
+Single-channel SAR sees along-track motion to first order: the mover's azimuth FM rate is
+off, so it is displaced between time sub-aperture looks (the look test) and focuses at a
+non-zero speed (the focus test): two independent observables of the same velocity.
+Radial (range) motion is, to first order, indistinguishable from a stationary target at a
+displaced position (azimuth offset ``R v_r / V``) and is not found by either test; the
+subpatch test (the seed's method) responds only to azimuth ambiguity (see
+:mod:`torchsar.motion.theory`) and is reported, not used in the decision.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor
 
+from torchsar._checks import check_complex, check_int, check_positive
 from torchsar.cfar import Detection
-from torchsar.motion.decision import MoverDecision, detect_movers, registration_sigma
+from torchsar.motion.defocus import FocusTest, focus_test
+from torchsar.motion.formation import polar_format
+from torchsar.motion.looks import LookPlan, look_images, look_plan
+from torchsar.motion.misregistration import LookTest, look_test
 from torchsar.motion.params import SpotlightParams
-from torchsar.motion.subpatch import subpatch_centers, subpatch_images
-from torchsar.motion.tracks import Tracks, measure_displacements
+from torchsar.motion.peaks import intensity
+from torchsar.motion.strips import background, strips
+from torchsar.motion.subpatch_test import subpatch_movers
+from torchsar.motion.targets import detect_targets
+from torchsar.motion.theory import wrap
 
-__all__ = ["MoverResult", "find_movers"]
-
-_HANN_BROADENING = 1.44  # 3 dB width of the Hann-weighted response / unweighted
-_SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
+__all__ = ["MoverReport", "find_movers"]
 
 
 @dataclass(frozen=True)
-class MoverResult:
-    """Output of :func:`find_movers`.
+class MoverReport:
+    """Output of :func:`find_movers`; per-target fields are ``(B, N)`` (padding: invalid).
 
     Attributes:
-        images: complex ``(B, P, H, W)`` subpatch images.
-        centers: ``(P, 2)`` subpatch centres in m.
-        tracks: the targets followed through the images (:class:`~torchsar.motion.tracks.Tracks`).
-        decision: the mover decision on the displacements used
-            (:class:`~torchsar.motion.decision.MoverDecision`).
+        image: complex ``(B, H, W)`` full-aperture image.
+        looks: complex ``(B, K, H, W)`` look images; ``plan`` their pulses and times.
+        plan: :class:`~torchsar.motion.looks.LookPlan`.
+        pixel: long ``(B, N, 2)`` target pixel in ``image`` (-1 for padding).
+        position: float64 ``(B, N, 2)`` ``(range, azimuth)`` image position in m.
+        valid: bool ``(B, N)``.
+        look: the look test (:class:`~torchsar.motion.misregistration.LookTest`).
+        focus: the focus test (:class:`~torchsar.motion.defocus.FocusTest`).
+        subpatch: bool ``(B, N)`` the subpatch decision of the associated subpatch track
+            (False when not associated or not run).
+        velocity: ``(B, N)`` along-track speed, inverse-variance mean of the two estimates.
+        sigma: ``(B, N)`` its standard deviation.
+        mover: bool ``(B, N)`` the combined decision: look test **and** focus test.
     """
 
-    images: Tensor
-    centers: Tensor
-    tracks: Tracks
-    decision: MoverDecision
+    image: Tensor
+    looks: Tensor
+    plan: LookPlan
+    pixel: Tensor
+    position: Tensor
+    valid: Tensor
+    look: LookTest
+    focus: FocusTest
+    subpatch: Tensor
+    velocity: Tensor
+    sigma: Tensor
+    mover: Tensor
 
 
 def find_movers(
     phase_history: Tensor,
     params: SpotlightParams,
     *,
-    grid: tuple[int, int] = (2, 2),
+    looks: int = 2,
+    overlap: float = 0.0,
     window: str = "hann",
+    max_speed: float = 16.0,
     detector: Callable[[Tensor], Detection] | None = None,
-    correct_distortion: bool = True,
     n_sigma: float = 5.0,
-    min_sigma: float = 0.01,
-    chip: int = 32,
-    gate: float = 15.0,
-) -> MoverResult:
-    """Subpatch images, target detection, association, displacements and the mover decision.
+    min_sigma: float = 0.02,
+    max_targets: int = 64,
+    subpatch: bool = True,
+) -> MoverReport:
+    """Detect point targets and decide which move, by two independent tests.
 
-    With ``correct_distortion`` (default) the displacements are corrected for the known
-    planar-wavefront distortion, so stationary targets agree to the measurement noise and
-    the tolerance is noise-derived: ``sigma = sqrt(2) * CRLB(snr)`` per target (difference
-    of two position estimates at the target's peak SNR, Hann-broadened resolution) added in
-    quadrature to a sampling term of 0.03 pixel, floored at ``min_sigma`` for model error.
-    Without it (the seed's plain displacements) the stationary pattern still varies with
-    position by the distortion, and ``sigma`` is the pooled robust spread (MAD) of the
-    residuals.
+    1. Full-aperture image; targets are CFAR peaks of its speed-bank intensity
+       (:func:`~torchsar.motion.targets.detect_targets`), so smeared movers are found too.
+    2. Focus test (:func:`~torchsar.motion.defocus.focus_test`): best-focusing speed.
+    3. Look test (:func:`~torchsar.motion.misregistration.look_test`): displacement between
+       ``looks`` time sub-apertures; looks are refocused for the focus speed when the focus
+       test flags the target, else for 0.
+    4. Combined decision: a mover when **both** tests exceed ``n_sigma`` (two independent
+       signatures must agree); velocity = inverse-variance mean of the two estimates.
+    5. With ``subpatch``, the subpatch test (:func:`~torchsar.motion.subpatch_test.subpatch_movers`)
+       is run and its decision attached to the nearest target (within 3 m); it is not part of
+       the decision (it flags azimuth ambiguity, not motion).
 
     Args:
         phase_history: complex ``(B, M, K)`` deramped on the scene centre.
-        params: the system.
-        grid: subpatch tiling.
+        params: the system (the image's azimuth extent must be the sampled extent
+            ``params.unambiguous_azimuth``, true whenever the scene is at least that wide).
+        looks: number of looks (>= 2).
+        overlap: fraction of a look shared with the next.
         window: image-formation taper.
-        detector: per-image target detector (default: CA-CFAR sized to the resolution).
-        correct_distortion: correct the planar-model distortion before deciding.
-        n_sigma: decision threshold in standard deviations.
-        min_sigma: floor of the standard deviation in m.
-        chip: chip size (pixels) for the sub-pixel cross-correlation.
-        gate: association gate in m.
+        max_speed: largest along-track speed searched (m/s).
+        detector: intensity -> :class:`~torchsar.cfar.Detection` (default CA-CFAR, pfa 1e-6).
+        n_sigma: threshold of each test in standard deviations.
+        min_sigma: floor (m/s) of each test's velocity standard deviation.
+        max_targets: at most this many targets per scene.
+        subpatch: also run the subpatch test.
 
     Returns:
-        :class:`MoverResult`.
+        :class:`MoverReport`.
 
     Raises:
         InputTypeError, ShapeError, InputValueError, OptionError: bad input.
@@ -87,29 +121,79 @@ def find_movers(
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.motion import SpotlightParams, simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=1.0, image_size=(256, 256))
-        >>> pos = torch.tensor([[[-20.0, -10.0], [15.0, 5.0], [0.0, -20.0], [10.0, 15.0]]])
-        >>> vel = torch.zeros_like(pos); vel[0, 3, 0] = 1.0  # 1 m/s in range
+        >>> p = SpotlightParams(image_size=(128, 512))
+        >>> pos = torch.tensor([[[-20.0, -10.0], [15.0, 5.0], [0.0, -20.0], [30.0, 15.0]]])
+        >>> vel = torch.zeros_like(pos); vel[0, 3, 1] = 2.0  # 2 m/s along track
         >>> g = simulate_phase_history(pos, p, velocities=vel, noise_std=0.3)
-        >>> r = find_movers(g, p)
-        >>> r.decision.mover.sum().item(), r.tracks.position.shape[1]
-        (1, 4)
+        >>> r = find_movers(g, p, subpatch=False)
+        >>> r.mover.tolist(), round(float(r.velocity[r.mover]), 1)
+        ([[False, False, False, True]], 2.0)
     """
-    images = subpatch_images(phase_history, params, grid, window=window)
-    centers = subpatch_centers(params, grid)
-    tracks = measure_displacements(
-        images, params, centers, detector=detector, chip=chip, gate=gate, window=window
+    check_complex(phase_history, "phase_history", ndim=3)
+    check_int(looks, "looks", minimum=2)
+    check_positive(n_sigma, "n_sigma")
+    plan = look_plan(params, looks=looks, overlap=overlap)
+    image = polar_format(phase_history, params, window=window)
+    look_imgs = look_images(phase_history, params, looks=looks, overlap=overlap, window=window)
+    pixel, valid = detect_targets(
+        image, params, max_speed=max_speed, detector=detector, max_targets=max_targets
     )
-    if correct_distortion:
-        scale = _HANN_BROADENING if window == "hann" else 1.0
-        res = (scale * params.range_resolution, scale * params.azimuth_resolution)
-        crlb = math.sqrt(2) * registration_sigma(tracks.snr, res)[:, :, None, :]
-        h, w = images.shape[-2:]
-        px = torch.tensor([params.image_extent[0] / h, params.image_extent[1] / w])
-        sigma = torch.sqrt(crlb**2 + (_SAMPLING_ERROR * px.to(crlb)) ** 2)
-        decision = detect_movers(
-            tracks.corrected, sigma=sigma, n_sigma=n_sigma, min_sigma=min_sigma
-        )
-    else:
-        decision = detect_movers(tracks.excess, n_sigma=n_sigma, min_sigma=min_sigma)
-    return MoverResult(images, centers, tracks, decision)
+    focus = _focus(image, params, pixel, valid, max_speed, n_sigma, min_sigma)
+    speed = torch.where(focus.mover, focus.velocity, torch.zeros_like(focus.velocity))
+    look = look_test(
+        look_imgs, plan, params, pixel=pixel, valid=valid, speed=speed,
+        background=background(intensity(look_imgs)), n_sigma=n_sigma, min_sigma=min_sigma,
+    )  # fmt: skip
+    position = _positions(pixel, valid, params, image.shape[-2:])
+    sub = _subpatch(phase_history, params, position, valid, window, n_sigma) if subpatch else None
+    velocity, sigma = _combine(look, focus)
+    return MoverReport(
+        image, look_imgs, plan, pixel, position, valid, look, focus,
+        torch.zeros_like(valid) if sub is None else sub,
+        velocity, sigma, look.mover & focus.mover,
+    )  # fmt: skip
+
+
+def _focus(image, params, pixel, valid, max_speed, n_sigma, min_sigma) -> FocusTest:
+    """Focus test on the full-aperture strips around each target."""
+    b, n = valid.shape
+    half = 1  # along-track motion stays in its range cell; the peak row +- 1
+    idx = torch.arange(b, device=pixel.device)[:, None].expand(b, n).reshape(-1)
+    rows = pixel[..., 0].clamp(min=0).reshape(-1)
+    x = strips(image[:, None], idx, rows, half)[:, 0].reshape(b, n, 2 * half + 1, image.shape[-1])
+    return focus_test(
+        x, params, column=pixel[..., 1].clamp(min=0), valid=valid,
+        background=background(intensity(image)), max_speed=max_speed,
+        n_sigma=n_sigma, min_sigma=min_sigma,
+    )  # fmt: skip
+
+
+def _positions(pixel: Tensor, valid: Tensor, params: SpotlightParams, shape) -> Tensor:
+    """Image position ``(range, azimuth)`` in m of each target pixel (NaN for padding)."""
+    ext = params.image_extent
+    spacing = torch.tensor([ext[0] / shape[0], ext[1] / shape[1]], dtype=torch.float64)
+    centre = torch.tensor([shape[0] // 2, shape[1] // 2], dtype=torch.float64)
+    pos = (pixel.cpu().double() - centre) * spacing
+    return torch.where(valid.cpu()[..., None], pos, torch.nan)
+
+
+def _combine(look: LookTest, focus: FocusTest) -> tuple[Tensor, Tensor]:
+    """Inverse-variance mean of the look and focus velocities and its sigma."""
+    wl, wf = look.sigma.pow(-2), focus.sigma.pow(-2).to(look.sigma)
+    velocity = (wl * look.velocity + wf * focus.velocity.to(look.velocity)) / (wl + wf)
+    return velocity, (wl + wf).rsqrt()
+
+
+def _subpatch(g, params, position, valid, window, n_sigma) -> Tensor:
+    """Subpatch decision of the subpatch track nearest each target (3 m gate)."""
+    result = subpatch_movers(g, params, window=window, n_sigma=n_sigma)
+    tracks = result.tracks
+    period = torch.tensor([params.unambiguous_range, params.unambiguous_azimuth])
+    track_pos = tracks.position[:, :, 0] + result.centers[0].double()  # (B, N', 2)
+    d = wrap(position[:, :, None] - track_pos[:, None], period.double()).norm(dim=-1)
+    d = torch.where(tracks.valid[:, None, :, 0], d, torch.inf).nan_to_num(nan=torch.inf)
+    if d.shape[-1] == 0:
+        return torch.zeros_like(valid)
+    dist, nearest = d.min(-1)
+    flagged = torch.gather(result.decision.mover, 1, nearest)
+    return (valid.cpu() & (dist <= 3.0) & flagged).to(valid.device)

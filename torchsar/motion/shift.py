@@ -7,7 +7,7 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, OptionError, ShapeError, check_int
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError, check_int
 
 __all__ = ["estimate_shift"]
 
@@ -25,6 +25,9 @@ def _check_pair(ref: object, mov: object) -> None:
         raise ShapeError(
             f"ref and mov must have the same shape, got {tuple(ref.shape)} and {tuple(mov.shape)}"  # type: ignore[union-attr]
         )
+    for name, x in (("ref", ref), ("mov", mov)):
+        if not bool(torch.isfinite(x).all()):  # type: ignore[arg-type]
+            raise InputValueError(f"{name} must be finite, got NaN or Inf values")
 
 
 def _upsampled_dft(data: Tensor, region: int, up: int, offsets: Tensor) -> Tensor:
@@ -76,7 +79,7 @@ def estimate_shift(
         (float64 for float64/complex128, else float32).
 
     Raises:
-        InputTypeError, ShapeError, OptionError: bad input.
+        InputTypeError, ShapeError, OptionError: bad input; InputValueError: NaN or Inf.
 
     Shape:
         ``(..., H, W), (..., H, W)`` -> ``(..., 2)``.

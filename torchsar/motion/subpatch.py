@@ -37,8 +37,8 @@ def subpatch_centers(
 def subpatch_images(
     phase_history: Tensor,
     params: SpotlightParams,
-    grid: tuple[int, int] = (2, 2),
     *,
+    grid: tuple[int, int] = (2, 2),
     size: tuple[int, int] | None = None,
     window: str = "hann",
 ) -> Tensor:

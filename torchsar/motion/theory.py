@@ -63,14 +63,20 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar.motion.formation import _window
+from torchsar.motion.formation import taper
 from torchsar.motion.geometry import pulse_times, slant_ranges
 from torchsar.motion.params import SpotlightParams
 
-__all__ = ["first_order_offsets", "folded_speed", "planar_image_positions", "scene_positions"]
+__all__ = [
+    "first_order_offsets",
+    "folded_speed",
+    "planar_image_positions",
+    "scene_positions",
+    "wrap",
+]
 
 
-def _wrap(v: Tensor, period: Tensor | float) -> Tensor:
+def wrap(v: Tensor, period: Tensor | float) -> Tensor:
     """Fold ``v`` into ``[-period / 2, period / 2)``."""
     return v - period * torch.floor(v / period + 0.5)
 
@@ -81,29 +87,29 @@ def _planar_fit(
     params: SpotlightParams,
     velocities: Tensor | None,
     window: str,
-    wrap: bool = True,
+    fold: bool = True,
 ) -> Tensor:
     """Planar-model image position ``(..., 2)`` of ``points`` relative to ``centers``.
 
-    With ``wrap`` the position is folded into the sampled window (replica ``k``).
+    With ``fold`` the position is folded into the sampled window (replica ``k``).
     """
     t = pulse_times(params, device=points.device)
     c = centers.to(torch.float64)
     u = (c[..., 1:2] - params.platform_speed * t) / (params.scene_range + c[..., 0:1])
     dr = slant_ranges(points, params, t, velocities) - slant_ranges(c, params, t)
     z = dr * torch.sqrt(1 + u * u)
-    w = _window(t.numel(), window, t)
+    w = taper(t.numel(), window, t)
     sw, su, suu = w.sum(), (w * u).sum(-1), (w * u * u).sum(-1)
     sz, suz = (w * z).sum(-1), (w * u * z).sum(-1)
     x = (sw * suz - su * sz) / (sw * suu - su * su)
     y = (sz - x * su) / sw
-    if not wrap:
+    if not fold:
         return torch.stack([y, x], dim=-1)
     r_c = params.scene_range + c[..., 0]
     period_x = params.wavelength * params.prf * r_c / (2 * params.platform_speed)
     k = torch.floor(x / period_x + 0.5)  # replica shown in the window
     y = y + k * period_x * c[..., 1] / r_c  # replicas sit along (u_c P, P) in (range, azimuth)
-    return torch.stack([_wrap(y, params.unambiguous_range), x - k * period_x], dim=-1)
+    return torch.stack([wrap(y, params.unambiguous_range), x - k * period_x], dim=-1)
 
 
 def planar_image_positions(
@@ -175,7 +181,7 @@ def scene_positions(
     c = centers.to(torch.float64)
     s = q + c
     for _ in range(iterations):
-        s = s + (q - _planar_fit(s, c, params, None, window, wrap=False))
+        s = s + (q - _planar_fit(s, c, params, None, window, fold=False))
     return s
 
 
@@ -222,5 +228,5 @@ def folded_speed(speed: float | Tensor, params: SpotlightParams) -> float | Tens
         -0.658
     """
     if isinstance(speed, Tensor):
-        return _wrap(speed.to(torch.float64), params.blind_speed)
+        return wrap(speed.to(torch.float64), params.blind_speed)
     return speed - params.blind_speed * math.floor(speed / params.blind_speed + 0.5)

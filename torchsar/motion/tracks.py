@@ -29,7 +29,7 @@ from torchsar.cfar import Detection
 from torchsar.motion.params import SpotlightParams
 from torchsar.motion.peaks import default_detector, detect_peaks
 from torchsar.motion.shift import estimate_shift
-from torchsar.motion.theory import _wrap, scene_positions
+from torchsar.motion.theory import scene_positions, wrap
 
 __all__ = ["Tracks", "associate", "measure_displacements"]
 
@@ -84,7 +84,7 @@ def associate(
     out = torch.full((reference.shape[0],), -1, dtype=torch.long)
     if reference.shape[0] == 0 or candidates.shape[0] == 0:
         return out
-    d = _wrap(candidates[None].double() - (reference[:, None] + offset).double(), period.double())
+    d = wrap(candidates[None].double() - (reference[:, None] + offset).double(), period.double())
     cost = d.norm(dim=-1)
     rows, cols = linear_sum_assignment(torch.where(cost <= gate, cost, 1e12).numpy())
     keep = cost[rows, cols] <= gate
@@ -234,9 +234,9 @@ def _measure(
     nan = torch.tensor(float("nan"), dtype=torch.float64)
     position = torch.where(valid[..., None], (pix.double() - shift - centre) * spacing, nan)
     offset = centers[0] - centers  # (P, 2) nominal displacement
-    excess = _wrap(position - position[:, :, :1] - offset, period)
+    excess = wrap(position - position[:, :, :1] - offset, period)
     scene = scene_positions(torch.nan_to_num(position), params, centers, window=window)
-    corrected = torch.where(valid[..., None], _wrap(scene - scene[:, :, :1], period), nan)
+    corrected = torch.where(valid[..., None], wrap(scene - scene[:, :, :1], period), nan)
     snr = _snr(intensity[:, 0].cpu(), pix[:, :, 0])
     return Tracks(pix, position, excess, corrected, snr, valid)
 

@@ -80,34 +80,51 @@ def histogram_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) 
     """The ``kk``-th smallest counted ring value at every pixel of ``planes`` ``(P, H, W)``.
 
     ``kk`` ``(P, H, W)`` holds 1-based ranks, at most the pixel's counted ring cells (``0``
-    gives ``0``); ``vm`` an optional bool mask of counted cells, same shape.
+    gives ``0``); ``vm`` an optional bool mask of counted cells, same shape. Tiles are
+    ranked and swept in groups whose histograms fit :data:`HIST_BUDGET`, so the memory
+    beyond the input and output is bounded.
     """
     p, h, w = planes.shape
     o = ring.outer
     side = max(2 * o + 1, 8)
-    tiling = _Tiling(side, -(-h // side), -(-w // side), o)
-    values = _tile_cells(planes, vm, tiling)
-    order = argsort_rows(values)
-    ranks = torch.empty_like(order)
-    m = tiling.cells
-    ranks.scatter_(1, order, torch.arange(m, device=planes.device).expand_as(order))
-    k = _to_tiles(kk.clamp_min(1), tiling)
-    found = _sweep_tiles(ranks, k, ring, tiling)
-    vals = torch.gather(values, 1, order.gather(1, found.clamp_(max=m - 1)))
-    out = _from_tiles(vals, tiling, p, h, w)
+    t = _Tiling(side, -(-h // side), -(-w // side), o)
+    tiles = _tile_view(planes, vm, t)
+    bins = _Bins.for_ranks(t.cells)
+    u = p * t.rows * t.cols
+    group = max(1, HIST_BUDGET // (t.side * bins.width))
+    hist = torch.empty((min(u, group), t.side, bins.width), dtype=bins.dtype, device=planes.device)
+    k = _to_tiles(kk.clamp_min(1), t).transpose(0, 1).contiguous()  # (x, U, y): contiguous steps
+    found = torch.empty_like(k)
+    vals = torch.empty((u, t.side * t.side), dtype=planes.dtype, device=planes.device)
+    for u0 in range(0, u, group):
+        u1 = min(u, u0 + group)
+        ui = torch.arange(u0, u1, device=planes.device)
+        rest = ui % (t.rows * t.cols)
+        cells = (
+            tiles[ui // (t.rows * t.cols), rest // t.cols, rest % t.cols]
+            .transpose(-1, -2)
+            .reshape(u1 - u0, -1)
+        )
+        order = argsort_rows(cells).to(planes.device)
+        ranks = torch.empty_like(order)
+        ranks.scatter_(1, order, torch.arange(t.cells, device=planes.device).expand_as(order))
+        images = (ranks, ranks // bins.fine + (bins.fine * bins.coarse + 1))
+        _sweep_group(hist[: u1 - u0], images, k[:, u0:u1], found[:, u0:u1], ring, t, bins)
+        at = found[:, u0:u1].transpose(0, 1).reshape(u1 - u0, -1).clamp_(max=t.cells - 1)
+        vals[u0:u1] = cells.gather(1, order.gather(1, at))
+    out = _from_tiles(vals, t, p, h, w)
     return torch.where(kk > 0, out, torch.zeros_like(out))
 
 
-def _tile_cells(planes: Tensor, vm: Tensor | None, t: _Tiling) -> Tensor:
-    """``(U, span^2)`` cell values of every tile with its halo, column-major inside a tile
-    (index ``col * span + row``); missing cells are ``+inf``."""
+def _tile_view(planes: Tensor, vm: Tensor | None, t: _Tiling) -> Tensor:
+    """``(P, rows, cols, span, span)`` view of every tile with its halo over the padded
+    image; missing cells are ``+inf``."""
     h, w = planes.shape[-2:]
     if vm is not None:
         planes = planes.masked_fill(~vm, torch.inf)
     extra_h, extra_w = t.rows * t.side - h, t.cols * t.side - w
     pad = torch.nn.functional.pad(planes, (t.o, t.o + extra_w, t.o, t.o + extra_h), value=torch.inf)
-    tiles = pad.unfold(1, t.span, t.side).unfold(2, t.span, t.side)  # (P, ty, tx, span, span)
-    return tiles.transpose(-1, -2).reshape(-1, t.cells)
+    return pad.unfold(1, t.span, t.side).unfold(2, t.span, t.side)
 
 
 def _to_tiles(kk: Tensor, t: _Tiling) -> Tensor:
@@ -122,23 +139,6 @@ def _from_tiles(vals: Tensor, t: _Tiling, p: int, h: int, w: int) -> Tensor:
     """Inverse of :func:`_to_tiles` for the ``(U, side * side)`` results (x-major)."""
     v = vals.view(p, t.rows, t.cols, t.side, t.side).permute(0, 1, 4, 2, 3)
     return v.reshape(p, t.rows * t.side, t.cols * t.side)[:, :h, :w]
-
-
-def _sweep_tiles(ranks: Tensor, k: Tensor, ring: Ring, t: _Tiling) -> Tensor:
-    """Rank of the answer per output pixel, ``(U, side * side)`` x-major, in groups of
-    tiles whose histograms fit :data:`HIST_BUDGET`."""
-    bins = _Bins.for_ranks(t.cells)
-    coarse = ranks // bins.fine + (bins.fine * bins.coarse + 1)
-    u = ranks.shape[0]
-    group = max(1, HIST_BUDGET // (t.side * bins.width))
-    hist = torch.empty((min(u, group), t.side, bins.width), dtype=bins.dtype, device=ranks.device)
-    kx = k.transpose(0, 1).contiguous()  # (x, U, y): every step reads a contiguous slice
-    found = torch.empty_like(kx)
-    for u0 in range(0, u, group):
-        u1 = min(u, u0 + group)
-        images = (ranks[u0:u1], coarse[u0:u1])
-        _sweep_group(hist[: u1 - u0], images, kx[:, u0:u1], found[:, u0:u1], ring, t, bins)
-    return found.transpose(0, 1).reshape(u, -1)
 
 
 def _sweep_group(

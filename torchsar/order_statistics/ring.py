@@ -13,7 +13,9 @@ the batch, and both return the same values bit for bit):
   (:mod:`torchsar.order_statistics.histogram`), whose work per pixel grows linearly with
   the ring side ``2(g+t)+1``, not with its area.
 
-Neither changes the process's thread settings.
+Neither changes the process's thread settings: the intra-op thread count is the caller's
+choice. Both run many short vectorised steps, so on a CPU shared with other busy processes
+``torch.set_num_threads(1)`` around the call can be much faster.
 """
 
 from __future__ import annotations

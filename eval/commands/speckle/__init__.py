@@ -107,6 +107,8 @@ def parse_options(args: argparse.Namespace) -> SpeckleOptions:
         raise EvalError(f"--looks must be finite and > 0, got {args.looks}")
     if args.tile < 4:
         raise EvalError(f"--tile must be >= 4, got {args.tile}")
+    if args.n is not None and args.n < 0:
+        raise EvalError(f"--n must be >= 0, got {args.n}")
     return SpeckleOptions(
         datasets=args.dataset or DEFAULT_DATASETS,
         filters=filters,

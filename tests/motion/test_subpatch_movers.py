@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from torchsar.motion import find_movers, simulate_phase_history
+from torchsar.motion import simulate_phase_history, subpatch_movers
 
 STILL = [[-25.0, -20.0], [20.0, -8.0], [-5.0, 6.0]]
 
@@ -15,7 +15,7 @@ def _scene(params, last, velocity=(0.0, 0.0), seed=0, noise=0.05):
     vel[0, 3] = torch.tensor(velocity, dtype=torch.float64)
     gen = torch.Generator().manual_seed(seed)
     g = simulate_phase_history(pos, params, velocities=vel, noise_std=noise, generator=gen)
-    return find_movers(g.to(torch.complex64), params)
+    return subpatch_movers(g.to(torch.complex64), params)
 
 
 def _track_of(result, params, expected):

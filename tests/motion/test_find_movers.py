@@ -1,0 +1,145 @@
+"""Moving targets end to end: focus test, look test, combined decision, controls, batches."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from tests.motion.conftest import make_params
+from torchsar._checks import OptionError
+from torchsar.motion import (
+    find_movers,
+    focus_step,
+    polar_format,
+    refocus,
+    simulate_phase_history,
+    speed_bank,
+)
+
+STILL = [[-25.0, -20.0], [20.0, -8.0], [-5.0, 6.0]]
+
+
+@pytest.fixture(scope="module")
+def table1():
+    return make_params(image_size=(128, 512))
+
+
+def _noise(params, snr_db: float) -> float:
+    """Noise std giving image peak SNR ``snr_db`` for a unit point (Hann in both axes)."""
+    m, k = params.n_pulses, params.n_samples
+    return (0.25 * m * k) / math.sqrt(0.140625 * m * k) * 10 ** (-snr_db / 20)
+
+
+def _scenes(params, velocities, snr_db=30.0, seed=0, mover=(10.0, 20.0)):
+    """Three stationary targets and a mover per scene, ``velocities (B, 2)``."""
+    b = len(velocities)
+    pos = torch.tensor([[*STILL, mover]], dtype=torch.float64).expand(b, -1, -1).contiguous()
+    vel = torch.zeros_like(pos)
+    vel[:, 3] = torch.tensor(velocities, dtype=torch.float64)
+    gen = torch.Generator().manual_seed(seed)
+    g = simulate_phase_history(pos, params, velocities=vel, noise_std=_noise(params, snr_db),
+                               generator=gen)  # fmt: skip
+    return g.to(torch.complex64)
+
+
+def _index(report, b, where):
+    """Target nearest the image position ``where`` (m)."""
+    d = (report.position[b] - torch.tensor(where, dtype=torch.float64)).norm(dim=-1)
+    return int(d.nan_to_num(nan=math.inf).argmin())
+
+
+@pytest.fixture(scope="module")
+def along(table1):
+    speeds = [1.0, 3.0, 10.0]
+    return speeds, find_movers(_scenes(table1, [(0.0, v) for v in speeds]), table1, subpatch=False)
+
+
+class TestRefocus:
+    def test_zero_speed_is_identity_and_bank_is_symmetric(self, table1):
+        img = torch.randn(
+            2, 8, 512, dtype=torch.complex64, generator=torch.Generator().manual_seed(0)
+        )
+        out = refocus(img, table1, torch.tensor([0.0]))[:, 0]
+        assert torch.allclose(out, img, atol=1e-5)
+        bank = speed_bank(16.0, focus_step(table1))
+        assert torch.equal(bank, -bank.flip(0)) and bank.abs().max() >= 16.0
+
+    def test_refocus_restores_a_mover_peak(self, table1):
+        g = simulate_phase_history(torch.zeros(1, 1, 2), table1,
+                                   velocities=torch.tensor([[[0.0, 6.0]]]))  # fmt: skip
+        img = polar_format(g, table1)
+        peaks = refocus(img, table1, torch.tensor([0.0, 6.0])).abs().flatten(-2).amax(-1)[0]
+        assert peaks[0] < 0.3 and peaks[1] > 0.95
+
+
+class TestAlongTrackMovers:
+    def test_detected_by_both_tests_with_velocity_within_10_percent(self, along):
+        speeds, r = along
+        for b, v in enumerate(speeds):
+            i = _index(r, b, [10.0, 20.0 * (1 - v / 200.0)])
+            assert r.mover[b, i] and r.look.mover[b, i] and r.focus.mover[b, i]
+            for est in (r.look.velocity, r.focus.velocity, r.velocity):
+                assert abs(float(est[b, i]) - v) < 0.1 * v, (v, float(est[b, i]))
+            dt = float(r.plan.time[-1] - r.plan.time[0])
+            shift = float(r.look.displacement[b, i, -1, 1])
+            assert abs(shift - (2 * v - v * v / 200.0) * dt) < 0.1 * 2 * v * dt
+
+    def test_no_false_movers_and_stationary_targets_found(self, along):
+        _, r = along
+        for b in range(3):
+            still = [_index(r, b, p) for p in STILL]
+            assert (r.position[b, still] - torch.tensor(STILL)).norm(dim=-1).max() < 1.0
+            assert int(r.mover[b].sum()) == 1 and not r.mover[b, still].any()
+
+    def test_uncertainty_is_honest(self, along):
+        """Stationary velocity estimates scatter within a few of their own sigmas."""
+        _, r = along
+        still = torch.stack([torch.tensor([_index(r, b, p) for p in STILL]) for b in range(3)])
+        b = torch.arange(3)[:, None]
+        for test in (r.look, r.focus):
+            z = (test.velocity[b, still] / test.sigma[b, still]).abs()
+            assert z.max() < 5.0
+
+
+class TestControlsAndEdgeCases:
+    def test_no_false_mover_on_20_control_scenes_with_clutter(self, small):
+        """Stationary targets plus 150 weak clutter scatterers and noise, 20 seeds."""
+        gen = torch.Generator().manual_seed(7)
+        ext = torch.tensor(small.image_extent, dtype=torch.float64)
+        clutter = (torch.rand(20, 150, 2, generator=gen, dtype=torch.float64) - 0.5) * ext
+        pos = torch.cat([torch.tensor([STILL], dtype=torch.float64).expand(20, -1, -1), clutter], 1)
+        amp = torch.ones(20, pos.shape[1], dtype=torch.complex128)
+        amp[:, 3:] = 0.05 * torch.randn(20, 150, generator=gen, dtype=torch.complex128)
+        g = simulate_phase_history(pos, small, amplitudes=amp, noise_std=_noise(small, 30.0),
+                                   generator=gen)  # fmt: skip
+        r = find_movers(g.to(torch.complex64), small, subpatch=False)
+        assert int(r.valid.sum(1).min()) >= 3  # the targets, and clutter peaks, are tested
+        assert not r.mover.any()
+        assert not (r.look.mover & r.focus.mover).any()
+
+    def test_batch_invariance(self, small):
+        g = _scenes(small, [(0.0, 2.0), (0.0, 0.0)], seed=3)
+        whole = find_movers(g, small, subpatch=False)
+        for b in range(2):
+            one = find_movers(g[b : b + 1], small, subpatch=False)
+            n = int(one.valid.sum())
+            assert torch.equal(whole.pixel[b, :n], one.pixel[0, :n])
+            assert torch.equal(whole.mover[b, :n], one.mover[0, :n])
+            assert torch.allclose(whole.velocity[b, :n], one.velocity[0, :n], atol=1e-6,
+                                  equal_nan=True)  # fmt: skip
+
+    def test_empty_scenes_and_empty_batch(self, small):
+        g = torch.zeros(2, small.n_pulses, small.n_samples, dtype=torch.complex64)
+        r = find_movers(g, small, subpatch=False)
+        assert r.mover.shape == (2, 0) and r.velocity.shape == (2, 0)
+        r0 = find_movers(g[:0], small)
+        assert r0.mover.shape[0] == 0
+
+    def test_bad_options(self, small):
+        g = torch.zeros(1, small.n_pulses, small.n_samples, dtype=torch.complex64)
+        with pytest.raises(OptionError):
+            find_movers(g, small, looks=1)
+        with pytest.raises(OptionError):
+            find_movers(g, small, n_sigma=0.0)
