@@ -68,14 +68,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return args
 
 
-def _raise_terminated(signum: int, frame) -> None:
-    """Raise :class:`Terminated`, except inside a finaliser (a weakref callback or
-    ``__del__``), where Python would print and swallow it: there, deliver the signal again a
-    moment later, outside the finaliser."""
-    code = getattr(frame, "f_code", None)
-    if code is not None and (code.co_name == "__del__" or code.co_filename.endswith("weakref.py")):
-        threading.Timer(0.01, os.kill, (os.getpid(), signum)).start()
-        return
+def _raise_terminated(signum: int, frame: object) -> None:
     raise Terminated
 
 
