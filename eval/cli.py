@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
@@ -68,28 +68,45 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return args
 
 
-def _raise_terminated(signum: int, frame) -> None:
-    """Raise :class:`Terminated`, except inside a finaliser (a weakref callback or
-    ``__del__``), where Python would print and swallow it: there, deliver the signal again a
-    moment later, outside the finaliser."""
-    code = getattr(frame, "f_code", None)
-    if code is not None and (code.co_name == "__del__" or code.co_filename.endswith("weakref.py")):
-        threading.Timer(0.01, os.kill, (os.getpid(), signum)).start()
-        return
+def _raise_terminated(signum: int, frame: object) -> None:
     raise Terminated
 
 
+_AGAIN = {Terminated: signal.SIGTERM, KeyboardInterrupt: signal.SIGINT}
+
+
+def _again_if_swallowed(previous: Callable) -> Callable:
+    """An unraisable hook: a :class:`Terminated` or Ctrl-C raised while Python ran a
+    finalizer is swallowed there ("Exception ignored in ..."), so send the signal again a
+    moment later (from a timer thread, once the finalizer is left) to interrupt the run at
+    its next step; anything else goes to ``previous``."""
+
+    def hook(unraisable) -> None:
+        for kind, signum in _AGAIN.items():
+            if isinstance(unraisable.exc_value, kind):
+                again = threading.Timer(0.01, os.kill, (os.getpid(), signum))
+                again.daemon = True
+                again.start()
+                return
+        previous(unraisable)
+
+    return hook
+
+
 @contextmanager
-def _sigterm_raises() -> Iterator[None]:
-    """Turn SIGTERM into :class:`Terminated` (so temporary folders are cleaned up)."""
+def _signals_raise() -> Iterator[None]:
+    """Turn SIGTERM into :class:`Terminated` (so temporary folders are cleaned up), and
+    never let it or Ctrl-C be lost in a finalizer."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    previous, hook = signal.signal(signal.SIGTERM, _raise_terminated), sys.unraisablehook
+    sys.unraisablehook = _again_if_swallowed(hook)
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = hook
 
 
 def _user_error(message: object) -> int:
@@ -114,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 for user errors, with a one-line message)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        with _sigterm_raises():
+        with _signals_raise():
             return _dispatch(_parse(argv))
     except Exception as exc:
         from torchsar._checks import TorchSARError

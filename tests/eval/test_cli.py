@@ -342,9 +342,24 @@ def _sigterm(*args, **kwargs):
     time.sleep(5)  # the handler interrupts this
 
 
+class _SigtermWhenCollected:
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(10_000))  # the handler raises in here, where Python swallows exceptions
+
+
+def _sigterm_in_finalizer(*args, **kwargs):
+    _SigtermWhenCollected()  # collected at once
+    time.sleep(5)  # the signal sent again interrupts this
+
+
 @pytest.mark.parametrize(
     ("interrupt", "code", "line"),
-    [(_ctrl_c, 130, "torchsar-eval: interrupted"), (_sigterm, 143, "torchsar-eval: terminated")],
+    [
+        (_ctrl_c, 130, "torchsar-eval: interrupted"),
+        (_sigterm, 143, "torchsar-eval: terminated"),
+        (_sigterm_in_finalizer, 143, "torchsar-eval: terminated"),
+    ],
 )
 def test_interrupted_run_leaves_the_previous_one_intact(
     tiny_folder, tmp_path, capsys, monkeypatch, interrupt, code, line
