@@ -30,7 +30,6 @@ from torch import Tensor
 
 from eval.detectors import DETECTORS, DetectorSpec, check_options, dry_run, parse_params, resolve
 from eval.errors import EvalError
-from eval.plots import slug
 from torchsar.speckle import FILTERS
 
 __all__ = [
@@ -38,7 +37,6 @@ __all__ = [
     "at_least",
     "check_run_args",
     "despeckler",
-    "distinct_labels",
     "floats",
     "ints",
     "names",
@@ -171,22 +169,8 @@ def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dic
     return partial(FILTERS[name], **opts), opts
 
 
-def distinct_labels(datasets: list[str]) -> None:
-    """Datasets whose file-name labels collide would share their files in the run folder
-    (state, plots): refused until the run names its files with :func:`eval.output.file_slugs`."""
-    seen: dict[str, str] = {}
-    for name in dict.fromkeys(datasets):
-        other = seen.setdefault(slug(name), name)
-        if other != name:
-            raise EvalError(
-                f"--dataset {other} and {name} would share the file label {slug(name)!r}: "
-                "give one of them another folder name"
-            )
-
-
 def check_run_args(args: Namespace) -> RunChoices:
     """Validate every option of ``torchsar-eval run`` before any dataset is built."""
-    distinct_labels(args.dataset or [])
     at_least(args.n, "--n", 1)
     at_least(args.batch_size, "--batch-size", 1)
     wanted = ",".join(DETECTORS) if args.detectors is None else args.detectors

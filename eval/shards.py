@@ -14,9 +14,9 @@ from __future__ import annotations
 import multiprocessing
 import os
 import pickle
+import signal
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -99,7 +99,19 @@ def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
 
 
 def _init_worker(threads: int) -> None:
+    """Worker set-up: its share of the cores, and Ctrl-C left to the parent (which stops
+    the pool) instead of a traceback per worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     torch.set_num_threads(threads)
+
+
+def _scored_or_error(task: tuple[ShardJob, int]) -> tuple[int, bytes | None, str]:
+    """A worker's answer for one shard: its state, or the error that stopped it."""
+    job, k = task
+    try:
+        return k, _scored(job, k), ""
+    except Exception as exc:
+        return k, None, f"{type(exc).__name__}: {exc}"
 
 
 def _scored(job: ShardJob, k: int) -> bytes:
@@ -150,17 +162,17 @@ def _local(job, todo, bar, sizes, fail, on_batch) -> None:
 
 
 def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
+    """Shards in ``workers`` spawned processes; leaving early (an error, Ctrl-C, SIGTERM)
+    terminates the pool at once rather than waiting for running shards."""
     threads = max(1, (os.cpu_count() or 1) // workers)
+    paths = dict(todo)
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(threads,)) as pool:  # fmt: skip
-        futures = {pool.submit(_scored, job, k): (k, path) for k, path in todo}
-        for f in as_completed(futures):
-            k, path = futures[f]
-            try:
-                _write(path, f.result())
-            except Exception as exc:
-                fail(k, exc)
+    with ctx.Pool(workers, initializer=_init_worker, initargs=(threads,)) as pool:
+        for k, data, error in pool.imap_unordered(_scored_or_error, [(job, k) for k in paths]):
+            if data is None:
+                fail(k, RuntimeError(error))
+            else:
+                _write(paths[k], data)
             bar.update(sizes[k])
 
 

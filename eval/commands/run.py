@@ -17,7 +17,7 @@ from eval.detectors import DETECTORS, dry_run
 from eval.errors import EvalError
 from eval.glossary import glossary
 from eval.options import check_run_args
-from eval.output import default_out, result_dir, write_config
+from eval.output import default_out, file_slugs, result_dir, write_config
 from eval.plots import plot_roc, slug
 from eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring, SkipBad
 from eval.shards import ShardJob, run_shards, shard_rows
@@ -237,13 +237,17 @@ def run(args: argparse.Namespace) -> int:
     with result_dir(out, resume=args.resume, keep_interrupted=True) as tmp:
         check_resumable(tmp / "resume.json", fingerprint(args, datasets, specs, scoring))
         results, stats, windows = {}, {}, {}
+        labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
         for name, ds in datasets.items():
             ds_specs = specs if args.window_units == "px" else windows_in_pixels(name, ds, specs)
             windows[name] = {s.name: dict(s.params) for s in ds_specs}
             results[name], stats[name] = evaluate_dataset(
-                name, ds, ds_specs, args, scoring, preprocess, tmp
+                name, ds, ds_specs, args, scoring, preprocess, tmp / "shards" / labels[name]
             )
-        files = write_tables(tmp, results, scoring, stats)
+            exporter = stats[name].pop("export")
+            if exporter is not None:
+                exporter.write(tmp / "coco", labels[name])
+        files = write_tables(tmp, results, scoring, stats, labels)
         write_config(
             tmp,
             "run",
@@ -330,12 +334,11 @@ def check_resumable(path: Path, expected: dict) -> None:
     path.write_text(json.dumps(expected, indent=2) + "\n")
 
 
-def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
+def evaluate_dataset(name, ds, specs, args, scoring, preprocess, state: Path):
     """Score one dataset shard by shard; with ``--calibrate-on`` each detector's operating
     point is chosen on the calibration split and the results are the disjoint test split's.
     Returns the merged results and the dataset's run statistics (wall time, shards)."""
     t0 = time.perf_counter()
-    state = tmp / "shards" / slug(name)
     indices = list(range(len(ds)))
     if args.skip_bad:
         ds = SkipBad(ds)
@@ -358,13 +361,11 @@ def evaluate_dataset(name, ds, specs, args, scoring, preprocess, tmp: Path):
         chosen = [choose_bin(r.objects, target) for r in tuned]
     exporter = CocoExport(name) if args.export_coco else None
     results, counts = shards(indices, state / "test", exporter.add if exporter else None)
-    if exporter:
-        exporter.write(tmp / "coco", slug(name))
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
-    stats = {"images": len(indices), "wall_s": wall, **counts,
+    stats = {"images": len(indices), "wall_s": wall, **counts, "export": exporter,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
     return results, stats
@@ -381,7 +382,9 @@ def write_per_image(path: Path, folders: dict[str, Path]) -> None:
                 out.writerows([name, det, *row] for row in rows)
 
 
-def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> list[str]:
+def write_tables(
+    tmp: Path, results: dict, scoring: Scoring, stats: dict, labels: dict[str, str]
+) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names."""
     summary = summary_table(results)
     tables = {
@@ -394,7 +397,9 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
     }
     for fname, df in tables.items():
         df.to_csv(tmp / fname, index=False)
-    write_per_image(tmp / "per_image.csv", {n: tmp / "shards" / slug(n) / "test" for n in results})
+    write_per_image(
+        tmp / "per_image.csv", {n: tmp / "shards" / labels[n] / "test" for n in results}
+    )
     text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
     text += "\nEvery column, for every detector, is in `summary.csv`.\n"
     text += "\n## Timing\n\n" + markdown(tables["timing.csv"])
@@ -417,6 +422,6 @@ def write_tables(tmp: Path, results: dict, scoring: Scoring, stats: dict) -> lis
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(
             sel["roc_pixel.csv"], sel["roc.csv"], sel["pr.csv"], sel["summary.csv"],
-            tmp / f"roc_{slug(name)}.png", name,
+            tmp / f"roc_{labels[name]}.png", name,
         )  # fmt: skip
     return files
