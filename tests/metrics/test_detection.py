@@ -85,3 +85,11 @@ class TestObjectCounts:
             torch.zeros(0, 1, 4, 4, dtype=torch.bool), torch.zeros(0, 1, 4, 4, dtype=torch.int32)
         )
         assert c.images == 0 and np.isnan(c.pd)
+
+
+def test_object_counts_connectivity_is_validated():
+    from torchsar._checks import OptionError
+
+    z = torch.zeros(1, 1, 4, 4, dtype=torch.bool)
+    with pytest.raises(OptionError, match="connectivity"):
+        object_counts(z, torch.zeros(1, 1, 4, 4, dtype=torch.int32), connectivity=3)
