@@ -32,9 +32,10 @@ def slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def save(fig: plt.Figure, path: Path) -> list[str]:
-    """Save ``fig`` as ``path`` (PNG) and beside it as PDF; return the file names."""
-    fig.tight_layout()
+def save(fig: plt.Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) -> list[str]:
+    """Save ``fig`` as ``path`` (PNG) and beside it as PDF; return the file names.
+    ``rect`` is the area the axes may fill (room for a figure legend)."""
+    fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=110)
     fig.savefig(path.with_suffix(".pdf"))
     plt.close(fig)
@@ -77,6 +78,7 @@ def plot_roc(
         ax.set_ylim(0, 1.02)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].plot([], [], "o", color="grey", label="design operating point")
-    axes[0].legend(fontsize=7, ncol=2 if len(names) > 8 else 1)
+    rows = -(-(len(names) + 1) // 7)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=7, fontsize=8)
     fig.suptitle(_short(title))
-    return save(fig, path)
+    return save(fig, path, rect=(0, 0.05 * rows + 0.02, 1, 1))
