@@ -14,7 +14,7 @@ Precision: sums are accumulated in float64 after subtracting a per-image offset 
 mean), so variances of bright, nearly constant areas do not suffer from cancellation, and
 a constant image gives exactly zero variance.
 
-Geometry (DESIGN §4.1): ``guard`` g is the half-width of the guard box (``(2g+1)^2`` cells,
+Geometry: ``guard`` g is the half-width of the guard box (``(2g+1)^2`` cells,
 CUT included, excluded from training); ``train`` t is the width of the training band; the
 outer box is ``(2(g+t)+1)^2`` and the ring holds ``N = (2(g+t)+1)^2 - (2g+1)^2`` cells. The
 pinwheel split cuts the ring into 4 equal blocks of ``t x (2g+t+1)`` cells: top, right,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from abc import ABC, abstractmethod
 from pathlib import Path
 
 import numpy as np
@@ -69,7 +70,7 @@ def make_item(
     }
 
 
-class FileDataset(Dataset):
+class FileDataset(Dataset, ABC):
     """Base of the file-backed datasets.
 
     Subclasses fill ``self.items`` (one entry per item), implement ``load(i) -> item`` and
@@ -160,13 +161,13 @@ class FileDataset(Dataset):
         except FileFormatError as exc:
             raise BadItemError(exc.path, str(exc)) from exc
 
+    @abstractmethod
     def load(self, i: int) -> dict:
         """Item ``i`` (may raise FileFormatError)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def item_files(self, i: int) -> list[Path]:
         """The files item ``i`` reads."""
-        raise NotImplementedError
 
 
 def require_dir(root: Path, scheme: str) -> None:

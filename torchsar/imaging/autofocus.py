@@ -1,7 +1,7 @@
 """Sparsity-driven SAR imaging with joint phase-error correction (Önhon & Çetin).
 
-Coordinate descent on ``J(f, phi) = ||g - C(phi) f||^2 + lam sum (|f_i|^2 + eps)^(p/2)``
-(DESIGN §4.5): a half-quadratic image step and a closed-form phase step for 1-D (per pulse),
+Coordinate descent on ``J(f, phi) = ||g - C(phi) f||^2 + lam sum (|f_i|^2 + eps)^(p/2)``:
+a half-quadratic image step and a closed-form phase step for 1-D (per pulse),
 2-D separable (per pulse + per frequency) or 2-D non-separable (per sample) errors.
 """
 

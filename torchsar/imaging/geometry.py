@@ -18,7 +18,7 @@ SPEED_OF_LIGHT = 299_792_458.0  # m/s; the one definition (torchsar.motion impor
 
 @dataclass(frozen=True)
 class SpotlightGeometry:
-    """Sampling of a deramped spotlight phase history (DESIGN §2: ``(B, M pulses, K samples)``).
+    """Sampling of a deramped spotlight phase history (``(B, M pulses, K samples)``).
 
     Pulse ``m`` looks at azimuth ``th_m = (m - M//2) * aperture / M`` (radians) and sample
     ``k`` has frequency ``f_k = fc + (k - K//2) * bandwidth / K``, i.e. spatial wavenumber

@@ -1,6 +1,6 @@
 """Phase-error generators (1-D per pulse and 2-D) and their application to phase histories.
 
-Convention (DESIGN §2): corrupted data ``g = exp(1j phi) * (C f)``; a 1-D error is ``(B, M)``,
+Convention: corrupted data ``g = exp(1j phi) * (C f)``; a 1-D error is ``(B, M)``,
 a 2-D error ``(B, M, K)``. Generators draw one independent error per batch item.
 """
 

@@ -1,4 +1,4 @@
-"""Closed-form phase-error steps of sparsity-driven autofocus (DESIGN §4.5, seed eqs. 13-19).
+"""Closed-form phase-error steps of sparsity-driven autofocus (seed eqs. 13-19).
 
 Given data ``g`` and the model prediction ``d = C f``, each step minimises
 ``||exp(-1j phi) g - d||^2`` over the phase exactly: the minimiser of

@@ -6,7 +6,7 @@ pulse, m), ``th``/``phi`` (azimuth / elevation, degrees) and ``af`` (AFRL's auto
 ``r_correct`` in metres and ``ph_correct`` in radians per pulse). Several files (consecutive
 azimuth degrees of one pass) are concatenated along the pulses.
 
-Axes follow DESIGN §2: the phase history is ``(M pulses, K frequencies)``.
+Axes: the phase history is ``(M pulses, K frequencies)``.
 Source: AFRL "Data Public Release # SN-07-0045" (GOTCHA volumetric SAR data set).
 """
 

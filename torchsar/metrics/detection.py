@@ -1,4 +1,4 @@
-"""Pixel- and object-level detection scores against ground-truth masks (DESIGN §5).
+"""Pixel- and object-level detection scores against ground-truth masks.
 
 Counts are plain integers held in small dataclasses that add up (``a + b``), so scores over
 a dataset are exact whatever the batching, sharding or worker split. Ratios are computed

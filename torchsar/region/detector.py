@@ -1,4 +1,4 @@
-"""Region-growing CFAR (seed paper section 3, steps a–j; DESIGN §4.3).
+"""Region-growing CFAR (seed paper section 3, steps a–j).
 
 Pipeline per image: despeckle (tensor) → 5x5 local-maximum seeds (tensor) → for each seed,
 brightest first, skipping seeds already inside a grown region: grow T on the despeckled

@@ -2,8 +2,8 @@
 
 All on a crop: the region's bounding box widened by ``guard + background`` (clipped to the
 image), never the whole image per region. Dilation uses a square structuring element
-(Chebyshev distance), the region analogue of the square guard box of window CFARs
-(DESIGN §4.1); dilating by ``guard`` then by ``background`` equals one dilation by their sum.
+(Chebyshev distance), the region analogue of the square guard box of window CFARs;
+dilating by ``guard`` then by ``background`` equals one dilation by their sum.
 
 This runs once per grown region inside the CPU loop, so it works on numpy views and uses
 :func:`scipy.ndimage.maximum_filter` (exact, separable): on 20x20 / 60x60 / 300x300 crops it
