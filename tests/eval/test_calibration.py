@@ -7,8 +7,14 @@ import pandas as pd
 import pytest
 import torch
 
-from eval.calibration import CLUTTER, PFA_COLUMNS, ClutterCase, binomial_interval, measure
 from eval.cli import main
+from eval.commands.pfa.calibration import (
+    CLUTTER,
+    PFA_COLUMNS,
+    ClutterCase,
+    binomial_interval,
+    measure,
+)
 from eval.detectors import DETECTORS
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
+from eval.commands.compare_region.sweep import best_setting, window_grid
 from eval.detectors import DETECTORS, DetectorSpec
 from eval.runner import evaluate
-from eval.sweep import best_setting, window_grid
 
 
 def _batch(seed: int) -> dict:

@@ -178,7 +178,7 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
 
 
 def _write(out: Path, table, sens, params: SpotlightParams, cfg: LadderConfig) -> None:
-    from eval.motion_plots import plot_displacement
+    from eval.commands.movers.plots import plot_displacement
 
     with result_dir(out) as tmp:
         table.to_csv(tmp / "movers.csv", index=False)

@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 from tqdm import tqdm
 
-from eval.calibration import CLUTTER, measure, measure_dataset
+from eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
 from eval.datasets import make_dataset
 from eval.detectors import DETECTORS, resolve
 from eval.options import at_least, floats, names

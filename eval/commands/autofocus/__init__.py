@@ -21,15 +21,15 @@ import torch
 from tqdm import tqdm
 
 import torchsar.imaging as ti
-from eval.autofocus_experiment import (
+from eval.commands.autofocus.experiment import (
     DEFAULT_METHODS,
     ERROR_CASES,
     METHODS,
     Config,
     run_error_case,
 )
+from eval.commands.autofocus.gotcha import run_gotcha
 from eval.errors import EvalError
-from eval.gotcha_experiment import run_gotcha
 from eval.output import default_out, result_dir, write_config
 from eval.plots import slug
 from eval.tables import markdown
