@@ -31,6 +31,7 @@ from eval.commands.autofocus.experiment import (
 from eval.commands.autofocus.gotcha import run_gotcha
 from eval.errors import EvalError
 from eval.output import default_out, result_dir, write_config
+from eval.paths import SHARED_DATA
 from eval.plots import slug
 from eval.tables import markdown
 from torchsar.io.gotcha import GotchaPass, read_gotcha
@@ -45,7 +46,7 @@ METRICS = [
     "iterations",
     "seconds",
 ]
-DEFAULT_GOTCHA = Path("../shared/data/gotcha")
+DEFAULT_GOTCHA = SHARED_DATA / "gotcha"
 DETECTION = ["pd_ca", "pfa_ca", "pd_global", "pfa_global"]
 
 

@@ -26,6 +26,7 @@ from eval.detectors import DETECTORS, DetectorSpec
 from eval.errors import EvalError
 from eval.options import at_least, floats, ints, names
 from eval.output import default_out, file_slugs, result_dir, write_config
+from eval.paths import SHARED_DATA
 from eval.plots import slug
 from eval.runner import batches, evaluate
 from eval.tables import markdown, summary_table, timing_table
@@ -33,7 +34,7 @@ from eval.tables import markdown, summary_table, timing_table
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
 TUNE_EVERY = 5
 """MSTAR: every 5th chip tunes the window CFARs; the summary reports on the others."""
-MSTAR = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "mstar_sarbake"
+MSTAR = SHARED_DATA / "mstar_sarbake"
 SHOWN = [
     "dataset", "detector", "images", "pd_object", "false_alarms_per_image", "f1", "ap50",
     "fragmentation", "mean_iou", "fom", "ms_per_image",
