@@ -89,8 +89,11 @@ class DetectorResult:
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
 
-    def add(self, statistic: Tensor, threshold: Tensor, det_mask: Tensor, batch: dict, truth):
-        """Accumulate one batch's detections (``truth``: :func:`eval.scoring.batch_truth`)."""
+    def add(
+        self, statistic: Tensor, threshold: Tensor, det_mask: Tensor, batch: dict, truth
+    ) -> Objects:
+        """Accumulate one batch's detections (``truth``: :func:`eval.scoring.batch_truth`);
+        returns the batch's objects."""
         mask, ignore = batch["mask"], batch["ignore"]
         self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
         self.roc.update(statistic, mask, ignore)
@@ -101,6 +104,7 @@ class DetectorResult:
         self.objects.update(m, obj, gt, info)
         self.rows += image_rows(m, obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
+        return obj
 
     def __add__(self, other: DetectorResult) -> DetectorResult:
         """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
@@ -210,16 +214,17 @@ def evaluate(
         if preprocess is not None:
             x = preprocess(x)
         t_pre = time.perf_counter() - t0
+        t0 = time.perf_counter()
         truth = batch_truth(batch, name or desc)
+        t_truth = (time.perf_counter() - t0) / max(len(results), 1)  # shared by the detectors
         found = {}
         for res in results:
             t0 = time.perf_counter()
             det = res.spec(x)
             res.seconds += time.perf_counter() - t0 + t_pre
             res.images += x.shape[0]
-            res.add(det.statistic, det.threshold, det.mask, batch, truth)
-            if on_batch is not None:
-                found[res.spec.name] = res.objects_of(det.statistic, det.threshold, batch)
+            res.object_seconds += t_truth
+            found[res.spec.name] = res.add(det.statistic, det.threshold, det.mask, batch, truth)
         if on_batch is not None:
             on_batch(batch, found)
     for res in results:

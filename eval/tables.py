@@ -114,25 +114,23 @@ def summary_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return _frame(results, lambda ds, r: [summary_row(ds, r)], SUMMARY_COLUMNS)
 
 
-def _changes(tp: np.ndarray, fp: np.ndarray) -> np.ndarray:
-    """Grid levels (indices into the suffix arrays) where the detections above change."""
+def _levels(tp: np.ndarray, fp: np.ndarray) -> list[tuple[float, int, int]]:
+    """``(threshold, TP above it, FP above it)`` at every score level where the detections
+    above change, highest threshold first (level j: scores > ``[-inf, *grid][j]``)."""
     ct, cf = suffix(tp), suffix(fp)
     keep = np.ones(ct.size, bool)
     keep[1:] = (ct[1:] != ct[:-1]) | (cf[1:] != cf[:-1])
-    return np.flatnonzero(keep)
+    thr = np.concatenate([[-np.inf], SCORE_GRID])
+    return [(thr[j], int(ct[j]), int(cf[j])) for j in np.flatnonzero(keep)[::-1]]
 
 
 def _froc_rows(ds: str, r: DetectorResult) -> list[list]:
-    o = r.objects
-    ct, cf = suffix(o.tp), suffix(o.fp)
-    thr = np.concatenate([[-np.inf], SCORE_GRID])  # level j: scores > thr[j]
-    rows = []
-    for j in _changes(o.tp, o.fp)[::-1]:
-        t, f = int(ct[j]), int(cf[j])
-        prec = t / (t + f) if t + f else float("nan")
-        pd_ = t / o.n_gt if o.n_gt else float("nan")
-        rows.append([ds, r.spec.name, thr[j], t, f, f / max(o.images, 1), pd_, prec])
-    return rows
+    o, nan = r.objects, float("nan")
+    return [
+        [ds, r.spec.name, thr, t, f, f / max(o.images, 1), t / o.n_gt if o.n_gt else nan,
+         t / (t + f) if t + f else nan]
+        for thr, t, f in _levels(o.tp, o.fp)
+    ]  # fmt: skip
 
 
 def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
@@ -143,14 +141,11 @@ def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 def _pr_rows(ds: str, r: DetectorResult) -> list[list]:
     o = r.objects
-    ct, cf = suffix(o.ap_tp[0]), suffix(o.ap_fp[0])
-    thr = np.concatenate([[-np.inf], SCORE_GRID])
-    rows = []
-    for j in _changes(o.ap_tp[0], o.ap_fp[0])[::-1]:
-        t, f = int(ct[j]), int(cf[j])
-        if t + f and o.n_gt:
-            rows.append([ds, r.spec.name, thr[j], t / o.n_gt, t / (t + f)])
-    return rows
+    return [
+        [ds, r.spec.name, thr, t / o.n_gt, t / (t + f)]
+        for thr, t, f in _levels(o.ap_tp[0], o.ap_fp[0])
+        if t + f and o.n_gt
+    ]
 
 
 def pr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from torchsar._checks import OptionError, check_choice
+from torchsar.objects.properties import label_boxes
 
 __all__ = [
     "COCO_IOUS",
@@ -100,17 +101,6 @@ class GroundTruth:
         return int(self.plane.shape[0])
 
 
-def _boxes_from_ids(ids: np.ndarray, n: int) -> np.ndarray:
-    from scipy import ndimage
-
-    if n == 0:
-        return np.zeros((0, 4))
-    sl = ndimage.find_objects(ids, max_label=n)
-    return np.array(
-        [(s[1].start, s[2].start, s[1].stop, s[2].stop) for s in sl], dtype=np.float64
-    ).reshape(n, 4)
-
-
 def ground_truth(
     instances: np.ndarray,
     ignore: np.ndarray | None = None,
@@ -144,7 +134,7 @@ def ground_truth(
     local = gids - offset[plane]
     n = int(gids.size)
     area = np.bincount(ids.reshape(-1), minlength=n + 1)[1:].astype(np.int64)
-    box = _boxes_from_ids(ids, n)
+    box = label_boxes(ids, n)[1]
     cls = np.array(["target"] * n, dtype=object)
     for k in range(n):
         p, i = int(plane[k]), int(local[k]) - 1

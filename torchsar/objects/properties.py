@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["measure"]
+__all__ = ["label_boxes", "measure"]
 
 
 def _extent(lab: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -34,6 +34,22 @@ def _moments(lab: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int, area: 
     return np.stack([r, c], axis=1), length, width
 
 
+def label_boxes(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Plane ``(n,)`` and end-exclusive box ``(n, 4)`` ``(r0, c0, r1, c1)`` of labels ``1..n``
+    of a stack ``(N, H, W)`` (ids unique across planes), from the labelled pixels only."""
+    flat = labels.reshape(-1)
+    idx = np.flatnonzero(flat)
+    return _plane_and_box(flat[idx].astype(np.int64), idx, labels.shape[-2:], n)
+
+
+def _plane_and_box(lab: np.ndarray, idx: np.ndarray, hw: tuple[int, int], n: int):
+    h, w = hw
+    plane = _extent(lab, idx // (h * w), n)[0]
+    (r0, r1), (c0, c1) = _extent(lab, (idx // w) % h, n), _extent(lab, idx % w, n)
+    box = np.stack([r0, c0, r1 + 1, c1 + 1], axis=1).astype(np.float64).reshape(n, 4)
+    return plane, box
+
+
 def measure(labels: np.ndarray, n: int, score: np.ndarray) -> dict[str, np.ndarray]:
     """Measure objects ``1..n`` of a label stack ``(N, H, W)`` (ids unique across planes).
 
@@ -48,9 +64,7 @@ def measure(labels: np.ndarray, n: int, score: np.ndarray) -> dict[str, np.ndarr
     r, c = (idx // w) % h, idx % w
     rows, cols = r.astype(np.float64), c.astype(np.float64)
     area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
-    plane = _extent(lab, idx // (h * w), n)[0]
-    (r0, r1), (c0, c1) = _extent(lab, r, n), _extent(lab, c, n)
-    box = np.stack([r0, c0, r1 + 1, c1 + 1], axis=1).astype(np.float64).reshape(n, 4)
+    plane, box = _plane_and_box(lab, idx, (h, w), n)
     centroid, length, width = _moments(lab, rows, cols, n, np.maximum(area, 1))
     peak = np.full(n + 1, -np.inf)
     np.maximum.at(peak, lab, score.reshape(-1)[idx])
