@@ -132,8 +132,7 @@ def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, 
         loose = np.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
         idx = np.flatnonzero(stat >= loose)
     s, t = stat[idx].astype(np.float64), thr[idx]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        score = np.where(t > 0, s / np.where(t > 0, t, 1.0), 1.0 + s - t)
+    score = normalised_score(torch.from_numpy(s), torch.from_numpy(t)).numpy()  # candidates
     mask = np.zeros(stat.size, dtype=bool)
     mask[idx[score > floor]] = True
     full = np.full(stat.size, -np.inf)
