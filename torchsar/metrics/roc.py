@@ -16,7 +16,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, check_same_shape
+from torchsar._checks import InputTypeError, InputValueError, check_same_shape
+from torchsar.metrics.log_bins import LogGrid
 
 __all__ = ["RocAccumulator", "default_pixel_grid"]
 
@@ -24,13 +25,11 @@ __all__ = ["RocAccumulator", "default_pixel_grid"]
 def default_pixel_grid(points_per_decade: int = 40) -> Tensor:
     """Symmetric log grid ``-1e6 .. -1e-3, 0, 1e-3 .. 1e6`` (float64): covers ratio and
     z-score statistics alike."""
-    pos = torch.logspace(-3, 6, 9 * points_per_decade + 1, dtype=torch.float64)
-    return torch.cat([-pos.flip(0), torch.zeros(1, dtype=torch.float64), pos])
+    return LogGrid(points_per_decade).grid
 
 
-def _exceedances(bins: Tensor, n_grid: int) -> Tensor:
-    """``out[k] = #(values > grid[k])`` from bucket indices (one bincount, a suffix sum)."""
-    hist = torch.bincount(bins, minlength=n_grid + 1).cpu()
+def _exceedances(hist: Tensor) -> Tensor:
+    """``out[k] = #(values > grid[k])`` from the bucket histogram (a suffix sum)."""
     return hist.flip(0).cumsum(0).flip(0)[1:]
 
 
@@ -52,6 +51,7 @@ class RocAccumulator:
         self.pixel_grid = self.pixel_grid.to(torch.float64).cpu()
         self.target_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
         self.clutter_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
+        self._log_grid = LogGrid.matching(self.pixel_grid)
 
     def update(self, statistic: Tensor, target: Tensor, ignore: Tensor | None = None) -> None:
         """Add a batch: ``statistic`` float, ``target`` bool, optional ``ignore`` bool, all
@@ -63,14 +63,25 @@ class RocAccumulator:
                 raise InputTypeError(f"{name} must be a bool tensor")
             if t is not None:
                 check_same_shape(statistic, t, "statistic", name)
+        if bool(torch.isnan(statistic).any()):
+            raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
         grid = self.pixel_grid.to(device=statistic.device, dtype=statistic.dtype)
-        bins = torch.bucketize(statistic, grid)  # statistic > grid[k]  <=>  bin > k
-        care = torch.ones_like(target) if ignore is None else ~ignore
-        tgt, clu = target & care, ~target & care
-        self.target_hits += _exceedances(bins[tgt], grid.numel())
-        self.clutter_hits += _exceedances(bins[clu], grid.numel())
-        self.targets += int(tgt.sum())
-        self.clutter += int(clu.sum())
+        bins = self._bins(statistic, grid)  # statistic > grid[k]  <=>  bin > k
+        # one histogram over (class, bin): class 0 target, 1 clutter, 2 ignored
+        cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
+        n = grid.numel() + 1
+        hist = torch.bincount((bins + n * cls).view(-1), minlength=3 * n).cpu().view(3, n)
+        self.target_hits += _exceedances(hist[0])
+        self.clutter_hits += _exceedances(hist[1])
+        self.targets += int(hist[0].sum())
+        self.clutter += int(hist[1].sum())
+
+    def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
+        """``torch.bucketize(statistic, grid)``, by arithmetic when the grid is the default
+        kind."""
+        if self._log_grid is None:
+            return torch.bucketize(statistic, grid)
+        return self._log_grid.bucketize(statistic, grid)
 
     def __add__(self, other: RocAccumulator) -> RocAccumulator:
         if not torch.equal(self.pixel_grid, other.pixel_grid):
