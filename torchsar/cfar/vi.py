@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
 import torch
@@ -86,9 +87,7 @@ def vi(
         rule = _decide(a, b, k_vi, k_mr)
         est = _estimate(rule, a, b, sums[4])
         stat = ratio(xs.to(torch.float64), est)
-        keys = torch.stack(torch.broadcast_tensors(rule.double(), a.count, b.count), dim=-1)
-        same = (rule == _CA) & (a.count + b.count == ring.n)
-        scale = torch.where(same, 1.0, full / keyed_factor_map(keys, factor))
+        scale = _rule_scale(rule, a.count, b.count, ring.n, full, factor)
         return finish(stat * scale, a.count + b.count, dtype)
 
     rects = [*pinwheel_rects(ring.guard, ring.train), ring.region]
@@ -102,6 +101,29 @@ def vi_threshold(*, guard: int, train: int, pfa: float, k_vi: float, k_mr: float
     check_positive(k_vi, "k_vi")
     check_positive(k_mr, "k_mr")
     return ca_threshold(guard=guard, train=train, pfa=pfa, looks=1.0)
+
+
+def _rule_scale(
+    rule: Tensor,
+    count_a: Tensor,
+    count_b: Tensor,
+    n: int,
+    full: float,
+    factor: Callable[[tuple[int, ...]], float],
+) -> Tensor:
+    """``full / alpha_rule`` per pixel (float64): a 5-entry table over the rules where both
+    halves are whole (the interior; CA there is exactly 1), the exact factor of each
+    pixel's half sizes elsewhere (the border band, a small part of the image)."""
+    rule, count_a, count_b = torch.broadcast_tensors(rule, count_a, count_b)
+    half = n // 2
+    inner = torch.tensor([full / factor((r, half, half)) for r in range(5)], dtype=torch.float64)
+    inner[_CA] = 1.0
+    scale = inner.to(rule.device)[rule]
+    edge = ((count_a != half) | (count_b != half)).nonzero(as_tuple=True)
+    if edge[0].numel():
+        keys = torch.stack([rule[edge].double(), count_a[edge], count_b[edge]], dim=-1)
+        scale[edge] = full / keyed_factor_map(keys, factor)
+    return scale
 
 
 def _merge(p: Sums, q: Sums) -> Sums:
