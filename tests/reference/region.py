@@ -115,3 +115,25 @@ def region_cfar(
         stat[region] = np.maximum(stat[region], z)
         rows.append({"seed": s, "region": sorted(region), "statistic": z, "accepted": ok})
     return stat.reshape(h, w), rows
+
+
+def fill_holes(stat: np.ndarray, region_id: np.ndarray, k: float, statistic_of) -> tuple:
+    """Holes of ``stat > k`` (scipy's binary_fill_holes) given, per hole, the largest
+    accepted id among the 8-neighbours of its pixels: returns new ``(stat, region_id)``."""
+    from scipy import ndimage
+
+    h, w = stat.shape
+    mask = stat > k
+    holes = ndimage.binary_fill_holes(mask) & ~mask
+    lab, n = ndimage.label(holes)
+    stat, region_id = stat.copy(), region_id.copy()
+    for i in range(1, n + 1):
+        owner = 0
+        for r, c in zip(*np.nonzero(lab == i), strict=True):
+            for rr in range(max(r - 1, 0), min(r + 2, h)):
+                for cc in range(max(c - 1, 0), min(c + 2, w)):
+                    if mask[rr, cc]:
+                        owner = max(owner, int(region_id[rr, cc]))
+        region_id[lab == i] = owner
+        stat[lab == i] = statistic_of(owner)
+    return stat, region_id

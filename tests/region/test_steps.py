@@ -180,3 +180,30 @@ class TestRingStats:
         low = np.zeros((11, 11))
         rs = ring_stats(crop, raw, raw, low, taken, 1, 2)
         assert rs.n_background == 40 - 7
+
+
+class TestFillHoles:
+    @given(st.integers(0, 2**31 - 1), st.integers(3, 14), st.integers(3, 14))
+    def test_equal_to_reference(self, seed, h, w):
+        from torchsar.region.detector import _fill_holes, _ImageState
+        from torchsar.region.params import resolve_params
+        from torchsar.region.table import RegionRow, RegionTable
+
+        rng = np.random.default_rng(seed)
+        n_regions = 4
+        region_id = rng.integers(0, n_regions + 1, size=h * w).astype(np.int32)
+        z = rng.normal(size=n_regions) + 0.5
+        stat = np.where(region_id > 0, z[region_id - 1], -np.inf)
+        stat[rng.random(h * w) < 0.3] = -np.inf  # unaccepted pixels, holes among them
+        state = _ImageState(torch.zeros(h, w, dtype=torch.float64), resolve_params("torchsar"))
+        state.stat, state.region_id = stat.copy(), region_id.copy()
+        state.table = RegionTable(
+            [RegionRow((0, 0), 1, 0.0, 0.0, 1.0, 20, float(v), bool(v > state.k), "") for v in z]
+        )
+        want_stat, want_id = ref.fill_holes(
+            stat.reshape(h, w), region_id.reshape(h, w), state.k, lambda t: z[t - 1]
+        )
+        _fill_holes(state)
+        np.testing.assert_array_equal(state.stat.reshape(h, w), want_stat)
+        holes = want_stat != stat.reshape(h, w)
+        np.testing.assert_array_equal(state.region_id.reshape(h, w)[holes], want_id[holes])

@@ -123,17 +123,28 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
 def _fill_holes(st: _ImageState) -> None:
     """Give the pixels enclosed by accepted regions (holes, e.g. bright scatterers whose ring
     lay on the target itself and were rejected) to an adjacent accepted region: its statistic
-    and its id. The table keeps each region's own decision."""
+    and its id. The table keeps each region's own decision.
+
+    A hole is a 4-connected component of the unaccepted pixels that does not reach the image
+    border (as :func:`scipy.ndimage.binary_fill_holes` defines it); its owner is the largest
+    accepted id in the 3x3 neighbourhoods of its pixels."""
     h, w = st.shape
     mask = (st.stat > st.k).reshape(h, w)
-    holes = ndimage.binary_fill_holes(mask) & ~mask
-    lab, n = ndimage.label(holes)
-    if n == 0:
+    if not mask.any():
         return
-    acc = np.where(mask, st.region_id.reshape(h, w), 0)
-    owner = ndimage.maximum(ndimage.maximum_filter(acc, 3), labels=lab, index=np.arange(1, n + 1))
-    owner = np.asarray(owner, dtype=np.int64)[lab[holes] - 1]
-    flat = np.flatnonzero(holes.reshape(-1))
+    lab, n = ndimage.label(~mask)
+    inner = np.ones(n + 1, dtype=bool)
+    inner[np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])] = False
+    inner[0] = False
+    rows, cols = np.nonzero(inner[lab])
+    if rows.size == 0:
+        return
+    acc = np.pad(np.where(mask, st.region_id.reshape(h, w), 0), 1)
+    near = np.max([acc[rows + dr, cols + dc] for dr in range(3) for dc in range(3)], axis=0)
+    owner = np.zeros(n + 1, dtype=np.int64)
+    np.maximum.at(owner, lab[rows, cols], near)
+    owner = owner[lab[rows, cols]]
+    flat = rows * w + cols
     st.region_id[flat] = owner
     st.stat[flat] = np.array([st.table.rows[t - 1].statistic for t in owner.tolist()])
 
