@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 
@@ -30,11 +31,18 @@ def poisson_weights(keys: Sequence[str], replicates: int, seed: int = 0) -> np.n
     """
     out = np.empty((replicates, len(keys)), dtype=np.int32)
     for j, key in enumerate(keys):
-        digest = hashlib.blake2b(key.encode(), digest_size=16).digest()
-        words = np.frombuffer(digest, dtype=np.uint32)
-        rng = np.random.default_rng([int(seed), *words.tolist()])
-        out[:, j] = rng.poisson(1.0, replicates)
+        out[:, j] = _weights(key, int(replicates), int(seed))
     return out
+
+
+@lru_cache(maxsize=4096)  # every detector of a run asks for the same images' weights
+def _weights(key: str, replicates: int, seed: int) -> np.ndarray:
+    """One image's replicate weights (read-only)."""
+    digest = hashlib.blake2b(key.encode(), digest_size=16).digest()
+    words = np.frombuffer(digest, dtype=np.uint32)
+    w = np.random.default_rng([seed, *words.tolist()]).poisson(1.0, replicates)
+    w.flags.writeable = False
+    return w
 
 
 def interval(values: np.ndarray, level: float = 0.95) -> tuple[float, float]:
