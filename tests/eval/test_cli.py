@@ -368,7 +368,7 @@ def test_interrupted_run_leaves_the_previous_one_intact(
     assert _tiny_run(tiny_folder, out) == 0
     before = _snapshot(out)
     capsys.readouterr()
-    monkeypatch.setattr("eval.commands.run.run_shards", interrupt)
+    monkeypatch.setattr("eval.commands.run.evaluate.run_shards", interrupt)
     handler = signal.getsignal(signal.SIGTERM)
     assert _tiny_run(tiny_folder, out, "--overwrite") == code
     hint = "; continue with the same command plus --resume"
