@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from unittest.mock import patch
+
 import numpy as np
 import pytest
 import torch
@@ -9,6 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.reference import region as ref
+from torchsar.region import grow as grow_module
 from torchsar.region.grow import Grid, grow
 from torchsar.region.rings import crop_around, dilate, ring_masks, ring_stats
 from torchsar.region.seeds import local_maxima, seed_order
@@ -92,6 +95,26 @@ class TestGrow:
             out.append(np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget)))
         np.testing.assert_array_equal(out[0], out[1])
         np.testing.assert_array_equal(out[0], out[2])
+
+    @pytest.mark.parametrize("label_max", [0, 2000, 1 << 16])
+    @given(seed=st.integers(0, 10_000), conn=st.sampled_from([4, 8]))
+    def test_crop_floods_equal_heap(self, label_max, seed, conn):
+        """Images above the labelling size are flooded on growing crops (margin doubling,
+        labelling or skimage's flood per crop size); below it, whole: all equal the heap."""
+        rng = np.random.default_rng(seed)
+        f = rng.gamma(4.0, 1.0, size=(64, 72))
+        f[10:50, 8:60] = rng.normal(20.0, 1.0, size=(40, 52))  # the flood crosses crop edges
+        blocked = rng.random(f.shape) < 0.05
+        blocked[30, 30] = False
+        start = 30 * 72 + 30
+        out = []
+        with patch.object(grow_module, "_LABEL_MAX", label_max):
+            for budget in (None, 3):
+                g = Grid.new(f, connectivity=conn)
+                g.free2d()[blocked] = 0
+                out.append(np.sort(grow(g, start, 1, tau=0.5, n_init=2, budget=budget)))
+        assert out[0].size > 400
+        np.testing.assert_array_equal(out[0], out[1])
 
     @given(st.integers(0, 10_000))
     def test_equal_to_reference(self, seed):

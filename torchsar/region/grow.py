@@ -240,10 +240,11 @@ def _flood_crop(
 def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: float) -> np.ndarray:
     """Finish a region from its partial heap region ``idx`` with flood fills on a crop around
     it; while the flood touches a crop edge inside the image, the flood so far (contained in
-    the final region) becomes the new partial region and the margin doubles."""
+    the final region) becomes the new partial region and the margin doubles. An image small
+    enough for one labelling is flooded whole: growing crops there costs more than it saves."""
     h, w = grid.shape
     seed = idx[0]
-    margin = 16
+    margin = 16 if h * w > _LABEL_MAX else max(h, w)  # small images: flood the whole at once
     while True:
         rows, cols = idx // w, idx % w
         box = (
