@@ -31,6 +31,17 @@ class TestSeeds:
         got = seed_order(f[0, 0], local_maxima(f)[0, 0]).tolist()
         assert got == ref.seeds(f[0, 0].numpy())
 
+    @given(
+        st.integers(0, 10_000),
+        st.sampled_from([1, 3, 5, 7]),
+        st.integers(1, 12),
+        st.integers(1, 12),
+    )
+    def test_plateaus_and_borders_equal_reference(self, seed, window, h, w):
+        f = torch.from_numpy(np.random.default_rng(seed).integers(0, 3, (h, w)).astype(float))
+        got = seed_order(f, local_maxima(f[None, None], window)[0, 0]).tolist()
+        assert got == ref.seeds(f.numpy(), window)
+
     def test_brightest_first_ties_by_index(self):
         f = torch.tensor([[2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0]])
         order = seed_order(f, local_maxima(f[None, None])[0, 0]).tolist()

@@ -31,10 +31,15 @@ def local_maxima(f: Tensor, window: int = 5) -> Tensor:
     if f.numel() == 0:
         return torch.zeros_like(f, dtype=torch.bool)
     r = window // 2
-    b, c, h, w = f.shape
-    peak = nnf.max_pool2d(f.reshape(b * c, 1, h, w), (1, window), stride=1, padding=(0, r))
-    peak = nnf.max_pool2d(peak, (window, 1), stride=1, padding=(r, 0))  # separable max
-    return f == peak.reshape(b, c, h, w)
+    h, w = f.shape[-2:]
+    pad = nnf.pad(f, (r, r, r, r), value=-torch.inf)  # outside cells never win
+    rows = pad[..., :, :w].clone()
+    for d in range(1, window):  # separable running maximum: shifted views, no pooling kernel
+        torch.maximum(rows, pad[..., :, d : d + w], out=rows)
+    peak = rows[..., :h, :].clone()
+    for d in range(1, window):
+        torch.maximum(peak, rows[..., d : d + h, :], out=peak)
+    return f == peak
 
 
 def seed_order(f: Tensor, seeds: Tensor) -> np.ndarray:
