@@ -126,3 +126,23 @@ class TestAC:
     def test_censor_pfa_validated(self):
         with pytest.raises(OptionError, match="censor_pfa"):
             ts.cfar.ac(torch.rand(1, 1, 16, 16), censor_pfa=2.0)
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_vi_every_pixel_equals_reference(masked):
+    """Interior, border band and masked-out cells: each pixel's rule, estimate and factor."""
+    from tests.reference.cfar import vi_statistic
+
+    rng = np.random.default_rng(3)
+    img = rng.exponential(size=(2, 17, 19))
+    img[:, 4:8, 5:9] *= 20.0  # variable halves near the bright patch
+    valid = rng.random(img.shape) > 0.15 if masked else np.ones(img.shape, bool)
+    x = torch.from_numpy(img)[:, None]
+    vm = torch.from_numpy(valid)[:, None] if masked else None
+    got = ts.cfar.vi(x, guard=1, train=2, k_vi=2.0, k_mr=1.5, valid=vm).statistic[:, 0].numpy()
+    for b in range(2):
+        for i in range(17):
+            for j in range(19):
+                if valid[b, i, j]:
+                    want = vi_statistic(img[b], valid[b], i, j, 1, 2, 1e-3, 2.0, 1.5)
+                    assert got[b, i, j] == pytest.approx(want, rel=1e-9), (b, i, j)

@@ -111,19 +111,47 @@ def _rule_scale(
     full: float,
     factor: Callable[[tuple[int, ...]], float],
 ) -> Tensor:
-    """``full / alpha_rule`` per pixel (float64): a 5-entry table over the rules where both
-    halves are whole (the interior; CA there is exactly 1), the exact factor of each
-    pixel's half sizes elsewhere (the border band, a small part of the image)."""
+    """``full / alpha_rule`` per pixel (float64): the interior factor of each rule where both
+    halves are whole (CA there is exactly 1), the exact factor of each pixel's half sizes
+    on the border band. Without a mask the half sizes are one plane shared by the batch, so
+    the factors are mapped once per rule on that plane and each pixel picks its rule's."""
+    count_a, count_b = torch.broadcast_tensors(count_a, count_b)
+    if count_a.numel() < rule.numel():  # geometric counts: one plane for the batch
+        maps = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
+        lead = (1,) * (rule.dim() - count_a.dim())  # counts may lack the leading dims
+        maps = maps.reshape(5, *lead, *count_a.shape).expand(5, *rule.shape)
+        return torch.gather(maps, 0, rule.unsqueeze(0)).squeeze(0)
     rule, count_a, count_b = torch.broadcast_tensors(rule, count_a, count_b)
-    half = n // 2
-    inner = torch.tensor([full / factor((r, half, half)) for r in range(5)], dtype=torch.float64)
-    inner[_CA] = 1.0
+    inner = torch.tensor([_inner(r, n, full, factor) for r in range(5)], dtype=torch.float64)
     scale = inner.to(rule.device)[rule]
-    edge = ((count_a != half) | (count_b != half)).nonzero(as_tuple=True)
+    edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
     if edge[0].numel():
         keys = torch.stack([rule[edge].double(), count_a[edge], count_b[edge]], dim=-1)
         scale[edge] = full / keyed_factor_map(keys, factor)
     return scale
+
+
+def _inner(rule: int, n: int, full: float, factor: Callable[[tuple[int, ...]], float]) -> float:
+    """``full / alpha_rule`` with both halves whole (exactly 1 for CA)."""
+    return 1.0 if rule == _CA else full / factor((rule, n // 2, n // 2))
+
+
+def _one_rule(
+    rule: int,
+    count_a: Tensor,
+    count_b: Tensor,
+    n: int,
+    full: float,
+    factor: Callable[[tuple[int, ...]], float],
+) -> Tensor:
+    """``full / alpha_rule`` at every pixel of the half-size planes for one rule."""
+    out = torch.full(count_a.shape, _inner(rule, n, full, factor), dtype=torch.float64,
+                     device=count_a.device)  # fmt: skip
+    edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
+    if edge[0].numel():
+        keys = torch.stack([torch.full_like(count_a[edge], rule), count_a[edge], count_b[edge]], -1)
+        out[edge] = full / keyed_factor_map(keys.double(), factor)
+    return out
 
 
 def _merge(p: Sums, q: Sums) -> Sums:
@@ -138,7 +166,9 @@ def _vi_mean(s: Sums) -> tuple[Tensor, Tensor]:
 
 
 def _decide(a: Sums, b: Sums, k_vi: float, k_mr: float) -> Tensor:
-    """The per-pixel rule code (Smith & Varshney's decision table)."""
+    """The per-pixel rule code (Smith & Varshney's decision table). A half with no counted
+    cell (a corner of the image, or masked out) has no mean: the other half's CA is used,
+    never SO or GO over an empty half (its mean would read as 0)."""
     mean_a, vi_a = _vi_mean(a)
     mean_b, vi_b = _vi_mean(b)
     var_a = (vi_a > k_vi) | (a.count <= 1)
@@ -147,7 +177,9 @@ def _decide(a: Sums, b: Sums, k_vi: float, k_mr: float) -> Tensor:
     rule = torch.where(differ, _GO, _CA)
     rule = torch.where(var_a & ~var_b, _CA_B, rule)
     rule = torch.where(var_b & ~var_a, _CA_A, rule)
-    return torch.where(var_a & var_b, _SO, rule)
+    rule = torch.where(var_a & var_b, _SO, rule)
+    rule = torch.where((a.count == 0) & (b.count > 0), _CA_B, rule)
+    return torch.where((b.count == 0) & (a.count > 0), _CA_A, rule)
 
 
 def _estimate(rule: Tensor, a: Sums, b: Sums, ring: Sums) -> Tensor:
