@@ -30,6 +30,7 @@ __all__ = [
     "WindowSizeError",
     "check_choice",
     "check_complex",
+    "check_device",
     "check_image",
     "check_int",
     "check_mask",
@@ -269,3 +270,31 @@ def check_range(
             f"{name} must be a pair (low, high) of reals, low <= high{bounds}; got {value!r}"
         )
     return low, high
+
+
+def check_device(device: object, name: str = "device") -> torch.device | None:
+    """``device`` as a :class:`torch.device` (``None`` kept), refused when it is unavailable.
+
+    Raises:
+        OptionError: not a device, or a CUDA/MPS device on a machine without one.
+
+    Example:
+        >>> check_device("cpu")
+        device(type='cpu')
+    """
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)  # type: ignore[arg-type]
+    except (RuntimeError, TypeError):
+        raise OptionError(f"{name} must be a torch device such as 'cpu', got {device!r}") from None
+    available = {
+        "cuda": torch.cuda.is_available,
+        "mps": lambda: torch.backends.mps.is_available(),
+    }.get(dev.type, lambda: True)
+    if not available():
+        raise OptionError(
+            f"{name} = {device!r} is not available on this machine (no {dev.type} device); "
+            f"use device='cpu'"
+        )
+    return dev

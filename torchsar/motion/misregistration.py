@@ -137,8 +137,11 @@ def look_test(
     b, n = valid.shape
     k, w = looks.shape[1], looks.shape[-1]
     dy, dx = params.image_extent[0] / looks.shape[-2], params.image_extent[1] / w
-    res = (HANN_BROADENING * params.range_resolution, HANN_BROADENING * params.azimuth_resolution)
-    res_look = (res[0], res[1] * params.n_pulses / float(plan.stop[0] - plan.start[0]))
+    res = (
+        HANN_BROADENING * params.geometry.range_resolution,
+        HANN_BROADENING * params.geometry.cross_range_resolution,
+    )
+    res_look = (res[0], res[1] * params.geometry.pulses / float(plan.stop[0] - plan.start[0]))
     half = max(2, math.ceil(res[0] / dy))
     idx = torch.arange(b, device=pixel.device)[:, None].expand(b, n)
     flat = torch.stack([idx, pixel[..., 0], pixel[..., 1]], -1).reshape(-1, 3).clamp(min=0)
@@ -156,7 +159,7 @@ def look_test(
     rate = _slope(disp[..., 1], times).reshape(b, n)
     rate = rate - robust_pattern(rate, valid)
     velocity = look_velocity(rate, params)
-    dvdr = 1 / (2 - 2 * velocity / params.platform_speed)
+    dvdr = 1 / (2 - 2 * velocity / params.track.platform_speed)
     sigma = (sig_rate.reshape(b, n) * dvdr.abs()).clamp(min=min_sigma)
     score = velocity.abs() / sigma
     nan = torch.tensor(float("nan"), dtype=torch.float64, device=x.device)
