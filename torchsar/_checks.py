@@ -35,6 +35,7 @@ __all__ = [
     "check_int",
     "check_mask",
     "check_odd",
+    "check_pairs",
     "check_positive",
     "check_probability",
     "check_range",
@@ -298,3 +299,20 @@ def check_device(device: object, name: str = "device") -> torch.device | None:
             f"use device='cpu'"
         )
     return dev
+
+
+def check_pairs(x: object, name: str, *, ndim: int, axes: str) -> Tensor:
+    """Validate a real floating tensor of ``ndim`` dims whose last axis holds 2 coordinates.
+
+    ``axes`` describes the expected layout in messages, e.g. ``"(B, N, 2) (range, azimuth)"``.
+    NaN is allowed (a missing measurement).
+
+    Example:
+        >>> check_pairs(torch.zeros(1, 3, 2), "positions", ndim=3, axes="(B, N, 2)").shape
+        torch.Size([1, 3, 2])
+    """
+    if not isinstance(x, Tensor) or not x.is_floating_point():
+        raise InputTypeError(f"{name} must be a real floating tensor, got {x!r:.60}")
+    if x.dim() != ndim or x.shape[-1] != 2:
+        raise ShapeError(f"{name} must have shape {axes}, got {tuple(x.shape)}")
+    return x

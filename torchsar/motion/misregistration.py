@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar.motion.decision import registration_sigma
+from torchsar.motion.decision import SAMPLING_ERROR, registration_sigma
 from torchsar.motion.focus import fm_correction
 from torchsar.motion.looks import LookPlan, look_displacement, look_velocity
 from torchsar.motion.params import HANN_BROADENING, SpotlightParams
@@ -16,9 +16,8 @@ from torchsar.motion.peaks import intensity
 from torchsar.motion.shift import estimate_shift
 from torchsar.motion.strips import peak_in_window, robust_pattern, strips
 
-__all__ = ["LOOK_SIGMA_FACTOR", "SAMPLING_ERROR", "LookTest", "look_test"]
+__all__ = ["LOOK_SIGMA_FACTOR", "LookTest", "look_test"]
 
-SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
 # Spread of the look-position estimate over its Cramér-Rao bound: z-scores of stationary
 # targets in white noise (image SNR 20 dB) had standard deviation 1.4 without this factor,
 # 0.9 with it (checked in tests/motion/test_find_movers.py).

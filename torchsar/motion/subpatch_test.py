@@ -10,14 +10,17 @@ import torch
 from torch import Tensor
 
 from torchsar.cfar import Detection
-from torchsar.motion.decision import MoverDecision, detect_movers, registration_sigma
+from torchsar.motion.decision import (
+    SAMPLING_ERROR,
+    MoverDecision,
+    detect_movers,
+    registration_sigma,
+)
 from torchsar.motion.params import HANN_BROADENING, SpotlightParams
 from torchsar.motion.subpatch import subpatch_centers, subpatch_images
 from torchsar.motion.tracks import Tracks, measure_displacements
 
 __all__ = ["SubpatchResult", "subpatch_movers"]
-
-_SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
 
 
 @dataclass(frozen=True)
@@ -109,7 +112,7 @@ def subpatch_movers(
         crlb = math.sqrt(2) * registration_sigma(tracks.snr, res)[:, :, None, :]
         h, w = images.shape[-2:]
         px = torch.tensor([params.image_extent[0] / h, params.image_extent[1] / w])
-        sigma = torch.sqrt(crlb**2 + (_SAMPLING_ERROR * px.to(crlb)) ** 2)
+        sigma = torch.sqrt(crlb**2 + (SAMPLING_ERROR * px.to(crlb)) ** 2)
         decision = detect_movers(
             tracks.corrected, sigma=sigma, n_sigma=n_sigma, min_sigma=min_sigma
         )

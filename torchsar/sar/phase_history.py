@@ -14,7 +14,7 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError, check_complex, check_int
+from torchsar._checks import ShapeError, check_complex, check_int, check_pairs
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry
 
 __all__ = ["phase_history", "simulate_phase_history"]
@@ -24,13 +24,7 @@ _CHUNK = 1 << 22  # complex (scatterer, pulse, sample) terms per intermediate bl
 
 def _check_points(positions: object, velocities: object, amplitudes: object) -> None:
     """Validate ``(B, N, 2)`` positions, matching velocities and ``(B, N)`` amplitudes."""
-    if not isinstance(positions, Tensor) or not positions.is_floating_point():
-        raise InputTypeError(f"positions must be a real floating tensor, got {positions!r:.60}")
-    if positions.dim() != 3 or positions.shape[-1] != 2:
-        raise ShapeError(
-            f"positions must have shape (B, N, 2) as (range, cross-range) metres, "
-            f"got {tuple(positions.shape)}"
-        )
+    positions = check_pairs(positions, "positions", ndim=3, axes="(B, N, 2) (range, cross-range)")
     for name, x, shape in (
         ("velocities", velocities, positions.shape),
         ("amplitudes", amplitudes, positions.shape[:2]),
