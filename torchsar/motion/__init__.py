@@ -39,7 +39,6 @@ __all__ = [
     "LookTest",
     "MoverDecision",
     "MoverReport",
-    "MoverResult",
     "SpotlightConsistencyWarning",
     "SpotlightParams",
     "SubpatchResult",
