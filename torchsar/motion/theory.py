@@ -94,7 +94,7 @@ def _planar_fit(
     """
     t = params.geometry.pulse_times(device=points.device)
     c = centers.to(torch.float64)
-    u = (c[..., 1:2] - params.track.platform_speed * t) / (params.track.scene_range + c[..., 0:1])
+    u = params.geometry.look_tangents(c, t)
     dr = params.geometry.slant_ranges(points, t, velocities) - params.geometry.slant_ranges(c, t)
     z = dr * torch.sqrt(1 + u * u)
     w = taper(t.numel(), window, t)

@@ -254,13 +254,14 @@ class SpotlightGeometry:
         centre = torch.zeros(1, 2, dtype=torch.float64, device=p.device)
         return self.slant_ranges(p, t, velocities) - self.slant_ranges(centre, t)
 
-    def look_tangents(self, center: tuple[float, float], times: Tensor) -> Tensor:
-        """``tan`` of the look angle to ``center``: ``(x_c - V t) / (R0 + y_c)``, ``(M,)``.
+    def look_tangents(self, center: Tensor | tuple[float, float], times: Tensor) -> Tensor:
+        """``tan`` of the look angle to ``center``: ``(x_c - V t) / (R0 + y_c)``, ``(..., M)``.
 
+        ``center`` is one ``(range, cross-range)`` point or a ``(..., 2)`` tensor of them.
         Exactly linear in slow time on a straight track, which lets the polar-format azimuth
         transform be one chirp-z transform per range-frequency row (track only).
         """
         tr = self._track()
-        return (center[1] - tr.platform_speed * times.to(torch.float64)) / (
-            tr.scene_range + center[0]
-        )
+        t = times.to(torch.float64)
+        c = torch.as_tensor(center, dtype=torch.float64, device=t.device)
+        return (c[..., 1:2] - tr.platform_speed * t) / (tr.scene_range + c[..., 0:1])
