@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.reference.imaging import exact_phase_history
 from torchsar._checks import OptionError
@@ -88,3 +90,25 @@ class TestSeeds:
             fb, mb = make(1, size=(16, 16), seed=image_seed(9, b))
             torch.testing.assert_close(f[b : b + 1], fb, atol=0, rtol=0)
             assert torch.equal(m[b : b + 1], mb)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    split=st.integers(1, 4),
+    tracked=st.booleans(),
+)
+def test_scatterers_superpose(seed, split, tracked):
+    """The data of a scene are the sum of the data of any split of its scatterers."""
+    geo = _track_geometry() if tracked else SpotlightGeometry.for_image((7, 6), pixel=0.5)
+    gen = torch.Generator().manual_seed(seed)
+    pos = (torch.rand(1, 5, 2, generator=gen, dtype=torch.float64) - 0.5) * 20
+    vel = torch.randn(1, 5, 2, generator=gen, dtype=torch.float64) if tracked else None
+    amp = torch.randn(1, 5, generator=gen, dtype=torch.complex128)
+
+    def part(sl: slice) -> torch.Tensor:
+        v = None if vel is None else vel[:, sl]
+        return simulate_phase_history(pos[:, sl], geo, velocities=v, amplitudes=amp[:, sl])
+
+    whole = part(slice(None))
+    torch.testing.assert_close(whole, part(slice(0, split)) + part(slice(split, None)))
