@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import cast
 
 from torchsar._checks import OptionError, check_int, check_positive
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry, Track
@@ -151,8 +152,7 @@ class SpotlightParams:
     @property
     def track(self) -> Track:
         """The platform track of :attr:`geometry`."""
-        assert self.geometry.track is not None  # checked at construction
-        return self.geometry.track
+        return cast(Track, self.geometry.track)  # never None: checked at construction
 
     @property
     def scene_doppler_bandwidth(self) -> float:
