@@ -1,6 +1,18 @@
 """torchsar: batched PyTorch SAR target detection and a dataset-scale evaluator."""
 
-from torchsar import cfar, imaging, io, metrics, motion, objects, region, simulate, speckle, windows
+from torchsar import (
+    cfar,
+    imaging,
+    io,
+    metrics,
+    motion,
+    objects,
+    region,
+    sar,
+    simulate,
+    speckle,
+    windows,
+)
 
 __version__ = "0.1.0"
 
@@ -13,6 +25,7 @@ __all__ = [
     "motion",
     "objects",
     "region",
+    "sar",
     "simulate",
     "speckle",
     "windows",

@@ -30,10 +30,12 @@ __all__ = [
     "WindowSizeError",
     "check_choice",
     "check_complex",
+    "check_device",
     "check_image",
     "check_int",
     "check_mask",
     "check_odd",
+    "check_pairs",
     "check_positive",
     "check_probability",
     "check_range",
@@ -269,3 +271,48 @@ def check_range(
             f"{name} must be a pair (low, high) of reals, low <= high{bounds}; got {value!r}"
         )
     return low, high
+
+
+def check_device(device: object, name: str = "device") -> torch.device | None:
+    """``device`` as a :class:`torch.device` (``None`` kept), refused when it is unavailable.
+
+    Raises:
+        OptionError: not a device, or a CUDA/MPS device on a machine without one.
+
+    Example:
+        >>> check_device("cpu")
+        device(type='cpu')
+    """
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)  # type: ignore[arg-type]
+    except (RuntimeError, TypeError):
+        raise OptionError(f"{name} must be a torch device such as 'cpu', got {device!r}") from None
+    available = {
+        "cuda": torch.cuda.is_available,
+        "mps": lambda: torch.backends.mps.is_available(),
+    }.get(dev.type, lambda: True)
+    if not available():
+        raise OptionError(
+            f"{name} = {device!r} is not available on this machine (no {dev.type} device); "
+            f"use device='cpu'"
+        )
+    return dev
+
+
+def check_pairs(x: object, name: str, *, ndim: int, axes: str) -> Tensor:
+    """Validate a real floating tensor of ``ndim`` dims whose last axis holds 2 coordinates.
+
+    ``axes`` describes the expected layout in messages, e.g. ``"(B, N, 2) (range, azimuth)"``.
+    NaN is allowed (a missing measurement).
+
+    Example:
+        >>> check_pairs(torch.zeros(1, 3, 2), "positions", ndim=3, axes="(B, N, 2)").shape
+        torch.Size([1, 3, 2])
+    """
+    if not isinstance(x, Tensor) or not x.is_floating_point():
+        raise InputTypeError(f"{name} must be a real floating tensor, got {x!r:.60}")
+    if x.dim() != ndim or x.shape[-1] != 2:
+        raise ShapeError(f"{name} must have shape {axes}, got {tuple(x.shape)}")
+    return x

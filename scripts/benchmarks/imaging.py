@@ -13,16 +13,14 @@ from collections.abc import Callable
 import torch
 
 import torchsar.imaging as ti
+import torchsar.sar as sar
 
 
 def _data(batch: int, size: int, error: str, seed: int = 0) -> torch.Tensor:
     gen = torch.Generator().manual_seed(seed)
-    f, _ = ti.point_scene(batch, size=(size, size), points=round(0.02 * size * size), generator=gen)
-    g = ti.add_noise(
-        ti.phase_history(f, ti.SpotlightGeometry.for_image((size, size))),
-        snr_db=30.0,
-        generator=gen,
-    )
+    f, _ = ti.point_scene(batch, size=(size, size), points=round(0.02 * size * size), seed=seed)
+    geometry = sar.SpotlightGeometry.for_image((size, size))
+    g = sar.add_noise(sar.phase_history(f, geometry), snr_db=30.0, seed=seed)
     if error == "1d":
         phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, generator=gen)
     else:

@@ -7,7 +7,7 @@ import torch
 
 from torchsar._checks import InputValueError, ShapeError
 from torchsar.imaging.backprojection import BackprojectionOperator
-from torchsar.imaging.geometry import SPEED_OF_LIGHT
+from torchsar.sar import SPEED_OF_LIGHT
 
 
 def _geometry(m=6, k=12, dtype=torch.float64):

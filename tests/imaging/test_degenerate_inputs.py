@@ -7,7 +7,6 @@ import torch
 
 from torchsar._checks import OptionError
 from torchsar.imaging import (
-    SpotlightGeometry,
     fft2c,
     min_entropy_autofocus,
     point_scene,
@@ -15,6 +14,7 @@ from torchsar.imaging import (
     pulse_min_entropy,
     speckled_scene,
 )
+from torchsar.sar import SpotlightGeometry
 
 
 def _pulses(zero_item: int) -> torch.Tensor:

@@ -12,7 +12,7 @@ from torchsar.motion import SpotlightParams
 def make_params(**kw) -> SpotlightParams:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return SpotlightParams(**kw)
+        return SpotlightParams.from_system(**kw)
 
 
 @pytest.fixture(scope="session")

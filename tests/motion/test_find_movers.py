@@ -14,9 +14,9 @@ from torchsar.motion import (
     focus_step,
     polar_format,
     refocus,
-    simulate_phase_history,
     speed_bank,
 )
+from torchsar.sar import add_noise, simulate_phase_history
 
 STILL = [[-25.0, -20.0], [20.0, -8.0], [-5.0, 6.0]]
 
@@ -28,7 +28,7 @@ def table1():
 
 def _noise(params, snr_db: float) -> float:
     """Noise std giving image peak SNR ``snr_db`` for a unit point (Hann in both axes)."""
-    m, k = params.n_pulses, params.n_samples
+    m, k = params.geometry.pulses, params.geometry.samples
     return (0.25 * m * k) / math.sqrt(0.140625 * m * k) * 10 ** (-snr_db / 20)
 
 
@@ -38,9 +38,8 @@ def _scenes(params, velocities, snr_db=30.0, seed=0, mover=(10.0, 20.0)):
     pos = torch.tensor([[*STILL, mover]], dtype=torch.float64).expand(b, -1, -1).contiguous()
     vel = torch.zeros_like(pos)
     vel[:, 3] = torch.tensor(velocities, dtype=torch.float64)
-    gen = torch.Generator().manual_seed(seed)
-    g = simulate_phase_history(pos, params, velocities=vel, noise_std=_noise(params, snr_db),
-                               generator=gen)  # fmt: skip
+    g = simulate_phase_history(pos, params.geometry, velocities=vel)
+    g = add_noise(g, std=_noise(params, snr_db), seed=seed)
     return g.to(torch.complex64)
 
 
@@ -67,7 +66,7 @@ class TestRefocus:
         assert torch.equal(bank, -bank.flip(0)) and bank.abs().max() >= 16.0
 
     def test_refocus_restores_a_mover_peak(self, table1):
-        g = simulate_phase_history(torch.zeros(1, 1, 2), table1,
+        g = simulate_phase_history(torch.zeros(1, 1, 2), table1.geometry,
                                    velocities=torch.tensor([[[0.0, 6.0]]]))  # fmt: skip
         img = polar_format(g, table1)
         peaks = refocus(img, table1, torch.tensor([0.0, 6.0])).abs().flatten(-2).amax(-1)[0]
@@ -112,8 +111,8 @@ class TestControlsAndEdgeCases:
         pos = torch.cat([torch.tensor([STILL], dtype=torch.float64).expand(20, -1, -1), clutter], 1)
         amp = torch.ones(20, pos.shape[1], dtype=torch.complex128)
         amp[:, 3:] = 0.05 * torch.randn(20, 150, generator=gen, dtype=torch.complex128)
-        g = simulate_phase_history(pos, small, amplitudes=amp, noise_std=_noise(small, 30.0),
-                                   generator=gen)  # fmt: skip
+        g = simulate_phase_history(pos, small.geometry, amplitudes=amp)
+        g = add_noise(g, std=_noise(small, 30.0), seed=7)
         r = find_movers(g.to(torch.complex64), small, subpatch=False)
         assert int(r.valid.sum(1).min()) >= 3  # the targets, and clutter peaks, are tested
         assert not r.mover.any()
@@ -131,14 +130,14 @@ class TestControlsAndEdgeCases:
                                   equal_nan=True)  # fmt: skip
 
     def test_empty_scenes_and_empty_batch(self, small):
-        g = torch.zeros(2, small.n_pulses, small.n_samples, dtype=torch.complex64)
+        g = torch.zeros(2, small.geometry.pulses, small.geometry.samples, dtype=torch.complex64)
         r = find_movers(g, small, subpatch=False)
         assert r.mover.shape == (2, 0) and r.velocity.shape == (2, 0)
         r0 = find_movers(g[:0], small)
         assert r0.mover.shape[0] == 0
 
     def test_bad_options(self, small):
-        g = torch.zeros(1, small.n_pulses, small.n_samples, dtype=torch.complex64)
+        g = torch.zeros(1, small.geometry.pulses, small.geometry.samples, dtype=torch.complex64)
         with pytest.raises(OptionError):
             find_movers(g, small, looks=1)
         with pytest.raises(OptionError):

@@ -9,10 +9,10 @@ from torchsar._checks import InputTypeError, OptionError, ShapeError
 from torchsar.motion import (
     planar_image_positions,
     polar_format,
-    simulate_phase_history,
     subpatch_centers,
     subpatch_images,
 )
+from torchsar.sar import simulate_phase_history
 
 
 def peak_position(amp: torch.Tensor, spacing: tuple[float, float]) -> torch.Tensor:
@@ -47,7 +47,7 @@ class TestStationaryFocus:
         centers = subpatch_centers(small)
         offsets = torch.tensor([[3.3, -2.1], [-4.2, 1.7], [2.6, 5.1], [-1.4, -3.8]])
         pos = (centers + offsets.double())[None]
-        g = simulate_phase_history(pos, small)
+        g = simulate_phase_history(pos, small.geometry)
         imgs = subpatch_images(g, small)[0]
         sp = small.pixel_spacing
         for p in range(4):
@@ -65,7 +65,7 @@ class TestStationaryFocus:
 
     def test_matches_direct_planar_sum(self, small):
         pos = torch.tensor([[[12.0, -7.0]]], dtype=torch.float64)
-        g = simulate_phase_history(pos, small)
+        g = simulate_phase_history(pos, small.geometry)
         center = (10.0, -10.0)
         img = polar_format(g, small, center=center, window="none")[0]
         sp = small.pixel_spacing
@@ -85,7 +85,7 @@ class TestPolarFormat:
     @pytest.mark.parametrize("b", [0, 1, 2])
     def test_batch_invariance(self, tiny, b):
         pos = torch.tensor([[[3.0, -4.0], [-10.0, 6.0]]])
-        g = simulate_phase_history(pos, tiny)
+        g = simulate_phase_history(pos, tiny.geometry)
         one = polar_format(g, tiny, center=(5.0, 5.0))
         many = polar_format(g.expand(b, -1, -1), tiny, center=(5.0, 5.0))
         assert many.shape == (b, 64, 64)
@@ -93,18 +93,18 @@ class TestPolarFormat:
             torch.testing.assert_close(many, one.expand(b, -1, -1))
 
     def test_dtype_follows_input(self, tiny):
-        g = simulate_phase_history(torch.zeros(1, 1, 2, dtype=torch.float64), tiny)
+        g = simulate_phase_history(torch.zeros(1, 1, 2, dtype=torch.float64), tiny.geometry)
         assert polar_format(g, tiny).dtype == torch.complex128
         assert polar_format(g.to(torch.complex64), tiny).dtype == torch.complex64
 
     def test_non_contiguous_input(self, tiny):
-        g = simulate_phase_history(torch.zeros(2, 1, 2), tiny)
+        g = simulate_phase_history(torch.zeros(2, 1, 2), tiny.geometry)
         nc = torch.cat([g, g], dim=2)[:, :, ::2]
         assert not nc.is_contiguous()
         torch.testing.assert_close(polar_format(nc, tiny), polar_format(g, tiny))
 
     def test_errors(self, tiny):
-        g = simulate_phase_history(torch.zeros(1, 1, 2), tiny)
+        g = simulate_phase_history(torch.zeros(1, 1, 2), tiny.geometry)
         with pytest.raises(InputTypeError, match="complex"):
             polar_format(g.real, tiny)
         with pytest.raises(ShapeError, match=r"\(B, 30, 180\)"):
@@ -113,7 +113,7 @@ class TestPolarFormat:
             polar_format(g, tiny, window="kaiser")
 
     def test_subpatch_channels_are_polar_format_per_centre(self, tiny):
-        g = simulate_phase_history(torch.tensor([[[1.0, 2.0]]]), tiny)
+        g = simulate_phase_history(torch.tensor([[[1.0, 2.0]]]), tiny.geometry)
         imgs = subpatch_images(g, tiny, grid=(1, 2))
         assert imgs.shape == (1, 2, 64, 64)
         for p, c in enumerate(subpatch_centers(tiny, (1, 2))):

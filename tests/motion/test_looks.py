@@ -14,8 +14,8 @@ from torchsar.motion import (
     look_plan,
     look_velocity,
     polar_format,
-    simulate_phase_history,
 )
+from torchsar.sar import add_noise, simulate_phase_history
 
 STILL = [[-25.0, -20.0], [20.0, -8.0], [-5.0, 6.0]]
 
@@ -50,7 +50,7 @@ class TestLookPlan:
         plan = look_plan(table1, looks=looks, overlap=overlap)
         length = plan.stop - plan.start
         assert (length == length[0]).all() and len(length) == looks
-        assert plan.start[0] == 0 and plan.stop[-1] <= table1.n_pulses
+        assert plan.start[0] == 0 and plan.stop[-1] <= table1.geometry.pulses
         assert torch.allclose(plan.time, -plan.time.flip(0), atol=1e-12)  # symmetric
         if looks > 1:
             shared = (plan.stop[0] - plan.start[1]).clamp(min=0) / length[0]
@@ -68,7 +68,9 @@ class TestLookImages:
     @pytest.mark.parametrize("looks,overlap", [(2, 0.0), (3, 0.5)])
     def test_stationary_targets_coincide(self, table1, looks, overlap):
         pos = torch.tensor([STILL], dtype=torch.float64)
-        x = look_images(simulate_phase_history(pos, table1), table1, looks=looks, overlap=overlap)
+        x = look_images(
+            simulate_phase_history(pos, table1.geometry), table1, looks=looks, overlap=overlap
+        )
         h, w = x.shape[-2:]
         for y, az in STILL:  # each target's own neighbourhood (targets are >= 15 m apart)
             r = round(y * h / table1.image_extent[0]) + h // 2
@@ -84,7 +86,7 @@ class TestLookImages:
         pos = torch.tensor([[10.0, 5.0]], dtype=torch.float64).expand(3, 1, 2)
         vel = torch.zeros(3, 1, 2, dtype=torch.float64)
         vel[:, 0, 1] = torch.tensor(speeds, dtype=torch.float64)
-        x = look_images(simulate_phase_history(pos, table1, velocities=vel), table1)
+        x = look_images(simulate_phase_history(pos, table1.geometry, velocities=vel), table1)
         plan = look_plan(table1)
         dt = float(plan.time[1] - plan.time[0])
         for b, speed in enumerate(speeds):
@@ -96,21 +98,19 @@ class TestLookImages:
             assert abs(float(look_velocity(rate, table1)) - speed) < 0.1 * speed
 
     def test_one_look_is_the_full_image(self, table1):
-        g = simulate_phase_history(torch.tensor([[[3.0, 4.0]]]), table1)
+        g = simulate_phase_history(torch.tensor([[[3.0, 4.0]]]), table1.geometry)
         assert torch.allclose(look_images(g, table1, looks=1)[:, 0], polar_format(g, table1))
 
     def test_batch_invariance(self, table1):
         pos = torch.tensor([[[3.0, 4.0]], [[-10.0, 12.0]], [[20.0, -30.0]]])
-        g = simulate_phase_history(
-            pos, table1, noise_std=0.5, generator=torch.Generator().manual_seed(1)
-        )
+        g = add_noise(simulate_phase_history(pos, table1.geometry), std=0.5, seed=1)
         whole = look_images(g, table1, looks=3)
         parts = torch.cat([look_images(g[i : i + 1], table1, looks=3) for i in range(3)])
         assert torch.allclose(whole, parts, atol=1e-6)
         assert look_images(g[:0], table1).shape == (0, 2, 128, 512)
 
     def test_polar_format_checks_pulses(self, table1):
-        g = simulate_phase_history(torch.zeros(1, 1, 2), table1)
+        g = simulate_phase_history(torch.zeros(1, 1, 2), table1.geometry)
         with pytest.raises(ShapeError):
             polar_format(g, table1, pulses=(0, 100))
         with pytest.raises(OptionError):

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from torchsar.motion import simulate_phase_history, subpatch_movers
+from torchsar.motion import subpatch_movers
+from torchsar.sar import add_noise, simulate_phase_history
 
 STILL = [[-25.0, -20.0], [20.0, -8.0], [-5.0, 6.0]]
 
@@ -13,8 +14,8 @@ def _scene(params, last, velocity=(0.0, 0.0), seed=0, noise=0.05):
     pos = torch.tensor([[*STILL, last]], dtype=torch.float64)
     vel = torch.zeros_like(pos)
     vel[0, 3] = torch.tensor(velocity, dtype=torch.float64)
-    gen = torch.Generator().manual_seed(seed)
-    g = simulate_phase_history(pos, params, velocities=vel, noise_std=noise, generator=gen)
+    g = simulate_phase_history(pos, params.geometry, velocities=vel)
+    g = add_noise(g, std=noise, seed=seed)
     return subpatch_movers(g.to(torch.complex64), params)
 
 
@@ -42,7 +43,7 @@ class TestFindMovers:
         assert r.decision.mover[0, mover]
         assert float(r.decision.residual[0, mover].norm(dim=-1).max()) > 0.2
         # ... and a stationary target at that apparent position is flagged just the same
-        apparent = [y + v * x / 200.0, x - v * (small.scene_range + y) / 200.0]
+        apparent = [y + v * x / 200.0, x - v * (small.track.scene_range + y) / 200.0]
         s = _scene(small, apparent)
         still = _track_of(s, small, [60.0 - 0.585, 70.0 - 116.4])
         assert s.decision.mover[0].sum() == 1 and s.decision.mover[0, still]
@@ -52,7 +53,7 @@ class TestFindMovers:
         displacements are those of a stationary target at its apparent position
         (y + v x / V, x - v R / V), so no displacement test can tell them apart."""
         v, y, x = 0.39, 10.0, 20.0
-        apparent = [y + v * x / 200.0, x - v * (small.scene_range + y) / 200.0]
+        apparent = [y + v * x / 200.0, x - v * (small.track.scene_range + y) / 200.0]
         moving = _scene(small, [y, x], (v, 0.0))
         still = _scene(small, apparent)
         c0 = moving.centers[0]

@@ -55,11 +55,11 @@ class TestPlanarTheory:
     def test_aliased_radial_motion_folds(self, small):
         v = 2.34
         got, _, c = _offsets(small, (v, 0.0))
-        assert folded_speed(v, small) == pytest.approx(v - small.blind_speed)
+        assert folded_speed(v, small) == pytest.approx(v - small.geometry.blind_speed)
         # the window shows replica k of the aliased mover, which behaves as speed v + k v_b
-        x = POS[3, 1] - c[:, 1] - (small.scene_range + c[:, 0]) * v / 200.0
-        k = torch.round(x / small.unambiguous_azimuth)
-        v_k = v + k * small.blind_speed
+        x = POS[3, 1] - c[:, 1] - (small.track.scene_range + c[:, 0]) * v / 200.0
+        k = torch.round(x / small.geometry.unambiguous_azimuth)
+        v_k = v + k * small.geometry.blind_speed
         for p, q in ((0, 2), (1, 3)):  # same azimuth centre, 100 m apart in range
             diff = got[q, 1] - got[p, 1]
             assert float(v_k[p]) == pytest.approx(float(v_k[q]))

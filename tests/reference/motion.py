@@ -9,16 +9,16 @@ C = 299_792_458.0
 
 def phase_history(params, positions, velocities):
     """g[m, k] = sum_i exp(-j 4 pi f_k / c (R_i(t_m) - R_0(t_m))), one pulse at a time."""
-    m_n, k_n = params.n_pulses, params.n_samples
+    m_n, k_n = params.geometry.pulses, params.geometry.samples
     g = np.zeros((m_n, k_n), dtype=np.complex128)
     for m in range(m_n):
-        t = (m - (m_n - 1) / 2) / params.prf
-        radar = np.array([-params.scene_range, params.platform_speed * t])
+        t = (m - (m_n - 1) / 2) / params.track.prf
+        radar = np.array([-params.track.scene_range, params.track.platform_speed * t])
         r0 = np.linalg.norm(radar)
         for k in range(k_n):
             f = (
-                params.center_frequency
-                + (k - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+                params.geometry.center_frequency
+                + (k - (k_n - 1) / 2) * params.geometry.frequency_step
             )
             for p, v in zip(positions, velocities, strict=True):
                 r = np.linalg.norm(np.asarray(p) + np.asarray(v) * t - radar)
@@ -34,13 +34,15 @@ def planar_image(params, g, center, ys, xs):
     Evaluated point by point at positions (y, x) relative to ``center``.
     """
     m_n, k_n = g.shape
-    t = (np.arange(m_n) - (m_n - 1) / 2) / params.prf
+    t = (np.arange(m_n) - (m_n - 1) / 2) / params.track.prf
     f = (
-        params.center_frequency
-        + (np.arange(k_n) - (k_n - 1) / 2) * params.chirp_rate / params.sampling_rate
+        params.geometry.center_frequency
+        + (np.arange(k_n) - (k_n - 1) / 2) * params.geometry.frequency_step
     )
     kappa = 4 * np.pi * f / C
-    radar = np.stack([-params.scene_range * np.ones_like(t), params.platform_speed * t], 1)
+    radar = np.stack(
+        [-params.track.scene_range * np.ones_like(t), params.track.platform_speed * t], 1
+    )
     rc = np.linalg.norm(np.asarray(center) - radar, axis=1)
     r0 = np.linalg.norm(radar, axis=1)
     gc = g * np.exp(1j * kappa[None, :] * (rc - r0)[:, None])

@@ -1,9 +1,12 @@
-"""Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics."""
+"""Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics.
+
+The phase histories these methods focus are simulated by :mod:`torchsar.sar` (one geometry,
+one exact simulator); :mod:`torchsar.imaging.scenes` draws the reflectivity they image.
+"""
 
 from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.imaging.fourier import fft2c, ifft2c
-from torchsar.imaging.geometry import SpotlightGeometry
 from torchsar.imaging.lp import default_lam, lp_image
 from torchsar.imaging.metrics import (
     align,
@@ -26,7 +29,6 @@ from torchsar.imaging.phase_errors import (
     sinusoidal_phase_error,
     uniform_phase_error,
 )
-from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
 from torchsar.imaging.phase_step import phase_step_1d, phase_step_2d, phase_step_separable
 from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
 from torchsar.imaging.scenes import point_scene, speckled_scene
@@ -38,8 +40,6 @@ __all__ = [
     "LinearOperator",
     "MinEntropyResult",
     "PGAResult",
-    "SpotlightGeometry",
-    "add_noise",
     "align",
     "apply_phase_error",
     "contrast",
@@ -52,12 +52,10 @@ __all__ = [
     "min_entropy_autofocus",
     "nonseparable_phase_error",
     "pga",
-    "phase_history",
     "phase_rmse",
     "phase_step_1d",
     "phase_step_2d",
     "phase_step_separable",
-    "point_phase_history",
     "point_scene",
     "polynomial_phase_error",
     "pulse_autofocus",

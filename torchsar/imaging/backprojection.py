@@ -24,8 +24,8 @@ from torch import Tensor
 
 from torchsar._checks import InputValueError, ShapeError, check_int
 from torchsar.imaging._dtypes import as_complex
-from torchsar.imaging.geometry import SPEED_OF_LIGHT
 from torchsar.imaging.operators import LinearOperator
+from torchsar.sar.geometry import SPEED_OF_LIGHT
 
 __all__ = ["BackprojectionOperator"]
 

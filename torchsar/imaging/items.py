@@ -1,13 +1,11 @@
-"""Batch items with nothing to focus (all-zero data) and the device an input asks for."""
+"""Batch items with nothing to focus (all-zero data)."""
 
 from __future__ import annotations
 
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError
-
-__all__ = ["check_device", "fill_items", "nonzero_items"]
+__all__ = ["fill_items", "nonzero_items"]
 
 
 def nonzero_items(x: Tensor) -> Tensor:
@@ -36,31 +34,3 @@ def fill_items(live: Tensor, values: Tensor, fill: float = 0.0) -> Tensor:
     )
     out[live.to(values.device)] = values
     return out
-
-
-def check_device(device: object, name: str = "device") -> torch.device | None:
-    """``device`` as a :class:`torch.device` (``None`` kept), refused when it is unavailable.
-
-    Raises:
-        OptionError: not a device, or a CUDA/MPS device on a machine without one.
-
-    Example:
-        >>> check_device("cpu")
-        device(type='cpu')
-    """
-    if device is None:
-        return None
-    try:
-        dev = torch.device(device)  # type: ignore[arg-type]
-    except (RuntimeError, TypeError):
-        raise OptionError(f"{name} must be a torch device such as 'cpu', got {device!r}") from None
-    available = {
-        "cuda": torch.cuda.is_available,
-        "mps": lambda: torch.backends.mps.is_available(),
-    }.get(dev.type, lambda: True)
-    if not available():
-        raise OptionError(
-            f"{name} = {device!r} is not available on this machine (no {dev.type} device); "
-            f"use device='cpu'"
-        )
-    return dev

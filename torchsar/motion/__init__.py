@@ -1,4 +1,8 @@
-"""Moving-target detection for single-channel spotlight SAR: looks, focus and subpatches."""
+"""Moving-target detection for single-channel spotlight SAR: looks, focus and subpatches.
+
+The phase histories come from :func:`torchsar.sar.simulate_phase_history` on the
+``geometry`` of a :class:`SpotlightParams` (a straight-track collection).
+"""
 
 from torchsar.motion.czt import czt
 from torchsar.motion.decision import MoverDecision, detect_movers, registration_sigma
@@ -17,7 +21,6 @@ from torchsar.motion.params import SpotlightConsistencyWarning, SpotlightParams
 from torchsar.motion.peaks import default_detector, detect_peaks, intensity, window_max
 from torchsar.motion.pipeline import MoverReport, find_movers
 from torchsar.motion.shift import estimate_shift
-from torchsar.motion.simulate import simulate_phase_history
 from torchsar.motion.subpatch import subpatch_centers, subpatch_images
 from torchsar.motion.subpatch_test import SubpatchResult, subpatch_movers
 from torchsar.motion.targets import bank_detect, detect_targets, smear_ghosts
@@ -36,7 +39,6 @@ __all__ = [
     "LookTest",
     "MoverDecision",
     "MoverReport",
-    "MoverResult",
     "SpotlightConsistencyWarning",
     "SpotlightParams",
     "SubpatchResult",
@@ -70,7 +72,6 @@ __all__ = [
     "registration_sigma",
     "rereference",
     "scene_positions",
-    "simulate_phase_history",
     "smear_ghosts",
     "speed_bank",
     "subpatch_centers",

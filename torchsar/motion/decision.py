@@ -8,9 +8,17 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, InputValueError, ShapeError, check_positive
+from torchsar._checks import (
+    InputTypeError,
+    InputValueError,
+    ShapeError,
+    check_pairs,
+    check_positive,
+)
 
-__all__ = ["MoverDecision", "detect_movers", "registration_sigma"]
+__all__ = ["SAMPLING_ERROR", "MoverDecision", "detect_movers", "registration_sigma"]
+
+SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
 
 
 @dataclass(frozen=True)
@@ -46,17 +54,6 @@ def registration_sigma(snr: Tensor, resolution: tuple[float, float]) -> Tensor:
     """
     k = math.sqrt(3) / (math.pi * torch.sqrt(2 * snr.clamp(min=1e-12)))
     return torch.stack([k * resolution[0], k * resolution[1]], dim=-1)
-
-
-def _check_displacements(d: object) -> Tensor:
-    if not isinstance(d, Tensor) or not d.is_floating_point():
-        raise InputTypeError(f"displacements must be a real floating tensor, got {d!r:.60}")
-    if d.dim() != 4 or d.shape[-1] != 2:
-        raise ShapeError(
-            f"displacements must have shape (B, N, P, 2) (scene, target, subpatch, "
-            f"(range, azimuth)), got {tuple(d.shape)}"
-        )
-    return d
 
 
 def detect_movers(
@@ -104,7 +101,12 @@ def detect_movers(
         >>> detect_movers(d, sigma=0.05).mover.tolist()
         [[False, False, False, True]]
     """
-    d = _check_displacements(displacements)
+    d = check_pairs(
+        displacements,
+        "displacements",
+        ndim=4,
+        axes="(B, N, P, 2) (scene, target, subpatch, (range, azimuth))",
+    )
     n_sigma = check_positive(n_sigma, "n_sigma")
     min_sigma = check_positive(min_sigma, "min_sigma", allow_zero=True)
     given = None if sigma is None else _check_sigma(sigma, d)

@@ -112,7 +112,12 @@ def focus_test(
     """
     step = focus_step(params) / 2
     speeds = speed_bank(max_speed + step, step).to(strips.device)
-    res_px = HANN_BROADENING * params.azimuth_resolution * strips.shape[-1] / params.image_extent[1]
+    res_px = (
+        HANN_BROADENING
+        * params.geometry.cross_range_resolution
+        * strips.shape[-1]
+        / params.image_extent[1]
+    )
     half = max(2, math.ceil(2 * res_px))
     curve = focus_curve(strips, params, speeds, column, half)
     speed, width, peak = _vertex(curve, speeds)

@@ -30,13 +30,18 @@ def azimuth_times(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> t = azimuth_times(SpotlightParams(), 4)  # 150 m rows: 1 bin = 1 pulse (5 ms)
+        >>> t = azimuth_times(SpotlightParams.from_system(), 4)  # 150 m rows: 1 bin = 1 pulse
         >>> (t * 200).round().tolist()
         [-0.0, -1.0, 2.0, 1.0]
     """
     dx = params.image_extent[1] / width
     f = torch.fft.fftfreq(width, d=dx, dtype=torch.float64, device=device)
-    return -f * params.wavelength * params.scene_range / (2 * params.platform_speed)
+    return (
+        -f
+        * params.geometry.wavelength
+        * params.track.scene_range
+        / (2 * params.track.platform_speed)
+    )
 
 
 def refocus(
@@ -63,10 +68,12 @@ def refocus(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion import polar_format, simulate_phase_history
-        >>> p = SpotlightParams(image_size=(64, 512))
+        >>> from torchsar.motion import polar_format
+        >>> from torchsar.sar import simulate_phase_history
+        >>> p = SpotlightParams.from_system(image_size=(64, 512))
         >>> v = torch.tensor([[[0.0, 4.0]]], dtype=torch.float64)
-        >>> img = polar_format(simulate_phase_history(torch.zeros(1, 1, 2), p, velocities=v), p)
+        >>> g = simulate_phase_history(torch.zeros(1, 1, 2), p.geometry, velocities=v)
+        >>> img = polar_format(g, p)
         >>> peak = refocus(img, p, torch.tensor([0.0, 4.0])).abs().flatten(-2).amax(-1)
         >>> [round(float(a), 1) for a in peak[0]]
         [0.2, 1.0]
@@ -90,8 +97,8 @@ def fm_correction(
     """Complex128 ``(Q, W)`` azimuth-spectrum factors ``exp(+j kappa_0 dR_v(t - t_c))``."""
     t = azimuth_times(params, width, device=device) - center_time
     v = velocities.to(device=device, dtype=torch.float64)[:, None]
-    dr = (v * v - 2 * params.platform_speed * v) * t * t / (2 * params.scene_range)
-    phase = torch.remainder(4 * math.pi / params.wavelength * dr, 2 * math.pi)
+    dr = (v * v - 2 * params.track.platform_speed * v) * t * t / (2 * params.track.scene_range)
+    phase = torch.remainder(4 * math.pi / params.geometry.wavelength * dr, 2 * math.pi)
     return torch.polar(torch.ones_like(phase), phase)
 
 
@@ -103,12 +110,18 @@ def focus_step(params: SpotlightParams, aperture_time: float | None = None) -> f
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> round(focus_step(SpotlightParams()), 3)
+        >>> round(focus_step(SpotlightParams.from_system()), 3)
         0.96
     """
-    t = params.aperture_time if aperture_time is None else aperture_time
+    t = params.geometry.aperture_time if aperture_time is None else aperture_time
     per_mps = (
-        4 * math.pi / params.wavelength * params.platform_speed * t * t / (4 * params.scene_range)
+        4
+        * math.pi
+        / params.geometry.wavelength
+        * params.track.platform_speed
+        * t
+        * t
+        / (4 * params.track.scene_range)
     )
     return 4 * math.pi / per_mps
 

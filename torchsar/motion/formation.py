@@ -28,7 +28,6 @@ from torch import Tensor
 
 from torchsar._checks import OptionError, ShapeError, check_choice, check_complex, check_int
 from torchsar.motion.czt import czt
-from torchsar.motion.geometry import look_tangents, pulse_times, slant_ranges, wavenumbers
 from torchsar.motion.params import SpotlightParams
 
 __all__ = ["polar_format", "rereference", "taper"]
@@ -56,24 +55,25 @@ def rereference(g: Tensor, params: SpotlightParams, center: tuple[float, float])
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion.simulate import simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=3.0)
-        >>> g = simulate_phase_history(torch.tensor([[[10.0, -5.0]]], dtype=torch.float64), p)
+        >>> from torchsar.sar import simulate_phase_history
+        >>> p = SpotlightParams.from_system(azimuth_resolution=3.0)
+        >>> pos = torch.tensor([[[10.0, -5.0]]], dtype=torch.float64)
+        >>> g = simulate_phase_history(pos, p.geometry)
         >>> h = rereference(g, p, (10.0, -5.0))
         >>> bool(torch.allclose(h, torch.ones_like(h)))
         True
     """
     check_complex(g, "g", ndim=3)
-    return _rereference(g, params, center, pulse_times(params, device=g.device))
+    return _rereference(g, params, center, slice(None))
 
 
 def _rereference(
-    g: Tensor, params: SpotlightParams, center: tuple[float, float], t: Tensor
+    g: Tensor, params: SpotlightParams, center: tuple[float, float], pulses: slice
 ) -> Tensor:
-    """:func:`rereference` of pulses at slow times ``t (M,)``."""
+    """:func:`rereference` of the pulses ``pulses`` of the aperture."""
     c = torch.tensor([center], dtype=torch.float64, device=g.device)
-    dr = slant_ranges(c, params, t)[0] - slant_ranges(torch.zeros_like(c), params, t)[0]
-    kappa = wavenumbers(params, device=g.device)
+    dr = params.geometry.differential_ranges(c, pulses=pulses)[0]
+    kappa = params.geometry.wavenumbers(device=g.device)
     return g * torch.polar(torch.ones_like(dr[:, None] * kappa), dr[:, None] * kappa).to(g.dtype)
 
 
@@ -128,7 +128,7 @@ def polar_format(
 
     Args:
         g: complex ``(B, M, K)`` deramped on the scene centre
-            (:func:`~torchsar.motion.simulate.simulate_phase_history`).
+            (:func:`~torchsar.sar.simulate_phase_history`).
         params: the system.
         center: ``(range, azimuth)`` reference point in m.
         size: ``(H, W)`` pixels; default ``params.image_size``.
@@ -154,9 +154,9 @@ def polar_format(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion.simulate import simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=1.0, image_size=(64, 64))
-        >>> g = simulate_phase_history(torch.zeros(1, 1, 2), p)
+        >>> from torchsar.sar import simulate_phase_history
+        >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(64, 64))
+        >>> g = simulate_phase_history(torch.zeros(1, 1, 2), p.geometry)
         >>> img = polar_format(g, p)
         >>> divmod(int(img.abs().flatten().argmax()), 64), round(float(img.abs().max()), 3)
         ((32, 32), 1.0)
@@ -166,16 +166,16 @@ def polar_format(
     h, w = params.image_size if size is None else size
     check_int(h, "size[0]", minimum=1)
     check_int(w, "size[1]", minimum=1)
-    start, stop = _check_pulses(pulses, params.n_pulses)
-    if g.shape[1:] != (stop - start, params.n_samples):
+    start, stop = _check_pulses(pulses, params.geometry.pulses)
+    if g.shape[1:] != (stop - start, params.geometry.samples):
         raise ShapeError(
-            f"g must have shape (B, {stop - start}, {params.n_samples}) for these params and "
-            f"pulses, got {tuple(g.shape)}"
+            f"g must have shape (B, {stop - start}, {params.geometry.samples}) for these params "
+            f"and pulses, got {tuple(g.shape)}"
         )
-    t = pulse_times(params, device=g.device)[start:stop]
-    gc = _rereference(g, params, center, t)
-    u = look_tangents(params, center, t)
-    kappa = wavenumbers(params, device=g.device)
+    t = params.geometry.pulse_times(device=g.device)[start:stop]
+    gc = _rereference(g, params, center, slice(start, stop))
+    u = params.geometry.look_tangents(center, t)
+    kappa = params.geometry.wavenumbers(device=g.device)
     ky0, dk, n_ky = _range_grid(kappa, 1 / torch.sqrt(1 + u * u))
     ky = ky0 + dk * torch.arange(n_ky, dtype=torch.float64, device=g.device)
     q = (ky[None, :] * torch.sqrt(1 + u[:, None] ** 2) - float(kappa[0])) / dk

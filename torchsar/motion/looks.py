@@ -17,7 +17,6 @@ from torch import Tensor
 
 from torchsar._checks import OptionError, check_int, check_positive
 from torchsar.motion.formation import polar_format
-from torchsar.motion.geometry import pulse_times
 from torchsar.motion.params import SpotlightParams
 
 __all__ = ["LookPlan", "look_displacement", "look_images", "look_plan", "look_velocity"]
@@ -45,7 +44,7 @@ def look_plan(params: SpotlightParams, *, looks: int = 2, overlap: float = 0.0) 
     spread evenly from the first to the last pulse.
 
     Args:
-        params: the system (``M = params.n_pulses``).
+        params: the system (``M = params.geometry.pulses``).
         looks: number of looks ``K >= 1``.
         overlap: fraction of a look shared with the next one, in ``[0, 1)``.
 
@@ -57,7 +56,7 @@ def look_plan(params: SpotlightParams, *, looks: int = 2, overlap: float = 0.0) 
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> plan = look_plan(SpotlightParams(), looks=2)
+        >>> plan = look_plan(SpotlightParams.from_system(), looks=2)
         >>> plan.start.tolist(), plan.stop.tolist(), plan.time.tolist()
         ([0, 250], [250, 500], [-0.625, 0.625])
     """
@@ -65,13 +64,13 @@ def look_plan(params: SpotlightParams, *, looks: int = 2, overlap: float = 0.0) 
     overlap = check_positive(overlap, "overlap", allow_zero=True)
     if overlap >= 1:
         raise OptionError(f"overlap must be in [0, 1), got {overlap!r}")
-    m = params.n_pulses
+    m = params.geometry.pulses
     length = int(m // (1 + (k - 1) * (1 - overlap)))
     if length < 2:
         raise OptionError(f"looks = {k} leaves {length} pulse(s) per look (of {m}); use fewer")
     start = torch.tensor([round(i * (m - length) / max(k - 1, 1)) for i in range(k)])
     stop = start + length
-    t = pulse_times(params)
+    t = params.geometry.pulse_times()
     time = torch.stack([t[a:b].mean() for a, b in zip(start.tolist(), stop.tolist(), strict=True)])
     return LookPlan(start, stop, time)
 
@@ -110,9 +109,9 @@ def look_images(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion.simulate import simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=1.0, image_size=(64, 64))
-        >>> g = simulate_phase_history(torch.zeros(2, 1, 2), p)
+        >>> from torchsar.sar import simulate_phase_history
+        >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(64, 64))
+        >>> g = simulate_phase_history(torch.zeros(2, 1, 2), p.geometry)
         >>> x = look_images(g, p, looks=3, overlap=0.5)
         >>> x.shape, [divmod(int(i), 64) for i in x[0].abs().flatten(1).argmax(1)]
         (torch.Size([2, 3, 64, 64]), [(32, 32), (32, 32), (32, 32)])
@@ -135,10 +134,10 @@ def look_displacement(velocity: Tensor | float, dt: Tensor | float, params: Spot
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> round(look_displacement(4.0, 1.25, SpotlightParams()), 4)
+        >>> round(look_displacement(4.0, 1.25, SpotlightParams.from_system()), 4)
         9.9
     """
-    return (2 * velocity - velocity * velocity / params.platform_speed) * dt
+    return (2 * velocity - velocity * velocity / params.track.platform_speed) * dt
 
 
 def look_velocity(displacement_rate: Tensor, params: SpotlightParams) -> Tensor:
@@ -148,8 +147,8 @@ def look_velocity(displacement_rate: Tensor, params: SpotlightParams) -> Tensor:
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> round(float(look_velocity(torch.tensor(7.92), SpotlightParams())), 4)
+        >>> round(float(look_velocity(torch.tensor(7.92), SpotlightParams.from_system())), 4)
         4.0
     """
-    v = params.platform_speed
+    v = params.track.platform_speed
     return v * (1 - torch.sqrt((1 - displacement_rate / v).clamp(min=0)))

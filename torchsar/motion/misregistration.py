@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar.motion.decision import registration_sigma
+from torchsar.motion.decision import SAMPLING_ERROR, registration_sigma
 from torchsar.motion.focus import fm_correction
 from torchsar.motion.looks import LookPlan, look_displacement, look_velocity
 from torchsar.motion.params import HANN_BROADENING, SpotlightParams
@@ -16,9 +16,8 @@ from torchsar.motion.peaks import intensity
 from torchsar.motion.shift import estimate_shift
 from torchsar.motion.strips import peak_in_window, robust_pattern, strips
 
-__all__ = ["LOOK_SIGMA_FACTOR", "SAMPLING_ERROR", "LookTest", "look_test"]
+__all__ = ["LOOK_SIGMA_FACTOR", "LookTest", "look_test"]
 
-SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
 # Spread of the look-position estimate over its Cramér-Rao bound: z-scores of stationary
 # targets in white noise (image SNR 20 dB) had standard deviation 1.4 without this factor,
 # 0.9 with it (checked in tests/motion/test_find_movers.py).
@@ -137,8 +136,11 @@ def look_test(
     b, n = valid.shape
     k, w = looks.shape[1], looks.shape[-1]
     dy, dx = params.image_extent[0] / looks.shape[-2], params.image_extent[1] / w
-    res = (HANN_BROADENING * params.range_resolution, HANN_BROADENING * params.azimuth_resolution)
-    res_look = (res[0], res[1] * params.n_pulses / float(plan.stop[0] - plan.start[0]))
+    res = (
+        HANN_BROADENING * params.geometry.range_resolution,
+        HANN_BROADENING * params.geometry.cross_range_resolution,
+    )
+    res_look = (res[0], res[1] * params.geometry.pulses / float(plan.stop[0] - plan.start[0]))
     half = max(2, math.ceil(res[0] / dy))
     idx = torch.arange(b, device=pixel.device)[:, None].expand(b, n)
     flat = torch.stack([idx, pixel[..., 0], pixel[..., 1]], -1).reshape(-1, 3).clamp(min=0)
@@ -156,7 +158,7 @@ def look_test(
     rate = _slope(disp[..., 1], times).reshape(b, n)
     rate = rate - robust_pattern(rate, valid)
     velocity = look_velocity(rate, params)
-    dvdr = 1 / (2 - 2 * velocity / params.platform_speed)
+    dvdr = 1 / (2 - 2 * velocity / params.track.platform_speed)
     sigma = (sig_rate.reshape(b, n) * dvdr.abs()).clamp(min=min_sigma)
     score = velocity.abs() / sigma
     nan = torch.tensor(float("nan"), dtype=torch.float64, device=x.device)

@@ -1,10 +1,11 @@
-"""Spotlight SAR system parameters (the seed paper's Table 1) and what they really give.
+"""The Table-1 spotlight system of the motion experiments: one geometry plus its image grid.
 
-Geometry used throughout :mod:`torchsar.motion`: a 2-D slant plane (grazing angle 0, as in
-Table 1). The platform flies a straight line along azimuth at speed ``V``; at slow time ``t``
-it is at ``(range, azimuth) = (-R0, V t)``; the scene centre is the origin, so its slant
-range at ``t = 0`` (the aperture centre) is ``R0``. Points are written ``(range, azimuth)``
-in metres, matching the image axes ``(H, W) = (range, azimuth)``.
+The collection itself is a :class:`~torchsar.sar.SpotlightGeometry` with a straight
+:class:`~torchsar.sar.Track` (2-D slant plane, grazing angle 0, as in Table 1): the platform
+flies along azimuth at speed ``V`` and is at ``(range, azimuth) = (-R0, V t)`` at slow time
+``t``; the scene centre is the origin. :class:`SpotlightParams` adds only what image
+formation needs beside it: the scene extent and the image size. Points are written
+``(range, azimuth)`` in metres, matching the image axes ``(H, W) = (range, azimuth)``.
 """
 
 from __future__ import annotations
@@ -12,11 +13,12 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import cast
 
 from torchsar._checks import OptionError, check_int, check_positive
-from torchsar.imaging.geometry import SPEED_OF_LIGHT
+from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry, Track
 
-__all__ = ["HANN_BROADENING", "SPEED_OF_LIGHT", "SpotlightConsistencyWarning", "SpotlightParams"]
+__all__ = ["HANN_BROADENING", "SpotlightConsistencyWarning", "SpotlightParams"]
 
 HANN_BROADENING = 1.44  # 3 dB width of the Hann-weighted impulse response / unweighted
 
@@ -27,32 +29,24 @@ class SpotlightConsistencyWarning(UserWarning):
 
 @dataclass(frozen=True)
 class SpotlightParams:
-    """Single-channel spotlight SAR parameters with derived quantities.
+    """A straight-track spotlight collection and the images formed from it.
 
-    Defaults are Table 1 of Yusufoglu & Kartal (2011). Derived quantities are properties;
-    constructing a parameter set whose figures contradict each other emits a
-    :class:`SpotlightConsistencyWarning` per problem (the defaults emit two: the chirp gives
-    150 MHz, i.e. 1 m range resolution rather than the stated 0.3 m, and PRF 200 Hz samples a
-    150 m azimuth extent, less than the 200 m scene). :meth:`consistency_report` returns the
-    same messages without warning.
+    Build it from the system figures with :meth:`from_system` (defaults: Table 1 of
+    Yusufoglu & Kartal 2011). Constructing a parameter set whose figures contradict each
+    other emits a :class:`SpotlightConsistencyWarning` per problem (Table 1 emits two: the
+    chirp gives 150 MHz, i.e. 1 m range resolution rather than the stated 0.3 m, and PRF
+    200 Hz samples a 150 m azimuth extent, less than the 200 m scene).
+    :meth:`consistency_report` returns the same messages without warning.
 
-    Args:
-        center_frequency: carrier ``f0`` in Hz.
-        pulse_duration: chirp length ``Tp`` in s.
-        prf: pulse repetition frequency in Hz.
-        sampling_rate: complex (I/Q) fast-time sampling rate ``fs`` in Hz.
-        chirp_rate: sweep rate ``gamma`` in Hz/s; bandwidth ``B = gamma * Tp``.
-        platform_speed: ``V`` in m/s.
-        scene_range: slant range ``R0`` to the scene centre in m.
+    Attributes:
+        geometry: the collection; must have a :class:`~torchsar.sar.Track`.
         scene_extent: ``(range, azimuth)`` size of the observed scene in m.
         image_size: ``(H, W)`` pixels of one formed image.
-        azimuth_resolution: wanted azimuth resolution in m; sets the aperture
-            ``dtheta = lambda / (2 rho_a)`` and hence the number of pulses.
         stated_range_resolution: the range resolution the system is claimed to have (Table 1
             says 0.3 m); only used to warn when the chirp cannot deliver it. ``None`` skips it.
 
     Raises:
-        OptionError: a non-positive figure, or a bandwidth larger than the sampling rate.
+        OptionError: a geometry without a track, a non-positive extent or a size below 2.
 
     References:
         M. H. Yusufoglu, M. Kartal, "Moving target detection in SAR images by using subpatch
@@ -64,108 +58,112 @@ class SpotlightParams:
         >>> import warnings
         >>> with warnings.catch_warnings():
         ...     warnings.simplefilter("ignore")
-        ...     p = SpotlightParams()
-        >>> round(p.bandwidth / 1e6), p.n_samples, p.n_pulses, round(p.range_resolution, 2)
+        ...     p = SpotlightParams.from_system()
+        >>> g = p.geometry
+        >>> round(g.bandwidth / 1e6), g.samples, g.pulses, round(g.range_resolution, 2)
         (150, 180, 500, 1.0)
     """
 
-    center_frequency: float = 10e9
-    pulse_duration: float = 1e-6
-    prf: float = 200.0
-    sampling_rate: float = 180e6
-    chirp_rate: float = 1.5e14
-    platform_speed: float = 200.0
-    scene_range: float = 10e3
+    geometry: SpotlightGeometry
     scene_extent: tuple[float, float] = (200.0, 200.0)
     image_size: tuple[int, int] = (1024, 1024)
-    azimuth_resolution: float = 0.3
-    stated_range_resolution: float | None = 0.3
+    stated_range_resolution: float | None = None
 
     def __post_init__(self) -> None:
-        for name in (
-            "center_frequency",
-            "pulse_duration",
-            "prf",
-            "sampling_rate",
-            "chirp_rate",
-            "platform_speed",
-            "scene_range",
-            "azimuth_resolution",
-        ):
-            check_positive(getattr(self, name), name)
+        if not isinstance(self.geometry, SpotlightGeometry) or self.geometry.track is None:
+            raise OptionError(
+                f"geometry must be a SpotlightGeometry with a track, got {self.geometry!r:.80}"
+            )
         for i, v in enumerate(self.scene_extent):
             check_positive(v, f"scene_extent[{i}]")
         for i, v in enumerate(self.image_size):
             check_int(v, f"image_size[{i}]", minimum=2)
-        if self.bandwidth > self.sampling_rate:
-            raise OptionError(
-                f"chirp bandwidth chirp_rate * pulse_duration = {self.bandwidth:.4g} Hz must not "
-                f"exceed sampling_rate = {self.sampling_rate:.4g} Hz (complex sampling)"
-            )
         for message in self.consistency_report():
-            warnings.warn(message, SpotlightConsistencyWarning, stacklevel=3)
+            warnings.warn(message, SpotlightConsistencyWarning, stacklevel=4)
 
-    # ---- fast time -------------------------------------------------------------------
-    @property
-    def wavelength(self) -> float:
-        """Carrier wavelength ``lambda = c / f0`` in m."""
-        return SPEED_OF_LIGHT / self.center_frequency
+    @classmethod
+    def from_system(
+        cls,
+        *,
+        center_frequency: float = 10e9,
+        pulse_duration: float = 1e-6,
+        prf: float = 200.0,
+        sampling_rate: float = 180e6,
+        chirp_rate: float = 1.5e14,
+        platform_speed: float = 200.0,
+        scene_range: float = 10e3,
+        scene_extent: tuple[float, float] = (200.0, 200.0),
+        image_size: tuple[int, int] = (1024, 1024),
+        azimuth_resolution: float = 0.3,
+        stated_range_resolution: float | None = 0.3,
+    ) -> SpotlightParams:
+        """Parameters from the system figures of a deramped (dechirped, deskewed) receiver.
+
+        The ``K = max(2, round(fs Tp))`` fast-time samples are ``gamma / fs`` apart
+        (bandwidth ``K gamma / fs``, the chirp's ``gamma Tp`` when ``fs Tp`` is whole); the
+        aperture ``lambda / (2 rho_a)`` lasts ``T_a = 2 R0 tan(aperture / 2) / V`` and holds
+        ``M = max(2, round(T_a PRF))`` pulses.
+
+        Args:
+            center_frequency: carrier ``f0`` in Hz.
+            pulse_duration: chirp length ``Tp`` in s.
+            prf: pulse repetition frequency in Hz.
+            sampling_rate: complex (I/Q) fast-time sampling rate ``fs`` in Hz.
+            chirp_rate: sweep rate ``gamma`` in Hz/s.
+            platform_speed: ``V`` in m/s.
+            scene_range: slant range ``R0`` to the scene centre in m.
+            scene_extent: ``(range, azimuth)`` size of the observed scene in m.
+            image_size: ``(H, W)`` pixels of one formed image.
+            azimuth_resolution: wanted azimuth resolution ``rho_a`` in m.
+            stated_range_resolution: the claimed range resolution (warned about), or ``None``.
+
+        Raises:
+            OptionError: a non-positive figure, or a chirp bandwidth larger than the
+                sampling rate.
+        """
+        for name, value in (
+            ("center_frequency", center_frequency),
+            ("pulse_duration", pulse_duration),
+            ("sampling_rate", sampling_rate),
+            ("chirp_rate", chirp_rate),
+            ("azimuth_resolution", azimuth_resolution),
+        ):
+            check_positive(value, name)
+        track = Track(platform_speed=platform_speed, scene_range=scene_range, prf=prf)
+        if chirp_rate * pulse_duration > sampling_rate:
+            raise OptionError(
+                f"chirp bandwidth chirp_rate * pulse_duration = {chirp_rate * pulse_duration:.4g} "
+                f"Hz must not exceed sampling_rate = {sampling_rate:.4g} Hz (complex sampling)"
+            )
+        samples = max(2, round(sampling_rate * pulse_duration))
+        aperture = SPEED_OF_LIGHT / center_frequency / (2 * azimuth_resolution)
+        aperture_time = 2 * scene_range * math.tan(aperture / 2) / platform_speed
+        geometry = SpotlightGeometry(
+            center_frequency=center_frequency,
+            bandwidth=samples * chirp_rate / sampling_rate,
+            aperture=aperture,
+            pulses=max(2, round(aperture_time * prf)),
+            samples=samples,
+            chirp_rate=chirp_rate,
+            track=track,
+        )
+        return cls(geometry, scene_extent, image_size, stated_range_resolution)
 
     @property
-    def bandwidth(self) -> float:
-        """Swept bandwidth ``B = gamma * Tp`` in Hz."""
-        return self.chirp_rate * self.pulse_duration
-
-    @property
-    def n_samples(self) -> int:
-        """Fast-time samples per pulse ``K = round(fs * Tp)`` (deramped, deskewed)."""
-        return max(2, round(self.sampling_rate * self.pulse_duration))
-
-    @property
-    def frequency_step(self) -> float:
-        """Frequency spacing of the deramped samples ``gamma / fs`` in Hz."""
-        return self.chirp_rate / self.sampling_rate
-
-    @property
-    def range_resolution(self) -> float:
-        """Slant-range resolution ``c / (2 B)`` in m (unweighted)."""
-        return SPEED_OF_LIGHT / (2 * self.bandwidth)
-
-    @property
-    def unambiguous_range(self) -> float:
-        """Range extent sampled without aliasing, ``c fs / (2 gamma)`` in m."""
-        return SPEED_OF_LIGHT / (2 * self.frequency_step)
-
-    # ---- slow time -------------------------------------------------------------------
-    @property
-    def aperture_angle(self) -> float:
-        """Integration angle ``lambda / (2 rho_a)`` in rad."""
-        return self.wavelength / (2 * self.azimuth_resolution)
-
-    @property
-    def aperture_time(self) -> float:
-        """Synthetic-aperture time ``2 R0 tan(dtheta / 2) / V`` in s."""
-        return 2 * self.scene_range * math.tan(self.aperture_angle / 2) / self.platform_speed
-
-    @property
-    def n_pulses(self) -> int:
-        """Pulses in the aperture, ``round(T_a * PRF)``."""
-        return max(2, round(self.aperture_time * self.prf))
-
-    @property
-    def unambiguous_azimuth(self) -> float:
-        """Azimuth extent sampled without aliasing, ``lambda R0 PRF / (2 V)`` in m."""
-        return self.wavelength * self.scene_range * self.prf / (2 * self.platform_speed)
+    def track(self) -> Track:
+        """The platform track of :attr:`geometry`."""
+        return cast(Track, self.geometry.track)  # never None: checked at construction
 
     @property
     def scene_doppler_bandwidth(self) -> float:
         """Doppler spread of the scene ``2 V W_az / (lambda R0)`` in Hz (must be <= PRF)."""
-        return 2 * self.platform_speed * self.scene_extent[1] / (self.wavelength * self.scene_range)
-
-    @property
-    def blind_speed(self) -> float:
-        """Radial speed whose Doppler equals the PRF, ``lambda PRF / 2`` in m/s."""
-        return self.wavelength * self.prf / 2
+        tr = self.track
+        return (
+            2
+            * tr.platform_speed
+            * self.scene_extent[1]
+            / (self.geometry.wavelength * tr.scene_range)
+        )
 
     # ---- image grid ------------------------------------------------------------------
     @property
@@ -176,8 +174,8 @@ class SpotlightParams:
         (the periodic replica); cutting keeps one copy.
         """
         return (
-            min(self.scene_extent[0], self.unambiguous_range),
-            min(self.scene_extent[1], self.unambiguous_azimuth),
+            min(self.scene_extent[0], self.geometry.unambiguous_range),
+            min(self.scene_extent[1], self.geometry.unambiguous_azimuth),
         )
 
     @property
@@ -188,27 +186,27 @@ class SpotlightParams:
 
     def consistency_report(self) -> list[str]:
         """Messages describing where the figures contradict each other (empty if consistent)."""
-        out = []
+        geo, out = self.geometry, []
         stated = self.stated_range_resolution
-        if stated is not None and self.range_resolution > 1.05 * stated:
+        if stated is not None and geo.range_resolution > 1.05 * stated:
             out.append(
-                f"chirp_rate * pulse_duration gives B = {self.bandwidth / 1e6:.0f} MHz, i.e. "
-                f"{self.range_resolution:.2f} m range resolution, not the stated {stated} m "
+                f"the chirp gives B = {geo.bandwidth / 1e6:.0f} MHz, i.e. "
+                f"{geo.range_resolution:.2f} m range resolution, not the stated {stated} m "
                 f"(that needs {SPEED_OF_LIGHT / (2 * stated) / 1e6:.0f} MHz)"
             )
-        if self.unambiguous_range < self.scene_extent[0]:
+        if geo.unambiguous_range < self.scene_extent[0]:
             out.append(
-                f"sampling_rate {self.sampling_rate / 1e6:.0f} MHz samples a range extent of "
-                f"{self.unambiguous_range:.0f} m < scene {self.scene_extent[0]:.0f} m; "
-                f"images are cut to {self.unambiguous_range:.0f} m"
+                f"sampling every {geo.frequency_step / 1e6:.3g} MHz covers a range extent of "
+                f"{geo.unambiguous_range:.0f} m < scene {self.scene_extent[0]:.0f} m; "
+                f"images are cut to {geo.unambiguous_range:.0f} m"
             )
-        if self.unambiguous_azimuth < self.scene_extent[1]:
+        if geo.unambiguous_azimuth < self.scene_extent[1]:
             out.append(
-                f"PRF {self.prf:g} Hz samples an azimuth extent of "
-                f"{self.unambiguous_azimuth:.0f} m "
+                f"PRF {self.track.prf:g} Hz samples an azimuth extent of "
+                f"{geo.unambiguous_azimuth:.0f} m "
                 f"< scene {self.scene_extent[1]:.0f} m (scene Doppler "
                 f"{self.scene_doppler_bandwidth:.0f} Hz > PRF); images are cut to "
-                f"{self.unambiguous_azimuth:.0f} m and radial speeds alias beyond "
-                f"+-{self.blind_speed / 2:.2f} m/s"
+                f"{geo.unambiguous_azimuth:.0f} m and radial speeds alias beyond "
+                f"+-{geo.blind_speed / 2:.2f} m/s"
             )
         return out

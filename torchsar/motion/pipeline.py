@@ -98,7 +98,7 @@ def find_movers(
     Args:
         phase_history: complex ``(B, M, K)`` deramped on the scene centre.
         params: the system (the image's azimuth extent must be the sampled extent
-            ``params.unambiguous_azimuth``, true whenever the scene is at least that wide).
+            ``params.geometry.unambiguous_azimuth``, true whenever the scene is at least that wide).
         looks: number of looks (>= 2).
         overlap: fraction of a look shared with the next.
         window: image-formation taper.
@@ -120,11 +120,12 @@ def find_movers(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion import SpotlightParams, simulate_phase_history
-        >>> p = SpotlightParams(image_size=(128, 512))
+        >>> from torchsar.motion import SpotlightParams
+        >>> from torchsar.sar import add_noise, simulate_phase_history
+        >>> p = SpotlightParams.from_system(image_size=(128, 512))
         >>> pos = torch.tensor([[[-20.0, -10.0], [15.0, 5.0], [0.0, -20.0], [30.0, 15.0]]])
         >>> vel = torch.zeros_like(pos); vel[0, 3, 1] = 2.0  # 2 m/s along track
-        >>> g = simulate_phase_history(pos, p, velocities=vel, noise_std=0.3)
+        >>> g = add_noise(simulate_phase_history(pos, p.geometry, velocities=vel), std=0.3, seed=0)
         >>> r = find_movers(g, p, subpatch=False)
         >>> r.mover.tolist(), round(float(r.velocity[r.mover]), 1)
         ([[False, False, False, True]], 2.0)
@@ -188,7 +189,7 @@ def _subpatch(g, params, position, valid, window, n_sigma) -> Tensor:
     """Subpatch decision of the subpatch track nearest each target (3 m gate)."""
     result = subpatch_movers(g, params, window=window, n_sigma=n_sigma)
     tracks = result.tracks
-    period = torch.tensor([params.unambiguous_range, params.unambiguous_azimuth])
+    period = torch.tensor([params.geometry.unambiguous_range, params.geometry.unambiguous_azimuth])
     track_pos = tracks.position[:, :, 0] + result.centers[0].double()  # (B, N', 2)
     d = wrap(position[:, :, None] - track_pos[:, None], period.double()).norm(dim=-1)
     d = torch.where(tracks.valid[:, None, :, 0], d, torch.inf).nan_to_num(nan=torch.inf)

@@ -22,7 +22,7 @@ def subpatch_centers(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> subpatch_centers(SpotlightParams()).tolist()
+        >>> subpatch_centers(SpotlightParams.from_system()).tolist()
         [[-50.0, -50.0], [-50.0, 50.0], [50.0, -50.0], [50.0, 50.0]]
     """
     if not (isinstance(grid, tuple | list) and len(grid) == 2):
@@ -71,9 +71,9 @@ def subpatch_images(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion.simulate import simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=1.0, image_size=(32, 32))
-        >>> g = simulate_phase_history(torch.zeros(2, 1, 2), p)
+        >>> from torchsar.sar import simulate_phase_history
+        >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(32, 32))
+        >>> g = simulate_phase_history(torch.zeros(2, 1, 2), p.geometry)
         >>> subpatch_images(g, p).shape
         torch.Size([2, 4, 32, 32])
     """

@@ -10,14 +10,17 @@ import torch
 from torch import Tensor
 
 from torchsar.cfar import Detection
-from torchsar.motion.decision import MoverDecision, detect_movers, registration_sigma
+from torchsar.motion.decision import (
+    SAMPLING_ERROR,
+    MoverDecision,
+    detect_movers,
+    registration_sigma,
+)
 from torchsar.motion.params import HANN_BROADENING, SpotlightParams
 from torchsar.motion.subpatch import subpatch_centers, subpatch_images
 from torchsar.motion.tracks import Tracks, measure_displacements
 
 __all__ = ["SubpatchResult", "subpatch_movers"]
-
-_SAMPLING_ERROR = 0.03  # registration error of sampled chips (pixels, 1/upsample quantisation)
 
 
 @dataclass(frozen=True)
@@ -85,11 +88,12 @@ def subpatch_movers(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> from torchsar.motion import SpotlightParams, simulate_phase_history
-        >>> p = SpotlightParams(azimuth_resolution=1.0, image_size=(256, 256))
+        >>> from torchsar.motion import SpotlightParams
+        >>> from torchsar.sar import add_noise, simulate_phase_history
+        >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(256, 256))
         >>> pos = torch.tensor([[[-20.0, -10.0], [15.0, 5.0], [0.0, -20.0], [10.0, 15.0]]])
         >>> vel = torch.zeros_like(pos); vel[0, 3, 0] = 1.0  # 1 m/s in range
-        >>> g = simulate_phase_history(pos, p, velocities=vel, noise_std=0.3)
+        >>> g = add_noise(simulate_phase_history(pos, p.geometry, velocities=vel), std=0.3, seed=0)
         >>> r = subpatch_movers(g, p)
         >>> r.decision.mover.sum().item(), r.tracks.position.shape[1]
         (1, 4)
@@ -101,11 +105,14 @@ def subpatch_movers(
     )
     if correct_distortion:
         scale = HANN_BROADENING if window == "hann" else 1.0
-        res = (scale * params.range_resolution, scale * params.azimuth_resolution)
+        res = (
+            scale * params.geometry.range_resolution,
+            scale * params.geometry.cross_range_resolution,
+        )
         crlb = math.sqrt(2) * registration_sigma(tracks.snr, res)[:, :, None, :]
         h, w = images.shape[-2:]
         px = torch.tensor([params.image_extent[0] / h, params.image_extent[1] / w])
-        sigma = torch.sqrt(crlb**2 + (_SAMPLING_ERROR * px.to(crlb)) ** 2)
+        sigma = torch.sqrt(crlb**2 + (SAMPLING_ERROR * px.to(crlb)) ** 2)
         decision = detect_movers(
             tracks.corrected, sigma=sigma, n_sigma=n_sigma, min_sigma=min_sigma
         )

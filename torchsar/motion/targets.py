@@ -73,8 +73,8 @@ def detect_targets(
     """
     h, w = image.shape[-2:]
     res_px = (
-        params.range_resolution * h / params.image_extent[0],
-        params.azimuth_resolution * w / params.image_extent[1],
+        params.geometry.range_resolution * h / params.image_extent[0],
+        params.geometry.cross_range_resolution * w / params.image_extent[1],
     )
     speeds = speed_bank(max_speed, 1.5 * focus_step(params)).to(image.device)
     if detector is None:

@@ -64,7 +64,6 @@ import torch
 from torch import Tensor
 
 from torchsar.motion.formation import taper
-from torchsar.motion.geometry import pulse_times, slant_ranges
 from torchsar.motion.params import SpotlightParams
 
 __all__ = [
@@ -93,10 +92,10 @@ def _planar_fit(
 
     With ``fold`` the position is folded into the sampled window (replica ``k``).
     """
-    t = pulse_times(params, device=points.device)
+    t = params.geometry.pulse_times(device=points.device)
     c = centers.to(torch.float64)
-    u = (c[..., 1:2] - params.platform_speed * t) / (params.scene_range + c[..., 0:1])
-    dr = slant_ranges(points, params, t, velocities) - slant_ranges(c, params, t)
+    u = params.geometry.look_tangents(c, t)
+    dr = params.geometry.slant_ranges(points, t, velocities) - params.geometry.slant_ranges(c, t)
     z = dr * torch.sqrt(1 + u * u)
     w = taper(t.numel(), window, t)
     sw, su, suu = w.sum(), (w * u).sum(-1), (w * u * u).sum(-1)
@@ -105,11 +104,13 @@ def _planar_fit(
     y = (sz - x * su) / sw
     if not fold:
         return torch.stack([y, x], dim=-1)
-    r_c = params.scene_range + c[..., 0]
-    period_x = params.wavelength * params.prf * r_c / (2 * params.platform_speed)
+    r_c = params.track.scene_range + c[..., 0]
+    period_x = (
+        params.geometry.wavelength * params.track.prf * r_c / (2 * params.track.platform_speed)
+    )
     k = torch.floor(x / period_x + 0.5)  # replica shown in the window
     y = y + k * period_x * c[..., 1] / r_c  # replicas sit along (u_c P, P) in (range, azimuth)
-    return torch.stack([wrap(y, params.unambiguous_range), x - k * period_x], dim=-1)
+    return torch.stack([wrap(y, params.geometry.unambiguous_range), x - k * period_x], dim=-1)
 
 
 def planar_image_positions(
@@ -134,7 +135,7 @@ def planar_image_positions(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> p = SpotlightParams()
+        >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, 0.0]], dtype=torch.float64)
         >>> q = planar_image_positions(torch.tensor([[10.0, 0.0]]), p, c)
         >>> (q.round(decimals=3) + 0).tolist()
@@ -171,7 +172,7 @@ def scene_positions(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> p = SpotlightParams()
+        >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, 50.0]], dtype=torch.float64)
         >>> q = planar_image_positions(torch.tensor([[5.0, -20.0]]), p, c)  # distorted
         >>> (scene_positions(q, p, c).round(decimals=4) + 0).tolist()
@@ -204,7 +205,7 @@ def first_order_offsets(
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> p = SpotlightParams()
+        >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, -50.0], [0.0, 50.0]], dtype=torch.float64)
         >>> v = torch.tensor([[0.4, 0.0]], dtype=torch.float64)
         >>> first_order_offsets(torch.zeros(1, 2), v, p, c).tolist()
@@ -213,9 +214,9 @@ def first_order_offsets(
     v = velocities.to(torch.float64)[..., :, None, :]
     x_t = positions.to(torch.float64)[..., :, None, 1]
     c = centers.to(torch.float64)
-    speed = params.platform_speed
+    speed = params.track.platform_speed
     dy = v[..., 0] * c[:, 1] / speed
-    dx = -v[..., 0] * (params.scene_range + c[:, 0]) / speed - v[..., 1] * x_t / speed
+    dx = -v[..., 0] * (params.track.scene_range + c[:, 0]) / speed - v[..., 1] * x_t / speed
     return torch.stack([dy, dx], dim=-1)
 
 
@@ -224,9 +225,11 @@ def folded_speed(speed: float | Tensor, params: SpotlightParams) -> float | Tens
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
-        >>> round(folded_speed(2.34, SpotlightParams()), 3)
+        >>> round(folded_speed(2.34, SpotlightParams.from_system()), 3)
         -0.658
     """
     if isinstance(speed, Tensor):
-        return wrap(speed.to(torch.float64), params.blind_speed)
-    return speed - params.blind_speed * math.floor(speed / params.blind_speed + 0.5)
+        return wrap(speed.to(torch.float64), params.geometry.blind_speed)
+    return speed - params.geometry.blind_speed * math.floor(
+        speed / params.geometry.blind_speed + 0.5
+    )

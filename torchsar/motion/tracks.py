@@ -98,7 +98,8 @@ def _grid(params: SpotlightParams, shape: tuple[int, int]) -> tuple[Tensor, Tens
     spacing = torch.tensor([ext[0] / shape[0], ext[1] / shape[1]], dtype=torch.float64)
     centre = torch.tensor([shape[0] // 2, shape[1] // 2], dtype=torch.float64)
     period = torch.tensor(
-        [params.unambiguous_range, params.unambiguous_azimuth], dtype=torch.float64
+        [params.geometry.unambiguous_range, params.geometry.unambiguous_azimuth],
+        dtype=torch.float64,
     )
     return spacing, centre, period
 
@@ -191,8 +192,8 @@ def measure_displacements(
     h, w = images.shape[-2:]
     spacing, centre, period = _grid(params, (h, w))
     res_px = (
-        params.range_resolution / float(spacing[0]),
-        params.azimuth_resolution / float(spacing[1]),
+        params.geometry.range_resolution / float(spacing[0]),
+        params.geometry.cross_range_resolution / float(spacing[1]),
     )
     detector = default_detector(res_px) if detector is None else detector
     radius = max(1, math.ceil(2 * max(res_px))) if radius is None else radius

@@ -1,4 +1,9 @@
-"""MSTAR-like simulated chips and scenes with ground truth, and SAR clutter models."""
+"""MSTAR-like simulated chips and scenes with ground truth, and SAR clutter models.
+
+These are detection datasets: intensity images ``(B, C, H, W)`` with masks and instances.
+Complex reflectivity for phase-history experiments is :mod:`torchsar.imaging.scenes`, and
+phase histories themselves are :mod:`torchsar.sar`.
+"""
 
 from torchsar.simulate.batch import SimBatch
 from torchsar.simulate.chips import chips

@@ -18,6 +18,7 @@ import torch
 from torch import Tensor
 
 import torchsar.imaging as ti
+import torchsar.sar as sar
 from torchsar.cfar import ca
 from torchsar.metrics import pixel_counts
 
@@ -147,13 +148,14 @@ METHODS: dict[str, Callable[[Tensor, str, Tensor], tuple]] = {
 def simulate(cfg: Config, case: ErrorCase, gen: torch.Generator) -> dict[str, Tensor]:
     """True scenes, clean and corrupted phase histories, and the injected error."""
     n = cfg.size
+    scene_seed, noise_seed = torch.randint(0, 2**62, (2,), generator=gen).tolist()
     f, mask = ti.point_scene(
-        cfg.scenes, size=(n, n), points=max(1, round(cfg.density * n * n)), generator=gen
+        cfg.scenes, size=(n, n), points=max(1, round(cfg.density * n * n)), seed=scene_seed
     )
-    clean = ti.add_noise(
-        ti.phase_history(f, ti.SpotlightGeometry.for_image((n, n))),
+    clean = sar.add_noise(
+        sar.phase_history(f, sar.SpotlightGeometry.for_image((n, n))),
         snr_db=cfg.snr_db,
-        generator=gen,
+        seed=noise_seed,
     )
     phi = case.make(cfg.scenes, n, n, gen)
     return {"f": f, "mask": mask, "clean": clean, "g": ti.apply_phase_error(clean, phi), "phi": phi}

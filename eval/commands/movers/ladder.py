@@ -31,7 +31,7 @@ def _match(
 ) -> tuple[dict[int, int], set[int]]:
     """Target index of each layout point (3 m gate, wider for a fast mover) and the
     fragments of the mover (other peaks inside its smear)."""
-    period = torch.tensor([params.unambiguous_range, params.unambiguous_azimuth])
+    period = torch.tensor([params.geometry.unambiguous_range, params.geometry.unambiguous_azimuth])
     centre = torch.zeros(1, 2, dtype=torch.float64)
     pred = planar_image_positions(pos, params, centre, velocities=vel)[:, 0]
     ok = report.valid[b].cpu()
@@ -39,7 +39,7 @@ def _match(
     dist = torch.where(ok[None], d.norm(dim=-1), torch.inf)
     matched: dict[int, int] = {}
     for j in range(pos.shape[0]):
-        gate = 3.0 + float(vel[j].norm()) * params.aperture_time
+        gate = 3.0 + float(vel[j].norm()) * params.geometry.aperture_time
         if (
             dist.shape[1]
             and float(dist[j].min()) <= gate
@@ -48,8 +48,8 @@ def _match(
             matched[j] = int(dist[j].argmin())
     fragments: set[int] = set()
     if pos.shape[0] > MOVER:
-        walk = 3.0 + abs(float(vel[MOVER, 0])) * params.aperture_time
-        smear = 3.0 + 2 * abs(float(vel[MOVER, 1])) * params.aperture_time
+        walk = 3.0 + abs(float(vel[MOVER, 0])) * params.geometry.aperture_time
+        smear = 3.0 + 2 * abs(float(vel[MOVER, 1])) * params.geometry.aperture_time
         near = (d[MOVER, :, 0].abs() <= walk) & (d[MOVER, :, 1].abs() <= smear) & ok
         fragments = {int(i) for i in near.nonzero().flatten()} - set(matched.values())
     return matched, fragments
@@ -89,7 +89,7 @@ def scene_row(
     v_a = float(vel[MOVER, 1]) if has_mover else 0.0
     row = {
         "theory_look_shift_m": look_displacement(v_a, dt, params),
-        "theory_smear_m": 2 * abs(v_a) * params.aperture_time,
+        "theory_smear_m": 2 * abs(v_a) * params.geometry.aperture_time,
         "mover_found": best >= 0,
         **_mover_columns(report, b, best),
         "stationary_found": len(still),

@@ -63,7 +63,7 @@ class LadderConfig:
 def _params(cfg: LadderConfig) -> SpotlightParams:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return SpotlightParams(
+        return SpotlightParams.from_system(
             image_size=(cfg.size // 4, cfg.size), azimuth_resolution=cfg.azimuth_resolution
         )
 
@@ -190,13 +190,13 @@ def _write(out: Path, table, sens, params: SpotlightParams, cfg: LadderConfig) -
             "movers",
             {
                 **asdict(cfg),
-                "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
+                "params": asdict(params),
                 "derived": {
-                    "n_pulses": params.n_pulses,
-                    "aperture_time_s": params.aperture_time,
-                    "range_resolution_m": params.range_resolution,
+                    "n_pulses": params.geometry.pulses,
+                    "aperture_time_s": params.geometry.aperture_time,
+                    "range_resolution_m": params.geometry.range_resolution,
                     "pixel_spacing_m": params.pixel_spacing,
-                    "blind_speed_mps": params.blind_speed,
+                    "blind_speed_mps": params.geometry.blind_speed,
                 },
                 "consistency_notes": params.consistency_report(),
                 "layout": LAYOUT,

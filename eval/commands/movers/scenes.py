@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar.motion import SpotlightParams, polar_format, simulate_phase_history
+from torchsar.motion import SpotlightParams, polar_format
+from torchsar.sar import add_noise, simulate_phase_history
 
 __all__ = ["LAYOUT", "MOVER", "Clutter", "make_clutter", "noise_std", "simulate_scenes"]
 
@@ -20,7 +21,7 @@ MOVER = 3
 
 def noise_std(params: SpotlightParams, snr_db: float) -> float:
     """Per-sample noise giving image peak SNR ``snr_db`` for a unit point (Hann in 2-D)."""
-    m, k = params.n_pulses, params.n_samples
+    m, k = params.geometry.pulses, params.geometry.samples
     gain = (0.5 * m * 0.5 * k) / math.sqrt(0.375 * m * 0.375 * k)  # sum w / sqrt(sum w^2)
     return gain * 10 ** (-snr_db / 20)
 
@@ -48,12 +49,15 @@ def make_clutter(
     full-aperture image has mean intensity 1 (measured on the formed image).
     """
     if points == 0:
-        return Clutter(torch.zeros(0, params.n_pulses, params.n_samples, dtype=torch.complex64), 0)
+        return Clutter(
+            torch.zeros(0, params.geometry.pulses, params.geometry.samples, dtype=torch.complex64),
+            0,
+        )
     gen = torch.Generator().manual_seed(seed)
     ext = torch.tensor(params.image_extent, dtype=torch.float64)
     pos = (torch.rand(realisations, points, 2, generator=gen, dtype=torch.float64) - 0.5) * ext
     amp = torch.randn(realisations, points, generator=gen, dtype=torch.complex128)
-    g = simulate_phase_history(pos, params, amplitudes=amp).to(torch.complex64)
+    g = simulate_phase_history(pos, params.geometry, amplitudes=amp).to(torch.complex64)
     mean = polar_format(g, params, size=size).abs().square().mean(dim=(-2, -1))
     return Clutter(g / mean.sqrt()[:, None, None], points)
 
@@ -70,7 +74,7 @@ def simulate_scenes(
 ) -> tuple[Tensor, Tensor]:
     """Phase histories ``(B, M, K)`` of the layout with the mover at ``velocities (B, 2)``.
 
-    Per scene ``b``: noise from generator ``seeds[b]``, clutter realisation ``seeds[b]``
+    Per scene ``b``: noise from seed ``seeds[b]``, clutter realisation ``seeds[b]``
     scaled to ``cnr_db`` over the noise, image peak SNR ``snr_db[b]`` of every target.
     Without ``mover`` the moving target is left out (control scenes).
 
@@ -86,10 +90,8 @@ def simulate_scenes(
     out = []
     for i in range(b):
         sigma = noise_std(params, float(snr_db[i]))
-        gen = torch.Generator().manual_seed(int(seeds[i]))
-        g = simulate_phase_history(
-            pos[i : i + 1], params, velocities=vel[i : i + 1], noise_std=sigma, generator=gen
-        ).to(torch.complex64)
+        g = simulate_phase_history(pos[i : i + 1], params.geometry, velocities=vel[i : i + 1])
+        g = add_noise(g, std=sigma, seed=int(seeds[i])).to(torch.complex64)
         noise_power = 10 ** (-float(snr_db[i]) / 10)
         out.append(g + clutter.scaled(seeds[i : i + 1], noise_power * 10 ** (cnr_db / 10)))
     return torch.cat(out), pos

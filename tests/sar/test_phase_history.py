@@ -9,20 +9,21 @@ import torch
 from tests.reference.imaging import exact_phase_history
 from torchsar._checks import OptionError, ShapeError
 from torchsar.imaging.fourier import fft2c, ifft2c
-from torchsar.imaging.geometry import SPEED_OF_LIGHT, SpotlightGeometry
-from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
-from torchsar.imaging.scenes import point_scene, speckled_scene
-
-
-def _gen(seed=0):
-    return torch.Generator().manual_seed(seed)
+from torchsar.imaging.scenes import point_scene
+from torchsar.sar import (
+    SPEED_OF_LIGHT,
+    SpotlightGeometry,
+    add_noise,
+    phase_history,
+    simulate_phase_history,
+)
 
 
 class TestGeometry:
     def test_pixel_spacing(self):
         geo = SpotlightGeometry.for_image((16, 8), pixel=0.5, center_frequency=9e9)
-        assert geo.range_pixel == pytest.approx(0.5)
-        assert geo.cross_range_pixel == pytest.approx(0.5)
+        assert geo.range_resolution == pytest.approx(0.5)
+        assert geo.cross_range_resolution == pytest.approx(0.5)
         assert geo.wavenumbers().shape == (8,)
         assert geo.angles().shape == (16,)
         assert geo.angles()[8] == 0
@@ -42,7 +43,7 @@ class TestGeometry:
 class TestPhaseHistory:
     def test_matches_triple_loop(self):
         geo = SpotlightGeometry.for_image((5, 4), pixel=1.0, center_frequency=3e9)
-        f, _ = point_scene(1, size=(5, 4), points=3, generator=_gen(1), dtype=torch.complex128)
+        f, _ = point_scene(1, size=(5, 4), points=3, seed=1, dtype=torch.complex128)
         g = phase_history(f, geo)
         y, x = geo.pixel_positions((5, 4))
         yy, xx = np.meshgrid(y.numpy(), x.numpy(), indexing="ij")
@@ -57,7 +58,7 @@ class TestPhaseHistory:
 
     def test_rvp_path_equals_separable_without_chirp(self):
         geo = SpotlightGeometry.for_image((6, 6))
-        f, _ = point_scene(2, size=(6, 6), points=4, generator=_gen(2), dtype=torch.complex128)
+        f, _ = point_scene(2, size=(6, 6), points=4, seed=2, dtype=torch.complex128)
         torch.testing.assert_close(phase_history(f, geo, rvp=True), phase_history(f, geo))
 
     def test_rvp_phase(self):
@@ -65,7 +66,9 @@ class TestPhaseHistory:
         geo = SpotlightGeometry.for_image((4, 4), chirp_rate=alpha / math.pi)
         pos = torch.tensor([[[3.0, 0.0]]], dtype=torch.float64)
         a = torch.ones(1, 1, dtype=torch.complex128)
-        ratio = point_phase_history(a, pos, geo, rvp=True) / point_phase_history(a, pos, geo)
+        ratio = simulate_phase_history(pos, geo, amplitudes=a, rvp=True) / simulate_phase_history(
+            pos, geo, amplitudes=a
+        )
         u = 3.0 * geo.angles().cos()
         expected = torch.polar(
             torch.ones(4, dtype=torch.float64), 4 * alpha * u**2 / SPEED_OF_LIGHT**2
@@ -74,7 +77,7 @@ class TestPhaseHistory:
 
     def test_narrow_angle_close_to_fft(self):
         geo = SpotlightGeometry.for_image((32, 32), pixel=1.0)
-        f, _ = point_scene(2, size=(32, 32), points=10, generator=_gen(3))
+        f, _ = point_scene(2, size=(32, 32), points=10, seed=3)
         img = ifft2c(phase_history(f, geo)).abs()
         corr = torch.nn.functional.cosine_similarity(img.flatten(1), f.abs().flatten(1))
         assert (corr > 0.98).all()
@@ -101,13 +104,13 @@ class TestPhaseHistory:
         with pytest.raises(ShapeError, match="one channel"):
             phase_history(torch.zeros(1, 2, 4, 4, dtype=torch.complex64), geo)
         with pytest.raises(ShapeError, match=r"\(B, N, 2\)"):
-            point_phase_history(torch.zeros(1, 3, dtype=torch.complex64), torch.zeros(1, 3), geo)
+            simulate_phase_history(torch.zeros(1, 3), geo, amplitudes=torch.zeros(1, 3))
 
 
 class TestNoise:
     def test_snr(self):
         g = torch.ones(2, 64, 64, dtype=torch.complex128)
-        noise = add_noise(g, snr_db=10.0, generator=_gen()) - g
+        noise = add_noise(g, snr_db=10.0, seed=0) - g
         snr = 10 * torch.log10(1 / noise.abs().square().mean(dim=(1, 2)))
         torch.testing.assert_close(
             snr, torch.full((2,), 10.0, dtype=torch.float64), atol=0.2, rtol=0
@@ -116,23 +119,3 @@ class TestNoise:
     def test_option(self):
         with pytest.raises(OptionError, match="snr_db"):
             add_noise(torch.ones(1, 2, 2, dtype=torch.complex64), snr_db="x")
-
-
-class TestScenes:
-    def test_point_scene(self):
-        f, m = point_scene(3, size=(10, 12), points=7, margin=2, generator=_gen())
-        assert f.shape == (3, 1, 10, 12) and m.sum(dim=(1, 2, 3)).tolist() == [7, 7, 7]
-        a = f.abs()[m]
-        assert (a >= 0.5).all() and (a <= 1.0 + 1e-6).all()
-        assert not m[..., :2, :].any() and not m[..., :, -2:].any()
-
-    def test_point_scene_too_many(self):
-        with pytest.raises(OptionError, match="points"):
-            point_scene(1, size=(2, 2), points=5)
-
-    def test_speckled_scene_statistics(self):
-        f, m = speckled_scene(4, size=(64, 64), contrast=10.0, generator=_gen())
-        clutter = f.abs().square()[~m].mean().item()
-        target = f.abs().square()[m].mean().item()
-        assert clutter == pytest.approx(1.0, rel=0.1)
-        assert target == pytest.approx(10.0, rel=0.25)
