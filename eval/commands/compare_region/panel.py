@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from eval.detectors import DetectorSpec
+from eval.plots import save
 
 __all__ = ["detection_panel"]
 
@@ -45,6 +46,4 @@ def detection_panel(items: list[dict], specs: list[DetectorSpec], path: Path) ->
         _overlay(row[1], img, item["mask"][0].numpy(), "ground truth")
         for ax, spec in zip(row[2:], specs, strict=True):
             _overlay(ax, img, spec(x).mask[0, 0].cpu().numpy(), spec.name)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)

@@ -21,7 +21,7 @@ import pandas as pd
 import torch
 
 import torchsar as ts
-from eval.commands.speckle.panel import plot_panel
+from eval.commands.speckle.panel import despeckling_panel
 from eval.commands.speckle.scoring import samples, score_dataset
 from eval.datasets import DATASETS, make_dataset
 from eval.errors import EvalError
@@ -143,7 +143,7 @@ def evaluate(opts: SpeckleOptions) -> int:
             looks = opts.looks if opts.looks is not None else (items[0].looks or 1.0)
             panel_window = 7 if 7 in opts.windows else opts.windows[0]
             path = tmp / f"speckle_{slug(name)}.png"
-            plot_panel(items[0], opts.filters, path, window=panel_window, looks=looks)
+            despeckling_panel(items[0], opts.filters, path, window=panel_window, looks=looks)
         table = pd.concat(tables, ignore_index=True)
         table.to_csv(tmp / "speckle.csv", index=False)
         (tmp / "speckle.md").write_text(markdown(table))

@@ -12,8 +12,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from eval.commands.speckle.scoring import Sample, apply_filter
+from eval.plots import save
 
-__all__ = ["plot_panel"]
+__all__ = ["despeckling_panel"]
 
 
 def _crop(s: Sample, size: int) -> tuple[slice, slice]:
@@ -27,7 +28,7 @@ def _crop(s: Sample, size: int) -> tuple[slice, slice]:
     return slice(r0, r0 + size), slice(c0, c0 + size)
 
 
-def plot_panel(
+def despeckling_panel(
     s: Sample, filters: list[str], path: Path, *, window: int, looks: float, size: int = 160
 ) -> None:
     """Before/after crops in dB (clean if known, noisy, every filter) on one colour scale,
@@ -49,6 +50,4 @@ def plot_panel(
         ax.set_title(title, fontsize=9)
     h, w = db[0][1].shape
     fig.suptitle(f"intensity (dB), crop {h}x{w}, looks {looks:g}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path)
