@@ -113,22 +113,13 @@ def _rule_scale(
 ) -> Tensor:
     """``full / alpha_rule`` per pixel (float64): the interior factor of each rule where both
     halves are whole (CA there is exactly 1), the exact factor of each pixel's half sizes
-    on the border band. Without a mask the half sizes are one plane shared by the batch, so
-    the factors are mapped once per rule on that plane and each pixel picks its rule's."""
+    on the border band. The factors are mapped once per rule over the half-size planes
+    (without a mask one plane shared by the batch) and each pixel picks its rule's."""
     count_a, count_b = torch.broadcast_tensors(count_a, count_b)
-    if count_a.numel() < rule.numel():  # geometric counts: one plane for the batch
-        maps = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
-        lead = (1,) * (rule.dim() - count_a.dim())  # counts may lack the leading dims
-        maps = maps.reshape(5, *lead, *count_a.shape).expand(5, *rule.shape)
-        return torch.gather(maps, 0, rule.unsqueeze(0)).squeeze(0)
-    rule, count_a, count_b = torch.broadcast_tensors(rule, count_a, count_b)
-    inner = torch.tensor([_inner(r, n, full, factor) for r in range(5)], dtype=torch.float64)
-    scale = inner.to(rule.device)[rule]
-    edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
-    if edge[0].numel():
-        keys = torch.stack([rule[edge].double(), count_a[edge], count_b[edge]], dim=-1)
-        scale[edge] = full / keyed_factor_map(keys, factor)
-    return scale
+    maps = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
+    lead = (1,) * (rule.dim() - count_a.dim())  # counts may lack the leading dims
+    maps = maps.reshape(5, *lead, *count_a.shape).expand(5, *rule.shape)
+    return torch.gather(maps, 0, rule.unsqueeze(0)).squeeze(0)
 
 
 def _inner(rule: int, n: int, full: float, factor: Callable[[tuple[int, ...]], float]) -> float:
