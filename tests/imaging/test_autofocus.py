@@ -16,7 +16,7 @@ from torchsar.imaging import (
     sparse_autofocus,
     uniform_phase_error,
 )
-from torchsar.imaging.metrics import magnitude_correlation, phase_rmse
+from torchsar.imaging.fidelity import magnitude_correlation, phase_rmse
 
 
 def _gen(seed=0):

@@ -96,7 +96,7 @@ class TestPulseImages:
         )
 
     def test_pulse_autofocus_recovers_synthetic_error(self):
-        from torchsar.imaging.metrics import phase_rmse
+        from torchsar.imaging.fidelity import phase_rmse
         from torchsar.imaging.pulse_autofocus import pulse_autofocus
 
         op = _op(m=32, k=32)

@@ -5,7 +5,7 @@ import torch
 
 from torchsar._checks import InputTypeError, OptionError, ShapeError
 from torchsar.imaging import FourierOperator, default_lam, ifft2c, lp_image
-from torchsar.imaging.metrics import magnitude_correlation
+from torchsar.imaging.fidelity import magnitude_correlation
 
 
 class TestLpImage:

@@ -13,7 +13,7 @@ from torchsar.imaging import (
     polynomial_phase_error,
     quadratic_phase_error,
 )
-from torchsar.imaging.metrics import magnitude_correlation, phase_rmse
+from torchsar.imaging.fidelity import magnitude_correlation, phase_rmse
 from torchsar.imaging.min_entropy import min_entropy_autofocus
 from torchsar.imaging.pga import pga
 

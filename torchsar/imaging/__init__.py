@@ -1,19 +1,14 @@
-"""Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, metrics."""
+"""Sparsity-driven SAR imaging with joint phase-error correction, autofocus baselines, and the
+focus (:mod:`~torchsar.imaging.focus`) and fidelity (:mod:`~torchsar.imaging.fidelity`) metrics
+of formed images."""
 
 from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
 from torchsar.imaging.backprojection import BackprojectionOperator
+from torchsar.imaging.fidelity import align, magnitude_correlation, phase_rmse
+from torchsar.imaging.focus import contrast, entropy, sharpness, target_to_background
 from torchsar.imaging.fourier import fft2c, ifft2c
 from torchsar.imaging.geometry import SpotlightGeometry
 from torchsar.imaging.lp import default_lam, lp_image
-from torchsar.imaging.metrics import (
-    align,
-    contrast,
-    entropy,
-    magnitude_correlation,
-    phase_rmse,
-    sharpness,
-    target_to_background,
-)
 from torchsar.imaging.min_entropy import MinEntropyResult, min_entropy_autofocus
 from torchsar.imaging.operators import FourierOperator, LinearOperator
 from torchsar.imaging.pga import PGAResult, pga

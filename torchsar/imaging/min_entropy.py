@@ -8,6 +8,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int
+from torchsar.imaging.focus import intensity_entropy
 from torchsar.imaging.fourier import ifft2c
 from torchsar.imaging.items import fill_items, nonzero_items
 
@@ -27,9 +28,7 @@ class MinEntropyResult:
 def _entropy(g: Tensor, phi: Tensor) -> Tensor:
     """Entropy of ``|ifft2c(exp(-1j phi) g)|^2`` per item."""
     img = ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
-    i = img.abs().square().flatten(1)
-    q = i / i.sum(-1, keepdim=True).clamp_min(torch.finfo(i.dtype).tiny)
-    return -(q * q.clamp_min(torch.finfo(i.dtype).tiny).log()).sum(-1)
+    return intensity_entropy(img.abs().square().flatten(1))
 
 
 def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
