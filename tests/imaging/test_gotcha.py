@@ -68,6 +68,7 @@ class TestInjectedErrors:
             * torch.polar(torch.ones_like(phi), phi).to(torch.complex64)[..., None, None]
         )
         blurred = ti.entropy(b.sum(1, keepdim=True).abs().square())
-        img, est, _ = pulse_autofocus(b)
+        out = pulse_autofocus(b)
+        img, est = out.image, out.phase
         assert ti.phase_rmse(est.double(), phi).item() < 0.5
         assert ti.entropy(img.abs().square()) < blurred

@@ -2,16 +2,16 @@
 focus (:mod:`~torchsar.imaging.focus`) and fidelity (:mod:`~torchsar.imaging.fidelity`) metrics
 of formed images."""
 
-from torchsar.imaging.autofocus import AutofocusResult, sparse_autofocus
+from torchsar.imaging.autofocus import sparse_autofocus
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.imaging.fidelity import align, magnitude_correlation, phase_rmse
 from torchsar.imaging.focus import contrast, entropy, sharpness, target_to_background
 from torchsar.imaging.fourier import fft2c, ifft2c
 from torchsar.imaging.geometry import SpotlightGeometry
 from torchsar.imaging.lp import default_lam, lp_image
-from torchsar.imaging.min_entropy import MinEntropyResult, min_entropy_autofocus
+from torchsar.imaging.min_entropy import min_entropy_autofocus
 from torchsar.imaging.operators import FourierOperator, LinearOperator
-from torchsar.imaging.pga import PGAResult, pga
+from torchsar.imaging.pga import pga
 from torchsar.imaging.phase_errors import (
     apply_phase_error,
     nonseparable_phase_error,
@@ -24,6 +24,7 @@ from torchsar.imaging.phase_errors import (
 from torchsar.imaging.phase_history import add_noise, phase_history, point_phase_history
 from torchsar.imaging.phase_step import phase_step_1d, phase_step_2d, phase_step_separable
 from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
+from torchsar.imaging.result import AutofocusResult, MinEntropyResult, SparseAutofocusResult
 from torchsar.imaging.scenes import point_scene, speckled_scene
 
 __all__ = [
@@ -32,7 +33,7 @@ __all__ = [
     "FourierOperator",
     "LinearOperator",
     "MinEntropyResult",
-    "PGAResult",
+    "SparseAutofocusResult",
     "SpotlightGeometry",
     "add_noise",
     "align",

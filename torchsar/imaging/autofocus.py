@@ -8,7 +8,6 @@ a half-quadratic image step and a closed-form phase step for 1-D (per pulse),
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -17,31 +16,11 @@ from torchsar._checks import check_choice, check_int
 from torchsar.imaging._solver import State, solve
 from torchsar.imaging.lp import initial_state, lam_tensor, resolve_operator, settings
 from torchsar.imaging.operators import LinearOperator
+from torchsar.imaging.result import SparseAutofocusResult
 
-__all__ = ["ERRORS", "AutofocusResult", "sparse_autofocus"]
+__all__ = ["ERRORS", "sparse_autofocus"]
 
 ERRORS = ("1d", "2d-separable", "2d")
-
-
-@dataclass(frozen=True)
-class AutofocusResult:
-    """Output of :func:`sparse_autofocus`.
-
-    Attributes:
-        image: complex reflectivity estimate ``(B, 1, H, W)``.
-        phase: phase-error estimate, ``(B, M)`` for ``"1d"``, ``(B, M, K)`` otherwise.
-        cost: final cost ``J`` per item ``(B,)``.
-        history: cost per iteration ``(B, max_iter + 1)`` (padded after an item stopped).
-        iterations: iterations used per item ``(B,)``.
-        lam: regularisation weight used per item ``(B,)``.
-    """
-
-    image: Tensor
-    phase: Tensor
-    cost: Tensor
-    history: Tensor
-    iterations: Tensor
-    lam: Tensor
 
 
 def sparse_autofocus(
@@ -60,7 +39,7 @@ def sparse_autofocus(
     keep: int | None = None,
     cg_iterations: int = 30,
     generator: torch.Generator | None = None,
-) -> AutofocusResult:
+) -> SparseAutofocusResult:
     """Joint sparsity-driven imaging and phase-error estimation.
 
     Each iteration: (1) ``inner`` half-quadratic image updates
@@ -92,7 +71,8 @@ def sparse_autofocus(
         generator: random generator for the restarts.
 
     Returns:
-        :class:`AutofocusResult`.
+        :class:`SparseAutofocusResult`: ``image``, ``phase``, ``iterations``, and the final
+        ``cost``, its per-iteration ``history`` and the ``lam`` used.
 
     Raises:
         InputTypeError, ShapeError: ``g`` is not complex ``(B, M, K)`` for the operator.
@@ -134,7 +114,9 @@ def sparse_autofocus(
         iters[better] = it[better]
         best_cost = torch.minimum(best_cost, h[:, -1])
     phase = best.phi[..., 0] if error == "1d" else best.phi
-    return AutofocusResult(best.f, phase, best_cost, history, iters, lam_t)
+    return SparseAutofocusResult(
+        image=best.f, phase=phase, iterations=iters, cost=best_cost, history=history, lam=lam_t
+    )
 
 
 def _random_start(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
 
 import torch
 from torch import Tensor
@@ -10,25 +10,65 @@ from torch import Tensor
 from torchsar._checks import check_complex, check_int
 from torchsar.imaging.focus import intensity_entropy
 from torchsar.imaging.fourier import ifft2c
-from torchsar.imaging.items import fill_items, nonzero_items
+from torchsar.imaging.items import nonzero_items
+from torchsar.imaging.result import MinEntropyResult, fill_result
 
-__all__ = ["MinEntropyResult", "min_entropy_autofocus"]
-
-
-@dataclass(frozen=True)
-class MinEntropyResult:
-    """Output of :func:`min_entropy_autofocus`: ``image`` ``(B, 1, M, K)``, ``phase`` ``(B, M)``,
-    final ``entropy`` ``(B,)``."""
-
-    image: Tensor
-    phase: Tensor
-    entropy: Tensor
+__all__ = ["min_entropy_autofocus", "minimise_entropy"]
 
 
-def _entropy(g: Tensor, phi: Tensor) -> Tensor:
-    """Entropy of ``|ifft2c(exp(-1j phi) g)|^2`` per item."""
-    img = ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
-    return intensity_entropy(img.abs().square().flatten(1))
+def _rotate(g: Tensor, phi: Tensor) -> Tensor:
+    """Image of the phase history corrected by the per-pulse phases ``phi``."""
+    return ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
+
+
+def minimise_entropy(
+    form: Callable[[Tensor], Tensor], like: Tensor, *, max_iter: int
+) -> MinEntropyResult:
+    """Per-pulse phases ``(B, M)`` minimising the entropy of ``|form(phi)|^2`` (L-BFGS).
+
+    ``form(phi)`` maps the phases to the corrected complex image ``(B, ...)``; its gradient
+    comes from autograd. The sum of per-item entropies is minimised, which decouples across
+    the batch (items share only the line search, so the iteration count is shared too).
+
+    Args:
+        form: phases ``(B, M)`` -> complex image ``(B, 1, H, W)``.
+        like: a complex tensor ``(B, M, ...)`` giving the phases' shape, dtype and device.
+        max_iter: L-BFGS iterations.
+
+    Returns:
+        :class:`MinEntropyResult`.
+
+    Example:
+        >>> b = torch.zeros(1, 3, 2, 2, dtype=torch.complex64); b[0, :, 0, 1] = 1
+        >>> b[0, :, 1, 1] = torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))
+        >>> def form(p):
+        ...     return (torch.polar(torch.ones_like(p), -p)[..., None, None] * b).sum(1, True)
+        >>> out = minimise_entropy(form, b, max_iter=50)
+        >>> out.image.shape, out.phase.shape, bool(out.entropy < 0.01)
+        (torch.Size([1, 1, 2, 2]), torch.Size([1, 3]), True)
+    """
+    phi = torch.zeros(like.shape[:2], dtype=like.real.dtype, device=like.device)
+    phi.requires_grad_(True)
+    iterations = 0
+    if like.shape[0] > 0 and max_iter > 0:
+        opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")
+
+        def closure() -> Tensor:
+            opt.zero_grad()
+            loss = intensity_entropy(form(phi).abs().square().flatten(1)).sum()
+            loss.backward()
+            return loss
+
+        opt.step(closure)
+        iterations = opt.state[phi].get("n_iter", 0)
+    phi = phi.detach()
+    img = form(phi)
+    return MinEntropyResult(
+        image=img,
+        phase=phi,
+        iterations=torch.full((like.shape[0],), iterations, dtype=torch.int64, device=phi.device),
+        entropy=intensity_entropy(img.abs().square().flatten(1)),
+    )
 
 
 def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
@@ -67,21 +107,5 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     g = g.detach()
     live = nonzero_items(g)
     if not bool(live.all()):
-        part = min_entropy_autofocus(g[live], max_iter=max_iter)
-        return MinEntropyResult(
-            *(fill_items(live, x) for x in (part.image, part.phase, part.entropy))
-        )
-    phi = torch.zeros(g.shape[:2], dtype=g.real.dtype, device=g.device, requires_grad=True)
-    if g.shape[0] > 0 and max_iter > 0:
-        opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")
-
-        def closure() -> Tensor:
-            opt.zero_grad()
-            loss = _entropy(g, phi).sum()
-            loss.backward()
-            return loss
-
-        opt.step(closure)
-    phi = phi.detach()
-    img = ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None]).unsqueeze(1)
-    return MinEntropyResult(img, phi, _entropy(g, phi))
+        return fill_result(live, min_entropy_autofocus(g[live], max_iter=max_iter))
+    return minimise_entropy(lambda phi: _rotate(g, phi).unsqueeze(1), g, max_iter=max_iter)

@@ -68,7 +68,7 @@ def fill_result(live: Tensor, part: R) -> R:
 
     Example:
         >>> import torch
-        >>> part = AutofocusResult(torch.ones(1, 1, 2, 2), torch.ones(1, 3), torch.ones(1))
+        >>> part = AutofocusResult(torch.ones(1, 1, 2, 2), torch.ones(1, 3), torch.tensor([2]))
         >>> fill_result(torch.tensor([False, True]), part).phase.tolist()
         [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]
     """

@@ -101,19 +101,20 @@ def _lp(g: Tensor, kind: str, phi: Tensor) -> tuple:
     return ti.lp_image(g, max_iter=50), None, None
 
 
-def _pga(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.pga(ti.ifft2c(g).unsqueeze(1))
+def _fields(out: ti.AutofocusResult) -> tuple:
     return out.image, out.phase, out.iterations
+
+
+def _pga(g: Tensor, kind: str, phi: Tensor) -> tuple:
+    return _fields(ti.pga(ti.ifft2c(g).unsqueeze(1)))
 
 
 def _min_entropy(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.min_entropy_autofocus(g)
-    return out.image, out.phase, None
+    return _fields(ti.min_entropy_autofocus(g))
 
 
 def _sparse(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.sparse_autofocus(g, error=kind)
-    return out.image, out.phase, out.iterations
+    return _fields(ti.sparse_autofocus(g, error=kind))
 
 
 def _sparse_keep_restarts(g: Tensor, kind: str, phi: Tensor, scatterers: int = 0) -> tuple | None:
@@ -126,7 +127,7 @@ def _sparse_keep_restarts(g: Tensor, kind: str, phi: Tensor, scatterers: int = 0
     out = ti.sparse_autofocus(
         g, error=kind, keep=keep, restarts=9, warmup=0, max_iter=200, tol=1e-5, generator=gen
     )
-    return out.image, out.phase, out.iterations
+    return _fields(out)
 
 
 def _sparse_true_phase(g: Tensor, kind: str, phi: Tensor) -> tuple:

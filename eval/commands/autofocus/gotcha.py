@@ -21,7 +21,6 @@ from torch import Tensor
 
 import torchsar.imaging as ti
 from torchsar.imaging.backprojection import BackprojectionOperator
-from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
 from torchsar.io.gotcha import GotchaPass
 
 __all__ = ["GOTCHA_ERRORS", "run_gotcha"]
@@ -43,8 +42,8 @@ def _estimate(method: str, g: Tensor, b: Tensor) -> Tensor:
     if method == "pga-fft":
         return ti.pga(ti.ifft2c(g).unsqueeze(1)).phase.double()
     if method == "min-entropy-bp":
-        return pulse_min_entropy(b)[1].double()
-    return pulse_autofocus(b)[1].double()
+        return ti.pulse_min_entropy(b).phase.double()
+    return ti.pulse_autofocus(b).phase.double()
 
 
 METHODS = ["none", "pga-fft", "min-entropy-bp", "sparse-bp"]
