@@ -23,11 +23,12 @@ def _data(batch: int, size: int, error: str, seed: int = 0) -> torch.Tensor:
         snr_db=30.0,
         generator=gen,
     )
+    error_seed = int(torch.randint(2**62, (1,), generator=gen))  # independent of the scenes
     if error == "1d":
-        phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, generator=gen)
+        phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, seed=error_seed)
     else:
         phi = ti.nonseparable_phase_error(
-            batch, size, size, amplitude=0.75 * math.pi, generator=gen
+            batch, size, size, amplitude=0.75 * math.pi, seed=error_seed
         )
     return ti.apply_phase_error(g, phi)
 
