@@ -27,9 +27,7 @@ def _data(batch: int, size: int, error: str, seed: int = 0) -> torch.Tensor:
     if error == "1d":
         phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, seed=error_seed)
     else:
-        phi = ti.nonseparable_phase_error(
-            batch, size, size, amplitude=0.75 * math.pi, seed=error_seed
-        )
+        phi = ti.uniform_phase_error(batch, size, size, amplitude=0.75 * math.pi, seed=error_seed)
     return ti.apply_phase_error(g, phi)
 
 

@@ -10,9 +10,7 @@ from torchsar.imaging import (
     AutofocusResult,
     FourierOperator,
     apply_phase_error,
-    nonseparable_phase_error,
     quadratic_phase_error,
-    separable_phase_error,
     sparse_autofocus,
     uniform_phase_error,
 )
@@ -43,7 +41,7 @@ class TestAcceptance:
 
     def test_2d_separable(self, sparse_data):
         f, _, g = sparse_data
-        phi = separable_phase_error(4, 32, 32, amplitude=0.75 * math.pi, seed=3)
+        phi = uniform_phase_error(4, 32, 32, separable=True, amplitude=0.75 * math.pi, seed=3)
         out = sparse_autofocus(apply_phase_error(g, phi), error="2d-separable")
         assert out.phase.shape == (4, 32, 32)
         assert (magnitude_correlation(out.image, f) >= 0.98).all()
@@ -51,7 +49,7 @@ class TestAcceptance:
 
     def test_2d_nonseparable(self, sparse_data):
         f, _, g = sparse_data
-        phi = nonseparable_phase_error(4, 32, 32, amplitude=0.75 * math.pi, seed=4)
+        phi = uniform_phase_error(4, 32, 32, amplitude=0.75 * math.pi, seed=4)
         out = sparse_autofocus(apply_phase_error(g, phi), error="2d")
         assert (magnitude_correlation(out.image, f, flip=True) >= 0.98).all()
 
@@ -87,7 +85,7 @@ class TestSolver:
 
     def test_restarts_never_worse(self, sparse_data):
         _, _, g = sparse_data
-        phi = nonseparable_phase_error(2, 32, 32, amplitude=math.pi, seed=7)
+        phi = uniform_phase_error(2, 32, 32, amplitude=math.pi, seed=7)
         gc = apply_phase_error(g[:2], phi)
         base = sparse_autofocus(gc, error="2d", max_iter=20)
         more = sparse_autofocus(gc, error="2d", max_iter=20, restarts=1, seed=8)
@@ -96,7 +94,9 @@ class TestSolver:
     def test_restart_seeds_are_per_item(self, sparse_data):
         """Item ``i``'s random starts come from ``image_seed(seed, i)``: batch size is irrelevant."""
         _, _, g = sparse_data
-        gc = apply_phase_error(g[:2], nonseparable_phase_error(2, 32, 32, seed=7))
+        gc = apply_phase_error(
+            g[:2], uniform_phase_error(2, 32, 32, amplitude=0.75 * math.pi, seed=7)
+        )
         opts = {"error": "2d", "max_iter": 5, "restarts": 2}
         both = sparse_autofocus(gc, seed=3, **opts)
         one = sparse_autofocus(gc[1:], seed=image_seed(3, 1), **opts)
@@ -146,7 +146,7 @@ class TestPhaseRetrieval:
         g = add_noise(
             phase_history(f, SpotlightGeometry.for_image((16, 16))), snr_db=30.0, generator=gen
         )
-        phi = nonseparable_phase_error(2, 16, 16, amplitude=math.pi, seed=13)
+        phi = uniform_phase_error(2, 16, 16, amplitude=math.pi, seed=13)
         gc = apply_phase_error(g, phi)
         out = sparse_autofocus(
             gc, error="2d", keep=9, restarts=5, warmup=0, max_iter=100, tol=1e-5, seed=12

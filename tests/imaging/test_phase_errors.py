@@ -8,16 +8,24 @@ import torch
 from torchsar._checks import OptionError, ShapeError
 from torchsar.imaging.phase_errors import (
     apply_phase_error,
-    nonseparable_phase_error,
     polynomial_phase_error,
     quadratic_phase_error,
-    separable_phase_error,
     sinusoidal_phase_error,
     uniform_phase_error,
 )
 from torchsar.simulate.seeding import image_seed
 
 ONE_D = [uniform_phase_error, quadratic_phase_error, polynomial_phase_error, sinusoidal_phase_error]
+
+
+def separable_phase_error(*args, **kw):
+    return uniform_phase_error(*args, separable=True, **kw)
+
+
+def nonseparable_phase_error(*args, **kw):
+    return uniform_phase_error(*args, **kw)
+
+
 ALL = [*ONE_D, separable_phase_error, nonseparable_phase_error]
 
 
@@ -76,6 +84,10 @@ class TestGenerators:
     def test_invalid(self):
         with pytest.raises(OptionError, match="amplitude"):
             uniform_phase_error(1, 4, amplitude=-1.0)
+        with pytest.raises(OptionError, match="separable needs samples"):
+            uniform_phase_error(1, 4, separable=True)
+        with pytest.raises(OptionError, match="samples"):
+            uniform_phase_error(1, 4, 0)
         with pytest.raises(OptionError, match="seed"):
             separable_phase_error(1, 4, 3, seed=-2)
         with pytest.raises(OptionError, match="seed"):

@@ -14,10 +14,8 @@ from torchsar.imaging.operators import FourierOperator, LinearOperator
 from torchsar.imaging.pga import pga
 from torchsar.imaging.phase_errors import (
     apply_phase_error,
-    nonseparable_phase_error,
     polynomial_phase_error,
     quadratic_phase_error,
-    separable_phase_error,
     sinusoidal_phase_error,
     uniform_phase_error,
 )
@@ -46,7 +44,6 @@ __all__ = [
     "lp_image",
     "magnitude_correlation",
     "min_entropy_autofocus",
-    "nonseparable_phase_error",
     "pga",
     "phase_history",
     "phase_rmse",
@@ -59,7 +56,6 @@ __all__ = [
     "pulse_autofocus",
     "pulse_min_entropy",
     "quadratic_phase_error",
-    "separable_phase_error",
     "sharpness",
     "sinusoidal_phase_error",
     "sparse_autofocus",

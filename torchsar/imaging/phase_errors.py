@@ -1,7 +1,9 @@
 """Phase-error generators (1-D per pulse and 2-D) and their application to phase histories.
 
 Convention: corrupted data ``g = exp(1j phi) * (C f)``; a 1-D error is ``(B, M)``,
-a 2-D error ``(B, M, K)``. Generators draw one independent error per batch item: item ``i``
+a 2-D error ``(B, M, K)``. Every generator takes ``(batch, pulses[, samples])``, then its own
+keyword options, then the shared ``amplitude``, ``seed``, ``dtype`` and ``device``. Generators
+draw one independent error per batch item: item ``i``
 draws only from the generator seeded with :func:`~torchsar.simulate.seeding.image_seed`
 ``(seed, i)``, so an item's error does not depend on the batch size (``seed`` in
 ``[0, 2**63)``; the same seed gives the same errors).
@@ -15,15 +17,13 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar._checks import ShapeError, check_complex, check_int, check_positive
+from torchsar._checks import OptionError, ShapeError, check_complex, check_int, check_positive
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 
 __all__ = [
     "apply_phase_error",
-    "nonseparable_phase_error",
     "polynomial_phase_error",
     "quadratic_phase_error",
-    "separable_phase_error",
     "sinusoidal_phase_error",
     "uniform_phase_error",
 ]
@@ -57,21 +57,55 @@ def _axis(n: int, dtype) -> Tensor:
 def uniform_phase_error(
     batch: int,
     pulses: int,
+    samples: int | None = None,
     *,
+    separable: bool = False,
     amplitude: float = math.pi,
     seed: int = 0,
     dtype: torch.dtype = torch.float32,
     device=None,
 ) -> Tensor:
-    """Independent per-pulse phase errors uniform in ``[-amplitude, amplitude]``, ``(B, M)``.
+    """Independent phase errors uniform in ``[-amplitude, amplitude]``, of the three structures
+    :func:`sparse_autofocus` corrects.
+
+    Args:
+        batch: number of errors ``B``.
+        pulses: pulses ``M``.
+        samples: range samples ``K`` for a 2-D error (default: a 1-D per-pulse error).
+        separable: with ``samples``, a separable error ``phi_m + psi_k`` (both terms uniform)
+            instead of an independent value per sample.
+        amplitude: bound of each uniform term.
+        seed: seed in ``[0, 2**63)`` (item ``i`` from ``image_seed(seed, i)``).
+        dtype: real dtype of the result.
+        device: device of the result.
+
+    Returns:
+        ``(B, M)`` (1-D, ``"1d"``), or ``(B, M, K)`` (``"2d-separable"`` with ``separable``,
+        else ``"2d"``).
+
+    Raises:
+        OptionError: invalid sizes, ``amplitude`` or ``seed``, or ``separable`` without
+            ``samples``.
 
     Example:
         >>> uniform_phase_error(2, 8, seed=0).shape
         torch.Size([2, 8])
+        >>> phi = uniform_phase_error(1, 4, 6, separable=True, amplitude=1.0)
+        >>> bool((phi - phi[:, :1] - phi[:, :, :1] + phi[:, :1, :1]).abs().max() < 1e-6)
+        True
     """
+    if samples is not None:
+        check_int(samples, "samples", minimum=1)
+    elif separable:
+        raise OptionError("separable needs samples (a 2-D error), got samples=None")
 
     def draw(gen: torch.Generator) -> Tensor:
-        return _uniform((pulses,), amplitude, gen, dtype)
+        if samples is None:
+            return _uniform((pulses,), amplitude, gen, dtype)
+        if separable:
+            rows = _uniform((pulses, 1), amplitude, gen, dtype)
+            return rows + _uniform((1, samples), amplitude, gen, dtype)
+        return _uniform((pulses, samples), amplitude, gen, dtype)
 
     return _per_item(batch, pulses, amplitude, seed, draw, device)
 
@@ -105,8 +139,8 @@ def polynomial_phase_error(
     batch: int,
     pulses: int,
     *,
-    amplitude: float = math.pi,
     order: int = 4,
+    amplitude: float = math.pi,
     seed: int = 0,
     dtype: torch.dtype = torch.float32,
     device=None,
@@ -142,8 +176,8 @@ def sinusoidal_phase_error(
     batch: int,
     pulses: int,
     *,
-    amplitude: float = math.pi,
     cycles: tuple[float, float] = (0.5, 3.0),
+    amplitude: float = math.pi,
     seed: int = 0,
     dtype: torch.dtype = torch.float32,
     device=None,
@@ -160,55 +194,6 @@ def sinusoidal_phase_error(
         psi = 2 * math.pi * torch.rand(1, generator=gen, dtype=dtype)
         t = (_axis(pulses, dtype) + 1) / 2
         return amplitude * torch.sin(2 * math.pi * c * t + psi)
-
-    return _per_item(batch, pulses, amplitude, seed, draw, device)
-
-
-def separable_phase_error(
-    batch: int,
-    pulses: int,
-    samples: int,
-    *,
-    amplitude: float = 0.75 * math.pi,
-    seed: int = 0,
-    dtype: torch.dtype = torch.float32,
-    device=None,
-) -> Tensor:
-    """2-D separable error ``phi_m + psi_k``, both uniform in ``[-amplitude, amplitude]``.
-
-    Example:
-        >>> separable_phase_error(1, 4, 6).shape
-        torch.Size([1, 4, 6])
-    """
-    check_int(samples, "samples", minimum=1)
-
-    def draw(gen: torch.Generator) -> Tensor:
-        rows = _uniform((pulses, 1), amplitude, gen, dtype)
-        return rows + _uniform((1, samples), amplitude, gen, dtype)
-
-    return _per_item(batch, pulses, amplitude, seed, draw, device)
-
-
-def nonseparable_phase_error(
-    batch: int,
-    pulses: int,
-    samples: int,
-    *,
-    amplitude: float = 0.75 * math.pi,
-    seed: int = 0,
-    dtype: torch.dtype = torch.float32,
-    device=None,
-) -> Tensor:
-    """2-D non-separable error: independent per sample, uniform in ``[-amplitude, amplitude]``.
-
-    Example:
-        >>> nonseparable_phase_error(2, 4, 6).shape
-        torch.Size([2, 4, 6])
-    """
-    check_int(samples, "samples", minimum=1)
-
-    def draw(gen: torch.Generator) -> Tensor:
-        return _uniform((pulses, samples), amplitude, gen, dtype)
 
     return _per_item(batch, pulses, amplitude, seed, draw, device)
 

@@ -37,18 +37,18 @@ def _one_d(fn: Callable[..., Tensor], amplitude: float) -> Callable[[int, int, i
     return lambda b, m, k, seed: fn(b, m, amplitude=amplitude, seed=seed)
 
 
-def _two_d(fn: Callable[..., Tensor], amplitude: float) -> Callable[[int, int, int, int], Tensor]:
-    return lambda b, m, k, seed: fn(b, m, k, amplitude=amplitude, seed=seed)
+def _two_d(amplitude: float, separable: bool) -> Callable[[int, int, int, int], Tensor]:
+    return lambda b, m, k, seed: ti.uniform_phase_error(
+        b, m, k, separable=separable, amplitude=amplitude, seed=seed
+    )
 
 
 ERROR_CASES: dict[str, ErrorCase] = {
     "1d-uniform-pi": ErrorCase("1d", _one_d(ti.uniform_phase_error, math.pi)),
     "1d-quadratic-2pi": ErrorCase("1d", _one_d(ti.quadratic_phase_error, 2 * math.pi)),
-    "2d-separable-3pi/4": ErrorCase(
-        "2d-separable", _two_d(ti.separable_phase_error, 0.75 * math.pi)
-    ),
-    "2d-3pi/4": ErrorCase("2d", _two_d(ti.nonseparable_phase_error, 0.75 * math.pi)),
-    "2d-pi": ErrorCase("2d", _two_d(ti.nonseparable_phase_error, math.pi)),
+    "2d-separable-3pi/4": ErrorCase("2d-separable", _two_d(0.75 * math.pi, separable=True)),
+    "2d-3pi/4": ErrorCase("2d", _two_d(0.75 * math.pi, separable=False)),
+    "2d-pi": ErrorCase("2d", _two_d(math.pi, separable=False)),
 }
 
 
