@@ -16,7 +16,14 @@ from torch import Tensor
 
 from torchsar._checks import check_image, check_same_shape
 
-__all__ = ["contrast", "entropy", "intensity_entropy", "sharpness", "target_to_background"]
+__all__ = [
+    "contrast",
+    "entropy",
+    "entropy_terms",
+    "intensity_entropy",
+    "sharpness",
+    "target_to_background",
+]
 
 
 def _intensity(x: Tensor) -> Tensor:
@@ -61,9 +68,19 @@ def intensity_entropy(i: Tensor) -> Tensor:
         >>> round(float(intensity_entropy(torch.ones(4))), 4) == round(2 * 0.693147, 4)
         True
     """
+    return entropy_terms(i).sum(-1)
+
+
+def entropy_terms(i: Tensor) -> Tensor:
+    """The terms ``-q log q`` of :func:`intensity_entropy`, ``q = i / sum i`` along the last dim.
+
+    Example:
+        >>> [round(v, 4) for v in entropy_terms(torch.tensor([1.0, 1.0, 0.0])).tolist()]
+        [0.3466, 0.3466, 0.0]
+    """
     tiny = torch.finfo(i.dtype).tiny
     q = i / i.sum(-1, keepdim=True).clamp_min(tiny)
-    return -(q * q.clamp_min(tiny).log()).sum(-1)
+    return -(q * q.clamp_min(tiny).log())
 
 
 def contrast(x: Tensor) -> Tensor:

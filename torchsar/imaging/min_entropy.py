@@ -13,7 +13,7 @@ from torchsar.imaging.fourier import ifft2c
 from torchsar.imaging.items import nonzero_items
 from torchsar.imaging.result import MinEntropyResult, fill_result
 
-__all__ = ["min_entropy_autofocus", "minimise_entropy"]
+__all__ = ["entropy_result", "lbfgs_phases", "min_entropy_autofocus"]
 
 
 def _rotate(g: Tensor, phi: Tensor) -> Tensor:
@@ -21,31 +21,32 @@ def _rotate(g: Tensor, phi: Tensor) -> Tensor:
     return ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
 
 
-def minimise_entropy(
-    form: Callable[[Tensor], Tensor], like: Tensor, *, max_iter: int
-) -> MinEntropyResult:
-    """Per-pulse phases ``(B, M)`` minimising the entropy of ``|form(phi)|^2`` (L-BFGS).
+def _intensity(g: Tensor, phi: Tensor) -> Tensor:
+    """Flattened intensity ``(B, M K)`` of the corrected image."""
+    return _rotate(g, phi).abs().square().flatten(1)
 
-    ``form(phi)`` maps the phases to the corrected complex image ``(B, ...)``; its gradient
-    comes from autograd. The sum of per-item entropies is minimised, which decouples across
-    the batch (items share only the line search, so the iteration count is shared too).
+
+def lbfgs_phases(
+    loss: Callable[[Tensor], Tensor], like: Tensor, *, max_iter: int
+) -> tuple[Tensor, Tensor]:
+    """Per-pulse phases ``(B, M)`` minimising a scalar ``loss(phi)`` with L-BFGS from zero.
+
+    The gradient comes from autograd. A loss that sums per-item terms decouples across the
+    batch (items share only the line search, so the iteration count is shared too).
 
     Args:
-        form: phases ``(B, M)`` -> complex image ``(B, 1, H, W)``.
+        loss: phases ``(B, M)`` -> scalar tensor.
         like: a complex tensor ``(B, M, ...)`` giving the phases' shape, dtype and device.
         max_iter: L-BFGS iterations.
 
     Returns:
-        :class:`MinEntropyResult`.
+        ``(phases (B, M), iterations (B,) int64)``.
 
     Example:
-        >>> b = torch.zeros(1, 3, 2, 2, dtype=torch.complex64); b[0, :, 0, 1] = 1
-        >>> b[0, :, 1, 1] = torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))
-        >>> def form(p):
-        ...     return (torch.polar(torch.ones_like(p), -p)[..., None, None] * b).sum(1, True)
-        >>> out = minimise_entropy(form, b, max_iter=50)
-        >>> out.image.shape, out.phase.shape, bool(out.entropy < 0.01)
-        (torch.Size([1, 1, 2, 2]), torch.Size([1, 3]), True)
+        >>> like = torch.zeros(2, 3, dtype=torch.complex64)
+        >>> phi, it = lbfgs_phases(lambda p: (p - 1).square().sum(), like, max_iter=20)
+        >>> torch.allclose(phi, torch.ones(2, 3)), it.tolist() == [it[0].item()] * 2
+        (True, True)
     """
     phi = torch.zeros(like.shape[:2], dtype=like.real.dtype, device=like.device)
     phi.requires_grad_(True)
@@ -55,20 +56,20 @@ def minimise_entropy(
 
         def closure() -> Tensor:
             opt.zero_grad()
-            loss = intensity_entropy(form(phi).abs().square().flatten(1)).sum()
-            loss.backward()
-            return loss
+            value = loss(phi)
+            value.backward()
+            return value
 
         opt.step(closure)
         iterations = opt.state[phi].get("n_iter", 0)
-    phi = phi.detach()
-    img = form(phi)
-    return MinEntropyResult(
-        image=img,
-        phase=phi,
-        iterations=torch.full((like.shape[0],), iterations, dtype=torch.int64, device=phi.device),
-        entropy=intensity_entropy(img.abs().square().flatten(1)),
-    )
+    count = torch.full((like.shape[0],), iterations, dtype=torch.int64, device=like.device)
+    return phi.detach(), count
+
+
+def entropy_result(image: Tensor, phase: Tensor, iterations: Tensor) -> MinEntropyResult:
+    """:class:`MinEntropyResult` of a corrected complex ``image`` ``(B, 1, H, W)``."""
+    entropy = intensity_entropy(image.abs().square().flatten(1))
+    return MinEntropyResult(image=image, phase=phase, iterations=iterations, entropy=entropy)
 
 
 def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
@@ -108,4 +109,7 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     live = nonzero_items(g)
     if not bool(live.all()):
         return fill_result(live, min_entropy_autofocus(g[live], max_iter=max_iter))
-    return minimise_entropy(lambda phi: _rotate(g, phi).unsqueeze(1), g, max_iter=max_iter)
+    phi, iterations = lbfgs_phases(
+        lambda phi: intensity_entropy(_intensity(g, phi)).sum(), g, max_iter=max_iter
+    )
+    return entropy_result(_rotate(g, phi).unsqueeze(1), phi, iterations)
