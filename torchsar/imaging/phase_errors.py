@@ -40,6 +40,7 @@ def _per_item(batch: int, pulses: int, amplitude: float, seed: int, draw: Draw, 
     check_int(pulses, "pulses", minimum=1)
     check_positive(amplitude, "amplitude")
     seed = check_seed(seed)
+    # An empty batch still draws one item, only for its shape and dtype.
     items = [draw(make_generator(image_seed(seed, i))) for i in range(max(batch, 1))]
     return torch.stack(items)[:batch].to(device)
 
@@ -153,11 +154,10 @@ def polynomial_phase_error(
         True
     """
     check_int(order, "order", minimum=2)
-    check_int(pulses, "pulses", minimum=1)
-    t = _axis(pulses, torch.float64)
-    basis = torch.stack([_legendre(n, t) for n in range(2, order + 1)])  # (order-1, M)
 
     def draw(gen: torch.Generator) -> Tensor:
+        t = _axis(pulses, torch.float64)
+        basis = torch.stack([_legendre(n, t) for n in range(2, order + 1)])  # (order-1, M)
         phi = torch.randn(order - 1, generator=gen, dtype=torch.float64) @ basis
         return (phi / phi.abs().amax().clamp_min(1e-12) * amplitude).to(dtype)
 
