@@ -17,16 +17,14 @@ import torchsar.sar as sar
 
 
 def _data(batch: int, size: int, error: str, seed: int = 0) -> torch.Tensor:
-    gen = torch.Generator().manual_seed(seed)
     f, _ = ti.point_scene(batch, size=(size, size), points=round(0.02 * size * size), seed=seed)
     geometry = sar.SpotlightGeometry.for_image((size, size))
     g = sar.add_noise(sar.phase_history(f, geometry), snr_db=30.0, seed=seed)
+    error_seed = seed + 1  # phase errors independent of the scenes and the noise
     if error == "1d":
-        phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, generator=gen)
+        phi = ti.uniform_phase_error(batch, size, amplitude=math.pi, seed=error_seed)
     else:
-        phi = ti.nonseparable_phase_error(
-            batch, size, size, amplitude=0.75 * math.pi, generator=gen
-        )
+        phi = ti.uniform_phase_error(batch, size, size, amplitude=0.75 * math.pi, seed=error_seed)
     return ti.apply_phase_error(g, phi)
 
 

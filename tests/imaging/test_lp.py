@@ -5,7 +5,7 @@ import torch
 
 from torchsar._checks import InputTypeError, OptionError, ShapeError
 from torchsar.imaging import FourierOperator, default_lam, ifft2c, lp_image
-from torchsar.imaging.metrics import magnitude_correlation
+from torchsar.imaging.fidelity import magnitude_correlation
 
 
 class TestLpImage:
@@ -75,9 +75,19 @@ class TestDefaultLam:
         _, _, g = sparse_data
         op = FourierOperator((32, 32))
         phi = torch.rand(g.shape, generator=torch.Generator().manual_seed(0)) * 6
-        torch.testing.assert_close(default_lam(g, op), default_lam(g * torch.exp(1j * phi), op))
+        torch.testing.assert_close(
+            default_lam(g, operator=op), default_lam(g * torch.exp(1j * phi), operator=op)
+        )
+
+    def test_default_operator_is_the_unitary_fft(self, sparse_data):
+        _, _, g = sparse_data
+        torch.testing.assert_close(
+            default_lam(g), default_lam(g, operator=FourierOperator((32, 32)))
+        )
+        with pytest.raises(TypeError):
+            default_lam(g, FourierOperator((32, 32)))  # type: ignore[misc]
 
     def test_scales_with_data(self, sparse_data):
         _, _, g = sparse_data
         op = FourierOperator((32, 32))
-        torch.testing.assert_close(default_lam(3 * g, op), 3 * default_lam(g, op))
+        torch.testing.assert_close(default_lam(3 * g, operator=op), 3 * default_lam(g, operator=op))

@@ -8,7 +8,6 @@ a half-quadratic image step and a closed-form phase step for 1-D (per pulse),
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -17,50 +16,31 @@ from torchsar._checks import check_choice, check_int
 from torchsar.imaging._solver import State, solve
 from torchsar.imaging.lp import initial_state, lam_tensor, resolve_operator, settings
 from torchsar.imaging.operators import LinearOperator
+from torchsar.imaging.result import SparseAutofocusResult
+from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 
-__all__ = ["ERRORS", "AutofocusResult", "sparse_autofocus"]
+__all__ = ["ERRORS", "sparse_autofocus"]
 
 ERRORS = ("1d", "2d-separable", "2d")
-
-
-@dataclass(frozen=True)
-class AutofocusResult:
-    """Output of :func:`sparse_autofocus`.
-
-    Attributes:
-        image: complex reflectivity estimate ``(B, 1, H, W)``.
-        phase: phase-error estimate, ``(B, M)`` for ``"1d"``, ``(B, M, K)`` otherwise.
-        cost: final cost ``J`` per item ``(B,)``.
-        history: cost per iteration ``(B, max_iter + 1)`` (padded after an item stopped).
-        iterations: iterations used per item ``(B,)``.
-        lam: regularisation weight used per item ``(B,)``.
-    """
-
-    image: Tensor
-    phase: Tensor
-    cost: Tensor
-    history: Tensor
-    iterations: Tensor
-    lam: Tensor
 
 
 def sparse_autofocus(
     g: Tensor,
     *,
     error: str = "1d",
+    operator: LinearOperator | None = None,
     p: float = 1.0,
     lam: float | Tensor | None = None,
-    operator: LinearOperator | None = None,
     eps: float | None = None,
     max_iter: int = 100,
     tol: float = 1e-4,
+    cg_iterations: int = 30,
     inner: int = 2,
-    restarts: int = 0,
     warmup: int = 10,
     keep: int | None = None,
-    cg_iterations: int = 30,
-    generator: torch.Generator | None = None,
-) -> AutofocusResult:
+    restarts: int = 0,
+    seed: int = 0,
+) -> SparseAutofocusResult:
     """Joint sparsity-driven imaging and phase-error estimation.
 
     Each iteration: (1) ``inner`` half-quadratic image updates
@@ -72,15 +52,15 @@ def sparse_autofocus(
     Args:
         g: corrupted complex phase history ``(B, M, K)`` (``g = exp(1j phi) C f + noise``).
         error: ``"1d"``, ``"2d-separable"`` or ``"2d"``.
+        operator: observation operator (default: unitary :class:`FourierOperator`).
         p: L_p exponent in ``(0, 2]``.
         lam: float, ``(B,)`` tensor, or None (data-driven, :func:`default_lam` with
             ``kappa`` 1.5, or 1.0 for ``"2d"``, whose many unknowns need a lower threshold).
-        operator: observation operator (default: unitary :class:`FourierOperator`).
         eps: smoothing of ``|f|`` in the penalty (default relative to the threshold).
         max_iter: outer iteration limit.
         tol: relative image change that stops an item.
+        cg_iterations: CG iterations per image step when ``C^H C != I``.
         inner: image updates per phase update.
-        restarts: extra random-phase restarts (best cost kept).
         warmup: continuation: over the first ``warmup`` iterations ``lam`` grows
             geometrically from ``lam / 16`` to ``lam`` (keeps the weak coherent part of a
             badly defocused image alive early on); no item stops during the warm-up.
@@ -88,11 +68,14 @@ def sparse_autofocus(
             largest pixels (the ``p -> 0`` limit with a known sparsity level; alternating
             projections). Meant for pure phase retrieval (2-D errors spanning ``[-pi, pi]``)
             together with ``restarts``.
-        cg_iterations: CG iterations per image step when ``C^H C != I``.
-        generator: random generator for the restarts.
+        restarts: extra random-phase restarts (best cost kept).
+        seed: seed of the restarts' initial phases in ``[0, 2**63)``; item ``i`` draws them
+            from its own generator (:func:`~torchsar.simulate.seeding.image_seed`
+            ``(seed, i)``), so its result does not depend on the batch size.
 
     Returns:
-        :class:`AutofocusResult`.
+        :class:`SparseAutofocusResult`: ``image``, ``phase``, ``iterations``, and the final
+        ``cost``, its per-iteration ``history`` and the ``lam`` used.
 
     Raises:
         InputTypeError, ShapeError: ``g`` is not complex ``(B, M, K)`` for the operator.
@@ -122,11 +105,13 @@ def sparse_autofocus(
         keep=None if keep is None else check_int(keep, "keep", minimum=1),
     )
     restarts = check_int(restarts, "restarts", minimum=0)
+    seed = check_seed(seed)
+    gens = [make_generator(image_seed(seed, i)) for i in range(g.shape[0] if restarts else 0)]
     lam_t = lam_tensor(lam, g, op, cfg.p, kappa=1.0 if error == "2d" else 1.5)
     best, history, iters = solve(g, initial_state(g, op, lam_t, eps), op, cfg)
     best_cost = history[:, -1]
     for _ in range(restarts):
-        start = _random_start(g, op, lam_t, eps, error, generator)
+        start = _random_start(g, op, lam_t, eps, error, gens)
         s, h, it = solve(g, start, op, cfg)
         better = h[:, -1] < best_cost
         best.put(better.nonzero().flatten(), s.take(better))
@@ -134,17 +119,27 @@ def sparse_autofocus(
         iters[better] = it[better]
         best_cost = torch.minimum(best_cost, h[:, -1])
     phase = best.phi[..., 0] if error == "1d" else best.phi
-    return AutofocusResult(best.f, phase, best_cost, history, iters, lam_t)
+    return SparseAutofocusResult(
+        image=best.f, phase=phase, iterations=iters, cost=best_cost, history=history, lam=lam_t
+    )
 
 
 def _random_start(
-    g: Tensor, op: LinearOperator, lam: Tensor, eps: float | None, error: str, gen
+    g: Tensor,
+    op: LinearOperator,
+    lam: Tensor,
+    eps: float | None,
+    error: str,
+    gens: list[torch.Generator],
 ) -> State:
-    """Initial state with a random phase of the error's structure."""
+    """Initial state with a random phase of the error's structure, item ``i`` from ``gens[i]``."""
     s = initial_state(g, op, lam, eps)
     b, m, k = g.shape
-    shape = {"1d": (b, m, 1), "2d-separable": (b, m, 1), "2d": (b, m, k)}[error]
-    phi = (2 * torch.rand(shape, generator=gen, dtype=s.phi.dtype) - 1) * torch.pi
+    shape = (m, k) if error == "2d" else (m, 1)
+    u = torch.empty(b, *shape, dtype=s.phi.dtype)
+    for i, gen in enumerate(gens):
+        u[i] = torch.rand(shape, generator=gen, dtype=s.phi.dtype)
+    phi = (2 * u - 1) * torch.pi
     s.phi = phi.to(g.device).expand(b, m, k).contiguous()
     s.f = op.adjoint(g * torch.polar(torch.ones_like(s.phi), -s.phi).to(g.dtype))
     return s

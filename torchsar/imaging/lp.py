@@ -15,7 +15,7 @@ __all__ = ["default_lam", "lp_image", "resolve_operator"]
 
 
 def default_lam(
-    g: Tensor, operator: LinearOperator, *, p: float = 1.0, kappa: float = 1.5
+    g: Tensor, *, operator: LinearOperator | None = None, p: float = 1.0, kappa: float = 1.5
 ) -> Tensor:
     """Data-driven regularisation weight: a threshold at ``kappa`` RMS pixel amplitudes.
 
@@ -28,7 +28,7 @@ def default_lam(
 
     Args:
         g: phase history ``(B, M, K)``.
-        operator: observation operator.
+        operator: observation operator (default: unitary :class:`FourierOperator`).
         p: the L_p exponent in ``(0, 2]``.
         kappa: threshold in RMS pixel amplitudes (1.5 suits 1-D / separable errors on scenes
             with about 1-3 % bright pixels; :func:`sparse_autofocus` uses 1.0 for ``"2d"``).
@@ -38,10 +38,16 @@ def default_lam(
 
     Example:
         >>> g = torch.ones(2, 8, 8, dtype=torch.complex64)
-        >>> default_lam(g, FourierOperator((8, 8)))
+        >>> default_lam(g)
         tensor([3., 3.])
     """
-    y = operator.adjoint(g).flatten(1)
+    operator, g = resolve_operator(g, operator)
+    return _threshold_lam(operator.adjoint(g), p, kappa)
+
+
+def _threshold_lam(image: Tensor, p: float, kappa: float) -> Tensor:
+    """``lam = 2 (kappa rms)^(2-p) / p`` from the conventional image ``(B, 1, H, W)``."""
+    y = image.flatten(1)
     rms = y.norm(dim=1) / math.sqrt(max(1, y.shape[1]))
     rms = rms.clamp_min(torch.finfo(rms.dtype).tiny)
     return 2 * (kappa * rms).pow(2 - p) / p
@@ -54,7 +60,7 @@ def lam_tensor(
     b = g.shape[0]
     real = g.real.dtype
     if lam is None:
-        return default_lam(g, op, p=p, kappa=kappa).to(real)
+        return _threshold_lam(op.adjoint(g), p, kappa).to(real)
     if isinstance(lam, Tensor):
         if lam.numel() not in (1, b):
             raise OptionError(

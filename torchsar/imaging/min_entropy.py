@@ -2,34 +2,74 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
 
 import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int
+from torchsar.imaging.focus import intensity_entropy
 from torchsar.imaging.fourier import ifft2c
-from torchsar.imaging.items import fill_items, nonzero_items
+from torchsar.imaging.items import nonzero_items
+from torchsar.imaging.result import MinEntropyResult, fill_result
 
-__all__ = ["MinEntropyResult", "min_entropy_autofocus"]
-
-
-@dataclass(frozen=True)
-class MinEntropyResult:
-    """Output of :func:`min_entropy_autofocus`: ``image`` ``(B, 1, M, K)``, ``phase`` ``(B, M)``,
-    final ``entropy`` ``(B,)``."""
-
-    image: Tensor
-    phase: Tensor
-    entropy: Tensor
+__all__ = ["entropy_result", "lbfgs_phases", "min_entropy_autofocus"]
 
 
-def _entropy(g: Tensor, phi: Tensor) -> Tensor:
-    """Entropy of ``|ifft2c(exp(-1j phi) g)|^2`` per item."""
-    img = ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
-    i = img.abs().square().flatten(1)
-    q = i / i.sum(-1, keepdim=True).clamp_min(torch.finfo(i.dtype).tiny)
-    return -(q * q.clamp_min(torch.finfo(i.dtype).tiny).log()).sum(-1)
+def _rotate(g: Tensor, phi: Tensor) -> Tensor:
+    """Image of the phase history corrected by the per-pulse phases ``phi``."""
+    return ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None])
+
+
+def _intensity(g: Tensor, phi: Tensor) -> Tensor:
+    """Flattened intensity ``(B, M K)`` of the corrected image."""
+    return _rotate(g, phi).abs().square().flatten(1)
+
+
+def lbfgs_phases(
+    loss: Callable[[Tensor], Tensor], like: Tensor, *, max_iter: int
+) -> tuple[Tensor, Tensor]:
+    """Per-pulse phases ``(B, M)`` minimising a scalar ``loss(phi)`` with L-BFGS from zero.
+
+    The gradient comes from autograd. A loss that sums per-item terms decouples across the
+    batch (items share only the line search, so the iteration count is shared too).
+
+    Args:
+        loss: phases ``(B, M)`` -> scalar tensor.
+        like: a complex tensor ``(B, M, ...)`` giving the phases' shape, dtype and device.
+        max_iter: L-BFGS iterations.
+
+    Returns:
+        ``(phases (B, M), iterations (B,) int64)``.
+
+    Example:
+        >>> like = torch.zeros(2, 3, dtype=torch.complex64)
+        >>> phi, it = lbfgs_phases(lambda p: (p - 1).square().sum(), like, max_iter=20)
+        >>> torch.allclose(phi, torch.ones(2, 3)), it.tolist() == [it[0].item()] * 2
+        (True, True)
+    """
+    phi = torch.zeros(like.shape[:2], dtype=like.real.dtype, device=like.device)
+    phi.requires_grad_(True)
+    iterations = 0
+    if like.shape[0] > 0 and max_iter > 0:
+        opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")
+
+        def closure() -> Tensor:
+            opt.zero_grad()
+            value = loss(phi)
+            value.backward()
+            return value
+
+        opt.step(closure)
+        iterations = opt.state[phi].get("n_iter", 0)
+    count = torch.full((like.shape[0],), iterations, dtype=torch.int64, device=like.device)
+    return phi.detach(), count
+
+
+def entropy_result(image: Tensor, phase: Tensor, iterations: Tensor) -> MinEntropyResult:
+    """:class:`MinEntropyResult` of a corrected complex ``image`` ``(B, 1, H, W)``."""
+    entropy = intensity_entropy(image.abs().square().flatten(1))
+    return MinEntropyResult(image=image, phase=phase, iterations=iterations, entropy=entropy)
 
 
 def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
@@ -68,21 +108,8 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     g = g.detach()
     live = nonzero_items(g)
     if not bool(live.all()):
-        part = min_entropy_autofocus(g[live], max_iter=max_iter)
-        return MinEntropyResult(
-            *(fill_items(live, x) for x in (part.image, part.phase, part.entropy))
-        )
-    phi = torch.zeros(g.shape[:2], dtype=g.real.dtype, device=g.device, requires_grad=True)
-    if g.shape[0] > 0 and max_iter > 0:
-        opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")
-
-        def closure() -> Tensor:
-            opt.zero_grad()
-            loss = _entropy(g, phi).sum()
-            loss.backward()
-            return loss
-
-        opt.step(closure)
-    phi = phi.detach()
-    img = ifft2c(g * torch.polar(torch.ones_like(phi), -phi)[..., None]).unsqueeze(1)
-    return MinEntropyResult(img, phi, _entropy(g, phi))
+        return fill_result(live, min_entropy_autofocus(g[live], max_iter=max_iter))
+    phi, iterations = lbfgs_phases(
+        lambda phi: intensity_entropy(_intensity(g, phi)).sum(), g, max_iter=max_iter
+    )
+    return entropy_result(_rotate(g, phi).unsqueeze(1), phi, iterations)

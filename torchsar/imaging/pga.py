@@ -10,24 +10,13 @@ trend and correct. Iterates until the RMS phase update is below ``tol``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_image, check_int, check_positive
+from torchsar.imaging.result import AutofocusResult
 
-__all__ = ["PGAResult", "pga"]
-
-
-@dataclass(frozen=True)
-class PGAResult:
-    """Output of :func:`pga`: corrected complex ``image`` ``(B, 1, H, W)``, ``phase`` ``(B, H)``
-    (estimate of the per-pulse error, convention ``g = exp(1j phase) C f``), ``iterations``."""
-
-    image: Tensor
-    phase: Tensor
-    iterations: Tensor
+__all__ = ["pga"]
 
 
 def _azimuth_fft(x: Tensor) -> Tensor:
@@ -77,7 +66,7 @@ def pga(
     tol: float = 1e-3,
     window_db: float = -20.0,
     min_window: int = 3,
-) -> PGAResult:
+) -> AutofocusResult:
     """Phase gradient autofocus of complex images with per-pulse (row) phase errors.
 
     Args:
@@ -89,7 +78,8 @@ def pga(
         min_window: smallest window width in rows.
 
     Returns:
-        :class:`PGAResult`.
+        :class:`AutofocusResult`: corrected ``image`` ``(B, 1, H, W)``, ``phase`` ``(B, H)``
+        (the per-pulse error estimate, convention ``g = exp(1j phase) C f``), ``iterations``.
 
     Raises:
         InputTypeError, ShapeError: ``image`` is not a complex ``(B, 1, H, W)`` tensor.
@@ -127,4 +117,4 @@ def pga(
         total = total + est
         iters = torch.where(active, it, iters)
         active = active & (est.square().mean(-1).sqrt() > tol)
-    return PGAResult(img.unsqueeze(1), total, iters)
+    return AutofocusResult(image=img.unsqueeze(1), phase=total, iterations=iters)

@@ -4,6 +4,10 @@ Given data ``g`` and the model prediction ``d = C f``, each step minimises
 ``||exp(-1j phi) g - d||^2`` over the phase exactly: the minimiser of
 ``||g - exp(1j phi) d||^2`` over one phase shared by a set of samples is
 ``angle(sum conj(d) g)`` (``atan2``, full quadrant).
+
+These are the inner steps of :func:`~torchsar.imaging.sparse_autofocus`, not autofocus
+methods: they return phases only (the methods return an
+:class:`~torchsar.imaging.AutofocusResult`).
 """
 
 from __future__ import annotations

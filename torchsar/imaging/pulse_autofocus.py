@@ -16,7 +16,10 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int, check_positive
-from torchsar.imaging.items import fill_items, nonzero_items
+from torchsar.imaging.focus import entropy_terms
+from torchsar.imaging.items import nonzero_items
+from torchsar.imaging.min_entropy import entropy_result, lbfgs_phases
+from torchsar.imaging.result import AutofocusResult, MinEntropyResult, fill_result
 
 __all__ = ["pulse_autofocus", "pulse_min_entropy"]
 
@@ -35,7 +38,7 @@ def pulse_autofocus(
     max_iter: int = 200,
     tol: float = 1e-4,
     inner: int = 2,
-) -> tuple[Tensor, Tensor, Tensor]:
+) -> AutofocusResult:
     """Sparsity-driven 1-D autofocus from per-pulse images (matched-filter image step).
 
     Args:
@@ -48,8 +51,9 @@ def pulse_autofocus(
         inner: image updates per phase step.
 
     Returns:
-        ``(image (B, 1, H, W), phase (B, M), iterations (B,))``; an all-zero item has
-        nothing to focus and gets a zero image, phase 0 and 0 iterations.
+        :class:`AutofocusResult` with ``image (B, 1, H, W)``, ``phase (B, M)``,
+        ``iterations (B,)``; an all-zero item has nothing to focus and gets a zero image,
+        phase 0 and 0 iterations.
 
     References:
         Önhon & Çetin 2012, doi:10.1109/TIP.2011.2174795; Ash, "An autofocus method for
@@ -58,8 +62,7 @@ def pulse_autofocus(
     Example:
         >>> b = torch.zeros(1, 3, 4, 4, dtype=torch.complex64); b[0, :, 1, 1] = 1
         >>> b = b * torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))[None, :, None, None]
-        >>> img, phi, _ = pulse_autofocus(b)
-        >>> float(img.abs().max()) > 2.0
+        >>> float(pulse_autofocus(b).image.abs().max()) > 2.0
         True
     """
     b = check_complex(pulse_images, "pulse_images", ndim=4)
@@ -68,7 +71,7 @@ def pulse_autofocus(
     live = nonzero_items(b)
     if not bool(live.all()):
         part = pulse_autofocus(b[live], p=p, kappa=kappa, max_iter=max_iter, tol=tol, inner=inner)
-        return tuple(fill_items(live, x) for x in part)  # type: ignore[return-value]
+        return fill_result(live, part)
     phi = torch.zeros(b.shape[:2], dtype=b.real.dtype, device=b.device)
     f = _form(b, phi)
     rms = f.flatten(1).norm(dim=1) / math.sqrt(max(1, f[0, 0].numel()))
@@ -90,41 +93,37 @@ def pulse_autofocus(
         phi = torch.where(active[:, None], phi_new, phi)
         iters = torch.where(active, it, iters)
         active = active & (change > tol)
-    return f, phi, iters
+    return AutofocusResult(image=f, phase=phi, iterations=iters)
 
 
-def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> tuple[Tensor, Tensor]:
+def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
     """Minimum-entropy 1-D autofocus of ``sum_m exp(-1j phi_m) b_m`` (L-BFGS, autograd).
 
+    Args:
+        pulse_images: complex ``(B, M, H, W)``.
+        max_iter: L-BFGS iterations.
+
     Returns:
-        ``(image (B, 1, H, W), phase (B, M))``; an all-zero item gets a zero image and
-        phase 0.
+        :class:`MinEntropyResult` with ``image (B, 1, H, W)``, ``phase (B, M)``; an
+        all-zero item gets a zero image, phase 0 and entropy 0.
 
     Example:
         >>> b = torch.zeros(1, 3, 4, 4, dtype=torch.complex64); b[0, :, 1, 1] = 1
         >>> b = b * torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))[None, :, None, None]
-        >>> img, phi = pulse_min_entropy(b)
-        >>> img.shape, phi.shape
+        >>> out = pulse_min_entropy(b)
+        >>> out.image.shape, out.phase.shape
         (torch.Size([1, 1, 4, 4]), torch.Size([1, 3]))
     """
     b = check_complex(pulse_images, "pulse_images", ndim=4).detach()
     check_int(max_iter, "max_iter", minimum=0)
     live = nonzero_items(b)
     if not bool(live.all()):
-        img, phase = pulse_min_entropy(b[live], max_iter=max_iter)
-        return fill_items(live, img), fill_items(live, phase)
-    phi = torch.zeros(b.shape[:2], dtype=b.real.dtype, device=b.device, requires_grad=True)
-    if b.shape[0] > 0 and max_iter > 0:
-        opt = torch.optim.LBFGS([phi], max_iter=max_iter, line_search_fn="strong_wolfe")
-
-        def closure() -> Tensor:
-            opt.zero_grad()
-            i = _form(b, phi).abs().square().flatten(1)
-            q = i / i.sum(-1, keepdim=True)
-            loss = -(q * q.clamp_min(1e-30).log()).sum()
-            loss.backward()
-            return loss
-
-        opt.step(closure)
-    phi = phi.detach()
-    return _form(b, phi), phi
+        return fill_result(live, pulse_min_entropy(b[live], max_iter=max_iter))
+    # One flat sum over the batch's pixels (this method's loss since it was written; the sum
+    # order sets the rounding, and so the L-BFGS path).
+    phi, iterations = lbfgs_phases(
+        lambda phi: entropy_terms(_form(b, phi).abs().square().flatten(1)).sum(),
+        b,
+        max_iter=max_iter,
+    )
+    return entropy_result(_form(b, phi), phi, iterations)

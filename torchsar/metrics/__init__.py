@@ -1,5 +1,8 @@
 """Pure scoring: pixel counts, one-to-one object matching, additive object states (AP, FROC,
-P/R/F1, breakdowns, bootstrap), the pixel ROC, and despeckling quality."""
+P/R/F1, breakdowns, bootstrap), the pixel ROC, and despeckling quality.
+
+Image-formation metrics (focus of a formed image, fidelity to a known scene or phase error)
+live with imaging: :mod:`torchsar.imaging.focus` and :mod:`torchsar.imaging.fidelity`."""
 
 from torchsar.metrics.assign import BatchMatch, match_batch
 from torchsar.metrics.curves import SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa

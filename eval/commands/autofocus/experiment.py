@@ -27,36 +27,29 @@ __all__ = ["DEFAULT_METHODS", "ERROR_CASES", "METHODS", "Config", "ErrorCase", "
 
 @dataclass(frozen=True)
 class ErrorCase:
-    """A phase-error type: the error structure the sparse method assumes and a generator."""
+    """A phase-error type: the error structure the sparse method assumes and a generator
+    ``make(batch, pulses, samples, seed)``."""
 
     kind: str  # "1d", "2d-separable" or "2d"
-    make: Callable[[int, int, int, torch.Generator], Tensor]
+    make: Callable[[int, int, int, int], Tensor]
+
+
+def _one_d(fn: Callable[..., Tensor], amplitude: float) -> Callable[[int, int, int, int], Tensor]:
+    return lambda b, m, k, seed: fn(b, m, amplitude=amplitude, seed=seed)
+
+
+def _two_d(amplitude: float, separable: bool) -> Callable[[int, int, int, int], Tensor]:
+    return lambda b, m, k, seed: ti.uniform_phase_error(
+        b, m, k, separable=separable, amplitude=amplitude, seed=seed
+    )
 
 
 ERROR_CASES: dict[str, ErrorCase] = {
-    "1d-uniform-pi": ErrorCase(
-        "1d", lambda b, m, k, gen: ti.uniform_phase_error(b, m, amplitude=math.pi, generator=gen)
-    ),
-    "1d-quadratic-2pi": ErrorCase(
-        "1d",
-        lambda b, m, k, gen: ti.quadratic_phase_error(b, m, amplitude=2 * math.pi, generator=gen),
-    ),
-    "2d-separable-3pi/4": ErrorCase(
-        "2d-separable",
-        lambda b, m, k, gen: ti.separable_phase_error(
-            b, m, k, amplitude=0.75 * math.pi, generator=gen
-        ),
-    ),
-    "2d-3pi/4": ErrorCase(
-        "2d",
-        lambda b, m, k, gen: ti.nonseparable_phase_error(
-            b, m, k, amplitude=0.75 * math.pi, generator=gen
-        ),
-    ),
-    "2d-pi": ErrorCase(
-        "2d",
-        lambda b, m, k, gen: ti.nonseparable_phase_error(b, m, k, amplitude=math.pi, generator=gen),
-    ),
+    "1d-uniform-pi": ErrorCase("1d", _one_d(ti.uniform_phase_error, math.pi)),
+    "1d-quadratic-2pi": ErrorCase("1d", _one_d(ti.quadratic_phase_error, 2 * math.pi)),
+    "2d-separable-3pi/4": ErrorCase("2d-separable", _two_d(0.75 * math.pi, separable=True)),
+    "2d-3pi/4": ErrorCase("2d", _two_d(0.75 * math.pi, separable=False)),
+    "2d-pi": ErrorCase("2d", _two_d(math.pi, separable=False)),
 }
 
 
@@ -102,19 +95,20 @@ def _lp(g: Tensor, kind: str, phi: Tensor) -> tuple:
     return ti.lp_image(g, max_iter=50), None, None
 
 
-def _pga(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.pga(ti.ifft2c(g).unsqueeze(1))
+def _fields(out: ti.AutofocusResult) -> tuple:
     return out.image, out.phase, out.iterations
+
+
+def _pga(g: Tensor, kind: str, phi: Tensor) -> tuple:
+    return _fields(ti.pga(ti.ifft2c(g).unsqueeze(1)))
 
 
 def _min_entropy(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.min_entropy_autofocus(g)
-    return out.image, out.phase, None
+    return _fields(ti.min_entropy_autofocus(g))
 
 
 def _sparse(g: Tensor, kind: str, phi: Tensor) -> tuple:
-    out = ti.sparse_autofocus(g, error=kind)
-    return out.image, out.phase, out.iterations
+    return _fields(ti.sparse_autofocus(g, error=kind))
 
 
 def _sparse_keep_restarts(g: Tensor, kind: str, phi: Tensor, scatterers: int = 0) -> tuple | None:
@@ -122,12 +116,11 @@ def _sparse_keep_restarts(g: Tensor, kind: str, phi: Tensor, scatterers: int = 0
     count, 10 random starts, lowest cost kept. Only run for 2-D non-separable errors."""
     if kind != "2d":
         return None
-    gen = torch.Generator().manual_seed(0)
     keep = max(1, math.ceil(1.5 * scatterers))
     out = ti.sparse_autofocus(
-        g, error=kind, keep=keep, restarts=9, warmup=0, max_iter=200, tol=1e-5, generator=gen
+        g, error=kind, keep=keep, restarts=9, warmup=0, max_iter=200, tol=1e-5, seed=0
     )
-    return out.image, out.phase, out.iterations
+    return _fields(out)
 
 
 def _sparse_true_phase(g: Tensor, kind: str, phi: Tensor) -> tuple:
@@ -157,8 +150,13 @@ def simulate(cfg: Config, case: ErrorCase, gen: torch.Generator) -> dict[str, Te
         snr_db=cfg.snr_db,
         seed=noise_seed,
     )
-    phi = case.make(cfg.scenes, n, n, gen)
+    phi = case.make(cfg.scenes, n, n, draw_seed(gen))
     return {"f": f, "mask": mask, "clean": clean, "g": ti.apply_phase_error(clean, phi), "phi": phi}
+
+
+def draw_seed(gen: torch.Generator) -> int:
+    """A seed in ``[0, 2**62)`` drawn from ``gen``: a further independent stream of the run."""
+    return int(torch.randint(2**62, (1,), generator=gen))
 
 
 def _phase_rmse(est: Tensor | None, phi: Tensor) -> Tensor:

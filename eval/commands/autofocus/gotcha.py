@@ -20,18 +20,16 @@ import torch
 from torch import Tensor
 
 import torchsar.imaging as ti
+from eval.commands.autofocus.experiment import draw_seed
 from torchsar.imaging.backprojection import BackprojectionOperator
-from torchsar.imaging.pulse_autofocus import pulse_autofocus, pulse_min_entropy
 from torchsar.io.gotcha import GotchaPass
 
 __all__ = ["GOTCHA_ERRORS", "run_gotcha"]
 
 GOTCHA_ERRORS = {
-    "1d-uniform-pi": lambda b, m, gen: ti.uniform_phase_error(
-        b, m, amplitude=math.pi, generator=gen
-    ),
-    "1d-quadratic-4pi": lambda b, m, gen: ti.quadratic_phase_error(
-        b, m, amplitude=4 * math.pi, generator=gen
+    "1d-uniform-pi": lambda b, m, seed: ti.uniform_phase_error(b, m, amplitude=math.pi, seed=seed),
+    "1d-quadratic-4pi": lambda b, m, seed: ti.quadratic_phase_error(
+        b, m, amplitude=4 * math.pi, seed=seed
     ),
 }
 
@@ -43,8 +41,8 @@ def _estimate(method: str, g: Tensor, b: Tensor) -> Tensor:
     if method == "pga-fft":
         return ti.pga(ti.ifft2c(g).unsqueeze(1)).phase.double()
     if method == "min-entropy-bp":
-        return pulse_min_entropy(b)[1].double()
-    return pulse_autofocus(b)[1].double()
+        return ti.pulse_min_entropy(b).phase.double()
+    return ti.pulse_autofocus(b).phase.double()
 
 
 METHODS = ["none", "pga-fft", "min-entropy-bp", "sparse-bp"]
@@ -65,7 +63,7 @@ def run_gotcha(
     rows, panel = [], {"reference": clean[0, 0]}
     gen = torch.Generator().manual_seed(seed)
     for name, make in GOTCHA_ERRORS.items():
-        phi = make(trials, g0.shape[1], gen).double()
+        phi = make(trials, g0.shape[1], draw_seed(gen)).double()
         rot = torch.polar(torch.ones_like(phi), phi).to(g0.dtype)
         g, b = g0 * rot[..., None], b0 * rot[..., None, None]
         for method in METHODS:

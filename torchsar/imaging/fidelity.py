@@ -1,9 +1,12 @@
-"""Focus and fidelity metrics for formed SAR images and phase-error estimates.
+"""Fidelity of an image or phase estimate to the truth, modulo what the data cannot observe.
 
-Focus metrics take real intensity images ``(B, C, H, W)`` and return ``(B, C)``. Fidelity
-metrics compare an estimate with the true scene *modulo what the data cannot observe*: a
-constant and linear phase error (a circular image shift), and for 2-D errors optionally the
-twin image (``conj(f(-r))``, the flip ambiguity of phase retrieval).
+For simulations with a known scene and phase error: a constant and linear phase error (a
+circular image shift) cannot be observed, and for 2-D errors optionally neither can the twin
+image (``conj(f(-r))``, the flip ambiguity of phase retrieval). :func:`align` and
+:func:`magnitude_correlation` compare images up to that shift (and flip); :func:`phase_rmse`
+compares phase estimates after :func:`remove_linear_phase`.
+
+How well focused an image is without a reference: :mod:`torchsar.imaging.focus`.
 """
 
 from __future__ import annotations
@@ -11,98 +14,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputValueError, ShapeError, check_image, check_same_shape
+from torchsar._checks import InputValueError, ShapeError, check_same_shape
 
-__all__ = [
-    "align",
-    "contrast",
-    "entropy",
-    "magnitude_correlation",
-    "phase_rmse",
-    "remove_linear_phase",
-    "sharpness",
-    "target_to_background",
-]
-
-
-def _intensity(x: Tensor) -> Tensor:
-    x = check_image(x, "x")
-    return x.flatten(-2).to(torch.float64 if x.dtype == torch.float64 else torch.float32)
-
-
-def entropy(x: Tensor) -> Tensor:
-    """Shannon entropy of the normalised intensity ``-sum q log q``, ``q = I / sum I``.
-
-    Lower is better focused. A constant image gives ``log(H W)``; an all-zero image gives 0.
-
-    Args:
-        x: intensity ``(B, C, H, W)``.
-
-    Returns:
-        ``(B, C)``.
-
-    References:
-        Xi, Guosui & Ni, IEEE Trans. AES 35(4), 1999, doi:10.1109/7.805442.
-
-    Example:
-        >>> round(float(entropy(torch.ones(1, 1, 4, 4))[0, 0]), 4) == round(4 * 0.693147, 4)
-        True
-    """
-    i = _intensity(x)
-    q = i / i.sum(-1, keepdim=True).clamp_min(torch.finfo(i.dtype).tiny)
-    return -(q * q.clamp_min(torch.finfo(i.dtype).tiny).log()).sum(-1)
-
-
-def contrast(x: Tensor) -> Tensor:
-    """Image contrast ``std(I) / mean(I)`` (higher is better focused).
-
-    Example:
-        >>> float(contrast(torch.ones(1, 1, 4, 4))[0, 0])
-        0.0
-    """
-    i = _intensity(x)
-    return i.std(-1, unbiased=False) / i.mean(-1).clamp_min(torch.finfo(i.dtype).tiny)
-
-
-def sharpness(x: Tensor) -> Tensor:
-    """Normalised sharpness ``sum I^2 / (sum I)^2`` (Fienup & Miller 2003; higher is sharper).
-
-    Equals 1 for a single bright pixel and ``1 / (H W)`` for a constant image.
-
-    References:
-        Fienup & Miller, JOSA A 20(4), 2003, doi:10.1364/JOSAA.20.000609.
-
-    Example:
-        >>> float(sharpness(torch.ones(1, 1, 2, 2))[0, 0])
-        0.25
-    """
-    i = _intensity(x)
-    return i.square().sum(-1) / i.sum(-1).square().clamp_min(torch.finfo(i.dtype).tiny)
-
-
-def target_to_background(x: Tensor, mask: Tensor) -> Tensor:
-    """Target-to-background ratio in dB: mean intensity on ``mask`` over mean off it.
-
-    Args:
-        x: intensity ``(B, C, H, W)``.
-        mask: bool target mask, same shape.
-
-    Returns:
-        ``(B, C)`` in dB.
-
-    Example:
-        >>> x = torch.ones(1, 1, 2, 2); x[0, 0, 0, 0] = 10
-        >>> m = torch.zeros(1, 1, 2, 2, dtype=torch.bool); m[0, 0, 0, 0] = True
-        >>> float(target_to_background(x, m)[0, 0])
-        10.0
-    """
-    i = _intensity(x)
-    check_same_shape(x, mask, "x", "mask")
-    m = mask.flatten(-2).to(i.dtype)
-    tiny = torch.finfo(i.dtype).tiny
-    tgt = (i * m).sum(-1) / m.sum(-1).clamp_min(1)
-    bkg = (i * (1 - m)).sum(-1) / (1 - m).sum(-1).clamp_min(1)
-    return 10 * torch.log10(tgt.clamp_min(tiny) / bkg.clamp_min(tiny))
+__all__ = ["align", "magnitude_correlation", "phase_rmse", "remove_linear_phase"]
 
 
 def _standardise(a: Tensor) -> Tensor:
