@@ -84,8 +84,9 @@ def vi(
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
-        rule = _decide(a, b, k_vi, k_mr)
-        est = _estimate(rule, a, b, sums[4])
+        mean_a, mean_b = a.mean(), b.mean()
+        rule = _decide(a, b, mean_a, mean_b, k_vi, k_mr)
+        est = _estimate(rule, mean_a, mean_b, sums[4])
         stat = ratio(xs.to(torch.float64), est)
         scale = _rule_scale(rule, a.count, b.count, ring.n, full, factor)
         return finish(stat * scale, a.count + b.count, dtype)
@@ -150,20 +151,18 @@ def _merge(p: Sums, q: Sums) -> Sums:
     return Sums(p.count + q.count, p.s1 + q.s1, p.s2 + q.s2, p.shift)
 
 
-def _vi_mean(s: Sums) -> tuple[Tensor, Tensor]:
-    """Half mean and variability index ``1 + s^2 / mean^2`` (unbiased ``s^2``)."""
-    mean = s.mean()
-    return mean, 1.0 + ratio(s.var(unbiased=True), mean * mean)
+def _variable(s: Sums, mean: Tensor, k_vi: float) -> Tensor:
+    """Whether a half is variable: ``VI = 1 + s^2 / mean^2 > k_vi`` (unbiased ``s^2``), or it
+    holds at most one cell."""
+    vi = 1.0 + ratio(s.var(unbiased=True), mean * mean)
+    return (vi > k_vi) | (s.count <= 1)
 
 
-def _decide(a: Sums, b: Sums, k_vi: float, k_mr: float) -> Tensor:
+def _decide(a: Sums, b: Sums, mean_a: Tensor, mean_b: Tensor, k_vi: float, k_mr: float) -> Tensor:
     """The per-pixel rule code (Smith & Varshney's decision table). A half with no counted
     cell (a corner of the image, or masked out) has no mean: the other half's CA is used,
     never SO or GO over an empty half (its mean would read as 0)."""
-    mean_a, vi_a = _vi_mean(a)
-    mean_b, vi_b = _vi_mean(b)
-    var_a = (vi_a > k_vi) | (a.count <= 1)
-    var_b = (vi_b > k_vi) | (b.count <= 1)
+    var_a, var_b = _variable(a, mean_a, k_vi), _variable(b, mean_b, k_vi)
     differ = (mean_a > k_mr * mean_b) | (mean_b > k_mr * mean_a)
     rule = torch.where(differ, _GO, _CA)
     rule = torch.where(var_a & ~var_b, _CA_B, rule)
@@ -173,13 +172,13 @@ def _decide(a: Sums, b: Sums, k_vi: float, k_mr: float) -> Tensor:
     return torch.where((b.count == 0) & (a.count > 0), _CA_A, rule)
 
 
-def _estimate(rule: Tensor, a: Sums, b: Sums, ring: Sums) -> Tensor:
-    """The clutter estimate of each pixel's rule (float64)."""
-    mean_a, mean_b = a.mean(), b.mean()
-    est = torch.where(rule == _CA, ring.mean(), torch.maximum(mean_a, mean_b))
-    est = torch.where(rule == _SO, torch.minimum(mean_a, mean_b), est)
-    est = torch.where(rule == _CA_A, mean_a, est)
-    return torch.where(rule == _CA_B, mean_b, est)
+def _estimate(rule: Tensor, mean_a: Tensor, mean_b: Tensor, ring: Sums) -> Tensor:
+    """The clutter estimate of each pixel's rule (float64): one gather over the candidate
+    estimates in rule-code order."""
+    ring_mean = ring.mean()
+    hi, lo = torch.maximum(mean_a, mean_b), torch.minimum(mean_a, mean_b)
+    cand = torch.stack(torch.broadcast_tensors(ring_mean, hi, lo, mean_a, mean_b))
+    return torch.gather(cand, 0, rule.expand(cand.shape[1:]).unsqueeze(0)).squeeze(0)
 
 
 def _rule_factor(key: tuple[int, ...], pfa: float) -> float:
