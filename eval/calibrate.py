@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eval.errors import EvalError
 from torchsar.metrics import ObjectState
 from torchsar.metrics.curves import SCORE_GRID, suffix
 from torchsar.metrics.object_state import operating_point
+from torchsar_eval.errors import EvalError
 
 __all__ = ["Target", "choose_bin", "parse_target", "split_indices", "threshold_of"]
 

@@ -22,8 +22,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
-from eval.commands import COMMANDS, load
-from eval.errors import EvalError
+from torchsar_eval.commands import COMMANDS, load
+from torchsar_eval.errors import EvalError
 
 __all__ = ["Terminated", "build_parser", "main"]
 
@@ -116,7 +116,7 @@ def _user_error(message: object) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    from eval.output import claim, default_out
+    from torchsar_eval.output import claim, default_out
 
     out = args.out if getattr(args, "out", None) is not None else default_out(args.command)
     resume = bool(getattr(args, "resume", False))

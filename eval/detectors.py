@@ -15,9 +15,9 @@ from typing import Any
 from torch import Tensor
 
 import torchsar as ts
-from eval.errors import EvalError
 from torchsar.cfar import Detection
 from torchsar.simulate import clutter
+from torchsar_eval.errors import EvalError
 
 __all__ = ["DETECTORS", "DetectorSpec", "check_options", "dry_run", "parse_params", "resolve"]
 

@@ -1,6 +1,6 @@
 """Typed command-line options: comma lists and numbers checked once, at the command's edge.
 
-Every parser raises :class:`~eval.errors.EvalError` naming the option, what it expects and
+Every parser raises :class:`~torchsar_eval.errors.EvalError` naming the option, what it expects and
 what was given, so the CLI reports it as one line with exit status 2. Commands parse their
 options here first, before any dataset is built (:func:`check_run_args` does it for ``run``).
 
@@ -14,7 +14,7 @@ Example:
     >>> ints("0", "--n", minimum=1)
     Traceback (most recent call last):
     ...
-    eval.errors.EvalError: --n must be >= 1, got 0
+    torchsar_eval.errors.EvalError: --n must be >= 1, got 0
 """
 
 from __future__ import annotations
@@ -28,9 +28,16 @@ from typing import Any, NamedTuple, TypeVar
 
 from torch import Tensor
 
-from eval.detectors import DETECTORS, DetectorSpec, check_options, dry_run, parse_params, resolve
-from eval.errors import EvalError
 from torchsar.speckle import FILTERS
+from torchsar_eval.detectors import (
+    DETECTORS,
+    DetectorSpec,
+    check_options,
+    dry_run,
+    parse_params,
+    resolve,
+)
+from torchsar_eval.errors import EvalError
 
 __all__ = [
     "RunChoices",

@@ -32,7 +32,7 @@ from typing import Any
 import torch
 
 import torchsar
-from eval.errors import EvalError
+from torchsar_eval.errors import EvalError
 
 __all__ = [
     "HOST",

@@ -20,9 +20,6 @@ from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
-from eval.datasets.base import BadItemError
-from eval.detectors import DetectorSpec
-from eval.scoring import batch_truth, image_rows, pixel_areas
 from torchsar.metrics import (
     Matching,
     ObjectState,
@@ -33,6 +30,9 @@ from torchsar.metrics import (
 )
 from torchsar.metrics.curves import OP_BIN
 from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar_eval.datasets.base import BadItemError
+from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.scoring import batch_truth, image_rows, pixel_areas
 
 __all__ = [
     "DEFAULT_MATCH",
@@ -92,7 +92,7 @@ class DetectorResult:
     def add(
         self, statistic: Tensor, threshold: Tensor, det_mask: Tensor, batch: dict, truth
     ) -> Objects:
-        """Accumulate one batch's detections (``truth``: :func:`eval.scoring.batch_truth`);
+        """Accumulate one batch's detections (``truth``: :func:`torchsar_eval.scoring.batch_truth`);
         returns the batch's objects."""
         mask, ignore = batch["mask"], batch["ignore"]
         self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
@@ -136,7 +136,7 @@ def _stack(items: list[dict]) -> dict:
 
 
 class SkipBad(Dataset):
-    """A dataset whose unreadable items (:class:`~eval.datasets.BadItemError`) are returned
+    """A dataset whose unreadable items (:class:`~torchsar_eval.datasets.BadItemError`) are returned
     as ``{"bad": path, "error": message}`` markers instead of stopping the run."""
 
     def __init__(self, dataset: Dataset) -> None:

@@ -24,8 +24,8 @@ import torch
 from torch.utils.data import Dataset, Subset
 from tqdm.auto import tqdm
 
-from eval.errors import EvalError
-from eval.runner import DetectorResult, Scoring, evaluate
+from torchsar_eval.errors import EvalError
+from torchsar_eval.runner import DetectorResult, Scoring, evaluate
 
 __all__ = ["ShardJob", "merge", "run_shards", "shard_files", "shard_ranges", "shard_rows"]
 

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from eval.errors import EvalError
+from torchsar_eval.errors import EvalError
 
 __all__ = ["FIELDS", "StoreDataset", "write_store"]
 

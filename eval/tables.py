@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from eval.calibrate import threshold_of
-from eval.runner import DetectorResult
 from torchsar.metrics.curves import SCORE_GRID, suffix
 from torchsar.metrics.object_state import operating_point
+from torchsar_eval.calibrate import threshold_of
+from torchsar_eval.runner import DetectorResult
 
 __all__ = [
     "BREAKDOWN_COLUMNS",

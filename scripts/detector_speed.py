@@ -24,8 +24,8 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from eval.datasets import make_dataset
-from eval.detectors import resolve
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.detectors import resolve
 
 HRSID = Path(__file__).resolve().parents[2] / "shared" / "data" / "hrsid"
 DEFAULT = "ca,two_parameter,go,so,os,vi,ac,lognormal,weibull,gamma,k,g0,region"

@@ -20,10 +20,10 @@ import numpy as np
 import torch
 
 import torchsar as ts
-from eval.datasets import make_dataset
-from eval.detectors import DetectorSpec
-from eval.runner import batches, evaluate
-from eval.tables import markdown, summary_table
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.runner import batches, evaluate
+from torchsar_eval.tables import markdown, summary_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "benchmarks"))
 from region import scene  # the benchmark's scene generator

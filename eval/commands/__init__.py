@@ -12,4 +12,4 @@ COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region", "m
 
 def load(name: str):
     """Import the module of sub-command ``name``."""
-    return importlib.import_module(f"eval.commands.{name.replace('-', '_')}")
+    return importlib.import_module(f"torchsar_eval.commands.{name.replace('-', '_')}")

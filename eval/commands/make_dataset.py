@@ -13,9 +13,9 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 import torchsar as ts
-from eval.datasets import make_dataset
-from eval.errors import EvalError
-from eval.store import write_store
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.errors import EvalError
+from torchsar_eval.store import write_store
 
 __all__ = ["add_parser", "run", "sim_items"]
 

@@ -22,7 +22,7 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
 - ``phoenix:DIR``: MSTAR raw Phoenix files (pixel spacing from the header).
 - ``sicd:FILE``: a SICD/NITF complex product cut into ``chip=N`` (512) chips, no ground
   truth (needs the optional ``sar`` extra: ``pip install 'torchsar[sar]'``).
-- ``store:DIR``: a store written by ``torchsar-eval make-dataset`` (see :mod:`eval.store`).
+- ``store:DIR``: a store written by ``torchsar-eval make-dataset`` (see :mod:`torchsar_eval.store`).
 
 Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-bit images
 ``display``, folder ``variant=linear`` ``amplitude``, float TIFF ``intensity``, complex TIFF
@@ -42,12 +42,12 @@ instances of its first readable items look split or merged; an unreadable item r
 :class:`BadItemError` (naming the file, ``.path``) when it is accessed.
 """
 
-from eval.datasets.base import BadItemError, DisplayScalingWarning, FileDataset
-from eval.datasets.folder import FolderDataset
-from eval.datasets.images import read_image
-from eval.datasets.make import DATASETS, make_dataset
-from eval.datasets.manifest import file_manifest
-from eval.datasets.sim import SimDataset
+from torchsar_eval.datasets.base import BadItemError, DisplayScalingWarning, FileDataset
+from torchsar_eval.datasets.folder import FolderDataset
+from torchsar_eval.datasets.images import read_image
+from torchsar_eval.datasets.make import DATASETS, make_dataset
+from torchsar_eval.datasets.manifest import file_manifest
+from torchsar_eval.datasets.sim import SimDataset
 
 __all__ = [
     "DATASETS",

@@ -11,10 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
-from eval.datasets.images import read_samples
-from eval.datasets.spec import DatasetSpec
-from eval.errors import EvalError
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     FileFormatError,
@@ -23,6 +19,10 @@ from torchsar.io import (
     read_coco,
     read_voc,
 )
+from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.images import read_samples
+from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.errors import EvalError
 
 __all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
 

@@ -12,11 +12,11 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from eval.datasets.manifest import file_manifest
-from eval.datasets.semantics import boxes_of, check_instance_counts
-from eval.errors import EvalError
 from torchsar._checks import TorchSARError
 from torchsar.io import FileFormatError, to_intensity
+from torchsar_eval.datasets.manifest import file_manifest
+from torchsar_eval.datasets.semantics import boxes_of, check_instance_counts
+from torchsar_eval.errors import EvalError
 
 __all__ = [
     "SANITY_ITEMS",

@@ -14,11 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
-from eval.datasets.images import check_same_size, read_labels, read_samples
-from eval.datasets.semantics import INSTANCE_MODES, SHADOW_MODES, form_instances, split_labels
-from eval.datasets.spec import DatasetSpec, parse_spacing
-from eval.errors import EvalError
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     RASTER_EXTS,
@@ -30,6 +25,16 @@ from torchsar.io import (
     read_raster,
     tiff_dtype,
 )
+from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.images import check_same_size, read_labels, read_samples
+from torchsar_eval.datasets.semantics import (
+    INSTANCE_MODES,
+    SHADOW_MODES,
+    form_instances,
+    split_labels,
+)
+from torchsar_eval.datasets.spec import DatasetSpec, parse_spacing
+from torchsar_eval.errors import EvalError
 
 __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
 

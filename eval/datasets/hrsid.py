@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
-from eval.datasets.images import check_same_size, read_samples
-from eval.datasets.spec import DatasetSpec
-from eval.errors import EvalError
 from torchsar.io import DEFAULT_MAX_PIXELS, decode_id_map, read_raster
+from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.images import check_same_size, read_samples
+from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.errors import EvalError
 
 __all__ = ["HRSID_OPTIONS", "HrsidDataset"]
 

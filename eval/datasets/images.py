@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.errors import EvalError
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     FileFormatError,
@@ -14,6 +13,7 @@ from torchsar.io import (
     read_raster,
     single_channel,
 )
+from torchsar_eval.errors import EvalError
 
 __all__ = ["LABELS", "check_same_size", "read_image", "read_labels", "read_samples"]
 

@@ -6,16 +6,16 @@ from collections.abc import Callable
 
 from torch.utils.data import Dataset
 
-from eval.datasets.annotated import coco_from_spec, voc_from_spec
-from eval.datasets.base import BadItemError
-from eval.datasets.folder import folder_from_spec
-from eval.datasets.hrsid import hrsid_from_spec
-from eval.datasets.phoenix import phoenix_from_spec
-from eval.datasets.sicd import sicd_from_spec
-from eval.datasets.sim import DEFAULT_N, SimDataset
-from eval.datasets.spec import DatasetSpec, parse_spec
-from eval.errors import EvalError
 from torchsar.io import FileFormatError
+from torchsar_eval.datasets.annotated import coco_from_spec, voc_from_spec
+from torchsar_eval.datasets.base import BadItemError
+from torchsar_eval.datasets.folder import folder_from_spec
+from torchsar_eval.datasets.hrsid import hrsid_from_spec
+from torchsar_eval.datasets.phoenix import phoenix_from_spec
+from torchsar_eval.datasets.sicd import sicd_from_spec
+from torchsar_eval.datasets.sim import DEFAULT_N, SimDataset
+from torchsar_eval.datasets.spec import DatasetSpec, parse_spec
+from torchsar_eval.errors import EvalError
 
 __all__ = ["DATASETS", "make_dataset"]
 
@@ -34,7 +34,7 @@ DATASETS = (
 
 def store_from_spec(spec: DatasetSpec, limit: int | None) -> Dataset:
     """``store:DIR``: a store written by ``torchsar-eval make-dataset`` (no options)."""
-    from eval.store import StoreDataset  # the store writer builds on make_dataset
+    from torchsar_eval.store import StoreDataset  # the store writer builds on make_dataset
 
     spec.check_keys(())
     return StoreDataset(spec.path, limit=limit)
@@ -52,7 +52,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
 
 
 def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
-    """Build a dataset from its name (see :mod:`eval.datasets`); ``n`` limits its size.
+    """Build a dataset from its name (see :mod:`torchsar_eval.datasets`); ``n`` limits its size.
 
     Raises:
         EvalError: unknown scheme or option, missing folder, unpairable files; a file that

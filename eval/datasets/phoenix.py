@@ -13,12 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.datasets.base import FileDataset, make_item, require_dir, walk_files
-from eval.datasets.images import read_labels
-from eval.datasets.semantics import INSTANCE_MODES, SHADOW_MODES, form_instances, split_labels
-from eval.datasets.spec import DatasetSpec
-from eval.errors import EvalError
 from torchsar.io import DEFAULT_MAX_PIXELS, RASTER_EXTS, FileFormatError, is_phoenix, read_phoenix
+from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.images import read_labels
+from torchsar_eval.datasets.semantics import (
+    INSTANCE_MODES,
+    SHADOW_MODES,
+    form_instances,
+    split_labels,
+)
+from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.errors import EvalError
 
 __all__ = ["PHOENIX_OPTIONS", "PhoenixDataset"]
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.datasets.base import FileDataset, make_item
-from eval.datasets.spec import DatasetSpec
-from eval.errors import EvalError
 from torchsar.io import DEFAULT_MAX_PIXELS, read_sicd, sicd_shape
+from torchsar_eval.datasets.base import FileDataset, make_item
+from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.errors import EvalError
 
 __all__ = ["SICD_OPTIONS", "SicdDataset"]
 

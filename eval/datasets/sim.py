@@ -10,7 +10,7 @@ from __future__ import annotations
 from torch.utils.data import Dataset
 
 import torchsar as ts
-from eval.errors import EvalError
+from torchsar_eval.errors import EvalError
 
 __all__ = ["DEFAULT_N", "SimDataset"]
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from eval.errors import EvalError
 from torchsar.io import SAMPLE_TYPES
+from torchsar_eval.errors import EvalError
 
 __all__ = ["DatasetSpec", "parse_spacing", "parse_spec"]
 

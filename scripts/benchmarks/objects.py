@@ -15,10 +15,10 @@ from collections.abc import Callable
 import torch
 
 import torchsar as ts
-from eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
-from eval.detectors import DETECTORS
-from eval.runner import Scoring, evaluate
 from torchsar.metrics import RocAccumulator, pixel_counts
+from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
+from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.runner import Scoring, evaluate
 
 
 def _dataset(kind: str, n: int) -> list[dict]:

@@ -7,15 +7,15 @@ import pandas as pd
 import pytest
 import torch
 
-from eval.cli import main
-from eval.commands.pfa.calibration import (
+from torchsar_eval.cli import main
+from torchsar_eval.commands.pfa.calibration import (
     CLUTTER,
     PFA_COLUMNS,
     ClutterCase,
     binomial_interval,
     measure,
 )
-from eval.detectors import DETECTORS
+from torchsar_eval.detectors import DETECTORS
 
 
 def test_binomial_interval_covers_and_matches_beta():

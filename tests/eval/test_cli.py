@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 from skimage import io
 
-from eval.cli import main
-from eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
+from torchsar_eval.cli import main
+from torchsar_eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
 
 
 def _write_pair(folder, stem, image, labels, ext="png"):
@@ -283,7 +283,7 @@ def test_run_user_errors_before_any_work(tiny_folder, tmp_path, capsys, monkeypa
     def no_dataset(*a, **k):
         raise AssertionError("a dataset was built before the options were checked")
 
-    monkeypatch.setattr("eval.commands.run.make_dataset", no_dataset)
+    monkeypatch.setattr("torchsar_eval.commands.run.make_dataset", no_dataset)
     out = tmp_path / "never"
     base = ["run", "--dataset", f"folder:{tiny_folder}", "--out", str(out), "--no-progress"]
     assert main(base + args) == 2
@@ -309,7 +309,7 @@ def _tiny_run(tiny_folder, out, *extra):
     ],
 )
 def test_bad_out_is_refused_at_once(tiny_folder, tmp_path, capsys, monkeypatch, prepare, message):
-    monkeypatch.setattr("eval.commands.run.check_run_args", pytest.fail)  # no work at all
+    monkeypatch.setattr("torchsar_eval.commands.run.check_run_args", pytest.fail)  # no work at all
     out = tmp_path / "out"
     prepare(out)
     target = out if out.exists() else tmp_path / "f" / "out"
@@ -368,7 +368,7 @@ def test_interrupted_run_leaves_the_previous_one_intact(
     assert _tiny_run(tiny_folder, out) == 0
     before = _snapshot(out)
     capsys.readouterr()
-    monkeypatch.setattr("eval.commands.run.evaluate.run_shards", interrupt)
+    monkeypatch.setattr("torchsar_eval.commands.run.evaluate.run_shards", interrupt)
     handler = signal.getsignal(signal.SIGTERM)
     assert _tiny_run(tiny_folder, out, "--overwrite") == code
     hint = "; continue with the same command plus --resume"
@@ -431,8 +431,8 @@ def test_compare_region_reports_mstar_on_chips_it_did_not_tune_on(tmp_path, caps
 
 
 def test_every_command_has_out_and_overwrite():
-    from eval.cli import build_parser
-    from eval.commands import COMMANDS
+    from torchsar_eval.cli import build_parser
+    from torchsar_eval.commands import COMMANDS
 
     parser = build_parser()
     required = {"make-dataset": ["--kind", "sim-chips"]}

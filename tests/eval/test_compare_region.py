@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from eval.cli import main
+from torchsar_eval.cli import main
 
 
 def test_compare_region_tiny(tmp_path, capsys):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import torchsar.io.raster as raster
-from eval.datasets import BadItemError, DisplayScalingWarning, make_dataset
-from eval.errors import EvalError
 from tests.eval.datasets_helpers import check_contract, write_pair
 from tests.io.writers import write_geotiff, write_png, write_tiff
+from torchsar_eval.datasets import BadItemError, DisplayScalingWarning, make_dataset
+from torchsar_eval.errors import EvalError
 
 rng = np.random.default_rng(3)
 

@@ -11,10 +11,10 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eval.datasets import make_dataset
-from eval.errors import EvalError
 from tests.eval.datasets_helpers import check_contract
 from tests.io.writers import write_png, write_tiff
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.errors import EvalError
 
 IMAGE_KINDS = ("png8", "png16", "jpeg", "tif_float", "tif_u16", "rgb_equal", "rgb_colour", "rgba")
 MASK_KINDS = ("grey", "rgb_equal", "red_only", "palette", "rgba_equal")

@@ -10,8 +10,6 @@ import pytest
 import torch
 
 import torchsar as ts
-from eval.datasets import BadItemError, SimDataset, make_dataset
-from eval.errors import EvalError
 from tests.eval.datasets_helpers import (
     canonical_instances,
     check_contract,
@@ -21,6 +19,8 @@ from tests.eval.datasets_helpers import (
 from tests.io.coco_fixture import H, W, truth, write_coco
 from tests.io.writers import voc_xml, write_phoenix, write_png
 from torchsar.io import decode_id_map, read_raster
+from torchsar_eval.datasets import BadItemError, SimDataset, make_dataset
+from torchsar_eval.errors import EvalError
 
 
 def _quiet(spec, **kw):
@@ -267,7 +267,7 @@ def test_sim_items_equal_batch_generation_in_any_order(kind, make, options):
 
 
 def test_store_scheme_reads_a_written_store(tmp_path):
-    from eval.store import write_store
+    from torchsar_eval.store import write_store
 
     src = make_dataset("sim-chips", n=3, seed=2)
     write_store((src[i] for i in range(3)), 3, tmp_path / "s", shard_size=2)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import torchsar.io.sicd as sicd
-from eval.datasets import make_dataset
-from eval.datasets.sicd import chip_regions
-from eval.errors import EvalError
 from tests.eval.datasets_helpers import check_contract
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.datasets.sicd import chip_regions
+from torchsar_eval.errors import EvalError
 
 rng = np.random.default_rng(2)
 DATA = (rng.normal(size=(10, 13)) + 1j * rng.normal(size=(10, 13))).astype(np.complex64)

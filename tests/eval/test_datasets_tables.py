@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pandas as pd
 
-from eval.cli import main
-from eval.datasets import make_dataset
 from tests.eval.datasets_helpers import coco_from_id_maps, write_hrsid_folder
 from torchsar.io import decode_id_map, read_raster
+from torchsar_eval.cli import main
+from torchsar_eval.datasets import make_dataset
 
 TIMING = ("ms_", "time", "per_s", "seconds")  # columns that measure speed, not results
 

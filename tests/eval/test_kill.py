@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from eval.cli import main
+from torchsar_eval.cli import main
 
 RUN_FILES = {"summary.csv", "roc.csv", "roc_pixel.csv", "summary.md", "config.json"}
 OLD_RUN = {"config.json": "old", "stale.csv": "old"}
@@ -25,7 +25,7 @@ def _start(out, old: bool) -> subprocess.Popen:
             (out / name).write_text(text)
     argv = ["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca", "--no-progress"]
     argv += ["--out", str(out)] + (["--overwrite"] if old else [])
-    cmd = [sys.executable, "-m", "eval.cli", *argv]
+    cmd = [sys.executable, "-m", "torchsar_eval.cli", *argv]
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 

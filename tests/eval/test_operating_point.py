@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.calibrate import Target, choose_bin, parse_target, split_indices, threshold_of
-from eval.cli import main
-from eval.errors import EvalError
 from torchsar.metrics import ObjectState
 from torchsar.metrics.curves import OP_BIN, SCORE_GRID
+from torchsar_eval.calibrate import Target, choose_bin, parse_target, split_indices, threshold_of
+from torchsar_eval.cli import main
+from torchsar_eval.errors import EvalError
 
 
 def test_split_is_disjoint_deterministic_and_near_the_fraction():

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eval.errors import EvalError
-from eval.options import at_least, floats, ints, names
+from torchsar_eval.errors import EvalError
+from torchsar_eval.options import at_least, floats, ints, names
 
 
 @given(st.lists(st.integers(-50, 50), min_size=1, max_size=6))

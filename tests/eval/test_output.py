@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from eval.errors import EvalError
-from eval.output import HOST, claim, file_slugs, recover, result_dir
+from torchsar_eval.errors import EvalError
+from torchsar_eval.output import HOST, claim, file_slugs, recover, result_dir
 
 
 def _write_run(folder, files):

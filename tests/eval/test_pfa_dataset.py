@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 from skimage import io
 
-from eval.cli import main
+from torchsar_eval.cli import main
 
 
 def test_pfa_on_a_dataset_counts_only_clutter_pixels(tmp_path):

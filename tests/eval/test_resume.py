@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from eval.cli import main
+from torchsar_eval.cli import main
 
 TABLES = ["summary.csv", "roc.csv", "pr.csv", "roc_pixel.csv", "breakdown.csv", "per_image.csv"]
 ARGS = ["run", "--dataset", "sim-chips", "--n", "12", "--detectors", "ca,so", "--shard-size",
@@ -24,7 +24,7 @@ def _saved(parent: Path, name: str) -> int:
 
 
 def _interrupt_after(out: Path, shards: int, sig: int) -> int:
-    cmd = [sys.executable, "-m", "eval.cli", *ARGS, "--out", str(out)]
+    cmd = [sys.executable, "-m", "torchsar_eval.cli", *ARGS, "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while _saved(out.parent, out.name) < shards and proc.poll() is None:

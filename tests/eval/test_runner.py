@@ -3,9 +3,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from eval.detectors import DETECTORS
-from eval.runner import evaluate
 from torchsar._checks import InputValueError
+from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.runner import evaluate
 
 
 class ListDataset(torch.utils.data.Dataset):

@@ -7,11 +7,11 @@ import pytest
 import torch
 
 import torchsar as ts
-from eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
-from eval.detectors import DETECTORS
-from eval.runner import Scoring
-from eval.shards import ShardJob, run_shards, shard_ranges, shard_rows
-from eval.tables import (
+from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
+from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.runner import Scoring
+from torchsar_eval.shards import ShardJob, run_shards, shard_ranges, shard_rows
+from torchsar_eval.tables import (
     breakdown_table,
     froc_table,
     pixel_roc_table,
@@ -107,8 +107,8 @@ class Poisoned(Chips):
 
 
 def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
-    from eval.detectors import DetectorSpec
-    from eval.errors import EvalError
+    from torchsar_eval.detectors import DetectorSpec
+    from torchsar_eval.errors import EvalError
 
     job = _job(6, 2)
     job = ShardJob("chips", Poisoned(6), job.indices, [DetectorSpec("x", _explode_on_big)],

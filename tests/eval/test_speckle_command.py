@@ -1,4 +1,4 @@
-"""``torchsar-eval speckle`` (:mod:`eval.commands.speckle`) on tiny datasets."""
+"""``torchsar-eval speckle`` (:mod:`torchsar_eval.commands.speckle`) on tiny datasets."""
 
 from __future__ import annotations
 
@@ -12,12 +12,17 @@ import pytest
 import torch
 from skimage import io
 
-from eval.cli import main
-from eval.commands import load
-from eval.commands import speckle as command
-from eval.commands.speckle.scoring import COLUMNS, homogeneous_tiles, samples, score_dataset
-from eval.errors import EvalError
 from torchsar._checks import OptionError
+from torchsar_eval.cli import main
+from torchsar_eval.commands import load
+from torchsar_eval.commands import speckle as command
+from torchsar_eval.commands.speckle.scoring import (
+    COLUMNS,
+    homogeneous_tiles,
+    samples,
+    score_dataset,
+)
+from torchsar_eval.errors import EvalError
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

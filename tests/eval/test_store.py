@@ -10,10 +10,10 @@ import pytest
 import torch
 
 import torchsar as ts
-from eval.cli import main
-from eval.commands.make_dataset import sim_items
-from eval.errors import EvalError
-from eval.store import StoreDataset, write_store
+from torchsar_eval.cli import main
+from torchsar_eval.commands.make_dataset import sim_items
+from torchsar_eval.errors import EvalError
+from torchsar_eval.store import StoreDataset, write_store
 
 
 def test_sim_items_equal_the_batch_generation():

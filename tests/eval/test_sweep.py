@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from eval.commands.compare_region.sweep import best_setting, window_grid
-from eval.detectors import DETECTORS, DetectorSpec
-from eval.runner import evaluate
+from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
+from torchsar_eval.detectors import DETECTORS, DetectorSpec
+from torchsar_eval.runner import evaluate
 
 
 def _batch(seed: int) -> dict:

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.cli import main
+from torchsar_eval.cli import main
 
 
 def test_autofocus_command_writes_tables(tmp_path):

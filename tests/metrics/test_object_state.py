@@ -9,11 +9,11 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eval.coco import CocoExport
 from torchsar.metrics import Matching, ObjectState, ground_truth, match_batch
 from torchsar.metrics.curves import OP_BIN, SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa
 from torchsar.metrics.object_state import ImageInfo
 from torchsar.objects import ObjectRules, discriminate
+from torchsar_eval.coco import CocoExport
 
 
 def _scene(rng, n_img=3, size=48):
@@ -149,8 +149,8 @@ def test_curve_helpers_by_hand():
 @pytest.mark.parametrize("kind", ["centroid", "mask"])
 def test_all_true_and_all_false_masks_on_simulated_data(kind):
     import torchsar as ts
-    from eval.detectors import DetectorSpec
-    from eval.runner import Scoring, evaluate
+    from torchsar_eval.detectors import DetectorSpec
+    from torchsar_eval.runner import Scoring, evaluate
 
     def constant(value):
         return lambda x: ts.cfar.detection_from(torch.full_like(x, value), 1.0)

@@ -21,20 +21,20 @@ import torch
 from tqdm import tqdm
 
 import torchsar.imaging as ti
-from eval.commands.autofocus.experiment import (
+from torchsar.io.gotcha import GotchaPass, read_gotcha
+from torchsar_eval.commands.autofocus.experiment import (
     DEFAULT_METHODS,
     ERROR_CASES,
     METHODS,
     Config,
     run_error_case,
 )
-from eval.commands.autofocus.gotcha import run_gotcha
-from eval.errors import EvalError
-from eval.output import default_out, result_dir, write_config
-from eval.paths import SHARED_DATA
-from eval.plots import slug
-from eval.tables import markdown
-from torchsar.io.gotcha import GotchaPass, read_gotcha
+from torchsar_eval.commands.autofocus.gotcha import run_gotcha
+from torchsar_eval.errors import EvalError
+from torchsar_eval.output import default_out, result_dir, write_config
+from torchsar_eval.paths import SHARED_DATA
+from torchsar_eval.plots import slug
+from torchsar_eval.tables import markdown
 
 METRICS = [
     "corr",

@@ -20,9 +20,9 @@ import torch
 from torch import Tensor
 
 import torchsar.imaging as ti
-from eval.commands.autofocus.experiment import draw_seed
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.io.gotcha import GotchaPass
+from torchsar_eval.commands.autofocus.experiment import draw_seed
 
 __all__ = ["GOTCHA_ERRORS", "run_gotcha"]
 

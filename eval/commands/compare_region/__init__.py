@@ -19,17 +19,17 @@ from pathlib import Path
 from torch.utils.data import Subset
 
 import torchsar as ts
-from eval.commands.compare_region.panel import detection_panel
-from eval.commands.compare_region.sweep import best_setting, window_grid
-from eval.datasets import make_dataset
-from eval.detectors import DETECTORS, DetectorSpec
-from eval.errors import EvalError
-from eval.options import at_least, floats, ints, names
-from eval.output import default_out, file_slugs, result_dir, write_config
-from eval.paths import SHARED_DATA
-from eval.plots import slug
-from eval.runner import batches, evaluate
-from eval.tables import markdown, summary_table, timing_table
+from torchsar_eval.commands.compare_region.panel import detection_panel
+from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.detectors import DETECTORS, DetectorSpec
+from torchsar_eval.errors import EvalError
+from torchsar_eval.options import at_least, floats, ints, names
+from torchsar_eval.output import default_out, file_slugs, result_dir, write_config
+from torchsar_eval.paths import SHARED_DATA
+from torchsar_eval.plots import slug
+from torchsar_eval.runner import batches, evaluate
+from torchsar_eval.tables import markdown, summary_table, timing_table
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
 TUNE_EVERY = 5

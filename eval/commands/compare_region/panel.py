@@ -12,8 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-from eval.detectors import DetectorSpec
-from eval.plots import save
+from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.plots import save
 
 __all__ = ["detection_panel"]
 

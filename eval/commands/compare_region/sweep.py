@@ -5,7 +5,7 @@ pass per window gives the statistic; the thresholds of the other ``pfa`` values 
 the detector's own threshold function (the interior threshold; the border rescaling of the
 chosen setting is exact again in the final evaluation, which reruns the detector at the
 chosen ``pfa``). Scores are the run's object scoring (the shared discrimination stage and
-one-to-one matching, :class:`eval.runner.Scoring`); the best setting maximises FoM, then
+one-to-one matching, :class:`torchsar_eval.runner.Scoring`); the best setting maximises FoM, then
 mean IoU.
 """
 
@@ -20,12 +20,12 @@ from typing import Any
 from torch import Tensor
 
 import torchsar as ts
-from eval.detectors import DetectorSpec
-from eval.errors import EvalError
-from eval.runner import Scoring
-from eval.scoring import batch_truth
 from torchsar.metrics import ObjectState, match_batch
 from torchsar.objects import discriminate
+from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.errors import EvalError
+from torchsar_eval.runner import Scoring
+from torchsar_eval.scoring import batch_truth
 
 __all__ = ["Choice", "best_setting", "window_grid"]
 

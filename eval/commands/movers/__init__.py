@@ -17,8 +17,8 @@ from pathlib import Path
 
 import torch
 
-from eval.commands.movers.run import LadderConfig, run_ladder
-from eval.errors import EvalError
+from torchsar_eval.commands.movers.run import LadderConfig, run_ladder
+from torchsar_eval.errors import EvalError
 
 __all__ = ["SPEEDS", "add_parser", "run"]
 
@@ -104,7 +104,7 @@ def config(args: argparse.Namespace) -> LadderConfig:
 
 def run(args: argparse.Namespace) -> int:
     cfg = config(args)
-    from eval.output import default_out
+    from torchsar_eval.output import default_out
 
     out = args.out or default_out("movers")
     t0 = time.perf_counter()

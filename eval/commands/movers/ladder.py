@@ -7,9 +7,9 @@ import math
 import torch
 from torch import Tensor
 
-from eval.commands.movers.scenes import MOVER
 from torchsar.motion import MoverReport, SpotlightParams, look_displacement, planar_image_positions
 from torchsar.motion import wrap as fold
+from torchsar_eval.commands.movers.scenes import MOVER
 
 __all__ = ["TESTS", "scene_row"]
 

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from eval.plots import save
+from torchsar_eval.plots import save
 
 __all__ = ["plot_displacement"]
 

@@ -17,13 +17,13 @@ import matplotlib.pyplot as plt
 import pandas as pd
 from tqdm import tqdm
 
-from eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
-from eval.datasets import make_dataset
-from eval.detectors import DETECTORS, resolve
-from eval.options import at_least, floats, names
-from eval.output import default_out, result_dir, write_config
-from eval.plots import detector_style, save, slug
-from eval.tables import markdown
+from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.detectors import DETECTORS, resolve
+from torchsar_eval.options import at_least, floats, names
+from torchsar_eval.output import default_out, result_dir, write_config
+from torchsar_eval.plots import detector_style, save, slug
+from torchsar_eval.tables import markdown
 
 DEFAULT_DETECTORS = [n for n in DETECTORS if n != "region"]
 DEFAULT_PFAS = (1e-2, 1e-3, 1e-4)

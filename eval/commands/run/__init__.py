@@ -1,9 +1,9 @@
 """``torchsar-eval run``: evaluate detectors on datasets; summary, ROC tables and plots.
 
 The command-line edge: options are parsed and validated here, then turned into the plain
-typed settings of :mod:`eval.commands.run.evaluate` (how shards run, calibration) and
-handed to :func:`~eval.commands.run.evaluate.execute`; :mod:`eval.commands.run.report`
-writes the tables and plots.
+typed settings of :mod:`torchsar_eval.commands.run.evaluate` (how shards run, calibration)
+and handed to :func:`~torchsar_eval.commands.run.evaluate.execute`;
+:mod:`torchsar_eval.commands.run.report` writes the tables and plots.
 """
 
 from __future__ import annotations
@@ -11,18 +11,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from eval.commands.run.evaluate import Calibration, Execution, RunPlan, execute
-from eval.commands.run.report import print_summary
-from eval.datasets import DATASETS, make_dataset
-from eval.detectors import DETECTORS
-from eval.errors import EvalError
-from eval.options import check_run_args
-from eval.output import default_out
-from eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring
 from torchsar._checks import TorchSARError
 from torchsar.metrics import Matching
 from torchsar.objects import ObjectRules
 from torchsar.speckle import FILTERS
+from torchsar_eval.commands.run.evaluate import Calibration, Execution, RunPlan, execute
+from torchsar_eval.commands.run.report import print_summary
+from torchsar_eval.datasets import DATASETS, make_dataset
+from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.errors import EvalError
+from torchsar_eval.options import check_run_args
+from torchsar_eval.output import default_out
+from torchsar_eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring
 
 __all__ = ["DEFAULT_DATASETS", "DEFAULT_MATCH", "DEFAULT_RULES", "add_parser", "run"]
 

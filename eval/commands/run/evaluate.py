@@ -9,15 +9,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from eval.calibrate import choose_bin, parse_target, split_indices
-from eval.coco import CocoExport
-from eval.commands.run.report import write_tables
-from eval.detectors import DetectorSpec, dry_run
-from eval.errors import EvalError
-from eval.output import file_slugs, result_dir, write_config
-from eval.plots import slug
-from eval.runner import Scoring, SkipBad
-from eval.shards import ShardJob, run_shards
+from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
+from torchsar_eval.coco import CocoExport
+from torchsar_eval.commands.run.report import write_tables
+from torchsar_eval.detectors import DetectorSpec, dry_run
+from torchsar_eval.errors import EvalError
+from torchsar_eval.output import file_slugs, result_dir, write_config
+from torchsar_eval.plots import slug
+from torchsar_eval.runner import Scoring, SkipBad
+from torchsar_eval.shards import ShardJob, run_shards
 
 __all__ = ["Calibration", "Execution", "RunPlan", "evaluate_dataset", "execute"]
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from eval.glossary import glossary
-from eval.plots import plot_roc
-from eval.runner import Scoring
-from eval.shards import shard_rows
-from eval.tables import (
+from torchsar_eval.glossary import glossary
+from torchsar_eval.plots import plot_roc
+from torchsar_eval.runner import Scoring
+from torchsar_eval.shards import shard_rows
+from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,
     breakdown_table,
     froc_table,

@@ -1,8 +1,8 @@
 """``torchsar-eval speckle``: despeckling quality of every speckle filter on datasets.
 
 Writes ``speckle.csv`` / ``speckle.md`` (one row per dataset, filter and window; see
-:mod:`eval.commands.speckle.scoring` for the metrics), ``speckle_<dataset>.png``
-(before/after crops, :mod:`eval.commands.speckle.panel`) and ``config.json``. Simulated
+:mod:`torchsar_eval.commands.speckle.scoring` for the metrics), ``speckle_<dataset>.png``
+(before/after crops, :mod:`torchsar_eval.commands.speckle.panel`) and ``config.json``. Simulated
 datasets have a clean reflectivity, so every metric is reported; on ``folder:`` datasets the
 clean-image metrics (EPI, PSNR, SSIM) are empty.
 
@@ -21,13 +21,13 @@ import pandas as pd
 import torch
 
 import torchsar as ts
-from eval.commands.speckle.panel import despeckling_panel
-from eval.commands.speckle.scoring import samples, score_dataset
-from eval.datasets import DATASETS, make_dataset
-from eval.errors import EvalError
-from eval.output import default_out, result_dir, write_config
-from eval.plots import slug
-from eval.tables import markdown
+from torchsar_eval.commands.speckle.panel import despeckling_panel
+from torchsar_eval.commands.speckle.scoring import samples, score_dataset
+from torchsar_eval.datasets import DATASETS, make_dataset
+from torchsar_eval.errors import EvalError
+from torchsar_eval.output import default_out, result_dir, write_config
+from torchsar_eval.plots import slug
+from torchsar_eval.tables import markdown
 
 __all__ = ["SpeckleOptions", "add_parser", "evaluate", "parse_options", "run"]
 

@@ -11,8 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from eval.commands.speckle.scoring import Sample, apply_filter
-from eval.plots import save
+from torchsar_eval.commands.speckle.scoring import Sample, apply_filter
+from torchsar_eval.plots import save
 
 __all__ = ["despeckling_panel"]
 
