@@ -33,7 +33,7 @@ from torchsar_eval.commands.autofocus.gotcha import run_gotcha
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import default_out, result_dir, write_config
 from torchsar_eval.paths import SHARED_DATA
-from torchsar_eval.plots import slug
+from torchsar_eval.plots import save, slug
 from torchsar_eval.tables import markdown
 
 METRICS = [
@@ -112,7 +112,7 @@ def _db(x: torch.Tensor) -> torch.Tensor:
     return 20 * torch.log10(a / a.max().clamp_min(1e-30) + 1e-6).clamp_min(-40)
 
 
-def plot_panel(name: str, data: dict, formed: dict, path: Path) -> None:
+def autofocus_panel(name: str, data: dict, formed: dict, path: Path) -> None:
     """Seed figure layout for scene 0: truth, clean conventional / L_p, corrupted, proposed."""
     clean = data["clean"][:1]
     panels = [
@@ -133,9 +133,7 @@ def plot_panel(name: str, data: dict, formed: dict, path: Path) -> None:
         ax.set_title(title, fontsize=8)
         ax.axis("off")
     fig.suptitle(f"phase error {name} (dB, 40 dB range)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
 
 
 def gotcha_data(folder: Path | None, enabled: bool) -> tuple[GotchaPass | None, str]:
@@ -157,9 +155,9 @@ def gotcha_data(folder: Path | None, enabled: bool) -> tuple[GotchaPass | None, 
         raise EvalError(f"--gotcha: {exc}") from None
 
 
-def gotcha_table(data: GotchaPass, args: argparse.Namespace, tmp: Path) -> None:
+def gotcha_table(data: GotchaPass, tmp: Path, *, trials: int, seed: int) -> None:
     """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
-    rows, panel = run_gotcha(data, trials=args.gotcha_trials, seed=args.seed)
+    rows, panel = run_gotcha(data, trials=trials, seed=seed)
     trials = pd.DataFrame(rows)
     trials.to_csv(tmp / "gotcha_trials.csv", index=False)
     cols = ["phase_rmse", "entropy", "reference_entropy", "reflector_peak_ratio", "seconds"]
@@ -170,9 +168,7 @@ def gotcha_table(data: GotchaPass, args: argparse.Namespace, tmp: Path) -> None:
         ax.imshow(_db(panel[name].sqrt()).numpy(), cmap="gray", vmin=-40, vmax=0, origin="lower")
         ax.set_title(name, fontsize=6)
         ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(tmp / "gotcha.png", dpi=110)
-    plt.close(fig)
+    save(fig, tmp / "gotcha.png")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -195,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
         for name in tqdm(errors, desc="autofocus", disable=args.no_progress):
             r, data, formed = run_error_case(name, cfg, methods)
             rows += r
-            plot_panel(name, data, formed, tmp / f"panel_{slug(name)}.png")
+            autofocus_panel(name, data, formed, tmp / f"panel_{slug(name)}.png")
         scenes = pd.DataFrame(rows)
         scenes.to_csv(tmp / "autofocus_scenes.csv", index=False)
         table = summarise(scenes, METRICS)
@@ -209,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
             + markdown(detection[["error", "method"] + [c + "_mean" for c in DETECTION]])
         )
         if gotcha is not None:
-            gotcha_table(gotcha, args, tmp)
+            gotcha_table(gotcha, tmp, trials=args.gotcha_trials, seed=args.seed)
         options = {**dataclasses.asdict(cfg), "errors": errors, "methods": methods}
         options.update(
             gotcha=gotcha_note, gotcha_trials=args.gotcha_trials, no_gotcha=args.no_gotcha
