@@ -20,7 +20,7 @@ class TestPixelCounts:
         pred = _t([[1, 1, 0], [0, 1, 0], [0, 0, 1]])
         tgt = _t([[1, 1, 1], [0, 0, 0], [0, 0, 0]])
         ign = _t([[0, 0, 0], [0, 0, 0], [0, 0, 1]])
-        c = pixel_counts(pred, tgt, ign)
+        c = pixel_counts(pred, tgt, ignore=ign)
         assert c == PixelCounts(tp=2, fp=1, targets=3, clutter=5)
         assert c.pd == pytest.approx(2 / 3)
         assert c.pfa == pytest.approx(1 / 5)
@@ -49,7 +49,7 @@ class TestObjectCounts:
         pred[5, 5] = True  # inside ignore: not a false alarm
         ignore = np.zeros((10, 10), bool)
         ignore[5, 5] = True
-        c = object_counts(_t(pred), _t(inst, torch.int32), _t(ignore))
+        c = object_counts(_t(pred), _t(inst, torch.int32), ignore=_t(ignore))
         assert (c.instances, c.detected, c.false_alarms, c.fragments) == (3, 2, 1, 3)
         assert c.fragmentation == 1.5
         assert c.iou_sum == pytest.approx(2 / 9 + 1.0)
@@ -65,7 +65,7 @@ class TestObjectCounts:
             inst[r : r + rng.integers(1, 5), c : c + rng.integers(1, 5)] = k
         pred = rng.random((24, 24)) < density
         ignore = (rng.random((24, 24)) < 0.1) & (inst == 0)
-        got = object_counts(_t(pred), _t(inst, torch.int32), _t(ignore))
+        got = object_counts(_t(pred), _t(inst, torch.int32), ignore=_t(ignore))
         ref = object_scores(pred, inst, ignore)
         for key in ("instances", "detected", "false_alarms", "fragments"):
             assert getattr(got, key) == ref[key], key

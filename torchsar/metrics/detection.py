@@ -107,7 +107,7 @@ def _as_bool(t: Tensor, name: str) -> Tensor:
     return t
 
 
-def pixel_counts(pred: Tensor, target: Tensor, ignore: Tensor | None = None) -> PixelCounts:
+def pixel_counts(pred: Tensor, target: Tensor, *, ignore: Tensor | None = None) -> PixelCounts:
     """Count detected target and clutter pixels.
 
     Args:
@@ -175,8 +175,8 @@ def _batch_objects(
 def object_counts(
     pred: Tensor,
     instances: Tensor,
-    ignore: Tensor | None = None,
     *,
+    ignore: Tensor | None = None,
     connectivity: int = 2,
 ) -> ObjectCounts:
     """Object-level counts for a batch ``(B, C, H, W)`` (each ``(b, c)`` plane is an image).
