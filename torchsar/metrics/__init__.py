@@ -14,7 +14,7 @@ from torchsar.metrics.despeckling import (
     ratio_moments,
     ssim,
 )
-from torchsar.metrics.detection import (
+from torchsar.metrics.counts import (
     ObjectCounts,
     PixelCounts,
     label_components,
