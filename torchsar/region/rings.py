@@ -6,9 +6,8 @@ image), never the whole image per region. Dilation uses a square structuring ele
 dilating by ``guard`` then by ``background`` equals one dilation by their sum.
 
 This runs once per grown region inside the CPU loop, so it works on numpy views and uses
-:func:`scipy.ndimage.maximum_filter` (exact, separable): on 20x20 / 60x60 / 300x300 crops it
-took 0.25 / 0.31 / 6.2 ms for both dilations against 0.58 / 2.0 / 59 ms with
-``torch.nn.functional.max_pool2d`` (1 thread), the per-region cost that dominated the run.
+:func:`scipy.ndimage.maximum_filter` (exact, separable): on such small crops its per-call
+cost is far below that of ``torch.nn.functional.max_pool2d``.
 """
 
 from __future__ import annotations
