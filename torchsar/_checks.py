@@ -288,7 +288,10 @@ def check_device(device: object, name: str = "device") -> torch.device | None:
     try:
         dev = torch.device(device)  # type: ignore[arg-type]
     except (RuntimeError, TypeError):
-        raise OptionError(f"{name} must be a torch device such as 'cpu', got {device!r}") from None
+        raise OptionError(
+            f"{name} must be a torch device (a torch.device or a name such as 'cpu'), "
+            f"got {device!r}"
+        ) from None
     available = {
         "cuda": torch.cuda.is_available,
         "mps": lambda: torch.backends.mps.is_available(),
@@ -296,7 +299,7 @@ def check_device(device: object, name: str = "device") -> torch.device | None:
     if not available():
         raise OptionError(
             f"{name} = {device!r} is not available on this machine (no {dev.type} device); "
-            f"use device='cpu'"
+            f"use {name}='cpu'"
         )
     return dev
 

@@ -18,7 +18,7 @@ MAKERS = [
 @pytest.mark.skipif(torch.cuda.is_available(), reason="needs a machine without a GPU")
 @pytest.mark.parametrize("make", MAKERS)
 def test_unavailable_device(make):
-    with pytest.raises(OptionError, match="device 'cuda' is not available.*device='cpu'"):
+    with pytest.raises(OptionError, match="device = 'cuda' is not available.*device='cpu'"):
         make(device="cuda")
 
 

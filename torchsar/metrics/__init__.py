@@ -5,6 +5,13 @@ Image-formation metrics (focus of a formed image, fidelity to a known scene or p
 live with imaging: :mod:`torchsar.imaging.focus` and :mod:`torchsar.imaging.fidelity`."""
 
 from torchsar.metrics.assign import BatchMatch, match_batch
+from torchsar.metrics.counts import (
+    ObjectCounts,
+    PixelCounts,
+    label_components,
+    object_counts,
+    pixel_counts,
+)
 from torchsar.metrics.curves import SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa
 from torchsar.metrics.despeckling import (
     edge_preservation,
@@ -13,13 +20,6 @@ from torchsar.metrics.despeckling import (
     psnr,
     ratio_moments,
     ssim,
-)
-from torchsar.metrics.counts import (
-    ObjectCounts,
-    PixelCounts,
-    label_components,
-    object_counts,
-    pixel_counts,
 )
 from torchsar.metrics.matching import GroundTruth, Matching, box_iou, greedy_match, ground_truth
 from torchsar.metrics.object_state import ImageInfo, ObjectState

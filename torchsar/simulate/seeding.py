@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import torch
 
+from torchsar import _checks as checks
 from torchsar._checks import OptionError, check_int
 
 __all__ = ["Draws", "check_device", "check_seed", "image_seed", "make_generator"]
@@ -65,26 +66,20 @@ def check_seed(seed: object, name: str = "seed") -> int:
 
 
 def check_device(device: object) -> torch.device:
-    """Validate a device (``None``: CPU) and check that random numbers can be drawn on it.
+    """Validate a device (``None``: CPU) with :func:`torchsar._checks.check_device` and check
+    that random numbers can be drawn on it.
 
     Raises:
         OptionError: not a device, or a device this machine or torch build does not have
             (e.g. ``"cuda"`` without a GPU).
     """
-    if device is None:
-        return torch.device("cpu")
-    try:
-        dev = torch.device(device)  # type: ignore[arg-type]
-    except (RuntimeError, TypeError):
-        raise OptionError(
-            f"device must be a torch.device or a name such as 'cpu' or 'cuda', got {device!r}"
-        ) from None
+    dev = checks.check_device(device) or torch.device("cpu")
     try:
         torch.Generator(device=dev)
     except RuntimeError as exc:
         reason = str(exc).split(".")[0]
         raise OptionError(
-            f"device {device!r} is not available here ({reason}); use device='cpu'"
+            f"device = {device!r} is not available here ({reason}); use device='cpu'"
         ) from None
     return dev
 
