@@ -9,6 +9,7 @@ carry the first category, and the matching AP is pycocotools' with ``useCats = 0
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -92,6 +93,26 @@ class CocoExport:
                     "score": float(obj.score[k]), "segmentation": encode(obj.labels[p] == k + 1),
                     "area": float(obj.area[k]),
                 })  # fmt: skip
+
+    @classmethod
+    def merge(cls, name: str, parts: Iterable[CocoExport]) -> CocoExport:
+        """One export from the exports of consecutive parts of a dataset (shards, in order):
+        image, annotation and category ids renumbered as one pass over the whole would."""
+        out = cls(name)
+        for part in parts:
+            images, anns = len(out.images), len(out.annotations)
+            cats = {i: out._category(n) for n, i in part.categories.items()}
+            out.images += [{**im, "id": im["id"] + images} for im in part.images]
+            out.annotations += [
+                {**a, "id": a["id"] + anns, "image_id": a["image_id"] + images,
+                 "category_id": cats[a["category_id"]]}
+                for a in part.annotations
+            ]  # fmt: skip
+            for det, res in part.results.items():
+                out.results.setdefault(det, []).extend(
+                    {**r, "image_id": r["image_id"] + images} for r in res
+                )
+        return out
 
     def write(self, folder: Path, stem: str) -> list[Path]:
         """Write ``<stem>__gt.json`` and ``<stem>__<detector>.json`` into ``folder``."""

@@ -24,10 +24,20 @@ import torch
 from torch.utils.data import Dataset, Subset
 from tqdm.auto import tqdm
 
+from torchsar_eval.coco import CocoExport
 from torchsar_eval.errors import EvalError
 from torchsar_eval.runner import DetectorResult, Scoring, evaluate
 
-__all__ = ["ShardJob", "merge", "run_shards", "shard_files", "shard_ranges", "shard_rows"]
+__all__ = [
+    "ShardJob",
+    "ShardState",
+    "merge",
+    "run_shards",
+    "shard_coco",
+    "shard_files",
+    "shard_ranges",
+    "shard_rows",
+]
 
 
 @dataclass(frozen=True)
@@ -43,6 +53,16 @@ class ShardJob:
     batch_size: int = 16
     preprocess: Callable | None = None
     shard_size: int = 256
+    export_coco: bool = False
+
+
+@dataclass
+class ShardState:
+    """What one shard leaves on disk: every detector's mergeable results and, with
+    ``export_coco``, the shard's COCO ground truth and detections."""
+
+    results: list[DetectorResult]
+    coco: CocoExport | None = None
 
 
 def shard_ranges(n: int, size: int) -> list[range]:
@@ -50,10 +70,11 @@ def shard_ranges(n: int, size: int) -> list[range]:
     return [range(k, min(k + size, n)) for k in range(0, n, size)]
 
 
-def _score_shard(job: ShardJob, k: int, on_batch=None) -> list[DetectorResult]:
+def _score_shard(job: ShardJob, k: int) -> ShardState:
     rng = shard_ranges(len(job.indices), job.shard_size)[k]
     part = Subset(job.dataset, [job.indices[i] for i in rng])
-    return evaluate(
+    coco = CocoExport(job.name) if job.export_coco else None
+    results = evaluate(
         part,
         job.specs,
         batch_size=job.batch_size,
@@ -61,16 +82,17 @@ def _score_shard(job: ShardJob, k: int, on_batch=None) -> list[DetectorResult]:
         scoring=job.scoring,
         name=job.name,
         progress=False,
-        on_batch=on_batch,
+        on_batch=None if coco is None else coco.add,
     )
+    return ShardState(results, coco)
 
 
-def _save(path: Path, results: list[DetectorResult]) -> None:
+def _save(path: Path, state: ShardState) -> None:
     """Write a shard state atomically (see :func:`_write`)."""
-    _write(path, zlib.compress(pickle.dumps(results, protocol=pickle.HIGHEST_PROTOCOL), 1))
+    _write(path, zlib.compress(pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), 1))
 
 
-def _load(path: Path) -> list[DetectorResult]:
+def _load(path: Path) -> ShardState:
     with open(path, "rb") as f:
         return pickle.loads(zlib.decompress(f.read()))
 
@@ -94,8 +116,13 @@ def shard_files(folder: Path) -> list[Path]:
 def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
     """``(detector, per-image rows)`` of every saved shard, in shard order."""
     for path in shard_files(folder):
-        for r in _load(path):
+        for r in _load(path).results:
             yield r.spec.name, r.rows
+
+
+def shard_coco(folder: Path, name: str) -> CocoExport:
+    """The COCO export of a dataset: the saved shards' exports merged in shard order."""
+    return CocoExport.merge(name, (s.coco for s in map(_load, shard_files(folder)) if s.coco))
 
 
 def _init_worker(threads: int) -> None:
@@ -152,10 +179,10 @@ class _Failures:
         self.failed.append({"shard": k, "error": f"{type(exc).__name__}: {exc}"})
 
 
-def _local(job, todo, bar, sizes, fail, on_batch) -> None:
+def _local(job, todo, bar, sizes, fail) -> None:
     for k, path in todo:
         try:
-            _save(path, _score_shard(job, k, on_batch))
+            _save(path, _score_shard(job, k))
         except (Exception, KeyboardInterrupt) as exc:
             fail(k, exc)
         bar.update(sizes[k])
@@ -210,7 +237,6 @@ def run_shards(
     address: str | None = None,
     skip_bad: bool = False,
     progress: bool = True,
-    on_batch=None,
 ) -> tuple[list[DetectorResult], dict]:
     """Score every shard not yet saved in ``folder``, then merge all saved shards.
 
@@ -222,7 +248,6 @@ def run_shards(
         address: Ray cluster address (default: a local Ray instance).
         skip_bad: record failed shards and merge the rest instead of stopping.
         progress: one progress bar over images.
-        on_batch: per-batch callback (in-process engine only).
 
     Returns:
         The merged results and counts ``{"shards", "done", "skipped", "failed"}``
@@ -238,12 +263,12 @@ def run_shards(
         if engine == "ray":
             _ray(job, todo, bar, sizes, fail, address)
         elif workers == 1:
-            _local(job, todo, bar, sizes, fail, on_batch)
+            _local(job, todo, bar, sizes, fail)
         else:
             _processes(job, todo, bar, sizes, fail, workers)
     finally:
         bar.close()
-    merged = merge(_load(p) for p in shard_files(folder))
+    merged = merge(_load(p).results for p in shard_files(folder))
     merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
               "skipped": len(sizes) - len(todo), "failed": fail.failed}  # fmt: skip

@@ -15,7 +15,8 @@ from torchsar_eval.cli import main
 
 TABLES = ["summary.csv", "roc.csv", "pr.csv", "roc_pixel.csv", "breakdown.csv", "per_image.csv"]
 ARGS = ["run", "--dataset", "sim-chips", "--n", "12", "--detectors", "ca,so", "--shard-size",
-        "2", "--batch-size", "2", "--bootstrap", "10", "--no-progress"]  # fmt: skip
+        "2", "--batch-size", "2", "--bootstrap", "10", "--export-coco", "--no-progress"]  # fmt: skip
+COCO = ["coco/sim-chips__gt.json", "coco/sim-chips__ca.json", "coco/sim-chips__so.json"]
 
 
 def _saved(parent: Path, name: str) -> int:
@@ -48,7 +49,7 @@ def test_interrupted_then_resumed_equals_uninterrupted(tmp_path, sig):
         assert code == 130 and err.strip().endswith("continue with the same command plus --resume")
         assert len(err.strip().splitlines()) == 1
     assert main([*ARGS, "--out", str(out), "--resume"]) == 0
-    for name in TABLES:
+    for name in TABLES + COCO:
         assert (out / name).read_bytes() == (whole / name).read_bytes(), name
     assert not list(tmp_path.glob(".run.torchsar-*"))  # the staging folder was adopted
 

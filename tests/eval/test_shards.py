@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 import pytest
 import torch
@@ -10,7 +12,7 @@ import torchsar as ts
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from torchsar_eval.detectors import DETECTORS
 from torchsar_eval.runner import Scoring
-from torchsar_eval.shards import ShardJob, run_shards, shard_ranges, shard_rows
+from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import (
     breakdown_table,
     froc_table,
@@ -41,10 +43,17 @@ def _tables(results) -> list[pd.DataFrame]:
                            breakdown_table)]  # fmt: skip
 
 
-def _job(n: int, shard_size: int) -> ShardJob:
+def _job(n: int, shard_size: int, export_coco: bool = False) -> ShardJob:
     specs = [DETECTORS["ca"], DETECTORS["so"]]
     scoring = Scoring(DEFAULT_RULES, DEFAULT_MATCH, replicates=10)
-    return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size)
+    return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size,
+                    export_coco=export_coco)  # fmt: skip
+
+
+def _coco_json(folder) -> dict[str, str]:
+    out = folder / "coco"
+    paths = shard_coco(folder, "chips").write(out, "chips")
+    return {p.name: p.read_text() for p in paths}
 
 
 def _rows(folder) -> dict[str, list]:
@@ -82,6 +91,22 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
     assert counts == {"shards": 3, "done": 1, "skipped": 2, "failed": []}
     _assert_same(first, again)
+
+
+def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
+    """The export travels with the shard states: one pass, small shards over two workers,
+    and a run resumed after losing a shard all write the same COCO files."""
+    run_shards(_job(7, 100, True), tmp_path / "one", progress=False)
+    run_shards(_job(7, 2, True), tmp_path / "two", workers=2, progress=False)
+    (tmp_path / "two" / "shard-000001.pkl").unlink()  # as if killed before it was saved
+    _, counts = run_shards(_job(7, 2, True), tmp_path / "two", progress=False)
+    assert counts["done"] == 1 and counts["skipped"] == 3
+    one, two = _coco_json(tmp_path / "one"), _coco_json(tmp_path / "two")
+    assert one == two and set(one) == {"chips__gt.json", "chips__ca.json", "chips__so.json"}
+    gt = json.loads(one["chips__gt.json"])
+    assert [im["id"] for im in gt["images"]] == list(range(1, 8))
+    assert [a["id"] for a in gt["annotations"]] == list(range(1, len(gt["annotations"]) + 1))
+    assert len(json.loads(one["chips__ca.json"])) > 0
 
 
 def test_two_workers_equal_one(tmp_path):

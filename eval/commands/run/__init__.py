@@ -197,8 +197,6 @@ def run(args: argparse.Namespace) -> int:
     specs, preprocess, despeckle_opts = check_run_args(args)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
-    if args.export_coco and (args.workers > 1 or args.engine != "local"):
-        raise EvalError("--export-coco collects detections in this process: use --workers 1")
     scoring = scoring_from(args)
     execution = Execution(
         batch_size=args.batch_size,

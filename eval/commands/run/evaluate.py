@@ -10,14 +10,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
-from torchsar_eval.coco import CocoExport
 from torchsar_eval.commands.run.report import write_tables
 from torchsar_eval.detectors import DetectorSpec, dry_run
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
 from torchsar_eval.runner import Scoring, SkipBad
-from torchsar_eval.shards import ShardJob, run_shards
+from torchsar_eval.shards import ShardJob, run_shards, shard_coco
 
 __all__ = ["Calibration", "Execution", "RunPlan", "evaluate_dataset", "execute"]
 
@@ -134,6 +133,7 @@ def fingerprint(plan: RunPlan, datasets: dict) -> dict:
         "despeckle": plan.despeckle,
         "scoring": plan.scoring.as_dict(), "shard_size": plan.execution.shard_size,
         "calibration": None if cal is None else [cal.target, cal.fraction],
+        "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
     }, default=str))  # fmt: skip
 
 
@@ -157,12 +157,12 @@ def evaluate_dataset(name: str, ds, specs: list[DetectorSpec], plan: RunPlan, st
     if ex.skip_bad:
         ds = SkipBad(ds)
 
-    def shards(idx: list[int], folder: Path, on_batch=None):
+    def shards(idx: list[int], folder: Path, export: bool = False):
         job = ShardJob(name, ds, idx, specs, plan.scoring, ex.batch_size, plan.preprocess,
-                       ex.shard_size)  # fmt: skip
+                       ex.shard_size, export_coco=export)  # fmt: skip
         return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
                           address=ex.address, skip_bad=ex.skip_bad,
-                          progress=ex.progress, on_batch=on_batch)  # fmt: skip
+                          progress=ex.progress)  # fmt: skip
 
     chosen = None
     if cal is not None:
@@ -173,8 +173,8 @@ def evaluate_dataset(name: str, ds, specs: list[DetectorSpec], plan: RunPlan, st
                             f"split of {cal.fraction:g}")  # fmt: skip
         tuned, _ = shards(calib, state / "calibration")
         chosen = [choose_bin(r.objects, target) for r in tuned]
-    exporter = CocoExport(name) if plan.export_coco else None
-    results, counts = shards(indices, state / "test", exporter.add if exporter else None)
+    results, counts = shards(indices, state / "test", plan.export_coco)
+    exporter = shard_coco(state / "test", name) if plan.export_coco else None
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b
     wall = time.perf_counter() - t0
