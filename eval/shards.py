@@ -5,7 +5,8 @@ resume gives identical tables).
 
 Engines: shards run in this process (``workers=1``), in ``workers`` spawned processes, each
 with ``cores // workers`` torch threads so workers never oversubscribe the machine, or as
-Ray tasks (one CPU and one torch thread each; a failed task is retried once).
+Ray tasks (one CPU and one torch thread each). Whatever the engine, a failed shard is run
+once more before it counts as failed.
 A saved shard is never recomputed, which is what ``--resume`` relies on.
 """
 
@@ -17,6 +18,8 @@ import pickle
 import signal
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -132,15 +135,6 @@ def _init_worker(threads: int) -> None:
     torch.set_num_threads(threads)
 
 
-def _scored_or_error(task: tuple[ShardJob, int]) -> tuple[int, bytes | None, str]:
-    """A worker's answer for one shard: its state, or the error that stopped it."""
-    job, k = task
-    try:
-        return k, _scored(job, k), ""
-    except Exception as exc:
-        return k, None, f"{type(exc).__name__}: {exc}"
-
-
 def _scored(job: ShardJob, k: int) -> bytes:
     """A shard's state as compressed bytes (what a worker sends back)."""
     return zlib.compress(pickle.dumps(_score_shard(job, k), pickle.HIGHEST_PROTOCOL), 1)
@@ -163,11 +157,20 @@ def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
 
 
 class _Failures:
-    """Shards that failed (after the engine's retry): fatal, or recorded with ``skip_bad``."""
+    """Shards that failed: each gets one retry, then the failure is fatal or, with
+    ``skip_bad``, recorded."""
 
     def __init__(self, skip_bad: bool) -> None:
         self.skip_bad = skip_bad
         self.failed: list[dict] = []
+        self.retried: list[int] = []
+
+    def retry(self, k: int) -> bool:
+        """Whether shard ``k`` gets another attempt (once per shard); counts it."""
+        if k in self.retried:
+            return False
+        self.retried.append(k)
+        return True
 
     def __call__(self, k: int, exc: BaseException) -> None:
         if isinstance(exc, KeyboardInterrupt):
@@ -181,26 +184,49 @@ class _Failures:
 
 def _local(job, todo, bar, sizes, fail) -> None:
     for k, path in todo:
-        try:
-            _save(path, _score_shard(job, k))
-        except (Exception, KeyboardInterrupt) as exc:
-            fail(k, exc)
+        while True:
+            try:
+                _save(path, _score_shard(job, k))
+                break
+            except KeyboardInterrupt:
+                raise
+            except Exception as exc:
+                if not fail.retry(k):
+                    fail(k, exc)
+                    break
         bar.update(sizes[k])
 
 
 def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
-    """Shards in ``workers`` spawned processes; leaving early (an error, Ctrl-C, SIGTERM)
-    terminates the pool at once rather than waiting for running shards."""
+    """Shards in ``workers`` spawned processes, a failed shard resubmitted once. A worker
+    that dies (killed, out of memory) breaks the pool: its shards are reported as failed
+    rather than waited for. Leaving early (an error, Ctrl-C, SIGTERM) stops the pool at once
+    instead of waiting for running shards."""
     threads = max(1, (os.cpu_count() or 1) // workers)
     paths = dict(todo)
     ctx = multiprocessing.get_context("spawn")
-    with ctx.Pool(workers, initializer=_init_worker, initargs=(threads,)) as pool:
-        for k, data, error in pool.imap_unordered(_scored_or_error, [(job, k) for k in paths]):
-            if data is None:
-                fail(k, RuntimeError(error))
-            else:
-                _write(paths[k], data)
-            bar.update(sizes[k])
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                               initargs=(threads,))  # fmt: skip
+    try:
+        running = {pool.submit(_scored, job, k): k for k in paths}
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in done:
+                k = running.pop(fut)
+                try:
+                    _write(paths[k], fut.result())
+                except BrokenProcessPool:
+                    fail(k, RuntimeError("a worker process died (killed or out of memory)"))
+                except Exception as exc:
+                    if fail.retry(k):
+                        running[pool.submit(_scored, job, k)] = k
+                        continue
+                    fail(k, exc)
+                bar.update(sizes[k])
+    finally:
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()  # do not wait for running shards
+        pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
@@ -211,7 +237,7 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False,
                  configure_logging=False)  # fmt: skip
-    task = ray.remote(num_cpus=1, max_retries=1, retry_exceptions=True)(_scored_one_thread)
+    task = ray.remote(num_cpus=1, max_retries=0)(_scored_one_thread)  # retried here, counted
     refs = {task.remote(job, k): (k, path) for k, path in todo}
     while refs:
         done, _ = ray.wait(list(refs), num_returns=1)
@@ -219,6 +245,9 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
         try:
             _write(path, ray.get(done[0]))
         except Exception as exc:
+            if fail.retry(k):
+                refs[task.remote(job, k)] = (k, path)
+                continue
             fail(k, exc)
         bar.update(sizes[k])
 
@@ -250,8 +279,9 @@ def run_shards(
         progress: one progress bar over images.
 
     Returns:
-        The merged results and counts ``{"shards", "done", "skipped", "failed"}``
-        (skipped = found saved already, e.g. on resume; failed = list of failed shards).
+        The merged results and counts ``{"shards", "done", "skipped", "retried", "failed"}``
+        (skipped = found saved already, e.g. on resume; retried = shards that failed once
+        and were run again; failed = list of shards that failed twice).
     """
     folder.mkdir(parents=True, exist_ok=True)
     sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
@@ -271,5 +301,6 @@ def run_shards(
     merged = merge(_load(p).results for p in shard_files(folder))
     merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
-              "skipped": len(sizes) - len(todo), "failed": fail.failed}  # fmt: skip
+              "skipped": len(sizes) - len(todo), "retried": len(fail.retried),
+              "failed": fail.failed}  # fmt: skip
     return merged, counts

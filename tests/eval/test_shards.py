@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pandas as pd
 import pytest
@@ -80,7 +81,7 @@ def test_shard_ranges_cover_every_item_once():
 def test_any_shard_size_gives_the_same_tables(tmp_path, size):
     whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
     parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
-    assert counts == {"shards": 1, "done": 1, "skipped": 0, "failed": []}
+    assert counts == {"shards": 1, "done": 1, "skipped": 0, "retried": 0, "failed": []}
     assert counts_p["shards"] == -(-9 // size)
     _assert_same(whole, parts, tmp_path / "a", tmp_path / "b")
 
@@ -89,7 +90,7 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
     (tmp_path / "shard-000001.pkl").unlink()  # as if killed before shard 1 was saved
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
-    assert counts == {"shards": 3, "done": 1, "skipped": 2, "failed": []}
+    assert counts == {"shards": 3, "done": 1, "skipped": 2, "retried": 0, "failed": []}
     _assert_same(first, again)
 
 
@@ -143,6 +144,49 @@ def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
     merged, counts = run_shards(job, tmp_path / "b", skip_bad=True, progress=False)
     assert counts["failed"] == [{"shard": 2, "error": "RuntimeError: corrupt shard"}]
     assert merged[0].images == 4  # the other shards, merged
+
+
+def _fail_first_time(x, marker):
+    """Fails on the first call for a shard whose first image is item 2 (any process), then
+    works: a transient fault."""
+    if float(x[0].sum()) == float(_FLAKY_SUM) and not marker.exists():
+        marker.touch()
+        raise RuntimeError("transient")
+    return DETECTORS["ca"](x)
+
+
+def _die_on_big(x):
+    if float(x.max()) > 1e30:
+        os._exit(3)  # the worker process dies, as under the OOM killer
+    return DETECTORS["ca"](x)
+
+
+_FLAKY_SUM = float(Chips(3)[2]["image"].sum())
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_transient_failure_is_retried_once_and_counted(tmp_path, workers):
+    from functools import partial
+
+    from torchsar_eval.detectors import DetectorSpec
+
+    spec = DetectorSpec("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
+    job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, 2, None, 2)
+    merged, counts = run_shards(job, tmp_path / "run", workers=workers, progress=False)
+    assert (tmp_path / "failed-once").exists()
+    assert counts["retried"] == 1 and counts["failed"] == [] and counts["done"] == 3
+    assert merged[0].images == 6
+
+
+def test_a_dead_worker_is_reported_not_waited_for(tmp_path):
+    from torchsar_eval.detectors import DetectorSpec
+
+    job = ShardJob("chips", Poisoned(6), list(range(6)), [DetectorSpec("x", _die_on_big)],
+                   _job(6, 2).scoring, 2, None, 2)  # fmt: skip
+    merged, counts = run_shards(job, tmp_path / "run", workers=2, skip_bad=True, progress=False)
+    assert 2 in {f["shard"] for f in counts["failed"]}
+    assert all("worker process died" in f["error"] for f in counts["failed"])
+    assert merged[0].images == 6 - 2 * len(counts["failed"])
 
 
 def test_ray_engine_equals_local(tmp_path):

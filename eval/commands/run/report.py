@@ -81,7 +81,7 @@ def write_tables(
     text += "".join(
         f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
         f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
-        f"resumed {st['skipped']}, failed {len(st['failed'])}"
+        f"resumed {st['skipped']}, retried {st['retried']}, failed {len(st['failed'])}"
         + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
         + (
             f"\n  - skipped {len(st['skipped_items'])} unreadable file(s)"
@@ -112,7 +112,8 @@ def print_summary(out: Path, stats: dict, files: list[str]) -> None:
         print(
             f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
             f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
-            f"(done {st['done']}, resumed {st['skipped']}, failed {len(st['failed'])})"
+            f"(done {st['done']}, resumed {st['skipped']}, retried {st['retried']}, "
+            f"failed {len(st['failed'])})"
         )
         for f in st["failed"]:
             print(f"  FAILED shard {f['shard']}: {f['error']}")
