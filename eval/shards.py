@@ -12,6 +12,9 @@ A saved shard is never recomputed, which is what ``--resume`` relies on.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import gc
 import multiprocessing
 import os
 import pickle
@@ -35,6 +38,7 @@ __all__ = [
     "ShardJob",
     "ShardState",
     "merge",
+    "release_memory",
     "run_shards",
     "shard_coco",
     "shard_files",
@@ -73,6 +77,19 @@ def shard_ranges(n: int, size: int) -> list[range]:
     return [range(k, min(k + size, n)) for k in range(0, n, size)]
 
 
+def release_memory() -> bool:
+    """Hand the memory freed by a shard back to the operating system: a garbage collection,
+    then glibc's ``malloc_trim`` where the C library has it (Linux). Without it the allocator
+    keeps its high-water mark, so a worker's resident memory climbs over its first shards
+    before it levels off. Returns whether memory was trimmed."""
+    gc.collect()
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        return bool(libc.malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
+
+
 def _score_shard(job: ShardJob, k: int) -> ShardState:
     rng = shard_ranges(len(job.indices), job.shard_size)[k]
     part = Subset(job.dataset, [job.indices[i] for i in rng])
@@ -87,6 +104,7 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
         progress=False,
         on_batch=None if coco is None else coco.add,
     )
+    release_memory()
     return ShardState(results, coco)
 
 
