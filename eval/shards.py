@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import torch
@@ -83,11 +84,17 @@ def release_memory() -> bool:
     keeps its high-water mark, so a worker's resident memory climbs over its first shards
     before it levels off. Returns whether memory was trimmed."""
     gc.collect()
+    trim = _malloc_trim()
+    return bool(trim(0)) if trim is not None else False
+
+
+@lru_cache(maxsize=1)
+def _malloc_trim() -> Callable[[int], int] | None:
+    """glibc's ``malloc_trim``, looked up once (``None`` without glibc)."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        return bool(libc.malloc_trim(0))
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
     except (OSError, AttributeError):
-        return False
+        return None
 
 
 def _score_shard(job: ShardJob, k: int) -> ShardState:
@@ -183,12 +190,14 @@ class _Failures:
         self.failed: list[dict] = []
         self.retried: list[int] = []
 
-    def retry(self, k: int) -> bool:
-        """Whether shard ``k`` gets another attempt (once per shard); counts it."""
-        if k in self.retried:
-            return False
-        self.retried.append(k)
-        return True
+    def again(self, k: int, exc: BaseException) -> bool:
+        """Shard ``k`` failed with ``exc``: ``True`` when it runs once more (its first
+        failure, counted), else the failure is settled (raised or recorded)."""
+        if k not in self.retried and not isinstance(exc, KeyboardInterrupt):
+            self.retried.append(k)
+            return True
+        self(k, exc)
+        return False
 
     def __call__(self, k: int, exc: BaseException) -> None:
         if isinstance(exc, KeyboardInterrupt):
@@ -209,8 +218,7 @@ def _local(job, todo, bar, sizes, fail) -> None:
             except KeyboardInterrupt:
                 raise
             except Exception as exc:
-                if not fail.retry(k):
-                    fail(k, exc)
+                if not fail.again(k, exc):
                     break
         bar.update(sizes[k])
 
@@ -236,10 +244,9 @@ def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
                 except BrokenProcessPool:
                     fail(k, RuntimeError("a worker process died (killed or out of memory)"))
                 except Exception as exc:
-                    if fail.retry(k):
+                    if fail.again(k, exc):
                         running[pool.submit(_scored, job, k)] = k
                         continue
-                    fail(k, exc)
                 bar.update(sizes[k])
     finally:
         for proc in list(getattr(pool, "_processes", {}).values()):
@@ -263,10 +270,9 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
         try:
             _write(path, ray.get(done[0]))
         except Exception as exc:
-            if fail.retry(k):
+            if fail.again(k, exc):
                 refs[task.remote(job, k)] = (k, path)
                 continue
-            fail(k, exc)
         bar.update(sizes[k])
 
 
