@@ -12,9 +12,6 @@ A saved shard is never recomputed, which is what ``--resume`` relies on.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import gc
 import multiprocessing
 import os
 import pickle
@@ -24,7 +21,6 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import torch
@@ -33,13 +29,13 @@ from tqdm.auto import tqdm
 
 from torchsar_eval.coco import CocoExport
 from torchsar_eval.errors import EvalError
+from torchsar_eval.memory import release_memory, tune_allocator
 from torchsar_eval.runner import DetectorResult, Scoring, evaluate
 
 __all__ = [
     "ShardJob",
     "ShardState",
     "merge",
-    "release_memory",
     "run_shards",
     "shard_coco",
     "shard_files",
@@ -78,26 +74,8 @@ def shard_ranges(n: int, size: int) -> list[range]:
     return [range(k, min(k + size, n)) for k in range(0, n, size)]
 
 
-def release_memory() -> bool:
-    """Hand the memory freed by a shard back to the operating system: a garbage collection,
-    then glibc's ``malloc_trim`` where the C library has it (Linux). Without it the allocator
-    keeps its high-water mark, so a worker's resident memory climbs over its first shards
-    before it levels off. Returns whether memory was trimmed."""
-    gc.collect()
-    trim = _malloc_trim()
-    return bool(trim(0)) if trim is not None else False
-
-
-@lru_cache(maxsize=1)
-def _malloc_trim() -> Callable[[int], int] | None:
-    """glibc's ``malloc_trim``, looked up once (``None`` without glibc)."""
-    try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
-    except (OSError, AttributeError):
-        return None
-
-
 def _score_shard(job: ShardJob, k: int) -> ShardState:
+    tune_allocator()
     rng = shard_ranges(len(job.indices), job.shard_size)[k]
     part = Subset(job.dataset, [job.indices[i] for i in rng])
     coco = CocoExport(job.name) if job.export_coco else None
