@@ -2,8 +2,9 @@
 
 ``torch.bucketize`` runs a binary search per value, which dominated the pixel-ROC update on
 chips. On the symmetric log grid the bucket follows from ``log10 |x|`` in a few elementwise
-operations. Only values within rounding distance of a grid value (and 0, infinities, NaN) can
-land in the wrong bucket; those few go through the exact binary search. The
+operations. Only values within rounding distance of a grid value can land in the wrong
+bucket; those few go through the exact binary search (0 and the infinities are exact by the
+arithmetic itself). The
 result equals ``torch.bucketize(x, grid)`` for every finite or infinite value (tested against
 it, grid values and their float neighbours included).
 """
@@ -44,14 +45,15 @@ class LogGrid:
 
     def bucketize(self, x: Tensor, grid: Tensor) -> Tensor:
         """``torch.bucketize(x, grid)`` (``grid``: this grid in ``x``'s dtype and device):
-        the number of grid values strictly below each ``x``."""
+        the number of grid values strictly below each ``x`` (``x`` free of NaN)."""
         a = torch.log10(x.abs()).sub_(self.low).mul_(self.ppd)  # position among |grid| > 0
         k = a.ceil().clamp_(0, self.m)  # positive grid values below |x|, off a grid value
-        # x > 0: the m negatives, 0 and k positives lie below; x < 0: m - k negatives do
+        # x > 0: the m negatives, 0 and k positives lie below; x < 0: m - k negatives do.
+        # Exact as it stands for 0 (k = 0, sign 0: m) and +-inf (k = m: 2m + 1 or 0).
         bins = torch.sign(x).mul_(k.add_(0.5)).add_(self.m + 0.5).long()
-        # values within rounding of a grid value, and 0, +-inf, NaN: the exact search
-        unsure = (a - a.round()).abs_().ge_(_SURE).logical_not_()
-        unsure = unsure.view(-1).nonzero().squeeze(1)
+        # values within rounding of a grid value: the exact search (for 0 and +-inf the
+        # distance is NaN, so they stay out)
+        unsure = a.sub_(a.round()).abs_().lt_(_SURE).view(-1).nonzero().squeeze(1)
         if unsure.numel():
             flat = bins.view(-1)
             flat[unsure] = torch.bucketize(x.reshape(-1)[unsure], grid)

@@ -70,7 +70,7 @@ class RocAccumulator:
         # one histogram over (class, bin): class 0 target, 1 clutter, 2 ignored
         cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
         n = grid.numel() + 1
-        hist = torch.bincount((bins + n * cls).view(-1), minlength=3 * n).cpu().view(3, n)
+        hist = torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).cpu().view(3, n)
         self.target_hits += _exceedances(hist[0])
         self.clutter_hits += _exceedances(hist[1])
         self.targets += int(hist[0].sum())
