@@ -1,7 +1,11 @@
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
+from hypothesis import given
+from hypothesis import strategies as st
 
 from torchsar import _checks as C
 
@@ -91,3 +95,15 @@ class TestOptions:
         assert C.float_dtype(torch.float64) is torch.float64
         assert C.float_dtype(torch.float16) is torch.float32
         assert C.float_dtype(torch.complex128) is torch.float64
+
+
+_SPECIAL = st.sampled_from([0.0, 1.0, -2.5, 3e38, -3e38, 1e-45, math.inf, -math.inf, math.nan])
+
+
+@given(st.lists(_SPECIAL, min_size=1, max_size=12), st.sampled_from([torch.float32, torch.float64]))
+def test_all_finite_and_has_nan_equal_elementwise_tests(values, dtype):
+    """The summation shortcuts agree with the elementwise tests, overflowing sums and
+    ``inf - inf`` included."""
+    x = torch.tensor(values, dtype=dtype)
+    assert C.all_finite(x) == bool(torch.isfinite(x).all())
+    assert C.has_nan(x) == bool(torch.isnan(x).any())

@@ -28,6 +28,7 @@ __all__ = [
     "ShapeError",
     "TorchSARError",
     "WindowSizeError",
+    "all_finite",
     "check_choice",
     "check_complex",
     "check_device",
@@ -42,6 +43,7 @@ __all__ = [
     "check_same_shape",
     "check_window_fits",
     "float_dtype",
+    "has_nan",
 ]
 
 
@@ -79,6 +81,19 @@ def float_dtype(dtype: torch.dtype) -> torch.dtype:
     float32. This is the single dtype policy of the library.
     """
     return torch.float64 if dtype in (torch.float64, torch.complex128) else torch.float32
+
+
+def all_finite(x: Tensor) -> bool:
+    """Whether every value of ``x`` is finite. One summation decides the usual case (a sum
+    is finite only if every term is); an overflowing sum falls back to the elementwise
+    test."""
+    return bool(torch.isfinite(x.sum())) or bool(torch.isfinite(x).all())
+
+
+def has_nan(x: Tensor) -> bool:
+    """Whether ``x`` holds a NaN. One summation decides the usual case (a NaN makes the sum
+    NaN); a NaN sum (e.g. ``inf - inf``) falls back to the elementwise test."""
+    return bool(torch.isnan(x.sum())) and bool(torch.isnan(x).any())
 
 
 def check_image(
@@ -147,7 +162,7 @@ def check_image(
         )
     if x.numel() == 0:
         return x
-    if not bool(torch.isfinite(x).all()):
+    if not all_finite(x):
         n_nan = int(torch.isnan(x).sum())
         n_inf = int(torch.isinf(x).sum())
         raise InputValueError(

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, InputValueError, check_same_shape
+from torchsar._checks import InputTypeError, InputValueError, check_same_shape, has_nan
 from torchsar.metrics.log_bins import LogGrid
 
 __all__ = ["RocAccumulator", "default_pixel_grid"]
@@ -63,7 +63,7 @@ class RocAccumulator:
                 raise InputTypeError(f"{name} must be a bool tensor")
             if t is not None:
                 check_same_shape(statistic, t, "statistic", name)
-        if bool(torch.isnan(statistic).any()):
+        if has_nan(statistic):
             raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
         grid = self.pixel_grid.to(device=statistic.device, dtype=statistic.dtype)
         bins = self._bins(statistic, grid)  # statistic > grid[k]  <=>  bin > k

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError, has_nan
 from torchsar.objects.components import label_components
 from torchsar.objects.properties import measure
 from torchsar.objects.rules import ObjectRules
@@ -146,7 +146,7 @@ def _check(statistic: object, pixel_area: object, rules: ObjectRules) -> None:
         raise InputTypeError(f"statistic must be a floating torch.Tensor, got {got}")
     if statistic.dim() != 4:
         raise ShapeError(f"statistic must have shape (B, C, H, W), got {tuple(statistic.shape)}")
-    if bool(torch.isnan(statistic).any()):
+    if has_nan(statistic):
         raise InputValueError("statistic must not hold NaN values")
     if rules.units == "m2" and pixel_area is None:
         raise OptionError("object areas in m2 need the pixel spacing: pass pixel_area")
