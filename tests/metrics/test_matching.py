@@ -25,6 +25,20 @@ def test_greedy_equals_the_pycocotools_loop(seed, d, g):
     assert np.array_equal(got, np.where(ref == g, -2, ref))
 
 
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), d=st.integers(0, 12), g=st.integers(0, 1))
+def test_greedy_with_at_most_one_instance_equals_the_pycocotools_loop(seed, d, g):
+    """The loop-free path for chips with one target (or none)."""
+    rng = np.random.default_rng(seed)
+    q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
+    crowd = rng.choice([0.0, 0.5, 0.8, 1.0], size=d)
+    thresholds = np.r_[COCO_IOUS, 1e-12]
+    got = greedy_match(q, crowd, thresholds)
+    ref = coco_match(np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
+                     thresholds)  # fmt: skip
+    assert np.array_equal(got, np.where(ref == g, -2, ref))
+
+
 def test_box_iou_hand_computed():
     a = np.array([[0, 0, 4, 4.0]])
     b = np.array([[2, 2, 6, 6.0], [10, 10, 12, 12.0]])

@@ -190,8 +190,10 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
         Among instances of equal quality the last one wins, as in ``pycocotools``.
     """
     n_t, (n_d, n_g) = len(thresholds), quality.shape
-    out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
     thr = np.minimum(np.asarray(thresholds, dtype=np.float64), 1 - 1e-10)
+    if n_g <= 1:
+        return _greedy_single(quality, crowd, thr)
+    out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
     best = quality.max(axis=1, initial=0.0) if n_g else np.zeros(n_d)
     cand = np.flatnonzero((best >= thr.min()) | (crowd >= thr.min()))
     taken = np.zeros((n_t, n_g), bool)
@@ -206,4 +208,19 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
         else:
             hit = np.zeros(n_t, bool)
         out[~hit & (crowd[d] >= thr), d] = IGNORED
+    return out
+
+
+def _greedy_single(quality: np.ndarray, crowd: np.ndarray, thr: np.ndarray) -> np.ndarray:
+    """:func:`greedy_match` for at most one instance (a chip with one target), without the
+    loop over detections: at each threshold the first detection reaching it takes the
+    instance; the others are ignored where their crowd quality reaches it."""
+    n_t, n_d = thr.size, quality.shape[0]
+    out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
+    if quality.shape[1] and n_d:
+        reach = quality[:, 0][None, :] >= thr[:, None]  # (T, D)
+        first = reach.argmax(axis=1)
+        t = np.flatnonzero(reach[np.arange(n_t), first])
+        out[t, first[t]] = 0
+    out[(out == UNMATCHED) & (crowd[None, :] >= thr[:, None])] = IGNORED
     return out
