@@ -82,7 +82,10 @@ def _disk_rectangles(radius: int) -> list[tuple[int, int]]:
 
 
 def _spread(x: np.ndarray, d: int, axis: int) -> np.ndarray:
-    """OR of ``x`` shifted by ``-d..d`` along ``axis`` (values beyond the edge count as 0)."""
+    """OR of ``x`` shifted by ``-d..d`` along ``axis`` (values beyond the edge count as 0);
+    ``x`` itself when ``d == 0``."""
+    if d == 0:
+        return x
     out = x.copy()
     n = x.shape[axis]
     for k in range(1, min(d, n - 1) + 1):
@@ -95,12 +98,18 @@ def _spread(x: np.ndarray, d: int, axis: int) -> np.ndarray:
 
 
 def _dilate(x: np.ndarray, rects: list[tuple[int, int]]) -> np.ndarray:
-    """Dilation of bool planes ``(N, H, W)`` by a union of rectangles (separable shifts;
-    outside the planes counts as unset)."""
-    out = np.zeros_like(x)
+    """Dilation of bool planes ``(N, H, W)`` by a union of rectangles ``(dy, dx)`` sorted by
+    ``dy`` (separable shifts, the row spreads built on each other; outside the planes
+    counts as unset)."""
+    out, rows, at = None, x, 0
     for dy, dx in rects:
-        out |= _spread(_spread(x, dy, -2), dx, -1)
-    return out
+        rows, at = _spread(rows, dy - at, -2), dy
+        part = _spread(rows, dx, -1)
+        if out is None:
+            out = part.copy() if part is x else part
+        else:
+            out |= part
+    return np.zeros_like(x) if out is None else out
 
 
 def _close(mask: np.ndarray, radius: int) -> np.ndarray:
