@@ -1,15 +1,19 @@
-"""Connected components of stacked bool planes (labels unique across the stack)."""
+"""Connected components of stacked bool planes (labels unique across the stack).
+
+The planes are labelled as one 2-D image, stacked with a blank row between neighbours
+(:func:`skimage.measure.label`, about twice as fast here as a 3-D
+:func:`scipy.ndimage.label` that cannot connect across planes); labels follow the raster
+order of each component's first pixel, planes in order.
+"""
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+from skimage.measure import label
 
 from torchsar._checks import OptionError
 
 __all__ = ["label_components"]
-
-_STRUCTURES = {1: ndimage.generate_binary_structure(2, 1), 2: np.ones((3, 3), bool)}
 
 
 def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarray, int]:
@@ -31,14 +35,14 @@ def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarra
         >>> label_components(m, 2)[1], label_components(m, 1)[1]
         (1, 2)
     """
-    if connectivity not in _STRUCTURES or isinstance(connectivity, bool):
+    if connectivity not in (1, 2) or isinstance(connectivity, bool):
         raise OptionError(
             f"connectivity must be 1 (4-connected) or 2 (8-connected), got {connectivity!r}"
         )
     if mask.size == 0:
         return np.zeros(mask.shape, np.int32), 0
-    plane = _STRUCTURES[connectivity]
-    structure = np.zeros((3,) * (mask.ndim - 2) + (3, 3), bool)
-    structure[(1,) * (mask.ndim - 2)] = plane
-    labels, n = ndimage.label(mask, structure=structure)
-    return labels, int(n)
+    h, w = mask.shape[-2:]
+    stack = np.zeros((mask.size // (h * w), h + 1, w), dtype=bool)  # a blank row below each
+    stack[:, :h] = mask.reshape(-1, h, w)
+    labels, n = label(stack.reshape(-1, w), connectivity=connectivity, return_num=True)
+    return labels.reshape(stack.shape)[:, :h].reshape(mask.shape).astype(np.int32), int(n)
