@@ -72,6 +72,29 @@ def _iou_units(bins: np.ndarray, iou: np.ndarray) -> np.ndarray:
     return out
 
 
+def _add_weighted(out: np.ndarray, w: np.ndarray, plane: np.ndarray, bins: np.ndarray) -> None:
+    """``out[r, bins[i]] += w[r, plane[i]]`` for every object ``i``, as one integer product
+    ``w @ counts`` over the bins present (``counts``: objects per plane and bin)."""
+    if bins.size == 0:
+        return
+    cols, at = np.unique(bins, return_inverse=True)
+    n = w.shape[1]
+    counts = np.bincount(at * n + plane, minlength=cols.size * n).reshape(cols.size, n)
+    out[:, cols] += w.astype(np.int64) @ counts.T
+
+
+def _planes_by_key(info: list[ImageInfo]) -> dict[str, np.ndarray]:
+    """The planes (a bool mask) of each image-level key, ``group:`` and ``image_class:``,
+    in order of first appearance."""
+    out: dict[str, np.ndarray] = {}
+    for p, i in enumerate(info):
+        for key in (f"group:{i.group}" if i.group else None,
+                    f"image_class:{i.cls}" if i.cls else None):  # fmt: skip
+            if key is not None:
+                out.setdefault(key, np.zeros(len(info), bool))[p] = True
+    return out
+
+
 @dataclass(eq=False)
 class KeyCounts:
     """Per breakdown key: instances, images and TP / FP score histograms (additive)."""
@@ -171,18 +194,12 @@ class ObjectState:
                     tp=_hist(gt_bins[mine & np.isfinite(m.gt_score)]),
                     fp=_hist(bins[false][fp_keys == k]),
                 )  # fmt: skip
-        for p, i in enumerate(info):
-            for key in (
-                f"group:{i.group}" if i.group else None,
-                f"image_class:{i.cls}" if i.cls else None,
-            ):
-                if key is None:
-                    continue
-                d, g = obj.plane == p, gt.plane == p
-                self._add_key(
-                    key, n_gt=int(g.sum()), images=1,
-                    tp=_hist(bins[d & (m.op >= 0)]), fp=_hist(bins[d & false]),
-                )  # fmt: skip
+        for key, planes in _planes_by_key(info).items():
+            d, g = planes[obj.plane], planes[gt.plane]
+            self._add_key(
+                key, n_gt=int(g.sum()), images=int(planes.sum()),
+                tp=_hist(bins[d & (m.op >= 0)]), fp=_hist(bins[d & false]),
+            )  # fmt: skip
 
     def _size_names(self, area: np.ndarray) -> np.ndarray:
         names = np.array(self.size_names, dtype=object)
@@ -192,7 +209,7 @@ class ObjectState:
         w = poisson_weights([i.key for i in info], self.replicates, self.seed)
         for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
                           ("tp50", m.ap[0] >= 0), ("fp50", m.ap[0] == -1)):  # fmt: skip
-            np.add.at(self.boot[name].T, bins[sel], w[:, obj.plane[sel]].T)
+            _add_weighted(self.boot[name], w, obj.plane[sel], bins[sel])
         per_plane = np.bincount(gt.plane, minlength=len(info))
         self.boot["n_gt"] += w @ per_plane
         self.boot["images"] += w.sum(axis=1)
