@@ -164,15 +164,18 @@ def _die_on_big(x):
 _FLAKY_SUM = float(Chips(3)[2]["image"].sum())
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_a_transient_failure_is_retried_once_and_counted(tmp_path, workers):
+@pytest.mark.parametrize("engine,workers", [("local", 1), ("local", 2), ("ray", 1)])
+def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, workers):
     from functools import partial
 
     from torchsar_eval.detectors import DetectorSpec
 
+    if engine == "ray":
+        pytest.importorskip("ray")
     spec = DetectorSpec("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
     job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, 2, None, 2)
-    merged, counts = run_shards(job, tmp_path / "run", workers=workers, progress=False)
+    run = tmp_path / "run"
+    merged, counts = run_shards(job, run, workers=workers, engine=engine, progress=False)
     assert (tmp_path / "failed-once").exists()
     assert counts["retried"] == 1 and counts["failed"] == [] and counts["done"] == 3
     assert merged[0].images == 6
