@@ -10,8 +10,8 @@ folder::
 Tar shards are the WebDataset layout (one sample = files sharing a key), so
 ``ray.data.read_webdataset`` and the ``webdataset`` package read them as they are, and a
 shard is one sequential file for object stores. The index gives random access by item: a
-read opens the shard, seeks and reads five members, and closes it, so no file handle is
-ever held across a fork. Item ``i`` of the store is item ``i`` of its source.
+read opens the shard, reads the item's five consecutive members at once and closes it, so
+no file handle is ever held across a fork. Item ``i`` of the store is item ``i`` of its source.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import torch
 from torch.utils.data import Dataset
 
 from torchsar_eval.errors import EvalError
+from torchsar_eval.npy import read_npy
 
 __all__ = ["FIELDS", "StoreDataset", "write_store"]
 
@@ -122,12 +123,17 @@ class StoreDataset(Dataset):
     def __len__(self) -> int:
         return self.n
 
-    def _read(self, f, offset: int, size: int) -> bytes:
-        f.seek(offset)
-        data = f.read(size)
-        if len(data) != size:
-            raise EvalError(f"store {self.root} is truncated (member at byte {offset})")
-        return data
+    def _read(self, shard: Path, rows: np.ndarray) -> list[memoryview]:
+        """An item's members: one read from its first member to the end of its last (they
+        are consecutive in the tar), cut at the index's offsets."""
+        first, end = int(rows[0, 0]), int(rows[-1, 0] + rows[-1, 1])
+        with open(shard, "rb") as f:
+            f.seek(first)
+            data = f.read(end - first)
+        if len(data) != end - first:
+            raise EvalError(f"store {self.root} is truncated (member at byte {first})")
+        view = memoryview(data)
+        return [view[int(o) - first : int(o + s) - first] for o, s in rows]
 
     def __getitem__(self, i: int) -> dict:
         if not 0 <= i < self.n:
@@ -135,11 +141,9 @@ class StoreDataset(Dataset):
         if self._index is None:
             self._index = np.load(self.root / "index.npy", mmap_mode="r")
         shard = self.root / f"shard-{i // int(self.header['shard_size']):06d}.tar"
-        with open(shard, "rb") as f:
-            parts = [self._read(f, int(o), int(s)) for o, s in self._index[i]]
-        out = {k: torch.from_numpy(np.load(io.BytesIO(b), allow_pickle=False))
-               for k, b in zip(FIELDS, parts, strict=False)}  # fmt: skip
-        out["meta"] = json.loads(parts[-1])
+        parts = self._read(shard, np.asarray(self._index[i]))
+        out = {k: torch.from_numpy(read_npy(b)) for k, b in zip(FIELDS, parts, strict=False)}
+        out["meta"] = json.loads(bytes(parts[-1]))
         return out
 
     def manifest(self) -> dict:
