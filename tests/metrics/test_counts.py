@@ -25,6 +25,22 @@ class TestPixelCounts:
         assert c.pd == pytest.approx(2 / 3)
         assert c.pfa == pytest.approx(1 / 5)
 
+    @given(seed=st.integers(0, 10_000), with_ignore=st.sampled_from([None, "some", "none"]))
+    def test_equals_counting_by_definition(self, seed, with_ignore):
+        rng = np.random.default_rng(seed)
+        pred, tgt = rng.random((2, 3, 1, 6, 7)) < 0.3
+        ign = (
+            None
+            if with_ignore is None
+            else rng.random((3, 1, 6, 7)) < (0.2 if with_ignore == "some" else 0)
+        )
+        care = np.ones_like(pred) if ign is None else ~ign
+        got = pixel_counts(torch.as_tensor(pred), torch.as_tensor(tgt),
+                           ignore=None if ign is None else torch.as_tensor(ign))  # fmt: skip
+        want = PixelCounts(tp=int((pred & tgt & care).sum()), fp=int((pred & ~tgt & care).sum()),
+                           targets=int((tgt & care).sum()), clutter=int((~tgt & care).sum()))  # fmt: skip
+        assert got == want
+
     def test_additive(self):
         a, b = PixelCounts(1, 2, 3, 4), PixelCounts(10, 20, 30, 40)
         assert a + b == PixelCounts(11, 22, 33, 44)

@@ -124,15 +124,14 @@ def pixel_counts(pred: Tensor, target: Tensor, *, ignore: Tensor | None = None) 
     _as_bool(pred, "pred")
     _as_bool(target, "target")
     check_same_shape(pred, target, "pred", "target")
-    care = torch.ones_like(pred) if ignore is None else ~_as_bool(ignore, "ignore")
-    tgt = target & care
-    clu = ~target & care
-    return PixelCounts(
-        tp=int((pred & tgt).sum()),
-        fp=int((pred & clu).sum()),
-        targets=int(tgt.sum()),
-        clutter=int(clu.sum()),
-    )
+    if ignore is not None and bool(_as_bool(ignore, "ignore").any()):
+        care = ~ignore
+        pred, target, n_care = pred & care, target & care, int(torch.count_nonzero(care))
+    else:
+        n_care = pred.numel()
+    tp, detected = int(torch.count_nonzero(pred & target)), int(torch.count_nonzero(pred))
+    targets = int(torch.count_nonzero(target))
+    return PixelCounts(tp=tp, fp=detected - tp, targets=targets, clutter=n_care - targets)
 
 
 def _global_ids(inst: np.ndarray) -> np.ndarray:
