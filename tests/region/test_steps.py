@@ -9,11 +9,12 @@ import pytest
 import torch
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from tests.reference import region as ref
 from torchsar.region import grow as grow_module
 from torchsar.region.grow import Grid, grow
-from torchsar.region.rings import crop_around, dilate, ring_masks, ring_stats
+from torchsar.region.rings import crop_around, dilate, mean_std, ring_masks, ring_stats
 from torchsar.region.seeds import local_maxima, seed_order
 
 
@@ -164,6 +165,23 @@ class TestRings:
         np.testing.assert_array_equal(k, rk)
         np.testing.assert_array_equal(c, rc)
 
+    @given(
+        st.integers(0, 10_000), st.integers(1, 30), st.integers(1, 30), st.integers(0, 4),
+        st.integers(0, 4),
+    )  # fmt: skip
+    def test_random_masks_equal_reference(self, seed, h, w, guard, background):
+        t = np.random.default_rng(seed).random((h, w)) < 0.1
+        k, c = ring_masks(t, guard, background)
+        rk, rc = ref.rings(np.flatnonzero(t).tolist(), t.shape, guard, background)
+        np.testing.assert_array_equal(k, rk)
+        np.testing.assert_array_equal(c, rc)
+
+    @given(st.integers(0, 10_000), st.integers(1, 40), st.integers(1, 40), st.integers(1, 9))
+    def test_dilate_equals_maximum_filter(self, seed, h, w, radius):
+        m = np.random.default_rng(seed).random((h, w)) < 0.05
+        want = ndimage.maximum_filter(m, size=2 * radius + 1, mode="constant", cval=False)
+        np.testing.assert_array_equal(dilate(m, radius), want)
+
     def test_dilate_zero_radius(self):
         m = np.eye(3, dtype=bool)
         np.testing.assert_array_equal(dilate(m, 0), m)
@@ -183,6 +201,12 @@ def _stats_case():
 
 
 class TestRingStats:
+    @given(st.integers(0, 10_000), st.integers(1, 2000), st.floats(-6, 6))
+    def test_mean_std_equal_numpy_bitwise(self, seed, n, scale):
+        v = np.random.default_rng(seed).gamma(1.0, 10.0**scale, n)
+        mu, sigma = mean_std(v)
+        assert mu == float(v.mean()) and sigma == float(v.std())
+
     def test_hand_computed(self):
         raw, crop = _stats_case()
         none = np.zeros((11, 11), dtype=bool)
