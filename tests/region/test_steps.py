@@ -108,6 +108,24 @@ class TestGrow:
         np.testing.assert_array_equal(out[0], out[1])
         np.testing.assert_array_equal(out[0], out[2])
 
+    @pytest.mark.parametrize("steps", [0, 1, 8])
+    @given(st.integers(0, 10_000), st.sampled_from([4, 8]))
+    def test_widening_floods_equal_heap(self, steps, seed, conn):
+        """A dim seed in smoothed speckle: ``beta`` grows over several floods, each found by
+        labelling only (0 steps) or by extending the previous one first; all equal the heap."""
+        rng = np.random.default_rng(seed)
+        f = ndimage.uniform_filter(rng.gamma(1.0, 1.0, size=(24, 27)), 3)
+        blocked = rng.random(f.shape) < 0.05
+        start = int(rng.integers(f.size))
+        blocked.flat[start] = False
+        out = []
+        for budget in (None, 3):
+            g = Grid.new(f, connectivity=conn)
+            g.free2d()[blocked] = 0
+            with patch.object(grow_module, "_STEPS", steps):
+                out.append(np.sort(grow(g, start, 1, tau=0.4, n_init=2, budget=budget)))
+        np.testing.assert_array_equal(out[0], out[1])
+
     @pytest.mark.parametrize("label_max", [0, 2000, 1 << 16])
     @given(seed=st.integers(0, 10_000), conn=st.sampled_from([4, 8]))
     def test_crop_floods_equal_heap(self, label_max, seed, conn):
