@@ -258,28 +258,74 @@ class TestRingStats:
         assert rs.n_background == 40 - 7
 
 
-class TestFillHoles:
-    @given(st.integers(0, 2**31 - 1), st.integers(3, 14), st.integers(3, 14))
-    def test_equal_to_reference(self, seed, h, w):
-        from torchsar.region.detector import _fill_holes, _ImageState
-        from torchsar.region.params import resolve_params
-        from torchsar.region.table import RegionRow, RegionTable
+def _state(stat: np.ndarray, region_id: np.ndarray, z: np.ndarray):
+    """An image state holding a painted statistic, region ids and one table row per id."""
+    from torchsar.region.detector import _ImageState
+    from torchsar.region.params import resolve_params
+    from torchsar.region.table import RegionRow, RegionTable
 
-        rng = np.random.default_rng(seed)
-        n_regions = 4
-        region_id = rng.integers(0, n_regions + 1, size=h * w).astype(np.int32)
-        z = rng.normal(size=n_regions) + 0.5
-        stat = np.where(region_id > 0, z[region_id - 1], -np.inf)
-        stat[rng.random(h * w) < 0.3] = -np.inf  # unaccepted pixels, holes among them
-        state = _ImageState(torch.zeros(h, w, dtype=torch.float64), resolve_params("torchsar"))
-        state.stat, state.region_id = stat.copy(), region_id.copy()
-        state.table = RegionTable(
-            [RegionRow((0, 0), 1, 0.0, 0.0, 1.0, 20, float(v), bool(v > state.k), "") for v in z]
-        )
-        want_stat, want_id = ref.fill_holes(
-            stat.reshape(h, w), region_id.reshape(h, w), state.k, lambda t: z[t - 1]
-        )
+    h, w = stat.shape
+    state = _ImageState(torch.zeros(h, w, dtype=torch.float64), resolve_params("torchsar"))
+    state.stat, state.region_id = stat.reshape(-1).copy(), region_id.reshape(-1).copy()
+    state.table = RegionTable(
+        [RegionRow((0, 0), 1, 0.0, 0.0, 1.0, 20, float(v), bool(v > state.k), "") for v in z]
+    )
+    return state
+
+
+def _painted(seed: int, h: int, w: int, corner: tuple[int, int], n_regions: int = 4):
+    """Random region ids and statistics, regions only in a box from ``corner`` (so the
+    accepted pixels may cover a small part of the image or touch its border)."""
+    rng = np.random.default_rng(seed)
+    region_id = rng.integers(0, n_regions + 1, size=(h, w)).astype(np.int32)
+    z = rng.normal(size=n_regions) + 0.5
+    z[0] = 3.0  # at least one accepted id
+    stat = np.where(region_id > 0, z[region_id - 1], -np.inf)
+    stat[rng.random((h, w)) < 0.3] = -np.inf  # unaccepted pixels, holes among them
+    keep = np.zeros((h, w), dtype=bool)
+    r, c = corner
+    keep[r : r + max(h // 2, 3), c : c + max(w // 2, 3)] = True
+    stat[~keep], region_id[~keep] = -np.inf, 0
+    return stat, region_id, z
+
+
+_SHAPES = (st.integers(0, 2**31 - 1), st.integers(3, 18), st.integers(3, 18))
+
+
+class TestFillHoles:
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)))
+    def test_equal_to_reference(self, seed, h, w, corner):
+        from torchsar.region.detector import _fill_holes
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        want_stat, want_id = ref.fill_holes(stat, region_id, state.k, lambda t: z[t - 1])
         _fill_holes(state)
         np.testing.assert_array_equal(state.stat.reshape(h, w), want_stat)
-        holes = want_stat != stat.reshape(h, w)
+        holes = want_stat != stat
         np.testing.assert_array_equal(state.region_id.reshape(h, w)[holes], want_id[holes])
+
+
+class TestObjects:
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)), st.integers(2, 12))
+    def test_drop_small_equal_reference(self, seed, h, w, corner, min_size):
+        from torchsar.region.detector import _drop_small_objects
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        small = ref.small_objects(stat > state.k, min_size)
+        _drop_small_objects(state, min_size)
+        np.testing.assert_array_equal(state.stat.reshape(h, w), np.where(small, -np.inf, stat))
+        dropped = {int(t) for t in np.unique(region_id[small])}
+        for t, row in enumerate(state.table.rows, start=1):
+            assert (row.reason == "too_small") == (t in dropped)
+
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)), st.integers(0, 3))
+    def test_merged_labels_equal_reference(self, seed, h, w, corner, merge):
+        from torchsar.region.detector import _labels
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        mask = (stat > state.k).reshape(-1)
+        got = _labels(state, mask, merge)
+        np.testing.assert_array_equal(got, ref.merged_labels(stat > state.k, merge))
