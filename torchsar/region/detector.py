@@ -1,6 +1,7 @@
 """Region-growing CFAR (seed paper section 3, steps a–j).
 
-Pipeline per image: despeckle (tensor) → 5x5 local-maximum seeds (tensor) → for each seed,
+Pipeline: despeckle and 5x5 local-maximum seeds (tensors, by the caller for the whole
+batch), then per image: for each seed,
 brightest first, skipping seeds already inside a grown region: grow T on the despeckled
 image F (CPU heap, :mod:`torchsar.region.grow`) → guard area K and background ring C by
 dilation on a crop → censor C → ``mu_C``, ``sigma_C`` on the unfiltered image → accept T iff
@@ -18,7 +19,7 @@ from torch import Tensor
 from torchsar.region.grow import Grid, grow
 from torchsar.region.params import RegionParams
 from torchsar.region.rings import crop_around, ring_stats
-from torchsar.region.seeds import local_maxima, seed_order
+from torchsar.region.seeds import seed_order
 from torchsar.region.table import RegionRow, RegionTable
 
 __all__ = ["detect_image"]
@@ -201,15 +202,23 @@ def _finish_table(st: _ImageState, labels: np.ndarray) -> None:
 
 
 def detect_image(
-    raw: Tensor, f: Tensor, target_img: Tensor, low: Tensor, p: RegionParams, dtype: np.dtype
+    raw: Tensor,
+    f: Tensor,
+    target_img: Tensor,
+    low: Tensor,
+    p: RegionParams,
+    dtype: np.dtype,
+    peaks: Tensor,
 ) -> tuple[np.ndarray, np.ndarray, RegionTable]:
-    """Run steps a–j on one image (``(H, W)`` float64 CPU tensors).
+    """Run steps b–j on one image (``(H, W)`` float64 CPU tensors); ``peaks`` is the bool
+    ``(H, W)`` seed mask of step a (:func:`~torchsar.region.seeds.local_maxima` of ``f``,
+    computed by the caller for a whole batch at once).
 
     Returns the painted statistic ``(H, W)`` in ``dtype``, the labels ``(H, W)`` int64 (of
     the pixels where ``statistic > k`` in that dtype) and the region table.
     """
     st = _ImageState(f, p)
-    seeds = seed_order(f, local_maxima(f[None, None], p.seed_window)[0, 0])
+    seeds = seed_order(f, peaks)
     imgs = (raw.numpy(), target_img.numpy(), low.numpy())
     for s in seeds.tolist():
         if not st.covered[s]:
