@@ -101,6 +101,7 @@ def _visit(st: _ImageState, seed: int, imgs: tuple[np.ndarray, ...], p: RegionPa
 
 
 _EIGHT = np.ones((3, 3), dtype=bool)
+_FOUR = ndimage.generate_binary_structure(2, 1)
 
 
 def _box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
@@ -155,14 +156,17 @@ def _fill_holes(st: _ImageState) -> None:
     box = _box(mask)
     if box is None:
         return
-    m = np.pad(mask[box], 1)
-    lab, n = ndimage.label(~m)
+    hb, wb = box[0].stop - box[0].start, box[1].stop - box[1].start
+    m = np.zeros((hb + 2, wb + 2), dtype=bool)
+    m[1:-1, 1:-1] = mask[box]
+    lab, n = ndimage.label(~m, structure=_FOUR)
     inner = np.ones(n + 1, dtype=bool)
     inner[[0, lab[0, 0]]] = False
     rows, cols = np.nonzero(inner[lab])
     if rows.size == 0:
         return
-    acc = np.where(m, np.pad(st.region_id.reshape(h, w)[box], 1), 0)  # holes: >= 2 from its edge
+    acc = np.zeros(m.shape, dtype=st.region_id.dtype)  # holes: >= 2 from its edge
+    acc[1:-1, 1:-1] = np.where(mask[box], st.region_id.reshape(h, w)[box], 0)
     near = np.max([acc[rows + dr, cols + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=0)
     owner = np.zeros(n + 1, dtype=np.int64)
     np.maximum.at(owner, lab[rows, cols], near)
