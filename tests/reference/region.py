@@ -137,3 +137,25 @@ def fill_holes(stat: np.ndarray, region_id: np.ndarray, k: float, statistic_of) 
         region_id[lab == i] = owner
         stat[lab == i] = statistic_of(owner)
     return stat, region_id
+
+
+def small_objects(mask: np.ndarray, min_size: int) -> np.ndarray:
+    """Pixels of the 8-connected components of ``mask`` with fewer than ``min_size`` pixels."""
+    from scipy import ndimage
+
+    lab, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    out = np.zeros_like(mask)
+    for i in range(1, n + 1):
+        if (lab == i).sum() < min_size:
+            out |= lab == i
+    return out
+
+
+def merged_labels(mask: np.ndarray, merge: int) -> np.ndarray:
+    """One label per group of ``mask`` pixels closer than ``merge`` (0: 8-connected), numbered
+    in raster order of each group's first pixel, over the whole image."""
+    from scipy import ndimage
+
+    grown = ndimage.binary_dilation(mask, np.ones((2 * merge + 1,) * 2)) if merge else mask
+    lab, _ = ndimage.label(grown, structure=np.ones((3, 3), dtype=bool))
+    return np.where(mask, lab, 0)

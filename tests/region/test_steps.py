@@ -9,11 +9,12 @@ import pytest
 import torch
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from tests.reference import region as ref
 from torchsar.region import grow as grow_module
 from torchsar.region.grow import Grid, grow
-from torchsar.region.rings import crop_around, dilate, ring_masks, ring_stats
+from torchsar.region.rings import crop_around, dilate, mean_std, ring_masks, ring_stats
 from torchsar.region.seeds import local_maxima, seed_order
 
 
@@ -107,6 +108,24 @@ class TestGrow:
         np.testing.assert_array_equal(out[0], out[1])
         np.testing.assert_array_equal(out[0], out[2])
 
+    @pytest.mark.parametrize("steps", [0, 1, 8])
+    @given(st.integers(0, 10_000), st.sampled_from([4, 8]))
+    def test_widening_floods_equal_heap(self, steps, seed, conn):
+        """A dim seed in smoothed speckle: ``beta`` grows over several floods, each found by
+        labelling only (0 steps) or by extending the previous one first; all equal the heap."""
+        rng = np.random.default_rng(seed)
+        f = ndimage.uniform_filter(rng.gamma(1.0, 1.0, size=(24, 27)), 3)
+        blocked = rng.random(f.shape) < 0.05
+        start = int(rng.integers(f.size))
+        blocked.flat[start] = False
+        out = []
+        for budget in (None, 3):
+            g = Grid.new(f, connectivity=conn)
+            g.free2d()[blocked] = 0
+            with patch.object(grow_module, "_STEPS", steps):
+                out.append(np.sort(grow(g, start, 1, tau=0.4, n_init=2, budget=budget)))
+        np.testing.assert_array_equal(out[0], out[1])
+
     @pytest.mark.parametrize("label_max", [0, 2000, 1 << 16])
     @given(seed=st.integers(0, 10_000), conn=st.sampled_from([4, 8]))
     def test_crop_floods_equal_heap(self, label_max, seed, conn):
@@ -164,6 +183,23 @@ class TestRings:
         np.testing.assert_array_equal(k, rk)
         np.testing.assert_array_equal(c, rc)
 
+    @given(
+        st.integers(0, 10_000), st.integers(1, 30), st.integers(1, 30), st.integers(0, 4),
+        st.integers(0, 4),
+    )  # fmt: skip
+    def test_random_masks_equal_reference(self, seed, h, w, guard, background):
+        t = np.random.default_rng(seed).random((h, w)) < 0.1
+        k, c = ring_masks(t, guard, background)
+        rk, rc = ref.rings(np.flatnonzero(t).tolist(), t.shape, guard, background)
+        np.testing.assert_array_equal(k, rk)
+        np.testing.assert_array_equal(c, rc)
+
+    @given(st.integers(0, 10_000), st.integers(1, 40), st.integers(1, 40), st.integers(1, 9))
+    def test_dilate_equals_maximum_filter(self, seed, h, w, radius):
+        m = np.random.default_rng(seed).random((h, w)) < 0.05
+        want = ndimage.maximum_filter(m, size=2 * radius + 1, mode="constant", cval=False)
+        np.testing.assert_array_equal(dilate(m, radius), want)
+
     def test_dilate_zero_radius(self):
         m = np.eye(3, dtype=bool)
         np.testing.assert_array_equal(dilate(m, 0), m)
@@ -183,6 +219,12 @@ def _stats_case():
 
 
 class TestRingStats:
+    @given(st.integers(0, 10_000), st.integers(1, 2000), st.floats(-6, 6))
+    def test_mean_std_equal_numpy_bitwise(self, seed, n, scale):
+        v = np.random.default_rng(seed).gamma(1.0, 10.0**scale, n)
+        mu, sigma = mean_std(v)
+        assert mu == float(v.mean()) and sigma == float(v.std())
+
     def test_hand_computed(self):
         raw, crop = _stats_case()
         none = np.zeros((11, 11), dtype=bool)
@@ -216,28 +258,74 @@ class TestRingStats:
         assert rs.n_background == 40 - 7
 
 
-class TestFillHoles:
-    @given(st.integers(0, 2**31 - 1), st.integers(3, 14), st.integers(3, 14))
-    def test_equal_to_reference(self, seed, h, w):
-        from torchsar.region.detector import _fill_holes, _ImageState
-        from torchsar.region.params import resolve_params
-        from torchsar.region.table import RegionRow, RegionTable
+def _state(stat: np.ndarray, region_id: np.ndarray, z: np.ndarray):
+    """An image state holding a painted statistic, region ids and one table row per id."""
+    from torchsar.region.detector import _ImageState
+    from torchsar.region.params import resolve_params
+    from torchsar.region.table import RegionRow, RegionTable
 
-        rng = np.random.default_rng(seed)
-        n_regions = 4
-        region_id = rng.integers(0, n_regions + 1, size=h * w).astype(np.int32)
-        z = rng.normal(size=n_regions) + 0.5
-        stat = np.where(region_id > 0, z[region_id - 1], -np.inf)
-        stat[rng.random(h * w) < 0.3] = -np.inf  # unaccepted pixels, holes among them
-        state = _ImageState(torch.zeros(h, w, dtype=torch.float64), resolve_params("torchsar"))
-        state.stat, state.region_id = stat.copy(), region_id.copy()
-        state.table = RegionTable(
-            [RegionRow((0, 0), 1, 0.0, 0.0, 1.0, 20, float(v), bool(v > state.k), "") for v in z]
-        )
-        want_stat, want_id = ref.fill_holes(
-            stat.reshape(h, w), region_id.reshape(h, w), state.k, lambda t: z[t - 1]
-        )
+    h, w = stat.shape
+    state = _ImageState(torch.zeros(h, w, dtype=torch.float64), resolve_params("torchsar"))
+    state.stat, state.region_id = stat.reshape(-1).copy(), region_id.reshape(-1).copy()
+    state.table = RegionTable(
+        [RegionRow((0, 0), 1, 0.0, 0.0, 1.0, 20, float(v), bool(v > state.k), "") for v in z]
+    )
+    return state
+
+
+def _painted(seed: int, h: int, w: int, corner: tuple[int, int], n_regions: int = 4):
+    """Random region ids and statistics, regions only in a box from ``corner`` (so the
+    accepted pixels may cover a small part of the image or touch its border)."""
+    rng = np.random.default_rng(seed)
+    region_id = rng.integers(0, n_regions + 1, size=(h, w)).astype(np.int32)
+    z = rng.normal(size=n_regions) + 0.5
+    z[0] = 3.0  # at least one accepted id
+    stat = np.where(region_id > 0, z[region_id - 1], -np.inf)
+    stat[rng.random((h, w)) < 0.3] = -np.inf  # unaccepted pixels, holes among them
+    keep = np.zeros((h, w), dtype=bool)
+    r, c = corner
+    keep[r : r + max(h // 2, 3), c : c + max(w // 2, 3)] = True
+    stat[~keep], region_id[~keep] = -np.inf, 0
+    return stat, region_id, z
+
+
+_SHAPES = (st.integers(0, 2**31 - 1), st.integers(3, 18), st.integers(3, 18))
+
+
+class TestFillHoles:
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)))
+    def test_equal_to_reference(self, seed, h, w, corner):
+        from torchsar.region.detector import _fill_holes
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        want_stat, want_id = ref.fill_holes(stat, region_id, state.k, lambda t: z[t - 1])
         _fill_holes(state)
         np.testing.assert_array_equal(state.stat.reshape(h, w), want_stat)
-        holes = want_stat != stat.reshape(h, w)
+        holes = want_stat != stat
         np.testing.assert_array_equal(state.region_id.reshape(h, w)[holes], want_id[holes])
+
+
+class TestObjects:
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)), st.integers(2, 12))
+    def test_drop_small_equal_reference(self, seed, h, w, corner, min_size):
+        from torchsar.region.detector import _drop_small_objects
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        small = ref.small_objects(stat > state.k, min_size)
+        _drop_small_objects(state, min_size)
+        np.testing.assert_array_equal(state.stat.reshape(h, w), np.where(small, -np.inf, stat))
+        dropped = {int(t) for t in np.unique(region_id[small])}
+        for t, row in enumerate(state.table.rows, start=1):
+            assert (row.reason == "too_small") == (t in dropped)
+
+    @given(*_SHAPES, st.tuples(st.integers(0, 12), st.integers(0, 12)), st.integers(0, 3))
+    def test_merged_labels_equal_reference(self, seed, h, w, corner, merge):
+        from torchsar.region.detector import _labels
+
+        stat, region_id, z = _painted(seed, h, w, corner)
+        state = _state(stat, region_id, z)
+        mask = (stat > state.k).reshape(-1)
+        got = _labels(state, mask, merge)
+        np.testing.assert_array_equal(got, ref.merged_labels(stat > state.k, merge))

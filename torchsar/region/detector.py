@@ -1,6 +1,7 @@
 """Region-growing CFAR (seed paper section 3, steps a–j).
 
-Pipeline per image: despeckle (tensor) → 5x5 local-maximum seeds (tensor) → for each seed,
+Pipeline: despeckle and 5x5 local-maximum seeds (tensors, by the caller for the whole
+batch), then per image: for each seed,
 brightest first, skipping seeds already inside a grown region: grow T on the despeckled
 image F (CPU heap, :mod:`torchsar.region.grow`) → guard area K and background ring C by
 dilation on a crop → censor C → ``mu_C``, ``sigma_C`` on the unfiltered image → accept T iff
@@ -18,7 +19,7 @@ from torch import Tensor
 from torchsar.region.grow import Grid, grow
 from torchsar.region.params import RegionParams
 from torchsar.region.rings import crop_around, ring_stats
-from torchsar.region.seeds import local_maxima, seed_order
+from torchsar.region.seeds import seed_order
 from torchsar.region.table import RegionRow, RegionTable
 
 __all__ = ["detect_image"]
@@ -100,6 +101,22 @@ def _visit(st: _ImageState, seed: int, imgs: tuple[np.ndarray, ...], p: RegionPa
 
 
 _EIGHT = np.ones((3, 3), dtype=bool)
+_FOUR = ndimage.generate_binary_structure(2, 1)
+
+
+def _box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
+    """The bounding box of a bool ``(H, W)`` mask widened by ``margin`` (clipped), as
+    slices; None for an empty mask. Components of the mask, and the holes it encloses,
+    lie inside it, so labelling can run on this crop instead of the image."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    h, w = mask.shape
+    return (
+        slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, h)),
+        slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w)),
+    )
 
 
 def _drop_small_objects(st: _ImageState, min_size: int) -> None:
@@ -107,14 +124,18 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
     regions) has fewer than ``min_size`` pixels: statistic ``-inf``, reason "too_small"."""
     if min_size <= 1:
         return
-    h, w = st.shape
-    lab, n = ndimage.label((st.stat > st.k).reshape(h, w), structure=_EIGHT)
-    if n == 0:
+    stat = st.stat.reshape(st.shape)
+    mask = stat > st.k
+    box = _box(mask)
+    if box is None:
         return
+    lab, n = ndimage.label(mask[box], structure=_EIGHT)
     small = np.flatnonzero(np.bincount(lab.reshape(-1), minlength=n + 1)[1:] < min_size) + 1
-    drop = np.isin(lab.reshape(-1), small)
-    tags = np.unique(st.region_id[drop])
-    st.stat[drop] = -np.inf
+    if small.size == 0:
+        return
+    drop = np.isin(lab, small)
+    tags = np.unique(st.region_id.reshape(st.shape)[box][drop])
+    stat[box][drop] = -np.inf
     for t in tags[tags > 0]:
         r = st.table.rows[t - 1]
         st.table.rows[t - 1] = RegionRow(**{**r.__dict__, "accepted": False, "reason": "too_small"})
@@ -127,24 +148,30 @@ def _fill_holes(st: _ImageState) -> None:
 
     A hole is a 4-connected component of the unaccepted pixels that does not reach the image
     border (as :func:`scipy.ndimage.binary_fill_holes` defines it); its owner is the largest
-    accepted id in the 3x3 neighbourhoods of its pixels."""
+    accepted id in the 3x3 neighbourhoods of its pixels. Holes lie inside the bounding box
+    of the accepted pixels, so the work is done on that box padded by one unaccepted pixel
+    (whose component is everything reaching the box's outside)."""
     h, w = st.shape
     mask = (st.stat > st.k).reshape(h, w)
-    if not mask.any():
+    box = _box(mask)
+    if box is None:
         return
-    lab, n = ndimage.label(~mask)
+    hb, wb = box[0].stop - box[0].start, box[1].stop - box[1].start
+    m = np.zeros((hb + 2, wb + 2), dtype=bool)
+    m[1:-1, 1:-1] = mask[box]
+    lab, n = ndimage.label(~m, structure=_FOUR)
     inner = np.ones(n + 1, dtype=bool)
-    inner[np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])] = False
-    inner[0] = False
+    inner[[0, lab[0, 0]]] = False
     rows, cols = np.nonzero(inner[lab])
     if rows.size == 0:
         return
-    acc = np.pad(np.where(mask, st.region_id.reshape(h, w), 0), 1)
-    near = np.max([acc[rows + dr, cols + dc] for dr in range(3) for dc in range(3)], axis=0)
+    acc = np.zeros(m.shape, dtype=st.region_id.dtype)  # holes: >= 2 from its edge
+    acc[1:-1, 1:-1] = np.where(mask[box], st.region_id.reshape(h, w)[box], 0)
+    near = np.max([acc[rows + dr, cols + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=0)
     owner = np.zeros(n + 1, dtype=np.int64)
     np.maximum.at(owner, lab[rows, cols], near)
     owner = owner[lab[rows, cols]]
-    flat = rows * w + cols
+    flat = (rows - 1 + box[0].start) * w + (cols - 1 + box[1].start)
     st.region_id[flat] = owner
     st.stat[flat] = np.array([st.table.rows[t - 1].statistic for t in owner.tolist()])
 
@@ -160,9 +187,14 @@ def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
         lut[tags] = np.arange(1, tags.size + 1)
         return np.where(mask, lut[st.region_id], 0).reshape(h, w)
     m2 = mask.reshape(h, w)
-    grown = ndimage.binary_dilation(m2, np.ones((2 * merge + 1,) * 2)) if merge else m2
-    lab, _ = ndimage.label(grown, structure=_EIGHT)
-    return np.where(m2, lab, 0)
+    out = np.zeros((h, w), dtype=np.int64)
+    box = _box(m2, merge)  # the dilated mask lies inside: same components, same numbering
+    if box is not None:
+        m = m2[box]
+        grown = ndimage.binary_dilation(m, np.ones((2 * merge + 1,) * 2)) if merge else m
+        lab, _ = ndimage.label(grown, structure=_EIGHT)
+        out[box] = np.where(m, lab, 0)
+    return out
 
 
 def _finish_table(st: _ImageState, labels: np.ndarray) -> None:
@@ -174,15 +206,23 @@ def _finish_table(st: _ImageState, labels: np.ndarray) -> None:
 
 
 def detect_image(
-    raw: Tensor, f: Tensor, target_img: Tensor, low: Tensor, p: RegionParams, dtype: np.dtype
+    raw: Tensor,
+    f: Tensor,
+    target_img: Tensor,
+    low: Tensor,
+    p: RegionParams,
+    dtype: np.dtype,
+    peaks: Tensor,
 ) -> tuple[np.ndarray, np.ndarray, RegionTable]:
-    """Run steps a–j on one image (``(H, W)`` float64 CPU tensors).
+    """Run steps b–j on one image (``(H, W)`` float64 CPU tensors); ``peaks`` is the bool
+    ``(H, W)`` seed mask of step a (:func:`~torchsar.region.seeds.local_maxima` of ``f``,
+    computed by the caller for a whole batch at once).
 
     Returns the painted statistic ``(H, W)`` in ``dtype``, the labels ``(H, W)`` int64 (of
     the pixels where ``statistic > k`` in that dtype) and the region table.
     """
     st = _ImageState(f, p)
-    seeds = seed_order(f, local_maxima(f[None, None], p.seed_window)[0, 0])
+    seeds = seed_order(f, peaks)
     imgs = (raw.numpy(), target_img.numpy(), low.numpy())
     for s in seeds.tolist():
         if not st.covered[s]:

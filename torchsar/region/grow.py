@@ -21,7 +21,11 @@ growable pixels with ``|F - mu_N| <= tau * beta`` for its final ``beta``, and it
 "flood with ``tau * beta``, update ``beta`` to the maximum of F over the flood" from any
 partial heap region converges to that same component (``beta`` only grows, every flood is
 contained in the final region). Only the order in which pixels join is lost, and nothing
-downstream depends on it.
+downstream depends on it. The same argument allows two shortcuts: a flood that reaches an
+inner crop edge hands its pixels and their maximum to the next, larger crop at once; and
+when ``beta`` grows, the previous flood is first extended by a few one-pixel dilations
+inside the new tolerance (once that stops changing it is the new component), the crop
+being labelled afresh only if it is still growing.
 """
 
 from __future__ import annotations
@@ -204,62 +208,116 @@ def grow(
 
 
 _LABEL_MAX = 1 << 16  # crops up to this many pixels: scipy labelling beats flood's overhead
+_MARGIN = 16  # first crop on a large image: the partial region's box widened by this much
+_STEPS = 8  # dilations tried before labelling afresh when the tolerance widens
+_STRUCTURE = {
+    4: ndimage.generate_binary_structure(2, 1),
+    8: ndimage.generate_binary_structure(2, 2),
+}
 
 
 def _component(
-    dist: np.ndarray, seed: tuple[int, int], tol: float, connectivity: int
+    dist: np.ndarray, ok: np.ndarray, seed: tuple[int, int], tol: float, connectivity: int
 ) -> np.ndarray:
-    """The connected component of ``dist <= tol`` containing ``seed`` (bool mask)."""
+    """The connected component of ``ok = dist <= tol`` containing ``seed`` (bool mask)."""
     if dist.size <= _LABEL_MAX:
-        structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
-        lab, _ = ndimage.label(dist <= tol, structure=structure)
+        lab, _ = ndimage.label(ok, structure=_STRUCTURE[connectivity])
         return lab == lab[seed]
     return flood(dist, seed, tolerance=tol, connectivity=1 if connectivity == 4 else 2)
+
+
+def _dilate_once(m: np.ndarray, width: int, connectivity: int) -> np.ndarray:
+    """A flat row-major mask of rows ``width`` long whose last column is always False,
+    dilated by one pixel (4-neighbours, or the 3x3 square for 8): shifts by one along the
+    flat array then only leak into that column, so every shift is one contiguous pass."""
+    g = m.copy()
+    g[width:] |= m[:-width]
+    g[:-width] |= m[width:]
+    src = g.copy() if connectivity == 8 else m  # 8: widen the column-dilated mask
+    g[1:] |= src[:-1]
+    g[:-1] |= src[1:]
+    return g
+
+
+def _extend(m: np.ndarray, ok: np.ndarray, connectivity: int, steps: int) -> np.ndarray | None:
+    """The component of ``ok`` containing the connected ``(h, w + 1)`` mask ``m``, found by
+    up to ``steps`` one-pixel dilations kept inside ``ok`` (both False in the last column,
+    ``m`` a subset of ``ok``), or None if the mask was still growing."""
+    flat, ok_flat, width = m.reshape(-1), ok.reshape(-1), m.shape[1]
+    n = np.count_nonzero(flat)
+    for _ in range(steps):
+        flat = _dilate_once(flat, width, connectivity)
+        flat &= ok_flat
+        n_g = np.count_nonzero(flat)  # the dilation contains m: equal counts, equal masks
+        if n_g == n:
+            return flat.reshape(m.shape)
+        n = n_g
+    return None
+
+
+def _touches_edge(m: np.ndarray, box: tuple[int, int, int, int], shape: tuple[int, int]) -> bool:
+    """Whether crop mask ``m`` reaches a side of its crop ``box`` that is inside the image
+    (beyond which the component may continue)."""
+    r0, r1, c0, c1 = box
+    h, w = shape
+    return bool(
+        (r0 > 0 and m[0].any()) or (r1 < h and m[-1].any())
+        or (c0 > 0 and m[:, 0].any()) or (c1 < w and m[:, -1].any())
+    )  # fmt: skip
 
 
 def _flood_crop(
     grid: Grid, idx: np.ndarray, box: tuple[int, int, int, int], mu_n: float, beta: float,
     tau: float,
-) -> tuple[np.ndarray, float]:  # fmt: skip
-    """Iterate flood fills on one crop until ``beta`` is stable; return the crop mask."""
+) -> tuple[np.ndarray, float, bool]:  # fmt: skip
+    """Iterate flood fills on one crop until ``beta`` is stable or the flood reaches an inner
+    crop edge; return the flat indices of the flood, ``beta`` and whether it reached such an
+    edge.
+
+    The crop carries one extra, never growable column (for :func:`_extend`). When ``beta``
+    grows, the flood so far is first extended by a few dilations; only if it is still
+    growing is the crop labelled afresh."""
     r0, r1, c0, c1 = box
     w = grid.width
-    sub = grid.f2d[r0:r1, c0:c1]
-    dist = np.abs(sub - mu_n)
-    dist[grid.free2d()[r0:r1, c0:c1] == 0] = np.inf
+    f = np.full((r1 - r0, c1 - c0 + 1), -np.inf)
+    f[:, :-1] = grid.f2d[r0:r1, c0:c1]
+    dist = np.abs(f - mu_n)  # inf in the extra column
+    dist[:, :-1][grid.free2d()[r0:r1, c0:c1] == 0] = np.inf
     rows, cols = idx // w - r0, idx % w - c0
     dist[rows, cols] = 0.0
+    m = None
     while True:
-        m = _component(dist, (int(rows[0]), int(cols[0])), tau * beta, grid.connectivity)
-        top = float(sub[m].max())
-        if top <= beta:
-            return m, beta
+        ok = dist <= tau * beta
+        m = None if m is None else _extend(m, ok, grid.connectivity, _STEPS)
+        if m is None:
+            m = _component(dist, ok, (int(rows[0]), int(cols[0])), tau * beta, grid.connectivity)
+        top = float(f[m].max())
+        edge = _touches_edge(m[:, :-1], box, grid.shape)
+        if edge or top <= beta:
+            break
         beta = top
+    p = np.flatnonzero(m)
+    width = m.shape[1]
+    return p + (p // width) * (w - width) + (r0 * w + c0), top if edge else beta, edge
 
 
 def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: float) -> np.ndarray:
     """Finish a region from its partial heap region ``idx`` with flood fills on a crop around
-    it; while the flood touches a crop edge inside the image, the flood so far (contained in
-    the final region) becomes the new partial region and the margin doubles. An image small
-    enough for one labelling is flooded whole: growing crops there costs more than it saves."""
+    it; when the flood reaches a crop edge inside the image, the flood so far (contained in
+    the final region, its maximum a valid ``beta``) becomes the new partial region and the
+    margin doubles. An image small enough for one labelling is flooded whole: growing crops
+    there costs more than it saves."""
     h, w = grid.shape
     seed = idx[0]
-    margin = 16 if h * w > _LABEL_MAX else max(h, w)  # small images: flood the whole at once
+    margin = _MARGIN if h * w > _LABEL_MAX else max(h, w)
     while True:
         rows, cols = idx // w, idx % w
         box = (
             max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h),
             max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w),
         )  # fmt: skip
-        m, beta = _flood_crop(grid, idx, box, mu_n, beta, tau)
-        r0, r1, c0, c1 = box
-        rr, cc = np.nonzero(m)
-        flat = (rr + r0) * w + (cc + c0)
+        flat, beta, edge = _flood_crop(grid, idx, box, mu_n, beta, tau)
         idx = np.concatenate([idx[:1], flat[flat != seed]])
-        edge = (
-            (r0 > 0 and m[0].any()) or (r1 < h and m[-1].any())
-            or (c0 > 0 and m[:, 0].any()) or (c1 < w and m[:, -1].any())
-        )  # fmt: skip
         if not edge:
             return idx
         margin *= 2

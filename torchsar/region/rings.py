@@ -5,19 +5,29 @@ image), never the whole image per region. Dilation uses a square structuring ele
 (Chebyshev distance), the region analogue of the square guard box of window CFARs;
 dilating by ``guard`` then by ``background`` equals one dilation by their sum.
 
-This runs once per grown region inside the CPU loop, so it works on numpy views and uses
-:func:`scipy.ndimage.maximum_filter` (exact, separable): on such small crops its per-call
-cost is far below that of ``torch.nn.functional.max_pool2d``.
+This runs once per grown region inside the CPU loop, so it works on numpy views with few
+array operations: a square dilation is "the box sum of the mask is positive", read off one
+summed-area table (integer counts, exact) that serves both K and the outer edge of C.
+The ring statistics use the same reductions as ``ndarray.mean`` / ``ndarray.std``, without
+their per-call overhead, so the numbers are the same to the bit.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
-__all__ = ["Crop", "RingStats", "crop_around", "dilate", "ring_masks", "ring_stats"]
+__all__ = [
+    "Crop",
+    "RingStats",
+    "crop_around",
+    "dilate",
+    "mean_std",
+    "ring_masks",
+    "ring_stats",
+]
 
 
 @dataclass(frozen=True)
@@ -44,12 +54,36 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
         ((0, 3, 0, 3), 1)
     """
     h, w = shape
-    rows, cols = idx // w, idx % w
-    r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h)
+    rows, cols = np.divmod(idx, w)
+    r0, r1 = max(int(idx.min()) // w - margin, 0), min(int(idx.max()) // w + margin + 1, h)
     c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
     mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
     mask[rows - r0, cols - c0] = True
     return Crop(r0, r1, c0, c1, mask)
+
+
+def _summed_area(mask: np.ndarray, pad: int) -> np.ndarray:
+    """The summed-area table of a bool ``(h, w)`` mask zero-padded by ``pad`` on every side:
+    ``S[a, b]`` = number of set cells of the padded mask above and left of ``(a, b)``;
+    shape ``(h + 2 pad + 1, w + 2 pad + 1)``, integer (exact counts)."""
+    h, w = mask.shape
+    n = h + 2 * pad + 1, w + 2 * pad + 1
+    s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**31 else np.int64)
+    s[pad + 1 : pad + 1 + h, pad + 1 : pad + 1 + w] = mask
+    np.cumsum(s, axis=0, out=s)
+    np.cumsum(s, axis=1, out=s)
+    return s
+
+
+def _box_any(s: np.ndarray, pad: int, radius: int, shape: tuple[int, int]) -> np.ndarray:
+    """Cells of the unpadded ``shape`` whose ``(2 radius + 1)^2`` box holds a set cell, from
+    a :func:`_summed_area` table padded by ``pad >= radius``."""
+    h, w = shape
+    lo, hi = pad - radius, pad + radius + 1
+    out = s[hi : hi + h, hi : hi + w] - s[lo : lo + h, hi : hi + w]
+    out -= s[hi : hi + h, lo : lo + w]
+    out += s[lo : lo + h, lo : lo + w]
+    return out > 0
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -60,9 +94,7 @@ def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
         >>> int(dilate(m, 1).sum())
         9
     """
-    if radius == 0:
-        return mask.copy()
-    return ndimage.maximum_filter(mask, size=2 * radius + 1, mode="constant", cval=False)
+    return _box_any(_summed_area(mask, radius), radius, radius, mask.shape)
 
 
 def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndarray, np.ndarray]:
@@ -75,9 +107,27 @@ def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndar
         >>> int(k.sum()), int(c.sum())
         (9, 40)
     """
-    k = dilate(region, guard)
-    c = dilate(region, guard + background) & ~k  # square dilations compose: g then b = g + b
+    pad = guard + background  # square dilations compose: g then b = g + b
+    s = _summed_area(region, pad)
+    k = _box_any(s, pad, guard, region.shape)
+    c = _box_any(s, pad, pad, region.shape)
+    c &= ~k
     return k, c
+
+
+def mean_std(v: np.ndarray) -> tuple[float, float]:
+    """``(v.mean(), v.std())`` of a non-empty 1-D float array, computed as numpy computes
+    them (the same pairwise sums and divisions, so equal to the bit) with one shared sum.
+
+    Example:
+        >>> mean_std(np.array([1.0, 2.0, 4.0, 5.0]))
+        (3.0, 1.5811388300841898)
+    """
+    n = v.size
+    mu = np.add.reduce(v) / n
+    d = v - mu
+    np.square(d, out=d)
+    return float(mu), math.sqrt(np.add.reduce(d) / n)
 
 
 @dataclass(frozen=True)
@@ -112,11 +162,12 @@ def ring_stats(
         guard, background: ring widths R_G and R_C.
     """
     _, ring = ring_masks(crop.region, guard, background)
-    region = crop.region
-    mu_t = float(crop.cut(target_img)[region].mean())
+    t = crop.cut(target_img)[crop.region]
+    mu_t = float(np.add.reduce(t) / t.size)
     ring &= crop.cut(lowpass) < mu_t
     ring &= ~crop.cut(taken)
     vals = crop.cut(raw)[ring]
     if vals.size == 0:
         return RingStats(mu_t, 0, float("nan"), float("nan"))
-    return RingStats(mu_t, int(vals.size), float(vals.mean()), float(vals.std()))
+    mu_c, sigma_c = mean_std(vals)
+    return RingStats(mu_t, int(vals.size), mu_c, sigma_c)

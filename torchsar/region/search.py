@@ -16,6 +16,7 @@ from torchsar._checks import OptionError, check_image, float_dtype
 from torchsar.detection import Detection
 from torchsar.region.detector import detect_image
 from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
+from torchsar.region.seeds import local_maxima
 from torchsar.region.table import RegionTable
 from torchsar.speckle import FILTERS
 from torchsar.windows import box_sums
@@ -67,8 +68,8 @@ def _lowpass(raw: Tensor, f: Tensor, how: str | int | None) -> Tensor:
 
 
 def _detect(args: tuple) -> tuple[np.ndarray, np.ndarray, RegionTable]:
-    (raw, f, target, low), p, np_dtype = args
-    return detect_image(raw, f, target, low, p, np_dtype)
+    (raw, f, target, low, peaks), p, np_dtype = args
+    return detect_image(raw, f, target, low, p, np_dtype, peaks)
 
 
 def _map_images(planes: list[tuple[Tensor, ...]], p: RegionParams, np_dtype: np.dtype):
@@ -93,7 +94,12 @@ def _run(x: Tensor, p: RegionParams) -> tuple[Detection, list[RegionTable]]:
     tables: list[RegionTable] = []
     if x.numel():
         raw, f, target, low = _images(x, p)
-        planes = [(raw[i, j], f[i, j], target[i, j], low[i, j]) for i in range(b) for j in range(c)]
+        peaks = local_maxima(f, p.seed_window)  # step a for the whole batch at once
+        planes = [
+            (raw[i, j], f[i, j], target[i, j], low[i, j], peaks[i, j])
+            for i in range(b)
+            for j in range(c)
+        ]
         for n, (s, lab, tab) in enumerate(
             _map_images(planes, replace(p, despeckle=None), np_dtype)
         ):
