@@ -131,3 +131,69 @@ def test_ground_truth_ids_classes_and_empty_planes():
     assert list(gt.classes) == ["a", "b", "c"]
     assert gt.box.tolist() == [[1, 1, 3, 3], [4, 4, 6, 6], [0, 0, 2, 2]]
     assert gt.area.tolist() == [4, 4, 4]
+
+
+def _reference_plane(obj, gt, p, rule):
+    """Brute force for one plane: pixel IoUs from the label maps, COCO's loop per threshold."""
+    d = obj.in_plane(p)
+    d = d[np.argsort(-obj.score[d], kind="stable")]
+    g = np.flatnonzero(gt.plane == p)
+    lab, ids, ign = obj.labels[p], gt.ids[p], gt.ignore[p]
+    iou = np.zeros((d.size, g.size))
+    for i, di in enumerate(d):
+        for j, gj in enumerate(g):
+            a, b = lab == di + 1, ids == gj + 1
+            iou[i, j] = (a & b).sum() / (a | b).sum()
+    crowd = np.array([(ign & (lab == di + 1)).sum() / max(obj.area[di], 1) for di in d])
+    if rule.iou_kind == "box":
+        iou, crowd = box_iou(obj.box[d], gt.box[g]), np.zeros(d.size)
+        if ign.any():
+            r, c = np.nonzero(ign)
+            crowd = box_iou(obj.box[d], np.array([[r.min(), c.min(), r.max() + 1, c.max() + 1.0]]),
+                            crowd=True)[:, 0]  # fmt: skip
+    ap = coco_match(np.c_[iou, crowd], np.r_[np.zeros(g.size), 1] > 0, COCO_IOUS)
+    if rule.kind == "centroid":
+        q = np.zeros((d.size, g.size))
+        for i, di in enumerate(d):
+            cy, cx = obj.centroid[di] + 0.5
+            for j, gj in enumerate(g):
+                r0, c0, r1, c1 = gt.box[gj]
+                m = rule.margin * max(r1 - r0, c1 - c0)
+                db = obj.box[di]
+                small = (db[2] - db[0]) * (db[3] - db[1]) <= rule.max_size_ratio * (r1 - r0) * (
+                    c1 - c0
+                )
+                if r0 - m <= cy <= r1 + m and c0 - m <= cx <= c1 + m and small:
+                    q[i, j] = 1 / (1 + np.hypot(cy - (r0 + r1) / 2, cx - (c0 + c1) / 2))
+        op = coco_match(np.c_[q, (crowd >= 0.5) * 1.0], np.r_[np.zeros(g.size), 1] > 0, [1e-12])[0]
+    else:
+        op = coco_match(np.c_[iou, crowd], np.r_[np.zeros(g.size), 1] > 0, [rule.iou])[0]
+
+    def code(a):  # reference columns -> instance indices; the crowd column -> -2
+        inst = np.r_[g, -2, -1]
+        return inst[np.where(a == -2, g.size, np.where(a == -1, g.size + 1, a))]
+
+    return d, code(ap), code(op)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), kind=st.sampled_from(["mask", "box", "centroid"]),
+       iou=st.sampled_from([0.5, 0.3]))  # fmt: skip
+def test_match_batch_equals_brute_force_per_plane(seed, kind, iou):
+    """Planes with 0, 1 and several instances in one batch (the first two kinds are matched
+    all at once, the last plane by plane)."""
+    rng = np.random.default_rng(seed)
+    n, size = 6, 24
+    inst = np.zeros((n, size, size), int)
+    for p in range(n):
+        for i in range(1, int(rng.choice([0, 1, 1, 2, 3])) + 1):
+            r, c = rng.integers(0, size - 6, 2)
+            inst[p, r : r + rng.integers(2, 7), c : c + rng.integers(2, 7)] = i
+    ignore = (rng.random((n, size, size)) < 0.05) & (inst == 0)
+    stat = rng.random((n, size, size)) * (rng.random((n, size, size)) < 0.25) * 4
+    stat[inst > 0] += rng.random() * 3
+    rule = Matching(kind=kind, iou=iou)
+    m, obj, gt = _score(stat, inst, rule, ignore=ignore)
+    for p in range(n):
+        d, ap, op = _reference_plane(obj, gt, p, rule)
+        assert np.array_equal(m.ap[:, d], ap) and np.array_equal(m.op[d], op)

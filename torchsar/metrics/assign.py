@@ -12,8 +12,10 @@ from torchsar.metrics.matching import (
     GroundTruth,
     Matching,
     box_iou,
+    first_reach,
     greedy_match,
     mask_overlaps,
+    pair_box_iou,
 )
 from torchsar.objects import Objects
 
@@ -59,23 +61,28 @@ def _ignore_boxes(ignore: np.ndarray) -> np.ndarray:
 
 
 def _centroid_quality(obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray, m: Matching):
+    """Prescreening quality matrix ``(len(d), len(g))``, see :func:`_centroid_pairs`."""
+    return _centroid_pairs(obj.centroid[d][:, None, :], obj.box[d][:, None, :],
+                           gt.box[g][None, :, :], m)  # fmt: skip
+
+
+def _centroid_pairs(cen: np.ndarray, db: np.ndarray, gb: np.ndarray, m: Matching) -> np.ndarray:
     """Prescreening pair quality ``1 / (1 + distance to the box centre)``, 0 where the
-    centroid is outside the grown box or the detection box is too large."""
-    cen = obj.centroid[d][:, None, :] + 0.5  # pixel centres, in box coordinates
-    box = gt.box[g][None, :, :]
-    grow = m.margin * np.maximum(box[..., 2] - box[..., 0], box[..., 3] - box[..., 1])
+    centroid is outside the grown box or the detection box is too large (centroids and
+    boxes ``(..., 2)`` / ``(..., 4)``, paired by broadcasting)."""
+    cen = cen + 0.5  # pixel centres, in box coordinates
+    grow = m.margin * np.maximum(gb[..., 2] - gb[..., 0], gb[..., 3] - gb[..., 1])
     inside = (
-        (cen[..., 0] >= box[..., 0] - grow)
-        & (cen[..., 0] <= box[..., 2] + grow)
-        & (cen[..., 1] >= box[..., 1] - grow)
-        & (cen[..., 1] <= box[..., 3] + grow)
+        (cen[..., 0] >= gb[..., 0] - grow)
+        & (cen[..., 0] <= gb[..., 2] + grow)
+        & (cen[..., 1] >= gb[..., 1] - grow)
+        & (cen[..., 1] <= gb[..., 3] + grow)
     )
-    db, gb = obj.box[d], gt.box[g]
-    area_d = ((db[:, 2] - db[:, 0]) * (db[:, 3] - db[:, 1]))[:, None]
-    area_g = ((gb[:, 2] - gb[:, 0]) * (gb[:, 3] - gb[:, 1]))[None, :]
+    area_d = (db[..., 2] - db[..., 0]) * (db[..., 3] - db[..., 1])
+    area_g = (gb[..., 2] - gb[..., 0]) * (gb[..., 3] - gb[..., 1])
     ok = inside & (area_d <= m.max_size_ratio * area_g)
-    mid = 0.5 * (box[..., :2] + box[..., 2:])
-    dist = np.hypot(*(cen - mid).transpose(2, 0, 1))
+    mid = 0.5 * (gb[..., :2] + gb[..., 2:])
+    dist = np.hypot(cen[..., 0] - mid[..., 0], cen[..., 1] - mid[..., 1])
     return np.where(ok, 1.0 / (1.0 + dist), 0.0)
 
 
@@ -122,17 +129,65 @@ def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
     return ap, op, op_iou
 
 
+def _single_quality(obj, gt, ov, ig_box, rule, d, g) -> tuple[np.ndarray, np.ndarray]:
+    """IoU of each detection ``d`` with its plane's one instance ``g`` (NaN: none) and its
+    crowd quality: box IoU under the box rule or on box-only planes, mask IoU otherwise."""
+    p, has = obj.plane[d], g >= 0
+    gi = np.maximum(g, 0)
+    box_iou_ = np.where(has, pair_box_iou(obj.box[d], gt.box[gi]) if len(gt) else 0.0, np.nan)
+    box_crowd = pair_box_iou(obj.box[d], ig_box[p], crowd=True)
+    if rule.iou_kind == "box":
+        return box_iou_, box_crowd
+    inter = np.zeros(len(obj))
+    inter[ov.d] = ov.inter  # a detection meets at most its own plane's instance here
+    inter, area_g = inter[d], gt.area[gi] if len(gt) else np.zeros(d.size)
+    mask_iou_ = np.where(has, inter / np.where(has, obj.area[d] + area_g - inter, 1), np.nan)
+    mask_crowd = ov.ignored[d] / np.maximum(obj.area[d], 1)
+    box_only = gt.box_only[p]
+    return np.where(box_only, box_iou_, mask_iou_), np.where(box_only, box_crowd, mask_crowd)
+
+
+def _match_single_planes(obj, gt, ov, ig_box, rule, single, out) -> None:
+    """Match the detections of every plane with at most one instance (``single``) at once
+    (:func:`~torchsar.metrics.matching.first_reach`), writing into ``out = (ap, op,
+    op_iou)``."""
+    d = np.flatnonzero(single[obj.plane])
+    d = d[np.lexsort((-obj.score[d], obj.plane[d]))]  # by plane, then descending score
+    if d.size == 0:
+        return
+    first_gt = np.full(obj.planes, -1)
+    first_gt[gt.plane[::-1]] = np.arange(len(gt))[::-1]
+    g = first_gt[obj.plane[d]]
+    start = np.searchsorted(obj.plane[d], obj.plane[d], side="left")
+    iou, crowd = _single_quality(obj, gt, ov, ig_box, rule, d, g)
+    ap = first_reach(iou, crowd, COCO_IOUS, start)
+    if rule.kind == "centroid":
+        gb = gt.box[np.maximum(g, 0)] if len(gt) else np.zeros((d.size, 4))
+        quality = np.where(g >= 0, _centroid_pairs(obj.centroid[d], obj.box[d], gb, rule), np.nan)
+        op = first_reach(quality, (crowd >= 0.5).astype(np.float64), np.array([1e-12]), start)[0]
+    elif rule.iou == COCO_IOUS[0]:
+        op = ap[0]
+    else:
+        op = first_reach(iou, crowd, np.array([rule.iou]), start)[0]
+    out[0][:, d] = np.where(ap == 0, g, ap)
+    out[1][d] = np.where(op == 0, g, op)
+    out[2][d] = np.where(op == 0, iou, 0.0)
+
+
 def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     """Match every plane's objects to its instances (objects and instances of the same
-    stack of planes)."""
+    stack of planes). Planes with at most one instance (chips) are matched all at once,
+    the others plane by plane."""
     n_d, n_g = len(obj), len(gt)
     ap = np.full((len(COCO_IOUS), n_d), -1, dtype=np.int64)
     op = np.full(n_d, -1, dtype=np.int64)
     op_iou = np.zeros(n_d)
     ov = _Overlaps(obj, gt)
     ig_box = _ignore_boxes(gt.ignore)
+    single = np.bincount(gt.plane, minlength=obj.planes) <= 1
+    _match_single_planes(obj, gt, ov, ig_box, rule, single, (ap, op, op_iou))
     dets, gts = _by_plane(obj.plane, obj.planes), _by_plane(gt.plane, obj.planes)
-    for p in range(obj.planes):
+    for p in np.flatnonzero(~single):
         d, g = dets[p], gts[p]
         if d.size == 0:
             continue

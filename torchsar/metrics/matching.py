@@ -30,9 +30,11 @@ __all__ = [
     "GroundTruth",
     "Matching",
     "box_iou",
+    "first_reach",
     "greedy_match",
     "ground_truth",
     "mask_overlaps",
+    "pair_box_iou",
 ]
 
 COCO_IOUS = np.round(np.linspace(0.5, 0.95, 10), 2)
@@ -167,7 +169,11 @@ def box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
         >>> box_iou(np.array([[0, 0, 2, 2.]]), np.array([[0, 1, 2, 3.]])).tolist()
         [[0.3333333333333333]]
     """
-    a, b = a[:, None, :], b[None, :, :]
+    return pair_box_iou(a[:, None, :], b[None, :, :], crowd=crowd)
+
+
+def pair_box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
+    """:func:`box_iou` of boxes ``a[..., :]`` and ``b[..., :]`` paired by broadcasting."""
     ih = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
     iw = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
     inter = ih * iw
@@ -190,7 +196,7 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
         Among instances of equal quality the last one wins, as in ``pycocotools``.
     """
     n_t, (n_d, n_g) = len(thresholds), quality.shape
-    thr = np.minimum(np.asarray(thresholds, dtype=np.float64), 1 - 1e-10)
+    thr = _clip(thresholds)
     if n_g <= 1:
         return _greedy_single(quality, crowd, thr)
     out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
@@ -211,16 +217,41 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
     return out
 
 
+def _clip(thresholds: np.ndarray) -> np.ndarray:
+    """Thresholds as float64, 1 lowered to ``1 - 1e-10`` (as ``pycocotools``)."""
+    return np.minimum(np.asarray(thresholds, dtype=np.float64), 1 - 1e-10)
+
+
 def _greedy_single(quality: np.ndarray, crowd: np.ndarray, thr: np.ndarray) -> np.ndarray:
-    """:func:`greedy_match` for at most one instance (a chip with one target), without the
-    loop over detections: at each threshold the first detection reaching it takes the
-    instance; the others are ignored where their crowd quality reaches it."""
-    n_t, n_d = thr.size, quality.shape[0]
-    out = np.full((n_t, n_d), UNMATCHED, dtype=np.int64)
-    if quality.shape[1] and n_d:
-        reach = quality[:, 0][None, :] >= thr[:, None]  # (T, D)
-        first = reach.argmax(axis=1)
-        t = np.flatnonzero(reach[np.arange(n_t), first])
-        out[t, first[t]] = 0
-    out[(out == UNMATCHED) & (crowd[None, :] >= thr[:, None])] = IGNORED
+    """:func:`greedy_match` for at most one instance (column 0), by :func:`first_reach`."""
+    n_d = quality.shape[0]
+    q = quality[:, 0] if quality.shape[1] else np.full(n_d, np.nan)
+    return first_reach(q, crowd, thr, np.zeros(n_d, np.int64))
+
+
+def first_reach(
+    quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray, start: np.ndarray
+) -> np.ndarray:
+    """:func:`greedy_match` for many groups of detections (e.g. planes) that each compete for
+    at most one instance (a chip with one target), all at once: at each threshold the first
+    detection of a group reaching it takes the instance; the others are ignored where their
+    crowd quality reaches it.
+
+    Args:
+        quality: ``(D,)`` quality of each detection with its group's instance (NaN: the
+            group has none); detections grouped, in descending score order within a group.
+        crowd: ``(D,)`` quality against the ignore region.
+        thresholds: ``(T,)`` minimum quality.
+        start: ``(D,)`` index of the first detection of each detection's group.
+
+    Returns:
+        int ``(T, D)``: ``0`` matched (the group's instance), ``-1`` unmatched, ``-2`` ignored.
+    """
+    thr = _clip(thresholds)[:, None]
+    reach = quality[None, :] >= thr  # NaN never reaches
+    seen = np.cumsum(reach, axis=1)
+    before = np.where(start > 0, seen[:, np.maximum(start - 1, 0)], 0)
+    first = reach & (seen - before == 1)
+    out = np.where(first, 0, UNMATCHED)
+    out[~first & (crowd[None, :] >= thr)] = IGNORED
     return out
