@@ -211,6 +211,7 @@ def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
                                initargs=(threads,))  # fmt: skip
+    finished = False
     try:
         running = {pool.submit(_scored, job, k): k for k in paths}
         while running:
@@ -226,10 +227,12 @@ def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
                         running[pool.submit(_scored, job, k)] = k
                         continue
                 bar.update(sizes[k])
+        finished = True
     finally:
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()  # do not wait for running shards
-        pool.shutdown(wait=False, cancel_futures=True)
+        if not finished:  # do not wait for running shards
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+        pool.shutdown(wait=finished, cancel_futures=True)  # idle workers exit cleanly
 
 
 def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:

@@ -87,3 +87,13 @@ def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
     # folder, nothing cleaned by the run itself); SIGTERM while writing a new one. Every
     # step of the publishing protocol is killed deterministically in test_output.py.
     _kill_cases(tmp_path, [(signal.SIGKILL, True), (signal.SIGTERM, False)], seed=14)
+
+
+def test_a_finished_two_worker_run_is_quiet(tmp_path):
+    """A run that ends normally lets its worker processes exit by themselves: nothing on
+    stderr (no semaphores of killed workers left for the resource tracker)."""
+    argv = ["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca", "--no-progress",
+            "--workers", "2", "--shard-size", "2", "--out", str(tmp_path / "run")]  # fmt: skip
+    done = subprocess.run([sys.executable, "-m", "torchsar_eval.cli", *argv],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 0 and done.stderr == "", done.stderr
