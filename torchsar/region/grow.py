@@ -15,17 +15,17 @@ flat index, so the result is deterministic.
 
 Large regions (clutter floods, big targets) would make the pure-Python heap the bottleneck,
 so after ``budget`` pixels the growth is finished by compiled flood fills on a crop
-(:func:`scipy.ndimage.label`, or :func:`skimage.segmentation.flood` on large crops). This is exact, not an approximation: the
-region the heap ends with is the connected component, containing the region so far, of the
-growable pixels with ``|F - mu_N| <= tau * beta`` for its final ``beta``, and iterating
-"flood with ``tau * beta``, update ``beta`` to the maximum of F over the flood" from any
-partial heap region converges to that same component (``beta`` only grows, every flood is
-contained in the final region). Only the order in which pixels join is lost, and nothing
-downstream depends on it. The same argument allows two shortcuts: a flood that reaches an
-inner crop edge hands its pixels and their maximum to the next, larger crop at once; and
-when ``beta`` grows, the previous flood is first extended by a few one-pixel dilations
-inside the new tolerance (once that stops changing it is the new component), the crop
-being labelled afresh only if it is still growing.
+(:func:`scipy.ndimage.label`, or :func:`skimage.segmentation.flood` on large crops). This is
+exact, not an approximation: the region the heap ends with is the connected component,
+containing the region so far, of the growable pixels with ``|F - mu_N| <= tau * beta`` for
+its final ``beta``, and iterating "flood with ``tau * beta``, update ``beta`` to the maximum
+of F over the flood" from any partial heap region converges to that same component (``beta``
+only grows, every flood is contained in the final region). Only the order in which pixels
+join is lost, and nothing downstream depends on it. The same argument allows two shortcuts:
+a flood that reaches an inner crop edge hands its pixels and their maximum to the next,
+larger crop at once; and when ``beta`` grows, the previous flood is first extended by a few
+one-pixel dilations inside the new tolerance (once that stops changing it is the new
+component), the crop being labelled afresh only if it is still growing.
 """
 
 from __future__ import annotations
