@@ -130,10 +130,11 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
     if box is None:
         return
     lab, n = ndimage.label(mask[box], structure=_EIGHT)
-    small = np.flatnonzero(np.bincount(lab.reshape(-1), minlength=n + 1)[1:] < min_size) + 1
-    if small.size == 0:
+    small = np.bincount(lab.reshape(-1), minlength=n + 1) < min_size  # per label
+    small[0] = False
+    if not small.any():
         return
-    drop = np.isin(lab, small)
+    drop = small[lab]
     tags = np.unique(st.region_id.reshape(st.shape)[box][drop])
     stat[box][drop] = -np.inf
     for t in tags[tags > 0]:

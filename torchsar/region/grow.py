@@ -83,6 +83,8 @@ class Grid:
 
         def four(p: int) -> list[int]:
             col = p % w
+            if 0 < col < w - 1 and w <= p < n - w:  # inside: all four, in the order below
+                return [p - w, p + w, p - 1, p + 1]
             out = []
             if p >= w:
                 out.append(p - w)

@@ -55,8 +55,9 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
     """
     h, w = shape
     rows, cols = np.divmod(idx, w)
-    r0, r1 = max(int(idx.min()) // w - margin, 0), min(int(idx.max()) // w + margin + 1, h)
-    c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
+    lo, hi = np.minimum.reduce, np.maximum.reduce  # ufunc reductions: no wrapper overhead
+    r0, r1 = max(int(lo(idx)) // w - margin, 0), min(int(hi(idx)) // w + margin + 1, h)
+    c0, c1 = max(int(lo(cols)) - margin, 0), min(int(hi(cols)) + margin + 1, w)
     mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
     mask[rows - r0, cols - c0] = True
     return Crop(r0, r1, c0, c1, mask)
