@@ -69,7 +69,7 @@ def _summed_area(mask: np.ndarray, pad: int) -> np.ndarray:
     shape ``(h + 2 pad + 1, w + 2 pad + 1)``, integer (exact counts)."""
     h, w = mask.shape
     n = h + 2 * pad + 1, w + 2 * pad + 1
-    s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**31 else np.int64)
+    s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**30 else np.int64)  # sums of two fit
     s[pad + 1 : pad + 1 + h, pad + 1 : pad + 1 + w] = mask
     np.cumsum(s, axis=0, out=s)
     np.cumsum(s, axis=1, out=s)
@@ -81,10 +81,8 @@ def _box_any(s: np.ndarray, pad: int, radius: int, shape: tuple[int, int]) -> np
     a :func:`_summed_area` table padded by ``pad >= radius``."""
     h, w = shape
     lo, hi = pad - radius, pad + radius + 1
-    out = s[hi : hi + h, hi : hi + w] - s[lo : lo + h, hi : hi + w]
-    out -= s[hi : hi + h, lo : lo + w]
-    out += s[lo : lo + h, lo : lo + w]
-    return out > 0
+    inside = s[hi : hi + h, hi : hi + w] + s[lo : lo + h, lo : lo + w]
+    return inside > s[lo : lo + h, hi : hi + w] + s[hi : hi + h, lo : lo + w]  # count > 0
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -112,7 +110,7 @@ def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndar
     s = _summed_area(region, pad)
     k = _box_any(s, pad, guard, region.shape)
     c = _box_any(s, pad, pad, region.shape)
-    c &= ~k
+    np.greater(c, k, out=c)  # c and not k
     return k, c
 
 
@@ -166,7 +164,7 @@ def ring_stats(
     t = crop.cut(target_img)[crop.region]
     mu_t = float(np.add.reduce(t) / t.size)
     ring &= crop.cut(lowpass) < mu_t
-    ring &= ~crop.cut(taken)
+    np.greater(ring, crop.cut(taken), out=ring)  # ring and not taken
     vals = crop.cut(raw)[ring]
     if vals.size == 0:
         return RingStats(mu_t, 0, float("nan"), float("nan"))
