@@ -71,8 +71,8 @@ def _summed_area(mask: np.ndarray, pad: int) -> np.ndarray:
     n = h + 2 * pad + 1, w + 2 * pad + 1
     s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**30 else np.int64)  # sums of two fit
     s[pad + 1 : pad + 1 + h, pad + 1 : pad + 1 + w] = mask
-    np.cumsum(s, axis=0, out=s)
-    np.cumsum(s, axis=1, out=s)
+    s.cumsum(axis=0, out=s)
+    s.cumsum(axis=1, out=s)
     return s
 
 
