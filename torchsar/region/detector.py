@@ -1,11 +1,10 @@
 """Region-growing CFAR (seed paper section 3, steps a–j).
 
 Pipeline: despeckle and 5x5 local-maximum seeds (tensors, by the caller for the whole
-batch), then per image: for each seed,
-brightest first, skipping seeds already inside a grown region: grow T on the despeckled
-image F (CPU heap, :mod:`torchsar.region.grow`) → guard area K and background ring C by
-dilation on a crop → censor C → ``mu_C``, ``sigma_C`` on the unfiltered image → accept T iff
-``(mu_T - mu_C) / sigma_C > k``.
+batch), then per image: for each seed, brightest first, skipping seeds already inside a
+grown region: grow T on the despeckled image F (CPU heap, :mod:`torchsar.region.grow`) →
+guard area K and background ring C by dilation on a crop → censor C → ``mu_C``, ``sigma_C``
+on the unfiltered image → accept T iff ``(mu_T - mu_C) / sigma_C > k``.
 """
 
 from __future__ import annotations

@@ -115,7 +115,7 @@ def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndar
 
 
 def mean_std(v: np.ndarray) -> tuple[float, float]:
-    """``(v.mean(), v.std())`` of a non-empty 1-D float array, computed as numpy computes
+    """``(v.mean(), v.std())`` of a non-empty 1-D float64 array, computed as numpy computes
     them (the same pairwise sums and divisions, so equal to the bit) with one shared sum.
 
     Example:
