@@ -88,6 +88,21 @@ class TestGrow:
         g8 = Grid.new(np.asarray(a), connectivity=8)
         assert sorted(grow(g8, 0, 1, tau=0.3, n_init=1).tolist()) == [0, 3]
 
+    @given(st.integers(1, 7), st.integers(1, 7), st.sampled_from([4, 8]))
+    def test_neighbours_are_the_in_image_ones(self, h, w, conn):
+        nbrs = Grid.new(np.zeros((h, w)), connectivity=conn).neighbours()
+        for p in range(h * w):
+            r, c = divmod(p, w)
+            want = {
+                rr * w + cc
+                for rr in range(r - 1, r + 2)
+                for cc in range(c - 1, c + 2)
+                if 0 <= rr < h and 0 <= cc < w and (rr, cc) != (r, c)
+                if conn == 8 or rr == r or cc == c
+            }
+            got = nbrs(p)
+            assert len(got) == len(want) and set(got) == want
+
     def test_blocked_pixels_are_not_entered(self):
         g = _grid([[10.0, 10.0, 10.0]])
         g.free[1] = 0

@@ -1,11 +1,10 @@
 """Region-growing CFAR (seed paper section 3, steps a–j).
 
 Pipeline: despeckle and 5x5 local-maximum seeds (tensors, by the caller for the whole
-batch), then per image: for each seed,
-brightest first, skipping seeds already inside a grown region: grow T on the despeckled
-image F (CPU heap, :mod:`torchsar.region.grow`) → guard area K and background ring C by
-dilation on a crop → censor C → ``mu_C``, ``sigma_C`` on the unfiltered image → accept T iff
-``(mu_T - mu_C) / sigma_C > k``.
+batch), then per image: for each seed, brightest first, skipping seeds already inside a
+grown region: grow T on the despeckled image F (CPU heap, :mod:`torchsar.region.grow`) →
+guard area K and background ring C by dilation on a crop → censor C → ``mu_C``, ``sigma_C``
+on the unfiltered image → accept T iff ``(mu_T - mu_C) / sigma_C > k``.
 """
 
 from __future__ import annotations
@@ -130,10 +129,11 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
     if box is None:
         return
     lab, n = ndimage.label(mask[box], structure=_EIGHT)
-    small = np.flatnonzero(np.bincount(lab.reshape(-1), minlength=n + 1)[1:] < min_size) + 1
-    if small.size == 0:
+    small = np.bincount(lab.reshape(-1), minlength=n + 1) < min_size  # per label
+    small[0] = False
+    if not small.any():
         return
-    drop = np.isin(lab, small)
+    drop = small[lab]
     tags = np.unique(st.region_id.reshape(st.shape)[box][drop])
     stat[box][drop] = -np.inf
     for t in tags[tags > 0]:

@@ -4,34 +4,34 @@ The paper grows region T from the seed by always adding the boundary pixel most 
 the region, accepting it while ``psi = |F(p) - mu_N| / beta <= tau``, where ``mu_N`` is the
 mean of the first ``N`` pixels added and ``beta`` the maximum of F over T.
 
-Implementation: flat (row-major) pixel indices, the image as a Python list of floats (fast
-scalar access), a ``bytearray`` of growable pixels shared by every region of the image, and
-an integer stamp array so nothing is cleared between regions. Until ``N`` pixels are in T
-the reference mean changes with every addition, so the few candidates are rescanned; after
-that the key ``|F(p) - mu_N|`` of a pixel never changes and a binary heap (``heapq``) orders
-the boundary. Since ``beta`` only grows and the heap top has the smallest key, growth stops
-exactly when the heap top fails the test. Ties are broken by the smaller flat index, so the
-result is deterministic.
+Implementation: flat (row-major) pixel indices, the image as a flat float64 memoryview (fast
+scalar access to Python floats), a ``bytearray`` of growable pixels shared by every region
+of the image, and an integer stamp array so nothing is cleared between regions. Until ``N``
+pixels are in T the reference mean changes with every addition, so the few candidates are
+rescanned; after that the key ``|F(p) - mu_N|`` of a pixel never changes and a binary heap
+(``heapq``) orders the boundary. Since ``beta`` only grows and the heap top has the smallest
+key, growth stops exactly when the heap top fails the test. Ties are broken by the smaller
+flat index, so the result is deterministic.
 
 Large regions (clutter floods, big targets) would make the pure-Python heap the bottleneck,
-so after ``budget`` pixels the growth is finished by a compiled flood fill
-(:func:`skimage.segmentation.flood`) on a crop. This is exact, not an approximation: the
-region the heap ends with is the connected component, containing the region so far, of the
-growable pixels with ``|F - mu_N| <= tau * beta`` for its final ``beta``, and iterating
-"flood with ``tau * beta``, update ``beta`` to the maximum of F over the flood" from any
-partial heap region converges to that same component (``beta`` only grows, every flood is
-contained in the final region). Only the order in which pixels join is lost, and nothing
-downstream depends on it. The same argument allows two shortcuts: a flood that reaches an
-inner crop edge hands its pixels and their maximum to the next, larger crop at once; and
-when ``beta`` grows, the previous flood is first extended by a few one-pixel dilations
-inside the new tolerance (once that stops changing it is the new component), the crop
-being labelled afresh only if it is still growing.
+so after ``budget`` pixels the growth is finished by compiled flood fills on a crop
+(:func:`scipy.ndimage.label`, or :func:`skimage.segmentation.flood` on large crops). This is
+exact, not an approximation: the region the heap ends with is the connected component,
+containing the region so far, of the growable pixels with ``|F - mu_N| <= tau * beta`` for
+its final ``beta``, and iterating "flood with ``tau * beta``, update ``beta`` to the maximum
+of F over the flood" from any partial heap region converges to that same component (``beta``
+only grows, every flood is contained in the final region). Only the order in which pixels
+join is lost, and nothing downstream depends on it. The same argument allows two shortcuts:
+a flood that reaches an inner crop edge hands its pixels and their maximum to the next,
+larger crop at once; and when ``beta`` grows, the previous flood is first extended by a few
+one-pixel dilations inside the new tolerance (once that stops changing it is the new
+component), the crop being labelled afresh only if it is still growing.
 """
 
 from __future__ import annotations
 
 import heapq
-from collections.abc import Callable, MutableSequence
+from collections.abc import Callable, MutableSequence, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,14 +46,15 @@ class Grid:
     """Per-image state shared by every region grown on that image.
 
     Attributes:
-        f: the despeckled image, flattened row-major, as Python floats.
+        f: the despeckled image, flattened row-major: a float64 buffer whose items read as
+            Python floats (a memoryview of the array: no per-pixel conversion up front).
         width: image width W (rows are ``len(f) // width``).
         free: 1 where a region may grow into the pixel, 0 where it is taken.
         stamp: per-pixel id of the last region that queued the pixel.
         connectivity: 4 (the paper's eq. 4) or 8.
     """
 
-    f: list[float]
+    f: Sequence[float]
     width: int
     free: bytearray
     stamp: MutableSequence[int]
@@ -63,8 +64,9 @@ class Grid:
     @staticmethod
     def new(f: np.ndarray, connectivity: int = 4) -> Grid:
         """The state of a fresh image: ``f`` is the ``(H, W)`` float64 despeckled image."""
+        f = np.ascontiguousarray(f, dtype=np.float64)
         n = f.size
-        flat = f.reshape(-1).tolist()
+        flat = memoryview(f.reshape(-1))
         return Grid(flat, f.shape[1], bytearray(b"\x01") * n, [0] * n, connectivity, f)
 
     @property
@@ -81,6 +83,8 @@ class Grid:
 
         def four(p: int) -> list[int]:
             col = p % w
+            if 0 < col < w - 1 and w <= p < n - w:  # inside: all four, in the order below
+                return [p - w, p + w, p - 1, p + 1]
             out = []
             if p >= w:
                 out.append(p - w)

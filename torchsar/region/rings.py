@@ -55,8 +55,9 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
     """
     h, w = shape
     rows, cols = np.divmod(idx, w)
-    r0, r1 = max(int(idx.min()) // w - margin, 0), min(int(idx.max()) // w + margin + 1, h)
-    c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w)
+    lo, hi = np.minimum.reduce, np.maximum.reduce  # ufunc reductions: no wrapper overhead
+    r0, r1 = max(int(lo(idx)) // w - margin, 0), min(int(hi(idx)) // w + margin + 1, h)
+    c0, c1 = max(int(lo(cols)) - margin, 0), min(int(hi(cols)) + margin + 1, w)
     mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
     mask[rows - r0, cols - c0] = True
     return Crop(r0, r1, c0, c1, mask)
@@ -68,10 +69,10 @@ def _summed_area(mask: np.ndarray, pad: int) -> np.ndarray:
     shape ``(h + 2 pad + 1, w + 2 pad + 1)``, integer (exact counts)."""
     h, w = mask.shape
     n = h + 2 * pad + 1, w + 2 * pad + 1
-    s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**31 else np.int64)
+    s = np.zeros(n, dtype=np.int32 if n[0] * n[1] < 2**30 else np.int64)  # sums of two fit
     s[pad + 1 : pad + 1 + h, pad + 1 : pad + 1 + w] = mask
-    np.cumsum(s, axis=0, out=s)
-    np.cumsum(s, axis=1, out=s)
+    s.cumsum(axis=0, out=s)
+    s.cumsum(axis=1, out=s)
     return s
 
 
@@ -80,10 +81,8 @@ def _box_any(s: np.ndarray, pad: int, radius: int, shape: tuple[int, int]) -> np
     a :func:`_summed_area` table padded by ``pad >= radius``."""
     h, w = shape
     lo, hi = pad - radius, pad + radius + 1
-    out = s[hi : hi + h, hi : hi + w] - s[lo : lo + h, hi : hi + w]
-    out -= s[hi : hi + h, lo : lo + w]
-    out += s[lo : lo + h, lo : lo + w]
-    return out > 0
+    inside = s[hi : hi + h, hi : hi + w] + s[lo : lo + h, lo : lo + w]
+    return inside > s[lo : lo + h, hi : hi + w] + s[hi : hi + h, lo : lo + w]  # count > 0
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -111,12 +110,12 @@ def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndar
     s = _summed_area(region, pad)
     k = _box_any(s, pad, guard, region.shape)
     c = _box_any(s, pad, pad, region.shape)
-    c &= ~k
+    np.greater(c, k, out=c)  # c and not k
     return k, c
 
 
 def mean_std(v: np.ndarray) -> tuple[float, float]:
-    """``(v.mean(), v.std())`` of a non-empty 1-D float array, computed as numpy computes
+    """``(v.mean(), v.std())`` of a non-empty 1-D float64 array, computed as numpy computes
     them (the same pairwise sums and divisions, so equal to the bit) with one shared sum.
 
     Example:
@@ -165,7 +164,7 @@ def ring_stats(
     t = crop.cut(target_img)[crop.region]
     mu_t = float(np.add.reduce(t) / t.size)
     ring &= crop.cut(lowpass) < mu_t
-    ring &= ~crop.cut(taken)
+    np.greater(ring, crop.cut(taken), out=ring)  # ring and not taken
     vals = crop.cut(raw)[ring]
     if vals.size == 0:
         return RingStats(mu_t, 0, float("nan"), float("nan"))

@@ -57,6 +57,6 @@ def seed_order(f: Tensor, seeds: Tensor) -> np.ndarray:
         >>> seed_order(f, f > 1).tolist()
         [1, 2, 3]
     """
-    idx = seeds.reshape(-1).nonzero().squeeze(1).cpu().numpy()
+    idx = np.flatnonzero(seeds.reshape(-1).cpu().numpy())
     vals = f.reshape(-1).cpu().numpy()[idx]
     return idx[np.argsort(-vals, kind="stable")]
