@@ -105,8 +105,19 @@ class _Overlaps:
         dd, gg, inter = self.d[sel], self.g[sel], self.inter[sel]
         iou = np.zeros((d.size, g.size))
         iou[pos_d[dd], pos_g[gg]] = inter / (obj.area[dd] + gt.area[gg] - inter)
-        crowd = self.ignored[d] / np.maximum(obj.area[d], 1)
-        return iou, crowd
+        return iou, self.crowd(obj, d)
+
+    def crowd(self, obj: Objects, d: np.ndarray) -> np.ndarray:
+        """Fraction of each detection's pixels on the ignore region (COCO's crowd rule)."""
+        return self.ignored[d] / np.maximum(obj.area[d], 1)
+
+    def pair_iou(self, obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray):
+        """Mask IoU of each detection ``d[i]`` with instance ``g[i]``, where every detection
+        meets no instance but possibly ``g[i]`` (its plane's only one)."""
+        inter = np.zeros(len(obj))
+        inter[self.d] = self.inter
+        inter = inter[d]
+        return inter / (obj.area[d] + gt.area[g] - inter)
 
 
 def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
@@ -130,21 +141,21 @@ def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
 
 
 def _single_quality(obj, gt, ov, ig_box, rule, d, g) -> tuple[np.ndarray, np.ndarray]:
-    """IoU of each detection ``d`` with its plane's one instance ``g`` (NaN: none) and its
-    crowd quality: box IoU under the box rule or on box-only planes, mask IoU otherwise."""
+    """IoU of each detection ``d`` with its plane's one instance ``g`` (-1: none, IoU NaN)
+    and its crowd quality: box IoU under the box rule or on box-only planes, mask IoU
+    otherwise."""
     p, has = obj.plane[d], g >= 0
-    gi = np.maximum(g, 0)
-    box_iou_ = np.where(has, pair_box_iou(obj.box[d], gt.box[gi]) if len(gt) else 0.0, np.nan)
-    box_crowd = pair_box_iou(obj.box[d], ig_box[p], crowd=True)
-    if rule.iou_kind == "box":
-        return box_iou_, box_crowd
-    inter = np.zeros(len(obj))
-    inter[ov.d] = ov.inter  # a detection meets at most its own plane's instance here
-    inter, area_g = inter[d], gt.area[gi] if len(gt) else np.zeros(d.size)
-    mask_iou_ = np.where(has, inter / np.where(has, obj.area[d] + area_g - inter, 1), np.nan)
-    mask_crowd = ov.ignored[d] / np.maximum(obj.area[d], 1)
-    box_only = gt.box_only[p]
-    return np.where(box_only, box_iou_, mask_iou_), np.where(box_only, box_crowd, mask_crowd)
+    box = np.full(d.size, True) if rule.iou_kind == "box" else gt.box_only[p]
+    iou, crowd = np.full(d.size, np.nan), np.empty(d.size)
+    for sel, boxes in ((box, True), (~box, False)):
+        ds, hit = d[sel], sel & has
+        if boxes:
+            crowd[sel] = pair_box_iou(obj.box[ds], ig_box[p[sel]], crowd=True)
+            iou[hit] = pair_box_iou(obj.box[d[hit]], gt.box[g[hit]])
+        else:
+            crowd[sel] = ov.crowd(obj, ds)
+            iou[hit] = ov.pair_iou(obj, gt, d[hit], g[hit])
+    return iou, crowd
 
 
 def _match_single_planes(obj, gt, ov, ig_box, rule, single, out) -> None:
@@ -162,8 +173,9 @@ def _match_single_planes(obj, gt, ov, ig_box, rule, single, out) -> None:
     iou, crowd = _single_quality(obj, gt, ov, ig_box, rule, d, g)
     ap = first_reach(iou, crowd, COCO_IOUS, start)
     if rule.kind == "centroid":
-        gb = gt.box[np.maximum(g, 0)] if len(gt) else np.zeros((d.size, 4))
-        quality = np.where(g >= 0, _centroid_pairs(obj.centroid[d], obj.box[d], gb, rule), np.nan)
+        has = g >= 0
+        quality = np.full(d.size, np.nan)
+        quality[has] = _centroid_pairs(obj.centroid[d[has]], obj.box[d[has]], gt.box[g[has]], rule)
         op = first_reach(quality, (crowd >= 0.5).astype(np.float64), np.array([1e-12]), start)[0]
     elif rule.iou == COCO_IOUS[0]:
         op = ap[0]

@@ -4,9 +4,8 @@
 chips. On the symmetric log grid the bucket follows from ``log10 |x|`` in a few elementwise
 operations. Only values within rounding distance of a grid value can land in the wrong
 bucket; those few go through the exact binary search (0 and the infinities are exact by the
-arithmetic itself). The
-result equals ``torch.bucketize(x, grid)`` for every finite or infinite value (tested against
-it, grid values and their float neighbours included).
+arithmetic itself). The result equals ``torch.bucketize(x, grid)`` for every finite or
+infinite value (tested against it, grid values and their float neighbours included).
 """
 
 from __future__ import annotations

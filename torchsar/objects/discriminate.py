@@ -132,8 +132,8 @@ def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, 
     b, c, h, w = statistic.shape
     stat = statistic.detach().cpu().numpy().reshape(-1)
     thr = torch.as_tensor(threshold).detach().cpu().to(torch.float64).numpy()
-    scalar = thr.size == 1  # the usual case: no full-size threshold plane
-    thr = np.broadcast_to(thr.reshape(-1)[:1] if scalar else thr, (b, c, h, w)).reshape(-1)
+    scalar = thr.size == 1  # the usual case: no need to compare a full-size plane
+    thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
     if thr.size and (scalar or np.all(thr == thr[0])):
         t = float(thr[0])
         loose = floor * t * (1 - 1e-5) - 1e-30 if t > 0 else t + floor - 1.0 - 1e-5
