@@ -15,6 +15,7 @@ import numpy as np
 from scipy import ndimage
 from torch import Tensor
 
+from torchsar.region.boxes import mask_box
 from torchsar.region.grow import Grid, grow
 from torchsar.region.params import RegionParams
 from torchsar.region.rings import crop_around, ring_stats
@@ -103,21 +104,6 @@ _EIGHT = np.ones((3, 3), dtype=bool)
 _FOUR = ndimage.generate_binary_structure(2, 1)
 
 
-def _box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
-    """The bounding box of a bool ``(H, W)`` mask widened by ``margin`` (clipped), as
-    slices; None for an empty mask. Components of the mask, and the holes it encloses,
-    lie inside it, so labelling can run on this crop instead of the image."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    if rows.size == 0:
-        return None
-    cols = np.flatnonzero(mask.any(axis=0))
-    h, w = mask.shape
-    return (
-        slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, h)),
-        slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w)),
-    )
-
-
 def _drop_small_objects(st: _ImageState, min_size: int) -> None:
     """Reject accepted regions whose object (the 8-connected union of touching accepted
     regions) has fewer than ``min_size`` pixels: statistic ``-inf``, reason "too_small"."""
@@ -125,7 +111,7 @@ def _drop_small_objects(st: _ImageState, min_size: int) -> None:
         return
     stat = st.stat.reshape(st.shape)
     mask = stat > st.k
-    box = _box(mask)
+    box = mask_box(mask)
     if box is None:
         return
     lab, n = ndimage.label(mask[box], structure=_EIGHT)
@@ -153,7 +139,7 @@ def _fill_holes(st: _ImageState) -> None:
     (whose component is everything reaching the box's outside)."""
     h, w = st.shape
     mask = (st.stat > st.k).reshape(h, w)
-    box = _box(mask)
+    box = mask_box(mask)
     if box is None:
         return
     hb, wb = box[0].stop - box[0].start, box[1].stop - box[1].start
@@ -188,7 +174,7 @@ def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
         return np.where(mask, lut[st.region_id], 0).reshape(h, w)
     m2 = mask.reshape(h, w)
     out = np.zeros((h, w), dtype=np.int64)
-    box = _box(m2, merge)  # the dilated mask lies inside: same components, same numbering
+    box = mask_box(m2, merge)  # the dilated mask lies inside: same components, same numbering
     if box is not None:
         m = m2[box]
         grown = ndimage.binary_dilation(m, np.ones((2 * merge + 1,) * 2)) if merge else m

@@ -38,6 +38,8 @@ import numpy as np
 from scipy import ndimage
 from skimage.segmentation import flood
 
+from torchsar.region.boxes import index_box
+
 __all__ = ["Grid", "grow"]
 
 
@@ -315,11 +317,7 @@ def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: floa
     seed = idx[0]
     margin = _MARGIN if h * w > _LABEL_MAX else max(h, w)
     while True:
-        rows, cols = idx // w, idx % w
-        box = (
-            max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, h),
-            max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, w),
-        )  # fmt: skip
+        box = index_box(idx, (h, w), margin)
         flat, beta, edge = _flood_crop(grid, idx, box, mu_n, beta, tau)
         idx = np.concatenate([idx[:1], flat[flat != seed]])
         if not edge:

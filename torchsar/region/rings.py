@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from torchsar.region.boxes import index_box
+
 __all__ = [
     "Crop",
     "RingStats",
@@ -53,11 +55,8 @@ def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
         >>> (c.r0, c.r1, c.c0, c.c1), c.region.sum().item()
         ((0, 3, 0, 3), 1)
     """
-    h, w = shape
-    rows, cols = np.divmod(idx, w)
-    lo, hi = np.minimum.reduce, np.maximum.reduce  # ufunc reductions: no wrapper overhead
-    r0, r1 = max(int(lo(idx)) // w - margin, 0), min(int(hi(idx)) // w + margin + 1, h)
-    c0, c1 = max(int(lo(cols)) - margin, 0), min(int(hi(cols)) + margin + 1, w)
+    r0, r1, c0, c1 = index_box(idx, shape, margin)
+    rows, cols = np.divmod(idx, shape[1])
     mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
     mask[rows - r0, cols - c0] = True
     return Crop(r0, r1, c0, c1, mask)
