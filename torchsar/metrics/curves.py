@@ -15,6 +15,7 @@ __all__ = [
     "SCORE_GRID",
     "coco_ap",
     "froc",
+    "interpolated_precision",
     "partial_auc",
     "pd_at_fa",
     "score_bins",
@@ -28,6 +29,7 @@ OP_BIN = int(np.searchsorted(SCORE_GRID, 1.0)) + 1
 """First bin of scores > 1: the design operating point."""
 
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
+"""COCO's recall points (``pycocotools`` ``recThrs``)."""
 
 
 def score_bins(score: np.ndarray) -> np.ndarray:
@@ -39,6 +41,36 @@ def score_bins(score: np.ndarray) -> np.ndarray:
 def suffix(hist: np.ndarray) -> np.ndarray:
     """``out[..., j] = hist[..., j:].sum()``: counts scoring above ``grid[j - 1]``."""
     return np.flip(np.cumsum(np.flip(hist, -1), -1), -1)
+
+
+def interpolated_precision(
+    tp_cum: np.ndarray, fp_cum: np.ndarray, n_gt: int
+) -> tuple[np.ndarray, float]:
+    """COCO's interpolated precision at the 101 recall points and the final recall, from
+    cumulative true / false positive counts of the detections in ranked order (an ignored
+    detection repeats the previous counts), exactly as ``pycocotools``' ``accumulate``.
+
+    Args:
+        tp_cum, fp_cum: ``(N,)`` cumulative counts after each ranked detection.
+        n_gt: ground-truth instances (> 0).
+
+    Returns:
+        ``(precision (101,), recall)``; precision is 0 at recall points never reached.
+
+    Example:
+        >>> p, r = interpolated_precision(np.array([1, 1, 2]), np.array([0, 1, 1]), 2)
+        >>> round(float(p.mean()), 4), r  # precision 1 up to recall 0.5, then 2/3
+        (0.835, 1.0)
+    """
+    tps = np.asarray(tp_cum, dtype=np.float64)
+    if tps.size == 0:
+        return np.zeros(RECALL_POINTS.size), 0.0
+    recall = tps / n_gt
+    precision = tps / (tps + np.asarray(fp_cum, dtype=np.float64) + np.spacing(1))
+    precision = np.maximum.accumulate(precision[::-1])[::-1]
+    idx = np.searchsorted(recall, RECALL_POINTS, side="left")
+    q = np.where(idx < precision.size, precision[np.minimum(idx, precision.size - 1)], 0.0)
+    return q, float(recall[-1])
 
 
 def coco_ap(tp: np.ndarray, fp: np.ndarray, n_gt: int) -> float:
@@ -59,14 +91,7 @@ def coco_ap(tp: np.ndarray, fp: np.ndarray, n_gt: int) -> float:
     rev = np.flatnonzero((np.asarray(tp) + np.asarray(fp))[::-1] > 0)
     tps = np.cumsum(np.asarray(tp)[::-1], dtype=np.float64)[rev]
     fps = np.cumsum(np.asarray(fp)[::-1], dtype=np.float64)[rev]
-    if tps.size == 0:
-        return 0.0
-    recall = tps / n_gt
-    precision = tps / (tps + fps + np.spacing(1))
-    precision = np.maximum.accumulate(precision[::-1])[::-1]
-    idx = np.searchsorted(recall, RECALL_POINTS, side="left")
-    q = np.where(idx < precision.size, precision[np.minimum(idx, precision.size - 1)], 0.0)
-    return float(q.mean())
+    return float(interpolated_precision(tps, fps, n_gt)[0].mean())
 
 
 def froc(tp: np.ndarray, fp: np.ndarray, n_gt: int, images: int) -> tuple[np.ndarray, ...]:
