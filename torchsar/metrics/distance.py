@@ -8,14 +8,16 @@ pixels or in metres (``(row_m, col_m)`` pixel spacing, possibly anisotropic).
 Reference: Paolo et al., "xView3-SAR: Detecting Dark Fishing Activity Using Synthetic Aperture
 Radar Imagery", NeurIPS 2022 Datasets and Benchmarks (arXiv:2206.00897), and its scoring code
 ``reference/metric.py`` of https://github.com/DIUx-xView/xview3-reference (the revision with
-the ``costly_dist`` and ``drop_low_detect`` options; the official score turns both on). That
-code, per scene:
+the ``costly_dist`` and ``drop_low_detect`` options, both on in the official scoring, e.g.
+``official_metric_scoring`` in ``xview3/metric.py`` of the first-place solution,
+https://github.com/BloodAxe/xView3-The-First-Place-Solution). That code, per scene:
 
 - builds ``dist = scipy.spatial.distance_matrix(pred, gt, p=2) * PIX_TO_M`` from
   ``(row, column)`` pixel positions (``PIX_TO_M = 10``: isotropic 10 m pixels);
 - with ``costly_dist``, sets the entries ``> distance_tolerance`` (200 m) to ``9999999 *
   PIX_TO_M`` and runs ``scipy.optimize.linear_sum_assignment(dist)``: so the assignment first
-  maximises the number of pairs within the tolerance, then minimises their total distance;
+  maximises the number of pairs at most the tolerance apart, then minimises their total
+  distance;
 - keeps as true positives the assigned pairs with ``dist < distance_tolerance`` (strictly:
   a pair exactly at the tolerance is not a match); unassigned detections are false
   positives, unassigned ground truth false negatives;
@@ -26,7 +28,8 @@ code, per scene:
   false negatives, and each absorbs at most one detection;
 - length (``compute_length_performance``): over the true-positive pairs whose ground-truth
   length is known, caps both lengths at ``MAX_OBJECT_LENGTH_M = 500`` m, averages
-  ``|pred - true| / true`` and scores ``1 - min(mean, 1)`` (0 when no pair qualifies).
+  ``|pred - true| / true`` and scores ``1 - min(mean, 1)`` (0 when no pair qualifies; only
+  the true length is checked for NaN).
 
 Here:
 
@@ -347,7 +350,7 @@ def dont_care(
 def _lengths(x: object, name: str, *, zero_ok: bool) -> np.ndarray:
     a = _array(x, name)
     if a.ndim != 1:
-        raise ShapeError(f"{name} must have shape (K,) (one length per matched pair), got {a.shape}")
+        raise ShapeError(f"{name} must have shape (K,), one length per matched pair; got {a.shape}")
     bad = a < 0 if zero_ok else a <= 0
     if bad.any():
         bound = ">= 0" if zero_ok else "> 0"
