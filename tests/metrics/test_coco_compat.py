@@ -54,7 +54,8 @@ def _rle(rng, box, h, w):
 def _dataset(seed: int, iou_type: str):
     """Random COCO ground truth and results, as JSON-like dicts: 1-6 images, 0-12 instances
     over 2-3 categories (some crowd, some duplicated), 0-30 or 120-160 detections (jittered
-    instances, random boxes, rounded scores for ties, exact duplicates)."""
+    instances, random boxes, rounded scores for ties, exact duplicates; the many detections of
+    an image mostly in one category, over the 100 cap)."""
     rng = np.random.default_rng(seed)
     cats = rng.choice([1, 2, 5, 7, 11], rng.integers(2, 4), replace=False).tolist()
     n_img = int(rng.integers(1, 7))
@@ -93,6 +94,8 @@ def _dataset(seed: int, iou_type: str):
                 if g is not None and rng.random() < 0.8
                 else rng.choice(cats).item()
             )
+            if n_det >= 120 and rng.random() < 0.9:  # over the cap in one category
+                cat = cats[0]
             score = float(rng.random())
             if rng.random() < 0.3:
                 score = round(score, 1)
@@ -125,8 +128,9 @@ def _file_order(rng, per_image: dict) -> list:
     return out
 
 
-def _pycocotools(images, gts, dts, iou_type, seed=0):
-    """COCOeval on the dicts: (stats, precision, recall)."""
+def _pycocotools(images, gts, dts, iou_type, seed=0, **params):
+    """COCOeval on the dicts, with ``params`` set on ``COCOeval.params``: (stats, precision,
+    recall)."""
     rng = np.random.default_rng(seed)
     anns = [dict(a, id=k + 1) for k, a in enumerate(_file_order(rng, gts))]
     seen = {a["category_id"] for a in anns} | {d["category_id"] for v in dts.values() for d in v}
@@ -141,6 +145,8 @@ def _pycocotools(images, gts, dts, iou_type, seed=0):
         dt = gt.loadRes(copy.deepcopy(_file_order(rng, dts)))
         ev = COCOeval(gt, dt, iou_type)
         ev.params.useCats = 1
+        for k, v in params.items():
+            setattr(ev.params, k, v)
         ev.evaluate()
         ev.accumulate()
         ev.summarize()
@@ -246,7 +252,12 @@ def _tiny(boxes_gt, boxes_dt, crowd=None, cats_gt=None, cats_dt=None, scores=Non
             boxes_dt=[[0, 0, 38, 40], [0, 0, 40, 40], [60, 60, 9, 9]],
             cats_dt=[1, 2, 2],
         ),
-        # tied IoUs with two instances, tied scores
+        # a tie of IoU 0.5 with two instances goes to the later one, leaving the earlier one
+        # to the second detection
+        dict(boxes_gt=[[0, 0, 10, 10], [10, 0, 10, 10]], boxes_dt=[[0, 0, 20, 10], [0, 0, 10, 10]]),
+        # the same with the instances in the other order: the second detection finds none
+        dict(boxes_gt=[[10, 0, 10, 10], [0, 0, 10, 10]], boxes_dt=[[0, 0, 20, 10], [0, 0, 10, 10]]),
+        # tied IoUs with two identical instances, tied scores
         dict(
             boxes_gt=[[0, 0, 10, 10], [0, 0, 10, 10]],
             boxes_dt=[[0, 0, 10, 8]] * 3,
@@ -259,6 +270,30 @@ def test_edge_cases_match_pycocotools(case):
     state = CocoState()
     state.update(_coco_images(images, gts, dts, "bbox"))
     _assert_same(state, _pycocotools(images, gts, dts, "bbox"))
+
+
+def test_other_parameters_match_pycocotools():
+    """Other thresholds (1.0: pycocotools clamps it to 1 - 1e-10), caps (stat 0 reads cap 100
+    whatever the caps) and area ranges (stats of a missing label are -1)."""
+    images, gts, dts = _dataset(433, "bbox")
+    gts[images[0]["id"]].append(dict(gts[images[0]["id"]][0], iscrowd=0, area=50.0))
+    x, y, w, h = gts[images[0]["id"]][-1]["bbox"]
+    near = {"image_id": images[0]["id"], "category_id": gts[images[0]["id"]][-1]["category_id"]}
+    dts[images[0]["id"]].append(dict(near, bbox=[x, y, w, h * (1 - 1e-11)], score=0.3))
+    params = dict(
+        iou_thresholds=[0.5, 0.75, 1.0],
+        max_dets=(20, 1, 5),
+        areas={"all": (0.0, 1e10), "small": (0.0, 40.0**2), "tiny": (0.0, 100.0)},
+    )
+    ref = _pycocotools(
+        images, gts, dts, "bbox",
+        iouThrs=np.array(params["iou_thresholds"]), maxDets=[1, 5, 20],
+        areaRng=[list(v) for v in params["areas"].values()], areaRngLbl=list(params["areas"]),
+    )  # fmt: skip
+    state = CocoState(**params)
+    state.update(_coco_images(images, gts, dts, "bbox"))
+    _assert_same(state, ref)
+    assert state.stats()[0] == -1 and state.stats()[5] == -1 and state.stats()[3] > -1
 
 
 def test_only_crowd_ground_truth_is_undefined():
