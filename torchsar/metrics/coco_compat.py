@@ -87,7 +87,7 @@ COCO_EVAL_IOUS = np.linspace(0.5, 0.95, 10)
 """pycocotools' IoU thresholds (``Params.iouThrs``, unrounded; see the module docstring)."""
 
 _WORK = 1 << 22
-"""Elements of the matcher's (problems, areas, thresholds, instances) working array."""
+"""Elements of the matcher's arrays per batch of problems (see ``_batches``)."""
 
 
 @dataclass(frozen=True)
@@ -187,21 +187,21 @@ def greedy_coco_match(
     if P == 0 or D == 0 or G == 0:
         return matched, matched_ig
     rank = _row_ranks(iou)
-    # key = group * G + rank: the largest candidate key is pycocotools' choice
-    group = np.where(ignore, 0, G).astype(rank.dtype)
-    taken = np.zeros((P, A, thr.size, G), bool)
+    # instances first (G, P, ...) so that every step is elementwise over whole arrays; the key
+    # 1 + group * G + rank (0: not a candidate) is largest for pycocotools' choice and unique
+    iou_t, rank_t = iou.transpose(1, 2, 0).copy(), rank.transpose(1, 2, 0).copy()  # (D, G, P)
+    group = np.where(ignore, 1, G + 1).astype(rank.dtype).transpose(2, 0, 1)  # (G, P, A)
+    real = ~crowd.T[:, :, None, None]  # (G, P, 1, 1): matched once only
+    free = np.ones((G, P, A, thr.size), bool)
     n_det = np.asarray(n_det)
     for d in range(int(n_det.max(initial=0))):
         n = int(np.count_nonzero(n_det > d))  # the active problems are a prefix
-        ok = (iou[:n, d, None, :] >= thr[:, None])[:, None] & ~taken[:n]
-        key = np.where(ok, (group[:n] + rank[:n, d, None, :])[:, :, None, :], -1)
-        m = key.argmax(-1)
-        best = np.take_along_axis(key, m[..., None], -1)[..., 0]
-        matched[:n, d] = best >= 0
-        matched_ig[:n, d] = (best >= 0) & (best < G)
-        hit = (best >= 0) & ~np.take_along_axis(crowd[:n, None, None, :], m[..., None], -1)[..., 0]
-        p, a, t = np.nonzero(hit)
-        taken[p, a, t, m[p, a, t]] = True
+        ok = free[:, :n] & (iou_t[d, :, :n, None] >= thr)[:, :, None, :]
+        key = (group[:, :n] + rank_t[d, :, :n, None])[..., None] * ok
+        best = key.max(0)  # (n, A, T)
+        matched[:n, d] = best > 0
+        matched_ig[:n, d] = (best > 0) & (best <= G)
+        free[:, :n] &= ~((key == best) & (best > 0) & real[:, :n])
     return matched, matched_ig
 
 
@@ -218,14 +218,14 @@ def _row_ranks(iou: np.ndarray) -> np.ndarray:
     return rank
 
 
-def _within(starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+def _within(sizes: np.ndarray) -> np.ndarray:
     """Position of each element within its run, runs of ``sizes`` laid end to end.
 
     Example:
-        >>> _within(np.array([0, 2]), np.array([2, 3])).tolist()
+        >>> _within(np.array([2, 3])).tolist()
         [0, 1, 0, 1, 2]
     """
-    return np.arange(int(sizes.sum())) - np.repeat(starts, sizes)
+    return np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
 
 
 def _runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -356,10 +356,16 @@ class CocoState:
         return self.max_dets, tuple(self.areas.items()), self.iou_thresholds.tobytes()
 
     def update(self, images: Iterable[CocoImage]) -> None:
-        """Add images (``evaluate``'s matching of each image and category).
+        """Add images: ``evaluateImg`` of each of their (image, category) pairs.
 
         Args:
-            images: :class:`CocoImage` s, in any order, not added before.
+            images: :class:`CocoImage` s, in any order, none added before.
+
+        Example:
+            >>> s = CocoState()
+            >>> s.update([CocoImage(0, [1, 1], [500.0, 2e4], [False, False], [], [], [], [])])
+            >>> s.recall()[0, 0, :, 2].tolist()  # no detection: recall 0 where there are instances
+            [0.0, 0.0, -1.0, 0.0]
         """
         images = list(images)
         if not images:
@@ -367,81 +373,59 @@ class CocoState:
         orders = np.array([im.order for im in images], np.int64)
         if np.unique(orders).size != orders.size:
             raise InputValueError("two images of one update have the same order")
-        self._orders.append(orders)
-        self._cache = self._consolidated = None
         d_cat = np.concatenate([im.det_category for im in images])
         g_cat = np.concatenate([im.gt_category for im in images])
         cats = np.unique(np.concatenate([d_cat, g_cat]))
-        g_out = _outside(np.concatenate([im.gt_area for im in images]), self._ranges)
         g_crowd = np.concatenate([im.gt_crowd for im in images])
-        g_ignore = g_out | g_crowd[:, None]
+        g_ignore = _outside(np.concatenate([im.gt_area for im in images]), self._ranges)
+        g_ignore |= g_crowd[:, None]
         counts = np.zeros((cats.size, len(self.areas)), np.int64)
         np.add.at(counts, np.searchsorted(cats, g_cat), ~g_ignore)
-        for c, n in zip(cats.tolist(), counts, strict=True):
-            self._npig[c] = self._npig[c] + n if c in self._npig else n
         if d_cat.size:
             self._records.append(self._evaluate(images, cats, d_cat, g_cat, g_ignore, g_crowd))
+        self._orders.append(orders)
+        self._cache = self._consolidated = None
+        for c, n in zip(cats.tolist(), counts, strict=True):
+            self._npig[c] = self._npig[c] + n if c in self._npig else n
 
     def _evaluate(self, images, cats, d_cat, g_cat, g_ignore, g_crowd) -> np.ndarray:
-        """Records of the kept detections of ``images`` (one ``update``'s matching)."""
+        """Records of the kept detections of ``images`` (``evaluateImg`` of every (image,
+        category) pair, vectorised over the pairs)."""
         n_det = np.array([im.det_category.size for im in images])
         n_gt = np.array([im.gt_category.size for im in images])
-        d_img, g_img = (
-            np.repeat(np.arange(len(images)), n_det),
-            np.repeat(np.arange(len(images)), n_gt),
-        )
-        d_file = _within(np.cumsum(n_det) - n_det, n_det)
-        g_col = _within(np.cumsum(n_gt) - n_gt, n_gt)
+        d_img, d_file = np.repeat(np.arange(len(images)), n_det), _within(n_det)
+        g_img, g_col = np.repeat(np.arange(len(images)), n_gt), _within(n_gt)
         score = np.concatenate([im.det_score for im in images])
         # detections by image, category, descending score, file order; cut per (image, category)
         perm = np.lexsort((d_file, -score, d_cat, d_img))
         d_key = d_img[perm] * cats.size + np.searchsorted(cats, d_cat[perm])
-        _, starts, sizes = _runs(d_key)
-        rank = _within(starts, sizes)
+        rank = _within(_runs(d_key)[2])
         keep = rank < self.max_dets[-1]
         perm, d_key, rank = perm[keep], d_key[keep], rank[keep]
-        d_out = _outside(np.concatenate([im.det_area for im in images])[perm], self._ranges)
-        # ground truth by image, category, annotation order
+        # instances by image, category, annotation order
         gperm = np.lexsort((g_col, g_cat, g_img))
         g_key = g_img[gperm] * cats.size + np.searchsorted(cats, g_cat[gperm])
+        # where each kept detection's IoU row starts in the flattened matrices, each column
+        iou_flat = np.concatenate([im.iou.ravel() for im in images])
+        row = (np.cumsum(n_det * n_gt) - n_det * n_gt)[d_img] + d_file * n_gt[d_img]
+        inputs = (iou_flat, row[perm], g_col[gperm], g_ignore[gperm], g_crowd[gperm])
+        # the (image, category) pairs with both detections and instances
         dk, ds, dn = _runs(d_key)
         gk, gs, gn = _runs(g_key)
         _, di, gi = np.intersect1d(dk, gk, assume_unique=True, return_indices=True)
-        iou_flat = np.concatenate([im.iou.ravel() for im in images])
-        iou_off = np.cumsum(n_det * n_gt) - n_det * n_gt
-        matched = np.zeros((perm.size, len(self.areas), self.iou_thresholds.size), bool)
-        tp = np.zeros_like(matched)
-        problems = (ds[di], dn[di], gs[gi], gn[gi])
-        for batch in _batches(*problems, len(self.areas) * self.iou_thresholds.size):
-            b_ds, b_dn, b_gs, b_gn = batch
-            G, D = int(b_gn.max()), int(b_dn.max())
-            # (problem, detection rank, instance) pairs
-            pairs = b_dn * b_gn
-            k = _within(np.cumsum(pairs) - pairs, pairs)
-            p = np.repeat(np.arange(b_ds.size), pairs)
-            r, q = k // b_gn[p], k % b_gn[p]
-            det, gt = b_ds[p] + r, gperm[b_gs[p] + q]
-            img = d_img[perm[det]]
-            iou = np.full((b_ds.size, D, G), -np.inf)
-            iou[p, r, q] = iou_flat[iou_off[img] + d_file[perm[det]] * n_gt[img] + g_col[gt]]
-            gp = np.repeat(np.arange(b_ds.size), b_gn)
-            gq = _within(np.cumsum(b_gn) - b_gn, b_gn)
-            ignore = np.ones((b_ds.size, len(self.areas), G), bool)
-            ignore[gp, :, gq] = g_ignore[gperm[b_gs[gp] + gq]]
-            crowd = np.zeros((b_ds.size, G), bool)
-            crowd[gp, gq] = g_crowd[gperm[b_gs[gp] + gq]]
-            m, m_ig = greedy_coco_match(iou, ignore, crowd, b_dn, self.iou_thresholds)
-            dp = np.repeat(np.arange(b_ds.size), b_dn)
-            dr = _within(np.cumsum(b_dn) - b_dn, b_dn)
-            matched[b_ds[dp] + dr] = m[dp, dr]
-            tp[b_ds[dp] + dr] = m[dp, dr] & ~m_ig[dp, dr]
-        fp = ~matched & ~d_out[:, :, None]
+        A, T = len(self.areas), self.iou_thresholds.size
+        matched, tp = np.zeros((perm.size, A, T), bool), np.zeros((perm.size, A, T), bool)
+        for b_ds, b_dn, b_gs, b_gn in _batches(ds[di], dn[di], gs[gi], gn[gi], A * T):
+            padded = _padded(*inputs, b_ds, b_dn, b_gs, b_gn)
+            m, m_ig = greedy_coco_match(*padded, b_dn, self.iou_thresholds)
+            p, r = np.repeat(np.arange(b_ds.size), b_dn), _within(b_dn)
+            matched[b_ds[p] + r], tp[b_ds[p] + r] = m[p, r], m[p, r] & ~m_ig[p, r]
+        d_out = _outside(np.concatenate([im.det_area for im in images])[perm], self._ranges)
         rec = np.empty(perm.size, self.dtype)
-        rec["score"] = score[perm]
-        rec["category"] = d_cat[perm]
-        rec["order"] = np.array([im.order for im in images], np.int64)[d_img[perm]]
-        rec["rank"] = rank
-        rec["bits"] = np.packbits(np.concatenate([tp, fp], 1).reshape(perm.size, -1), axis=1)
+        rec["score"], rec["category"], rec["rank"] = score[perm], d_cat[perm], rank
+        rec["order"] = np.array([im.order for im in images])[d_img[perm]]
+        bits = np.concatenate([tp, ~matched & ~d_out[:, :, None]], 1)  # true, false positives
+        rec["bits"] = np.packbits(bits.reshape(perm.size, -1), axis=1)
         return rec
 
     def _merged(self) -> tuple[np.ndarray, np.ndarray]:
@@ -490,7 +474,16 @@ class CocoState:
 
     def __eq__(self, other: object) -> bool:
         """Equal parameters, images, ground-truth counts and detection records (whatever the
-        split into updates and the order of merges)."""
+        split into updates and the order of merges).
+
+        Example:
+            >>> ims = [CocoImage(i, [1], [500.0], [False], [1], [0.5], [480.0], [[0.6]])
+            ...        for i in range(3)]
+            >>> a, b, c = CocoState(), CocoState(), CocoState()
+            >>> a.update(ims); b.update(ims[2:]); c.update(ims[:2])
+            >>> a == b + c == c + b
+            True
+        """
         if not isinstance(other, CocoState):
             return NotImplemented
         return (
@@ -503,54 +496,133 @@ class CocoState:
 
     def _accumulate(self) -> tuple[np.ndarray, np.ndarray]:
         """``COCOeval.accumulate``: ``(precision (T, R, K, A, M), recall (T, K, A, M))``."""
-        if self._cache is not None:
-            return self._cache
-        rec, _ = self._merged()
-        T, A, M, cats = (
-            self.iou_thresholds.size,
-            len(self.areas),
-            len(self.max_dets),
-            self.categories,
-        )
-        precision = -np.ones((T, RECALL_POINTS.size, len(cats), A, M))
-        recall = -np.ones((T, len(cats), A, M))
-        rec = rec[np.lexsort((rec["rank"], rec["order"], -rec["score"], rec["category"]))]
-        lo = np.searchsorted(rec["category"], cats, "left")
-        hi = np.searchsorted(rec["category"], cats, "right")
-        for k, c in enumerate(cats):
-            npig, part = self._npig[c], rec[lo[k] : hi[k]]
-            if not npig.any():
-                continue
-            bits = np.unpackbits(part["bits"], axis=1, count=2 * A * T).astype(bool)
-            bits = bits.reshape(part.size, 2, A, T)
-            for m, cap in enumerate(self.max_dets):
-                sel = bits[part["rank"] < cap]
-                tp, fp = np.cumsum(sel[:, 0], 0), np.cumsum(sel[:, 1], 0)
-                for a in np.flatnonzero(npig):
-                    for t in range(T):
-                        q, r = interpolated_precision(tp[:, a, t], fp[:, a, t], int(npig[a]))
-                        precision[t, :, k, a, m], recall[t, k, a, m] = q, r
-        self._cache = precision, recall
+        if self._cache is None:
+            rec, _ = self._merged()
+            rec = rec[np.lexsort((rec["rank"], rec["order"], -rec["score"], rec["category"]))]
+            cats = self.categories
+            lo = np.searchsorted(rec["category"], cats, "left")
+            hi = np.searchsorted(rec["category"], cats, "right")
+            curves = [
+                _category_curves(
+                    rec[lo[k] : hi[k]], self._npig[c], self.max_dets, self.iou_thresholds.size
+                )
+                for k, c in enumerate(cats)
+            ]
+            T, A, M = self.iou_thresholds.size, len(self.areas), len(self.max_dets)
+            self._cache = (
+                np.stack([p for p, _ in curves], 2)
+                if curves
+                else -np.ones((T, RECALL_POINTS.size, 0, A, M)),
+                np.stack([r for _, r in curves], 1) if curves else -np.ones((T, 0, A, M)),
+            )
         return self._cache
 
     def precision(self) -> np.ndarray:
         """``COCOeval.eval["precision"]``: ``(T, R, K, A, M)``, -1 where a category has no
-        non-ignored ground truth in an area range; ``K`` is :attr:`categories`."""
+        non-ignored ground truth in an area range; ``K`` is :attr:`categories`.
+
+        Example:
+            >>> s = CocoState()
+            >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
+            >>> s.precision()[[0, 7], 50, 0, 0, 2].round(6).tolist()  # IoU 0.8: at 0.5, not 0.85
+            [1.0, 0.0]
+        """
         return self._accumulate()[0].copy()
 
     def recall(self) -> np.ndarray:
-        """``COCOeval.eval["recall"]``: ``(T, K, A, M)``, -1 as :meth:`precision`."""
+        """``COCOeval.eval["recall"]``: ``(T, K, A, M)``, -1 as :meth:`precision`.
+
+        Example:
+            >>> s = CocoState()
+            >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
+            >>> s.recall()[[0, 7], 0, 2, 2].tolist()  # no medium instance
+            [-1.0, -1.0]
+        """
         return self._accumulate()[1].copy()
 
     def stats(self) -> np.ndarray:
-        """``COCOeval.stats``: the 12 summary numbers (see :func:`summarize`)."""
+        """``COCOeval.stats``: the 12 summary numbers (see :func:`summarize`).
+
+        Example:
+            >>> CocoState().stats()[:3].tolist()  # nothing to score
+            [-1.0, -1.0, -1.0]
+        """
         precision, recall = self._accumulate()
         return summarize(precision, recall, self.iou_thresholds, list(self.areas), self.max_dets)
 
 
+def _category_curves(
+    rec: np.ndarray, npig: np.ndarray, max_dets: tuple[int, ...], T: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``accumulate`` for one category: precision ``(T, R, A, M)`` and recall ``(T, A, M)``.
+
+    Args:
+        rec: the category's records, ranked (score descending, image order, rank).
+        npig: ``(A,)`` non-ignored instances per area range (-1 entries where 0).
+        max_dets: the caps.
+        T: IoU thresholds.
+
+    Example:
+        >>> s = CocoState(areas={"all": (0, 1e10)})
+        >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
+        >>> p, r = _category_curves(s._merged()[0], np.array([1]), (1, 10, 100), 10)
+        >>> r[:, 0, 0].tolist()
+        [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]
+    """
+    A, M = npig.size, len(max_dets)
+    precision, recall = -np.ones((T, RECALL_POINTS.size, A, M)), -np.ones((T, A, M))
+    if not npig.any():
+        return precision, recall
+    bits = np.unpackbits(rec["bits"], axis=1, count=2 * A * T)
+    dtype = np.int32 if rec.size < 2**31 else np.int64
+    for m, cap in enumerate(max_dets):
+        # cumulative true / false positive counts along contiguous rows (2, A, T, detections)
+        kept = np.ascontiguousarray(bits[rec["rank"] < cap].T)
+        tp, fp = np.cumsum(kept, -1, dtype=dtype).reshape(2, A, T, -1)
+        for a in np.flatnonzero(npig):
+            for t in range(T):
+                q, r = interpolated_precision(tp[a, t], fp[a, t], int(npig[a]))
+                precision[t, :, a, m], recall[t, a, m] = q, r
+    return precision, recall
+
+
+def _padded(iou_flat, row, col, ignore, crowd, ds, dn, gs, gn):
+    """The matcher's padded inputs for a batch of problems.
+
+    Args:
+        iou_flat: the flattened IoU matrices.
+        row: per ranked detection, where its IoU row starts in ``iou_flat``.
+        col: per sorted instance, its column; ``ignore`` ``(N, A)``, ``crowd`` ``(N,)``: flags.
+        ds, dn, gs, gn: per problem, its first detection and instance and their counts.
+
+    Returns:
+        ``iou (P, D, G)`` (``-inf`` padding), ``ignore (P, A, G)``, ``crowd (P, G)``.
+
+    Example:
+        >>> iou, ignore, crowd = _padded(np.array([0.1, 0.2, 0.3]), np.array([0, 1]),
+        ...     np.array([0, 1]), np.zeros((2, 1), bool), np.zeros(2, bool),
+        ...     np.array([0, 1]), np.array([1, 1]), np.array([0, 1]), np.array([1, 1]))
+        >>> iou[:, 0].tolist()  # problem 1: the row starting at 1, column 1
+        [[0.1], [0.3]]
+    """
+    P, D, G = ds.size, int(dn.max()), int(gn.max())
+    pairs = dn * gn
+    p = np.repeat(np.arange(P), pairs)
+    r, q = np.divmod(_within(pairs), gn[p])
+    out_iou = np.full((P, D, G), -np.inf)
+    out_iou[p, r, q] = iou_flat[row[ds[p] + r] + col[gs[p] + q]]
+    p, q = np.repeat(np.arange(P), gn), _within(gn)
+    out_ignore = np.ones((P, ignore.shape[1], G), bool)
+    out_ignore[p, :, q] = ignore[gs[p] + q]
+    out_crowd = np.zeros((P, G), bool)
+    out_crowd[p, q] = crowd[gs[p] + q]
+    return out_iou, out_ignore, out_crowd
+
+
 def _batches(ds, dn, gs, gn, width: int):
     """Problems grouped by instance count (power-of-two padding), most detections first, in
-    batches whose matcher working array stays under ``_WORK`` elements.
+    batches whose matcher arrays (IoUs, and instances or detections times ``width`` area ranges
+    and thresholds, per problem) stay under ``_WORK`` elements.
 
     Example:
         >>> ds, dn, gs, gn = np.array([[0, 2, 3], [2, 1, 5], [0, 1, 4], [1, 3, 4]])
@@ -561,7 +633,8 @@ def _batches(ds, dn, gs, gn, width: int):
     for g in np.unique(pad):
         idx = np.flatnonzero(pad == g)
         idx = idx[np.argsort(-dn[idx], kind="stable")]
-        step = max(1, _WORK // (int(g) * width))
+        d = int(dn[idx[0]])
+        step = max(1, _WORK // (d * int(g) + max(d, int(g)) * width))
         for i in range(0, idx.size, step):
             j = idx[i : i + step]
             yield ds[j], dn[j], gs[j], gn[j]
