@@ -200,7 +200,7 @@ def _assert_same(state: CocoState, ref) -> None:
     assert np.array_equal(state.recall(), recall)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), iou_type=st.sampled_from(["bbox", "segm"]))
 def test_matches_pycocotools_and_any_split(seed, iou_type):
     images, gts, dts = _dataset(seed, iou_type)
