@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import pickle
 
 import numpy as np
 import pytest
@@ -215,6 +216,7 @@ def test_matches_pycocotools_and_any_split(seed, iou_type):
     a.update(coco[:cut])
     for im in coco[cut:]:
         b.update([im])
+    a = pickle.loads(pickle.dumps(a))  # as from a worker
     for merged in (a + b, b + a):
         assert merged == whole
         assert np.array_equal(merged.stats(), whole.stats())

@@ -43,6 +43,8 @@ Conventions where pycocotools' inputs differ from these:
   in ground truth or detections. A category without non-ignored ground truth gives -1 entries,
   which the means leave out, so the stats are the same; ``precision`` / ``recall`` have one
   ``K`` slot per category seen (those of an unseen listed category would be all -1).
+  pycocotools drops detections of a category missing from its list; such a category has no
+  ground truth, so its -1 entries here change nothing either.
 - IoU thresholds: pycocotools' ``np.linspace(0.5, 0.95, 10)`` (:data:`COCO_EVAL_IOUS`), not
   the rounded :data:`~torchsar.metrics.matching.COCO_IOUS`, whose 0.9 is one ulp higher than
   pycocotools' 0.8999999999999999: with it an IoU of exactly 0.8999999999999999 would not match.
