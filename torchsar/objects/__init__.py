@@ -2,7 +2,15 @@
 detector (closing, connected components, size limits), ready for one-to-one matching."""
 
 from torchsar.objects.components import label_components
-from torchsar.objects.discriminate import Objects, discriminate, normalised_score
+from torchsar.objects.discriminate import discriminate, normalised_score
+from torchsar.objects.objects import ObjectMasks, Objects
 from torchsar.objects.rules import ObjectRules
 
-__all__ = ["ObjectRules", "Objects", "discriminate", "label_components", "normalised_score"]
+__all__ = [
+    "ObjectMasks",
+    "ObjectRules",
+    "Objects",
+    "discriminate",
+    "label_components",
+    "normalised_score",
+]

@@ -14,7 +14,6 @@ For a threshold ``<= 0`` (a z-score detector at ``pfa >= 0.5``) the ratio is mea
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -22,44 +21,11 @@ from torch import Tensor
 
 from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError, has_nan
 from torchsar.objects.components import label_components
+from torchsar.objects.objects import Objects
 from torchsar.objects.properties import measure
 from torchsar.objects.rules import ObjectRules
 
-__all__ = ["Objects", "discriminate", "normalised_score"]
-
-
-@dataclass(frozen=True)
-class Objects:
-    """Objects of a batch ``(B, C, H, W)``; each ``(b, c)`` plane is one image.
-
-    Attributes:
-        labels: int32 ``(B * C, H, W)`` object ids, unique across the batch (0 = none);
-            object ``k`` (0-based in the arrays below) has id ``k + 1``.
-        plane: int64 ``(M,)`` plane index ``b * C + c`` of each object.
-        score: float64 ``(M,)`` peak normalised score (> ``floor``; > 1 at the design point).
-        area: int64 ``(M,)`` pixels.
-        box: float64 ``(M, 4)`` ``(r0, c0, r1, c1)``, end-exclusive.
-        centroid: float64 ``(M, 2)`` (row, col).
-        length, width: float64 ``(M,)`` major / minor axis lengths in pixels.
-        planes: number of planes ``B * C``.
-    """
-
-    labels: np.ndarray
-    plane: np.ndarray
-    score: np.ndarray
-    area: np.ndarray
-    box: np.ndarray
-    centroid: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    planes: int
-
-    def __len__(self) -> int:
-        return int(self.score.shape[0])
-
-    def in_plane(self, p: int) -> np.ndarray:
-        """Indices (0-based) of the objects of plane ``p``."""
-        return np.flatnonzero(self.plane == p)
+__all__ = ["discriminate", "normalised_score"]
 
 
 def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
@@ -217,4 +183,6 @@ def discriminate(
         labels=lut[labels],
         **{k: v[keep] for k, v in props.items()},
         planes=b * c,
+        shape=tuple(statistic.shape[-2:]),
+        threshold=1.0,
     )

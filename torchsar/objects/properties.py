@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["label_boxes", "measure"]
+__all__ = ["label_boxes", "measure", "measure_pixels"]
 
 
 def _extent(lab: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -60,14 +60,23 @@ def measure(labels: np.ndarray, n: int, score: np.ndarray) -> dict[str, np.ndarr
     flat = labels.reshape(-1)
     idx = np.flatnonzero(flat)
     lab = flat[idx].astype(np.int64)
-    h, w = labels.shape[-2:]
+    return measure_pixels(lab, idx, labels.shape[-2:], n, score.reshape(-1)[idx])
+
+
+def measure_pixels(
+    lab: np.ndarray, idx: np.ndarray, hw: tuple[int, int], n: int, values: np.ndarray
+) -> dict[str, np.ndarray]:
+    """:func:`measure` from pixel lists: object id ``lab`` (``1..n``) of every pixel, its
+    flat index ``idx`` into the ``(N, H, W)`` stack and its score ``values`` (a pixel may
+    appear once per object that owns it, so objects may overlap)."""
+    h, w = hw
     r, c = (idx // w) % h, idx % w
     rows, cols = r.astype(np.float64), c.astype(np.float64)
     area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
     plane, box = _plane_and_box(lab, idx, (h, w), n)
     centroid, length, width = _moments(lab, rows, cols, n, np.maximum(area, 1))
     peak = np.full(n + 1, -np.inf)
-    np.maximum.at(peak, lab, score.reshape(-1)[idx])
+    np.maximum.at(peak, lab, values)
     return {
         "plane": plane,
         "area": area,

@@ -1,0 +1,416 @@
+"""The evaluator as a Python function: :func:`evaluate` scores any detectors (built-in names,
+import paths, your own callables, saved predictions) on any datasets and returns the tables;
+``torchsar-eval run`` is a thin client of it.
+
+Example:
+    >>> import torchsar_eval as te
+    >>> res = te.evaluate("sim-chips", ["ca", "so"], n=4, progress=False)
+    >>> res.summary[["detector", "images", "targets"]].values.tolist()
+    [['ca', 4, 4], ['so', 4, 4]]
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import ExitStack
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from torch.utils.data import Dataset
+
+from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
+from torchsar_eval.detector import Detector, as_detector
+from torchsar_eval.errors import EvalError
+from torchsar_eval.output import claim, file_slugs, result_dir, write_config
+from torchsar_eval.plots import slug
+from torchsar_eval.report import per_image_rows, result_tables, write_run
+from torchsar_eval.runner import Scoring, SkipBad
+from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_rows
+from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
+__all__ = ["Calibration", "Execution", "Results", "evaluate"]
+
+ENGINES = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How a run executes (none of it changes the tables).
+
+    Attributes:
+        batch_size: images per batch.
+        shard_size: images per shard, the unit of work and of resume.
+        workers: local worker processes (each with ``cores // workers`` torch threads);
+            detectors must then be importable by name (see :func:`torchsar_eval.load`).
+        engine: ``"local"`` or ``"ray"`` (``pip install 'torchsar[ray]'``).
+        address: Ray cluster address (default: a local Ray instance).
+        skip_bad: skip unreadable files and failing shards, naming them in the summary.
+        progress: progress bars on stderr.
+        device: where detectors run (``"cpu"``, ``"cuda"``, ``"cuda:1"``); batches move
+            there and back for scoring, which stays on the CPU.
+    """
+
+    batch_size: int = 16
+    shard_size: int = 256
+    workers: int = 1
+    engine: str = "local"
+    address: str | None = None
+    skip_bad: bool = False
+    progress: bool = True
+    device: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("batch_size", "shard_size", "workers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise EvalError(f"{{opt:{name}}}{v!r}: must be an integer >= 1")
+        if self.engine not in ENGINES:
+            raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
+        if self.device is not None:
+            from torchsar._checks import TorchSARError, check_device
+
+            try:
+                check_device(self.device, "device")
+            except TorchSARError as exc:
+                raise EvalError(f"{{opt:device}}{self.device!r}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Choose each detector's operating point on a hashed ``fraction`` of the images for
+    ``target`` (``"fa=L"``: at most L false alarms per image; ``"f1"``: best F1) and report
+    on the disjoint rest."""
+
+    target: str
+    fraction: float = 0.3
+
+    def __post_init__(self) -> None:
+        parse_target(self.target)
+        if not 0 < self.fraction < 1:
+            raise EvalError(f"{{opt:calibration_fraction}}{self.fraction}: must be in (0, 1)")
+
+
+@dataclass
+class Results:
+    """What :func:`evaluate` returns: the tables (pandas, the CSV files of a run folder),
+    the merged states and the run statistics.
+
+    Attributes:
+        summary: one row per dataset x detector (``summary.csv``).
+        froc, pr, pixel_roc, breakdown, timing, per_image: the other tables.
+        states: ``{dataset: [DetectorResult]}`` merged states (pixel counts and ROC,
+            :class:`~torchsar.metrics.ObjectState`).
+        stats: per dataset: images, wall time, shards done / resumed / retried / failed.
+        out: the run folder (``None`` when nothing was written).
+        files: the files written into ``out``.
+    """
+
+    summary: pd.DataFrame
+    froc: pd.DataFrame
+    pr: pd.DataFrame
+    pixel_roc: pd.DataFrame
+    breakdown: pd.DataFrame
+    timing: pd.DataFrame
+    per_image: pd.DataFrame
+    states: dict[str, list] = field(repr=False)
+    stats: dict[str, dict] = field(repr=False)
+    out: Path | None = None
+    files: list[str] = field(default_factory=list)
+
+    def row(self, dataset: str, detector: str) -> pd.Series:
+        """The summary row of one dataset and detector."""
+        sel = self.summary[(self.summary.dataset == dataset) & (self.summary.detector == detector)]
+        if sel.empty:
+            raise KeyError(f"no summary row for dataset {dataset!r} and detector {detector!r}")
+        return sel.iloc[0]
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Everything a run does to each dataset (validated)."""
+
+    detectors: list[Detector]
+    scoring: Scoring
+    execution: Execution
+    calibration: Calibration | None
+    preprocess: Callable | None
+    despeckle: dict | None
+    window_units: str
+    export_coco: bool
+    seed: int
+
+
+def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
+    """``{name: dataset}`` from a name, a dataset, a list of them or a dict."""
+    from torchsar_eval.datasets import make_dataset
+
+    if isinstance(datasets, str | Dataset):
+        datasets = [datasets]
+    if isinstance(datasets, Mapping):
+        items = list(datasets.items())
+    elif isinstance(datasets, Iterable):
+        items = [(d if isinstance(d, str) else getattr(d, "name", None), d) for d in datasets]
+    else:
+        raise EvalError(f"{{opt:datasets}}{datasets!r}: expected a dataset name, a dataset or "
+                        "a list or dict of them")  # fmt: skip
+    out: dict[str, Dataset] = {}
+    for i, (name, d) in enumerate(items):
+        name = str(name) if name else f"dataset{i}"
+        if name in out:
+            raise EvalError(f"{{opt:datasets}} names {name!r} twice")
+        out[name] = make_dataset(d, n=n, seed=seed) if isinstance(d, str) else d
+    if not out:
+        raise EvalError("{opt:datasets} is empty: give at least one dataset")
+    return out
+
+
+def _detectors(detectors: object) -> list[Detector]:
+    """Detectors from names / import paths, detector objects, or a list or dict of them."""
+    from torchsar_eval.registry import load
+
+    if isinstance(detectors, str) or callable(detectors):
+        detectors = [detectors]
+    if isinstance(detectors, Mapping):
+        items = list(detectors.items())
+    elif isinstance(detectors, Iterable):
+        items = [(None, d) for d in detectors]
+    else:
+        raise EvalError(f"{{opt:detectors}}{detectors!r}: expected a detector, a name or a "
+                        "list or dict of them")  # fmt: skip
+    out = [load(d, name=name) if isinstance(d, str) else as_detector(d, name) for name, d in items]
+    names = [d.name for d in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise EvalError(f"{{opt:detectors}} names {', '.join(twice)} more than once: give each "
+                        "its own name")  # fmt: skip
+    if not out:
+        raise EvalError("{opt:detectors} is empty: give at least one detector")
+    return out
+
+
+def evaluate(
+    datasets: object,
+    detectors: object = None,
+    *,
+    scoring: Scoring | None = None,
+    execution: Execution | None = None,
+    calibration: Calibration | None = None,
+    preprocess: Callable | None = None,
+    despeckle: Mapping[str, Any] | None = None,
+    window_units: str = "px",
+    export_coco: bool = False,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    resume: bool = False,
+    n: int | None = None,
+    seed: int = 0,
+    progress: bool | None = None,
+) -> Results:
+    """Score detectors on datasets: every detector's output through the same matching,
+    states, intervals and tables.
+
+    Args:
+        datasets: a dataset name (``"sim-chips"``, ``"coco:ann.json"``, ...; see
+            :func:`torchsar_eval.datasets.make_dataset`), a torch ``Dataset`` yielding the
+            harness's items, or a list or ``{name: dataset}`` dict of them.
+        detectors: a built-in name, an entry-point name or an import path
+            (``"package.module:name"``), a :class:`~torchsar_eval.Detector`, any callable
+            ``images (B, C, H, W) -> Detection | Objects``, saved predictions
+            (:func:`torchsar_eval.predictions`), or a list or ``{name: detector}`` dict of
+            them. Default: every built-in detector.
+        scoring: discrimination, matching, bootstrap and instance policy (default
+            :class:`~torchsar_eval.Scoring`).
+        execution: batches, shards, workers, engine, device (default
+            :class:`Execution`).
+        calibration: choose each detector's operating point on a calibration split.
+        preprocess: an image stage run once per batch before every detector (e.g. a
+            speckle filter); ``despeckle`` records its options in ``config.json``.
+        window_units: ``"px"`` or ``"m"``: the detectors' ``guard`` / ``train`` options in
+            metres, converted per dataset with its pixel spacing.
+        export_coco: write the ground truth and detections as COCO JSON (needs ``out``).
+        out: the run folder to write (tables, plots, ``config.json``); ``None`` writes
+            nothing. The folder is published whole or not at all.
+        overwrite: replace a previous run in ``out``.
+        resume: continue the interrupted run in ``out`` from its saved shards.
+        n: images per named dataset (default: the dataset's own size).
+        seed: seed of the simulated datasets.
+        progress: shorthand for ``execution.progress``.
+
+    Returns:
+        :class:`Results`: the tables as DataFrames, the merged states, the run statistics.
+
+    Raises:
+        EvalError: a bad option, dataset or detector, named by its parameter.
+    """
+    from torchsar_eval.registry import BUILTIN
+
+    execution = execution or Execution()
+    if progress is not None:
+        execution = replace(execution, progress=progress)
+    if window_units not in ("px", "m"):
+        raise EvalError(f"{{opt:window_units}}{window_units!r}: expected 'px' or 'm'")
+    if (resume or overwrite or export_coco) and out is None:
+        wanted = "resume" if resume else "overwrite" if overwrite else "export_coco"
+        raise EvalError(f"{{opt:{wanted}}} needs {{opt:out}}FOLDER")
+    plan = _Plan(
+        detectors=_detectors(list(BUILTIN.values()) if detectors is None else detectors),
+        scoring=scoring or Scoring(), execution=execution, calibration=calibration,
+        preprocess=preprocess, despeckle=None if despeckle is None else dict(despeckle),
+        window_units=window_units, export_coco=export_coco, seed=seed,
+    )  # fmt: skip
+    named = _datasets(datasets, n, seed)
+    with ExitStack() as stack:
+        if out is None:
+            tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="torchsar-")))
+            return _execute(plan, named, tmp, None)
+        target = stack.enter_context(claim(Path(out), overwrite=overwrite, resume=resume))
+        tmp = stack.enter_context(result_dir(target, resume=resume, keep_interrupted=True))
+        results = _execute(plan, named, tmp, target)
+    return results
+
+
+def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
+    """Score every dataset into the folder ``tmp`` (a run's staging folder, or a temporary
+    one); with ``out``, write the tables, plots and ``config.json`` there too."""
+    check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
+    results, stats, windows = {}, {}, {}
+    labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
+    for name, ds in datasets.items():
+        dets = [_bound(d, ds, name) for d in plan.detectors]
+        if plan.window_units == "m":
+            dets = windows_in_pixels(name, ds, dets)
+        windows[name] = {d.name: d.describe() for d in dets}
+        results[name], stats[name] = evaluate_dataset(
+            name, ds, dets, plan, tmp / "shards" / labels[name]
+        )
+        exporter = stats[name].pop("export")
+        if exporter is not None:
+            exporter.write(tmp / "coco", labels[name])
+    tables = result_tables(results)
+    folders = {n: tmp / "shards" / labels[n] / "test" for n in results}
+    files: list[str] = []
+    if out is not None:
+        rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
+        files = write_run(tmp, tables, rows, plan.scoring, stats, labels)
+        write_config(tmp, "run", config(plan, datasets, windows, stats, out))
+        per_image = pd.read_csv(tmp / "per_image.csv")
+    else:
+        rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
+        per_image = pd.DataFrame(list(rows), columns=PER_IMAGE_COLUMNS)
+    return Results(**tables, per_image=per_image, states=results, stats=stats, out=out,
+                   files=[*files, "config.json"] if out is not None else [])  # fmt: skip
+
+
+def _bound(det: Detector, ds: Dataset, name: str) -> Detector:
+    """Detectors that read per-dataset files (saved predictions) bound to the dataset."""
+    bind = getattr(det.fn, "bind", None)
+    return det if bind is None else replace(det, fn=bind(ds, name))
+
+
+def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path) -> dict:
+    """The ``config.json`` record of a run."""
+    ex, cal = plan.execution, plan.calibration
+    return {
+        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+        "manifests": {n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")},
+        "detectors": {d.name: d.describe() for d in plan.detectors},
+        "window_units": plan.window_units,
+        "detectors_in_pixels": windows,
+        "despeckle": plan.despeckle,
+        "scoring": plan.scoring.as_dict(),
+        "workers": ex.workers,
+        "engine": ex.engine,
+        "device": ex.device,
+        "shard_size": ex.shard_size,
+        "throughput": stats,
+        "calibration": None if cal is None else {"target": cal.target, "fraction": cal.fraction},
+        "batch_size": ex.batch_size,
+        "seed": plan.seed,
+        "out": str(out),
+    }
+
+
+def windows_in_pixels(name: str, ds, detectors: list[Detector]) -> list[Detector]:
+    """Detectors with ``guard`` / ``train`` given in metres converted to pixels with the
+    dataset's pixel spacing (the mean of its row and column spacing, read from item 0)."""
+    spacing = ds[0]["meta"].get("pixel_spacing") if len(ds) else None
+    if spacing is None:
+        raise EvalError(f"{{opt:window_units}}'m' needs the pixel spacing of {name}: declare "
+                        "it with ?spacing=METRES")  # fmt: skip
+    step = (float(spacing[0]) + float(spacing[1])) / 2
+    out = []
+    for det in detectors:
+        conv = {k: round(float(det.options[k]) / step) for k in ("guard", "train")
+                if k in det.options}  # fmt: skip
+        if conv.get("train", 1) < 1:
+            raise EvalError(f"{det.name}: train {det.options['train']} m is less than one "
+                            f"pixel of {name} ({step:g} m)")  # fmt: skip
+        out.append(det.with_options(conv) if conv else det)
+    return out
+
+
+def fingerprint(plan: _Plan, datasets: dict) -> dict:
+    """Everything a saved shard depends on (a resumed run must match it exactly)."""
+    cal = plan.calibration
+    return json.loads(json.dumps({
+        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+        "detectors": {d.name: d.describe() for d in plan.detectors},
+        "despeckle": plan.despeckle,
+        "scoring": plan.scoring.as_dict(), "shard_size": plan.execution.shard_size,
+        "calibration": None if cal is None else [cal.target, cal.fraction],
+        "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
+    }, default=str))  # fmt: skip
+
+
+def check_resumable(path: Path, expected: dict) -> None:
+    """Record the run's fingerprint, or check it against the one of the run being resumed."""
+    if path.exists():
+        if json.loads(path.read_text()) != expected:
+            raise EvalError(f"{{opt:resume}}: the options differ from those of the interrupted "
+                            f"run (see {path.name} in its folder); run again without "
+                            "{opt:resume}")  # fmt: skip
+        return
+    path.write_text(json.dumps(expected, indent=2) + "\n")
+
+
+def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
+    """Score one dataset shard by shard; with a calibration each detector's operating point
+    is chosen on the calibration split and the results are the disjoint test split's.
+    Returns the merged results and the dataset's run statistics (wall time, shards)."""
+    t0 = time.perf_counter()
+    ex, cal = plan.execution, plan.calibration
+    indices = list(range(len(ds)))
+    if ex.skip_bad:
+        ds = SkipBad(ds)
+
+    def shards(idx: list[int], folder: Path, export: bool = False):
+        job = ShardJob(name, ds, idx, detectors, plan.scoring, ex.batch_size, plan.preprocess,
+                       ex.shard_size, export_coco=export, device=ex.device)  # fmt: skip
+        return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
+                          address=ex.address, skip_bad=ex.skip_bad,
+                          progress=ex.progress)  # fmt: skip
+
+    chosen = None
+    if cal is not None:
+        target = parse_target(cal.target)
+        calib, indices = split_indices(len(ds), name, cal.fraction)
+        if not calib or not indices:
+            raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
+                            f"split of {cal.fraction:g}")  # fmt: skip
+        tuned, _ = shards(calib, state / "calibration")
+        chosen = [choose_bin(r.objects, target) for r in tuned]
+    results, counts = shards(indices, state / "test", plan.export_coco)
+    exporter = shard_coco(state / "test", name) if plan.export_coco else None
+    for r, b in zip(results, chosen or [], strict=False):
+        r.op_bin = b
+    wall = time.perf_counter() - t0
+    bad = results[0].skipped if results else []
+    stats = {"images": len(indices), "wall_s": wall, **counts, "export": exporter,
+             "skipped_items": [{"file": f, "error": e} for f, e in bad],
+             "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
+    return results, stats

@@ -1,0 +1,106 @@
+"""The tables of a run and what a run folder holds: the CSV tables, ``summary.md`` and the
+plots."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import pandas as pd
+
+from torchsar_eval.glossary import glossary
+from torchsar_eval.plots import plot_roc
+from torchsar_eval.runner import Scoring
+from torchsar_eval.tables import (
+    PER_IMAGE_COLUMNS,
+    breakdown_table,
+    froc_table,
+    headline_table,
+    markdown,
+    pixel_roc_table,
+    pr_table,
+    summary_table,
+    timing_table,
+)
+
+__all__ = ["TABLE_FILES", "per_image_rows", "result_tables", "write_run"]
+
+TABLE_FILES = {
+    "summary": "summary.csv",
+    "froc": "roc.csv",
+    "pr": "pr.csv",
+    "pixel_roc": "roc_pixel.csv",
+    "breakdown": "breakdown.csv",
+    "timing": "timing.csv",
+}
+"""Each table of :func:`result_tables` and its file in a run folder."""
+
+
+def result_tables(results: dict) -> dict[str, pd.DataFrame]:
+    """Every merged table of a run (``{dataset: [DetectorResult]}``), by the keys of
+    :data:`TABLE_FILES`."""
+    return {
+        "summary": summary_table(results),
+        "froc": froc_table(results),
+        "pr": pr_table(results),
+        "pixel_roc": pixel_roc_table(results),
+        "breakdown": breakdown_table(results),
+        "timing": timing_table(results),
+    }
+
+
+def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[list]:
+    """``per_image.csv`` rows from each dataset's ``(detector, rows)`` stream (the saved
+    shards, in order)."""
+    for name, parts in folders.items():
+        for det, rows in parts:
+            for row in rows:
+                yield [name, det, *row]
+
+
+def _stats_lines(stats: dict) -> str:
+    return "".join(
+        f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
+        f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
+        f"resumed {st['skipped']}, retried {st['retried']}, failed {len(st['failed'])}"
+        + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
+        + (
+            f"\n  - skipped {len(st['skipped_items'])} unreadable file(s)"
+            if st["skipped_items"]
+            else ""
+        )
+        + "".join(f"\n    - {b['file']}: {b['error']}" for b in st["skipped_items"])
+        for name, st in stats.items()
+    )
+
+
+def write_run(
+    tmp: Path,
+    tables: dict[str, pd.DataFrame],
+    per_image: Iterable[list],
+    scoring: Scoring,
+    stats: dict,
+    labels: dict[str, str],
+) -> list[str]:
+    """Every table and plot of a run into ``tmp``; returns the file names. ``per_image``
+    is streamed to ``per_image.csv`` (memory independent of the dataset size)."""
+    for key, fname in TABLE_FILES.items():
+        tables[key].to_csv(tmp / fname, index=False)
+    with open(tmp / "per_image.csv", "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(PER_IMAGE_COLUMNS)
+        out.writerows(per_image)
+    summary = tables["summary"]
+    text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
+    text += "\nEvery column, for every detector, is in `summary.csv`.\n"
+    text += "\n## Timing\n\n" + markdown(tables["timing"]) + _stats_lines(stats)
+    (tmp / "summary.md").write_text(text)
+    files = [*TABLE_FILES.values(), "per_image.csv", "summary.md"]
+    for name, label in labels.items():
+        sel = {k: df[df.dataset == name] for k, df in tables.items()}
+        files += plot_roc(
+            sel["pixel_roc"], sel["froc"], sel["pr"], sel["summary"],
+            tmp / f"roc_{label}.png", name,
+        )  # fmt: skip
+    return files
