@@ -19,7 +19,6 @@ from pycocotools.cocoeval import COCOeval
 from torchsar._checks import InputValueError, OptionError
 from torchsar.metrics.coco_compat import (
     COCO_AREAS,
-    COCO_EVAL_IOUS,
     COCO_MAX_DETS,
     CocoImage,
     CocoState,
@@ -307,18 +306,19 @@ def test_only_crowd_ground_truth_is_undefined():
 
 def test_pycocotools_thresholds_not_rounded():
     """pycocotools' 0.9 threshold is 0.8999999999999999: a box pair with exactly that IoU
-    matches there, but not at COCO_IOUS' 0.9."""
-    assert np.allclose(COCO_EVAL_IOUS, COCO_IOUS) and not np.array_equal(COCO_EVAL_IOUS, COCO_IOUS)
+    matches there (and with COCO_IOUS), but not at a rounded 0.9."""
+    rounded_ious = np.round(COCO_IOUS, 2)
+    assert np.allclose(rounded_ious, COCO_IOUS) and not np.array_equal(rounded_ious, COCO_IOUS)
     gt = np.array([[0.0, 0.0, 1.0, 1.0]])
     h = next(
         h
         for h in np.nextafter(0.9, 0) - np.arange(20) * 2e-17
-        if mask_utils.iou(np.array([[0, 0, 1, h]]), gt, [0])[0, 0] == COCO_EVAL_IOUS[8]
+        if mask_utils.iou(np.array([[0, 0, 1, h]]), gt, [0])[0, 0] == COCO_IOUS[8]
     )
     images, gts, dts = _tiny([[0, 0, 1, 1]], [[0, 0, 1, h]])
     gts[1][0]["area"] = 2000.0
     coco = _coco_images(images, gts, dts, "bbox")
-    exact, rounded = CocoState(), CocoState(iou_thresholds=COCO_IOUS)
+    exact, rounded = CocoState(), CocoState(iou_thresholds=rounded_ious)
     exact.update(coco)
     rounded.update(coco)
     _assert_same(exact, _pycocotools(images, gts, dts, "bbox"))

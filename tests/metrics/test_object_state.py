@@ -22,7 +22,7 @@ def _scene(rng, n_img=3, size=48):
     inst = np.zeros((n_img, size, size), int)
     ignore = np.zeros((n_img, size, size), bool)
     stat = np.zeros((n_img, size, size))
-    levels = rng.permutation(np.arange(60, 340))
+    levels = rng.permutation(np.arange(OP_BIN - 40, OP_BIN + 240))
     k = 0
     for p in range(n_img):
         for i in range(1, rng.integers(0, 5) + 1):
@@ -47,7 +47,7 @@ def _state(inst, ignore, stat, rule, planes=None, replicates=0):
     gt = ground_truth(inst[sel], ignore[sel])
     idx = np.arange(len(inst))[sel]
     st_ = ObjectState(replicates=replicates)
-    st_.update(match_batch(obj, gt, rule), obj, gt, [ImageInfo(f"i{j}") for j in idx])
+    st_.update(match_batch(obj, gt, rule), obj, gt, [ImageInfo(f"i{j}", order=int(j)) for j in idx])
     return st_, obj
 
 
@@ -149,18 +149,18 @@ def test_curve_helpers_by_hand():
 @pytest.mark.parametrize("kind", ["centroid", "mask"])
 def test_all_true_and_all_false_masks_on_simulated_data(kind):
     import torchsar as ts
-    from torchsar_eval.detectors import DetectorSpec
-    from torchsar_eval.runner import Scoring, evaluate
+    from torchsar_eval.detector import Detector
+    from torchsar_eval.runner import Scoring, run_detectors
 
     def constant(value):
         return lambda x: ts.cfar.detection_from(torch.full_like(x, value), 1.0)
 
-    specs = [DetectorSpec("all_true", constant(2.0)), DetectorSpec("all_false", constant(0.0))]
+    specs = [Detector("all_true", constant(2.0)), Detector("all_false", constant(0.0))]
     scoring = Scoring(ObjectRules(closing=2, min_area=5), Matching(kind=kind), 0)
     for n, sim in ((8, ts.simulate.chips), (2, ts.simulate.scenes)):
         b = sim(n, seed=1)
         ds = [{**b[i], "meta": {"name": str(i), **b[i]["meta"]}} for i in range(n)]
-        yes, no = (r.objects.metrics() for r in evaluate(ds, specs, scoring=scoring,
+        yes, no = (r.objects.metrics() for r in run_detectors(ds, specs, scoring=scoring,
                                                          progress=False))  # fmt: skip
         assert yes["tp"] == 0 and yes["fp"] == n and yes["recall"] == 0  # one flood per image
         assert yes["ap50"] == 0 and yes["pd_at_1_fa_per_image"] == 0

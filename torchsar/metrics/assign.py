@@ -19,7 +19,7 @@ from torchsar.metrics.matching import (
 )
 from torchsar.objects import Objects
 
-__all__ = ["BatchMatch", "match_batch"]
+__all__ = ["BatchMatch", "by_plane", "match_batch"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,7 @@ class BatchMatch:
             rule (0 when unmatched).
         gt_score: float ``(G,)`` score of the detection that matched each instance under the
             rule (``-inf``: missed).
+        gt_det: int ``(G,)`` index of that detection (-1: missed).
         overlaps: int ``(G,)`` number of detections touching each instance (fragmentation).
     """
 
@@ -42,9 +43,12 @@ class BatchMatch:
     op_iou: np.ndarray
     gt_score: np.ndarray
     overlaps: np.ndarray
+    gt_det: np.ndarray
+    ap_kind: str = "iou"
 
 
-def _by_plane(plane: np.ndarray, n_planes: int) -> list[np.ndarray]:
+def by_plane(plane: np.ndarray, n_planes: int) -> list[np.ndarray]:
+    """Indices of the items of each plane (``plane``: each item's plane), in item order."""
     order = np.argsort(plane, kind="stable")
     cuts = np.searchsorted(plane[order], np.arange(n_planes + 1))
     return [order[cuts[p] : cuts[p + 1]] for p in range(n_planes)]
@@ -87,14 +91,24 @@ def _centroid_pairs(cen: np.ndarray, db: np.ndarray, gb: np.ndarray, m: Matching
 
 
 class _Overlaps:
-    """Pixel intersections of the batch's objects with its instances and ignore pixels."""
+    """Pixel intersections of the batch's objects with its instances and ignore pixels
+    (objects with masks; a box or a point covers no pixel here, see :func:`_touching`)."""
 
     def __init__(self, obj: Objects, gt: GroundTruth) -> None:
         n_d, n_g = len(obj), len(gt)
-        self.d, self.g, self.inter = mask_overlaps(obj.labels, n_d, gt.ids, n_g)
-        lab = obj.labels.reshape(-1)
-        self.ignored = np.bincount(lab[gt.ignore.reshape(-1)], minlength=n_d + 1)[1:]
-        self.touch = np.bincount(self.g, minlength=n_g)
+        if obj.labels is not None:  # non-overlapping objects: one label map
+            self.d, self.g, self.inter = mask_overlaps(obj.labels, n_d, gt.ids, n_g)
+            lab = obj.labels.reshape(-1)
+            self.ignored = np.bincount(lab[gt.ignore.reshape(-1)], minlength=n_d + 1)[1:]
+        else:  # pixel lists, possibly overlapping (none for boxes and points)
+            owner, idx = obj.pixel_lists()
+            gid = gt.ids.reshape(-1)[idx]
+            both = gid > 0
+            key = owner[both] * (n_g + 1) + gid[both]
+            pairs, self.inter = np.unique(key, return_counts=True)
+            self.d, self.g = pairs // (n_g + 1), pairs % (n_g + 1) - 1
+            self.ignored = np.bincount(owner[gt.ignore.reshape(-1)[idx]], minlength=n_d)
+        self.touch = np.bincount(self.g, minlength=n_g) if obj.has_masks else _touching(obj, gt)
 
     def mask_iou(self, obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray):
         pos_d = np.full(len(obj), -1)
@@ -120,11 +134,51 @@ class _Overlaps:
         return inter / (obj.area[d] + gt.area[g] - inter)
 
 
+def _same_plane_pairs(plane_d: np.ndarray, plane_g: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every ``(detection, instance)`` index pair that shares a plane."""
+    order_g = np.argsort(plane_g, kind="stable")
+    lo = np.searchsorted(plane_g[order_g], plane_d, side="left")
+    n = np.searchsorted(plane_g[order_g], plane_d, side="right") - lo
+    d = np.repeat(np.arange(plane_d.size), n)
+    start = np.repeat(lo - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+    return d, order_g[np.arange(d.size) + start]
+
+
+def _touching(obj: Objects, gt: GroundTruth) -> np.ndarray:
+    """Detections touching each instance, for boxes (box intersection) and points (the
+    point's pixel lies on the instance)."""
+    if obj.geometry == "point":
+        gid = gt.ids.reshape(-1)[_point_pixels(obj)]
+        return np.bincount(gid[gid > 0] - 1, minlength=len(gt))
+    d, g = _same_plane_pairs(obj.plane, gt.plane)
+    a, b = obj.box[d], gt.box[g]
+    meet = (np.minimum(a[:, 2], b[:, 2]) > np.maximum(a[:, 0], b[:, 0])) & (
+        np.minimum(a[:, 3], b[:, 3]) > np.maximum(a[:, 1], b[:, 1]))  # fmt: skip
+    return np.bincount(g[meet], minlength=len(gt))
+
+
+def _point_pixels(obj: Objects) -> np.ndarray:
+    """Flat stack index of the pixel under each point object."""
+    h, w = obj.shape
+    r = np.clip(np.floor(obj.centroid[:, 0] + 0.5), 0, h - 1).astype(np.int64)
+    c = np.clip(np.floor(obj.centroid[:, 1] + 0.5), 0, w - 1).astype(np.int64)
+    return obj.plane * (h * w) + r * w + c
+
+
+def _box_crowd(obj: Objects, gt: GroundTruth, d: np.ndarray, ig_box: np.ndarray) -> np.ndarray:
+    """The crowd quality of detections without masks: a box's intersection with the
+    bounding box of its plane's ignore pixels over its area (COCO's bbox rule); a point's is
+    1 on an ignore pixel, else 0."""
+    if obj.geometry == "point":
+        return gt.ignore.reshape(-1)[_point_pixels(obj)[d]].astype(np.float64)
+    return pair_box_iou(obj.box[d], ig_box[obj.plane[d]], crowd=True)
+
+
 def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
     """Assign the detections ``d`` (descending score) of plane ``p`` to its instances ``g``."""
-    if rule.iou_kind == "box" or gt.box_only[p]:
+    if rule.iou_kind == "box" or gt.box_only[p] or not obj.has_masks:
         iou = box_iou(obj.box[d], gt.box[g])
-        crowd = box_iou(obj.box[d], ig_box[p][None], crowd=True)[:, 0]
+        crowd = _box_crowd(obj, gt, d, ig_box)
     else:
         iou, crowd = ov.mask_iou(obj, gt, d, g)
     ap = greedy_match(iou, crowd, COCO_IOUS)
@@ -140,17 +194,22 @@ def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
     return ap, op, op_iou
 
 
+def _boxes_only(rule: Matching, obj: Objects) -> bool:
+    """Whether IoU is box IoU on every plane: the box rule, or objects without masks."""
+    return rule.iou_kind == "box" or not obj.has_masks
+
+
 def _single_quality(obj, gt, ov, ig_box, rule, d, g) -> tuple[np.ndarray, np.ndarray]:
     """IoU of each detection ``d`` with its plane's one instance ``g`` (-1: none, IoU NaN)
     and its crowd quality: box IoU under the box rule or on box-only planes, mask IoU
     otherwise."""
     p, has = obj.plane[d], g >= 0
-    box = np.full(d.size, True) if rule.iou_kind == "box" else gt.box_only[p]
+    box = np.full(d.size, True) if _boxes_only(rule, obj) else gt.box_only[p]
     iou, crowd = np.full(d.size, np.nan), np.empty(d.size)
     for sel, boxes in ((box, True), (~box, False)):
         ds, hit = d[sel], sel & has
         if boxes:
-            crowd[sel] = pair_box_iou(obj.box[ds], ig_box[p[sel]], crowd=True)
+            crowd[sel] = _box_crowd(obj, gt, ds, ig_box)
             iou[hit] = pair_box_iou(obj.box[d[hit]], gt.box[g[hit]])
         else:
             crowd[sel] = ov.crowd(obj, ds)
@@ -189,7 +248,12 @@ def _match_single_planes(obj, gt, ov, ig_box, rule, single, out) -> None:
 def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     """Match every plane's objects to its instances (objects and instances of the same
     stack of planes). Planes with at most one instance (chips) are matched all at once,
-    the others plane by plane."""
+    the others plane by plane; the distance rule by :func:`torchsar.metrics.points.match_points`.
+    """
+    if rule.kind == "distance":
+        from torchsar.metrics.points import match_points
+
+        return match_points(obj, gt, rule)
     n_d, n_g = len(obj), len(gt)
     ap = np.full((len(COCO_IOUS), n_d), -1, dtype=np.int64)
     op = np.full(n_d, -1, dtype=np.int64)
@@ -198,7 +262,7 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     ig_box = _ignore_boxes(gt.ignore)
     single = np.bincount(gt.plane, minlength=obj.planes) <= 1
     _match_single_planes(obj, gt, ov, ig_box, rule, single, (ap, op, op_iou))
-    dets, gts = _by_plane(obj.plane, obj.planes), _by_plane(gt.plane, obj.planes)
+    dets, gts = by_plane(obj.plane, obj.planes), by_plane(gt.plane, obj.planes)
     for p in np.flatnonzero(~single):
         d, g = dets[p], gts[p]
         if d.size == 0:
@@ -208,7 +272,9 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
         ap[:, d] = np.where(a >= 0, g[np.maximum(a, 0)] if g.size else -1, a)
         op[d] = np.where(o >= 0, g[np.maximum(o, 0)] if g.size else -1, o)
         op_iou[d] = oi
-    gt_score = np.full(n_g, -np.inf)
-    hit = op >= 0
-    gt_score[op[hit]] = obj.score[hit]
-    return BatchMatch(ap, op, op_iou, gt_score, ov.touch.astype(np.int64))
+    gt_det = np.full(n_g, -1, dtype=np.int64)
+    hit = np.flatnonzero(op >= 0)
+    gt_det[op[hit]] = hit
+    gt_score = np.where(gt_det >= 0, obj.score[np.maximum(gt_det, 0)] if n_d else 0, -np.inf)
+    kind = "iou" if obj.geometry != "point" else "none"
+    return BatchMatch(ap, op, op_iou, gt_score, ov.touch.astype(np.int64), gt_det, kind)

@@ -45,9 +45,9 @@ Conventions where pycocotools' inputs differ from these:
   ``K`` slot per category seen (those of an unseen listed category would be all -1).
   pycocotools drops detections of a category missing from its list; such a category has no
   ground truth, so its -1 entries here change nothing either.
-- IoU thresholds: pycocotools' ``np.linspace(0.5, 0.95, 10)`` (:data:`COCO_EVAL_IOUS`), not
-  the rounded :data:`~torchsar.metrics.matching.COCO_IOUS`, whose 0.9 is one ulp higher than
-  pycocotools' 0.8999999999999999: with it an IoU of exactly 0.8999999999999999 would not match.
+- IoU thresholds: pycocotools' ``np.linspace(0.5, 0.95, 10)``
+  (:data:`~torchsar.metrics.matching.COCO_IOUS`), not rounded: its 0.9 is
+  0.8999999999999999, and a rounded 0.9 would refuse an IoU of exactly that value.
 - pycocotools counts a match to a ground-truth instance of id 0 as no match (``dtMatches``
   holds ids, 0 meaning none); COCO ids start at 1, and the ids play no part here.
 - A ground-truth ``ignore`` key has no effect in pycocotools (``_prepare`` overwrites it with
@@ -63,10 +63,10 @@ import numpy as np
 
 from torchsar._checks import InputValueError, OptionError, ShapeError
 from torchsar.metrics.curves import RECALL_POINTS, interpolated_precision
+from torchsar.metrics.matching import COCO_IOUS
 
 __all__ = [
     "COCO_AREAS",
-    "COCO_EVAL_IOUS",
     "COCO_MAX_DETS",
     "CocoImage",
     "CocoState",
@@ -85,7 +85,6 @@ COCO_AREAS: dict[str, tuple[float, float]] = {
 COCO_MAX_DETS = (1, 10, 100)
 """pycocotools' detection caps per image and category (``Params.maxDets``)."""
 
-COCO_EVAL_IOUS = np.linspace(0.5, 0.95, 10)
 """pycocotools' IoU thresholds (``Params.iouThrs``, unrounded; see the module docstring)."""
 
 _WORK = 1 << 22
@@ -273,7 +272,7 @@ def summarize(
 
     Example:
         >>> p, r = np.ones((10, 101, 1, 4, 3)), np.full((10, 1, 4, 3), 0.5)
-        >>> summarize(p, r, COCO_EVAL_IOUS, list(COCO_AREAS), (1, 10, 100))[[0, 6]].tolist()
+        >>> summarize(p, r, COCO_IOUS, list(COCO_AREAS), (1, 10, 100))[[0, 6]].tolist()
         [1.0, 0.5]
     """
     if len(max_dets) < 3:
@@ -305,7 +304,7 @@ class CocoState:
     Args:
         max_dets: detection caps per image and category (sorted, as pycocotools).
         areas: area ranges ``{label: (lo, hi)}``, bounds inclusive.
-        iou_thresholds: IoU thresholds (default pycocotools' own, :data:`COCO_EVAL_IOUS`).
+        iou_thresholds: IoU thresholds (default pycocotools' own, :data:`COCO_IOUS`).
 
     Example:
         >>> s = CocoState()
@@ -323,7 +322,7 @@ class CocoState:
         *,
         max_dets: Iterable[int] = COCO_MAX_DETS,
         areas: dict[str, tuple[float, float]] = COCO_AREAS,
-        iou_thresholds: Iterable[float] = COCO_EVAL_IOUS,
+        iou_thresholds: Iterable[float] = COCO_IOUS,
     ) -> None:
         self.max_dets = tuple(sorted(int(m) for m in max_dets))
         if not self.max_dets or self.max_dets[0] < 1 or self.max_dets[-1] >= 2**16:

@@ -22,8 +22,13 @@ __all__ = [
     "suffix",
 ]
 
-SCORE_GRID = 10.0 ** (np.arange(-50, 301) / 50.0)
-"""Score bin edges: 50 per decade from 0.1 to 1e6 (``SCORE_GRID[50] == 1.0`` exactly)."""
+SCORE_GRID = np.concatenate(
+    [-(10.0 ** (np.arange(150, -301, -1) / 50.0)), [0.0], 10.0 ** (np.arange(-300, 301) / 50.0)]
+)
+"""Score bin edges, 50 per decade on each side of 0: -1e3 .. -1e-6, 0, 1e-6 .. 1e6 (1.0 is
+an edge exactly). Scores normalised by the operating threshold (a CFAR's statistic over
+its design threshold, a probability over a declared threshold) put the operating point at
+1; raw scores of any range (probabilities, logits) still fall on the grid."""
 
 OP_BIN = int(np.searchsorted(SCORE_GRID, 1.0)) + 1
 """First bin of scores > 1: the design operating point."""

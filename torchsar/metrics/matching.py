@@ -14,6 +14,10 @@ The prescreening rule (``kind="centroid"``), common for SAR vehicle prescreeners
 hits an instance when its centroid lies inside the instance's box grown by ``margin`` (a
 fraction of the box's larger side) and its box is at most ``max_size_ratio`` times the
 instance's box area; among several, the nearest box centre; the same greedy one-to-one visit.
+
+The distance rule (``kind="distance"``), for point detectors (xView3-SAR): a detection's
+centroid and an instance's centroid pair up when closer than ``max_distance`` (pixels, or
+metres with each image's pixel spacing); see :mod:`torchsar.metrics.points`.
 """
 
 from __future__ import annotations
@@ -37,8 +41,9 @@ __all__ = [
     "pair_box_iou",
 ]
 
-COCO_IOUS = np.round(np.linspace(0.5, 0.95, 10), 2)
-"""The IoU thresholds of COCO's AP@[.5:.95]."""
+COCO_IOUS = np.linspace(0.5, 0.95, 10)
+"""The IoU thresholds of COCO's AP@[.5:.95], exactly as ``pycocotools`` computes them (its
+0.9 is 0.8999999999999999: rounding it would refuse an IoU of exactly that value)."""
 
 UNMATCHED, IGNORED = -1, -2
 
@@ -48,19 +53,28 @@ class Matching:
     """The matching rule of the operating-point metrics and the FROC.
 
     Attributes:
-        kind: ``"mask"`` (mask IoU), ``"box"`` (box IoU) or ``"centroid"`` (prescreening).
+        kind: ``"mask"`` (mask IoU), ``"box"`` (box IoU), ``"centroid"`` (prescreening) or
+            ``"distance"`` (points closer than ``max_distance``).
         iou: IoU threshold of ``mask`` / ``box`` (0.5: PASCAL VOC / COCO AP50).
         margin: ``centroid`` rule: box growth, as a fraction of the box's larger side.
         max_size_ratio: ``centroid`` rule: largest detection-box / instance-box area ratio.
+        max_distance: ``distance`` rule: the tolerance (strict), in ``distance_units``.
+        distance_units: ``"px"`` or ``"m"`` (with each image's pixel spacing).
+        assign: ``distance`` rule at the operating point: ``"optimal"`` (the most pairs,
+            then the least total distance, as xView3-SAR) or ``"greedy"`` (by score). AP and
+            the FROC always use the greedy visit by score.
     """
 
     kind: str = "mask"
     iou: float = 0.5
     margin: float = 0.25
     max_size_ratio: float = 4.0
+    max_distance: float | None = None
+    distance_units: str = "px"
+    assign: str = "optimal"
 
     def __post_init__(self) -> None:
-        check_choice(self.kind, "kind", ("mask", "box", "centroid"))
+        check_choice(self.kind, "kind", ("mask", "box", "centroid", "distance"))
         for name, lo, hi in (("iou", 0.0, 1.0), ("margin", 0.0, 10.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
@@ -68,6 +82,14 @@ class Matching:
         r = self.max_size_ratio
         if isinstance(r, bool) or not isinstance(r, int | float) or not r >= 1:
             raise OptionError(f"max_size_ratio must be >= 1, got {r!r}")
+        check_choice(self.distance_units, "distance_units", ("px", "m"))
+        check_choice(self.assign, "assign", ("optimal", "greedy"))
+        d = self.max_distance
+        if self.kind == "distance" and d is None:
+            raise OptionError("the distance rule needs max_distance (pixels or metres)")
+        if d is not None and (isinstance(d, bool) or not isinstance(d, int | float)
+                              or not 0 < d < float("inf")):  # fmt: skip
+            raise OptionError(f"max_distance must be a finite number > 0, got {d!r}")
 
     @property
     def iou_kind(self) -> str:
@@ -89,6 +111,10 @@ class GroundTruth:
             ``(r0, c0, r1, c1)`` end-exclusive; classes: ``(G,)`` object array of str.
         ignore: bool ``(N, H, W)`` don't-care pixels.
         box_only: bool ``(N,)`` planes whose ground truth is boxes only (box IoU there).
+        centroid: float64 ``(G, 2)`` (row, col) pixel-index centroid (a box-only
+            instance's box centre).
+        spacing: float64 ``(N, 2)`` pixel spacing (row, col) in metres, NaN if unknown.
+        length_m: float64 ``(G,)`` declared lengths in metres (NaN where unknown).
     """
 
     ids: np.ndarray
@@ -98,6 +124,9 @@ class GroundTruth:
     classes: np.ndarray
     ignore: np.ndarray
     box_only: np.ndarray
+    centroid: np.ndarray | None = None
+    spacing: np.ndarray | None = None
+    length_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.plane.shape[0])
@@ -110,6 +139,8 @@ def ground_truth(
     classes: list[list[str]] | None = None,
     boxes: list[list] | None = None,
     box_only: np.ndarray | None = None,
+    spacing: np.ndarray | None = None,
+    lengths: list[list] | None = None,
 ) -> GroundTruth:
     """Build :class:`GroundTruth` from instance-id planes ``(N, H, W)``.
 
@@ -121,6 +152,8 @@ def ground_truth(
         boxes: per plane, the box of local id ``k`` at position ``k - 1`` (default: the
             bounding box of the id's pixels); required to be exact for box-only planes.
         box_only: bool per plane (default all False).
+        spacing: ``(N, 2)`` pixel spacing per plane in metres (NaN: unknown).
+        lengths: per plane, the length in metres of local id ``k`` at position ``k - 1``.
     """
     inst = np.asarray(instances).astype(np.int64)
     n_planes = inst.shape[0]
@@ -138,15 +171,35 @@ def ground_truth(
     area = np.bincount(ids.reshape(-1), minlength=n + 1)[1:].astype(np.int64)
     box = label_boxes(ids, n)[1]
     cls = np.array(["target"] * n, dtype=object)
+    length_m = np.full(n, np.nan)
     for k in range(n):
         p, i = int(plane[k]), int(local[k]) - 1
         if classes is not None and i < len(classes[p]):
             cls[k] = str(classes[p][i])
         if boxes is not None and i < len(boxes[p]):
             box[k] = np.asarray(boxes[p][i], dtype=np.float64)
+        if lengths is not None and i < len(lengths[p]) and lengths[p][i] is not None:
+            length_m[k] = float(lengths[p][i])
     ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
     bo = np.zeros(n_planes, bool) if box_only is None else np.asarray(box_only, bool)
-    return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo)
+    sp = np.full((n_planes, 2), np.nan) if spacing is None else np.asarray(spacing, np.float64)
+    centroid = _centroids(ids, n, area)
+    on_box = bo[plane] if n else np.zeros(0, bool)
+    centroid[on_box] = 0.5 * (box[on_box, :2] + box[on_box, 2:]) - 0.5
+    return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo,
+                       centroid, sp.reshape(n_planes, 2), length_m)  # fmt: skip
+
+
+def _centroids(ids: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:
+    """Mean (row, col) of each id's pixels ``(n, 2)``."""
+    flat = ids.reshape(-1)
+    idx = np.flatnonzero(flat)
+    lab = flat[idx]
+    h, w = ids.shape[-2:]
+    out = np.zeros((n, 2))
+    for axis, coord in enumerate(((idx // w) % h, idx % w)):
+        out[:, axis] = np.bincount(lab, weights=coord, minlength=n + 1)[1:] / np.maximum(area, 1)
+    return out
 
 
 def mask_overlaps(

@@ -3,7 +3,9 @@
 One :class:`ObjectState` per detector and dataset holds, over a fixed score grid
 (:data:`~torchsar.metrics.curves.SCORE_GRID`):
 
-- TP / FP histograms at the ten COCO IoU thresholds (AP50, AP50:95);
+- one record per detection with its status at the ten COCO IoU thresholds, ranked once at
+  the end for exact AP50 and AP50:95 on scores of any range
+  (:class:`~torchsar.metrics.ranked.RankedDetections`, 24 bytes per detection);
 - TP / FP histograms and the summed IoU of matches under the matching rule (operating point,
   precision / recall / F1, FoM, FROC, Pd at fixed false alarms per image);
 - the same TP / FP histograms per breakdown key: ground-truth class (false alarms go to the
@@ -12,8 +14,11 @@ One :class:`ObjectState` per detector and dataset holds, over a fixed score grid
 - Poisson-bootstrap replicates of the rule's and the IoU-0.5 histograms (see
   :mod:`torchsar.metrics.bootstrap`) for intervals over images.
 
-Nothing grows with the number of images or detections, and any split of a dataset into
-batches, shards or workers gives identical states once added up.
+Histograms bin each detection's score normalised by its detector's operating threshold
+(:func:`normalise`), so the operating point is score bin :data:`OP_BIN` for every detector;
+objects without a declared threshold are binned by their raw score and every one of them
+counts at the operating point. Only the AP records grow with the number of detections, and
+any split of a dataset into batches, shards or workers gives identical states once added up.
 """
 
 from __future__ import annotations
@@ -33,10 +38,19 @@ from torchsar.metrics.curves import (
     pd_at_fa,
     score_bins,
 )
-from torchsar.metrics.matching import GroundTruth
+from torchsar.metrics.matching import COCO_IOUS, GroundTruth
+from torchsar.metrics.ranked import RankedDetections, plane_ranks
 from torchsar.objects import Objects
 
-__all__ = ["FA_LEVELS", "ImageInfo", "KeyCounts", "ObjectState", "operating_point", "size_bin"]
+__all__ = [
+    "FA_LEVELS",
+    "ImageInfo",
+    "KeyCounts",
+    "ObjectState",
+    "normalise",
+    "operating_point",
+    "size_bin",
+]
 
 N_BINS = SCORE_GRID.size + 1
 FA_LEVELS = (0.1, 1.0, 10.0)
@@ -51,6 +65,23 @@ class ImageInfo:
     cls: str | None = None
     group: str | None = None
     km2: float | None = None
+    order: int | None = None
+    """Global order of the plane in its dataset (ties in score are ranked by it, as
+    ``pycocotools`` ranks them by image id); default: its position in the batch."""
+
+
+def normalise(score: np.ndarray, threshold: float | None) -> np.ndarray:
+    """Scores relative to the operating ``threshold``: ``score / threshold`` (threshold >
+    0), else ``1 + score - threshold``, so the threshold maps to 1; ``None``: unchanged.
+
+    Example:
+        >>> normalise(np.array([0.25, 0.5, 1.0]), 0.5).tolist()
+        [0.5, 1.0, 2.0]
+    """
+    s = np.asarray(score, dtype=np.float64)
+    if threshold is None:
+        return s
+    return s / threshold if threshold > 0 else 1.0 + s - threshold
 
 
 def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
@@ -131,8 +162,10 @@ class ObjectState:
     area_mm2: int = 0
     images_km2: int = 0
     n_gt: int = 0
-    ap_tp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
-    ap_fp: np.ndarray = field(default_factory=lambda: np.zeros((10, N_BINS), np.int64))
+    ranked: RankedDetections = field(default_factory=lambda: RankedDetections(len(COCO_IOUS)))
+    thresholded: bool | None = None
+    ap_kind: str | None = None
+    threshold: float | None = None
     tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
     fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
     iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
@@ -154,31 +187,51 @@ class ObjectState:
 
     def update(self, m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInfo]) -> None:
         """Add one matched batch (``info``: one entry per plane)."""
-        bins = score_bins(obj.score)
+        bins = score_bins(normalise(obj.score, obj.threshold))
         hit, false = m.op >= 0, m.op == -1
         self.images += len(info)
         spaced = [i.km2 for i in info if i.km2 is not None]
         self.area_mm2 += sum(round(a * 1e12) for a in spaced)  # integers: exact in any order
         self.images_km2 += len(spaced)
         self.n_gt += len(gt)
-        for t in range(m.ap.shape[0]):
-            self.ap_tp[t] += _hist(bins[m.ap[t] >= 0])
-            self.ap_fp[t] += _hist(bins[m.ap[t] == -1])
+        self._update_ranked(m, obj, info)
         self.tp += _hist(bins[hit])
         self.fp += _hist(bins[false])
         self.iou_sum += _iou_units(bins[hit], m.op_iou[hit])
-        found = score_bins(m.gt_score) >= OP_BIN
+        gt_bins = np.where(m.gt_det >= 0, bins[np.maximum(m.gt_det, 0)] if bins.size else 0, -1)
+        found = gt_bins >= OP_BIN if obj.threshold is not None else gt_bins >= 0
         self.fragments += int(m.overlaps[found].sum())
         self.fragmented += int(found.sum())
-        self._update_keys(m, obj, gt, info, bins)
+        self._update_keys(m, obj, gt, info, bins, gt_bins)
         if self.replicates:
             self._update_boot(m, obj, gt, info, bins)
+
+    def _update_ranked(self, m: BatchMatch, obj: Objects, info: list[ImageInfo]) -> None:
+        """The AP records, and what the objects say about their operating point and AP."""
+        if len(obj):
+            declared = obj.threshold is not None
+            if self.thresholded is not None and (self.thresholded, self.threshold) != (
+                    declared, obj.threshold):  # fmt: skip
+                raise ValueError("objects with different operating thresholds in one state")
+            self.thresholded, self.threshold = declared, obj.threshold
+            if self.ap_kind is not None and m.ap_kind != self.ap_kind:
+                raise ValueError(f"AP of kinds {self.ap_kind} and {m.ap_kind} in one state")
+            self.ap_kind = m.ap_kind
+        order = np.array([p if i.order is None else i.order for p, i in enumerate(info)],
+                         dtype=np.int64)  # fmt: skip
+        image = order[obj.plane] if len(obj) else np.zeros(0, np.int64)
+        self.ranked.update(obj.score, image, m.ap, plane_ranks(obj.plane))
+
+    @property
+    def op_bin(self) -> int:
+        """The design operating point: scores above the declared threshold (bin
+        :data:`OP_BIN`), or every object when the objects declared none (bin 0)."""
+        return 0 if self.thresholded is False else OP_BIN
 
     def _add_key(self, key: str, **parts) -> None:
         self.keys[key] = self.keys.get(key, KeyCounts()) + KeyCounts(**parts)
 
-    def _update_keys(self, m, obj, gt, info, bins) -> None:
-        gt_bins = score_bins(m.gt_score)
+    def _update_keys(self, m, obj, gt, info, bins, gt_bins) -> None:
         false = m.op == -1
         image_cls = np.array([i.cls or NO_CLASS for i in info], dtype=object)
         fp_size = self._size_names(obj.area[false])
@@ -191,7 +244,7 @@ class ObjectState:
                 mine = gt_keys == k
                 self._add_key(
                     f"{prefix}:{k}", n_gt=int(mine.sum()),
-                    tp=_hist(gt_bins[mine & np.isfinite(m.gt_score)]),
+                    tp=_hist(gt_bins[mine & (gt_bins >= 0)]),
                     fp=_hist(bins[false][fp_keys == k]),
                 )  # fmt: skip
         for key, planes in _planes_by_key(info).items():
@@ -223,11 +276,20 @@ class ObjectState:
         keys = dict(self.keys)
         for k, v in other.keys.items():
             keys[k] = keys.get(k, KeyCounts()) + v
+        if None not in (self.thresholded, other.thresholded) and (
+                self.threshold != other.threshold):  # fmt: skip
+            raise ValueError("cannot add states with different operating thresholds")
+        declared = other.thresholded if self.thresholded is None else self.thresholded
+        threshold = other.threshold if self.thresholded is None else self.threshold
+        if None not in (self.ap_kind, other.ap_kind) and self.ap_kind != other.ap_kind:
+            raise ValueError("cannot add states of different AP kinds")
+        kind = other.ap_kind if self.ap_kind is None else self.ap_kind
         return ObjectState(
             self.replicates, self.seed, self.size_edges, self.size_names,
             self.images + other.images, self.area_mm2 + other.area_mm2,
             self.images_km2 + other.images_km2, self.n_gt + other.n_gt,
-            self.ap_tp + other.ap_tp, self.ap_fp + other.ap_fp, self.tp + other.tp,
+            self.ranked + other.ranked, declared, kind, threshold,
+            self.tp + other.tp,
             self.fp + other.fp, self.iou_sum + other.iou_sum,
             self.fragments + other.fragments, self.fragmented + other.fragmented, keys,
             {k: self.boot[k] + other.boot[k] for k in self.boot},
@@ -240,9 +302,11 @@ class ObjectState:
 
     # -- results -----------------------------------------------------------------------------
 
-    def metrics(self, at: int = OP_BIN) -> dict[str, float]:
+    def metrics(self, at: int | None = None) -> dict[str, float]:
         """Every object metric with the operating point at score bin ``at`` (default: the
-        design point, score > 1)."""
+        design point :attr:`op_bin`). AP is exact (from the per-detection records)."""
+        at = self.op_bin if at is None else at
+        ap = self.ap()
         out = operating_point(self.tp, self.fp, self.n_gt, self.images, at)
         tp = out["tp"]
         fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
@@ -253,9 +317,8 @@ class ObjectState:
             fa_per_km2=out["fp"] / km2 if full else float("nan"),
             mean_iou=float(self.iou_sum[at:].sum() / IOU_UNIT / tp) if tp else float("nan"),
             fragmentation=self.fragments / self.fragmented if self.fragmented else float("nan"),
-            ap50=coco_ap(self.ap_tp[0], self.ap_fp[0], self.n_gt),
-            ap50_95=float(np.mean([coco_ap(t, f, self.n_gt)
-                                   for t, f in zip(self.ap_tp, self.ap_fp, strict=True)])),
+            ap50=float(ap[0]),
+            ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else float("nan"),
             pauc=partial_auc(fa, pd, 1.0) if self.n_gt else float("nan"),
         )  # fmt: skip
         for level in FA_LEVELS:
@@ -264,8 +327,19 @@ class ObjectState:
             )
         return out
 
-    def intervals(self, at: int = OP_BIN, level: float = 0.95) -> dict[str, tuple[float, float]]:
+    def ap(self) -> np.ndarray:
+        """Exact AP at each COCO IoU threshold (NaN without ground truth, or for points
+        under an IoU rule); under the distance rule every entry is the AP at the distance
+        tolerance."""
+        if self.ap_kind == "none":
+            return np.full(len(COCO_IOUS), np.nan)
+        return self.ranked.ap(self.n_gt)
+
+    def intervals(
+        self, at: int | None = None, level: float = 0.95
+    ) -> dict[str, tuple[float, float]]:
         """Bootstrap percentile intervals of the headline metrics."""
+        at = self.op_bin if at is None else at
         b = self.boot
         reps = {"precision": [], "recall": [], "f1": [], "ap50": [], "pd_at_1_fa_per_image": []}
         for r in range(self.replicates):
@@ -275,9 +349,19 @@ class ObjectState:
             reps["precision"].append(op["precision"])
             reps["recall"].append(op["recall"])
             reps["f1"].append(op["f1"])
-            reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt))
+            reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt)
+                                if self.ap_kind != "none" else float("nan"))  # fmt: skip
             reps["pd_at_1_fa_per_image"].append(pd_at_fa(fa, pd, 1.0) if n_gt else float("nan"))
         return {k: interval(np.array(v), level) for k, v in reps.items()}
+
+    def score_at(self, at: int) -> float:
+        """The threshold, on the objects' own score scale, of an operating point starting at
+        score bin ``at`` (scores above it count)."""
+        level = float(SCORE_GRID[at - 1]) if at > 0 else float("-inf")
+        t = self.threshold
+        if t is None or not np.isfinite(level):
+            return level
+        return level * t if t > 0 else level - 1.0 + t
 
     def froc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(score threshold, false alarms per image, Pd)``, highest threshold first."""
