@@ -1,1 +1,59 @@
-"""torchsar evaluation harness: datasets, detector registry, runner, tables, plots, CLI."""
+"""torchsar's evaluation harness: score any detector, or saved predictions, against
+ground truth at dataset scale.
+
+The public API (imported lazily, so the command line starts fast):
+
+- :func:`evaluate`: datasets x detectors -> :class:`Results` (tables as DataFrames; a run
+  folder with ``out=``).
+- :class:`Detector`, :func:`load` (built-in names, entry points, ``module:name`` import
+  paths), :func:`predictions` (saved COCO results, point CSV, mask folders).
+- :class:`Scoring`, :class:`Execution`, :class:`Calibration`; :class:`EvalError`.
+- Re-exported from torchsar for convenience: ``Objects`` (what a detector may return
+  besides a ``Detection``), ``ObjectRules``, ``Matching``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = [
+    "BUILTIN",
+    "Calibration",
+    "Detector",
+    "EvalError",
+    "Execution",
+    "Matching",
+    "ObjectRules",
+    "Objects",
+    "Results",
+    "Scoring",
+    "evaluate",
+    "load",
+    "predictions",
+]
+
+_HOMES = {
+    "BUILTIN": "torchsar_eval.registry",
+    "Calibration": "torchsar_eval.api",
+    "Detector": "torchsar_eval.detector",
+    "EvalError": "torchsar_eval.errors",
+    "Execution": "torchsar_eval.api",
+    "Matching": "torchsar.metrics",
+    "ObjectRules": "torchsar.objects",
+    "Objects": "torchsar.objects",
+    "Results": "torchsar_eval.api",
+    "Scoring": "torchsar_eval.runner",
+    "evaluate": "torchsar_eval.api",
+    "load": "torchsar_eval.registry",
+    "predictions": "torchsar_eval.saved",
+}
+
+
+def __getattr__(name: str) -> object:
+    if name not in _HOMES:
+        raise AttributeError(f"module 'torchsar_eval' has no attribute {name!r}")
+    return getattr(importlib.import_module(_HOMES[name]), name)
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *__all__])

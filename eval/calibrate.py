@@ -40,14 +40,17 @@ def parse_target(text: str) -> Target:
     except ValueError:
         level = float("nan")
     if key != "fa" or not level >= 0:
-        raise EvalError(f"--calibrate-on must be 'f1' or 'fa=LEVEL' (LEVEL >= 0), got {text!r}")
+        raise EvalError(
+            f"{{opt:calibrate_on}}{text!r}: the calibration target must be 'f1' or 'fa=LEVEL' "
+            "(LEVEL >= 0)"
+        )
     return Target("fa", level)
 
 
 def split_indices(n: int, name: str, fraction: float) -> tuple[list[int], list[int]]:
     """``(calibration, test)`` item indices of a dataset of ``n`` items."""
     if not 0 < fraction < 1:
-        raise EvalError(f"--calibration-fraction must be in (0, 1), got {fraction}")
+        raise EvalError(f"{{opt:calibration_fraction}}{fraction}: must be in (0, 1)")
     cal, test = [], []
     for i in range(n):
         h = hashlib.blake2b(f"{name}\0{i}".encode(), digest_size=8).digest()

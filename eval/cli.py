@@ -23,11 +23,14 @@ from pathlib import Path
 from typing import NoReturn
 
 from torchsar_eval.commands import COMMANDS, load
-from torchsar_eval.errors import EvalError
+from torchsar_eval.errors import EvalError, cli_spelling
 
 __all__ = ["Terminated", "build_parser", "main"]
 
 PROG = "torchsar-eval"
+
+FLAGS = {"datasets": "--dataset", "params": "--param", "replicates": "--bootstrap"}
+"""Python parameters whose command-line flag is not ``--`` + the name with dashes."""
 
 
 class Terminated(BaseException):
@@ -122,6 +125,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     resume = bool(getattr(args, "resume", False))
     if resume and getattr(args, "out", None) is None:
         raise EvalError("--resume needs --out naming the interrupted run's folder")
+    if getattr(args, "claims_out", False):  # the command checks and publishes --out itself
+        args.out = Path(out)
+        return int(args.func(args))
     with claim(Path(out), overwrite=args.overwrite, resume=resume) as claimed:
         args.out = claimed
         return int(args.func(args))
@@ -136,7 +142,9 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:
         from torchsar._checks import TorchSARError
 
-        if isinstance(exc, (EvalError, TorchSARError)):
+        if isinstance(exc, EvalError):
+            return _user_error(exc.render(cli_spelling(FLAGS)))
+        if isinstance(exc, TorchSARError):
             return _user_error(exc)
         raise  # a bug: show the traceback
     except SystemExit as exc:

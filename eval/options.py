@@ -19,34 +19,26 @@ Example:
 
 from __future__ import annotations
 
+import ast
 import math
-from argparse import Namespace
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, TypeVar
 
-from torch import Tensor
-
+from torchsar.simulate import clutter
 from torchsar.speckle import FILTERS
-from torchsar_eval.detectors import (
-    DETECTORS,
-    DetectorSpec,
-    check_options,
-    dry_run,
-    parse_params,
-    resolve,
-)
+from torchsar_eval.detector import check_options
 from torchsar_eval.errors import EvalError
 
 __all__ = [
-    "RunChoices",
     "at_least",
-    "check_run_args",
     "despeckler",
+    "dry_run",
     "floats",
     "ints",
     "names",
+    "parse_params",
 ]
 
 Number = TypeVar("Number", int, float)
@@ -151,12 +143,48 @@ def at_least(value: Number | None, option: str, minimum: Number) -> Number | Non
     return value
 
 
-class RunChoices(NamedTuple):
-    """The validated choices of ``torchsar-eval run``."""
+def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[str, Any]]:
+    """Parse ``["ca.guard=3", "region.k=0.5"]`` into ``{"ca": {"guard": 3}, ...}`` (values
+    as Python literals where they parse, else strings).
 
-    specs: list[DetectorSpec]
-    preprocess: Callable[[Tensor], Tensor] | None
-    despeckle: dict[str, Any]
+    Example:
+        >>> parse_params(["ca.guard=3", "mine.mode=fast"])
+        {'ca': {'guard': 3}, 'mine': {'mode': 'fast'}}
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        key, eq, raw = item.partition("=")
+        name, dot, param = key.partition(".")
+        if not (eq and dot and name and param):
+            raise EvalError(f"{option} must look like DETECTOR.NAME=VALUE, got {item!r}")
+        try:
+            value = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw  # a bare string such as a mode name
+        out.setdefault(name, {})[param] = value
+    return out
+
+
+DRY_SIDE = 257
+"""Largest side of the image of :func:`dry_run` (a larger window is checked by the run)."""
+
+
+def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
+    """Call ``fn(image, **options)`` once on a small clutter image, so a bad option value
+    (out of range, wrong type, a threshold that cannot be computed) fails before any
+    work, as an :class:`EvalError` naming ``what`` and the options."""
+    try:
+        reach = 2 * (int(options.get("guard") or 0) + int(options.get("train") or 0))
+        side = max(32, reach + int(options.get("window") or 0) + 1)
+    except (TypeError, ValueError):
+        side = 32  # a malformed window option: the call names it
+    if side > DRY_SIDE:
+        return
+    try:
+        fn(clutter((1, 1, side, side), seed=0), **options)
+    except Exception as exc:  # whatever the library raises for these options
+        shown = ", ".join(f"{k}={v!r}" for k, v in options.items())
+        raise EvalError(f"{what} rejects its options ({shown}): {exc}") from exc
 
 
 def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict[str, Any]]:
@@ -174,19 +202,3 @@ def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dic
     check_options(FILTERS[name], opts, what)
     dry_run(FILTERS[name], opts, what)
     return partial(FILTERS[name], **opts), opts
-
-
-def check_run_args(args: Namespace) -> RunChoices:
-    """Validate every option of ``torchsar-eval run`` before any dataset is built."""
-    at_least(args.n, "--n", 1)
-    at_least(args.batch_size, "--batch-size", 1)
-    wanted = ",".join(DETECTORS) if args.detectors is None else args.detectors
-    chosen = names(wanted, "--detectors", DETECTORS, what="detector")
-    overrides = parse_params(args.param)
-    specs = resolve(chosen, overrides)
-    in_metres = getattr(args, "window_units", "px") == "m"  # checked once converted
-    for spec in specs:
-        if spec.name in overrides and not in_metres:  # registered defaults are known to work
-            dry_run(spec.fn, spec.params, f"detector {spec.name}")
-    preprocess, despeckle = despeckler(args.despeckle, args.despeckle_param)
-    return RunChoices(specs, preprocess, despeckle)

@@ -37,6 +37,7 @@ from torchsar_eval.errors import EvalError
 __all__ = [
     "HOST",
     "Hidden",
+    "check_out",
     "claim",
     "default_out",
     "file_slugs",
@@ -153,23 +154,38 @@ def _check_writable(out: Path) -> None:
     while not (anc.exists() or anc.is_symlink()):
         anc = anc.parent
     if not anc.is_dir():
-        raise EvalError(f"--out {out}: {anc} is not a folder")
+        raise EvalError(f"{{opt:out}}{out}: {anc} is not a folder")
     probe = _hidden_name(anc / "probe", "partial")
     try:
         probe.mkdir()
         probe.rmdir()
     except OSError as exc:
-        raise EvalError(f"--out {out}: cannot write in {anc} ({exc.strerror})") from None
+        raise EvalError(f"{{opt:out}}{out}: cannot write in {anc} ({exc.strerror})") from None
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
     if out.is_symlink() or (out.exists() and not out.is_dir()):
-        raise EvalError(f"--out {out} exists and is not a folder")
+        raise EvalError(f"{{opt:out}}{out} exists and is not a folder")
     if out.is_dir() and not _is_empty_dir(out):
         if not (out / RUN_MARKER).is_file():
-            raise EvalError(f"--out {out} is a non-empty folder that is not a run: choose another")
+            raise EvalError(
+                f"{{opt:out}}{out} is a non-empty folder that is not a run: choose another"
+            )
         if not overwrite:
-            raise EvalError(f"--out {out} holds a previous run: pass --overwrite to replace it")
+            raise EvalError(
+                f"{{opt:out}}{out} holds a previous run: pass {{opt:overwrite}} to replace it"
+            )
+
+
+def check_out(out: Path, *, overwrite: bool = False, resume: bool = False) -> None:
+    """:func:`claim`'s checks of ``out``, and what dead runs left beside it settled, without
+    touching ``out`` itself (to refuse a bad ``out`` before any other work)."""
+    out = Path(out)
+    if out.name in ("", ".", ".."):
+        raise EvalError(f"{{opt:out}} must name a folder, got {str(out)!r}")
+    _check_writable(out)
+    recover(out.parent, keep=out.name if resume else None)
+    _check_out(out, overwrite)
 
 
 @contextmanager
@@ -185,7 +201,7 @@ def claim(out: Path, *, overwrite: bool = False, resume: bool = False) -> Iterat
     """
     out = Path(out)
     if out.name in ("", ".", ".."):
-        raise EvalError(f"--out must name a folder, got {str(out)!r}")
+        raise EvalError(f"{{opt:out}} must name a folder, got {str(out)!r}")
     _check_writable(out)
     recover(out.parent, keep=out.name if resume else None)
     _check_out(out, overwrite)
@@ -216,7 +232,7 @@ def result_dir(
     """
     out = Path(out)
     if out.is_symlink() or (out.exists() and not _is_empty_dir(out)):
-        raise EvalError(f"--out {out} already exists and is not an empty folder")
+        raise EvalError(f"{{opt:out}}{out} already exists and is not an empty folder")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = _hidden_name(out, "partial")
     left = [h for h in hidden_folders(out.parent) if _resumable(h, out)] if resume else []
@@ -246,7 +262,7 @@ def _publish(tmp: Path, out: Path) -> None:
         os.rename(tmp, out)  # atomic; replaces an empty folder, refuses anything else
     except OSError as exc:
         if exc.errno in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
-            raise EvalError(f"--out {out} was filled by someone else during the run") from None
+            raise EvalError(f"{{opt:out}}{out} was filled by someone else during the run") from None
         raise EvalError(f"cannot publish the run as {out}: {exc.strerror}") from None
 
 

@@ -1,10 +1,12 @@
 """The dataset-scale runner: one pass per detector over batches, states merged by addition.
 
-Each batch is loaded once and given to every detector. Per detector the runner accumulates
-pixel counts and the pixel ROC (:class:`~torchsar.metrics.RocAccumulator` over
-``Detection.statistic``), then sends the detection through the shared discrimination stage
-(:func:`torchsar.objects.discriminate`, the same rules for every detector), matches the
-objects one-to-one to the ground truth and adds them to an
+Each batch is loaded once (and moved to the run's device once) and given to every
+detector. A detector returns a :class:`~torchsar.cfar.Detection` or
+:class:`~torchsar.objects.Objects`. Per detector the runner accumulates pixel counts and
+the pixel ROC (from the statistic, or from the score of the objects' pixels when they have
+masks), turns the output into scored objects (:meth:`DetectorResult.objects_of`: the
+shared discrimination stage for a statistic, the detector's own instances otherwise),
+matches them one-to-one to the ground truth and adds them to an
 :class:`~torchsar.metrics.ObjectState`. Images of different sizes (folder datasets) are
 grouped into same-size sub-batches.
 """
@@ -15,11 +17,13 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
+from torchsar.detection import Detection
 from torchsar.metrics import (
     Matching,
     ObjectState,
@@ -28,10 +32,11 @@ from torchsar.metrics import (
     match_batch,
     pixel_counts,
 )
-from torchsar.metrics.curves import OP_BIN
-from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar.metrics.object_state import normalise
+from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar_eval.datasets.base import BadItemError
-from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.detector import Detector
+from torchsar_eval.errors import EvalError
 from torchsar_eval.scoring import batch_truth, image_rows, pixel_areas
 
 __all__ = [
@@ -41,7 +46,7 @@ __all__ = [
     "Scoring",
     "SkipBad",
     "batches",
-    "evaluate",
+    "run_detectors",
 ]
 
 
@@ -54,27 +59,55 @@ DEFAULT_MATCH = Matching(kind="centroid")
 
 @dataclass(frozen=True)
 class Scoring:
-    """How detections are scored: the discrimination rules, the matching rule and the
-    bootstrap (the same for every detector of a run; defaults: the harness's)."""
+    """How detections are scored, the same for every detector of a run (defaults: the
+    harness's).
+
+    Attributes:
+        rules: the discrimination stage (closing, size limits, floor) of detectors that
+            return a statistic.
+        matching: the matching rule of the operating point and the FROC.
+        replicates: bootstrap replicates of the intervals (0: none).
+        seed: bootstrap seed.
+        instances: ``"auto"`` scores each detector's own instances when it returns them
+            (a region CFAR's regions, a CNN's boxes); ``"discriminate"`` sends every
+            detector's statistic (or its objects' pixel scores) through the discrimination
+            stage, for like-for-like comparisons.
+    """
 
     rules: ObjectRules = DEFAULT_RULES
     matching: Matching = DEFAULT_MATCH
     replicates: int = 100
     seed: int = 0
+    instances: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.instances not in ("auto", "discriminate"):
+            raise EvalError(f"{{opt:instances}}{self.instances!r}: expected 'auto' or "
+                            "'discriminate'")  # fmt: skip
+        if isinstance(self.replicates, bool) or not isinstance(self.replicates, int) or (
+                self.replicates < 0):  # fmt: skip
+            raise EvalError(f"bootstrap replicates must be an integer >= 0, got "
+                            f"{self.replicates!r}")  # fmt: skip
 
     def as_dict(self) -> dict:
         return {
             "objects": self.rules.as_dict(),
             "matching": self.matching.as_dict(),
             "bootstrap": {"replicates": self.replicates, "seed": self.seed},
+            "instances": self.instances,
         }
 
 
 @dataclass
 class DetectorResult:
-    """Everything measured for one detector on one dataset."""
+    """Everything measured for one detector on one dataset.
 
-    spec: DetectorSpec
+    ``op_bin`` is the operating point's score bin when it was chosen (calibrated), else
+    ``None``: the design point of the objects (:attr:`ObjectState.op_bin`).
+    ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
+    """
+
+    detector: Detector
     scoring: Scoring = field(default_factory=Scoring)
     pixels: PixelCounts = field(default_factory=PixelCounts)
     roc: RocAccumulator = field(default_factory=RocAccumulator)
@@ -83,22 +116,30 @@ class DetectorResult:
     object_seconds: float = 0.0
     images: int = 0
     rows: list = field(default_factory=list)
-    op_bin: int = OP_BIN
+    op_bin: int | None = None
     skipped: list = field(default_factory=list)
+    pixel_level: bool = False
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
 
-    def add(
-        self, statistic: Tensor, threshold: Tensor, det_mask: Tensor, batch: dict, truth
-    ) -> Objects:
-        """Accumulate one batch's detections (``truth``: :func:`torchsar_eval.scoring.batch_truth`);
-        returns the batch's objects."""
+    @property
+    def at(self) -> int:
+        """The score bin of the reported operating point."""
+        return self.objects.op_bin if self.op_bin is None else self.op_bin
+
+    def add(self, out: Detection | Objects, batch: dict, truth) -> Objects:
+        """Accumulate one batch's detector output (on the CPU; ``truth``:
+        :func:`torchsar_eval.scoring.batch_truth`); returns the batch's objects."""
         mask, ignore = batch["mask"], batch["ignore"]
-        self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
-        self.roc.update(statistic, mask, ignore)
+        view = pixel_view(out)
+        if view is not None:
+            statistic, det_mask = view
+            self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
+            self.roc.update(statistic, mask, ignore)
+            self.pixel_level = True
         t0 = time.perf_counter()
-        obj = self.objects_of(statistic, threshold, batch)
+        obj = self.objects_of(out, batch)
         gt, info = truth
         m = match_batch(obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info)
@@ -108,9 +149,9 @@ class DetectorResult:
 
     def __add__(self, other: DetectorResult) -> DetectorResult:
         """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
-        if self.spec.name != other.spec.name or self.scoring != other.scoring:
+        if self.detector.name != other.detector.name or self.scoring != other.scoring:
             raise ValueError("cannot add results of different detectors or scoring settings")
-        out = DetectorResult(self.spec, self.scoring, self.pixels + other.pixels,
+        out = DetectorResult(self.detector, self.scoring, self.pixels + other.pixels,
                              self.roc + other.roc, op_bin=self.op_bin)  # fmt: skip
         out.objects = self.objects + other.objects
         out.seconds = self.seconds + other.seconds
@@ -118,13 +159,51 @@ class DetectorResult:
         out.images = self.images + other.images
         out.rows = self.rows + other.rows
         out.skipped = self.skipped + other.skipped
+        out.pixel_level = self.pixel_level or other.pixel_level
         return out
 
-    def objects_of(self, statistic: Tensor, threshold: Tensor, batch: dict) -> Objects:
-        """The discrimination stage of this run on one batch."""
+    def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:
+        """The scored objects of one batch: the detector's own instances (``Objects``, or a
+        Detection's ``labels``), else (or when the run or the detector asks for it) the
+        shared discrimination stage on its statistic."""
+        own = "discriminate" not in (self.scoring.instances, self.detector.instances)
+        if isinstance(out, Objects):
+            if own:
+                return out
+            view = pixel_view(out)
+            if view is None:
+                raise EvalError(f"detector {self.detector.name} returns {out.geometry}es, "
+                                "which the discrimination stage cannot use: score its own "
+                                "instances ({opt:instances}'auto')")  # fmt: skip
+            statistic, threshold = view[0], 1.0 if out.threshold is not None else -np.inf
+        else:
+            if own and out.labels is not None:
+                score = normalised_score(out.statistic, out.threshold)
+                b, c, h, w = score.shape
+                return Objects.from_labels(out.labels.reshape(b * c, h, w).numpy(),
+                                           score.reshape(b * c, h, w).numpy())  # fmt: skip
+            statistic, threshold = out.statistic, out.threshold
         rules = self.scoring.rules
         area = pixel_areas(batch) if rules.units == "m2" else None
         return discriminate(statistic, threshold, rules=rules, pixel_area=area)
+
+
+def pixel_view(out: Detection | Objects) -> tuple[Tensor, Tensor] | None:
+    """``(statistic, mask)`` of a detector output for the pixel metrics: a Detection's own,
+    or for objects with masks each pixel's best normalised object score (``-inf`` outside
+    every object; the mask: pixels of objects above the operating threshold, or of every
+    object when none is declared); ``None`` for boxes and points."""
+    if isinstance(out, Detection):
+        return out.statistic, out.mask
+    if not out.has_masks:
+        return None
+    h, w = out.shape
+    owner, idx = out.pixel_lists()
+    best = np.full(out.planes * h * w, -np.inf)
+    np.maximum.at(best, idx, normalise(out.score, out.threshold)[owner])
+    stat = torch.from_numpy(best.reshape(out.planes, 1, h, w))
+    level = 1.0 if out.threshold is not None else -np.inf
+    return stat, stat > level
 
 
 def _stack(items: list[dict]) -> dict:
@@ -152,17 +231,39 @@ class SkipBad(Dataset):
             return {"bad": str(exc.path), "error": str(exc)}
 
 
+class Indexed(Dataset):
+    """Items ``indices`` of a dataset, each with its index in the dataset as
+    ``meta["index"]`` (the order key of exact AP and of exported image ids)."""
+
+    def __init__(self, dataset: Dataset, indices) -> None:
+        self.dataset, self.indices = dataset, list(indices)
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, i: int) -> dict:
+        item = self.dataset[self.indices[i]]
+        if "meta" in item:
+            item["meta"] = {**item["meta"], "index": self.indices[i]}
+        return item
+
+
 def batches(dataset: Dataset, batch_size: int, skipped: list | None = None) -> Iterator[dict]:
     """Yield stacked batches; consecutive images of different sizes split a batch; items
-    marked bad by :class:`SkipBad` are left out and listed in ``skipped``."""
+    marked bad by :class:`SkipBad` are left out and listed in ``skipped``. Each image's
+    ``meta["index"]`` is its position in ``dataset`` unless it has one (see
+    :class:`Indexed`)."""
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, collate_fn=list)
+    position = 0
     for items in loader:
         group: list[dict] = []
         for it in items:
+            position += 1
             if "bad" in it:
                 if skipped is not None:
                     skipped.append((it["bad"], it["error"]))
                 continue
+            it["meta"] = {"index": position - 1, **it["meta"]}
             if group and it["image"].shape != group[0]["image"].shape:
                 yield _stack(group)
                 group = []
@@ -171,9 +272,17 @@ def batches(dataset: Dataset, batch_size: int, skipped: list | None = None) -> I
             yield _stack(group)
 
 
-def evaluate(
+def to_cpu(out: Detection | Objects) -> Detection | Objects:
+    """A detector's output with its tensors on the CPU (objects already are)."""
+    if isinstance(out, Detection) and out.statistic.device.type != "cpu":
+        labels = None if out.labels is None else out.labels.cpu()
+        return Detection(out.mask.cpu(), out.statistic.cpu(), out.threshold.cpu(), labels)
+    return out
+
+
+def run_detectors(
     dataset: Dataset,
-    detectors: list[DetectorSpec],
+    detectors: list[Detector],
     *,
     batch_size: int = 16,
     preprocess: Callable[[Tensor], Tensor] | None = None,
@@ -182,12 +291,13 @@ def evaluate(
     progress: bool = True,
     desc: str = "",
     on_batch: Callable[[dict, dict], None] | None = None,
+    device: torch.device | str | None = None,
 ) -> list[DetectorResult]:
     """Run every detector over the dataset and accumulate its pixel and object states.
 
     Args:
         dataset: yields dicts with ``image``, ``mask``, ``instances``, ``ignore``, ``meta``.
-        detectors: the detectors to run (with resolved parameters).
+        detectors: the detectors to run (with resolved options).
         batch_size: images per batch.
         preprocess: optional image stage applied once per batch before every detector (e.g. a
             speckle filter); its time is charged to every detector's ``ms_per_image``.
@@ -197,9 +307,17 @@ def evaluate(
         desc: progress-bar label.
         on_batch: called as ``on_batch(batch, {detector: Objects})`` after each batch (e.g.
             a COCO exporter).
+        device: where the detectors run: each batch (and each ``torch.nn.Module``
+            detector) is moved there, outputs come back to the CPU for scoring.
     """
     scoring = Scoring() if scoring is None else scoring
-    results = [DetectorResult(spec, scoring) for spec in detectors]
+    device = None if device is None else torch.device(device)
+    for det in detectors:
+        if isinstance(det.fn, torch.nn.Module):
+            det.fn.eval()
+            if device is not None:
+                det.fn.to(device)
+    results = [DetectorResult(det, scoring) for det in detectors]
     n_batches = -(-len(dataset) // batch_size) if len(dataset) else 0
     skipped: list = []
     for batch in tqdm(
@@ -209,7 +327,7 @@ def evaluate(
         disable=not progress,
         leave=False,
     ):
-        x = batch["image"]
+        x = batch["image"] if device is None else batch["image"].to(device)
         t0 = time.perf_counter()
         if preprocess is not None:
             x = preprocess(x)
@@ -220,11 +338,11 @@ def evaluate(
         found = {}
         for res in results:
             t0 = time.perf_counter()
-            det = res.spec(x)
+            out = to_cpu(res.detector(x, batch["meta"]))
             res.seconds += time.perf_counter() - t0 + t_pre
             res.images += x.shape[0]
             res.object_seconds += t_truth
-            found[res.spec.name] = res.add(det.statistic, det.threshold, det.mask, batch, truth)
+            found[res.detector.name] = res.add(out, batch, truth)
         if on_batch is not None:
             on_batch(batch, found)
     for res in results:

@@ -8,7 +8,7 @@ import numpy as np
 from torchsar.metrics.assign import BatchMatch
 from torchsar.metrics.curves import OP_BIN, score_bins
 from torchsar.metrics.matching import GroundTruth, ground_truth
-from torchsar.metrics.object_state import ImageInfo
+from torchsar.metrics.object_state import ImageInfo, normalise
 from torchsar.objects import Objects
 
 __all__ = ["batch_truth", "image_rows", "pixel_areas"]
@@ -34,7 +34,7 @@ def _group(meta: dict) -> str | None:
 def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]]:
     """Ground truth of a batch (one plane per image channel) and each plane's facts: the
     bootstrap key (the image name, so a store and its source agree), image-level class,
-    group and area in km^2."""
+    group, area in km^2 and order in the dataset (``meta["index"]`` and the channel)."""
     b, c = _planes(batch)
     h, w = batch["instances"].shape[-2:]
     metas = [m for m in batch["meta"] for _ in range(c)]
@@ -53,7 +53,9 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
         sp = _spacing(m)
         name = str(m.get("name", f"{dataset}/{k}")) + (f"#{k % c}" if c > 1 else "")
         km2 = None if sp is None else h * w * sp[0] * sp[1] / 1e6
-        info.append(ImageInfo(name, m.get("class"), _group(m), km2))
+        index = m.get("index")
+        order = None if index is None else int(index) * c + k % c
+        info.append(ImageInfo(name, m.get("class"), _group(m), km2, order))
     return gt, info
 
 
@@ -70,10 +72,12 @@ def pixel_areas(batch: dict) -> np.ndarray | None:
 
 
 def image_rows(m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInfo]) -> list:
-    """One row per plane at the design operating point:
+    """One row per plane at the design operating point (scores above the objects'
+    threshold, or every object when they declare none):
     ``(image, n_gt, tp, fp, fn, objects, max_score)``."""
     n = len(info)
-    at_op = score_bins(obj.score) >= OP_BIN
+    at_op = score_bins(normalise(obj.score, obj.threshold)) >= (
+        OP_BIN if obj.threshold is not None else 0)  # fmt: skip
     tp = np.bincount(obj.plane[at_op & (m.op >= 0)], minlength=n)
     fp = np.bincount(obj.plane[at_op & (m.op == -1)], minlength=n)
     n_gt = np.bincount(gt.plane, minlength=n)

@@ -16,6 +16,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import sys
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -24,13 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-from torch.utils.data import Dataset, Subset
+from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
 from torchsar_eval.coco import CocoExport
+from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
 from torchsar_eval.memory import release_memory, tune_allocator
-from torchsar_eval.runner import DetectorResult, Scoring, evaluate
+from torchsar_eval.runner import DetectorResult, Indexed, Scoring, run_detectors
 
 __all__ = [
     "ShardJob",
@@ -47,17 +49,19 @@ __all__ = [
 @dataclass(frozen=True)
 class ShardJob:
     """Everything a worker needs to score shards of one dataset (picklable: the dataset
-    object holds paths and options, never open files)."""
+    object holds paths and options, never open files; detectors resolved by name or import
+    path travel as that reference)."""
 
     name: str
     dataset: Dataset
     indices: Sequence[int]
-    specs: list
+    detectors: list
     scoring: Scoring
     batch_size: int = 16
     preprocess: Callable | None = None
     shard_size: int = 256
     export_coco: bool = False
+    device: str | None = None
 
 
 @dataclass
@@ -77,17 +81,18 @@ def shard_ranges(n: int, size: int) -> list[range]:
 def _score_shard(job: ShardJob, k: int) -> ShardState:
     tune_allocator()
     rng = shard_ranges(len(job.indices), job.shard_size)[k]
-    part = Subset(job.dataset, [job.indices[i] for i in rng])
+    part = Indexed(job.dataset, [job.indices[i] for i in rng])
     coco = CocoExport(job.name) if job.export_coco else None
-    results = evaluate(
+    results = run_detectors(
         part,
-        job.specs,
+        job.detectors,
         batch_size=job.batch_size,
         preprocess=job.preprocess,
         scoring=job.scoring,
         name=job.name,
         progress=False,
         on_batch=None if coco is None else coco.add,
+        device=job.device,
     )
     release_memory()
     return ShardState(results, coco)
@@ -123,7 +128,7 @@ def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
     """``(detector, per-image rows)`` of every saved shard, in shard order."""
     for path in shard_files(folder):
         for r in _load(path).results:
-            yield r.spec.name, r.rows
+            yield r.detector.name, r.rows
 
 
 def shard_coco(folder: Path, name: str) -> CocoExport:
@@ -182,7 +187,7 @@ class _Failures:
             raise exc
         if not self.skip_bad:
             raise EvalError(
-                f"shard {k} failed: {exc} (use --skip-bad to continue past it)"
+                f"shard {k} failed: {exc} (pass {{opt:skip_bad}} to continue past it)"
             ) from exc
         self.failed.append({"shard": k, "error": f"{type(exc).__name__}: {exc}"})
 
@@ -206,6 +211,7 @@ def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
     that dies (killed, out of memory) breaks the pool: its shards are reported as failed
     rather than waited for. Leaving early (an error, Ctrl-C, SIGTERM) stops the pool at once
     instead of waiting for running shards."""
+    check_portable(job.detectors)
     threads = max(1, (os.cpu_count() or 1) // workers)
     paths = dict(todo)
     ctx = multiprocessing.get_context("spawn")
@@ -241,8 +247,11 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
     except ImportError:
         raise EvalError("--engine ray needs Ray: pip install 'torchsar[ray]'") from None
     if not ray.is_initialized():
+        env = None if address else {"env_vars": {"PYTHONPATH": os.pathsep.join(
+            p for p in sys.path if p)}}  # fmt: skip
         ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                 configure_logging=False)  # fmt: skip
+                 configure_logging=False, runtime_env=env)  # fmt: skip
+    _ray_preflight(ray, job)
     task = ray.remote(num_cpus=1, max_retries=0)(_scored_one_thread)  # retried here, counted
     refs = {task.remote(job, k): (k, path) for k, path in todo}
     while refs:
@@ -255,6 +264,27 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
                 refs[task.remote(job, k)] = (k, path)
                 continue
         bar.update(sizes[k])
+
+
+def _detectors_load(detectors: bytes) -> str | None:
+    """In a Ray worker: rebuild the detectors; ``None`` or the error as one line."""
+    try:
+        pickle.loads(detectors)
+    except Exception as exc:
+        return f"{type(exc).__name__}: {exc}".splitlines()[0]
+    return None
+
+
+def _ray_preflight(ray, job: ShardJob) -> None:
+    """Refuse up front, in one line, detectors that a Ray worker cannot rebuild (a module
+    the nodes cannot import), instead of failing every shard."""
+    probe = ray.remote(num_cpus=1, max_retries=0)(_detectors_load)
+    for det in job.detectors:
+        error = ray.get(probe.remote(pickle.dumps(det)))
+        if error is not None:
+            raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker ({error}): "
+                            "install its package on every node, or give Ray its module "
+                            "through runtime_env")  # fmt: skip
 
 
 def _scored_one_thread(job: ShardJob, k: int) -> bytes:
@@ -304,7 +334,7 @@ def run_shards(
     finally:
         bar.close()
     merged = merge(_load(p).results for p in shard_files(folder))
-    merged = merged or [DetectorResult(s, job.scoring) for s in job.specs]
+    merged = merged or [DetectorResult(d, job.scoring) for d in job.detectors]
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
               "skipped": len(sizes) - len(todo), "retried": len(fail.retried),
               "failed": fail.failed}  # fmt: skip

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from torchsar.metrics.curves import SCORE_GRID, suffix
+from torchsar.metrics.curves import RECALL_POINTS, suffix
 from torchsar.metrics.object_state import operating_point
-from torchsar_eval.calibrate import threshold_of
 from torchsar_eval.runner import DetectorResult
 
 __all__ = [
@@ -70,21 +69,24 @@ PER_IMAGE_COLUMNS = ["dataset", "detector", "image", "targets", "tp", "fp", "fn"
 
 
 def summary_row(dataset: str, r: DetectorResult) -> dict:
-    """One summary row at the detector's design operating point."""
-    m = r.objects.metrics(r.op_bin)
-    ci = r.objects.intervals(r.op_bin) if r.objects.replicates else {}
+    """One summary row at the detector's operating point (its design or calibrated one)."""
+    m = r.objects.metrics(r.at)
+    ci = r.objects.intervals(r.at) if r.objects.replicates else {}
+    nan = float("nan")
+    if r.scoring.matching.kind == "distance":
+        m["mean_iou"] = nan  # no IoU under the distance rule
     row = {
         "dataset": dataset,
-        "detector": r.spec.name,
+        "detector": r.detector.name,
         "images": r.images,
         "targets": r.objects.n_gt,
-        "pd_pixel": r.pixels.pd,
-        "pfa_pixel": r.pixels.pfa,
+        "pd_pixel": r.pixels.pd if r.pixel_level else nan,
+        "pfa_pixel": r.pixels.pfa if r.pixel_level else nan,
         "pd_object": m["recall"],
         "false_alarms": m["fp"],
         "false_alarms_per_image": m["fa_per_image"],
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
-        "score_threshold": threshold_of(r.op_bin),
+        "score_threshold": r.objects.score_at(r.at),
     }
     for k in HEADLINE:
         row[f"{k}_lo"], row[f"{k}_hi"] = ci.get(k, (float("nan"), float("nan")))
@@ -95,7 +97,7 @@ def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
     nan = float("nan")
     ms = 1e3 * r.seconds / r.images if r.images else nan
     obj = 1e3 * r.object_seconds / r.images if r.images else nan
-    return [[ds, r.spec.name, r.images, ms, obj, 1e3 / (ms + obj) if r.images else nan]]
+    return [[ds, r.detector.name, r.images, ms, obj, 1e3 / (ms + obj) if r.images else nan]]
 
 
 def timing_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
@@ -114,22 +116,22 @@ def summary_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return _frame(results, lambda ds, r: [summary_row(ds, r)], SUMMARY_COLUMNS)
 
 
-def _levels(tp: np.ndarray, fp: np.ndarray) -> list[tuple[float, int, int]]:
-    """``(threshold, TP above it, FP above it)`` at every score level where the detections
-    above change, highest threshold first (level j: scores > ``[-inf, *grid][j]``)."""
+def _levels(tp: np.ndarray, fp: np.ndarray) -> list[tuple[int, int, int]]:
+    """``(bin, TP above it, FP above it)`` at every score level where the detections above
+    change, highest level first (level j: normalised scores > ``[-inf, *SCORE_GRID][j]``)."""
     ct, cf = suffix(tp), suffix(fp)
     keep = np.ones(ct.size, bool)
     keep[1:] = (ct[1:] != ct[:-1]) | (cf[1:] != cf[:-1])
-    thr = np.concatenate([[-np.inf], SCORE_GRID])
-    return [(thr[j], int(ct[j]), int(cf[j])) for j in np.flatnonzero(keep)[::-1]]
+    return [(int(j), int(ct[j]), int(cf[j])) for j in np.flatnonzero(keep)[::-1]]
 
 
 def _froc_rows(ds: str, r: DetectorResult) -> list[list]:
+    """The threshold is on the detector's own score scale."""
     o, nan = r.objects, float("nan")
     return [
-        [ds, r.spec.name, thr, t, f, f / max(o.images, 1), t / o.n_gt if o.n_gt else nan,
-         t / (t + f) if t + f else nan]
-        for thr, t, f in _levels(o.tp, o.fp)
+        [ds, r.detector.name, o.score_at(j), t, f, f / max(o.images, 1),
+         t / o.n_gt if o.n_gt else nan, t / (t + f) if t + f else nan]
+        for j, t, f in _levels(o.tp, o.fp)
     ]  # fmt: skip
 
 
@@ -140,11 +142,16 @@ def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 
 def _pr_rows(ds: str, r: DetectorResult) -> list[list]:
+    """COCO's interpolated precision at the 101 recall points reached (the exact curve
+    behind AP50), with the score of the detection where each is reached."""
     o = r.objects
+    if not o.n_gt or o.ap_kind == "none":
+        return []
+    prec, _, score = o.ranked.curves(o.n_gt)
+    keep = np.isfinite(score[0])
     return [
-        [ds, r.spec.name, thr, t / o.n_gt, t / (t + f)]
-        for thr, t, f in _levels(o.ap_tp[0], o.ap_fp[0])
-        if t + f and o.n_gt
+        [ds, r.detector.name, float(t), float(rc), float(p)]
+        for t, rc, p in zip(score[0][keep], RECALL_POINTS[keep], prec[0][keep], strict=True)
     ]
 
 
@@ -162,12 +169,12 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     for key in sorted(r.objects.keys):
         by, _, name = key.partition(":")
         k = r.objects.keys[key]
-        op = operating_point(k.tp, k.fp, k.n_gt, k.images, r.op_bin)
+        op = operating_point(k.tp, k.fp, k.n_gt, k.images, r.at)
         if by == "class" and not has_image_class:
             if k.n_gt == 0:
                 continue  # the sink of unattributed false alarms
             op.update(fp=nan, precision=nan, f1=nan)
-        rows.append([ds, r.spec.name, by, name, k.images or None, k.n_gt, op["tp"], op["fp"],
+        rows.append([ds, r.detector.name, by, name, k.images or None, k.n_gt, op["tp"], op["fp"],
                      op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
     return rows
 
@@ -179,17 +186,20 @@ def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 def per_image_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """One row per image and detector at the design operating point."""
-    return _frame(results, lambda ds, r: [[ds, r.spec.name, *row] for row in r.rows],
+    return _frame(results, lambda ds, r: [[ds, r.detector.name, *row] for row in r.rows],
                   PER_IMAGE_COLUMNS)  # fmt: skip
 
 
 def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
-    """The fine pixel-level ROC (every grid threshold) per dataset and detector."""
+    """The fine pixel-level ROC (every grid threshold) per dataset and detector (those with
+    pixel masks)."""
     frames = []
     for ds, rs in results.items():
         for r in rs:
+            if not r.pixel_level:
+                continue
             df = pd.DataFrame(r.roc.pixel_curve())
-            df.insert(0, "detector", r.spec.name)
+            df.insert(0, "detector", r.detector.name)
             df.insert(0, "dataset", ds)
             frames.append(df)
     cols = ["dataset", "detector", "threshold", "pd_pixel", "pfa_pixel"]

@@ -25,7 +25,7 @@ from PIL import Image
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from torchsar_eval.datasets import make_dataset
-from torchsar_eval.detectors import resolve
+from torchsar_eval.registry import BUILTIN
 
 HRSID = Path(__file__).resolve().parents[2] / "shared" / "data" / "hrsid"
 DEFAULT = "ca,two_parameter,go,so,os,vi,ac,lognormal,weibull,gamma,k,g0,region"
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hrsid", type=Path, default=HRSID, help="folder of HRSID PNG samples")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
-    specs = resolve(args.detectors.split(","), {})
+    specs = [BUILTIN[n] for n in args.detectors.split(",")]
     rows = []
     for kind, x in images(args.hrsid).items():
         mp = x[:, 0].numel() / 1e6

@@ -21,8 +21,8 @@ import torch
 
 import torchsar as ts
 from torchsar_eval.datasets import make_dataset
-from torchsar_eval.detectors import DetectorSpec
-from torchsar_eval.runner import batches, evaluate
+from torchsar_eval.detector import Detector
+from torchsar_eval.runner import batches, run_detectors
 from torchsar_eval.tables import markdown, summary_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "benchmarks"))
@@ -56,15 +56,15 @@ STEPS = [
 ]
 
 
-def specs() -> list[DetectorSpec]:
+def specs() -> list[Detector]:
     out, acc = [], {"preset": "paper"}
     for name, extra in STEPS:
         acc = {**acc, **extra}
-        out.append(DetectorSpec(name, ts.region.region_cfar, dict(acc)))
+        out.append(Detector(name, ts.region.region_cfar, dict(acc)))
     return out
 
 
-def floods(ds, spec: DetectorSpec, batch_size: int) -> int:
+def floods(ds, spec: Detector, batch_size: int) -> int:
     """Accepted regions larger than 20000 px (larger than any target) over the dataset."""
     params = {k: v for k, v in spec.params.items() if k != "preset"}
     n = 0
@@ -86,7 +86,7 @@ def main() -> None:
     else:
         ds = make_dataset(args.dataset, n=args.n, seed=args.seed)
     sp = specs()
-    table = summary_table({args.dataset: evaluate(ds, sp, batch_size=4, progress=False)})
+    table = summary_table({args.dataset: run_detectors(ds, sp, batch_size=4, progress=False)})
     table["accepted_floods"] = [floods(ds, s, 4) for s in sp]
     cols = ["detector", "pd_object", "false_alarms_per_image", "fragmentation", "mean_iou",
             "fom", "accepted_floods", "ms_per_image"]  # fmt: skip

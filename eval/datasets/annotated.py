@@ -35,10 +35,12 @@ class AnnotatedDataset(FileDataset):
     Every image must exist and be annotated once (a second annotation would count it twice).
     """
 
-    def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, **kw):
+    def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, *,
+                 image_ids: list[int] | None = None, **kw):  # fmt: skip
         self.scheme = scheme
         super().__init__(root, **kw)
         self.items = entries
+        self.image_ids = image_ids
         missing = [str(e[0]) for e in entries if not e[0].is_file()]
         if missing:
             raise EvalError(
@@ -51,6 +53,17 @@ class AnnotatedDataset(FileDataset):
 
     def item_files(self, i: int) -> list[Path]:
         return [self.items[i][0]]
+
+    def item_key(self, i: int) -> dict:
+        key = {"name": self.items[i][3], "path": str(self.items[i][0])}
+        if self.image_ids is not None:
+            key["image_id"] = self.image_ids[i]
+        return key
+
+    def limit(self, n: int | None) -> None:
+        super().limit(n)
+        if n is not None and self.image_ids is not None:
+            self.image_ids = self.image_ids[:n]
 
     def load(self, i: int) -> dict:
         path, size, objects, name = self.items[i]
@@ -74,6 +87,8 @@ class AnnotatedDataset(FileDataset):
             inst[m] = len(classes)
         meta = self.base_meta(name, path, None, gt="mask" if has_masks else "box")
         meta["classes"] = classes
+        if self.image_ids is not None:
+            meta["image_id"] = self.image_ids[i]
         return make_item(self.intensity(samples, path), inst, ignore, meta, boxes=boxes)
 
 
@@ -100,6 +115,7 @@ def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> An
     except FileFormatError as exc:
         raise EvalError(str(exc)) from exc
     folder = images or path.parent
+    ordered = sorted(coco.images, key=lambda im: im.id)  # pycocotools' image order
     entries = [
         (
             folder / im.file_name,
@@ -107,9 +123,10 @@ def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> An
             [(a.category, a.box, _Painter(a.box, a), a.iscrowd) for a in im.annotations],
             im.file_name,
         )
-        for im in coco.images
+        for im in ordered
     ]
-    ds = AnnotatedDataset("coco", path, entries, [path], **kw)
+    ids = [im.id for im in ordered]
+    ds = AnnotatedDataset("coco", path, entries, [path], image_ids=ids, **kw)
     ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())))
     ds.options["labels"] = "COCO segmentation (box when absent); iscrowd = ignore"
     ds.finish("annotation", limit)

@@ -169,6 +169,12 @@ class FileDataset(Dataset, ABC):
     def item_files(self, i: int) -> list[Path]:
         """The files item ``i`` reads."""
 
+    def item_key(self, i: int) -> dict:
+        """What identifies item ``i`` without reading it: ``name`` (as in its meta) and
+        ``path`` (its image file), and ``image_id`` where the annotations give one."""
+        path = self.item_files(i)[0]
+        return {"name": str(path.relative_to(self.root)), "path": str(path)}
+
 
 def require_dir(root: Path, scheme: str) -> None:
     """Refuse a missing dataset folder."""

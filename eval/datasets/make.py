@@ -59,7 +59,7 @@ def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
             cannot be read while building raises :class:`BadItemError` naming it.
     """
     if n is not None and n < 0:
-        raise EvalError(f"--n must be >= 0, got {n}")
+        raise EvalError(f"{{opt:n}}{n}: must be >= 0")
     if spec in DEFAULT_N:
         return SimDataset(spec, DEFAULT_N[spec] if n is None else n, seed)
     build = _SCHEMES.get(spec.partition(":")[0]) if ":" in spec else None

@@ -57,6 +57,10 @@ class SicdDataset(FileDataset):
     def item_files(self, i: int) -> list[Path]:
         return [self.root]
 
+    def item_key(self, i: int) -> dict:
+        r = self.items[i]
+        return {"name": f"{self.root.name}@{r[0]},{r[1]}", "path": str(self.root)}
+
     def load(self, i: int) -> dict:
         region = self.items[i]
         chip = read_sicd(self.root, region=region, max_pixels=self.max_pixels)

@@ -52,6 +52,10 @@ class SimDataset(Dataset):
         }
         return item
 
+    def item_key(self, i: int) -> dict:
+        """The name of item ``i`` (as in its meta)."""
+        return {"name": f"{self.name}/{i}"}
+
     def manifest(self) -> dict:
         """Simulated data have no files: the manifest is the generator and its options."""
         return {"generator": f"torchsar.simulate.{self.make.__name__}", **self.options}

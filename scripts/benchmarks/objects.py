@@ -17,8 +17,8 @@ import torch
 import torchsar as ts
 from torchsar.metrics import RocAccumulator, pixel_counts
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
-from torchsar_eval.detectors import DETECTORS
-from torchsar_eval.runner import Scoring, evaluate
+from torchsar_eval.registry import BUILTIN
+from torchsar_eval.runner import Scoring, run_detectors
 
 
 def _dataset(kind: str, n: int) -> list[dict]:
@@ -33,7 +33,7 @@ def _pixels_only(items: list[dict], batch: int) -> None:
         x = torch.stack([it["image"] for it in part])
         mask = torch.stack([it["mask"] for it in part])
         ignore = torch.stack([it["ignore"] for it in part])
-        for spec in DETECTORS.values():
+        for spec in BUILTIN.values():
             det = spec(x)
             pixel_counts(det.mask, mask, ignore=ignore)
             RocAccumulator().update(det.statistic, mask, ignore)
@@ -46,7 +46,7 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
         items = _dataset(kind, n)
         out.append((
             f"default run, sim-{kind} x{n}, all detectors: without / with object stage",
-            lambda items=items: evaluate(items, list(DETECTORS.values()), scoring=scoring,
+            lambda items=items: run_detectors(items, list(BUILTIN.values()), scoring=scoring,
                                          progress=False),
             lambda items=items: _pixels_only(items, 16),
         ))  # fmt: skip

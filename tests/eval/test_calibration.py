@@ -15,7 +15,7 @@ from torchsar_eval.commands.pfa.calibration import (
     binomial_interval,
     measure,
 )
-from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.registry import BUILTIN
 
 
 def test_binomial_interval_covers_and_matches_beta():
@@ -28,9 +28,9 @@ def test_binomial_interval_covers_and_matches_beta():
 def test_measure_rows_and_looks_passed():
     x = torch.empty(1, 1, 64, 64).exponential_(generator=torch.Generator().manual_seed(0))
     case = ClutterCase("gamma L=4", "gamma", looks=4.0)
-    table = measure([DETECTORS["ca"], DETECTORS["so"]], case, x, [1e-2, 1e-3])
+    table = measure([BUILTIN["ca"], BUILTIN["so"]], case, x, [1e-2, 1e-3])
     assert list(table.columns) == PFA_COLUMNS and len(table) == 4
-    ca = DETECTORS["ca"].with_params({"pfa": 1e-2, "looks": 4.0})(x)
+    ca = BUILTIN["ca"].with_options({"pfa": 1e-2, "looks": 4.0})(x)
     row = table[(table.detector == "ca") & (table.design_pfa == 1e-2)].iloc[0]
     assert row.false_alarms == int(ca.mask.sum()) and row.pixels == 64 * 64
     assert np.isclose(row.measured_pfa, row.false_alarms / row.pixels)
@@ -80,7 +80,7 @@ def test_cli_pfa_errors(tmp_path, capsys, argv, msg):
 
 def test_every_registered_detector_runs_with_its_defaults():
     x = torch.empty(2, 1, 40, 40).exponential_(generator=torch.Generator().manual_seed(1))
-    for name, spec in DETECTORS.items():
+    for name, spec in BUILTIN.items():
         d = spec(x)
         assert d.mask.shape == x.shape, name
         assert torch.equal(d.mask, d.statistic > d.threshold), name

@@ -283,7 +283,7 @@ def test_run_user_errors_before_any_work(tiny_folder, tmp_path, capsys, monkeypa
     def no_dataset(*a, **k):
         raise AssertionError("a dataset was built before the options were checked")
 
-    monkeypatch.setattr("torchsar_eval.commands.run.make_dataset", no_dataset)
+    monkeypatch.setattr("torchsar_eval.datasets.make_dataset", no_dataset)
     out = tmp_path / "never"
     base = ["run", "--dataset", f"folder:{tiny_folder}", "--out", str(out), "--no-progress"]
     assert main(base + args) == 2
@@ -368,7 +368,7 @@ def test_interrupted_run_leaves_the_previous_one_intact(
     assert _tiny_run(tiny_folder, out) == 0
     before = _snapshot(out)
     capsys.readouterr()
-    monkeypatch.setattr("torchsar_eval.commands.run.evaluate.run_shards", interrupt)
+    monkeypatch.setattr("torchsar_eval.api.run_shards", interrupt)
     handler = signal.getsignal(signal.SIGTERM)
     assert _tiny_run(tiny_folder, out, "--overwrite") == code
     hint = "; continue with the same command plus --resume"

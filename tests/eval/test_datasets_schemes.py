@@ -262,7 +262,7 @@ def test_sim_items_equal_batch_generation_in_any_order(kind, make, options):
     with pytest.raises(IndexError):
         ds[n]
     assert len(make_dataset(kind, n=5)) == 5
-    with pytest.raises(EvalError, match="n must be >= 0, got -1"):
+    with pytest.raises(EvalError, match="n=-1: must be >= 0"):
         make_dataset(kind, n=-1)
 
 

@@ -41,7 +41,7 @@ def test_choose_bin_by_hand():
 def test_parse_target():
     assert parse_target("f1") == Target("f1") and parse_target("fa=0.1") == Target("fa", 0.1)
     for bad in ("fa=-1", "fa=x", "recall=1"):
-        with pytest.raises(EvalError, match="calibrate-on"):
+        with pytest.raises(EvalError, match="calibration target must be"):
             parse_target(bad)
 
 

@@ -63,7 +63,7 @@ def test_empty_folder_is_replaced_and_a_full_one_refused(tmp_path):
     [
         (lambda p: p.write_text("x"), "exists and is not a folder"),
         (lambda p: (p.mkdir(), (p / "notes.txt").write_text("x")), "not a run"),
-        (lambda p: (p.mkdir(), _write_run(p, {})), "pass --overwrite"),
+        (lambda p: (p.mkdir(), _write_run(p, {})), "pass overwrite=True"),
     ],
 )
 def test_claim_refuses_before_any_work(tmp_path, prepare, message):

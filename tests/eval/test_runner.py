@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from torchsar._checks import InputValueError
-from torchsar_eval.detectors import DETECTORS
-from torchsar_eval.runner import evaluate
+from torchsar_eval.registry import BUILTIN
+from torchsar_eval.runner import run_detectors
 
 
 class ListDataset(torch.utils.data.Dataset):
@@ -31,7 +31,7 @@ def test_bad_pixels_raise_typed_error(bad):
     img = torch.ones(1, 32, 32)
     img[0, 3, 3] = bad
     with pytest.raises(InputValueError):
-        evaluate(ListDataset([img]), [DETECTORS["ca"]], progress=False)
+        run_detectors(ListDataset([img]), [BUILTIN["ca"]], progress=False)
 
 
 def test_results_do_not_depend_on_batch_size():
@@ -39,7 +39,7 @@ def test_results_do_not_depend_on_batch_size():
     imgs = [torch.empty(1, 40, 40).exponential_(generator=g) for _ in range(5)]
     imgs.insert(2, torch.empty(1, 30, 30).exponential_(generator=g))  # a size change mid-batch
     runs = [
-        evaluate(ListDataset(imgs), [DETECTORS["ca"]], batch_size=b, progress=False)[0]
+        run_detectors(ListDataset(imgs), [BUILTIN["ca"]], batch_size=b, progress=False)[0]
         for b in (1, 4, 16)
     ]
     for r in runs[1:]:
@@ -49,7 +49,7 @@ def test_results_do_not_depend_on_batch_size():
 
 
 def test_empty_dataset():
-    (res,) = evaluate(ListDataset([]), [DETECTORS["ca"]], progress=False)
+    (res,) = run_detectors(ListDataset([]), [BUILTIN["ca"]], progress=False)
     assert res.images == 0 and res.roc.targets == 0 and res.objects.images == 0
     assert res.objects.metrics()["tp"] == 0
 
@@ -63,6 +63,6 @@ def test_preprocess_runs_before_detectors():
 
     img = torch.ones(1, 32, 32)
     img[0, 16, 16] = 100.0
-    (res,) = evaluate(ListDataset([img]), [DETECTORS["ca"]], preprocess=stage, progress=False)
+    (res,) = run_detectors(ListDataset([img]), [BUILTIN["ca"]], preprocess=stage, progress=False)
     assert seen == [(1, 1, 32, 32)]
     assert res.pixels.fp == 0

@@ -11,7 +11,7 @@ import torch
 
 import torchsar as ts
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
-from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.registry import BUILTIN
 from torchsar_eval.runner import Scoring
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import (
@@ -45,7 +45,7 @@ def _tables(results) -> list[pd.DataFrame]:
 
 
 def _job(n: int, shard_size: int, export_coco: bool = False) -> ShardJob:
-    specs = [DETECTORS["ca"], DETECTORS["so"]]
+    specs = [BUILTIN["ca"], BUILTIN["so"]]
     scoring = Scoring(DEFAULT_RULES, DEFAULT_MATCH, replicates=10)
     return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size,
                     export_coco=export_coco)  # fmt: skip
@@ -119,7 +119,7 @@ def test_two_workers_equal_one(tmp_path):
 def _explode_on_big(x):
     if float(x.max()) > 1e30:
         raise RuntimeError("corrupt shard")
-    return DETECTORS["ca"](x)
+    return BUILTIN["ca"](x)
 
 
 class Poisoned(Chips):
@@ -133,11 +133,11 @@ class Poisoned(Chips):
 
 
 def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
-    from torchsar_eval.detectors import DetectorSpec
+    from torchsar_eval.detector import Detector
     from torchsar_eval.errors import EvalError
 
     job = _job(6, 2)
-    job = ShardJob("chips", Poisoned(6), job.indices, [DetectorSpec("x", _explode_on_big)],
+    job = ShardJob("chips", Poisoned(6), job.indices, [Detector("x", _explode_on_big)],
                    job.scoring, 2, None, 2)  # fmt: skip
     with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
         run_shards(job, tmp_path / "a", progress=False)
@@ -152,13 +152,13 @@ def _fail_first_time(x, marker):
     if float(x[0].sum()) == float(_FLAKY_SUM) and not marker.exists():
         marker.touch()
         raise RuntimeError("transient")
-    return DETECTORS["ca"](x)
+    return BUILTIN["ca"](x)
 
 
 def _die_on_big(x):
     if float(x.max()) > 1e30:
         os._exit(3)  # the worker process dies, as under the OOM killer
-    return DETECTORS["ca"](x)
+    return BUILTIN["ca"](x)
 
 
 _FLAKY_SUM = float(Chips(3)[2]["image"].sum())
@@ -168,11 +168,11 @@ _FLAKY_SUM = float(Chips(3)[2]["image"].sum())
 def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, workers):
     from functools import partial
 
-    from torchsar_eval.detectors import DetectorSpec
+    from torchsar_eval.detector import Detector
 
     if engine == "ray":
         pytest.importorskip("ray")
-    spec = DetectorSpec("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
+    spec = Detector("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
     job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, 2, None, 2)
     run = tmp_path / "run"
     merged, counts = run_shards(job, run, workers=workers, engine=engine, progress=False)
@@ -182,9 +182,9 @@ def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, worke
 
 
 def test_a_dead_worker_is_reported_not_waited_for(tmp_path):
-    from torchsar_eval.detectors import DetectorSpec
+    from torchsar_eval.detector import Detector
 
-    job = ShardJob("chips", Poisoned(6), list(range(6)), [DetectorSpec("x", _die_on_big)],
+    job = ShardJob("chips", Poisoned(6), list(range(6)), [Detector("x", _die_on_big)],
                    _job(6, 2).scoring, 2, None, 2)  # fmt: skip
     merged, counts = run_shards(job, tmp_path / "run", workers=2, skip_bad=True, progress=False)
     assert 2 in {f["shard"] for f in counts["failed"]}

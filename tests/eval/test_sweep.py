@@ -5,8 +5,9 @@ from __future__ import annotations
 import torch
 
 from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
-from torchsar_eval.detectors import DETECTORS, DetectorSpec
-from torchsar_eval.runner import evaluate
+from torchsar_eval.detector import Detector
+from torchsar_eval.registry import BUILTIN
+from torchsar_eval.runner import run_detectors
 
 
 def _batch(seed: int) -> dict:
@@ -29,11 +30,11 @@ def test_window_grid_is_the_product():
 def test_best_setting_scores_match_a_direct_run():
     batches = [_batch(0), _batch(1)]
     grid = window_grid([1, 4], [2, 4], [1e-2, 1e-6])
-    choice = best_setting(DETECTORS["ca"], grid, batches)
+    choice = best_setting(BUILTIN["ca"], grid, batches)
     assert {k: choice.params[k] for k in ("guard", "train", "pfa")} in grid
     items = [{k: v[i] for k, v in b.items()} for b in batches for i in range(2)]
-    spec = DetectorSpec("ca", DETECTORS["ca"].fn, choice.params)
-    (direct,) = evaluate(items, [spec], batch_size=2, progress=False)
+    spec = Detector("ca", BUILTIN["ca"].fn, choice.params)
+    (direct,) = run_detectors(items, [spec], batch_size=2, progress=False)
     metrics = direct.objects.metrics()
     assert (metrics["fom"], metrics["mean_iou"]) == (
         choice.scores["fom"],
@@ -43,5 +44,5 @@ def test_best_setting_scores_match_a_direct_run():
 
 
 def test_windows_larger_than_the_images_are_skipped():
-    choice = best_setting(DETECTORS["ca"], window_grid([1, 40], [2], [1e-3]), [_batch(0)])
+    choice = best_setting(BUILTIN["ca"], window_grid([1, 40], [2], [1e-3]), [_batch(0)])
     assert choice.params["guard"] == 1

@@ -22,13 +22,14 @@ import torchsar as ts
 from torchsar_eval.commands.compare_region.panel import detection_panel
 from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
 from torchsar_eval.datasets import make_dataset
-from torchsar_eval.detectors import DETECTORS, DetectorSpec
+from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.options import at_least, floats, ints, names
 from torchsar_eval.output import default_out, file_slugs, result_dir, write_config
 from torchsar_eval.paths import SHARED_DATA
 from torchsar_eval.plots import slug
-from torchsar_eval.runner import batches, evaluate
+from torchsar_eval.registry import BUILTIN
+from torchsar_eval.runner import batches, run_detectors
 from torchsar_eval.tables import markdown, summary_table, timing_table
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
@@ -60,7 +61,7 @@ def _sweep(args: argparse.Namespace) -> Sweep:
     at_least(args.mstar_n, "--mstar-n", 2)
     at_least(args.batch_size, "--batch-size", 1)
     at_least(args.max_ring, "--max-ring", 1)
-    window_cfars = [d for d in DETECTORS if d != "region"]
+    window_cfars = [d for d in BUILTIN if d != "region"]
     return Sweep(
         guards=ints(args.guards, "--guards", minimum=0),
         trains=ints(args.trains, "--trains", minimum=1),
@@ -141,14 +142,14 @@ def _ring(q: dict) -> int:
     return (2 * (q["guard"] + q["train"]) + 1) ** 2 - (2 * q["guard"] + 1) ** 2
 
 
-def _region_specs() -> list[DetectorSpec]:
+def _region_specs() -> list[Detector]:
     return [
-        DetectorSpec("region-paper", ts.region.region_cfar, {"preset": "paper"}),
-        DetectorSpec("region", ts.region.region_cfar, {}),
+        Detector("region-paper", ts.region.region_cfar, {"preset": "paper"}),
+        Detector("region", ts.region.region_cfar, {}),
     ]
 
 
-def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[DetectorSpec], list]:
+def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detector], list]:
     """Each requested window CFAR at its best grid point on the tuning set."""
     tb = list(batches(tune, sweep.batch_size))
     grid = window_grid(sweep.guards, sweep.trains, sweep.pfas)
@@ -158,8 +159,8 @@ def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detect
         if not g:
             notes.append(f"{name}: no OS window within --max-ring {sweep.max_ring}: skipped")
             continue
-        c = best_setting(DETECTORS[det], g, tb)
-        specs.append(DetectorSpec(det, DETECTORS[det].fn, c.params))
+        c = best_setting(BUILTIN[det], g, tb)
+        specs.append(Detector(det, BUILTIN[det].fn, c.params))
         chosen.append({"dataset": name, "detector": det, **c.params, "tuning_fom": c.scores["fom"]})
     return specs, chosen
 
@@ -178,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
             specs, rows = _tuned(tune, sweep, notes, name)
             specs = _region_specs() + specs
             chosen += rows
-            results[name] = evaluate(
+            results[name] = run_detectors(
                 ds, specs, batch_size=sweep.batch_size, progress=not args.no_progress, desc=name
             )
             detection_panel(

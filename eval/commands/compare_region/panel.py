@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.detector import Detector
 from torchsar_eval.plots import save
 
 __all__ = ["detection_panel"]
@@ -32,7 +32,7 @@ def _overlay(ax, img: np.ndarray, mask: np.ndarray, title: str) -> None:
     ax.axis("off")
 
 
-def detection_panel(items: list[dict], specs: list[DetectorSpec], path: Path) -> None:
+def detection_panel(items: list[dict], specs: list[Detector], path: Path) -> None:
     """Draw ``items`` (dataset dicts with ``image``, ``mask``) against every detector."""
     cols = 2 + len(specs)
     fig, axes = plt.subplots(len(items), cols, figsize=(2.1 * cols, 2.2 * len(items)))

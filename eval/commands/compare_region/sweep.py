@@ -22,7 +22,7 @@ from torch import Tensor
 import torchsar as ts
 from torchsar.metrics import ObjectState, match_batch
 from torchsar.objects import discriminate
-from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.runner import Scoring
 from torchsar_eval.scoring import batch_truth
@@ -65,13 +65,13 @@ def _scores(stats: list[Tensor], thr: float, batches: list[dict], scoring: Scori
     return state.metrics()
 
 
-def _threshold(spec: DetectorSpec, params: Mapping[str, Any]) -> float:
+def _threshold(spec: Detector, params: Mapping[str, Any]) -> float:
     """The detector's design threshold for ``params`` (no image needed)."""
     return ts.cfar.threshold(spec.fn, **params)
 
 
 def best_setting(
-    spec: DetectorSpec,
+    spec: Detector,
     grid: list[dict[str, Any]],
     batches: list[dict],
     scoring: Scoring | None = None,

@@ -19,13 +19,13 @@ from tqdm import tqdm
 
 from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
 from torchsar_eval.datasets import make_dataset
-from torchsar_eval.detectors import DETECTORS, resolve
 from torchsar_eval.options import at_least, floats, names
 from torchsar_eval.output import default_out, result_dir, write_config
 from torchsar_eval.plots import detector_style, save, slug
+from torchsar_eval.registry import BUILTIN
 from torchsar_eval.tables import markdown
 
-DEFAULT_DETECTORS = [n for n in DETECTORS if n != "region"]
+DEFAULT_DETECTORS = [n for n in BUILTIN if n != "region"]
 DEFAULT_PFAS = (1e-2, 1e-3, 1e-4)
 
 
@@ -58,7 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     wanted = ",".join(DEFAULT_DETECTORS) if args.detectors is None else args.detectors
-    specs = resolve(names(wanted, "--detectors", DETECTORS, what="detector"), {})
+    specs = [BUILTIN[n] for n in names(wanted, "--detectors", BUILTIN, what="detector")]
     pfas = floats(args.pfa, "--pfa", above=0, below=1)
     at_least(args.size, "--size", 16)
     at_least(args.images, "--images", 1)

@@ -14,7 +14,7 @@ import pandas as pd
 from scipy import stats
 from torch import Tensor
 
-from torchsar_eval.detectors import DetectorSpec
+from torchsar_eval.detector import Detector
 
 __all__ = [
     "CLUTTER",
@@ -89,16 +89,16 @@ def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float
     return lo, hi
 
 
-def _params_for(spec: DetectorSpec, case: ClutterCase, pfa: float) -> DetectorSpec:
+def _params_for(spec: Detector, case: ClutterCase, pfa: float) -> Detector:
     """The detector at design ``pfa``; a detector with a ``looks`` option gets the clutter's."""
     over: dict[str, object] = {"pfa": pfa}
     if "looks" in inspect.signature(spec.fn).parameters:
         over["looks"] = case.looks
-    return spec.with_params(over)
+    return spec.with_options(over)
 
 
 def measure(
-    specs: Sequence[DetectorSpec], case: ClutterCase, x: Tensor, pfas: Sequence[float]
+    specs: Sequence[Detector], case: ClutterCase, x: Tensor, pfas: Sequence[float]
 ) -> pd.DataFrame:
     """Measured Pfa of every detector at every design ``pfa`` on clutter ``x`` (every pixel
     counted; the interval treats pixels as independent trials, which neighbouring windows
@@ -130,7 +130,7 @@ def measure(
 
 
 def measure_dataset(
-    specs: Sequence[DetectorSpec], name: str, dataset, pfas: Sequence[float], batch_size: int
+    specs: Sequence[Detector], name: str, dataset, pfas: Sequence[float], batch_size: int
 ) -> pd.DataFrame:
     """Measured Pfa of every detector at every design ``pfa`` on a dataset's clutter pixels
     (neither target nor ignore): how far real clutter is from the detectors' models."""
@@ -141,7 +141,7 @@ def measure_dataset(
         clutter = ~batch["mask"] & ~batch["ignore"]
         for spec in specs:
             for pfa in pfas:
-                det = spec.with_params({"pfa": pfa})(batch["image"])
+                det = spec.with_options({"pfa": pfa})(batch["image"])
                 c = counts[(spec.name, pfa)]
                 c[0] += int((det.mask & clutter).sum())
                 c[1] += int(clutter.sum())

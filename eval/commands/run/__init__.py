@@ -1,32 +1,47 @@
 """``torchsar-eval run``: evaluate detectors on datasets; summary, ROC tables and plots.
 
-The command-line edge: options are parsed and validated here, then turned into the plain
-typed settings of :mod:`torchsar_eval.commands.run.evaluate` (how shards run, calibration)
-and handed to :func:`~torchsar_eval.commands.run.evaluate.execute`;
-:mod:`torchsar_eval.commands.run.report` writes the tables and plots.
+The command-line edge of :func:`torchsar_eval.evaluate`: options are parsed and validated
+here (:mod:`torchsar_eval.commands.run.options`), turned into the typed settings of the
+Python API and handed to it; this module prints the summary.
 """
 
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
-from torchsar._checks import TorchSARError
-from torchsar.metrics import Matching
-from torchsar.objects import ObjectRules
 from torchsar.speckle import FILTERS
-from torchsar_eval.commands.run.evaluate import Calibration, Execution, RunPlan, execute
-from torchsar_eval.commands.run.report import print_summary
-from torchsar_eval.datasets import DATASETS, make_dataset
-from torchsar_eval.detectors import DETECTORS
+from torchsar_eval.api import Calibration, Execution, Results, evaluate
+from torchsar_eval.commands.run.options import check_run_args, scoring_from
+from torchsar_eval.datasets import DATASETS
 from torchsar_eval.errors import EvalError
-from torchsar_eval.options import check_run_args
-from torchsar_eval.output import default_out
-from torchsar_eval.runner import DEFAULT_MATCH, DEFAULT_RULES, Scoring
+from torchsar_eval.output import check_out
+from torchsar_eval.registry import available
+from torchsar_eval.runner import DEFAULT_MATCH, DEFAULT_RULES
 
 __all__ = ["DEFAULT_DATASETS", "DEFAULT_MATCH", "DEFAULT_RULES", "add_parser", "run"]
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
+
+SUMMARY_SHOWN = [
+    "dataset",
+    "detector",
+    "images",
+    "pd_pixel",
+    "pfa_pixel",
+    "tp",
+    "fp",
+    "fn",
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "pd_at_1_fa_per_image",
+    "false_alarms_per_image",
+    "mean_iou",
+    "ms_per_image",
+]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -46,7 +61,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--detectors",
         default=None,
-        help=f"comma-separated detectors (default: all): {','.join(DETECTORS)}",
+        metavar="LIST",
+        help="comma-separated detectors: built-in or registered names "
+        f"({', '.join(available())}), import paths package.module:name, or NAME=REFERENCE "
+        "to name a row (default: every built-in)",
+    )
+    p.add_argument(
+        "--predictions",
+        action="append",
+        default=[],
+        metavar="NAME=FILE",
+        help="score saved predictions as detector NAME (repeatable): COCO results .json "
+        "(bbox and/or segmentation, score), points .csv (image,row,col,score[,length_m]) "
+        "or a folder of per-image masks; needs one --dataset",
+    )
+    p.add_argument(
+        "--device",
+        default=None,
+        help="where detectors run: cpu, cuda, cuda:N (batches move there; scoring stays on "
+        "the CPU; default: cpu)",
     )
     p.add_argument("--n", type=int, default=None, help="images per dataset (default: per dataset)")
     p.add_argument("--batch-size", type=int, default=16)
@@ -119,7 +152,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "summary (default: stop at the first, naming it, and write no tables)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, claims_out=True)
 
 
 def add_scoring_options(p: argparse.ArgumentParser) -> None:
@@ -153,12 +186,33 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--match",
-        choices=["centroid", "mask", "box"],
+        choices=["centroid", "mask", "box", "distance"],
         default=DEFAULT_MATCH.kind,
         help=f"matching rule of the operating point and FROC (default "
-        f"{DEFAULT_MATCH.kind}); AP always uses IoU",
+        f"{DEFAULT_MATCH.kind}); AP uses IoU, or the distance rule with --match distance",
     )
     g.add_argument("--iou", type=float, default=0.5, help="IoU threshold of --match mask|box")
+    g.add_argument(
+        "--max-distance",
+        default=None,
+        metavar="D",
+        help="--match distance: the tolerance, e.g. 200m (with the pixel spacing) or 20px",
+    )
+    g.add_argument(
+        "--assign",
+        choices=["optimal", "greedy"],
+        default="optimal",
+        help="--match distance at the operating point: optimal assignment (xView3-SAR) or "
+        "greedy by score (default optimal; AP and FROC are always greedy)",
+    )
+    g.add_argument(
+        "--instances",
+        choices=["auto", "discriminate"],
+        default="auto",
+        help="auto: score each detector's own instances when it returns them (region "
+        "labels, boxes, masks); discriminate: every detector's statistic through the same "
+        "discrimination stage (default auto)",
+    )
     g.add_argument(
         "--bootstrap",
         type=int,
@@ -177,27 +231,13 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
                    help="share of each dataset's images in the calibration split")  # fmt: skip
 
 
-def scoring_from(args: argparse.Namespace) -> Scoring:
-    """The run's :class:`Scoring` from the parsed options (validated here, before any work)."""
-    if args.bootstrap < 0:
-        raise EvalError(f"--bootstrap must be >= 0, got {args.bootstrap}")
-    try:
-        rules = ObjectRules(
-            closing=args.closing, min_area=args.min_area, max_area=args.max_area,
-            units=args.area_units, floor=args.floor,
-        )  # fmt: skip
-        matching = Matching(kind=args.match, iou=args.iou)
-    except TorchSARError as exc:
-        raise EvalError(f"bad object/matching option: {exc}") from exc
-    return Scoring(rules, matching, args.bootstrap, args.seed)
-
-
 def run(args: argparse.Namespace) -> int:
-    """The ``run`` sub-command: validate, build the datasets, execute, print the summary."""
-    specs, preprocess, despeckle_opts = check_run_args(args)
+    """The ``run`` sub-command: validate, evaluate, print the summary."""
+    check_out(args.out, overwrite=args.overwrite, resume=args.resume)  # before any other work
+    detectors, preprocess, despeckle_opts = check_run_args(args)
+    scoring = scoring_from(args)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
-    scoring = scoring_from(args)
     execution = Execution(
         batch_size=args.batch_size,
         shard_size=args.shard_size,
@@ -206,26 +246,49 @@ def run(args: argparse.Namespace) -> int:
         address=args.address,
         skip_bad=args.skip_bad,
         progress=not args.no_progress,
+        device=args.device,
     )
     calibration = None
     if args.calibrate_on is not None:
         calibration = Calibration(args.calibrate_on, args.calibration_fraction)
-    plan = RunPlan(
-        specs=specs,
+    datasets = args.dataset or DEFAULT_DATASETS
+    if args.predictions and len(datasets) != 1:
+        raise EvalError("--predictions scores one dataset: name it with --dataset")
+    results = evaluate(
+        datasets,
+        detectors,
         scoring=scoring,
-        preprocess=preprocess,
-        despeckle=None if args.despeckle is None else {"filter": args.despeckle, **despeckle_opts},
         execution=execution,
         calibration=calibration,
+        preprocess=preprocess,
+        despeckle=None if args.despeckle is None else {"filter": args.despeckle, **despeckle_opts},
         window_units=args.window_units,
         export_coco=args.export_coco,
+        out=args.out,
+        overwrite=args.overwrite,
+        resume=args.resume,
+        n=args.n,
         seed=args.seed,
     )
-    datasets = {
-        name: make_dataset(name, n=args.n, seed=args.seed)
-        for name in (args.dataset or DEFAULT_DATASETS)
-    }
-    out = args.out or default_out("run")
-    stats, files = execute(plan, datasets, out, resume=args.resume)
-    print_summary(out, stats, files)
+    print_summary(results)
     return 0
+
+
+def print_summary(results: Results) -> None:
+    """The console summary: the headline columns, each dataset's throughput and problems."""
+    summary = results.summary.merge(results.timing, on=["dataset", "detector", "images"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for name, st in results.stats.items():
+        print(
+            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
+            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
+            f"(done {st['done']}, resumed {st['skipped']}, retried {st['retried']}, "
+            f"failed {len(st['failed'])})"
+        )
+        for f in st["failed"]:
+            print(f"  FAILED shard {f['shard']}: {f['error']}")
+        for b in st["skipped_items"]:
+            print(f"  skipped unreadable {b['file']}")
+    print(f"\nwrote {results.out}/: " + " ".join(results.files))

@@ -1,0 +1,130 @@
+"""The command-line edge of ``torchsar-eval run``: ``--detectors``, ``--predictions`` and
+``--param`` parsed into detectors, dry runs of overridden built-ins, the scoring options,
+all checked before any dataset is built."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+from torch import Tensor
+
+from torchsar._checks import TorchSARError
+from torchsar.metrics import Matching
+from torchsar.objects import ObjectRules
+from torchsar_eval.detector import Detector
+from torchsar_eval.errors import EvalError
+from torchsar_eval.options import at_least, despeckler, dry_run, parse_params
+from torchsar_eval.registry import BUILTIN, load
+from torchsar_eval.runner import Scoring
+
+__all__ = ["RunChoices", "check_run_args", "detector_refs", "scoring_from"]
+
+
+class RunChoices(NamedTuple):
+    """The validated choices of ``torchsar-eval run``."""
+
+    detectors: list[Detector]
+    preprocess: Callable[[Tensor], Tensor] | None
+    despeckle: dict[str, Any]
+
+
+def detector_refs(text: str) -> list[tuple[str | None, str]]:
+    """``(name, reference)`` of each comma-separated ``--detectors`` item: a built-in or
+    registered name, ``package.module:name``, or ``NAME=REFERENCE`` to name the row.
+
+    Example:
+        >>> detector_refs("ca, mine=pkg.mod:Det, pkg.mod:fn")
+        [(None, 'ca'), ('mine', 'pkg.mod:Det'), (None, 'pkg.mod:fn')]
+    """
+    items = [v.strip() for v in str(text).split(",") if v.strip()]
+    if not items:
+        raise EvalError(f"--detectors is empty: give at least one detector, got {text!r}")
+    out = []
+    for item in items:
+        name, eq, ref = item.partition("=")
+        if eq and not (name.strip() and ref.strip()):
+            raise EvalError(f"--detectors item {item!r} must look like NAME=REFERENCE")
+        out.append((name.strip(), ref.strip()) if eq else (None, item))
+    return out
+
+
+def _predictions(items: list[str]) -> list[tuple[str, str]]:
+    out = []
+    for item in items:
+        name, eq, path = item.partition("=")
+        if not (eq and name.strip() and path.strip()):
+            raise EvalError(f"--predictions must look like NAME=FILE, got {item!r}")
+        out.append((name.strip(), path.strip()))
+    return out
+
+
+def _resolve(args: argparse.Namespace, overrides: dict) -> list[Detector]:
+    """Every detector of the run, options applied, names unique."""
+    from torchsar_eval.saved import predictions
+
+    refs = [] if args.detectors is None and args.predictions else (
+        [(None, n) for n in BUILTIN] if args.detectors is None else detector_refs(args.detectors)
+    )  # fmt: skip
+    names = [name or ref.rpartition(":")[2].rpartition(".")[2] for name, ref in refs]
+    names += [n for n, _ in _predictions(args.predictions)]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise EvalError(f"--detectors / --predictions name {', '.join(twice)} more than once: "
+                        "name each row with NAME=...")  # fmt: skip
+    stray = sorted(set(overrides) - set(names))
+    if stray:
+        raise EvalError(f"--param given for detector(s) not being run: {stray}")
+    dets = [load(ref, name=name, options=overrides.get(name or ref, {})) for name, ref in refs]
+    for name, path in _predictions(args.predictions):
+        opts = dict(overrides.get(name, {}))
+        unknown = sorted(set(opts) - {"threshold", "instances", "format"})
+        if unknown:
+            raise EvalError(f"--param {name}.{unknown[0]}: saved predictions take only "
+                            "threshold, instances and format")  # fmt: skip
+        dets.append(predictions(path, name=name, **opts))
+    return dets
+
+
+def check_run_args(args: argparse.Namespace) -> RunChoices:
+    """Validate every option of ``torchsar-eval run`` before any dataset is built."""
+    at_least(args.n, "--n", 1)
+    at_least(args.batch_size, "--batch-size", 1)
+    overrides = parse_params(args.param)
+    detectors = _resolve(args, overrides)
+    in_metres = getattr(args, "window_units", "px") == "m"  # checked once converted
+    for det in detectors:
+        if det.ref in BUILTIN and det.name in overrides and not in_metres:
+            dry_run(det.fn, det.params, f"detector {det.name}")
+    preprocess, despeckle = despeckler(args.despeckle, args.despeckle_param)
+    return RunChoices(detectors, preprocess, despeckle)
+
+
+def _matching(args: argparse.Namespace) -> Matching:
+    if args.match != "distance":
+        if args.max_distance is not None:
+            raise EvalError("--max-distance applies to --match distance only")
+        return Matching(kind=args.match, iou=args.iou)
+    if args.max_distance is None:
+        raise EvalError("--match distance needs --max-distance (e.g. 200m or 20px)")
+    from torchsar.metrics.distance import parse_distance
+
+    value, units = parse_distance(args.max_distance)
+    return Matching(kind="distance", max_distance=value, distance_units=units,
+                    assign=args.assign)  # fmt: skip
+
+
+def scoring_from(args: argparse.Namespace) -> Scoring:
+    """The run's :class:`Scoring` from the parsed options (validated here, before any work)."""
+    if args.bootstrap < 0:
+        raise EvalError(f"--bootstrap must be >= 0, got {args.bootstrap}")
+    try:
+        rules = ObjectRules(
+            closing=args.closing, min_area=args.min_area, max_area=args.max_area,
+            units=args.area_units, floor=args.floor,
+        )  # fmt: skip
+        matching = _matching(args)
+    except TorchSARError as exc:
+        raise EvalError(f"bad object/matching option: {exc}") from exc
+    return Scoring(rules, matching, args.bootstrap, args.seed, instances=args.instances)

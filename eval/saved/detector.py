@@ -1,0 +1,190 @@
+"""Saved predictions as a detector: read once, bound to a dataset (every prediction must
+refer to one of its images), then called batch by batch like any detector.
+
+Worker processes receive the file's path and the row -> item map, and read the file again
+(once per process), so a large file is never pickled per shard.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+from torch import Tensor
+from torch.utils.data import Dataset
+
+from torchsar.detection import Detection
+from torchsar.objects import Objects
+from torchsar_eval.detector import Detector
+from torchsar_eval.errors import EvalError
+from torchsar_eval.saved.keys import dataset_keys, locate
+from torchsar_eval.saved.masks import MaskFolder
+from torchsar_eval.saved.table import (
+    IOU_TYPES,
+    PredictionTable,
+    read_coco_results,
+    read_points,
+)
+
+__all__ = ["FORMATS", "SavedPredictions", "predictions"]
+
+FORMATS = ("auto", "coco", "points", "masks")
+
+_TABLES: dict[tuple, PredictionTable] = {}
+"""Tables read in this process, by (path, size, mtime, format, iou_type)."""
+
+
+def _format(path: Path, fmt: str) -> str:
+    if fmt not in FORMATS:
+        raise EvalError(f"predictions format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if not path.exists():
+        raise EvalError(f"predictions {path} do not exist")
+    if fmt != "auto":
+        return fmt
+    if path.is_dir():
+        return "masks"
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        return "coco"
+    if suffix in (".csv", ".txt"):
+        return "points"
+    raise EvalError(f"predictions {path}: cannot tell the format from the name: give "
+                    "format='coco' (JSON), 'points' (CSV) or 'masks' (a folder)")  # fmt: skip
+
+
+def _read(path: Path, fmt: str, iou_type: str) -> PredictionTable | MaskFolder:
+    if fmt == "masks":
+        return MaskFolder(path)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, fmt, iou_type)
+    if key not in _TABLES:
+        _TABLES[key] = read_coco_results(path, iou_type) if fmt == "coco" else read_points(path)
+    return _TABLES[key]
+
+
+def _segmentation_pixels(seg: object, h: int, w: int) -> np.ndarray:
+    """Flat pixel indices (``row * W + col``) of a COCO segmentation at ``(h, w)``."""
+    from pycocotools import mask as mask_utils
+
+    if isinstance(seg, list):
+        rle = mask_utils.merge(mask_utils.frPyObjects(seg, h, w))
+    elif isinstance(seg.get("counts"), list):
+        rle = mask_utils.frPyObjects(seg, h, w)
+    else:
+        size = seg.get("size")
+        if size is not None and list(size) != [h, w]:
+            raise EvalError(f"a segmentation of size {size} on an image of {h}x{w}")
+        counts = seg["counts"]
+        rle = {"size": [h, w], "counts": counts.encode() if isinstance(counts, str) else counts}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        m = mask_utils.decode(rle)
+    return np.flatnonzero(np.asarray(m, bool).reshape(h, w))
+
+
+class SavedPredictions:
+    """The predictions in one file, to bind to a dataset (:meth:`bind`) before use.
+
+    Args:
+        path: a COCO results JSON, a point CSV or a folder of per-image masks.
+        format: ``"auto"`` (by the name), ``"coco"``, ``"points"`` or ``"masks"``.
+        iou_type: COCO results: ``"auto"`` (``segm`` when every entry has a
+            segmentation), ``"bbox"`` or ``"segm"``.
+        threshold: operating threshold of the scores (needed by score-map masks).
+    """
+
+    def __init__(self, path: str | Path, *, format: str = "auto", iou_type: str = "auto",
+                 threshold: float | None = None) -> None:  # fmt: skip
+        self.path = Path(path)
+        self.format = _format(self.path, format)
+        if iou_type not in IOU_TYPES:
+            raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
+        self.iou_type, self.threshold = iou_type, threshold
+        self.table = _read(self.path, self.format, iou_type)  # read now: errors before any work
+        self._item_rows: tuple[np.ndarray, np.ndarray] | None = None
+
+    def bind(self, dataset: Dataset, name: str) -> SavedPredictions:
+        """These predictions with each row's dataset item (every row must have one)."""
+        bound = SavedPredictions.__new__(SavedPredictions)
+        bound.__dict__.update(self.__dict__)
+        items = locate(self.table.refs, dataset_keys(dataset), f"predictions {self.path} on "
+                       f"dataset {name}")  # fmt: skip
+        order = np.argsort(items, kind="stable")
+        bound._item_rows = (items[order], order)
+        return bound
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["table"] = None  # read again by each process
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.table = _read(self.path, self.format, self.iou_type)
+
+    def rows_of(self, item: int) -> np.ndarray:
+        """The rows of dataset item ``item``, in file order."""
+        if self._item_rows is None:
+            raise EvalError(f"predictions {self.path} are not bound to a dataset")
+        items, order = self._item_rows
+        lo, hi = np.searchsorted(items, [item, item + 1])
+        return order[lo:hi]
+
+    def __call__(self, images: Tensor, meta: list[dict]) -> Objects | Detection:
+        b, c, h, w = images.shape
+        rows = [self.rows_of(int(m["index"])) for m in meta]
+        if isinstance(self.table, MaskFolder):
+            return self.table.batch(rows, (b, c, h, w), self.threshold)
+        plane = np.concatenate([np.full(r.size, k * c, np.int64) for k, r in enumerate(rows)])
+        r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        t = self.table
+        classes = None if t.classes is None else t.classes[r]
+        common = {"plane": plane, "planes": b * c, "classes": classes}
+        if t.geometry == "mask":
+            pixels = [_segmentation_pixels(t.segmentation[i], h, w) for i in r]
+            return Objects.from_pixel_lists(pixels, t.score[r], shape=(h, w), **common)
+        if t.geometry == "box":
+            return Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)
+        length = None if t.length_m is None else t.length_m[r]
+        return Objects.from_points(t.point[r], t.score[r], shape=(h, w), length_m=length,
+                                   **common)  # fmt: skip
+
+
+def predictions(
+    path: str | Path,
+    *,
+    name: str | None = None,
+    format: str = "auto",
+    iou_type: str = "auto",
+    threshold: float | None = None,
+    instances: str = "auto",
+) -> Detector:
+    """Saved predictions as a detector for :func:`torchsar_eval.evaluate`.
+
+    Args:
+        path: a COCO results JSON (``[{image_id, bbox, segmentation, score}]``), a point
+            CSV (``image,row,col,score[,length_m]``) or a folder of per-image masks
+            (``<image>.png|.npy|.tif``: integer instance ids with optional
+            ``<image>.scores.json`` ``{"id": score}``, or a float score map).
+        name: the row name (default: the file's stem).
+        format, iou_type: see :class:`SavedPredictions`.
+        threshold: the operating threshold of the scores (``None``: every prediction
+            counts at the operating point; choose one with a calibration instead).
+        instances: ``"discriminate"`` sends mask predictions through the discrimination
+            stage instead of scoring them as they are.
+
+    Example:
+        >>> import json, tempfile, pathlib
+        >>> f = pathlib.Path(tempfile.mkdtemp()) / "dets.json"
+        >>> _ = f.write_text(json.dumps([{"image_id": 1, "bbox": [2, 3, 4, 5], "score": 0.9}]))
+        >>> d = predictions(f, threshold=0.5)
+        >>> d.name, d.threshold
+        ('dets', 0.5)
+    """
+    saved = SavedPredictions(path, format=format, iou_type=iou_type, threshold=threshold)
+    opts = {"path": str(path), "format": saved.format}
+    if saved.format == "coco":
+        opts["iou_type"] = (saved.table.geometry == "mask" and "segm") or "bbox"
+    return Detector(name or Path(path).stem, saved, opts, threshold=threshold,
+                    instances=instances, call_options={})  # fmt: skip

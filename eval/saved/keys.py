@@ -1,0 +1,88 @@
+"""Which dataset item a saved prediction refers to.
+
+A prediction names its image by a COCO image id (an integer) or by a name. An integer is the
+item's COCO id when the dataset has COCO ids (``coco:`` datasets), else its 1-based position
+in the dataset (the ids ``torchsar-eval run --export-coco`` writes). A name is matched to an
+item's name (as in ``per_image.csv``), else its file name, else its file name without
+extension; a name that is all digits may also be an integer id.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import PurePath
+
+import numpy as np
+from torch.utils.data import Dataset
+
+from torchsar_eval.errors import EvalError
+
+__all__ = ["dataset_keys", "locate"]
+
+
+def dataset_keys(dataset: Dataset) -> list[dict]:
+    """Each item's ``name``, ``path`` and ``image_id`` where known, without reading the
+    images when the dataset can say (``item_key``), else from each item's metadata."""
+    key = getattr(dataset, "item_key", None)
+    if key is not None:
+        return [key(i) for i in range(len(dataset))]
+    out = []
+    for i in range(len(dataset)):
+        meta = dataset[i]["meta"]
+        out.append({k: meta[k] for k in ("name", "path", "image_id") if meta.get(k) is not None})
+    return out
+
+
+def _unique_index(values: list[str | None]) -> dict[str, int]:
+    """Value -> item for values held by exactly one item."""
+    seen: dict[str, list[int]] = defaultdict(list)
+    for i, v in enumerate(values):
+        if v is not None:
+            seen[v].append(i)
+    return {v: items[0] for v, items in seen.items() if len(items) == 1}
+
+
+def _by_name(keys: list[dict]) -> list[dict[str, int]]:
+    names = [k.get("name") for k in keys]
+    files = [PurePath(k.get("path") or k.get("name") or "").name or None for k in keys]
+    stems = [PurePath(f).stem if f else None for f in files]
+    return [_unique_index([str(n) if n is not None else None for n in names]),
+            _unique_index(files), _unique_index(stems)]  # fmt: skip
+
+
+def locate(refs: np.ndarray, keys: list[dict], what: str) -> np.ndarray:
+    """The item index of each reference (see the module docstring).
+
+    Raises:
+        EvalError: a reference no item has (naming the first and the count), or a name
+            that several items share.
+    """
+    ids = [k.get("image_id") for k in keys]
+    by_id = _unique_index(ids) if any(i is not None for i in ids) else None
+    tables = _by_name(keys)
+    out = np.full(len(refs), -1, dtype=np.int64)
+    memo: dict[object, int] = {}
+    for r, ref in enumerate(refs.tolist()):
+        if ref not in memo:
+            memo[ref] = _find(ref, by_id, tables, len(keys))
+        out[r] = memo[ref]
+    missing = [ref for ref, i in memo.items() if i < 0]
+    if missing:
+        raise EvalError(f"{what}: {len(missing)} image(s) not in the dataset, e.g. "
+                        f"{missing[0]!r} (images are matched by COCO id, or by name, file "
+                        "name or file stem; ids of other datasets count from 1 in dataset "
+                        "order)")  # fmt: skip
+    return out
+
+
+def _find(ref: object, by_id: dict | None, tables: list[dict[str, int]], n: int) -> int:
+    if isinstance(ref, str):
+        for table in tables:
+            if ref in table:
+                return table[ref]
+        if not ref.isdigit():
+            return -1
+        ref = int(ref)
+    if by_id is not None:
+        return by_id.get(ref, -1)
+    return ref - 1 if isinstance(ref, int) and 1 <= ref <= n else -1

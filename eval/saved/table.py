@@ -1,0 +1,186 @@
+"""Saved predictions as one table: a row per prediction, referring to its image by COCO id
+or by name, and the readers of the COCO results and point CSV formats.
+
+- COCO results JSON (what ``pycocotools``' ``loadRes`` reads, and what
+  ``torchsar-eval run --export-coco`` writes): a list of ``{"image_id", "score", "bbox":
+  [x, y, w, h]}`` and/or ``"segmentation"`` (polygons or RLE), optional ``"category_id"``;
+  ``"file_name"`` may stand for ``"image_id"``. The IoU type is ``segm`` when every row has
+  a segmentation, else ``bbox`` (or as asked).
+- Point CSV (centroid detectors, xView3-SAR style): one row per detection with an image
+  column (``image``, ``file_name``, ``image_id`` or ``scene_id``), ``row`` and ``col``
+  (or ``detect_scene_row`` / ``detect_scene_column``), optional ``score`` (1 when absent),
+  ``length_m`` (or ``vessel_length_m``) and ``class``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from torchsar_eval.errors import EvalError
+
+__all__ = ["IOU_TYPES", "PredictionTable", "read_coco_results", "read_points"]
+
+IOU_TYPES = ("auto", "bbox", "segm")
+
+
+@dataclass(frozen=True)
+class PredictionTable:
+    """Predictions of one file.
+
+    Attributes:
+        path: the file.
+        refs: ``(N,)`` object array: each row's image, a COCO id (int) or a name (str).
+        score: float64 ``(N,)``.
+        geometry: ``"mask"`` (``segmentation``), ``"box"`` (``box``) or ``"point"``.
+        box: float64 ``(N, 4)`` ``(r0, c0, r1, c1)`` (boxes and masks' boxes).
+        segmentation: the rows' COCO segmentations (``geometry == "mask"``), else ``None``.
+        point: float64 ``(N, 2)`` (row, col) for points, else ``None``.
+        classes: ``(N,)`` object array of class names, or ``None``.
+        length_m: float64 ``(N,)`` lengths in metres (NaN unknown), or ``None``.
+    """
+
+    path: Path
+    refs: np.ndarray
+    score: np.ndarray
+    geometry: str
+    box: np.ndarray
+    segmentation: list | None = None
+    point: np.ndarray | None = None
+    classes: np.ndarray | None = None
+    length_m: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.score.size)
+
+
+def _fail(path: Path, message: str) -> EvalError:
+    return EvalError(f"predictions {path}: {message}")
+
+
+def _number(value: object, path: Path, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        raise _fail(path, f"{what} must be a number, got {value!r:.40}")
+    return float(value)
+
+
+def _coco_row(row: object, k: int, path: Path) -> tuple:
+    if not isinstance(row, dict):
+        raise _fail(path, f"entry {k} is not an object: {row!r:.60}")
+    ref = row.get("image_id", row.get("file_name"))
+    if isinstance(ref, bool) or not isinstance(ref, int | str):
+        raise _fail(path, f"entry {k} has no image_id (an integer) or file_name")
+    score = _number(row.get("score"), path, f"entry {k} score")
+    box = row.get("bbox")
+    if box is not None:
+        if not isinstance(box, list) or len(box) != 4:
+            raise _fail(path, f"entry {k} bbox must be [x, y, width, height]")
+        x, y, w, h = (_number(v, path, f"entry {k} bbox") for v in box)
+        if w < 0 or h < 0 or not all(map(math.isfinite, (x, y, w, h))):
+            raise _fail(path, f"entry {k} bbox {box} has a negative or infinite side")
+        box = (y, x, y + h, x + w)
+    seg = row.get("segmentation")
+    if seg is not None and not isinstance(seg, list | dict):
+        raise _fail(path, f"entry {k} segmentation must be polygons or RLE")
+    return ref, score, box, seg, row.get("category_id")
+
+
+def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTable:
+    """Read a COCO results file (see the module docstring).
+
+    Raises:
+        EvalError: not a JSON list, an entry without image, score, bbox or segmentation, a
+            bad box; names the file and the entry.
+    """
+    path = Path(path)
+    if iou_type not in IOU_TYPES:
+        raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _fail(path, f"is not a readable JSON file ({exc})") from None
+    if isinstance(data, dict) and "annotations" in data and "images" in data:
+        raise _fail(path, "is a COCO ground-truth file: give it as --dataset coco:FILE and the "
+                    "detections as a results list [{image_id, bbox, score}, ...]")  # fmt: skip
+    if not isinstance(data, list):
+        raise _fail(path, "is not a COCO results list [{image_id, bbox|segmentation, score}]")
+    rows = [_coco_row(r, k, path) for k, r in enumerate(data)]
+    has_seg = all(r[3] is not None for r in rows) and bool(rows)
+    has_box = all(r[2] is not None for r in rows)
+    if iou_type == "auto":
+        iou_type = "segm" if has_seg else "bbox"
+    if (iou_type == "segm" and not has_seg) or (iou_type == "bbox" and not has_box):
+        what = "segmentation" if iou_type == "segm" else "bbox"
+        raise _fail(path, f"iou_type {iou_type} needs a {what} in every entry")
+    n = len(rows)
+    box = np.array([r[2] if r[2] is not None else (np.nan,) * 4 for r in rows],
+                   dtype=np.float64).reshape(n, 4)  # fmt: skip
+    cats = [r[4] for r in rows]
+    return PredictionTable(
+        path=path, refs=np.array([r[0] for r in rows], dtype=object).reshape(n),
+        score=np.array([r[1] for r in rows], dtype=np.float64).reshape(n),
+        geometry="mask" if iou_type == "segm" else "box", box=box,
+        segmentation=[r[3] for r in rows] if iou_type == "segm" else None,
+        classes=None if all(c is None for c in cats) else np.array(
+            [str(c) for c in cats], dtype=object),
+    )  # fmt: skip
+
+
+_IMAGE = ("image", "file_name", "image_id", "scene_id")
+_ROW = ("row", "detect_scene_row")
+_COL = ("col", "detect_scene_column")
+_LENGTH = ("length_m", "vessel_length_m")
+
+
+def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path, required: bool = True):
+    for n in names:
+        if n in df.columns:
+            return df[n]
+    if required:
+        raise _fail(path, f"has no column {' or '.join(names)} (columns: {', '.join(df.columns)})")
+    return None
+
+
+def _floats(col: pd.Series, path: Path, what: str, *, finite: bool = True) -> np.ndarray:
+    values = pd.to_numeric(col, errors="coerce").to_numpy(np.float64)
+    bad = np.isnan(values) if finite else np.zeros(values.size, bool)
+    bad |= np.isinf(values) if finite else False
+    bad |= ~pd.isna(col).to_numpy() & np.isnan(values)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise _fail(path, f"row {k + 2}: {what} {col.iloc[k]!r} is not a finite number")
+    return values
+
+
+def read_points(path: str | Path) -> PredictionTable:
+    """Read a point CSV (see the module docstring).
+
+    Raises:
+        EvalError: unreadable CSV, a missing column, a non-numeric coordinate or score.
+    """
+    path = Path(path)
+    try:
+        df = pd.read_csv(path, dtype={n: str for n in _IMAGE})
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+        raise _fail(path, f"is not a readable CSV file ({exc})") from None
+    except pd.errors.EmptyDataError:
+        raise _fail(path, "is empty (expected a header image,row,col,score)") from None
+    refs = _column(df, _IMAGE, path).astype(str).to_numpy(dtype=object)
+    point = np.stack([_floats(_column(df, _ROW, path), path, "row"),
+                      _floats(_column(df, _COL, path), path, "col")], axis=1)  # fmt: skip
+    score_col = _column(df, ("score",), path, required=False)
+    score = np.ones(len(df)) if score_col is None else _floats(score_col, path, "score")
+    length_col = _column(df, _LENGTH, path, required=False)
+    length = None if length_col is None else _floats(length_col, path, "length", finite=False)
+    cls = _column(df, ("class",), path, required=False)
+    return PredictionTable(
+        path=path, refs=refs, score=score, geometry="point",
+        box=np.concatenate([point + 0.5, point + 0.5], axis=1), point=point,
+        classes=None if cls is None else cls.astype(str).to_numpy(dtype=object),
+        length_m=length,
+    )  # fmt: skip
