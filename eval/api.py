@@ -103,6 +103,7 @@ class Results:
     Attributes:
         summary: one row per dataset x detector (``summary.csv``).
         froc, pr, pixel_roc, breakdown, timing, per_image: the other tables.
+        coco: ``pycocotools``' 12 stats (with ``Scoring(coco_compatible=True)``).
         states: ``{dataset: [DetectorResult]}`` merged states (pixel counts and ROC,
             :class:`~torchsar.metrics.ObjectState`).
         stats: per dataset: images, wall time, shards done / resumed / retried / failed.
@@ -116,6 +117,7 @@ class Results:
     pixel_roc: pd.DataFrame
     breakdown: pd.DataFrame
     timing: pd.DataFrame
+    coco: pd.DataFrame
     per_image: pd.DataFrame
     states: dict[str, list] = field(repr=False)
     stats: dict[str, dict] = field(repr=False)
@@ -193,6 +195,12 @@ def _detectors(detectors: object) -> list[Detector]:
     return out
 
 
+def _check_type(value: object, kind: type, name: str) -> None:
+    if value is not None and not isinstance(value, kind):
+        raise EvalError(f"{{opt:{name}}}{value!r}: expected a torchsar_eval.{kind.__name__} "
+                        "or None")  # fmt: skip
+
+
 def evaluate(
     datasets: object,
     detectors: object = None,
@@ -249,6 +257,9 @@ def evaluate(
     """
     from torchsar_eval.registry import BUILTIN
 
+    _check_type(scoring, Scoring, "scoring")
+    _check_type(execution, Execution, "execution")
+    _check_type(calibration, Calibration, "calibration")
     execution = execution or Execution()
     if progress is not None:
         execution = replace(execution, progress=progress)
@@ -378,6 +389,20 @@ def check_resumable(path: Path, expected: dict) -> None:
     path.write_text(json.dumps(expected, indent=2) + "\n")
 
 
+def _default_class(ds) -> str:
+    """The class COCO-compatible scoring gives to class-agnostic detections: the dataset's
+    first category (COCO files: the lowest category id), else the first class among its
+    first items' ground truth, else ``"target"``."""
+    known = getattr(ds, "default_class", None)
+    if known is not None:
+        return str(known)
+    for i in range(min(len(ds), 16)):
+        classes = ds[i]["meta"].get("classes") or []
+        if classes:
+            return str(classes[0])
+    return "target"
+
+
 def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
     """Score one dataset shard by shard; with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
@@ -385,12 +410,14 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     t0 = time.perf_counter()
     ex, cal = plan.execution, plan.calibration
     indices = list(range(len(ds)))
+    default_class = _default_class(ds) if plan.scoring.coco_compatible else "target"
     if ex.skip_bad:
         ds = SkipBad(ds)
 
     def shards(idx: list[int], folder: Path, export: bool = False):
         job = ShardJob(name, ds, idx, detectors, plan.scoring, ex.batch_size, plan.preprocess,
-                       ex.shard_size, export_coco=export, device=ex.device)  # fmt: skip
+                       ex.shard_size, export_coco=export, device=ex.device,
+                       default_class=default_class)  # fmt: skip
         return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
                           address=ex.address, skip_bad=ex.skip_bad,
                           progress=ex.progress)  # fmt: skip
@@ -405,6 +432,8 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
         tuned, _ = shards(calib, state / "calibration")
         chosen = [choose_bin(r.objects, target) for r in tuned]
     results, counts = shards(indices, state / "test", plan.export_coco)
+    for r, det in zip(results, detectors, strict=True):
+        r.detector = det  # saved shards keep only its name
     exporter = shard_coco(state / "test", name) if plan.export_coco else None
     for r, b in zip(results, chosen or [], strict=False):
         r.op_bin = b

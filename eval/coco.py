@@ -1,9 +1,12 @@
 """COCO export of a run: ground truth (``instances`` format) and each detector's detections
 (results format with scores), so anyone can re-score a run with ``pycocotools``.
 
-Boxes are ``[x, y, width, height]`` in pixels, masks run-length encoded. A plane's ignore
-pixels become one ``iscrowd`` annotation. torchsar detectors are class-agnostic: detections
-carry the first category, and the matching AP is pycocotools' with ``useCats = 0``.
+Boxes are ``[x, y, width, height]`` in pixels, masks run-length encoded (point objects
+carry ``"point": [x, y]`` and a zero-size box). A plane's ignore pixels become one
+``iscrowd`` annotation. Image ids are the planes' positions in the dataset, counted from 1
+(item ``i``'s channel ``c`` of ``C`` is ``i * C + c + 1``), so the ids do not depend on the
+shards and saved predictions that use them find their images again. Class-agnostic
+detections carry the first category; torchsar's AP is pycocotools' with ``useCats = 0``.
 """
 
 from __future__ import annotations
@@ -53,32 +56,45 @@ class CocoExport:
         ids = []
         for p in range(b * c):
             meta = batch["meta"][p // c]
-            image_id = len(self.images) + 1
+            index = meta.get("index")
+            image_id = len(self.images) + 1 if index is None else int(index) * c + p % c + 1
             ids.append(image_id)
             self.images.append({"id": image_id, "file_name": str(meta.get("name", image_id)),
                                 "height": h, "width": w})  # fmt: skip
             classes = list(meta.get("classes") or [])
             boxes = list(meta.get("boxes") or []) if meta.get("gt") == "box" else []
+            areas = list(meta.get("areas") or [])
+            seen = []
             for k in np.unique(inst[p][inst[p] > 0]).tolist():
                 m = inst[p] == k
                 rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
                 box = boxes[k - 1] if k - 1 < len(boxes) else (rows[0], cols[0], rows[-1] + 1,
                                                               cols[-1] + 1)  # fmt: skip
                 cls = str(classes[k - 1]) if k - 1 < len(classes) else "target"
-                self._annotation(image_id, self._category(cls), m, box, crowd=0)
+                area = areas[k - 1] if k - 1 < len(areas) and areas[k - 1] is not None else None
+                seen.append(self._category(cls))
+                self._annotation(image_id, seen[-1], m, box, crowd=0, area=area)
             if ignore[p].any():
-                m = ignore[p] & (inst[p] == 0)
-                rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
-                if rows.size:
-                    box = (rows[0], cols[0], rows[-1] + 1, cols[-1] + 1)
-                    self._annotation(image_id, self._category("target"), m, box, crowd=1)
+                self._crowd(image_id, ignore[p] & (inst[p] == 0), seen)
         return ids
 
-    def _annotation(self, image_id: int, cat: int, m: np.ndarray, box, *, crowd: int) -> None:
+    def _crowd(self, image_id: int, m: np.ndarray, seen: list[int]) -> None:
+        """The ignore pixels as one crowd annotation per category of the image (and the
+        first category, that of class-agnostic detections): don't-care for every class."""
+        rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
+        if not rows.size:
+            return
+        box = (rows[0], cols[0], rows[-1] + 1, cols[-1] + 1)
+        first = self._category(next(iter(self.categories), "target"))
+        for cat in sorted({first, *seen}):
+            self._annotation(image_id, cat, m, box, crowd=1)
+
+    def _annotation(self, image_id: int, cat: int, m: np.ndarray, box, *, crowd: int,
+                    area: float | None = None) -> None:  # fmt: skip
         self.annotations.append({
             "id": len(self.annotations) + 1, "image_id": image_id, "category_id": cat,
-            "segmentation": encode(m), "area": float(m.sum()), "bbox": _xywh(box),
-            "iscrowd": crowd,
+            "segmentation": encode(m), "area": float(m.sum() if area is None else area),
+            "bbox": _xywh(box), "iscrowd": crowd,
         })  # fmt: skip
 
     def add(self, batch: dict, found: dict[str, Objects]) -> None:
@@ -87,12 +103,18 @@ class CocoExport:
         for det, obj in found.items():
             out = self.results.setdefault(det, [])
             for k in range(len(obj)):
-                p = int(obj.plane[k])
-                out.append({
-                    "image_id": ids[p], "category_id": 1, "bbox": _xywh(obj.box[k]),
-                    "score": float(obj.score[k]), "segmentation": encode(obj.labels[p] == k + 1),
-                    "area": float(obj.area[k]),
-                })  # fmt: skip
+                out.append(self._result(obj, k, ids[int(obj.plane[k])]))
+
+    def _result(self, obj: Objects, k: int, image_id: int) -> dict:
+        cls = obj.classes[k] if obj.classes is not None else None
+        rec = {"image_id": image_id, "category_id": None if cls is None else self._category(cls),
+               "bbox": _xywh(obj.box[k]), "score": float(obj.score[k])}  # fmt: skip
+        if obj.has_masks:
+            rec["segmentation"] = encode(obj.mask_of(k))
+            rec["area"] = float(obj.area[k])
+        elif obj.geometry == "point":
+            rec["point"] = [float(obj.centroid[k, 1]), float(obj.centroid[k, 0])]
+        return rec
 
     @classmethod
     def merge(cls, name: str, parts: Iterable[CocoExport]) -> CocoExport:
@@ -100,17 +122,17 @@ class CocoExport:
         image, annotation and category ids renumbered as one pass over the whole would."""
         out = cls(name)
         for part in parts:
-            images, anns = len(out.images), len(out.annotations)
+            anns = len(out.annotations)
             cats = {i: out._category(n) for n, i in part.categories.items()}
-            out.images += [{**im, "id": im["id"] + images} for im in part.images]
+            cats[None] = None  # class-agnostic: the first category once written
+            out.images += part.images
             out.annotations += [
-                {**a, "id": a["id"] + anns, "image_id": a["image_id"] + images,
-                 "category_id": cats[a["category_id"]]}
+                {**a, "id": a["id"] + anns, "category_id": cats[a["category_id"]]}
                 for a in part.annotations
             ]  # fmt: skip
             for det, res in part.results.items():
                 out.results.setdefault(det, []).extend(
-                    {**r, "image_id": r["image_id"] + images} for r in res
+                    {**r, "category_id": cats[r["category_id"]]} for r in res
                 )
         return out
 
@@ -127,5 +149,6 @@ class CocoExport:
         paths[0].write_text(json.dumps(gt))
         for det, res in self.results.items():
             paths.append(folder / f"{stem}__{det}.json")
-            paths[-1].write_text(json.dumps(res))
+            rows = [r if r["category_id"] is not None else {**r, "category_id": 1} for r in res]
+            paths[-1].write_text(json.dumps(rows))
         return paths

@@ -284,17 +284,24 @@ def check_portable(detectors: list[Detector]) -> None:
     callable defined in ``__main__`` (a script or notebook: a worker re-runs the script or
     cannot find it) or one that cannot be pickled (a lambda, a local function)."""
     for det in detectors:
+        if det.ref is not None and det.ref.partition(":")[0] in ("__main__", "__mp_main__"):
+            raise EvalError(
+                f"detector {det.name} is defined in __main__ ({det.ref}), which worker "
+                "processes cannot import: move it into a module and pass its import path "
+                "(module:name), or run with {opt:workers}1"
+            )
         if det.ref is not None:
             continue
         finder = _MainFinder()
         try:
             finder.dump(det)
         except Exception as exc:
-            raise EvalError(
-                f"detector {det.name} cannot be sent to worker processes ({type(exc).__name__}: "
-                f"{exc}): define it at the top level of a module and pass its import path "
-                f"(module:name), or run with {{opt:workers}}1"
-            ) from None
+            if not finder.main:
+                raise EvalError(
+                    f"detector {det.name} cannot be sent to worker processes "
+                    f"({type(exc).__name__}: {exc}): define it at the top level of a module "
+                    "and pass its import path (module:name), or run with {opt:workers}1"
+                ) from None
         if finder.main:
             raise EvalError(
                 f"detector {det.name} is defined in __main__ ({finder.main[0]}), which worker "

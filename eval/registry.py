@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from importlib.metadata import EntryPoint, entry_points
@@ -73,9 +75,13 @@ def available() -> list[str]:
 
 
 def _import(path: str) -> object:
+    """The object of ``module:attribute``; the working directory is searched too (a module
+    beside the user, as ``python -m`` would find it; worker processes inherit the path)."""
     module, _, attr = path.partition(":")
     if not module or not attr:
         raise EvalError(f"detector {path!r}: an import path looks like package.module:name")
+    if "" not in sys.path and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
     try:
         obj: object = importlib.import_module(module)
     except Exception as exc:  # ImportError, or an error raised while importing

@@ -15,6 +15,7 @@ from torchsar_eval.runner import Scoring
 from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,
     breakdown_table,
+    coco_table,
     froc_table,
     headline_table,
     markdown,
@@ -33,6 +34,7 @@ TABLE_FILES = {
     "pixel_roc": "roc_pixel.csv",
     "breakdown": "breakdown.csv",
     "timing": "timing.csv",
+    "coco": "coco.csv",
 }
 """Each table of :func:`result_tables` and its file in a run folder."""
 
@@ -47,6 +49,7 @@ def result_tables(results: dict) -> dict[str, pd.DataFrame]:
         "pixel_roc": pixel_roc_table(results),
         "breakdown": breakdown_table(results),
         "timing": timing_table(results),
+        "coco": coco_table(results),
     }
 
 
@@ -85,8 +88,10 @@ def write_run(
 ) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names. ``per_image``
     is streamed to ``per_image.csv`` (memory independent of the dataset size)."""
+    written = [f for k, f in TABLE_FILES.items() if k != "coco" or not tables[k].empty]
     for key, fname in TABLE_FILES.items():
-        tables[key].to_csv(tmp / fname, index=False)
+        if fname in written:
+            tables[key].to_csv(tmp / fname, index=False)
     with open(tmp / "per_image.csv", "w", newline="") as f:
         out = csv.writer(f)
         out.writerow(PER_IMAGE_COLUMNS)
@@ -94,9 +99,14 @@ def write_run(
     summary = tables["summary"]
     text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
     text += "\nEvery column, for every detector, is in `summary.csv`.\n"
+    if not tables["coco"].empty:
+        text += (
+            "\n## COCO-compatible (pycocotools' 12 stats: per category, 100 detections "
+            "per image and category, COCO area ranges)\n\n" + markdown(tables["coco"])
+        )
     text += "\n## Timing\n\n" + markdown(tables["timing"]) + _stats_lines(stats)
     (tmp / "summary.md").write_text(text)
-    files = [*TABLE_FILES.values(), "per_image.csv", "summary.md"]
+    files = [*written, "per_image.csv", "summary.md"]
     for name, label in labels.items():
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(

@@ -32,6 +32,8 @@ from torchsar.metrics import (
     match_batch,
     pixel_counts,
 )
+from torchsar.metrics.coco_compat import CocoState
+from torchsar.metrics.coco_inputs import coco_images
 from torchsar.metrics.object_state import normalise
 from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar_eval.datasets.base import BadItemError
@@ -42,6 +44,7 @@ from torchsar_eval.scoring import batch_truth, image_rows, pixel_areas
 __all__ = [
     "DEFAULT_MATCH",
     "DEFAULT_RULES",
+    "DetectorName",
     "DetectorResult",
     "Scoring",
     "SkipBad",
@@ -72,6 +75,8 @@ class Scoring:
             (a region CFAR's regions, a CNN's boxes); ``"discriminate"`` sends every
             detector's statistic (or its objects' pixel scores) through the discrimination
             stage, for like-for-like comparisons.
+        coco_compatible: also compute ``pycocotools``' 12 ``COCOeval.stats`` exactly (per
+            category, 100 detections per image and category, COCO's area ranges).
     """
 
     rules: ObjectRules = DEFAULT_RULES
@@ -79,6 +84,7 @@ class Scoring:
     replicates: int = 100
     seed: int = 0
     instances: str = "auto"
+    coco_compatible: bool = False
 
     def __post_init__(self) -> None:
         if self.instances not in ("auto", "discriminate"):
@@ -95,7 +101,16 @@ class Scoring:
             "matching": self.matching.as_dict(),
             "bootstrap": {"replicates": self.replicates, "seed": self.seed},
             "instances": self.instances,
+            "coco_compatible": self.coco_compatible,
         }
+
+
+@dataclass(frozen=True)
+class DetectorName:
+    """What a saved :class:`DetectorResult` keeps of its detector."""
+
+    name: str
+    instances: str = "auto"
 
 
 @dataclass
@@ -107,7 +122,7 @@ class DetectorResult:
     ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
     """
 
-    detector: Detector
+    detector: Detector | DetectorName
     scoring: Scoring = field(default_factory=Scoring)
     pixels: PixelCounts = field(default_factory=PixelCounts)
     roc: RocAccumulator = field(default_factory=RocAccumulator)
@@ -119,9 +134,21 @@ class DetectorResult:
     op_bin: int | None = None
     skipped: list = field(default_factory=list)
     pixel_level: bool = False
+    default_class: str = "target"
+    coco: CocoState | None = None
+    coco_iou_type: str | None = None
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
+        if self.scoring.coco_compatible and self.coco is None:
+            self.coco = CocoState()
+
+    def __getstate__(self) -> dict:
+        """Saved shard states hold the detector's name, not the detector (which may be a
+        lambda, a network, a file reader): data only."""
+        state = dict(self.__dict__)
+        state["detector"] = DetectorName(self.detector.name, self.detector.instances)
+        return state
 
     @property
     def at(self) -> int:
@@ -144,15 +171,34 @@ class DetectorResult:
         m = match_batch(obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info)
         self.rows += image_rows(m, obj, gt, info)
+        if self.coco is not None:
+            self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
         return obj
+
+    def _add_coco(self, obj: Objects, gt, info) -> None:
+        """COCO's own evaluation of the batch: segm IoU for objects with masks (unless the
+        run matches boxes or the ground truth is boxes), else bbox."""
+        masks = obj.has_masks and self.scoring.matching.iou_kind == "mask"
+        iou_type = "segm" if masks and not gt.box_only.any() else "bbox"
+        if len(obj) and self.coco_iou_type not in (None, iou_type):
+            raise EvalError(f"detector {self.detector.name}: COCO IoU type changes from "
+                            f"{self.coco_iou_type} to {iou_type} within a dataset")  # fmt: skip
+        if len(obj):
+            self.coco_iou_type = iou_type
+        orders = [p if i.order is None else i.order for p, i in enumerate(info)]
+        self.coco.update(coco_images(obj, gt, orders, iou_type, self.default_class))
 
     def __add__(self, other: DetectorResult) -> DetectorResult:
         """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
         if self.detector.name != other.detector.name or self.scoring != other.scoring:
             raise ValueError("cannot add results of different detectors or scoring settings")
         out = DetectorResult(self.detector, self.scoring, self.pixels + other.pixels,
-                             self.roc + other.roc, op_bin=self.op_bin)  # fmt: skip
+                             self.roc + other.roc, op_bin=self.op_bin,
+                             default_class=self.default_class)  # fmt: skip
+        if self.coco is not None:
+            out.coco = self.coco + other.coco
+            out.coco_iou_type = self.coco_iou_type or other.coco_iou_type
         out.objects = self.objects + other.objects
         out.seconds = self.seconds + other.seconds
         out.object_seconds = self.object_seconds + other.object_seconds
@@ -292,6 +338,7 @@ def run_detectors(
     desc: str = "",
     on_batch: Callable[[dict, dict], None] | None = None,
     device: torch.device | str | None = None,
+    default_class: str = "target",
 ) -> list[DetectorResult]:
     """Run every detector over the dataset and accumulate its pixel and object states.
 
@@ -309,6 +356,7 @@ def run_detectors(
             a COCO exporter).
         device: where the detectors run: each batch (and each ``torch.nn.Module``
             detector) is moved there, outputs come back to the CPU for scoring.
+        default_class: the class of objects without one (COCO-compatible scoring).
     """
     scoring = Scoring() if scoring is None else scoring
     device = None if device is None else torch.device(device)
@@ -317,7 +365,7 @@ def run_detectors(
             det.fn.eval()
             if device is not None:
                 det.fn.to(device)
-    results = [DetectorResult(det, scoring) for det in detectors]
+    results = [DetectorResult(det, scoring, default_class=default_class) for det in detectors]
     n_batches = -(-len(dataset) // batch_size) if len(dataset) else 0
     skipped: list = []
     for batch in tqdm(

@@ -41,12 +41,16 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
     inst = batch["instances"].reshape(b * c, h, w).cpu().numpy()
     ignore = batch["ignore"].reshape(b * c, h, w).cpu().numpy()
     box_only = np.array([m.get("gt") == "box" for m in metas])
+    spacing = [_spacing(m) or (np.nan, np.nan) for m in metas]
     gt = ground_truth(
         inst,
         ignore,
         classes=[list(m.get("classes") or []) for m in metas],
         boxes=[list(m.get("boxes") or []) if m.get("gt") == "box" else [] for m in metas],
         box_only=box_only,
+        spacing=np.array(spacing, dtype=np.float64).reshape(len(metas), 2),
+        lengths=[list(m.get("lengths_m") or []) for m in metas],
+        areas=[list(m.get("areas") or []) for m in metas],
     )
     info = []
     for k, m in enumerate(metas):

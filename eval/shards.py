@@ -62,6 +62,7 @@ class ShardJob:
     shard_size: int = 256
     export_coco: bool = False
     device: str | None = None
+    default_class: str = "target"
 
 
 @dataclass
@@ -93,6 +94,7 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
         progress=False,
         on_batch=None if coco is None else coco.add,
         device=job.device,
+        default_class=job.default_class,
     )
     release_memory()
     return ShardState(results, coco)
@@ -334,7 +336,8 @@ def run_shards(
     finally:
         bar.close()
     merged = merge(_load(p).results for p in shard_files(folder))
-    merged = merged or [DetectorResult(d, job.scoring) for d in job.detectors]
+    merged = merged or [DetectorResult(d, job.scoring, default_class=job.default_class)
+                        for d in job.detectors]  # fmt: skip
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
               "skipped": len(sizes) - len(todo), "retried": len(fail.retried),
               "failed": fail.failed}  # fmt: skip

@@ -11,12 +11,15 @@ from torchsar_eval.runner import DetectorResult
 
 __all__ = [
     "BREAKDOWN_COLUMNS",
+    "COCO_COLUMNS",
+    "COCO_STATS",
     "FROC_COLUMNS",
     "PER_IMAGE_COLUMNS",
     "PR_COLUMNS",
     "SUMMARY_COLUMNS",
     "TIMING_COLUMNS",
     "breakdown_table",
+    "coco_table",
     "froc_table",
     "headline_table",
     "markdown",
@@ -54,6 +57,7 @@ SUMMARY_COLUMNS = [
     "pd_at_10_fa_per_image",
     "pauc",
     "fa_per_km2",
+    "length_score",
     *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
     "score_threshold",
 ]
@@ -64,6 +68,10 @@ FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_pe
 PR_COLUMNS = ["dataset", "detector", "threshold", "recall", "precision"]
 BREAKDOWN_COLUMNS = ["dataset", "detector", "by", "key", "images", "targets", "tp", "fp",
                      "fn", "precision", "recall", "f1"]  # fmt: skip
+COCO_STATS = ["AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large", "AR1", "AR10",
+              "AR100", "AR_small", "AR_medium", "AR_large"]  # fmt: skip
+"""``COCOeval.stats`` in order (-1 where pycocotools gives -1: nothing to average)."""
+COCO_COLUMNS = ["dataset", "detector", "iou_type", *COCO_STATS]
 PER_IMAGE_COLUMNS = ["dataset", "detector", "image", "targets", "tp", "fp", "fn", "objects",
                      "max_score"]  # fmt: skip
 
@@ -182,6 +190,18 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
 def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """Operating-point counts per ground-truth class, size bin, image class and group."""
     return _frame(results, _breakdown_rows, BREAKDOWN_COLUMNS)
+
+
+def _coco_rows(ds: str, r: DetectorResult) -> list[list]:
+    if r.coco is None:
+        return []
+    return [[ds, r.detector.name, r.coco_iou_type or "", *r.coco.stats().tolist()]]
+
+
+def coco_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """``pycocotools``' 12 ``COCOeval.stats`` per dataset and detector (COCO-compatible
+    scoring only; empty otherwise)."""
+    return _frame(results, _coco_rows, COCO_COLUMNS)
 
 
 def per_image_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:

@@ -75,7 +75,7 @@ class AnnotatedDataset(FileDataset):
         samples = read_samples(path, self.sample_type, max_pixels=self.max_pixels)
         inst = np.zeros(shape, np.int32)
         ignore = np.zeros(shape, bool)
-        classes, boxes, has_masks = [], [], True
+        classes, boxes, areas, has_masks = [], [], [], True
         for cls, box, mask, is_ignore in objects:
             m = mask(*shape)
             if is_ignore:
@@ -84,9 +84,12 @@ class AnnotatedDataset(FileDataset):
             has_masks &= mask.segmented
             classes.append(cls)
             boxes.append(box)
+            areas.append(mask.area)
             inst[m] = len(classes)
         meta = self.base_meta(name, path, None, gt="mask" if has_masks else "box")
         meta["classes"] = classes
+        if any(a is not None for a in areas):
+            meta["areas"] = areas
         if self.image_ids is not None:
             meta["image_id"] = self.image_ids[i]
         return make_item(self.intensity(samples, path), inst, ignore, meta, boxes=boxes)
@@ -98,6 +101,7 @@ class _Painter:
     def __init__(self, box, coco_annotation=None) -> None:
         self.box, self.ann = box, coco_annotation
         self.segmented = coco_annotation is not None and coco_annotation.segmentation is not None
+        self.area = None if coco_annotation is None else coco_annotation.area
 
     def __call__(self, h: int, w: int) -> np.ndarray:
         if self.ann is not None:
@@ -128,6 +132,9 @@ def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> An
     ids = [im.id for im in ordered]
     ds = AnnotatedDataset("coco", path, entries, [path], image_ids=ids, **kw)
     ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())))
+    ds.categories = dict(coco.categories)  # id -> name: saved predictions give ids
+    if coco.categories:
+        ds.default_class = coco.categories[min(coco.categories)]
     ds.options["labels"] = "COCO segmentation (box when absent); iscrowd = ignore"
     ds.finish("annotation", limit)
     return ds

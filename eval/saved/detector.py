@@ -83,6 +83,19 @@ def _segmentation_pixels(seg: object, h: int, w: int) -> np.ndarray:
     return np.flatnonzero(np.asarray(m, bool).reshape(h, w))
 
 
+def _class_names(classes: np.ndarray | None, dataset: Dataset) -> np.ndarray | None:
+    """Class names of the rows: COCO category ids named by the dataset's categories (a
+    ``coco:`` dataset); on other datasets, ids that are all 1 (what ``--export-coco`` writes
+    for class-agnostic detectors) mean class-agnostic."""
+    if classes is None:
+        return None
+    known = getattr(dataset, "categories", None)
+    if known:
+        return np.array([known.get(int(c), c) if str(c).lstrip("-").isdigit() else c
+                         for c in classes.tolist()], dtype=object)  # fmt: skip
+    return None if set(classes.tolist()) <= {"1"} else classes
+
+
 class SavedPredictions:
     """The predictions in one file, to bind to a dataset (:meth:`bind`) before use.
 
@@ -112,6 +125,7 @@ class SavedPredictions:
                        f"dataset {name}")  # fmt: skip
         order = np.argsort(items, kind="stable")
         bound._item_rows = (items[order], order)
+        bound._classes = _class_names(getattr(self.table, "classes", None), dataset)
         return bound
 
     def __getstate__(self) -> dict:
@@ -139,7 +153,8 @@ class SavedPredictions:
         plane = np.concatenate([np.full(r.size, k * c, np.int64) for k, r in enumerate(rows)])
         r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
         t = self.table
-        classes = None if t.classes is None else t.classes[r]
+        names = getattr(self, "_classes", None)
+        classes = None if names is None else names[r]
         common = {"plane": plane, "planes": b * c, "classes": classes}
         if t.geometry == "mask":
             pixels = [_segmentation_pixels(t.segmentation[i], h, w) for i in r]

@@ -29,6 +29,7 @@ class CocoAnnotation:
     box: tuple[float, float, float, float]
     segmentation: object
     iscrowd: bool
+    area: float | None = None
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,7 @@ def _annotation(a: dict, categories: dict[int, str], image: dict, path) -> CocoA
         (y, x, y + h, x + w),
         a.get("segmentation") or None,
         bool(a.get("iscrowd", 0)),
+        float(a["area"]) if isinstance(a.get("area"), int | float) else None,
     )
 
 

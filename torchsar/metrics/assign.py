@@ -19,7 +19,7 @@ from torchsar.metrics.matching import (
 )
 from torchsar.objects import Objects
 
-__all__ = ["BatchMatch", "by_plane", "match_batch"]
+__all__ = ["BatchMatch", "Overlaps", "by_plane", "match_batch"]
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def _centroid_pairs(cen: np.ndarray, db: np.ndarray, gb: np.ndarray, m: Matching
     return np.where(ok, 1.0 / (1.0 + dist), 0.0)
 
 
-class _Overlaps:
+class Overlaps:
     """Pixel intersections of the batch's objects with its instances and ignore pixels
     (objects with masks; a box or a point covers no pixel here, see :func:`_touching`)."""
 
@@ -258,7 +258,7 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     ap = np.full((len(COCO_IOUS), n_d), -1, dtype=np.int64)
     op = np.full(n_d, -1, dtype=np.int64)
     op_iou = np.zeros(n_d)
-    ov = _Overlaps(obj, gt)
+    ov = Overlaps(obj, gt)
     ig_box = _ignore_boxes(gt.ignore)
     single = np.bincount(gt.plane, minlength=obj.planes) <= 1
     _match_single_planes(obj, gt, ov, ig_box, rule, single, (ap, op, op_iou))

@@ -115,6 +115,8 @@ class GroundTruth:
             instance's box centre).
         spacing: float64 ``(N, 2)`` pixel spacing (row, col) in metres, NaN if unknown.
         length_m: float64 ``(G,)`` declared lengths in metres (NaN where unknown).
+        declared_area: float64 ``(G,)`` areas the annotations declare (COCO ``area``; NaN
+            where unknown), used for COCO's area ranges.
     """
 
     ids: np.ndarray
@@ -127,6 +129,7 @@ class GroundTruth:
     centroid: np.ndarray | None = None
     spacing: np.ndarray | None = None
     length_m: np.ndarray | None = None
+    declared_area: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.plane.shape[0])
@@ -141,6 +144,7 @@ def ground_truth(
     box_only: np.ndarray | None = None,
     spacing: np.ndarray | None = None,
     lengths: list[list] | None = None,
+    areas: list[list] | None = None,
 ) -> GroundTruth:
     """Build :class:`GroundTruth` from instance-id planes ``(N, H, W)``.
 
@@ -154,6 +158,7 @@ def ground_truth(
         box_only: bool per plane (default all False).
         spacing: ``(N, 2)`` pixel spacing per plane in metres (NaN: unknown).
         lengths: per plane, the length in metres of local id ``k`` at position ``k - 1``.
+        areas: per plane, the declared area of local id ``k`` at position ``k - 1``.
     """
     inst = np.asarray(instances).astype(np.int64)
     n_planes = inst.shape[0]
@@ -172,6 +177,7 @@ def ground_truth(
     box = label_boxes(ids, n)[1]
     cls = np.array(["target"] * n, dtype=object)
     length_m = np.full(n, np.nan)
+    declared = np.full(n, np.nan)
     for k in range(n):
         p, i = int(plane[k]), int(local[k]) - 1
         if classes is not None and i < len(classes[p]):
@@ -180,6 +186,8 @@ def ground_truth(
             box[k] = np.asarray(boxes[p][i], dtype=np.float64)
         if lengths is not None and i < len(lengths[p]) and lengths[p][i] is not None:
             length_m[k] = float(lengths[p][i])
+        if areas is not None and i < len(areas[p]) and areas[p][i] is not None:
+            declared[k] = float(areas[p][i])
     ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
     bo = np.zeros(n_planes, bool) if box_only is None else np.asarray(box_only, bool)
     sp = np.full((n_planes, 2), np.nan) if spacing is None else np.asarray(spacing, np.float64)
@@ -187,7 +195,7 @@ def ground_truth(
     on_box = bo[plane] if n else np.zeros(0, bool)
     centroid[on_box] = 0.5 * (box[on_box, :2] + box[on_box, 2:]) - 0.5
     return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo,
-                       centroid, sp.reshape(n_planes, 2), length_m)  # fmt: skip
+                       centroid, sp.reshape(n_planes, 2), length_m, declared)  # fmt: skip
 
 
 def _centroids(ids: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:

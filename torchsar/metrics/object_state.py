@@ -38,6 +38,7 @@ from torchsar.metrics.curves import (
     pd_at_fa,
     score_bins,
 )
+from torchsar.metrics.distance import LengthErrors
 from torchsar.metrics.matching import COCO_IOUS, GroundTruth
 from torchsar.metrics.ranked import RankedDetections, plane_ranks
 from torchsar.objects import Objects
@@ -171,6 +172,7 @@ class ObjectState:
     iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
     fragments: int = 0
     fragmented: int = 0
+    lengths: LengthErrors = field(default_factory=LengthErrors)
     keys: dict[str, KeyCounts] = field(default_factory=dict)
     boot: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -202,9 +204,19 @@ class ObjectState:
         found = gt_bins >= OP_BIN if obj.threshold is not None else gt_bins >= 0
         self.fragments += int(m.overlaps[found].sum())
         self.fragmented += int(found.sum())
+        self._update_lengths(m, obj, gt, bins)
         self._update_keys(m, obj, gt, info, bins, gt_bins)
         if self.replicates:
             self._update_boot(m, obj, gt, info, bins)
+
+    def _update_lengths(self, m: BatchMatch, obj: Objects, gt: GroundTruth, bins) -> None:
+        """Length errors of the matches at the design operating point where both the
+        detection and its instance declare a length in metres."""
+        if obj.length_m is None or gt.length_m is None:
+            return
+        at = bins >= (OP_BIN if obj.threshold is not None else 0)
+        hit = np.flatnonzero(at & (m.op >= 0))
+        self.lengths = self.lengths.add(obj.length_m[hit], gt.length_m[m.op[hit]])
 
     def _update_ranked(self, m: BatchMatch, obj: Objects, info: list[ImageInfo]) -> None:
         """The AP records, and what the objects say about their operating point and AP."""
@@ -284,15 +296,16 @@ class ObjectState:
         if None not in (self.ap_kind, other.ap_kind) and self.ap_kind != other.ap_kind:
             raise ValueError("cannot add states of different AP kinds")
         kind = other.ap_kind if self.ap_kind is None else self.ap_kind
+        summed = {
+            k: getattr(self, k) + getattr(other, k)
+            for k in ("images", "area_mm2", "images_km2", "n_gt", "ranked", "tp", "fp",
+                      "iou_sum", "fragments", "fragmented", "lengths")
+        }  # fmt: skip
         return ObjectState(
-            self.replicates, self.seed, self.size_edges, self.size_names,
-            self.images + other.images, self.area_mm2 + other.area_mm2,
-            self.images_km2 + other.images_km2, self.n_gt + other.n_gt,
-            self.ranked + other.ranked, declared, kind, threshold,
-            self.tp + other.tp,
-            self.fp + other.fp, self.iou_sum + other.iou_sum,
-            self.fragments + other.fragments, self.fragmented + other.fragmented, keys,
-            {k: self.boot[k] + other.boot[k] for k in self.boot},
+            replicates=self.replicates, seed=self.seed, size_edges=self.size_edges,
+            size_names=self.size_names, thresholded=declared, ap_kind=kind,
+            threshold=threshold, keys=keys,
+            boot={k: self.boot[k] + other.boot[k] for k in self.boot}, **summed,
         )  # fmt: skip
 
     def __eq__(self, other: object) -> bool:
@@ -317,6 +330,7 @@ class ObjectState:
             fa_per_km2=out["fp"] / km2 if full else float("nan"),
             mean_iou=float(self.iou_sum[at:].sum() / IOU_UNIT / tp) if tp else float("nan"),
             fragmentation=self.fragments / self.fragmented if self.fragmented else float("nan"),
+            length_score=self.lengths.score,
             ap50=float(ap[0]),
             ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else float("nan"),
             pauc=partial_auc(fa, pd, 1.0) if self.n_gt else float("nan"),

@@ -206,6 +206,12 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         "greedy by score (default optimal; AP and FROC are always greedy)",
     )
     g.add_argument(
+        "--coco-compatible",
+        action="store_true",
+        help="also report pycocotools' 12 COCOeval stats exactly (per category, 100 "
+        "detections per image and category, COCO area ranges) in coco.csv",
+    )
+    g.add_argument(
         "--instances",
         choices=["auto", "discriminate"],
         default="auto",

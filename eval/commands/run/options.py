@@ -76,7 +76,8 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> list[Detector]:
     stray = sorted(set(overrides) - set(names))
     if stray:
         raise EvalError(f"--param given for detector(s) not being run: {stray}")
-    dets = [load(ref, name=name, options=overrides.get(name or ref, {})) for name, ref in refs]
+    dets = [load(ref, name=name, options=overrides.get(row, {}))
+            for (name, ref), row in zip(refs, names, strict=False)]  # fmt: skip
     for name, path in _predictions(args.predictions):
         opts = dict(overrides.get(name, {}))
         unknown = sorted(set(opts) - {"threshold", "instances", "format"})
@@ -127,4 +128,5 @@ def scoring_from(args: argparse.Namespace) -> Scoring:
         matching = _matching(args)
     except TorchSARError as exc:
         raise EvalError(f"bad object/matching option: {exc}") from exc
-    return Scoring(rules, matching, args.bootstrap, args.seed, instances=args.instances)
+    return Scoring(rules, matching, args.bootstrap, args.seed, instances=args.instances,
+                   coco_compatible=args.coco_compatible)  # fmt: skip

@@ -1,0 +1,248 @@
+"""Saved predictions scored like any detector: COCO results (bbox, segm), point CSV and mask
+folders; AP and the COCO-compatible stats against pycocotools on the same files; the round
+trip from ``--export-coco``; one-line errors."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from skimage import io as skio
+
+import torchsar_eval as te
+from torchsar_eval.cli import main
+from torchsar_eval.errors import EvalError
+
+SIZE = 96
+CATEGORIES = [{"id": 3, "name": "ship"}, {"id": 7, "name": "boat"}]
+
+
+def _rle(mask: np.ndarray) -> dict:
+    from pycocotools import mask as mask_utils
+
+    rle = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
+    rle["counts"] = rle["counts"].decode()
+    return rle
+
+
+def _xywh(mask: np.ndarray) -> list[float]:
+    rr, cc = np.nonzero(mask)
+    return [float(cc.min()), float(rr.min()), float(cc.max() - cc.min() + 1),
+            float(rr.max() - rr.min() + 1)]  # fmt: skip
+
+
+def write_coco_set(root, seed: int = 0, n_img: int = 5, crowd: bool = False):
+    """Images, a COCO ground truth (two categories, non-overlapping masks, areas as the
+    mask areas, image ids out of order) and random detections with continuous scores."""
+    rng = np.random.default_rng(seed)
+    root.mkdir(parents=True, exist_ok=True)
+    images, anns, results = [], [], []
+    for k in range(n_img):
+        image_id = 100 - 10 * k  # pycocotools sorts ids: the dataset must too
+        name = f"im{k}.png"
+        skio.imsave(root / name, rng.integers(0, 255, (SIZE, SIZE)).astype(np.uint8),
+                    check_contrast=False)  # fmt: skip
+        images.append({"id": image_id, "file_name": name, "height": SIZE, "width": SIZE})
+        taken = np.zeros((SIZE, SIZE), bool)
+        for _ in range(int(rng.integers(1, 6))):
+            r, c = rng.integers(0, SIZE - 40, 2)
+            h, w = rng.integers(4, 40, 2)  # areas across COCO's 32^2 bound
+            m = np.zeros((SIZE, SIZE), bool)
+            m[r : r + h, c : c + w] = True
+            if (m & taken).any():
+                continue
+            taken |= m
+            anns.append({"id": len(anns) + 1, "image_id": image_id,
+                         "category_id": int(rng.choice([3, 7])), "segmentation": _rle(m),
+                         "area": float(m.sum()), "bbox": _xywh(m), "iscrowd": 0})  # fmt: skip
+        if crowd and k % 2:
+            m = np.zeros((SIZE, SIZE), bool)
+            m[SIZE - 12 :, SIZE - 12 :] = True
+            m &= ~taken
+            anns.append({"id": len(anns) + 1, "image_id": image_id, "category_id": 3,
+                         "segmentation": _rle(m), "area": float(m.sum()), "bbox": _xywh(m),
+                         "iscrowd": 1})  # fmt: skip
+        if k == 0:
+            continue  # an image without predictions
+        for _ in range(int(rng.integers(5, 40))):
+            r, c = rng.uniform(0, SIZE - 30, 2)
+            h, w = rng.uniform(3, 30, 2)
+            m = np.zeros((SIZE, SIZE), bool)
+            m[int(r) : int(r + h) + 1, int(c) : int(c + w) + 1] = True
+            results.append({"image_id": image_id, "category_id": int(rng.choice([3, 7])),
+                            "bbox": [c, r, w, h], "segmentation": _rle(m),
+                            "score": float(rng.random())})  # fmt: skip
+    gt = {"images": images, "annotations": anns, "categories": CATEGORIES}
+    (root / "gt.json").write_text(json.dumps(gt))
+    (root / "dets.json").write_text(json.dumps(results))
+    return root / "gt.json", root / "dets.json"
+
+
+def _cocoeval(gt_path, results, iou_type, use_cats=True):
+    from pycocotools.coco import COCO
+    from pycocotools.cocoeval import COCOeval
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        gt = COCO(str(gt_path))
+        ev = COCOeval(gt, gt.loadRes(results), iou_type)
+        if not use_cats:
+            ev.params.useCats = 0
+            ev.params.maxDets = [1, 10, 100_000]
+        ev.evaluate()
+        ev.accumulate()
+        ev.summarize()
+    return ev
+
+
+def _sar_ap(ev) -> tuple[float, float]:
+    prec = ev.eval["precision"][:, :, 0, 0, -1]
+
+    def ap(p):
+        return float(p[p > -1].mean()) if (p > -1).any() else float("nan")
+
+    return ap(prec[0]), float(np.mean([ap(p) for p in prec]))
+
+
+@pytest.mark.parametrize("iou_type", ["bbox", "segm"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_scored_file_equals_pycocotools_sar_and_coco_modes(tmp_path, iou_type, seed):
+    gt_path, dets = write_coco_set(tmp_path / "set", seed=seed, crowd=seed == 1)
+    results = json.loads(dets.read_text())
+    if iou_type == "bbox":
+        results = [{k: v for k, v in r.items() if k != "segmentation"} for r in results]
+        (tmp_path / "boxes.json").write_text(json.dumps(results))
+        dets = tmp_path / "boxes.json"
+    scoring = te.Scoring(matching=te.Matching(kind="box" if iou_type == "bbox" else "mask"),
+                         replicates=0, coco_compatible=True)  # fmt: skip
+    res = te.evaluate(f"coco:{gt_path}?type=display", [te.predictions(dets, name="cnn")],
+                      scoring=scoring, progress=False)  # fmt: skip
+    row = res.row(f"coco:{gt_path}?type=display", "cnn")
+    sar = _sar_ap(_cocoeval(gt_path, results, iou_type, use_cats=False))
+    assert (row.ap50, row.ap50_95) == pytest.approx(sar, abs=1e-6)
+    coco = _cocoeval(gt_path, results, iou_type)
+    assert res.coco.iou_type.tolist() == [iou_type]
+    assert res.coco[te.tables.COCO_STATS].to_numpy()[0] == pytest.approx(coco.stats, abs=1e-12)
+
+
+def test_round_trip_through_export_coco(tmp_path):
+    """A built-in detector's exported detections, scored as a file, give its summary row
+    (object level; a CFAR's pixel metrics come from its statistic, the file's from its
+    objects' masks, the same for the region CFAR whose masks are its regions)."""
+    first = tmp_path / "direct"
+    argv = ["run", "--dataset", "sim-chips", "--n", "12", "--no-progress", "--bootstrap", "30"]
+    assert main([*argv, "--detectors", "ca,region", "--floor", "0.5", "--export-coco",
+                 "--out", str(first)]) == 0  # fmt: skip
+    again = tmp_path / "again"
+    assert main([*argv, "--floor", "0.5", "--out", str(again),
+                 "--predictions", f"ca={first / 'coco' / 'sim-chips__ca.json'}",
+                 "--predictions", f"region={first / 'coco' / 'sim-chips__region.json'}",
+                 "--param", "ca.threshold=1", "--param", "region.threshold=1"]) == 0  # fmt: skip
+    a = pd.read_csv(first / "summary.csv").set_index("detector")
+    b = pd.read_csv(again / "summary.csv").set_index("detector")
+    objects = [c for c in a.columns if c not in ("pd_pixel", "pfa_pixel")]
+    pd.testing.assert_frame_equal(a[objects], b[objects])
+    pd.testing.assert_series_equal(a.loc["region"], b.loc["region"])
+    for table in ("roc.csv", "pr.csv", "per_image.csv"):
+        pd.testing.assert_frame_equal(pd.read_csv(first / table), pd.read_csv(again / table))
+
+
+CENTRES = {"a": [(20, 20), (40, 40)], "b": [(30, 30)]}
+
+
+class _Targets(torch.utils.data.Dataset):
+    """Two 64 x 64 images of anisotropic 0.5 m x 2 m pixels, square targets of known length."""
+
+    name = "targets"
+
+    def __len__(self):
+        return 2
+
+    def __getitem__(self, i):
+        name = "ab"[i]
+        inst = torch.zeros(1, 64, 64, dtype=torch.int32)
+        for k, (r, c) in enumerate(CENTRES[name], start=1):
+            inst[0, r - 2 : r + 3, c - 2 : c + 3] = k  # centroid (r, c)
+        meta = {"name": name, "pixel_spacing": (0.5, 2.0), "gt": "mask",
+                "classes": ["ship"] * k, "lengths_m": [10.0, 20.0][:k]}  # fmt: skip
+        return {"image": torch.ones(1, 64, 64), "mask": inst > 0, "instances": inst,
+                "ignore": torch.zeros(1, 64, 64, dtype=torch.bool), "meta": meta}  # fmt: skip
+
+
+def test_points_csv_with_distance_matching_in_pixels_and_metres(tmp_path):
+    """3.5 px off in columns is within 5 px but 7 m away with 2 m columns."""
+    rows = [{"image": "a", "row": 20, "col": 23.5, "score": 0.9, "length_m": 11.0},
+            {"image": "a", "row": 40, "col": 40, "score": 0.8, "length_m": 18.0},
+            {"image": "b", "row": 5, "col": 5, "score": 0.7}]  # fmt: skip
+    path = tmp_path / "points.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    counts = {}
+    for units in ("px", "m"):
+        rule = te.Matching(kind="distance", max_distance=5.0, distance_units=units)
+        res = te.evaluate({"targets": _Targets()}, [te.predictions(path, threshold=0.5)],
+                          scoring=te.Scoring(matching=rule, replicates=0), progress=False)  # fmt: skip
+        row = res.summary.iloc[0]
+        counts[units] = (row.tp, row.fp, row.fn, row.length_score)
+        assert pd.isna(row.pd_pixel) and pd.isna(row.mean_iou) and pd.isna(row.ap50_95)
+    assert counts["px"] == (2, 1, 1, pytest.approx(0.9))  # errors 0.1 and 0.1
+    assert counts["m"] == (1, 2, 2, pytest.approx(0.9))  # only the second: 2 / 20
+
+
+def test_mask_folder_ids_with_scores_and_score_maps(tmp_path):
+    from torchsar_eval.datasets import make_dataset
+
+    sim = make_dataset("sim-chips", n=2)
+    ids, maps = tmp_path / "ids", tmp_path / "maps"
+    ids.mkdir()
+    maps.mkdir()
+    for i in range(2):
+        inst = sim[i]["instances"][0].numpy().astype(np.int32)
+        name = f"{i}"  # the items' stems: sim-chips/0 -> "0"
+        np.save(ids / f"{name}.npy", inst)
+        (ids / f"{name}.scores.json").write_text(json.dumps({"1": 0.7}))
+        np.save(maps / f"{name}.npy", (inst > 0) * 0.9 + 0.05)
+    res = te.evaluate("sim-chips", [te.predictions(ids, name="ids", threshold=0.5),
+                                    te.predictions(maps, name="maps", threshold=0.5)],
+                      n=2, progress=False)  # fmt: skip
+    s = res.summary.set_index("detector")
+    assert (s.loc["ids", ["tp", "fp", "fn"]] == [2, 0, 0]).all()
+    assert s.loc["ids", "ap50"] == 1.0 and s.loc["ids", "pd_pixel"] == 1.0
+    assert (s.loc["maps", ["tp", "fp", "fn"]] == [2, 0, 0]).all()
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("{}", "is not a COCO results list"),
+        ('{"images": [], "annotations": []}', "is a COCO ground-truth file"),
+        ('[{"image_id": 1, "bbox": [0, 0, 2, 2]}]', "entry 0 score must be a number"),
+        ('[{"image_id": 1, "bbox": [0, 0, -2, 2], "score": 1}]', "negative or infinite side"),
+        ('[{"bbox": [0, 0, 2, 2], "score": 1}]', "entry 0 has no image_id"),
+        ('[{"image_id": 99, "bbox": [0, 0, 2, 2], "score": 1}]', "1 image(s) not in the dataset"),
+        ("[{", "is not a readable JSON file"),
+    ],
+)
+def test_bad_results_files_are_one_line(tmp_path, capsys, content, message):
+    path = tmp_path / "dets.json"
+    path.write_text(content)
+    code = main(["run", "--dataset", "sim-chips", "--n", "2", "--predictions", f"x={path}",
+                 "--no-progress", "--out", str(tmp_path / "out")])  # fmt: skip
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and message in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_predictions_need_one_dataset_and_known_options(tmp_path, capsys):
+    path = tmp_path / "dets.json"
+    path.write_text("[]")
+    assert main(["run", "--predictions", f"x={path}", "--no-progress"]) == 2
+    assert "--predictions scores one dataset" in capsys.readouterr().err
+    assert main(["run", "--dataset", "sim-chips", "--predictions", f"x={path}",
+                 "--param", "x.guard=3", "--no-progress"]) == 2  # fmt: skip
+    assert "saved predictions take only" in capsys.readouterr().err
+    with pytest.raises(EvalError, match="do not exist"):
+        te.predictions(tmp_path / "missing.json")
