@@ -29,7 +29,7 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
 from torchsar_eval.report import per_image_rows, result_tables, write_run
-from torchsar_eval.runner import Scoring, SkipBad
+from torchsar_eval.runner import Scoring, SkipBad, TruthOnly
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_rows
 from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
@@ -411,6 +411,8 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     ex, cal = plan.execution, plan.calibration
     indices = list(range(len(ds)))
     default_class = _default_class(ds) if plan.scoring.coco_compatible else "target"
+    if plan.preprocess is None and not any(d.needs_images for d in detectors):
+        ds = TruthOnly(ds)  # saved predictions only: no image is decoded
     if ex.skip_bad:
         ds = SkipBad(ds)
 

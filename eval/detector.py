@@ -164,6 +164,11 @@ class Detector:
         call = None if self.call_options is None else dict(self.call_options)
         return replace(self, options={**self.options, **passed}, call_options=call, **harness)
 
+    @property
+    def needs_images(self) -> bool:
+        """Whether the detector reads the pixels (saved predictions need only the shape)."""
+        return bool(getattr(self.fn, "needs_images", True))
+
     def wants_meta(self) -> bool:
         """Whether the callable names a ``meta`` parameter (the batch metadata)."""
         return "meta" in (_named(self.fn) or []) and "meta" not in self.params

@@ -48,6 +48,7 @@ __all__ = [
     "DetectorResult",
     "Scoring",
     "SkipBad",
+    "TruthOnly",
     "batches",
     "run_detectors",
 ]
@@ -258,6 +259,21 @@ def _stack(items: list[dict]) -> dict:
     }
     out["meta"] = [it["meta"] for it in items]
     return out
+
+
+class TruthOnly(Dataset):
+    """A dataset read for its ground truth only (``dataset.truth(i)`` where it has one):
+    what scoring saved predictions needs, without decoding images."""
+
+    def __init__(self, dataset: Dataset) -> None:
+        self.dataset = dataset
+        self._get = getattr(dataset, "truth", dataset.__getitem__)
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, i: int) -> dict:
+        return self._get(i)
 
 
 class SkipBad(Dataset):

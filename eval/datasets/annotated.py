@@ -65,14 +65,22 @@ class AnnotatedDataset(FileDataset):
         if n is not None and self.image_ids is not None:
             self.image_ids = self.image_ids[:n]
 
-    def load(self, i: int) -> dict:
+    def load_truth(self, i: int) -> dict:
+        """The item without decoding its image (zeros of its shape, read from the header)."""
+        return self.load(i, images=False)
+
+    def load(self, i: int, images: bool = True) -> dict:
         path, size, objects, name = self.items[i]
         shape = raster_shape(path)[:2]
         if size is not None and tuple(shape) != tuple(size):
             raise FileFormatError(
                 path, f"is {shape[1]}x{shape[0]} but its annotation says {size[1]}x{size[0]}"
             )
-        samples = read_samples(path, self.sample_type, max_pixels=self.max_pixels)
+        if images:
+            samples = self.intensity(read_samples(path, self.sample_type,
+                                                  max_pixels=self.max_pixels), path)  # fmt: skip
+        else:
+            samples = np.zeros(shape, np.float32)
         inst = np.zeros(shape, np.int32)
         ignore = np.zeros(shape, bool)
         classes, boxes, areas, has_masks = [], [], [], True
@@ -92,7 +100,7 @@ class AnnotatedDataset(FileDataset):
             meta["areas"] = areas
         if self.image_ids is not None:
             meta["image_id"] = self.image_ids[i]
-        return make_item(self.intensity(samples, path), inst, ignore, meta, boxes=boxes)
+        return make_item(samples, inst, ignore, meta, boxes=boxes)
 
 
 class _Painter:

@@ -161,6 +161,20 @@ class FileDataset(Dataset, ABC):
         except FileFormatError as exc:
             raise BadItemError(exc.path, str(exc)) from exc
 
+    def truth(self, i: int) -> dict:
+        """Item ``i`` for scoring saved predictions: its ground truth, with an image of the
+        right shape that need not hold the samples (see :meth:`load_truth`)."""
+        if not 0 <= i < len(self):
+            raise IndexError(f"item {i} out of range for {len(self)} items")
+        try:
+            return self.load_truth(i)
+        except FileFormatError as exc:
+            raise BadItemError(exc.path, str(exc)) from exc
+
+    def load_truth(self, i: int) -> dict:
+        """:meth:`truth` (may raise FileFormatError); default: the whole item."""
+        return self.load(i)
+
     @abstractmethod
     def load(self, i: int) -> dict:
         """Item ``i`` (may raise FileFormatError)."""

@@ -97,7 +97,9 @@ def _class_names(classes: np.ndarray | None, dataset: Dataset) -> np.ndarray | N
 
 
 class SavedPredictions:
-    """The predictions in one file, to bind to a dataset (:meth:`bind`) before use.
+    """The predictions in one file, to bind to a dataset (:meth:`bind`) before use. They
+    read no pixel (``needs_images``): a run of saved predictions only decodes the ground
+    truth.
 
     Args:
         path: a COCO results JSON, a point CSV or a folder of per-image masks.
@@ -114,6 +116,7 @@ class SavedPredictions:
         if iou_type not in IOU_TYPES:
             raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
         self.iou_type, self.threshold = iou_type, threshold
+        self.needs_images = False
         self.table = _read(self.path, self.format, iou_type)  # read now: errors before any work
         self._item_rows: tuple[np.ndarray, np.ndarray] | None = None
 
