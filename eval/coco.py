@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.objects import Objects
+from torchsar_eval.scoring import declared_boxes
 
 __all__ = ["CocoExport", "encode"]
 
@@ -62,7 +63,7 @@ class CocoExport:
             self.images.append({"id": image_id, "file_name": str(meta.get("name", image_id)),
                                 "height": h, "width": w})  # fmt: skip
             classes = list(meta.get("classes") or [])
-            boxes = list(meta.get("boxes") or []) if meta.get("gt") == "box" else []
+            boxes = list(meta.get("boxes") or []) if declared_boxes(meta) else []
             areas = list(meta.get("areas") or [])
             seen = []
             for k in np.unique(inst[p][inst[p] > 0]).tolist():

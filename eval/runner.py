@@ -160,11 +160,11 @@ class DetectorResult:
         """Accumulate one batch's detector output (on the CPU; ``truth``:
         :func:`torchsar_eval.scoring.batch_truth`); returns the batch's objects."""
         mask, ignore = batch["mask"], batch["ignore"]
-        view = pixel_view(out)
-        if view is not None:
-            statistic, det_mask = view
-            self.pixels = self.pixels + pixel_counts(det_mask, mask, ignore=ignore)
-            self.roc.update(statistic, mask, ignore)
+        if isinstance(out, Detection):
+            self.pixels = self.pixels + pixel_counts(out.mask, mask, ignore=ignore)
+            self.roc.update(out.statistic, mask, ignore)
+            self.pixel_level = True
+        elif _sparse_pixel_metrics(self, out, batch):
             self.pixel_level = True
         t0 = time.perf_counter()
         obj = self.objects_of(out, batch)
@@ -242,15 +242,52 @@ def pixel_view(out: Detection | Objects) -> tuple[Tensor, Tensor] | None:
     object when none is declared); ``None`` for boxes and points."""
     if isinstance(out, Detection):
         return out.statistic, out.mask
+    sparse = object_pixels(out)
+    if sparse is None:
+        return None
+    idx, best, level = sparse
+    h, w = out.shape
+    full = np.full(out.planes * h * w, -np.inf)
+    full[idx] = best
+    stat = torch.from_numpy(full.reshape(out.planes, 1, h, w))
+    return stat, stat > level
+
+
+def object_pixels(out: Objects) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The pixels the objects cover: ``(flat index, best normalised score, level)`` with
+    ``level`` the operating point (1, or ``-inf`` when no threshold is declared); ``None``
+    for objects without masks."""
     if not out.has_masks:
         return None
-    h, w = out.shape
     owner, idx = out.pixel_lists()
+    h, w = out.shape
     best = np.full(out.planes * h * w, -np.inf)
     np.maximum.at(best, idx, normalise(out.score, out.threshold)[owner])
-    stat = torch.from_numpy(best.reshape(out.planes, 1, h, w))
-    level = 1.0 if out.threshold is not None else -np.inf
-    return stat, stat > level
+    covered = np.zeros(best.size, bool)
+    covered[idx] = True
+    idx = np.flatnonzero(covered)
+    return idx, best[idx], 1.0 if out.threshold is not None else -np.inf
+
+
+def _sparse_pixel_metrics(res: DetectorResult, out: Objects, batch: dict) -> bool:
+    """Pixel counts and ROC of objects with masks from their pixels only (every other
+    pixel is ``-inf``); ``False`` for objects without masks."""
+    sparse = object_pixels(out)
+    if sparse is None:
+        return False
+    idx, best, level = sparse
+    target = batch["mask"].reshape(-1)
+    ignore = batch["ignore"].reshape(-1)
+    care = ~ignore
+    n_target = int(torch.count_nonzero(target & care))
+    n_clutter = int(torch.count_nonzero(care)) - n_target
+    ti = torch.from_numpy(idx)
+    t, ig = target[ti], ignore[ti]
+    det = torch.from_numpy(best > level) & ~ig
+    res.pixels = res.pixels + PixelCounts(int((det & t).sum()), int((det & ~t).sum()),
+                                          n_target, n_clutter)  # fmt: skip
+    res.roc.update_sparse(torch.from_numpy(best), t, ig, n_target, n_clutter)
+    return True
 
 
 def _stack(items: list[dict]) -> dict:

@@ -11,7 +11,7 @@ from torchsar.metrics.matching import GroundTruth, ground_truth
 from torchsar.metrics.object_state import ImageInfo, normalise
 from torchsar.objects import Objects
 
-__all__ = ["batch_truth", "image_rows", "pixel_areas"]
+__all__ = ["batch_truth", "declared_boxes", "image_rows", "pixel_areas"]
 
 
 def _planes(batch: dict) -> tuple[int, int]:
@@ -31,6 +31,12 @@ def _group(meta: dict) -> str | None:
     return f"clutter={clutter['model']}" if isinstance(clutter, dict) else meta.get("group")
 
 
+def declared_boxes(meta: dict) -> bool:
+    """Whether the instances' boxes are the annotations' (box-only ground truth, COCO and
+    VOC files) rather than their masks' bounding boxes."""
+    return meta.get("gt") == "box" or meta.get("box_source") == "annotation"
+
+
 def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]]:
     """Ground truth of a batch (one plane per image channel) and each plane's facts: the
     bootstrap key (the image name, so a store and its source agree), image-level class,
@@ -46,7 +52,7 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
         inst,
         ignore,
         classes=[list(m.get("classes") or []) for m in metas],
-        boxes=[list(m.get("boxes") or []) if m.get("gt") == "box" else [] for m in metas],
+        boxes=[list(m.get("boxes") or []) if declared_boxes(m) else [] for m in metas],
         box_only=box_only,
         spacing=np.array(spacing, dtype=np.float64).reshape(len(metas), 2),
         lengths=[list(m.get("lengths_m") or []) for m in metas],

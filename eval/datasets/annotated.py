@@ -14,11 +14,11 @@ import numpy as np
 from torchsar.io import (
     DEFAULT_MAX_PIXELS,
     FileFormatError,
-    annotation_mask,
     raster_shape,
     read_coco,
     read_voc,
 )
+from torchsar.io.coco import CocoAnnotation, annotation_pixels
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from torchsar_eval.datasets.images import read_samples
 from torchsar_eval.datasets.spec import DatasetSpec
@@ -66,12 +66,12 @@ class AnnotatedDataset(FileDataset):
             self.image_ids = self.image_ids[:n]
 
     def load_truth(self, i: int) -> dict:
-        """The item without decoding its image (zeros of its shape, read from the header)."""
+        """The item without reading its image (zeros of the annotated shape)."""
         return self.load(i, images=False)
 
     def load(self, i: int, images: bool = True) -> dict:
         path, size, objects, name = self.items[i]
-        shape = raster_shape(path)[:2]
+        shape = tuple(size) if size is not None and not images else raster_shape(path)[:2]
         if size is not None and tuple(shape) != tuple(size):
             raise FileFormatError(
                 path, f"is {shape[1]}x{shape[0]} but its annotation says {size[1]}x{size[0]}"
@@ -81,21 +81,26 @@ class AnnotatedDataset(FileDataset):
                                                   max_pixels=self.max_pixels), path)  # fmt: skip
         else:
             samples = np.zeros(shape, np.float32)
-        inst = np.zeros(shape, np.int32)
-        ignore = np.zeros(shape, bool)
+        inst = np.zeros(shape[0] * shape[1], np.int32)
+        ignore = np.zeros(inst.size, bool)
         classes, boxes, areas, has_masks = [], [], [], True
-        for cls, box, mask, is_ignore in objects:
-            m = mask(*shape)
+        try:
+            pixels = annotation_pixels([_painted(o, box) for _, box, o, _ in objects], *shape)
+        except FileFormatError as exc:
+            raise FileFormatError(path, exc.problem) from None
+        for (cls, box, mask, is_ignore), pix in zip(objects, pixels, strict=True):
             if is_ignore:
-                ignore |= m
+                ignore[pix] = True
                 continue
             has_masks &= mask.segmented
             classes.append(cls)
             boxes.append(box)
             areas.append(mask.area)
-            inst[m] = len(classes)
+            inst[pix] = len(classes)  # a later object wins where two overlap
+        inst, ignore = inst.reshape(shape), ignore.reshape(shape)
         meta = self.base_meta(name, path, None, gt="mask" if has_masks else "box")
         meta["classes"] = classes
+        meta["box_source"] = "annotation"  # box IoU uses these boxes, as pycocotools
         if any(a is not None for a in areas):
             meta["areas"] = areas
         if self.image_ids is not None:
@@ -103,21 +108,21 @@ class AnnotatedDataset(FileDataset):
         return make_item(samples, inst, ignore, meta, boxes=boxes)
 
 
+def _painted(painter: _Painter, box) -> CocoAnnotation:
+    """The annotation a painter paints (a bare box for VOC objects)."""
+    if painter.ann is not None:
+        return painter.ann
+    return CocoAnnotation(-1, "", tuple(box), None, False)
+
+
 class _Painter:
-    """Deferred mask of one object: a decoded COCO segmentation or a filled box."""
+    """What paints one object: its COCO annotation (decoded with the image's others), or
+    a filled box."""
 
     def __init__(self, box, coco_annotation=None) -> None:
         self.box, self.ann = box, coco_annotation
         self.segmented = coco_annotation is not None and coco_annotation.segmentation is not None
         self.area = None if coco_annotation is None else coco_annotation.area
-
-    def __call__(self, h: int, w: int) -> np.ndarray:
-        if self.ann is not None:
-            return annotation_mask(self.ann, h, w)
-        m = np.zeros((h, w), bool)
-        r0, c0, r1, c1 = (round(v) for v in self.box)
-        m[r0:r1, c0:c1] = True
-        return m
 
 
 def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> AnnotatedDataset:

@@ -7,7 +7,6 @@ Worker processes receive the file's path and the row -> item map, and read the f
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from torch import Tensor
 from torch.utils.data import Dataset
 
 from torchsar.detection import Detection
+from torchsar.io.rle import counts_from_strings, rle_pixels
 from torchsar.objects import Objects
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
@@ -63,24 +63,27 @@ def _read(path: Path, fmt: str, iou_type: str) -> PredictionTable | MaskFolder:
     return _TABLES[key]
 
 
-def _segmentation_pixels(seg: object, h: int, w: int) -> np.ndarray:
-    """Flat pixel indices (``row * W + col``) of a COCO segmentation at ``(h, w)``."""
+def compressed_counts(seg: object, h: int, w: int) -> bytes:
+    """A COCO segmentation (polygons, RLE or compressed RLE) as the compressed RLE string of
+    an ``(h, w)`` mask."""
     from pycocotools import mask as mask_utils
 
     if isinstance(seg, list):
-        rle = mask_utils.merge(mask_utils.frPyObjects(seg, h, w))
-    elif isinstance(seg.get("counts"), list):
-        rle = mask_utils.frPyObjects(seg, h, w)
-    else:
-        size = seg.get("size")
-        if size is not None and list(size) != [h, w]:
-            raise EvalError(f"a segmentation of size {size} on an image of {h}x{w}")
-        counts = seg["counts"]
-        rle = {"size": [h, w], "counts": counts.encode() if isinstance(counts, str) else counts}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        m = mask_utils.decode(rle)
-    return np.flatnonzero(np.asarray(m, bool).reshape(h, w))
+        return mask_utils.merge(mask_utils.frPyObjects(seg, h, w))["counts"]
+    if isinstance(seg.get("counts"), list):
+        return mask_utils.frPyObjects(seg, h, w)["counts"]
+    size = seg.get("size")
+    if size is not None and list(size) != [h, w]:
+        raise EvalError(f"a segmentation of size {size} on an image of {h}x{w}")
+    counts = seg["counts"]
+    return counts.encode() if isinstance(counts, str) else counts
+
+
+def segmentation_pixels(segs: list, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(mask index, flat row-major index)`` of the pixels of COCO segmentations of one
+    image size, decoded from their run lengths without dense masks."""
+    counts, owner = counts_from_strings([compressed_counts(s, h, w) for s in segs])
+    return rle_pixels(counts, owner, len(segs), (h, w))
 
 
 def _class_names(classes: np.ndarray | None, dataset: Dataset) -> np.ndarray | None:
@@ -160,8 +163,8 @@ class SavedPredictions:
         classes = None if names is None else names[r]
         common = {"plane": plane, "planes": b * c, "classes": classes}
         if t.geometry == "mask":
-            pixels = [_segmentation_pixels(t.segmentation[i], h, w) for i in r]
-            return Objects.from_pixel_lists(pixels, t.score[r], shape=(h, w), **common)
+            owner, pixels = segmentation_pixels([t.segmentation[i] for i in r], h, w)
+            return Objects.from_pixels(owner, pixels, t.score[r], shape=(h, w), **common)
         if t.geometry == "box":
             return Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)
         length = None if t.length_m is None else t.length_m[r]

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from tests.reference.coco import coco_match
 from torchsar._checks import OptionError
 from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
-from torchsar.metrics.matching import COCO_IOUS
+from torchsar.metrics.matching import COCO_IOUS, greedy_match_planes
 from torchsar.objects import ObjectRules, discriminate
 
 
@@ -23,6 +23,27 @@ def test_greedy_equals_the_pycocotools_loop(seed, d, g):
     ref = coco_match(np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
                      COCO_IOUS)  # fmt: skip
     assert np.array_equal(got, np.where(ref == g, -2, ref))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), planes=st.integers(1, 5))
+def test_planes_at_once_equal_the_pycocotools_loop_per_plane(seed, planes):
+    """Many planes matched rank by rank (padded, with ties and crowd) equal the literal
+    loop on each plane."""
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(0, 8, (planes, 2))
+    n_d, n_g = int(sizes[:, 0].max()), int(sizes[:, 1].max())
+    quality = np.full((planes, n_d, n_g), -1.0)
+    crowd = np.full((planes, n_d), -1.0)
+    for p, (d, g) in enumerate(sizes):
+        quality[p, :d, :g] = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
+        crowd[p, :d] = rng.choice([0.0, 0.5, 0.8], size=d)
+    got = greedy_match_planes(quality, crowd, COCO_IOUS)
+    for p, (d, g) in enumerate(sizes):
+        q, c = quality[p, :d, :g], crowd[p, :d]
+        ref = coco_match(np.concatenate([q, c[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
+                         COCO_IOUS)  # fmt: skip
+        assert np.array_equal(got[:, p, :d], np.where(ref == g, -2, ref))
 
 
 @settings(max_examples=60, deadline=None)

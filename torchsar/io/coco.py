@@ -17,7 +17,15 @@ import numpy as np
 from torchsar.io.errors import FileFormatError
 from torchsar.io.raster import check_regular_file
 
-__all__ = ["CocoAnnotation", "CocoImage", "CocoSet", "annotation_mask", "read_coco"]
+__all__ = [
+    "CocoAnnotation",
+    "CocoImage",
+    "CocoSet",
+    "annotation_mask",
+    "annotation_pixels",
+    "read_coco",
+    "segmentation_counts",
+]
 
 
 @dataclass(frozen=True)
@@ -133,6 +141,56 @@ def read_coco(path: str | Path) -> CocoSet:
         tuple(CocoImage(**rec, annotations=tuple(anns)) for rec, anns in images.values()),
         categories,
     )
+
+
+def segmentation_counts(seg: object, height: int, width: int) -> bytes:
+    """A COCO segmentation (polygons, uncompressed or compressed RLE) as the compressed RLE
+    string of a ``(height, width)`` mask (decode it with :mod:`torchsar.io.rle`).
+
+    Raises:
+        FileFormatError: an RLE whose ``size`` is not ``[height, width]`` (path ``""``).
+    """
+    from pycocotools import mask as mask_utils
+
+    if isinstance(seg, list):
+        return mask_utils.merge(mask_utils.frPyObjects(seg, height, width))["counts"]
+    if isinstance(seg.get("counts"), list):
+        return mask_utils.frPyObjects(seg, height, width)["counts"]
+    size = seg.get("size")
+    if size is not None and [int(v) for v in size] != [height, width]:
+        raise FileFormatError("", f"a segmentation of size {size} on an image of "
+                              f"{height}x{width}")  # fmt: skip
+    counts = seg["counts"]
+    return counts.encode() if isinstance(counts, str) else bytes(counts)
+
+
+def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int) -> list[np.ndarray]:
+    """The flat pixel indices (``row * width + col``) of each annotation's mask (its
+    filled box when unsegmented), the run lengths of all decoded at once.
+
+    Example:
+        >>> a = CocoAnnotation(1, "ship", (1.0, 1.0, 3.0, 2.0), None, False)
+        >>> annotation_pixels([a], 4, 4)[0].tolist()
+        [5, 9]
+    """
+    from torchsar.io.rle import counts_from_strings, rle_pixels
+
+    out: list[np.ndarray] = []
+    segmented = [k for k, a in enumerate(anns) if a.segmentation is not None]
+    strings = [segmentation_counts(anns[k].segmentation, height, width) for k in segmented]
+    counts, owner = counts_from_strings(strings)
+    mask_of, flat = rle_pixels(counts, owner, len(strings), (height, width))
+    cuts = np.searchsorted(mask_of, np.arange(1, len(strings)))
+    decoded = dict(zip(segmented, np.split(flat, cuts) if strings else [], strict=True))
+    for k, a in enumerate(anns):
+        if k in decoded:
+            out.append(decoded[k])
+            continue
+        r0, c0, r1, c1 = (min(max(round(v), 0), lim) for v, lim in
+                          zip(a.box, (height, width, height, width), strict=True))  # fmt: skip
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        out.append((rr * width + cc).reshape(-1))
+    return out
 
 
 def annotation_mask(ann: CocoAnnotation, height: int, width: int) -> np.ndarray:

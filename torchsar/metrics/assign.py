@@ -13,7 +13,7 @@ from torchsar.metrics.matching import (
     Matching,
     box_iou,
     first_reach,
-    greedy_match,
+    greedy_match_planes,
     mask_overlaps,
     pair_box_iou,
 )
@@ -174,24 +174,71 @@ def _box_crowd(obj: Objects, gt: GroundTruth, d: np.ndarray, ig_box: np.ndarray)
     return pair_box_iou(obj.box[d], ig_box[obj.plane[d]], crowd=True)
 
 
-def _plane_match(obj, gt, ov, p, d, g, ig_box, rule):
-    """Assign the detections ``d`` (descending score) of plane ``p`` to its instances ``g``."""
+def _plane_qualities(obj, gt, ov, p, d, g, ig_box, rule):
+    """The pair qualities of plane ``p``'s detections ``d`` (descending score) and instances
+    ``g``: ``(iou, crowd)`` for AP, and ``(quality, crowd, threshold)`` of the rule (``None``
+    when it is AP50's)."""
     if rule.iou_kind == "box" or gt.box_only[p] or not obj.has_masks:
         iou = box_iou(obj.box[d], gt.box[g])
         crowd = _box_crowd(obj, gt, d, ig_box)
     else:
         iou, crowd = ov.mask_iou(obj, gt, d, g)
-    ap = greedy_match(iou, crowd, COCO_IOUS)
     if rule.kind == "centroid":
-        quality = _centroid_quality(obj, gt, d, g, rule)
         mostly_ignored = (crowd >= 0.5).astype(np.float64)  # COCO's crowd rule at 0.5
-        op = greedy_match(quality, mostly_ignored, np.array([1e-12]))[0]
-    elif rule.iou == COCO_IOUS[0]:
-        op = ap[0]
-    else:
-        op = greedy_match(iou, crowd, np.array([rule.iou]))[0]
-    op_iou = np.where(op >= 0, iou[np.arange(d.size), np.maximum(op, 0)] if g.size else 0, 0.0)
-    return ap, op, op_iou
+        return (iou, crowd), (_centroid_quality(obj, gt, d, g, rule), mostly_ignored, 1e-12)
+    if rule.iou == COCO_IOUS[0]:
+        return (iou, crowd), None
+    return (iou, crowd), (iou, crowd, rule.iou)
+
+
+def _greedy_planes(problems: list[tuple], thresholds: np.ndarray) -> list[np.ndarray]:
+    """:func:`~torchsar.metrics.matching.greedy_match` of each ``(quality, crowd)`` problem,
+    all at once: only the detections that can match or be ignored at the lowest threshold
+    take part (the others are unmatched whatever the order), padded across problems."""
+    thr = np.asarray(thresholds, dtype=np.float64)
+    lowest = min(float(thr.min()), 1 - 1e-10)
+    cands = [np.flatnonzero((q.max(axis=1, initial=-1.0) >= lowest) | (c >= lowest))
+             for q, c in problems]  # fmt: skip
+    n_d = max((c.size for c in cands), default=0)
+    n_g = max((q.shape[1] for q, _ in problems), default=0)
+    quality = np.full((len(problems), n_d, n_g), -1.0)
+    crowd = np.full((len(problems), n_d), -1.0)
+    for k, ((q, c), cand) in enumerate(zip(problems, cands, strict=True)):
+        quality[k, : cand.size, : q.shape[1]] = q[cand]
+        crowd[k, : cand.size] = c[cand]
+    found = greedy_match_planes(quality, crowd, thr)
+    out = []
+    for k, ((q, _), cand) in enumerate(zip(problems, cands, strict=True)):
+        res = np.full((thr.size, q.shape[0]), -1, dtype=np.int64)
+        res[:, cand] = found[:, k, : cand.size]
+        out.append(res)
+    return out
+
+
+def _match_multi_planes(obj, gt, ov, ig_box, rule, planes, out) -> None:
+    """Match the detections of the planes with several instances (``planes``), writing
+    into ``out = (ap, op, op_iou)``."""
+    dets, gts = by_plane(obj.plane, obj.planes), by_plane(gt.plane, obj.planes)
+    work = []
+    for p in planes:
+        d = dets[p]
+        if d.size:
+            d = d[np.argsort(-obj.score[d], kind="stable")]
+            work.append((d, gts[p], *_plane_qualities(obj, gt, ov, p, d, gts[p], ig_box, rule)))
+    if not work:
+        return
+    aps = _greedy_planes([w[2] for w in work], COCO_IOUS)
+    ops = {}
+    for thr in {w[3][2] for w in work if w[3] is not None}:
+        chosen = [k for k, w in enumerate(work) if w[3] is not None and w[3][2] == thr]
+        res = _greedy_planes([work[k][3][:2] for k in chosen], np.array([thr]))
+        ops.update({k: r[0] for k, r in zip(chosen, res, strict=True)})
+    for k, (d, g, (iou, _), _rule) in enumerate(work):
+        a, o = aps[k], ops.get(k, aps[k][0])
+        out[0][:, d] = np.where(a >= 0, g[np.maximum(a, 0)] if g.size else -1, a)
+        out[1][d] = np.where(o >= 0, g[np.maximum(o, 0)] if g.size else -1, o)
+        out[2][d] = np.where(o >= 0, iou[np.arange(d.size), np.maximum(o, 0)] if g.size else 0,
+                             0.0)  # fmt: skip
 
 
 def _boxes_only(rule: Matching, obj: Objects) -> bool:
@@ -247,8 +294,9 @@ def _match_single_planes(obj, gt, ov, ig_box, rule, single, out) -> None:
 
 def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     """Match every plane's objects to its instances (objects and instances of the same
-    stack of planes). Planes with at most one instance (chips) are matched all at once,
-    the others plane by plane; the distance rule by :func:`torchsar.metrics.points.match_points`.
+    stack of planes). Planes with at most one instance (chips) are matched all at once, the
+    others rank by rank across planes; the distance rule by
+    :func:`torchsar.metrics.points.match_points`.
     """
     if rule.kind == "distance":
         from torchsar.metrics.points import match_points
@@ -262,16 +310,7 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     ig_box = _ignore_boxes(gt.ignore)
     single = np.bincount(gt.plane, minlength=obj.planes) <= 1
     _match_single_planes(obj, gt, ov, ig_box, rule, single, (ap, op, op_iou))
-    dets, gts = by_plane(obj.plane, obj.planes), by_plane(gt.plane, obj.planes)
-    for p in np.flatnonzero(~single):
-        d, g = dets[p], gts[p]
-        if d.size == 0:
-            continue
-        d = d[np.argsort(-obj.score[d], kind="stable")]
-        a, o, oi = _plane_match(obj, gt, ov, p, d, g, ig_box, rule)
-        ap[:, d] = np.where(a >= 0, g[np.maximum(a, 0)] if g.size else -1, a)
-        op[d] = np.where(o >= 0, g[np.maximum(o, 0)] if g.size else -1, o)
-        op_iou[d] = oi
+    _match_multi_planes(obj, gt, ov, ig_box, rule, np.flatnonzero(~single), (ap, op, op_iou))
     gt_det = np.full(n_g, -1, dtype=np.int64)
     hit = np.flatnonzero(op >= 0)
     gt_det[op[hit]] = hit

@@ -27,7 +27,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from torchsar._checks import OptionError, check_choice
-from torchsar.objects.properties import label_boxes
 
 __all__ = [
     "COCO_IOUS",
@@ -36,6 +35,7 @@ __all__ = [
     "box_iou",
     "first_reach",
     "greedy_match",
+    "greedy_match_planes",
     "ground_truth",
     "mask_overlaps",
     "pair_box_iou",
@@ -160,21 +160,21 @@ def ground_truth(
         lengths: per plane, the length in metres of local id ``k`` at position ``k - 1``.
         areas: per plane, the declared area of local id ``k`` at position ``k - 1``.
     """
-    inst = np.asarray(instances).astype(np.int64)
+    inst = np.asarray(instances)
     n_planes = inst.shape[0]
-    per_plane = inst.reshape(n_planes, int(np.prod(inst.shape[1:]))).max(axis=1, initial=0)
-    offset = np.concatenate([[0], np.cumsum(per_plane)[:-1]])
-    raw = np.where(inst > 0, inst + offset[:, None, None], 0)
-    used = np.bincount(raw.reshape(-1), minlength=1) > 0
-    used[0] = False
-    lut = np.cumsum(used)
-    ids = np.where(raw > 0, lut[raw], 0)
-    gids = np.flatnonzero(used)
-    plane = np.searchsorted(offset, gids, side="left") - 1  # offset[p] < id <= offset[p+1]
-    local = gids - offset[plane]
-    n = int(gids.size)
-    area = np.bincount(ids.reshape(-1), minlength=n + 1)[1:].astype(np.int64)
-    box = label_boxes(ids, n)[1]
+    flat = inst.reshape(-1)
+    idx = np.flatnonzero(flat)  # the labelled pixels: everything below works on them only
+    hw = int(np.prod(inst.shape[1:]))
+    pix_plane = idx // hw
+    key = pix_plane * (int(flat.max(initial=0)) + 1) + flat[idx].astype(np.int64)
+    keys, inv = np.unique(key, return_inverse=True)  # planes in order, then local ids
+    n = int(keys.size)
+    ids = np.zeros(inst.shape, np.int64)
+    ids.reshape(-1)[idx] = inv + 1
+    plane = keys // (int(flat.max(initial=0)) + 1)
+    local = keys - plane * (int(flat.max(initial=0)) + 1)
+    area = np.bincount(inv, minlength=n).astype(np.int64)
+    box, centroid = _boxes_and_centroids(idx, inv, inst.shape[-2:], n, area)
     cls = np.array(["target"] * n, dtype=object)
     length_m = np.full(n, np.nan)
     declared = np.full(n, np.nan)
@@ -191,23 +191,26 @@ def ground_truth(
     ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
     bo = np.zeros(n_planes, bool) if box_only is None else np.asarray(box_only, bool)
     sp = np.full((n_planes, 2), np.nan) if spacing is None else np.asarray(spacing, np.float64)
-    centroid = _centroids(ids, n, area)
     on_box = bo[plane] if n else np.zeros(0, bool)
     centroid[on_box] = 0.5 * (box[on_box, :2] + box[on_box, 2:]) - 0.5
     return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo,
                        centroid, sp.reshape(n_planes, 2), length_m, declared)  # fmt: skip
 
 
-def _centroids(ids: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:
-    """Mean (row, col) of each id's pixels ``(n, 2)``."""
-    flat = ids.reshape(-1)
-    idx = np.flatnonzero(flat)
-    lab = flat[idx]
-    h, w = ids.shape[-2:]
-    out = np.zeros((n, 2))
-    for axis, coord in enumerate(((idx // w) % h, idx % w)):
-        out[:, axis] = np.bincount(lab, weights=coord, minlength=n + 1)[1:] / np.maximum(area, 1)
-    return out
+def _boxes_and_centroids(idx: np.ndarray, inv: np.ndarray, hw, n: int, area: np.ndarray):
+    """End-exclusive boxes ``(n, 4)`` and mean (row, col) ``(n, 2)`` of instances ``inv``
+    of the labelled pixels ``idx`` (flat indices into the stack)."""
+    h, w = hw
+    rows, cols = (idx // w) % h, idx % w
+    box = np.zeros((n, 4))
+    for axis, coord in enumerate((rows, cols)):
+        lo = np.full(n, np.iinfo(np.int64).max)
+        hi = np.full(n, -1)
+        np.minimum.at(lo, inv, coord)
+        np.maximum.at(hi, inv, coord)
+        box[:, axis], box[:, axis + 2] = lo, hi + 1
+    centroid = np.stack([np.bincount(inv, weights=c, minlength=n) for c in (rows, cols)], axis=1)
+    return box, centroid / np.maximum(area, 1)[:, None]
 
 
 def mask_overlaps(
@@ -275,6 +278,41 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
         else:
             hit = np.zeros(n_t, bool)
         out[~hit & (crowd[d] >= thr), d] = IGNORED
+    return out
+
+
+def greedy_match_planes(
+    quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray
+) -> np.ndarray:
+    """:func:`greedy_match` of many planes at once, one detection rank at a time.
+
+    Args:
+        quality: ``(P, D, G)`` pair quality per plane, detections in descending score order,
+            padded with -1 (a padded detection or instance never matches).
+        crowd: ``(P, D)`` crowd quality (-1 for padding).
+        thresholds: ``(T,)`` minimum quality.
+
+    Returns:
+        int ``(T, P, D)``: matched instance column, -1 unmatched, -2 ignored.
+
+    Example:
+        >>> q = np.array([[[0.9, 0.6], [0.8, 0.0]]])  # one plane, two detections, two instances
+        >>> greedy_match_planes(q, np.zeros((1, 2)), np.array([0.5]))[0].tolist()
+        [[0, -1]]
+    """
+    n_p, n_d, n_g = quality.shape
+    thr = _clip(thresholds)
+    out = np.full((thr.size, n_p, n_d), UNMATCHED, dtype=np.int64)
+    taken = np.zeros((thr.size, n_p, n_g), bool)
+    tt, pp = np.meshgrid(np.arange(thr.size), np.arange(n_p), indexing="ij")
+    for d in range(n_d):
+        q = quality[None, :, d, :]  # (1, P, G)
+        q = np.where(~taken & (q >= thr[:, None, None]), q, -1.0)  # (T, P, G)
+        j = n_g - 1 - np.argmax(q[..., ::-1], axis=2) if n_g else np.zeros((thr.size, n_p), int)
+        hit = (q[tt, pp, j] >= 0) if n_g else np.zeros((thr.size, n_p), bool)
+        out[tt[hit], pp[hit], d] = j[hit]
+        taken[tt[hit], pp[hit], j[hit]] = True
+        out[:, :, d][~hit & (crowd[None, :, d] >= thr[:, None])] = IGNORED
     return out
 
 

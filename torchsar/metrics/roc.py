@@ -76,6 +76,36 @@ class RocAccumulator:
         self.targets += int(hist[0].sum())
         self.clutter += int(hist[1].sum())
 
+    def update_sparse(
+        self, values: Tensor, target: Tensor, ignore: Tensor, targets: int, clutter: int
+    ) -> None:
+        """Add a batch whose statistic is ``-inf`` except at some pixels: their ``values``
+        with their ``target`` / ``ignore`` flags (bool, same length), and the batch's
+        counts of target and clutter pixels (``-inf`` exceeds no threshold, so only the
+        listed pixels reach the histograms). Equal to :meth:`update` on the dense batch.
+
+        Example:
+            >>> a, b = RocAccumulator(), RocAccumulator()
+            >>> stat = torch.full((6,), -torch.inf); stat[[1, 4]] = torch.tensor([2.0, 0.5])
+            >>> tgt = torch.tensor([0, 1, 1, 0, 0, 0], dtype=torch.bool)
+            >>> a.update(stat, tgt)
+            >>> no = torch.zeros(2, dtype=torch.bool)
+            >>> b.update_sparse(stat[[1, 4]], tgt[[1, 4]], no, targets=2, clutter=4)
+            >>> [torch.equal(getattr(a, k), getattr(b, k)) for k in ("target_hits", "clutter_hits")]
+            [True, True]
+        """
+        if has_nan(values):
+            raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
+        grid = self.pixel_grid.to(dtype=values.dtype)
+        bins = self._bins(values, grid)
+        cls = (~target).long().masked_fill_(ignore, 2)
+        n = grid.numel() + 1
+        hist = torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).view(3, n)
+        self.target_hits += _exceedances(hist[0])
+        self.clutter_hits += _exceedances(hist[1])
+        self.targets += int(targets)
+        self.clutter += int(clutter)
+
     def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
         """``torch.bucketize(statistic, grid)``, by arithmetic when the grid is the default
         kind."""

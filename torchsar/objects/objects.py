@@ -45,7 +45,7 @@ class ObjectMasks:
 
     Attributes:
         offsets: int64 ``(M + 1,)``; object ``k`` owns ``pixels[offsets[k]:offsets[k + 1]]``.
-        pixels: int64 ``(P,)`` flat indices into the ``(N, H, W)`` stack, ascending per object.
+        pixels: int64 ``(P,)`` flat indices into the ``(N, H, W)`` stack, object by object.
     """
 
     offsets: np.ndarray
@@ -253,26 +253,55 @@ class Objects:
             >>> o.area.tolist(), o.box.tolist()
             ([3], [[0.0, 0.0, 2.0, 2.0]])
         """
+        m = len(pixels)
+        counts = np.array([len(p) for p in pixels], dtype=np.int64)
+        local = np.concatenate([np.asarray(p, np.int64) for p in pixels]) if m else np.zeros(
+            0, np.int64)  # fmt: skip
+        return cls.from_pixels(np.repeat(np.arange(m), counts), local, scores, shape=shape,
+                               plane=plane, planes=planes, threshold=threshold,
+                               classes=classes)  # fmt: skip
+
+    @classmethod
+    def from_pixels(
+        cls,
+        owner: np.ndarray,
+        pixels: np.ndarray,
+        scores: np.ndarray,
+        *,
+        shape: tuple[int, int],
+        plane: np.ndarray | None = None,
+        planes: int | None = None,
+        threshold: float | None = None,
+        classes: Sequence[str] | None = None,
+    ) -> Objects:
+        """:meth:`from_pixel_lists` with the pixels of every object in one array:
+        ``pixels[i]`` (flat index in its plane) belongs to object ``owner[i]`` (objects in
+        order: ``owner`` non-decreasing).
+
+        Example:
+            >>> o = Objects.from_pixels(np.array([0, 0, 1]), np.array([0, 1, 9]),
+            ...                         np.array([0.5, 0.7]), shape=(4, 4))
+            >>> o.area.tolist(), o.centroid.tolist()
+            ([2, 1], [[0.0, 0.5], [2.0, 1.0]])
+        """
         h, w = _shape(shape)
         scores = np.asarray(scores, dtype=np.float64).reshape(-1)
         m = scores.size
-        if len(pixels) != m:
-            raise ShapeError(f"pixels must hold one array per score ({m}), got {len(pixels)}")
+        owner = np.asarray(owner, np.int64).reshape(-1)
+        local = np.asarray(pixels, np.int64).reshape(-1)
+        if owner.shape != local.shape or (
+            owner.size and (owner.min() < 0 or owner.max() >= m or (np.diff(owner) < 0).any())
+        ):
+            raise ShapeError(f"owner must give each pixel its object in 0..{m - 1} in order")
         plane = np.zeros(m, np.int64) if plane is None else np.asarray(plane, np.int64)
         _, scores, plane, planes = _per_plane(np.zeros((m, 0)), scores, plane, planes,
                                               "pixels", 2)  # fmt: skip
-        counts = np.array([len(p) for p in pixels], dtype=np.int64)
-        local = (
-            np.concatenate([np.asarray(p, np.int64) for p in pixels])
-            if m
-            else np.zeros(0, np.int64)
-        )
         if local.size and (local.min() < 0 or local.max() >= h * w):
             raise InputValueError(f"pixel indices must lie in [0, H*W={h * w})")
-        owner = np.repeat(np.arange(m), counts)
+        counts = np.bincount(owner, minlength=m)
         flat = plane[owner] * (h * w) + local
         offsets = np.concatenate([[0], np.cumsum(counts)])
-        props = measure_pixels(owner + 1, flat, (h, w), m, np.repeat(scores, counts))
+        props = measure_pixels(owner + 1, flat, (h, w), m, scores[owner])
         props["plane"], props["score"] = plane, scores
         props["box"][props["area"] == 0] = 0.0  # an empty mask has no extent
         masks_ = ObjectMasks(offsets.astype(np.int64), flat.astype(np.int64))

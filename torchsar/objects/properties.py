@@ -7,21 +7,49 @@ import numpy as np
 __all__ = ["label_boxes", "measure", "measure_pixels"]
 
 
-def _extent(lab: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-label minimum and maximum of ``values`` (labels ``1..n``)."""
-    lo = np.full(n + 1, np.iinfo(np.int64).max)
-    hi = np.full(n + 1, -1)
-    np.minimum.at(lo, lab, values)
-    np.maximum.at(hi, lab, values)
-    return lo[1:], hi[1:]
+class _Groups:
+    """Per-label reductions of pixel values (labels ``1..n``): by contiguous runs when the
+    labels come sorted (objects given pixel list by pixel list), else by scatter."""
+
+    def __init__(self, lab: np.ndarray, n: int) -> None:
+        self.lab, self.n = lab, n
+        self.runs = lab.size < 2 or bool((lab[1:] >= lab[:-1]).all())
+        if self.runs:
+            self.starts = np.flatnonzero(np.diff(lab, prepend=-1) != 0)
+            self.labels = lab[self.starts]
+
+    def _reduce(self, ufunc: np.ufunc, values: np.ndarray, fill) -> np.ndarray:
+        out = np.full(self.n + 1, fill, dtype=np.result_type(values, type(fill)))
+        if self.runs:
+            if self.starts.size:
+                out[self.labels] = ufunc.reduceat(values, self.starts)
+        else:
+            ufunc.at(out, self.lab, values)
+        return out[1:]
+
+    def sum(self, values: np.ndarray) -> np.ndarray:
+        if not self.runs:
+            return np.bincount(self.lab, weights=values, minlength=self.n + 1)[1:]
+        return self._reduce(np.add, values, 0.0)
+
+    def min(self, values: np.ndarray, fill) -> np.ndarray:
+        return self._reduce(np.minimum, values, fill)
+
+    def max(self, values: np.ndarray, fill) -> np.ndarray:
+        return self._reduce(np.maximum, values, fill)
 
 
-def _moments(lab: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int, area: np.ndarray):
+def _extent(groups: _Groups, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-label minimum and maximum of integer ``values``."""
+    return groups.min(values, np.iinfo(np.int64).max), groups.max(values, -1)
+
+
+def _moments(groups: _Groups, rows: np.ndarray, cols: np.ndarray, area: np.ndarray):
     """Centroids ``(n, 2)`` and major / minor axis lengths (``4 sqrt(eigenvalue)`` of the
     central second moments, the convention of ``skimage.measure.regionprops``)."""
 
     def mean(w: np.ndarray) -> np.ndarray:
-        return np.bincount(lab, weights=w, minlength=n + 1)[1:] / area
+        return groups.sum(w) / area
 
     r, c = mean(rows), mean(cols)
     mrr = mean(rows * rows) - r * r
@@ -39,13 +67,14 @@ def label_boxes(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     of a stack ``(N, H, W)`` (ids unique across planes), from the labelled pixels only."""
     flat = labels.reshape(-1)
     idx = np.flatnonzero(flat)
-    return _plane_and_box(flat[idx].astype(np.int64), idx, labels.shape[-2:], n)
+    lab = flat[idx].astype(np.int64)
+    return _plane_and_box(_Groups(lab, n), idx, labels.shape[-2:], n)
 
 
-def _plane_and_box(lab: np.ndarray, idx: np.ndarray, hw: tuple[int, int], n: int):
+def _plane_and_box(groups: _Groups, idx: np.ndarray, hw: tuple[int, int], n: int):
     h, w = hw
-    plane = _extent(lab, idx // (h * w), n)[0]
-    (r0, r1), (c0, c1) = _extent(lab, (idx // w) % h, n), _extent(lab, idx % w, n)
+    plane = _extent(groups, idx // (h * w))[0]
+    (r0, r1), (c0, c1) = _extent(groups, (idx // w) % h), _extent(groups, idx % w)
     box = np.stack([r0, c0, r1 + 1, c1 + 1], axis=1).astype(np.float64).reshape(n, 4)
     return plane, box
 
@@ -73,10 +102,10 @@ def measure_pixels(
     r, c = (idx // w) % h, idx % w
     rows, cols = r.astype(np.float64), c.astype(np.float64)
     area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
-    plane, box = _plane_and_box(lab, idx, (h, w), n)
-    centroid, length, width = _moments(lab, rows, cols, n, np.maximum(area, 1))
-    peak = np.full(n + 1, -np.inf)
-    np.maximum.at(peak, lab, values)
+    groups = _Groups(lab, n)
+    plane, box = _plane_and_box(groups, idx, (h, w), n)
+    centroid, length, width = _moments(groups, rows, cols, np.maximum(area, 1))
+    peak = groups.max(np.asarray(values, dtype=np.float64), -np.inf)
     return {
         "plane": plane,
         "area": area,
@@ -84,5 +113,5 @@ def measure_pixels(
         "centroid": centroid,
         "length": length,
         "width": width,
-        "score": peak[1:],
+        "score": peak,
     }
