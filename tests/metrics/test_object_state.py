@@ -10,7 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from torchsar.metrics import Matching, ObjectState, ground_truth, match_batch
-from torchsar.metrics.curves import OP_BIN, SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa
+from torchsar.metrics.curves import (
+    OP_BIN,
+    SCORE_GRID,
+    coco_ap,
+    coco_ap_rows,
+    froc,
+    partial_auc,
+    pd_at_fa,
+)
 from torchsar.metrics.object_state import ImageInfo
 from torchsar.objects import ObjectRules, discriminate
 from torchsar_eval.coco import CocoExport
@@ -165,3 +173,38 @@ def test_all_true_and_all_false_masks_on_simulated_data(kind):
         assert yes["tp"] == 0 and yes["fp"] == n and yes["recall"] == 0  # one flood per image
         assert yes["ap50"] == 0 and yes["pd_at_1_fa_per_image"] == 0
         assert no["tp"] == no["fp"] == 0 and np.isnan(no["precision"]) and no["recall"] == 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 100_000), rows=st.integers(1, 6), n_gt=st.integers(0, 9))
+def test_ap_of_many_rows_equals_ap_row_by_row(seed, rows, n_gt):
+    rng = np.random.default_rng(seed)
+    tp = rng.poisson(0.05, (rows, SCORE_GRID.size + 1)) * (rng.random((rows, 1)) < 0.8)
+    fp = rng.poisson(0.05, tp.shape)
+    gts = rng.integers(0, n_gt + 1, rows)
+    got = coco_ap_rows(tp, fp, gts)
+    ref = [coco_ap(t, f, g) for t, f, g in zip(tp, fp, gts, strict=True)]
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+
+def test_intervals_equal_the_replicate_by_replicate_metrics():
+    """The vectorised bootstrap intervals are the percentiles of each replicate's metrics
+    computed one by one with the scalar helpers."""
+    from torchsar.metrics.bootstrap import interval
+    from torchsar.metrics.object_state import operating_point
+
+    inst, ignore, stat = _scene(np.random.default_rng(11), n_img=6)
+    state, _ = _state(inst, ignore, stat, Matching(kind="centroid"), replicates=50)
+    b, at = state.boot, OP_BIN
+    reps = {k: [] for k in ("precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image")}
+    for r in range(50):
+        n_gt, images = int(b["n_gt"][r]), int(b["images"][r])
+        op = operating_point(b["tp"][r], b["fp"][r], n_gt, images, at)
+        fa, pd = froc(b["tp"][r], b["fp"][r], n_gt, images)
+        for k in ("precision", "recall", "f1"):
+            reps[k].append(op[k])
+        reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt))
+        reps["pd_at_1_fa_per_image"].append(pd_at_fa(fa, pd, 1.0) if n_gt else float("nan"))
+    got = state.intervals()
+    for k, v in reps.items():
+        assert got[k] == pytest.approx(interval(np.array(v)), nan_ok=True), k

@@ -14,6 +14,7 @@ __all__ = [
     "OP_BIN",
     "SCORE_GRID",
     "coco_ap",
+    "coco_ap_rows",
     "froc",
     "interpolated_precision",
     "partial_auc",
@@ -97,6 +98,38 @@ def coco_ap(tp: np.ndarray, fp: np.ndarray, n_gt: int) -> float:
     tps = np.cumsum(np.asarray(tp)[::-1], dtype=np.float64)[rev]
     fps = np.cumsum(np.asarray(fp)[::-1], dtype=np.float64)[rev]
     return float(interpolated_precision(tps, fps, n_gt)[0].mean())
+
+
+def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray:
+    """:func:`coco_ap` of every row of TP / FP histograms ``(R, N)`` at once (e.g. bootstrap
+    replicates, ``n_gt`` ``(R,)``); NaN where a row has no ground truth.
+
+    Example:
+        >>> tp = np.zeros((2, 352), int); fp = np.zeros_like(tp)
+        >>> tp[:, 300] = 1; fp[:, 200] = 1; tp[:, 100] = 1
+        >>> np.round(coco_ap_rows(tp, fp, np.array([2, 0])), 4).tolist()
+        [0.835, nan]
+    """
+    tp, fp = np.atleast_2d(tp), np.atleast_2d(fp)
+    n_gt = np.asarray(n_gt, dtype=np.float64)
+    rows = tp.shape[0]
+    if rows == 0:
+        return np.zeros(0)
+    cols = np.flatnonzero((tp + fp).any(axis=0))[::-1]  # bins holding detections, best first
+    if cols.size == 0:
+        return np.where(n_gt > 0, 0.0, np.nan)
+    tps = np.cumsum(tp[:, cols], axis=1, dtype=np.float64)
+    fps = np.cumsum(fp[:, cols], axis=1, dtype=np.float64)
+    recall = tps / np.where(n_gt > 0, n_gt, 1.0)[:, None]
+    precision = tps / (tps + fps + np.spacing(1))
+    precision = np.maximum.accumulate(precision[:, ::-1], axis=1)[:, ::-1]
+    # first column reaching each recall point, per row: one search over rows laid end to end
+    offset = (float(recall.max()) + 2.0) * np.arange(rows)[:, None]
+    idx = np.searchsorted((recall + offset).reshape(-1), (RECALL_POINTS + offset).reshape(-1))
+    idx = idx.reshape(rows, -1) - cols.size * np.arange(rows)[:, None]
+    q = np.take_along_axis(precision, np.minimum(idx, cols.size - 1), axis=1)
+    q = np.where(idx < cols.size, q, 0.0)
+    return np.where(n_gt > 0, q.mean(axis=1), np.nan)
 
 
 def froc(tp: np.ndarray, fp: np.ndarray, n_gt: int, images: int) -> tuple[np.ndarray, ...]:

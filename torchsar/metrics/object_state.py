@@ -32,11 +32,12 @@ from torchsar.metrics.bootstrap import interval, poisson_weights
 from torchsar.metrics.curves import (
     OP_BIN,
     SCORE_GRID,
-    coco_ap,
+    coco_ap_rows,
     froc,
     partial_auc,
     pd_at_fa,
     score_bins,
+    suffix,
 )
 from torchsar.metrics.distance import LengthErrors
 from torchsar.metrics.matching import COCO_IOUS, GroundTruth
@@ -352,21 +353,25 @@ class ObjectState:
     def intervals(
         self, at: int | None = None, level: float = 0.95
     ) -> dict[str, tuple[float, float]]:
-        """Bootstrap percentile intervals of the headline metrics."""
+        """Bootstrap percentile intervals of the headline metrics (every replicate at
+        once)."""
         at = self.op_bin if at is None else at
-        b = self.boot
-        reps = {"precision": [], "recall": [], "f1": [], "ap50": [], "pd_at_1_fa_per_image": []}
-        for r in range(self.replicates):
-            n_gt, images = int(b["n_gt"][r]), int(b["images"][r])
-            op = operating_point(b["tp"][r], b["fp"][r], n_gt, images, at)
-            fa, pd = froc(b["tp"][r], b["fp"][r], n_gt, images)
-            reps["precision"].append(op["precision"])
-            reps["recall"].append(op["recall"])
-            reps["f1"].append(op["f1"])
-            reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt)
-                                if self.ap_kind != "none" else float("nan"))  # fmt: skip
-            reps["pd_at_1_fa_per_image"].append(pd_at_fa(fa, pd, 1.0) if n_gt else float("nan"))
-        return {k: interval(np.array(v), level) for k, v in reps.items()}
+        b, nan = self.boot, float("nan")
+        n_gt, images = b["n_gt"].astype(np.float64), b["images"].astype(np.float64)
+        t, f = b["tp"][:, at:].sum(axis=1), b["fp"][:, at:].sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            reps = {
+                "precision": np.where(t + f > 0, t / (t + f), nan),
+                "recall": np.where(n_gt > 0, t / n_gt, nan),
+                "f1": np.where(t + f + n_gt > 0, 2 * t / (2 * t + f + (n_gt - t)), nan),
+            }
+            fa = suffix(b["fp"]) / np.maximum(images, 1)[:, None]
+            pd = suffix(b["tp"]) / n_gt[:, None]
+        reps["ap50"] = (coco_ap_rows(b["tp50"], b["fp50"], n_gt) if self.ap_kind != "none"
+                        else np.full(n_gt.size, nan))  # fmt: skip
+        best = np.where(fa <= 1.0, pd, 0.0).max(axis=1, initial=0.0)
+        reps["pd_at_1_fa_per_image"] = np.where(n_gt > 0, best, nan)
+        return {k: interval(v, level) for k, v in reps.items()}
 
     def score_at(self, at: int) -> float:
         """The threshold, on the objects' own score scale, of an operating point starting at
