@@ -284,18 +284,22 @@ class _MainFinder(pickle.Pickler):
         return NotImplemented
 
 
+def _from_main(name: str, where: str) -> EvalError:
+    return EvalError(
+        f"detector {name} is defined in __main__ ({where}), which worker processes cannot "
+        "import: move it into a module and pass its import path (module:name), or run with "
+        "{opt:workers}1"
+    )
+
+
 def check_portable(detectors: list[Detector]) -> None:
     """Refuse, with one line each, detectors that worker processes could not rebuild: a
     callable defined in ``__main__`` (a script or notebook: a worker re-runs the script or
     cannot find it) or one that cannot be pickled (a lambda, a local function)."""
     for det in detectors:
-        if det.ref is not None and det.ref.partition(":")[0] in ("__main__", "__mp_main__"):
-            raise EvalError(
-                f"detector {det.name} is defined in __main__ ({det.ref}), which worker "
-                "processes cannot import: move it into a module and pass its import path "
-                "(module:name), or run with {opt:workers}1"
-            )
         if det.ref is not None:
+            if det.ref.partition(":")[0] in ("__main__", "__mp_main__"):
+                raise _from_main(det.name, det.ref)
             continue
         finder = _MainFinder()
         try:
@@ -308,8 +312,4 @@ def check_portable(detectors: list[Detector]) -> None:
                     "and pass its import path (module:name), or run with {opt:workers}1"
                 ) from None
         if finder.main:
-            raise EvalError(
-                f"detector {det.name} is defined in __main__ ({finder.main[0]}), which worker "
-                "processes cannot import: move it into a module and pass its import path "
-                "(module:name), or run with {opt:workers}1"
-            )
+            raise _from_main(det.name, finder.main[0])

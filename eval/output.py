@@ -200,11 +200,7 @@ def claim(out: Path, *, overwrite: bool = False, resume: bool = False) -> Iterat
     ``result_dir(out, resume=True)``.
     """
     out = Path(out)
-    if out.name in ("", ".", ".."):
-        raise EvalError(f"{{opt:out}} must name a folder, got {str(out)!r}")
-    _check_writable(out)
-    recover(out.parent, keep=out.name if resume else None)
-    _check_out(out, overwrite)
+    check_out(out, overwrite=overwrite, resume=resume)
     aside = None
     if out.is_dir() and not _is_empty_dir(out):
         aside = _hidden_name(out, "replaced")

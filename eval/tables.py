@@ -13,6 +13,7 @@ __all__ = [
     "BREAKDOWN_COLUMNS",
     "COCO_COLUMNS",
     "COCO_STATS",
+    "CONSOLE_COLUMNS",
     "FROC_COLUMNS",
     "PER_IMAGE_COLUMNS",
     "PR_COLUMNS",
@@ -61,6 +62,10 @@ SUMMARY_COLUMNS = [
     *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
     "score_threshold",
 ]
+CONSOLE_COLUMNS = ["dataset", "detector", "images", "pd_pixel", "pfa_pixel", "tp", "fp", "fn",
+                   "precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image",
+                   "false_alarms_per_image", "mean_iou", "ms_per_image"]  # fmt: skip
+"""What ``torchsar-eval run`` prints (summary and timing columns)."""
 TIMING_COLUMNS = ["dataset", "detector", "images", "ms_per_image", "object_ms_per_image",
                   "images_per_s"]  # fmt: skip
 FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_per_image",

@@ -154,20 +154,19 @@ class FileDataset(Dataset, ABC):
         }
 
     def __getitem__(self, i: int) -> dict:
-        if not 0 <= i < len(self):
-            raise IndexError(f"item {i} out of range for {len(self)} items")
-        try:
-            return self.load(i)
-        except FileFormatError as exc:
-            raise BadItemError(exc.path, str(exc)) from exc
+        return self._checked(self.load, i)
 
     def truth(self, i: int) -> dict:
         """Item ``i`` for scoring saved predictions: its ground truth, with an image of the
         right shape that need not hold the samples (see :meth:`load_truth`)."""
+        return self._checked(self.load_truth, i)
+
+    def _checked(self, load, i: int) -> dict:
+        """``load(i)`` for an index in range, a file error as :class:`BadItemError`."""
         if not 0 <= i < len(self):
             raise IndexError(f"item {i} out of range for {len(self)} items")
         try:
-            return self.load_truth(i)
+            return load(i)
         except FileFormatError as exc:
             raise BadItemError(exc.path, str(exc)) from exc
 

@@ -19,29 +19,11 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.output import check_out
 from torchsar_eval.registry import available
 from torchsar_eval.runner import DEFAULT_MATCH, DEFAULT_RULES
+from torchsar_eval.tables import CONSOLE_COLUMNS
 
 __all__ = ["DEFAULT_DATASETS", "DEFAULT_MATCH", "DEFAULT_RULES", "add_parser", "run"]
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
-
-SUMMARY_SHOWN = [
-    "dataset",
-    "detector",
-    "images",
-    "pd_pixel",
-    "pfa_pixel",
-    "tp",
-    "fp",
-    "fn",
-    "precision",
-    "recall",
-    "f1",
-    "ap50",
-    "pd_at_1_fa_per_image",
-    "false_alarms_per_image",
-    "mean_iou",
-    "ms_per_image",
-]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -285,7 +267,7 @@ def print_summary(results: Results) -> None:
     summary = results.summary.merge(results.timing, on=["dataset", "detector", "images"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
-        print(summary[SUMMARY_SHOWN].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        print(summary[CONSOLE_COLUMNS].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for name, st in results.stats.items():
         print(
             f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
