@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import torch
 from torch.utils.data import Dataset
 
 from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
@@ -75,9 +76,15 @@ class Execution:
             from torchsar._checks import TorchSARError, check_device
 
             try:
+                torch.device(self.device)
+            except (RuntimeError, TypeError):
+                raise EvalError(f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, "
+                                "cuda:N)") from None
+            try:
                 check_device(self.device, "device")
-            except TorchSARError as exc:
-                raise EvalError(f"{{opt:device}}{self.device!r}: {exc}") from None
+            except TorchSARError:
+                raise EvalError(f"{{opt:device}}{self.device!r} is not available on this "
+                                "machine: use cpu") from None
 
 
 @dataclass(frozen=True)

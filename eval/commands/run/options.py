@@ -80,10 +80,10 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> list[Detector]:
             for (name, ref), row in zip(refs, names, strict=False)]  # fmt: skip
     for name, path in _predictions(args.predictions):
         opts = dict(overrides.get(name, {}))
-        unknown = sorted(set(opts) - {"threshold", "instances", "format"})
+        unknown = sorted(set(opts) - {"threshold", "instances", "format", "iou_type"})
         if unknown:
             raise EvalError(f"--param {name}.{unknown[0]}: saved predictions take only "
-                            "threshold, instances and format")  # fmt: skip
+                            "threshold, instances, format and iou_type")  # fmt: skip
         dets.append(predictions(path, name=name, **opts))
     return dets
 
