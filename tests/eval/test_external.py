@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 import torchsar_eval as te
+from torchsar_eval.cli import main
 from torchsar_eval.detector import Detector, check_portable
 from torchsar_eval.errors import EvalError
 
@@ -72,19 +73,20 @@ def test_ray_equals_one_process(one_process, tmp_path):
     assert _tables(out) == _tables(one_process)
 
 
-def test_an_entry_point_detector_is_found_by_name(tmp_path):
+def test_an_entry_point_detector_is_found_by_name(tmp_path, monkeypatch, capsys):
     dist = tmp_path / "site" / "mydets_plugin-0.1.dist-info"
     dist.mkdir(parents=True)
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: mydets-plugin\nVersion: 0.1\n")
     (dist / "entry_points.txt").write_text("[torchsar.detectors]\nratio-net = mydets:RatioNet\n")
-    path = Path(os.pathsep.join([str(tmp_path / "site"), str(EXTERNAL)]))
+    monkeypatch.syspath_prepend(str(EXTERNAL))
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
     out = tmp_path / "ep"
-    done = _cli(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ratio-net",
-                 "--no-progress", "--out", str(out)], extra_path=path)  # fmt: skip
-    assert done.returncode == 0, done.stderr
+    assert main(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ratio-net",
+                 "--no-progress", "--out", str(out)]) == 0  # fmt: skip
     assert pd.read_csv(out / "summary.csv").detector.tolist() == ["ratio-net"]
-    listed = _cli(["run", "--help"], extra_path=path)
-    assert "ratio-net" in listed.stdout
+    capsys.readouterr()
+    assert main(["run", "--help"]) == 0
+    assert "ratio-net" in capsys.readouterr().out
 
 
 def test_a_main_only_detector_with_two_workers_gets_one_line(tmp_path):
@@ -139,10 +141,11 @@ def test_python_api_refuses_main_objects_and_lambdas_for_workers():
         ),
     ],
 )
-def test_bad_references_are_one_line(tmp_path, extra, message):
-    done = _cli(["run", "--dataset", "sim-chips", "--n", "2", "--no-progress",
+def test_bad_references_are_one_line(tmp_path, monkeypatch, capsys, extra, message):
+    monkeypatch.syspath_prepend(str(EXTERNAL))
+    code = main(["run", "--dataset", "sim-chips", "--n", "2", "--no-progress",
                  "--out", str(tmp_path / "x"), *extra])  # fmt: skip
-    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
-    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1, lines
     assert message in lines[0]
     assert not (tmp_path / "x").exists()
