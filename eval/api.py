@@ -78,13 +78,15 @@ class Execution:
             try:
                 torch.device(self.device)
             except (RuntimeError, TypeError):
-                raise EvalError(f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, "
-                                "cuda:N)") from None
+                raise EvalError(
+                    f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, cuda:N)"
+                ) from None
             try:
                 check_device(self.device, "device")
             except TorchSARError:
-                raise EvalError(f"{{opt:device}}{self.device!r} is not available on this "
-                                "machine: use cpu") from None
+                raise EvalError(
+                    f"{{opt:device}}{self.device!r} is not available on this machine: use cpu"
+                ) from None
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import os
 import pickle
 import signal
 import sys
-import zlib
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -28,11 +28,19 @@ import torch
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
+from torchsar.metrics import ObjectState, PixelCounts, RocAccumulator
+from torchsar.metrics.coco_compat import CocoState
+from torchsar.metrics.distance import LengthErrors
+from torchsar.metrics.matching import Matching
+from torchsar.metrics.object_state import KeyCounts
+from torchsar.metrics.ranked import RankedDetections
+from torchsar.objects import ObjectRules
+from torchsar_eval import statefile
 from torchsar_eval.coco import CocoExport
 from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
 from torchsar_eval.memory import release_memory, tune_allocator
-from torchsar_eval.runner import DetectorResult, Indexed, Scoring, run_detectors
+from torchsar_eval.runner import DetectorName, DetectorResult, Indexed, Scoring, run_detectors
 
 __all__ = [
     "ShardJob",
@@ -100,14 +108,38 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
     return ShardState(results, coco)
 
 
+for _cls in (
+    ShardState,
+    DetectorResult,
+    DetectorName,
+    Scoring,
+    ObjectRules,
+    Matching,
+    PixelCounts,
+    ObjectState,
+    KeyCounts,
+    RankedDetections,
+    LengthErrors,
+    CocoExport,
+):
+    statefile.register(_cls)  # fmt: skip
+statefile.register(RocAccumulator, transient=("_log_grid",))
+statefile.register(CocoState, transient=("_cache", "_consolidated"))
+
+
 def _save(path: Path, state: ShardState) -> None:
-    """Write a shard state atomically (see :func:`_write`)."""
-    _write(path, zlib.compress(pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), 1))
+    """Write a shard state atomically (see :func:`_write`), as data only
+    (:mod:`torchsar_eval.statefile`)."""
+    _write(path, statefile.dumps(state))
 
 
 def _load(path: Path) -> ShardState:
+    """A saved shard state: data only, its content hash checked (``CorruptStateError``)."""
     with open(path, "rb") as f:
-        return pickle.loads(zlib.decompress(f.read()))
+        state = statefile.loads(f.read(), f"shard state {path}")
+    if not isinstance(state, ShardState):
+        raise statefile.CorruptStateError(f"shard state {path} does not hold a shard")
+    return state
 
 
 def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
@@ -123,7 +155,7 @@ def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
 
 def shard_files(folder: Path) -> list[Path]:
     """The saved shard states of a folder, in shard order."""
-    return sorted(folder.glob("shard-*.pkl"))
+    return sorted(folder.glob("shard-*.state"))
 
 
 def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
@@ -146,8 +178,8 @@ def _init_worker(threads: int) -> None:
 
 
 def _scored(job: ShardJob, k: int) -> bytes:
-    """A shard's state as compressed bytes (what a worker sends back)."""
-    return zlib.compress(pickle.dumps(_score_shard(job, k), pickle.HIGHEST_PROTOCOL), 1)
+    """A shard's state as the bytes of its state file (what a worker sends back)."""
+    return statefile.dumps(_score_shard(job, k))
 
 
 def _write(path: Path, data: bytes) -> None:
@@ -161,9 +193,23 @@ def _write(path: Path, data: bytes) -> None:
 
 
 def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
+    """The shards to score: those not saved, and those whose saved state is corrupt
+    (scored again, with a warning naming the file)."""
     n_shards = len(shard_ranges(len(job.indices), job.shard_size))
-    paths = [(k, folder / f"shard-{k:06d}.pkl") for k in range(n_shards)]
-    return [(k, p) for k, p in paths if not p.exists()]
+    paths = [(k, folder / f"shard-{k:06d}.state") for k in range(n_shards)]
+    return [(k, p) for k, p in paths if not _usable(p)]
+
+
+def _usable(path: Path) -> bool:
+    if not path.exists():
+        return False
+    try:
+        _load(path)
+    except statefile.CorruptStateError as exc:
+        warnings.warn(f"{exc}: scoring that shard again", RuntimeWarning, stacklevel=3)
+        path.unlink()
+        return False
+    return True
 
 
 class _Failures:
@@ -269,7 +315,8 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
 
 
 def _detectors_load(detectors: bytes) -> str | None:
-    """In a Ray worker: rebuild the detectors; ``None`` or the error as one line."""
+    """In a Ray worker: rebuild a detector from the bytes Ray's own serializer made of it
+    (the driver's in-memory object, never a file); ``None`` or the error as one line."""
     try:
         pickle.loads(detectors)
     except Exception as exc:
@@ -282,7 +329,7 @@ def _ray_preflight(ray, job: ShardJob) -> None:
     the nodes cannot import), instead of failing every shard."""
     probe = ray.remote(num_cpus=1, max_retries=0)(_detectors_load)
     for det in job.detectors:
-        error = ray.get(probe.remote(pickle.dumps(det)))
+        error = ray.get(probe.remote(ray.cloudpickle.dumps(det)))
         if error is not None:
             raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker ({error}): "
                             "install its package on every node, or give Ray its module "

@@ -20,7 +20,7 @@ COCO = ["coco/sim-chips__gt.json", "coco/sim-chips__ca.json", "coco/sim-chips__s
 
 
 def _saved(parent: Path, name: str) -> int:
-    return sum(len(list(p.glob("shards/sim-chips/test/shard-*.pkl")))
+    return sum(len(list(p.glob("shards/sim-chips/test/shard-*.state")))
                for p in parent.glob(f".{name}.torchsar-partial-*"))  # fmt: skip
 
 

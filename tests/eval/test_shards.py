@@ -88,7 +88,7 @@ def test_any_shard_size_gives_the_same_tables(tmp_path, size):
 
 def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
-    (tmp_path / "shard-000001.pkl").unlink()  # as if killed before shard 1 was saved
+    (tmp_path / "shard-000001.state").unlink()  # as if killed before shard 1 was saved
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
     assert counts == {"shards": 3, "done": 1, "skipped": 2, "retried": 0, "failed": []}
     _assert_same(first, again)
@@ -99,7 +99,7 @@ def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
     and a run resumed after losing a shard all write the same COCO files."""
     run_shards(_job(7, 100, True), tmp_path / "one", progress=False)
     run_shards(_job(7, 2, True), tmp_path / "two", workers=2, progress=False)
-    (tmp_path / "two" / "shard-000001.pkl").unlink()  # as if killed before it was saved
+    (tmp_path / "two" / "shard-000001.state").unlink()  # as if killed before it was saved
     _, counts = run_shards(_job(7, 2, True), tmp_path / "two", progress=False)
     assert counts["done"] == 1 and counts["skipped"] == 3
     one, two = _coco_json(tmp_path / "one"), _coco_json(tmp_path / "two")

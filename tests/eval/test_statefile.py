@@ -1,0 +1,121 @@
+"""Shard states are data only: written and read back without pickle, content-hashed, and a
+planted, changed or foreign file is refused (a shard is scored again) without running any
+of its code."""
+
+from __future__ import annotations
+
+import io
+import json
+import pickle
+import zlib
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import torchsar_eval as te
+from torchsar_eval import statefile
+from torchsar_eval.shards import ShardState, _load, run_shards
+from torchsar_eval.tables import summary_table
+
+
+class _Marker:
+    """Unpickling this creates a file: the proof that a state file ran code."""
+
+    def __init__(self, path) -> None:
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def _one_run(tmp_path, **scoring):
+    return te.evaluate("sim-chips", ["ca", "region"], n=5, progress=False,
+                       scoring=te.Scoring(replicates=10, **scoring))  # fmt: skip
+
+
+def test_state_round_trip_keeps_every_table(tmp_path):
+    res = _one_run(tmp_path, coco_compatible=True)
+    states = res.states["sim-chips"]
+    again = statefile.loads(statefile.dumps(ShardState(states)), "test").results
+    for a, b in zip(states, again, strict=True):
+        b.detector = a.detector
+        assert a.objects == b.objects and a.pixels == b.pixels
+        assert a.coco == b.coco
+    pd.testing.assert_frame_equal(summary_table({"d": states}), summary_table({"d": again}))
+
+
+def test_a_planted_pickle_runs_nothing_and_the_shard_is_scored_again(tmp_path):
+    marker = tmp_path / "pwned"
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.shards import ShardJob
+
+    job = ShardJob("chips", make_dataset("sim-chips", n=4), list(range(4)), [BUILTIN["ca"]],
+                   te.Scoring(replicates=0), 2, None, 2)  # fmt: skip
+    folder = tmp_path / "shards"
+    folder.mkdir()
+    payload = zlib.compress(pickle.dumps(_Marker(marker)), 1)
+    (folder / "shard-000000.state").write_bytes(payload)  # where a state is looked for
+    (folder / "shard-000001.pkl").write_bytes(payload)  # the old name
+    with pytest.warns(RuntimeWarning, match="not a readable torchsar state"):
+        merged, counts = run_shards(job, folder, progress=False)
+    assert not marker.exists()
+    assert counts["done"] == 2 and merged[0].images == 4
+
+
+def _pack(header: dict, members: dict) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **members)
+    body = zlib.compress(buf.getvalue(), 1)
+    if header.get("blake2b") == "recompute":
+        header = {**header, "blake2b": statefile._digest(body)}
+    return statefile.MAGIC + json.dumps(header).encode() + b"\n" + body
+
+
+def _unpack(data: bytes) -> tuple[dict, dict]:
+    line, _, body = data[len(statefile.MAGIC) :].partition(b"\n")
+    with np.load(io.BytesIO(zlib.decompress(body)), allow_pickle=False) as npz:
+        return json.loads(line), {k: npz[k] for k in npz.files}
+
+
+@pytest.mark.parametrize("how", ["array", "structure", "truncated", "version", "magic"])
+def test_changed_states_are_refused(tmp_path, how):
+    path = tmp_path / "s.state"
+    res = _one_run(tmp_path)
+    data = statefile.dumps(ShardState(res.states["sim-chips"]))
+    header, members = _unpack(data)
+    if how == "array":
+        key = next(k for k in members if not k.startswith("__") and members[k].size)
+        members[key] = members[key].copy()
+        members[key].reshape(-1).view(np.uint8)[0] ^= 1
+        data = _pack(header, members)
+    elif how == "structure":
+        text = members["__structure__"].tobytes().replace(b"PixelCounts", b"PixelCounts ")
+        members["__structure__"] = np.frombuffer(text, np.uint8)
+        data = _pack(header, members)
+    elif how == "version":
+        data = _pack({**header, "version": 99, "blake2b": "recompute"}, members)
+    elif how == "magic":
+        data = data[1:]
+    else:
+        data = data[: len(data) // 2]
+    path.write_bytes(data)
+    with pytest.raises(statefile.CorruptStateError, match="s.state"):
+        _load(path)
+
+
+def test_only_allow_listed_types_are_written():
+    with pytest.raises(TypeError, match="not a state type"):
+        statefile.dumps(_Marker("x"))
+    with pytest.raises(TypeError, match="object arrays"):
+        statefile.dumps(np.array([object()]))
+
+
+def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
+    """Even a file whose hash was recomputed cannot name a class off the allow-list."""
+    structure = json.dumps({"__type__": "Popen", "state": {"__dict__": [["args", "id"]]}})
+    header = {"format": statefile.FORMAT, "version": statefile.VERSION, "blake2b": "recompute"}
+    data = _pack(header, {"__structure__": np.frombuffer(structure.encode(), np.uint8)})
+    with pytest.raises(statefile.CorruptStateError, match="unexpected structure"):
+        statefile.loads(data, "crafted")
