@@ -150,3 +150,22 @@ def test_results_do_not_depend_on_batch_or_shard_size():
     pd.testing.assert_frame_equal(a.summary, b.summary)
     pd.testing.assert_frame_equal(a.froc, b.froc)
     pd.testing.assert_frame_equal(a.pr, b.pr)
+
+
+def test_region_cfar_is_scored_by_its_regions_unless_discrimination_is_asked():
+    """Own instances: one object per region of the region CFAR (its labels); with
+    ``instances="discriminate"`` its statistic goes through the closing and size rules."""
+    from torchsar_eval.datasets import make_dataset
+
+    chips = make_dataset("sim-chips", n=4)
+    own = te.evaluate({"c": chips}, ["region"], progress=False,
+                      scoring=te.Scoring(replicates=0)).states["c"][0]  # fmt: skip
+    forced = te.evaluate({"c": chips}, ["region"], progress=False,
+                         scoring=te.Scoring(replicates=0, instances="discriminate"))  # fmt: skip
+    x = torch.stack([chips[i]["image"] for i in range(4)])
+    d = ts.region.region_cfar(x)
+    regions = sum(int(np.unique(d.labels[i].numpy()).size) - 1 for i in range(4))
+    assert len(own.objects.ranked) == regions  # every region, as it is
+    rules = te.Scoring().rules
+    objs = ts.objects.discriminate(d.statistic, d.threshold, rules=rules)
+    assert len(forced.states["c"][0].objects.ranked) == len(objs)

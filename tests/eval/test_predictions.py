@@ -38,8 +38,11 @@ def _xywh(mask: np.ndarray) -> list[float]:
 
 def write_coco_set(root, seed: int = 0, n_img: int = 5, crowd: bool = False):
     """Images, a COCO ground truth (two categories, non-overlapping masks, areas as the
-    mask areas, image ids out of order) and random detections with continuous scores."""
+    mask areas, image ids out of order) and random detections with continuous scores. With
+    ``crowd``, one category and crowd regions (torchsar's ignore regions are don't-care for
+    every category, pycocotools' crowd for its own: the same with one category)."""
     rng = np.random.default_rng(seed)
+    cats = [3] if crowd else [3, 7]
     root.mkdir(parents=True, exist_ok=True)
     images, anns, results = [], [], []
     for k in range(n_img):
@@ -58,7 +61,7 @@ def write_coco_set(root, seed: int = 0, n_img: int = 5, crowd: bool = False):
                 continue
             taken |= m
             anns.append({"id": len(anns) + 1, "image_id": image_id,
-                         "category_id": int(rng.choice([3, 7])), "segmentation": _rle(m),
+                         "category_id": int(rng.choice(cats)), "segmentation": _rle(m),
                          "area": float(m.sum()), "bbox": _xywh(m), "iscrowd": 0})  # fmt: skip
         if crowd and k % 2:
             m = np.zeros((SIZE, SIZE), bool)
@@ -74,7 +77,7 @@ def write_coco_set(root, seed: int = 0, n_img: int = 5, crowd: bool = False):
             h, w = rng.uniform(3, 30, 2)
             m = np.zeros((SIZE, SIZE), bool)
             m[int(r) : int(r + h) + 1, int(c) : int(c + w) + 1] = True
-            results.append({"image_id": image_id, "category_id": int(rng.choice([3, 7])),
+            results.append({"image_id": image_id, "category_id": int(rng.choice(cats)),
                             "bbox": [c, r, w, h], "segmentation": _rle(m),
                             "score": float(rng.random())})  # fmt: skip
     gt = {"images": images, "annotations": anns, "categories": CATEGORIES}
