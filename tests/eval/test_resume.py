@@ -62,3 +62,43 @@ def test_resume_with_other_options_is_refused(tmp_path):
     other = [a if a != "ca,so" else "ca" for a in ARGS]
     assert main([*other, "--out", str(out), "--resume"]) == 2
     assert not out.exists()
+
+
+def test_resume_refuses_a_dataset_that_changed(tmp_path):
+    """Files added, resized or touched between the interrupted run and --resume: refused,
+    saying what changed (the saved shards would no longer describe the data)."""
+    import numpy as np
+    from skimage import io
+
+    from torchsar_eval.api import Execution, _Plan, check_resumable, fingerprint
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.errors import EvalError
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.runner import Scoring
+
+    data = tmp_path / "data"
+    data.mkdir()
+
+    def chip(stem, value=20):
+        io.imsave(data / f"{stem}.png", np.full((32, 32), value, np.uint8), check_contrast=False)
+        io.imsave(data / f"{stem}.mask.png", np.zeros((32, 32), np.uint8), check_contrast=False)
+
+    chip("a")
+    chip("b")
+    plan = _Plan([BUILTIN["ca"]], Scoring(), Execution(), None, None, None, "px", False, 0)
+    record = tmp_path / "resume.json"
+
+    def check():
+        ds = make_dataset(f"folder:{data}?type=intensity")
+        check_resumable(record, fingerprint(plan, {"d": ds}))
+
+    check()  # the interrupted run records its fingerprint
+    check()  # nothing changed: resumable
+    chip("c")
+    with pytest.raises(EvalError, match=r"dataset d changed .*4 files of \d+ bytes then, 6 files"):
+        check()
+    (data / "c.png").unlink()
+    (data / "c.mask.png").unlink()
+    os.utime(data / "a.png", ns=(1, 1))
+    with pytest.raises(EvalError, match="dataset d changed .*files modified"):
+        check()
