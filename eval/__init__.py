@@ -34,15 +34,15 @@ __all__ = [
 
 _HOMES = {
     "BUILTIN": "torchsar_eval.registry",
-    "Calibration": "torchsar_eval.api",
+    "Calibration": "torchsar_eval.settings",
     "Detector": "torchsar_eval.detector",
     "EvalError": "torchsar_eval.errors",
-    "Execution": "torchsar_eval.api",
+    "Execution": "torchsar_eval.settings",
     "Matching": "torchsar.metrics",
     "ObjectRules": "torchsar.objects",
     "Objects": "torchsar.objects",
     "Results": "torchsar_eval.api",
-    "Scoring": "torchsar_eval.runner",
+    "Scoring": "torchsar_eval.result",
     "evaluate": "torchsar_eval.api",
     "load": "torchsar_eval.registry",
     "predictions": "torchsar_eval.saved",

@@ -11,7 +11,6 @@ Example:
 
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -21,87 +20,22 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import torch
 from torch.utils.data import Dataset
 
+from torchsar_eval.batches import SkipBad, TruthOnly
 from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
 from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
 from torchsar_eval.report import per_image_rows, result_tables, write_run
-from torchsar_eval.runner import Scoring, SkipBad, TruthOnly
+from torchsar_eval.result import Scoring
+from torchsar_eval.resume import check_resumable, fingerprint
+from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_rows
 from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
-__all__ = ["Calibration", "Execution", "Results", "evaluate"]
-
-ENGINES = ("local", "ray")
-
-
-@dataclass(frozen=True)
-class Execution:
-    """How a run executes (none of it changes the tables).
-
-    Attributes:
-        batch_size: images per batch.
-        shard_size: images per shard, the unit of work and of resume.
-        workers: local worker processes (each with ``cores // workers`` torch threads);
-            detectors must then be importable by name (see :func:`torchsar_eval.load`).
-        engine: ``"local"`` or ``"ray"`` (``pip install 'torchsar[ray]'``).
-        address: Ray cluster address (default: a local Ray instance).
-        skip_bad: skip unreadable files and failing shards, naming them in the summary.
-        progress: progress bars on stderr.
-        device: where detectors run (``"cpu"``, ``"cuda"``, ``"cuda:1"``); batches move
-            there and back for scoring, which stays on the CPU.
-    """
-
-    batch_size: int = 16
-    shard_size: int = 256
-    workers: int = 1
-    engine: str = "local"
-    address: str | None = None
-    skip_bad: bool = False
-    progress: bool = True
-    device: str | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("batch_size", "shard_size", "workers"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise EvalError(f"{{opt:{name}}}{v!r}: must be an integer >= 1")
-        if self.engine not in ENGINES:
-            raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
-        if self.device is not None:
-            from torchsar._checks import TorchSARError, check_device
-
-            try:
-                torch.device(self.device)
-            except (RuntimeError, TypeError):
-                raise EvalError(
-                    f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, cuda:N)"
-                ) from None
-            try:
-                check_device(self.device, "device")
-            except TorchSARError:
-                raise EvalError(
-                    f"{{opt:device}}{self.device!r} is not available on this machine: use cpu"
-                ) from None
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """Choose each detector's operating point on a hashed ``fraction`` of the images for
-    ``target`` (``"fa=L"``: at most L false alarms per image; ``"f1"``: best F1) and report
-    on the disjoint rest."""
-
-    target: str
-    fraction: float = 0.3
-
-    def __post_init__(self) -> None:
-        parse_target(self.target)
-        if not 0 < self.fraction < 1:
-            raise EvalError(f"{{opt:calibration_fraction}}{self.fraction}: must be in (0, 1)")
+__all__ = ["Results", "evaluate"]
 
 
 @dataclass
@@ -372,51 +306,6 @@ def windows_in_pixels(name: str, ds, detectors: list[Detector]) -> list[Detector
                             f"pixel of {name} ({step:g} m)")  # fmt: skip
         out.append(det.with_options(conv) if conv else det)
     return out
-
-
-def fingerprint(plan: _Plan, datasets: dict) -> dict:
-    """Everything a saved shard depends on (a resumed run must match it exactly)."""
-    cal = plan.calibration
-    return json.loads(json.dumps({
-        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
-        "detectors": {d.name: d.describe() for d in plan.detectors},
-        "despeckle": plan.despeckle,
-        "scoring": plan.scoring.as_dict(), "shard_size": plan.execution.shard_size,
-        "calibration": None if cal is None else [cal.target, cal.fraction],
-        "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
-        "manifests": {n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")},
-    }, default=str))  # fmt: skip
-
-
-def check_resumable(path: Path, expected: dict) -> None:
-    """Record the run's fingerprint, or check it against the one of the run being resumed
-    (the options, and each dataset's files: names, sizes and modification times)."""
-    if path.exists():
-        saved = json.loads(path.read_text())
-        for name, now in expected.get("manifests", {}).items():
-            before = saved.get("manifests", {}).get(name)
-            if before is not None and before != now:
-                raise EvalError(f"{{opt:resume}}: dataset {name} changed since the interrupted "
-                                f"run ({_manifest_change(before, now)}); run again without "
-                                "{opt:resume}")  # fmt: skip
-        if saved != expected:
-            raise EvalError(f"{{opt:resume}}: the options differ from those of the interrupted "
-                            f"run (see {path.name} in its folder); run again without "
-                            "{opt:resume}")  # fmt: skip
-        return
-    path.write_text(json.dumps(expected, indent=2) + "\n")
-
-
-def _manifest_change(before: dict, now: dict) -> str:
-    """What changed in a dataset's manifest, in words."""
-    if before.get("files") != now.get("files") or before.get("bytes") != now.get("bytes"):
-        return (f"{before.get('files')} files of {before.get('bytes')} bytes then, "
-                f"{now.get('files')} files of {now.get('bytes')} bytes now")  # fmt: skip
-    if before.get("sha256") != now.get("sha256"):
-        return "files renamed or resized"
-    if before.get("sha256_mtime") != now.get("sha256_mtime"):
-        return "files modified"
-    return "its description differs"
 
 
 def _default_class(ds) -> str:

@@ -11,7 +11,7 @@ import pandas as pd
 
 from torchsar_eval.glossary import glossary
 from torchsar_eval.plots import plot_roc
-from torchsar_eval.runner import Scoring
+from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,
     breakdown_table,

@@ -36,11 +36,13 @@ from torchsar.metrics.object_state import KeyCounts
 from torchsar.metrics.ranked import RankedDetections
 from torchsar.objects import ObjectRules
 from torchsar_eval import statefile
+from torchsar_eval.batches import Indexed
 from torchsar_eval.coco import CocoExport
 from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
 from torchsar_eval.memory import release_memory, tune_allocator
-from torchsar_eval.runner import DetectorName, DetectorResult, Indexed, Scoring, run_detectors
+from torchsar_eval.result import DetectorName, DetectorResult, Scoring
+from torchsar_eval.runner import run_detectors
 
 __all__ = [
     "ShardJob",

@@ -37,11 +37,16 @@ class CorruptStateError(EvalError):
     """A state file that is not a complete, unchanged torchsar state."""
 
 
+def _key(cls: type) -> str:
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
 def register(cls: type, *, transient: tuple[str, ...] = ()) -> type:
-    """Allow ``cls`` in state files (``transient``: attributes not saved, ``None`` when read
-    back). Its state is ``__getstate__()`` when it defines one, else its attributes."""
-    _TYPES[cls.__name__] = cls
-    _TRANSIENT[cls.__name__] = transient
+    """Allow ``cls`` in state files, named by its module and name (``transient``: attributes
+    not saved, ``None`` when read back). Its state is ``__getstate__()`` when it defines
+    one, else its attributes."""
+    _TYPES[_key(cls)] = cls
+    _TRANSIENT[_key(cls)] = transient
     return cls
 
 
@@ -77,9 +82,9 @@ class _Encoder:
             return {"__tuple__": [self(v) for v in obj]}
         if isinstance(obj, dict):
             return {"__dict__": [[self(k), self(v)] for k, v in obj.items()]}
-        name = type(obj).__name__
+        name = _key(type(obj))
         if _TYPES.get(name) is not type(obj):
-            raise TypeError(f"{name} is not a state type")
+            raise TypeError(f"{type(obj).__name__} is not a state type")
         if _own(type(obj), "__getstate__"):
             state = obj.__getstate__()
         else:
@@ -110,7 +115,7 @@ def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     if _own(cls, "__setstate__"):
         obj.__setstate__(state)
     else:
-        obj.__dict__.update({k: None for k in _TRANSIENT[cls.__name__]})
+        obj.__dict__.update({k: None for k in _TRANSIENT[tree["__type__"]]})
         obj.__dict__.update(state)
     return obj
 

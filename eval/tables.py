@@ -7,7 +7,7 @@ import pandas as pd
 
 from torchsar.metrics.curves import RECALL_POINTS, suffix
 from torchsar.metrics.object_state import operating_point
-from torchsar_eval.runner import DetectorResult
+from torchsar_eval.result import DetectorResult
 
 __all__ = [
     "BREAKDOWN_COLUMNS",

@@ -20,9 +20,10 @@ import numpy as np
 import torch
 
 import torchsar as ts
+from torchsar_eval.batches import batches
 from torchsar_eval.datasets import make_dataset
 from torchsar_eval.detector import Detector
-from torchsar_eval.runner import batches, run_detectors
+from torchsar_eval.runner import run_detectors
 from torchsar_eval.tables import markdown, summary_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "benchmarks"))

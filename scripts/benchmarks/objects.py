@@ -18,7 +18,8 @@ import torchsar as ts
 from torchsar.metrics import RocAccumulator, pixel_counts
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from torchsar_eval.registry import BUILTIN
-from torchsar_eval.runner import Scoring, run_detectors
+from torchsar_eval.result import Scoring
+from torchsar_eval.runner import run_detectors
 
 
 def _dataset(kind: str, n: int) -> list[dict]:

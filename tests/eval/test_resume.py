@@ -70,11 +70,13 @@ def test_resume_refuses_a_dataset_that_changed(tmp_path):
     import numpy as np
     from skimage import io
 
-    from torchsar_eval.api import Execution, _Plan, check_resumable, fingerprint
+    from torchsar_eval.api import _Plan
     from torchsar_eval.datasets import make_dataset
     from torchsar_eval.errors import EvalError
     from torchsar_eval.registry import BUILTIN
-    from torchsar_eval.runner import Scoring
+    from torchsar_eval.result import Scoring
+    from torchsar_eval.resume import check_resumable, fingerprint
+    from torchsar_eval.settings import Execution
 
     data = tmp_path / "data"
     data.mkdir()

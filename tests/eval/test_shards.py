@@ -12,7 +12,7 @@ import torch
 import torchsar as ts
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from torchsar_eval.registry import BUILTIN
-from torchsar_eval.runner import Scoring
+from torchsar_eval.result import Scoring
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import (
     breakdown_table,

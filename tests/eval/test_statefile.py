@@ -114,7 +114,8 @@ def test_only_allow_listed_types_are_written():
 
 def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
     """Even a file whose hash was recomputed cannot name a class off the allow-list."""
-    structure = json.dumps({"__type__": "Popen", "state": {"__dict__": [["args", "id"]]}})
+    structure = json.dumps({"__type__": "subprocess.Popen",
+                            "state": {"__dict__": [["args", "id"]]}})  # fmt: skip
     header = {"format": statefile.FORMAT, "version": statefile.VERSION, "blake2b": "recompute"}
     data = _pack(header, {"__structure__": np.frombuffer(structure.encode(), np.uint8)})
     with pytest.raises(statefile.CorruptStateError, match="unexpected structure"):

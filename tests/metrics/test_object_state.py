@@ -158,7 +158,8 @@ def test_curve_helpers_by_hand():
 def test_all_true_and_all_false_masks_on_simulated_data(kind):
     import torchsar as ts
     from torchsar_eval.detector import Detector
-    from torchsar_eval.runner import Scoring, run_detectors
+    from torchsar_eval.result import Scoring
+    from torchsar_eval.runner import run_detectors
 
     def constant(value):
         return lambda x: ts.cfar.detection_from(torch.full_like(x, value), 1.0)

@@ -19,6 +19,7 @@ from pathlib import Path
 from torch.utils.data import Subset
 
 import torchsar as ts
+from torchsar_eval.batches import batches
 from torchsar_eval.commands.compare_region.panel import detection_panel
 from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
 from torchsar_eval.datasets import make_dataset
@@ -29,7 +30,7 @@ from torchsar_eval.output import default_out, file_slugs, result_dir, write_conf
 from torchsar_eval.paths import SHARED_DATA
 from torchsar_eval.plots import slug
 from torchsar_eval.registry import BUILTIN
-from torchsar_eval.runner import batches, run_detectors
+from torchsar_eval.runner import run_detectors
 from torchsar_eval.tables import markdown, summary_table, timing_table
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]

@@ -5,7 +5,7 @@ pass per window gives the statistic; the thresholds of the other ``pfa`` values 
 the detector's own threshold function (the interior threshold; the border rescaling of the
 chosen setting is exact again in the final evaluation, which reruns the detector at the
 chosen ``pfa``). Scores are the run's object scoring (the shared discrimination stage and
-one-to-one matching, :class:`torchsar_eval.runner.Scoring`); the best setting maximises FoM, then
+one-to-one matching, :class:`torchsar_eval.result.Scoring`); the best setting maximises FoM, then
 mean IoU.
 """
 
@@ -24,7 +24,7 @@ from torchsar.metrics import ObjectState, match_batch
 from torchsar.objects import discriminate
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
-from torchsar_eval.runner import Scoring
+from torchsar_eval.result import Scoring
 from torchsar_eval.scoring import batch_truth
 
 __all__ = ["Choice", "best_setting", "window_grid"]

@@ -134,7 +134,7 @@ def measure_dataset(
 ) -> pd.DataFrame:
     """Measured Pfa of every detector at every design ``pfa`` on a dataset's clutter pixels
     (neither target nor ignore): how far real clutter is from the detectors' models."""
-    from torchsar_eval.runner import batches
+    from torchsar_eval.batches import batches
 
     counts = {(s.name, p): [0, 0] for s in specs for p in pfas}
     for batch in batches(dataset, batch_size):

@@ -12,13 +12,14 @@ import warnings
 from pathlib import Path
 
 from torchsar.speckle import FILTERS
-from torchsar_eval.api import Calibration, Execution, Results, evaluate
+from torchsar_eval.api import Results, evaluate
 from torchsar_eval.commands.run.options import check_run_args, scoring_from
 from torchsar_eval.datasets import DATASETS
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import check_out
 from torchsar_eval.registry import available
-from torchsar_eval.runner import DEFAULT_MATCH, DEFAULT_RULES
+from torchsar_eval.result import DEFAULT_MATCH, DEFAULT_RULES
+from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.tables import CONSOLE_COLUMNS
 
 __all__ = ["DEFAULT_DATASETS", "DEFAULT_MATCH", "DEFAULT_RULES", "add_parser", "run"]

@@ -17,7 +17,7 @@ from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.options import at_least, despeckler, dry_run, parse_params
 from torchsar_eval.registry import BUILTIN, load
-from torchsar_eval.runner import Scoring
+from torchsar_eval.result import Scoring
 
 __all__ = ["RunChoices", "check_run_args", "detector_refs", "scoring_from"]
 

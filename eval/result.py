@@ -1,0 +1,276 @@
+"""What a run measures of one detector on one dataset (:class:`DetectorResult`: pixel counts and
+ROC, object state, per-image rows, timing; mergeable by ``+``) and how (:class:`Scoring`):
+a detector's output becomes scored objects here (the shared discrimination stage, or its
+own instances), is matched one-to-one and added to the states."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from torchsar.detection import Detection
+from torchsar.metrics import (
+    Matching,
+    ObjectState,
+    PixelCounts,
+    RocAccumulator,
+    match_batch,
+    pixel_counts,
+)
+from torchsar.metrics.coco_compat import CocoState
+from torchsar.metrics.coco_inputs import coco_images
+from torchsar.metrics.object_state import normalise
+from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
+from torchsar_eval.detector import Detector
+from torchsar_eval.errors import EvalError
+from torchsar_eval.scoring import image_rows, pixel_areas
+
+__all__ = [
+    "DEFAULT_MATCH",
+    "DEFAULT_RULES",
+    "DetectorName",
+    "DetectorResult",
+    "Scoring",
+    "object_pixels",
+    "pixel_view",
+]
+
+
+DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
+"""The harness's discrimination defaults: a closing that joins a vehicle's scatterer
+fragments, and no object smaller than 5 px."""
+DEFAULT_MATCH = Matching(kind="centroid")
+"""The harness's matching default: the prescreening rule (see the README)."""
+
+
+@dataclass(frozen=True)
+class Scoring:
+    """How detections are scored, the same for every detector of a run (defaults: the
+    harness's).
+
+    Attributes:
+        rules: the discrimination stage (closing, size limits, floor) of detectors that
+            return a statistic.
+        matching: the matching rule of the operating point and the FROC.
+        replicates: bootstrap replicates of the intervals (0: none).
+        seed: bootstrap seed.
+        instances: ``"auto"`` scores each detector's own instances when it returns them
+            (a region CFAR's regions, a CNN's boxes); ``"discriminate"`` sends every
+            detector's statistic (or its objects' pixel scores) through the discrimination
+            stage, for like-for-like comparisons.
+        coco_compatible: also compute ``pycocotools``' 12 ``COCOeval.stats`` exactly (per
+            category, 100 detections per image and category, COCO's area ranges).
+    """
+
+    rules: ObjectRules = DEFAULT_RULES
+    matching: Matching = DEFAULT_MATCH
+    replicates: int = 100
+    seed: int = 0
+    instances: str = "auto"
+    coco_compatible: bool = False
+
+    def __post_init__(self) -> None:
+        if self.instances not in ("auto", "discriminate"):
+            raise EvalError(f"{{opt:instances}}{self.instances!r}: expected 'auto' or "
+                            "'discriminate'")  # fmt: skip
+        if isinstance(self.replicates, bool) or not isinstance(self.replicates, int) or (
+                self.replicates < 0):  # fmt: skip
+            raise EvalError(f"bootstrap replicates must be an integer >= 0, got "
+                            f"{self.replicates!r}")  # fmt: skip
+
+    def as_dict(self) -> dict:
+        return {
+            "objects": self.rules.as_dict(),
+            "matching": self.matching.as_dict(),
+            "bootstrap": {"replicates": self.replicates, "seed": self.seed},
+            "instances": self.instances,
+            "coco_compatible": self.coco_compatible,
+        }
+
+
+@dataclass(frozen=True)
+class DetectorName:
+    """What a saved :class:`DetectorResult` keeps of its detector."""
+
+    name: str
+    instances: str = "auto"
+
+
+@dataclass
+class DetectorResult:
+    """Everything measured for one detector on one dataset.
+
+    ``op_bin`` is the operating point's score bin when it was chosen (calibrated), else
+    ``None``: the design point of the objects (:attr:`ObjectState.op_bin`).
+    ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
+    """
+
+    detector: Detector | DetectorName
+    scoring: Scoring = field(default_factory=Scoring)
+    pixels: PixelCounts = field(default_factory=PixelCounts)
+    roc: RocAccumulator = field(default_factory=RocAccumulator)
+    objects: ObjectState = field(init=False)
+    seconds: float = 0.0
+    object_seconds: float = 0.0
+    images: int = 0
+    rows: list = field(default_factory=list)
+    op_bin: int | None = None
+    skipped: list = field(default_factory=list)
+    pixel_level: bool = False
+    default_class: str = "target"
+    coco: CocoState | None = None
+    coco_iou_type: str | None = None
+
+    def __post_init__(self) -> None:
+        self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
+        if self.scoring.coco_compatible and self.coco is None:
+            self.coco = CocoState()
+
+    def __getstate__(self) -> dict:
+        """Saved shard states hold the detector's name, not the detector (which may be a
+        lambda, a network, a file reader): data only."""
+        state = dict(self.__dict__)
+        state["detector"] = DetectorName(self.detector.name, self.detector.instances)
+        return state
+
+    @property
+    def at(self) -> int:
+        """The score bin of the reported operating point."""
+        return self.objects.op_bin if self.op_bin is None else self.op_bin
+
+    def add(self, out: Detection | Objects, batch: dict, truth) -> Objects:
+        """Accumulate one batch's detector output (on the CPU; ``truth``:
+        :func:`torchsar_eval.scoring.batch_truth`); returns the batch's objects."""
+        mask, ignore = batch["mask"], batch["ignore"]
+        if isinstance(out, Detection):
+            self.pixels = self.pixels + pixel_counts(out.mask, mask, ignore=ignore)
+            self.roc.update(out.statistic, mask, ignore)
+            self.pixel_level = True
+        elif _sparse_pixel_metrics(self, out, batch):
+            self.pixel_level = True
+        t0 = time.perf_counter()
+        obj = self.objects_of(out, batch)
+        gt, info = truth
+        m = match_batch(obj, gt, self.scoring.matching)
+        self.objects.update(m, obj, gt, info)
+        self.rows += image_rows(m, obj, gt, info)
+        if self.coco is not None:
+            self._add_coco(obj, gt, info)
+        self.object_seconds += time.perf_counter() - t0
+        return obj
+
+    def _add_coco(self, obj: Objects, gt, info) -> None:
+        """COCO's own evaluation of the batch: segm IoU for objects with masks (unless the
+        run matches boxes or the ground truth is boxes), else bbox."""
+        masks = obj.has_masks and self.scoring.matching.iou_kind == "mask"
+        iou_type = "segm" if masks and not gt.box_only.any() else "bbox"
+        if len(obj) and self.coco_iou_type not in (None, iou_type):
+            raise EvalError(f"detector {self.detector.name}: COCO IoU type changes from "
+                            f"{self.coco_iou_type} to {iou_type} within a dataset")  # fmt: skip
+        if len(obj):
+            self.coco_iou_type = iou_type
+        orders = [p if i.order is None else i.order for p, i in enumerate(info)]
+        self.coco.update(coco_images(obj, gt, orders, iou_type, self.default_class))
+
+    def __add__(self, other: DetectorResult) -> DetectorResult:
+        """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
+        if self.detector.name != other.detector.name or self.scoring != other.scoring:
+            raise ValueError("cannot add results of different detectors or scoring settings")
+        out = DetectorResult(self.detector, self.scoring, self.pixels + other.pixels,
+                             self.roc + other.roc, op_bin=self.op_bin,
+                             default_class=self.default_class)  # fmt: skip
+        if self.coco is not None:
+            out.coco = self.coco + other.coco
+            out.coco_iou_type = self.coco_iou_type or other.coco_iou_type
+        out.objects = self.objects + other.objects
+        out.seconds = self.seconds + other.seconds
+        out.object_seconds = self.object_seconds + other.object_seconds
+        out.images = self.images + other.images
+        out.rows = self.rows + other.rows
+        out.skipped = self.skipped + other.skipped
+        out.pixel_level = self.pixel_level or other.pixel_level
+        return out
+
+    def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:
+        """The scored objects of one batch: the detector's own instances (``Objects``, or a
+        Detection's ``labels``), else (or when the run or the detector asks for it) the
+        shared discrimination stage on its statistic."""
+        own = "discriminate" not in (self.scoring.instances, self.detector.instances)
+        if isinstance(out, Objects):
+            if own:
+                return out
+            view = pixel_view(out)
+            if view is None:
+                raise EvalError(f"detector {self.detector.name} returns {out.geometry}es, "
+                                "which the discrimination stage cannot use: score its own "
+                                "instances ({opt:instances}'auto')")  # fmt: skip
+            statistic, threshold = view[0], 1.0 if out.threshold is not None else -np.inf
+        else:
+            if own and out.labels is not None:
+                score = normalised_score(out.statistic, out.threshold)
+                b, c, h, w = score.shape
+                return Objects.from_labels(out.labels.reshape(b * c, h, w).numpy(),
+                                           score.reshape(b * c, h, w).numpy())  # fmt: skip
+            statistic, threshold = out.statistic, out.threshold
+        rules = self.scoring.rules
+        area = pixel_areas(batch) if rules.units == "m2" else None
+        return discriminate(statistic, threshold, rules=rules, pixel_area=area)
+
+
+def pixel_view(out: Detection | Objects) -> tuple[Tensor, Tensor] | None:
+    """``(statistic, mask)`` of a detector output for the pixel metrics: a Detection's own,
+    or for objects with masks each pixel's best normalised object score (``-inf`` outside
+    every object; the mask: pixels of objects above the operating threshold, or of every
+    object when none is declared); ``None`` for boxes and points."""
+    if isinstance(out, Detection):
+        return out.statistic, out.mask
+    sparse = object_pixels(out)
+    if sparse is None:
+        return None
+    idx, best, level = sparse
+    h, w = out.shape
+    full = np.full(out.planes * h * w, -np.inf)
+    full[idx] = best
+    stat = torch.from_numpy(full.reshape(out.planes, 1, h, w))
+    return stat, stat > level
+
+
+def object_pixels(out: Objects) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The pixels the objects cover: ``(flat index, best normalised score, level)`` with
+    ``level`` the operating point (1, or ``-inf`` when no threshold is declared); ``None``
+    for objects without masks."""
+    if not out.has_masks:
+        return None
+    owner, idx = out.pixel_lists()
+    h, w = out.shape
+    best = np.full(out.planes * h * w, -np.inf)
+    np.maximum.at(best, idx, normalise(out.score, out.threshold)[owner])
+    covered = np.zeros(best.size, bool)
+    covered[idx] = True
+    idx = np.flatnonzero(covered)
+    return idx, best[idx], 1.0 if out.threshold is not None else -np.inf
+
+
+def _sparse_pixel_metrics(res: DetectorResult, out: Objects, batch: dict) -> bool:
+    """Pixel counts and ROC of objects with masks from their pixels only (every other
+    pixel is ``-inf``); ``False`` for objects without masks."""
+    sparse = object_pixels(out)
+    if sparse is None:
+        return False
+    idx, best, level = sparse
+    target = batch["mask"].reshape(-1)
+    ignore = batch["ignore"].reshape(-1)
+    care = ~ignore
+    n_target = int(torch.count_nonzero(target & care))
+    n_clutter = int(torch.count_nonzero(care)) - n_target
+    ti = torch.from_numpy(idx)
+    t, ig = target[ti], ignore[ti]
+    det = torch.from_numpy(best > level) & ~ig
+    res.pixels = res.pixels + PixelCounts(int((det & t).sum()), int((det & ~t).sum()),
+                                          n_target, n_clutter)  # fmt: skip
+    res.roc.update_sparse(torch.from_numpy(best), t, ig, n_target, n_clutter)
+    return True

@@ -1,0 +1,80 @@
+"""The settings of a run that are not about scoring: how it executes (batches, shards,
+workers, engine, device) and how its operating points are calibrated."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from torchsar_eval.calibrate import parse_target
+from torchsar_eval.errors import EvalError
+
+__all__ = ["ENGINES", "Calibration", "Execution"]
+
+ENGINES = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How a run executes (none of it changes the tables).
+
+    Attributes:
+        batch_size: images per batch.
+        shard_size: images per shard, the unit of work and of resume.
+        workers: local worker processes (each with ``cores // workers`` torch threads);
+            detectors must then be importable by name (see :func:`torchsar_eval.load`).
+        engine: ``"local"`` or ``"ray"`` (``pip install 'torchsar[ray]'``).
+        address: Ray cluster address (default: a local Ray instance).
+        skip_bad: skip unreadable files and failing shards, naming them in the summary.
+        progress: progress bars on stderr.
+        device: where detectors run (``"cpu"``, ``"cuda"``, ``"cuda:1"``); batches move
+            there and back for scoring, which stays on the CPU.
+    """
+
+    batch_size: int = 16
+    shard_size: int = 256
+    workers: int = 1
+    engine: str = "local"
+    address: str | None = None
+    skip_bad: bool = False
+    progress: bool = True
+    device: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("batch_size", "shard_size", "workers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise EvalError(f"{{opt:{name}}}{v!r}: must be an integer >= 1")
+        if self.engine not in ENGINES:
+            raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
+        if self.device is not None:
+            from torchsar._checks import TorchSARError, check_device
+
+            try:
+                torch.device(self.device)
+            except (RuntimeError, TypeError):
+                raise EvalError(
+                    f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, cuda:N)"
+                ) from None
+            try:
+                check_device(self.device, "device")
+            except TorchSARError:
+                raise EvalError(
+                    f"{{opt:device}}{self.device!r} is not available on this machine: use cpu"
+                ) from None
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Choose each detector's operating point on a hashed ``fraction`` of the images for
+    ``target`` (``"fa=L"``: at most L false alarms per image; ``"f1"``: best F1) and report
+    on the disjoint rest."""
+
+    target: str
+    fraction: float = 0.3
+
+    def __post_init__(self) -> None:
+        parse_target(self.target)
+        if not 0 < self.fraction < 1:
+            raise EvalError(f"{{opt:calibration_fraction}}{self.fraction}: must be in (0, 1)")
