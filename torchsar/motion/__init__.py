@@ -8,6 +8,13 @@ from torchsar.motion.czt import czt
 from torchsar.motion.decision import MoverDecision, detect_movers, registration_sigma
 from torchsar.motion.defocus import FocusTest, focus_curve, focus_test
 from torchsar.motion.focus import azimuth_times, fm_correction, focus_step, refocus, speed_bank
+from torchsar.motion.folds import (
+    doppler_fold,
+    radial_speed_interval,
+    unwalk,
+    walk_correction,
+    walk_rate,
+)
 from torchsar.motion.formation import polar_format, rereference
 from torchsar.motion.looks import (
     LookPlan,
@@ -51,6 +58,7 @@ __all__ = [
     "detect_movers",
     "detect_peaks",
     "detect_targets",
+    "doppler_fold",
     "estimate_shift",
     "find_movers",
     "first_order_offsets",
@@ -68,6 +76,7 @@ __all__ = [
     "measure_displacements",
     "planar_image_positions",
     "polar_format",
+    "radial_speed_interval",
     "refocus",
     "registration_sigma",
     "rereference",
@@ -77,6 +86,9 @@ __all__ = [
     "subpatch_centers",
     "subpatch_images",
     "subpatch_movers",
+    "unwalk",
+    "walk_correction",
+    "walk_rate",
     "window_max",
     "wrap",
 ]
