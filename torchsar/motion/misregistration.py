@@ -27,13 +27,16 @@ from torchsar.motion.peaks import intensity
 from torchsar.motion.shift import estimate_shift
 from torchsar.motion.strips import peak_in_box, robust_pattern, strips
 
-__all__ = ["LOOK_BALANCE", "LOOK_SIGMA_FACTOR", "LookTest", "look_test"]
+__all__ = ["INTERFERENCE_SIGMA", "LOOK_BALANCE", "LOOK_SIGMA_FACTOR", "LookTest", "look_test"]
 
-# Spread of the look-position estimate over its Cramér-Rao bound, measured on the seeded
-# random scenes of tests/motion (stationary targets and movers at 28 dB): see
-# tests/motion/test_find_movers.py::TestHonestSigma.
+# Spread of the look-position estimate over its Cramér-Rao bound: with it, stationary
+# targets of the seeded random scenes (28 dB) have look-speed z-scores of rms 0.8 and range
+# walk z-scores of rms 0.65 (tests/motion/test_find_movers.py::TestRandomScenes).
 LOOK_SIGMA_FACTOR = 1.5
-# Position error (look-resolution cells) per unit relative amplitude of interfering streaks.
+# Position error (look-resolution cells) per unit relative amplitude of other targets'
+# streaks at the target's look position. Measured on 137 along-track movers of 96 random
+# scenes: without it, movers on a bright neighbour's streak were off by 6-8 sigma (rms z
+# 1.31); with 0.1-0.5 the rms is 0.96-1.0 and the largest 3.1; 0.25 is used.
 INTERFERENCE_SIGMA = 0.25
 # A target seen in every look has about the same peak in each; a look whose peak is more
 # than this many times another's has caught a neighbour (the measurement is not trusted).
