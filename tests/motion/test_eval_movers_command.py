@@ -32,6 +32,10 @@ def test_movers_tiny_ladder(tmp_path, capsys):
     assert along.mover_found and along.look_detected
     assert abs(along.look_shift_m - along.theory_look_shift_m) < 0.1 * along.theory_look_shift_m
     assert table.combined_false_stationary.sum() == 0 and table.combined_false_clutter.sum() == 0
+    radial = table[table.direction == "range"].iloc[0]
+    assert radial.theory_fold == -3 and not radial.combined_detected
+    # 64 range pixels over 180 m undersample the 1 m resolution: no walk, nothing radial
+    assert not table.radial_detected.any() and table.radial_false_clutter.sum() == 0
     assert (table.stationary_found == 3).all()
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["derived"]["n_pulses"] == 150
@@ -48,6 +52,7 @@ def test_movers_tiny_ladder(tmp_path, capsys):
         (["--snr-ladder", "x"], "--snr-ladder must be"),
         (["--directions", "up"], "--directions"),
         (["--looks", "9"], "--looks in 2..4"),
+        (["--max-fold", "-1"], "--max-fold"),
     ],
 )
 def test_bad_options_exit_2_with_one_line(tmp_path, capsys, argv, message):

@@ -1,19 +1,22 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 import torch
 
 from tests.reference.imaging import exact_phase_history
-from torchsar._checks import OptionError, ShapeError
+from torchsar._checks import InputTypeError, OptionError, ShapeError
 from torchsar.imaging.fourier import fft2c, ifft2c
 from torchsar.imaging.scenes import point_scene
 from torchsar.sar import (
     SPEED_OF_LIGHT,
     SpotlightGeometry,
+    Track,
     add_noise,
+    image_noise_std,
     phase_history,
     simulate_phase_history,
 )
@@ -119,3 +122,80 @@ class TestNoise:
     def test_option(self):
         with pytest.raises(OptionError, match="snr_db"):
             add_noise(torch.ones(1, 2, 2, dtype=torch.complex64), snr_db="x")
+
+
+class TestRaggedScenes:
+    """Scenes of unequal sizes in one call: each scene as if simulated alone."""
+
+    @staticmethod
+    def _geometry() -> SpotlightGeometry:
+        track = Track(platform_speed=200.0, scene_range=1e4, prf=200.0)
+        return SpotlightGeometry(10e9, 150e6, 0.02, pulses=9, samples=6, track=track)
+
+    def test_each_scene_equals_its_own_call(self):
+        geo = self._geometry()
+        gen = torch.Generator().manual_seed(3)
+        counts = [2, 0, 5]
+        pos = [(torch.rand(n, 2, generator=gen, dtype=torch.float64) - 0.5) * 40 for n in counts]
+        vel = [torch.randn(n, 2, generator=gen, dtype=torch.float64) for n in counts]
+        amp = [torch.randn(n, generator=gen, dtype=torch.complex128) for n in counts]
+        g = simulate_phase_history(pos, geo, velocities=vel, amplitudes=amp)
+        assert g.shape == (3, 9, 6) and g.dtype == torch.complex128
+        for b in range(3):
+            alone = simulate_phase_history(
+                pos[b][None], geo, velocities=vel[b][None], amplitudes=amp[b][None]
+            )
+            torch.testing.assert_close(g[b : b + 1], alone, atol=1e-12, rtol=0)
+        assert torch.equal(g[1], torch.zeros_like(g[1]))  # an empty scene has no echo
+
+    def test_defaults_and_empty_batch(self):
+        geo = self._geometry()
+        pos = [torch.zeros(1, 2), torch.zeros(3, 2)]
+        g = simulate_phase_history(pos, geo)
+        torch.testing.assert_close(g[:, 4, 3].real, torch.tensor([1.0, 3.0]))
+        assert simulate_phase_history([], geo).shape == (0, 9, 6)
+
+    def test_errors_name_the_argument(self):
+        geo = self._geometry()
+        pos = [torch.zeros(1, 2), torch.zeros(3, 2)]
+        with pytest.raises(InputTypeError, match="velocities"):
+            simulate_phase_history(pos, geo, velocities=[torch.zeros(1, 2)])
+        with pytest.raises(InputTypeError, match="amplitudes"):
+            simulate_phase_history(pos, geo, amplitudes=torch.ones(2, 3))
+        with pytest.raises(ShapeError, match=r"velocities\[1\]"):
+            simulate_phase_history(pos, geo, velocities=[torch.zeros(1, 2), torch.zeros(2, 2)])
+        with pytest.raises(ShapeError, match=r"positions\[0\]"):
+            simulate_phase_history([torch.zeros(1, 3)], geo)
+
+
+class TestImageNoise:
+    def test_taper_gain_is_the_closed_form(self):
+        geo = SpotlightGeometry.for_image((64, 32))
+        hann = math.sqrt(2 * 63 / 3) * math.sqrt(2 * 31 / 3) * 10 ** (-20 / 20)
+        assert image_noise_std(geo, 20.0) == pytest.approx(hann, rel=1e-12)
+        assert image_noise_std(geo, 20.0, window="none") == pytest.approx(
+            math.sqrt(64 * 32) / 10, rel=1e-12
+        )
+
+    @pytest.mark.parametrize("window", ["hann", "none"])
+    def test_measured_image_snr(self, window):
+        """A unit point formed by polar formatting peaks ``snr_db`` above the image noise."""
+        from torchsar.motion import SpotlightParams, polar_format
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(128, 128))
+        std = image_noise_std(p.geometry, 25.0, window=window)
+        zero = torch.zeros(4, p.geometry.pulses, p.geometry.samples, dtype=torch.complex128)
+        noise = polar_format(add_noise(zero, std=std, seed=2), p, window=window)
+        point = simulate_phase_history(torch.zeros(1, 1, 2, dtype=torch.float64), p.geometry)
+        peak = polar_format(point, p, window=window).abs().square().max()
+        snr = 10 * math.log10(float(peak / noise.abs().square().mean()))
+        assert snr == pytest.approx(25.0, abs=0.15)
+
+    def test_bad_options(self):
+        geo = SpotlightGeometry.for_image((8, 8))
+        with pytest.raises(OptionError, match="snr_db"):
+            image_noise_std(geo, float("nan"))
+        with pytest.raises(OptionError, match="window"):
+            image_noise_std(geo, 10.0, window="kaiser")

@@ -124,26 +124,45 @@ def look_images(
     return torch.stack(images, dim=1)
 
 
-def look_displacement(velocity: Tensor | float, dt: Tensor | float, params: SpotlightParams):
-    """Azimuth displacement ``(2 v_a - v_a^2 / V) dt`` of an along-track mover between looks.
+def look_displacement(
+    velocity: Tensor | float,
+    dt: Tensor | float,
+    params: SpotlightParams,
+    *,
+    ranges: Tensor | float = 0.0,
+):
+    """Image azimuth displacement of an along-track mover between looks ``dt`` apart.
 
     The look formed around slow time ``t_c`` focuses a scatterer where its Doppler rate
     history matches a stationary point's at ``t_c``; for a mover at ``v_a`` (along the
     platform track, platform speed ``V``) that point moves by ``2 v_a - v_a^2 / V`` per second
-    of look time: the first-order law is twice the ground motion ``v_a dt``.
+    of look time: the first-order law is twice the ground motion ``v_a dt``. The image's
+    azimuth axis is referenced to the scene centre's slant range ``R0``, so a scatterer at
+    range offset ``r`` is drawn ``R0 / (R0 + r)`` times its azimuth offset: the image
+    displacement is ``(2 v_a - v_a^2 / V) dt R0 / (R0 + r)``.
+
+    Args:
+        velocity: along-track speed ``v_a`` (m/s).
+        dt: look time difference (s).
+        params: the system.
+        ranges: range offset ``r`` of the scatterer from the scene centre (m).
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(look_displacement(4.0, 1.25, SpotlightParams.from_system()), 4)
         9.9
     """
-    return (2 * velocity - velocity * velocity / params.track.platform_speed) * dt
+    scale = params.track.scene_range / (params.track.scene_range + ranges)
+    return (2 * velocity - velocity * velocity / params.track.platform_speed) * dt * scale
 
 
-def look_velocity(displacement_rate: Tensor, params: SpotlightParams) -> Tensor:
-    """Invert :func:`look_displacement`: ``v_a`` from the displacement per second ``dx / dt``.
+def look_velocity(
+    displacement_rate: Tensor, params: SpotlightParams, *, ranges: Tensor | float = 0.0
+) -> Tensor:
+    """Invert :func:`look_displacement`: ``v_a`` from the image displacement per second.
 
-    ``v_a = V (1 - sqrt(1 - r / V))`` (the root near zero; ``r`` clipped to ``<= V``).
+    ``v_a = V (1 - sqrt(1 - r' / V))``, ``r' = rate (R0 + r) / R0`` (the root near zero;
+    ``r'`` clipped to ``<= V``).
 
     Example:
         >>> import warnings; warnings.simplefilter("ignore")
@@ -151,4 +170,5 @@ def look_velocity(displacement_rate: Tensor, params: SpotlightParams) -> Tensor:
         4.0
     """
     v = params.track.platform_speed
-    return v * (1 - torch.sqrt((1 - displacement_rate / v).clamp(min=0)))
+    rate = displacement_rate * (1 + ranges / params.track.scene_range)
+    return v * (1 - torch.sqrt((1 - rate / v).clamp(min=0)))

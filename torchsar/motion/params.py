@@ -33,8 +33,9 @@ class SpotlightParams:
 
     Build it from the system figures with :meth:`from_system` (defaults: Table 1 of
     Yusufoglu & Kartal 2011). Constructing a parameter set whose figures contradict each
-    other emits a :class:`SpotlightConsistencyWarning` per problem (Table 1 emits two: the
-    chirp gives 150 MHz, i.e. 1 m range resolution rather than the stated 0.3 m, and PRF
+    other emits a :class:`SpotlightConsistencyWarning` per problem (Table 1 emits three: the
+    chirp gives 150 MHz, i.e. 1 m range resolution rather than the stated 0.3 m; 180
+    samples 0.83 MHz apart cover a 180 m range extent, less than the 200 m scene; and PRF
     200 Hz samples a 150 m azimuth extent, less than the 200 m scene).
     :meth:`consistency_report` returns the same messages without warning.
 
@@ -206,7 +207,9 @@ class SpotlightParams:
                 f"{geo.unambiguous_azimuth:.0f} m "
                 f"< scene {self.scene_extent[1]:.0f} m (scene Doppler "
                 f"{self.scene_doppler_bandwidth:.0f} Hz > PRF); images are cut to "
-                f"{geo.unambiguous_azimuth:.0f} m and radial speeds alias beyond "
-                f"+-{geo.blind_speed / 2:.2f} m/s"
+                f"{geo.unambiguous_azimuth:.0f} m; a scatterer at azimuth x moving in range "
+                f"at v_r is Doppler-folded when |x - R v_r / V| > "
+                f"{geo.unambiguous_azimuth / 2:.0f} m (|v_r| > {geo.blind_speed / 2:.2f} m/s "
+                "at the scene centre)"
             )
         return out

@@ -7,7 +7,7 @@ import math
 import torch
 from torch import Tensor
 
-__all__ = ["background", "peak_in_window", "robust_pattern", "strips"]
+__all__ = ["background", "peak_in_box", "peak_in_window", "robust_pattern", "strips"]
 
 
 def strips(images: Tensor, batch: Tensor, rows: Tensor, half: int) -> Tensor:
@@ -45,6 +45,46 @@ def peak_in_window(intensity: Tensor, center: Tensor, half: int) -> tuple[Tensor
     n = cols.shape[-1]
     col = torch.gather(cols, -1, (flat % n)[..., None])[..., 0]
     return value, torch.stack([flat // n, col], dim=-1)
+
+
+def peak_in_box(
+    intensity: Tensor, center: Tensor, half: tuple[int, int], *, rows: Tensor | None = None
+) -> tuple[Tensor, Tensor]:
+    """Maximum of ``intensity (..., S, W)`` in rows ``center_row ± half[0]`` (clipped to the
+    strip) and columns ``center_col ± half[1]`` (circular).
+
+    ``center`` is long ``(..., 2)`` matching ``intensity.shape[:-2]``; ``rows`` optionally
+    narrows the row half-width per element (long ``(...)``, at most ``half[0]``).
+
+    Returns:
+        ``(value (...), pixel (..., 2))``: the maximum and its ``(row, column)`` in the strip.
+
+    Example:
+        >>> x = torch.zeros(2, 9, 8); x[:, 1, 7] = 5.0; x[0, 6, 0] = 3.0; x[1, 4, 7] = 2.0
+        >>> value, pix = peak_in_box(x, torch.tensor([[5, 1], [5, 1]]), (2, 2))
+        >>> value.tolist(), pix.tolist()
+        ([3.0, 2.0], [[6, 0], [4, 7]])
+    """
+    s, w = intensity.shape[-2:]
+    dev = intensity.device
+    index = (center[..., :1].to(dev) + torch.arange(-half[0], half[0] + 1, device=dev)).clamp(
+        0, s - 1
+    )
+    cols = (center[..., 1:].to(dev) + torch.arange(-half[1], half[1] + 1, device=dev)) % w
+    lead = [
+        torch.arange(n, device=dev).reshape(-1, *[1] * (index.dim() + 1 - i))
+        for i, n in enumerate(intensity.shape[:-2], start=1)
+    ]
+    win = intensity[(*lead, index[..., :, None], cols[..., None, :])]
+    if rows is not None:
+        offsets = torch.arange(-half[0], half[0] + 1, device=dev).abs()
+        inside = offsets <= rows.to(dev)[..., None]
+        win = torch.where(inside[..., None], win, torch.full_like(win, -torch.inf))
+    value, flat = win.flatten(-2).max(-1)
+    n = cols.shape[-1]
+    row = torch.gather(index, -1, (flat // n)[..., None])[..., 0]
+    col = torch.gather(cols, -1, (flat % n)[..., None])[..., 0]
+    return value, torch.stack([row, col], dim=-1)
 
 
 def background(intensity: Tensor) -> Tensor:

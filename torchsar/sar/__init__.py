@@ -5,7 +5,7 @@ Used by :mod:`torchsar.imaging` (polar-raster experiments) and :mod:`torchsar.mo
 """
 
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry, Track
-from torchsar.sar.noise import add_noise
+from torchsar.sar.noise import add_noise, image_noise_std
 from torchsar.sar.phase_history import phase_history, simulate_phase_history
 
 __all__ = [
@@ -13,6 +13,7 @@ __all__ = [
     "SpotlightGeometry",
     "Track",
     "add_noise",
+    "image_noise_std",
     "phase_history",
     "simulate_phase_history",
 ]

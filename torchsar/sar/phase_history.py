@@ -10,11 +10,14 @@ collection's own samples, never with the operator that reconstructs them (no inv
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from functools import partial
 
 import torch
 from torch import Tensor
+from torch.nn.utils.rnn import pad_sequence
 
-from torchsar._checks import ShapeError, check_complex, check_int, check_pairs
+from torchsar._checks import InputTypeError, ShapeError, check_complex, check_int, check_pairs
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry
 
 __all__ = ["phase_history", "simulate_phase_history"]
@@ -34,6 +37,39 @@ def _check_points(positions: object, velocities: object, amplitudes: object) -> 
             raise ShapeError(f"{name} must have shape {tuple(shape)}, got {got}")
 
 
+def _pad_scenes(
+    positions: Sequence[Tensor], velocities: object, amplitudes: object
+) -> tuple[Tensor, Tensor | None, Tensor]:
+    """Scenes of unequal sizes as one ``(B, N, 2)`` batch; padding scatterers get amplitude 0.
+
+    ``velocities`` / ``amplitudes`` are ``None`` or sequences of tensors matching ``positions``.
+    """
+    for name, seq in (("velocities", velocities), ("amplitudes", amplitudes)):
+        if seq is not None and (
+            isinstance(seq, Tensor) or not isinstance(seq, Sequence) or len(seq) != len(positions)
+        ):
+            raise InputTypeError(
+                f"{name} must be None or a sequence of {len(positions)} tensors like positions, "
+                f"got {type(seq).__name__}"
+            )
+    for i, p in enumerate(positions):
+        check_pairs(p, f"positions[{i}]", ndim=2, axes="(N_b, 2) (range, cross-range)")
+        for name, seq, shape in (
+            ("velocities", velocities, p.shape),
+            ("amplitudes", amplitudes, p.shape[:1]),
+        ):
+            x = None if seq is None else seq[i]  # type: ignore[index]
+            if seq is not None and (not isinstance(x, Tensor) or x.shape != shape):
+                got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
+                raise ShapeError(f"{name}[{i}] must have shape {tuple(shape)}, got {got}")
+    if not positions:
+        return torch.zeros(0, 0, 2), None, torch.zeros(0, 0)
+    ones = [p.new_ones(p.shape[0]) for p in positions]
+    pad = partial(pad_sequence, batch_first=True)  # zeros beyond each scene's N_b
+    vel = None if velocities is None else pad(list(velocities))  # type: ignore[arg-type]
+    return pad(list(positions)), vel, pad(list(amplitudes or ones))  # type: ignore[arg-type]
+
+
 def _result_dtype(positions: Tensor, amplitudes: Tensor | None) -> torch.dtype:
     """complex128 when positions or amplitudes are double precision, else complex64."""
     double = positions.dtype == torch.float64 or (
@@ -43,11 +79,11 @@ def _result_dtype(positions: Tensor, amplitudes: Tensor | None) -> torch.dtype:
 
 
 def simulate_phase_history(
-    positions: Tensor,
+    positions: Tensor | Sequence[Tensor],
     geometry: SpotlightGeometry,
     *,
-    velocities: Tensor | None = None,
-    amplitudes: Tensor | None = None,
+    velocities: Tensor | Sequence[Tensor] | None = None,
+    amplitudes: Tensor | Sequence[Tensor] | None = None,
     rvp: bool = False,
     chunk_elements: int = _CHUNK,
 ) -> Tensor:
@@ -61,12 +97,20 @@ def simulate_phase_history(
     Memory stays bounded: pulses are processed in chunks of at most ``chunk_elements``
     ``(scatterer, pulse, sample)`` terms (the result does not depend on the chunking).
 
+    Scenes with different numbers of scatterers go in one call as sequences: ``positions``
+    a list of ``(N_b, 2)`` tensors, ``velocities`` and ``amplitudes`` (when given) lists of
+    ``(N_b, 2)`` and ``(N_b,)`` tensors; scene ``b`` gives the same data as a call with its
+    scatterers alone.
+
     Args:
-        positions: real ``(B, N, 2)`` positions ``(range, cross-range)`` in m at ``t = 0``.
+        positions: real ``(B, N, 2)`` positions ``(range, cross-range)`` in m at ``t = 0``,
+            or a sequence of ``B`` tensors ``(N_b, 2)``.
         geometry: the collection (:class:`~torchsar.sar.SpotlightGeometry`).
         velocities: optional ``(B, N, 2)`` constant velocities in m/s (positive range
-            velocity = receding); needs ``geometry.track``. Default: stationary.
-        amplitudes: optional ``(B, N)`` complex (or real) reflectivities; default 1.
+            velocity = receding), or a sequence like ``positions``; needs
+            ``geometry.track``. Default: stationary.
+        amplitudes: optional ``(B, N)`` complex (or real) reflectivities (or a sequence of
+            ``(N_b,)``); default 1.
         rvp: include the residual video phase (uses ``geometry.chirp_rate``).
         chunk_elements: memory bound of one chunk.
 
@@ -90,7 +134,12 @@ def simulate_phase_history(
         >>> g = simulate_phase_history(torch.zeros(2, 1, 2), geo)
         >>> g.shape, bool(torch.allclose(g, torch.ones_like(g)))
         (torch.Size([2, 4, 4]), True)
+        >>> ragged = simulate_phase_history([torch.zeros(1, 2), torch.zeros(3, 2)], geo)
+        >>> ragged[:, 0, 0].real.tolist()  # one and three unit scatterers at the centre
+        [1.0, 3.0]
     """
+    if isinstance(positions, Sequence):
+        positions, velocities, amplitudes = _pad_scenes(positions, velocities, amplitudes)
     _check_points(positions, velocities, amplitudes)
     chunk_elements = check_int(chunk_elements, "chunk_elements", minimum=1)
     device = positions.device

@@ -1,11 +1,13 @@
 """``torchsar-eval movers``: moving targets found in clutter, a speed and SNR ladder.
 
 Scenes: three stationary point targets and one mover (along-track or range, 0.39-15.6 m/s,
-the seed paper's ladder) in weak distributed clutter (many random scatterers, clutter-to-noise
+the seed paper's ladder; range movers from 2.34 m/s are Doppler-folded 1-5 times) in weak
+distributed clutter (many random scatterers, clutter-to-noise
 ratio ``--cnr-db``) and white noise (target peak SNR ``--snr-db``); along-track movers again
 at every SNR of ``--snr-ladder``; control scenes without a mover. Each scene goes through
 :func:`torchsar.motion.find_movers` (look test, focus test, subpatch test, combined
-decision). Writes ``movers.csv`` / ``movers.md`` (one row per scene), ``sensitivity.csv``
+decision, radial flag with the fold). Writes ``movers.csv`` / ``movers.md`` (one row per
+scene), ``sensitivity.csv``
 (minimum detectable along-track speed per SNR), ``displacement.png`` and ``config.json``.
 """
 
@@ -53,6 +55,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--looks", type=int, default=2, help="time sub-apertures (2-4)")
     p.add_argument("--overlap", type=float, default=0.0, help="overlap of the looks, [0, 1)")
     p.add_argument("--n-sigma", type=float, default=5.0, help="threshold of each test in sigmas")
+    p.add_argument("--max-fold", type=int, default=5,
+                   help="Doppler folds in the motion bank (5 covers 15.6 m/s radial)")  # fmt: skip
     p.add_argument("--no-subpatch", dest="subpatch", action="store_false",
                    help="skip the subpatch test (it forms four more images per scene)")  # fmt: skip
     p.add_argument("--batch-size", type=int, default=4, help="scenes imaged at once")
@@ -87,6 +91,7 @@ def config(args: argparse.Namespace) -> LadderConfig:
         "--clutter-fields >= 1": args.clutter_fields >= 1, "--controls >= 0": args.controls >= 0,
         "--looks in 2..4": 2 <= args.looks <= 4, "0 <= --overlap < 1": 0 <= args.overlap < 1,
         "--n-sigma > 0": args.n_sigma > 0, "--azimuth-resolution > 0": args.azimuth_resolution > 0,
+        "0 <= --max-fold <= 8": 0 <= args.max_fold <= 8,
     }  # fmt: skip
     bad = [k for k, ok in checks.items() if not ok]
     if bad:
@@ -97,7 +102,7 @@ def config(args: argparse.Namespace) -> LadderConfig:
         snr_ladder=floats(args.snr_ladder, "--snr-ladder", allow_empty=True),
         cnr_db=args.cnr_db, clutter_points=args.clutter_points,
         clutter_fields=args.clutter_fields, controls=args.controls, looks=args.looks,
-        overlap=args.overlap, n_sigma=args.n_sigma, subpatch=args.subpatch,
+        overlap=args.overlap, n_sigma=args.n_sigma, max_fold=args.max_fold, subpatch=args.subpatch,
         batch_size=args.batch_size, seed=args.seed, progress=not args.no_progress,
     )  # fmt: skip
 

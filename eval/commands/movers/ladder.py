@@ -7,13 +7,26 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar.motion import MoverReport, SpotlightParams, look_displacement, planar_image_positions
+from torchsar.motion import (
+    MoverReport,
+    SpotlightParams,
+    doppler_fold,
+    look_displacement,
+    planar_image_positions,
+    walk_rate,
+)
 from torchsar.motion import wrap as fold
 from torchsar_eval.commands.movers.scenes import MOVER
 
 __all__ = ["TESTS", "scene_row"]
 
-TESTS = {"look": "look", "focus": "focus", "subpatch": "subpatch", "combined": "mover"}
+TESTS = {
+    "look": "look",
+    "focus": "focus",
+    "subpatch": "subpatch",
+    "combined": "mover",
+    "radial": "radial",
+}
 
 
 def _flags(report: MoverReport) -> dict[str, Tensor]:
@@ -23,6 +36,7 @@ def _flags(report: MoverReport) -> dict[str, Tensor]:
         "focus": report.focus.mover,
         "subpatch": report.subpatch,
         "combined": report.mover,
+        "radial": report.radial,
     }
 
 
@@ -61,7 +75,8 @@ def _mover_columns(report: MoverReport, b: int, i: int) -> dict:
     if i < 0:
         return {k: nan for k in ("look_shift_m", "look_range_shift_m", "look_velocity_mps",
                                  "focus_velocity_mps", "focus_gain_db", "velocity_mps",
-                                 "velocity_sigma_mps", "mover_snr_db")}  # fmt: skip
+                                 "velocity_sigma_mps", "mover_snr_db", "walk_mps", "fold",
+                                 "radial_low_mps", "radial_high_mps")}  # fmt: skip
     disp = report.look.displacement[b, i, -1]
     return {
         "look_shift_m": float(disp[1]),
@@ -72,6 +87,10 @@ def _mover_columns(report: MoverReport, b: int, i: int) -> dict:
         "velocity_mps": float(report.velocity[b, i]),
         "velocity_sigma_mps": float(report.sigma[b, i]),
         "mover_snr_db": 10 * math.log10(float(report.focus.snr[b, i])),
+        "walk_mps": float(report.look.walk[b, i]),
+        "fold": int(report.fold[b, i]) if bool(report.radial[b, i]) else nan,
+        "radial_low_mps": float(report.radial_speed[b, i, 0]),
+        "radial_high_mps": float(report.radial_speed[b, i, 1]),
     }
 
 
@@ -87,14 +106,18 @@ def scene_row(
     clutter = targets - still - fragments - {best}
     dt = float(report.plan.time[-1] - report.plan.time[0])
     v_a = float(vel[MOVER, 1]) if has_mover else 0.0
+    k = int(doppler_fold(pos[MOVER], params, velocities=vel[MOVER])) if has_mover else 0
     row = {
         "theory_look_shift_m": look_displacement(v_a, dt, params),
         "theory_smear_m": 2 * abs(v_a) * params.geometry.aperture_time,
+        "theory_fold": k,
+        "theory_walk_mps": walk_rate(k, params),
         "mover_found": best >= 0,
         **_mover_columns(report, b, best),
         "stationary_found": len(still),
         "clutter_peaks": len(clutter),
         "fragments": len(fragments),
+        "conflicts": int(report.conflict[b].sum()),
     }
     for name, flags in _flags(report).items():
         f = flags[b].cpu()

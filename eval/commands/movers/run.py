@@ -22,19 +22,21 @@ SHOWN = [
     "kind", "direction", "speed_mps", "snr_db", "theory_look_shift_m", "look_shift_m",
     "theory_smear_m", "focus_gain_db", "velocity_mps", "look_detected", "focus_detected",
     "subpatch_detected", "combined_detected", "combined_false_stationary",
-    "combined_false_clutter",
+    "combined_false_clutter", "theory_fold", "fold", "radial_detected", "radial_false_stationary",
+    "radial_false_clutter",
 ]  # fmt: skip
 AXIS = {"along-track": 1, "range": 0}
 
 SCOPE = """\
 Scope (single-channel SAR): along-track motion changes the azimuth FM rate, so a mover is
 displaced between time sub-aperture looks by (2 v_a - v_a^2/V) dt and focuses best at v_a:
-both tests measure it. Radial (range) motion is, to first order, a stationary target at a
-displaced position (azimuth offset R v_r / V, aliased by the PRF beyond +-lambda PRF / 4):
-no single-channel test measures it. When the Doppler is aliased, the replica shown keeps an
-uncompensated part of the range walk, which the looks and the focus test may read as a
-spurious along-track speed (the 'range' rows say where; the velocity reported is then not
-the target's). The subpatch test responds to azimuth ambiguity, not to motion."""
+both tests measure it and must agree ('combined'). Radial (range) motion is, to first order,
+a stationary target displaced in azimuth by R v_r / V. When that leaves the sampled azimuth
+extent (|x - R v_r / V| > lambda PRF R / 4V) the Doppler folds (fold k), and the image keeps
+a residual range walk of k lambda PRF / 2 per second: the looks see it, the motion bank
+compacts it, and the 'radial' flag reports k (not v_r: the true azimuth is unknown). An
+unfolded radial mover shows nothing. The subpatch test responds to azimuth ambiguity, not
+to motion."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,7 @@ class LadderConfig:
     looks: int
     overlap: float
     n_sigma: float
+    max_fold: int
     subpatch: bool
     batch_size: int
     seed: int
@@ -101,7 +104,8 @@ def _batch(cfg, params, clutter, scenes: list[dict]) -> list[dict]:
     )  # fmt: skip
     report = find_movers(
         g, params, looks=cfg.looks, overlap=cfg.overlap, n_sigma=cfg.n_sigma,
-        subpatch=cfg.subpatch and scenes[0]["kind"] == "ladder", max_targets=128,
+        max_fold=cfg.max_fold, subpatch=cfg.subpatch and scenes[0]["kind"] == "ladder",
+        max_targets=128,
     )  # fmt: skip
     full_vel = torch.zeros(len(scenes), len(LAYOUT), 2, dtype=torch.float64)
     full_vel[:, MOVER] = vel
@@ -154,14 +158,17 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
     shown = table[[c for c in SHOWN if c in table]]
     false = {
         t: int(table[f"{t}_false_stationary"].sum() + table[f"{t}_false_clutter"].sum())
-        for t in ("look", "focus", "subpatch", "combined")
+        for t in ("look", "focus", "subpatch", "combined", "radial")
     }
     controls = table[table.kind == "control"]
-    radial = table[(table.direction == "range") & table.combined_detected]
+    ranged = table[table.direction == "range"]
     flagged = ", ".join(
-        f"{r.speed_mps:g} m/s (read as {r.velocity_mps:.2g} m/s along track)"
-        for r in radial.itertuples()
+        f"{r.speed_mps:g} m/s: fold {r.theory_fold:d} "
+        + (f"found {r.fold:.0f}" if r.radial_detected else "not flagged")
+        for r in ranged[ranged.theory_fold != 0].itertuples()
     )
+    along = ranged[ranged.combined_detected]
+    misread = ", ".join(f"{r.speed_mps:g} m/s" for r in along.itertuples())
     lines = [
         shown.to_string(index=False, float_format=lambda v: f"{v:.3g}"),
         "",
@@ -170,7 +177,8 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
         "",
         "false movers over all scenes: " + ", ".join(f"{k} {v}" for k, v in false.items()),
         f"control scenes: {len(controls)}, clutter peaks tested {int(table.clutter_peaks.sum())}",
-        f"range movers flagged by the combined decision: {flagged or 'none'}",
+        f"folded range movers (fold from the range walk): {flagged or 'none'}",
+        f"range movers read as along-track movers: {misread or 'none'}",
         "",
         SCOPE,
     ]
