@@ -11,8 +11,10 @@ Example:
 
 from __future__ import annotations
 
+import os
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
@@ -32,7 +34,7 @@ from torchsar_eval.report import per_image_rows, result_tables, write_run
 from torchsar_eval.result import Scoring
 from torchsar_eval.resume import check_resumable, fingerprint
 from torchsar_eval.settings import Calibration, Execution
-from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_rows
+from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
 __all__ = ["Results", "evaluate"]
@@ -90,6 +92,10 @@ class _Plan:
     seed: int
 
 
+MAX_N = 10_000_000
+"""Most images per named dataset in one run (larger datasets: split them into runs)."""
+
+
 def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     """``{name: dataset}`` from a name, a dataset, a list of them or a dict."""
     from torchsar_eval.datasets import make_dataset
@@ -103,6 +109,8 @@ def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     else:
         raise EvalError(f"{{opt:datasets}}{datasets!r}: expected a dataset name, a dataset or "
                         "a list or dict of them")  # fmt: skip
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_N):
+        raise EvalError(f"{{opt:n}}{n!r}: must be an integer from 1 to {MAX_N:,}")
     out: dict[str, Dataset] = {}
     for i, (name, d) in enumerate(items):
         name = str(name) if name else f"dataset{i}"
@@ -158,6 +166,7 @@ def evaluate(
     out: str | Path | None = None,
     overwrite: bool = False,
     resume: bool = False,
+    discard: bool = False,
     n: int | None = None,
     seed: int = 0,
     progress: bool | None = None,
@@ -187,7 +196,11 @@ def evaluate(
         out: the run folder to write (tables, plots, ``config.json``); ``None`` writes
             nothing. The folder is published whole or not at all.
         overwrite: replace a previous run in ``out``.
-        resume: continue the interrupted run in ``out`` from its saved shards.
+        resume: continue the interrupted run in ``out`` from its saved shards. A run that
+            fails or is interrupted keeps its saved shards (in a hidden folder beside
+            ``out``) for this; a new run of the same ``out`` is refused until the saved
+            work is resumed or discarded.
+        discard: delete the saved work an interrupted run of ``out`` left, and start over.
         n: images per named dataset (default: the dataset's own size).
         seed: seed of the simulated datasets.
         progress: shorthand for ``execution.progress``.
@@ -206,10 +219,20 @@ def evaluate(
     execution = execution or Execution()
     if progress is not None:
         execution = replace(execution, progress=progress)
+    execution = _cap_workers(execution)
     if window_units not in ("px", "m"):
         raise EvalError(f"{{opt:window_units}}{window_units!r}: expected 'px' or 'm'")
-    if (resume or overwrite or export_coco) and out is None:
-        wanted = "resume" if resume else "overwrite" if overwrite else "export_coco"
+    if (resume or overwrite or discard or export_coco) and out is None:
+        wanted = next(
+            k
+            for k, v in [
+                ("resume", resume),
+                ("overwrite", overwrite),
+                ("discard", discard),
+                ("export_coco", True),
+            ]
+            if v
+        )
         raise EvalError(f"{{opt:{wanted}}} needs {{opt:out}}FOLDER")
     plan = _Plan(
         detectors=_detectors(list(BUILTIN.values()) if detectors is None else detectors),
@@ -222,10 +245,24 @@ def evaluate(
         if out is None:
             tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="torchsar-")))
             return _execute(plan, named, tmp, None)
-        target = stack.enter_context(claim(Path(out), overwrite=overwrite, resume=resume))
-        tmp = stack.enter_context(result_dir(target, resume=resume, keep_interrupted=True))
+        target = stack.enter_context(
+            claim(Path(out), overwrite=overwrite, resume=resume, discard=discard)
+        )
+        tmp = stack.enter_context(result_dir(target, resume=resume, keep=True))
         results = _execute(plan, named, tmp, target)
     return results
+
+
+def _cap_workers(ex: Execution) -> Execution:
+    """More local workers than cores only adds processes and memory: capped, with a
+    warning."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = cores or 1
+    if ex.engine == "local" and ex.workers > cores:
+        warnings.warn(f"{ex.workers} workers are more than this machine's {cores} cores: "
+                      f"using {cores}", UserWarning, stacklevel=3)  # fmt: skip
+        return replace(ex, workers=cores)
+    return ex
 
 
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
@@ -322,6 +359,22 @@ def _default_class(ds) -> str:
     return "target"
 
 
+def _check_failures(name: str, total: int, bad: list, counts: dict, ex: Execution) -> None:
+    """Refuse to publish a dataset whose images all failed, or more than ``max_bad`` of
+    them (skipped items plus the images of failed shards)."""
+    max_bad = ex.max_bad
+    sizes = shard_ranges(total, ex.shard_size) if counts["failed"] else []
+    failed = len(bad) + sum(len(sizes[f["shard"]]) for f in counts["failed"])
+    if total == 0 or failed == 0:
+        return
+    limit = "" if max_bad is None else f" (more than {{opt:max_bad}}{max_bad:g})"
+    if failed >= total or (max_bad is not None and failed > max_bad * total):
+        first = bad[0] if bad else (f"shard {counts['failed'][0]['shard']}",
+                                    counts["failed"][0]["error"])  # fmt: skip
+        raise EvalError(f"dataset {name}: {failed} of {total} images failed{limit}, the "
+                        f"first {first[0]}: {first[1]}")  # fmt: skip
+
+
 def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
     """Score one dataset shard by shard; with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
@@ -338,7 +391,7 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     def shards(idx: list[int], folder: Path, export: bool = False):
         job = ShardJob(name, ds, idx, detectors, plan.scoring, ex.batch_size, plan.preprocess,
                        ex.shard_size, export_coco=export, device=ex.device,
-                       default_class=default_class)  # fmt: skip
+                       default_class=default_class, skip_bad=ex.skip_bad)  # fmt: skip
         return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
                           address=ex.address, skip_bad=ex.skip_bad,
                           progress=ex.progress)  # fmt: skip
@@ -360,6 +413,7 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
         r.op_bin = b
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
+    _check_failures(name, len(indices), bad, counts, ex)
     stats = {"images": len(indices), "wall_s": wall, **counts, "export": exporter,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip

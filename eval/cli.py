@@ -54,7 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        load(name).add_parser(sub)
+        module = load(name)
+        module.add_parser(sub)
+        if not getattr(module, "WRITES_OUT", True):
+            continue
         sub.choices[name].add_argument(
             "--overwrite",
             action="store_true",
@@ -126,7 +129,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     if resume and getattr(args, "out", None) is None:
         raise EvalError("--resume needs --out naming the interrupted run's folder")
     if getattr(args, "claims_out", False):  # the command checks and publishes --out itself
-        args.out = Path(out)
+        if hasattr(args, "out"):
+            args.out = Path(out)
         return int(args.func(args))
     with claim(Path(out), overwrite=args.overwrite, resume=resume) as claimed:
         args.out = claimed

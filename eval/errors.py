@@ -23,7 +23,7 @@ __all__ = ["FLAGS", "EvalError", "cli_spelling", "python_spelling"]
 
 _OPTION = re.compile(r"\{opt:(\w+)\}")
 
-FLAGS = frozenset({"overwrite", "resume", "skip_bad", "export_coco", "coco_compatible"})
+FLAGS = frozenset({"overwrite", "resume", "discard", "skip_bad", "export_coco", "coco_compatible"})
 """Boolean options: named ``NAME=True`` in Python and ``--flag`` on the command line."""
 
 

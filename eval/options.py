@@ -143,6 +143,10 @@ def at_least(value: Number | None, option: str, minimum: Number) -> Number | Non
     return value
 
 
+MAX_PARAM = 1000
+"""Longest ``DETECTOR.NAME=VALUE`` accepted (no option needs more; refused before parsing)."""
+
+
 def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[str, Any]]:
     """Parse ``["ca.guard=3", "region.k=0.5"]`` into ``{"ca": {"guard": 3}, ...}`` (values
     as Python literals where they parse, else strings).
@@ -153,13 +157,16 @@ def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[st
     """
     out: dict[str, dict[str, Any]] = {}
     for item in items:
+        if len(item) > MAX_PARAM:
+            raise EvalError(f"{option} {item[:40]}...: {len(item)} characters, more than the "
+                            f"{MAX_PARAM} an option value may have")  # fmt: skip
         key, eq, raw = item.partition("=")
         name, dot, param = key.partition(".")
         if not (eq and dot and name and param):
             raise EvalError(f"{option} must look like DETECTOR.NAME=VALUE, got {item!r}")
         try:
             value = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
+        except (ValueError, SyntaxError, RecursionError, MemoryError):
             value = raw  # a bare string such as a mode name
         out.setdefault(name, {})[param] = value
     return out

@@ -34,12 +34,11 @@ def check_resumable(path: Path, expected: dict) -> None:
             before = saved.get("manifests", {}).get(name)
             if before is not None and before != now:
                 raise EvalError(f"{{opt:resume}}: dataset {name} changed since the interrupted "
-                                f"run ({_manifest_change(before, now)}); run again without "
-                                "{opt:resume}")  # fmt: skip
+                                f"run ({_manifest_change(before, now)}); start over with "
+                                "{opt:discard}")  # fmt: skip
         if saved != expected:
             raise EvalError(f"{{opt:resume}}: the options differ from those of the interrupted "
-                            f"run (see {path.name} in its folder); run again without "
-                            "{opt:resume}")  # fmt: skip
+                            f"run (see {path.name} in its folder)")  # fmt: skip
         return
     path.write_text(json.dumps(expected, indent=2) + "\n")
 

@@ -48,6 +48,7 @@ def run_detectors(
     on_batch: Callable[[dict, dict], None] | None = None,
     device: torch.device | str | None = None,
     default_class: str = "target",
+    skip_bad: bool = False,
 ) -> list[DetectorResult]:
     """Run every detector over the dataset and accumulate its pixel and object states.
 
@@ -66,6 +67,9 @@ def run_detectors(
         device: where the detectors run: each batch (and each ``torch.nn.Module``
             detector) is moved there, outputs come back to the CPU for scoring.
         default_class: the class of objects without one (COCO-compatible scoring).
+        skip_bad: when a batch fails (an image smaller than a detector's window, say),
+            score its images one by one and skip, naming them, those that fail alone;
+            by default the error stops the run.
     """
     scoring = Scoring() if scoring is None else scoring
     device = None if device is None else torch.device(device)
@@ -84,24 +88,54 @@ def run_detectors(
         disable=not progress,
         leave=False,
     ):
-        x = batch["image"] if device is None else batch["image"].to(device)
-        t0 = time.perf_counter()
-        if preprocess is not None:
-            x = preprocess(x)
-        t_pre = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        truth = batch_truth(batch, name or desc)
-        t_truth = (time.perf_counter() - t0) / max(len(results), 1)  # shared by the detectors
-        found = {}
-        for res in results:
+        try:
+            parts = [(batch, _outputs(results, batch, preprocess, device))]
+        except Exception:
+            if not skip_bad or len(batch["meta"]) == 0:
+                raise
+            parts = list(_one_by_one(results, batch, preprocess, device, skipped))
+        for part, (outs, seconds) in parts:
             t0 = time.perf_counter()
-            out = to_cpu(res.detector(x, batch["meta"]))
-            res.seconds += time.perf_counter() - t0 + t_pre
-            res.images += x.shape[0]
-            res.object_seconds += t_truth
-            found[res.detector.name] = res.add(out, batch, truth)
-        if on_batch is not None:
-            on_batch(batch, found)
+            truth = batch_truth(part, name or desc)
+            t_truth = (time.perf_counter() - t0) / max(len(results), 1)  # shared
+            found = {}
+            for res, out, sec in zip(results, outs, seconds, strict=True):
+                res.seconds += sec
+                res.images += part["image"].shape[0]
+                res.object_seconds += t_truth
+                found[res.detector.name] = res.add(out, part, truth)
+            if on_batch is not None:
+                on_batch(part, found)
     for res in results:
         res.skipped = list(skipped)
     return results
+
+
+def _outputs(results: list[DetectorResult], batch: dict, preprocess, device) -> tuple:
+    """Every detector's output on one batch (on the CPU) and its seconds (the shared
+    preprocessing charged to each); all or nothing, so a failure adds nothing."""
+    x = batch["image"] if device is None else batch["image"].to(device)
+    t0 = time.perf_counter()
+    if preprocess is not None:
+        x = preprocess(x)
+    t_pre = time.perf_counter() - t0
+    outs, seconds = [], []
+    for res in results:
+        t0 = time.perf_counter()
+        outs.append(to_cpu(res.detector(x, batch["meta"])))
+        seconds.append(time.perf_counter() - t0 + t_pre)
+    return outs, seconds
+
+
+def _one_by_one(results, batch: dict, preprocess, device, skipped: list):
+    """A failed batch image by image: the images that fail alone are skipped (named in
+    ``skipped`` with the error), the others scored as in any batch."""
+    for i, meta in enumerate(batch["meta"]):
+        one = {k: v[i : i + 1] for k, v in batch.items() if k != "meta"}
+        one["meta"] = [meta]
+        try:
+            yield one, _outputs(results, one, preprocess, device)
+        except Exception as exc:
+            where = meta.get("path") or meta.get("name") or f"item {meta.get('index')}"
+            message = " ".join(f"{type(exc).__name__}: {exc}".split())
+            skipped.append((str(where), message))

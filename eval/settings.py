@@ -26,7 +26,12 @@ class Execution:
             detectors must then be importable by name (see :func:`torchsar_eval.load`).
         engine: ``"local"`` or ``"ray"`` (``pip install 'torchsar[ray]'``).
         address: Ray cluster address (default: a local Ray instance).
-        skip_bad: skip unreadable files and failing shards, naming them in the summary.
+        skip_bad: skip the images that cannot be read or that a detector fails on (each
+            named in the summary), and shards whose worker died twice; by default the
+            first such error stops the run.
+        max_bad: with ``skip_bad``, the largest share of a dataset's images that may be
+            skipped (0 to 1); beyond it the run fails and publishes nothing. Default:
+            any share short of all: a run that scored no image of a dataset always fails.
         progress: progress bars on stderr.
         device: where detectors run (``"cpu"``, ``"cuda"``, ``"cuda:1"``); batches move
             there and back for scoring, which stays on the CPU.
@@ -40,12 +45,17 @@ class Execution:
     skip_bad: bool = False
     progress: bool = True
     device: str | None = None
+    max_bad: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "shard_size", "workers"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise EvalError(f"{{opt:{name}}}{v!r}: must be an integer >= 1")
+        if self.max_bad is not None and not (
+            isinstance(self.max_bad, int | float) and 0 <= self.max_bad <= 1
+        ):
+            raise EvalError(f"{{opt:max_bad}}{self.max_bad!r}: must be a share from 0 to 1")
         if self.engine not in ENGINES:
             raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
         if self.device is not None:

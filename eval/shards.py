@@ -73,6 +73,7 @@ class ShardJob:
     export_coco: bool = False
     device: str | None = None
     default_class: str = "target"
+    skip_bad: bool = False
 
 
 @dataclass
@@ -105,6 +106,7 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
         on_batch=None if coco is None else coco.add,
         device=job.device,
         default_class=job.default_class,
+        skip_bad=job.skip_bad,
     )
     release_memory()
     return ShardState(results, coco)
@@ -185,13 +187,19 @@ def _scored(job: ShardJob, k: int) -> bytes:
 
 
 def _write(path: Path, data: bytes) -> None:
-    """Save shard bytes atomically: a temporary name in the same folder, then rename."""
+    """Save shard bytes atomically: a temporary name in the same folder, then rename. A
+    failure to save (a full disk) stops the run: it is no fault of the shard's."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        reason = exc.strerror or exc
+        raise EvalError(f"cannot save {path.name} in {path.parent} ({reason})") from exc
 
 
 def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
@@ -246,49 +254,93 @@ def _local(job, todo, bar, sizes, fail) -> None:
     for k, path in todo:
         while True:
             try:
-                _save(path, _score_shard(job, k))
-                break
+                data = _scored(job, k)
             except KeyboardInterrupt:
                 raise
             except Exception as exc:
                 if not fail.again(k, exc):
                     break
+            else:
+                _write(path, data)
+                break
         bar.update(sizes[k])
 
 
+_DIED = "a worker process died (killed or out of memory)"
+
+
 def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
-    """Shards in ``workers`` spawned processes, a failed shard resubmitted once. A worker
-    that dies (killed, out of memory) breaks the pool: its shards are reported as failed
-    rather than waited for. Leaving early (an error, Ctrl-C, SIGTERM) stops the pool at once
-    instead of waiting for running shards."""
+    """Shards in ``workers`` spawned processes, at most ``workers`` at a time, a failed shard
+    resubmitted once. A worker that dies (killed, out of memory) breaks the pool: the shards
+    that were running are run again one at a time, each in a fresh process of its own (so a
+    shard that kills its worker is told from those that only shared the pool with it and
+    fails alone), and the rest go on in a fresh pool. Leaving early (an error, Ctrl-C,
+    SIGTERM) stops the pool at once instead of waiting for running shards."""
     check_portable(job.detectors)
     threads = max(1, (os.cpu_count() or 1) // workers)
+    workers = min(workers, len(todo))  # no idle processes
     paths = dict(todo)
+    queue = list(paths)
+    while queue:
+        suspects = _pool_round(job, queue, paths, bar, sizes, fail, workers, threads)
+        if suspects:
+            warnings.warn(f"{_DIED}: running its {len(suspects)} shard(s) again one at a "
+                          "time", RuntimeWarning, stacklevel=2)  # fmt: skip
+        for k in suspects:
+            _pool_round(job, [k], paths, bar, sizes, fail, 1, threads, solo=True)
+
+
+def _pool_round(job, queue, paths, bar, sizes, fail, workers, threads, solo=False) -> list:
+    """Run the shards of ``queue`` (consumed) in one pool of ``workers`` processes until
+    they are done or the pool breaks; returns the shards that were running when it broke
+    (with ``solo``, the shard is failed instead and ``[]`` returned)."""
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
                                initargs=(threads,))  # fmt: skip
-    finished = False
+    finished, broken = False, []
+    running: dict = {}
     try:
-        running = {pool.submit(_scored, job, k): k for k in paths}
-        while running:
-            done, _ = wait(running, return_when=FIRST_COMPLETED)
+        while queue or running:
+            try:
+                while queue and len(running) < workers:
+                    running[pool.submit(_scored, job, queue[0])] = queue[0]
+                    queue.pop(0)
+            except BrokenProcessPool:  # broke before we noticed: settle what ran
+                done = set(running)
+                if not running:  # no worker even started
+                    broken.append(queue.pop(0))
+            else:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
             for fut in done:
                 k = running.pop(fut)
                 try:
-                    _write(paths[k], fut.result())
+                    data = fut.result()
                 except BrokenProcessPool:
-                    fail(k, RuntimeError("a worker process died (killed or out of memory)"))
+                    broken.append(k)
+                    continue
                 except Exception as exc:
                     if fail.again(k, exc):
-                        running[pool.submit(_scored, job, k)] = k
+                        queue.insert(0, k)
                         continue
+                else:
+                    _write(paths[k], data)
                 bar.update(sizes[k])
+            if broken:
+                broken += running.values()
+                running.clear()
+                break
         finished = True
     finally:
-        if not finished:  # do not wait for running shards
+        if not finished or broken:  # do not wait for running shards
             for proc in list(getattr(pool, "_processes", {}).values()):
                 proc.terminate()
-        pool.shutdown(wait=finished, cancel_futures=True)  # idle workers exit cleanly
+        pool.shutdown(wait=finished and not broken, cancel_futures=True)
+    if solo and broken:
+        (k,) = broken
+        fail(k, RuntimeError(_DIED))
+        bar.update(sizes[k])
+        return []
+    return sorted(broken)
 
 
 def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
@@ -308,11 +360,13 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
         done, _ = ray.wait(list(refs), num_returns=1)
         k, path = refs.pop(done[0])
         try:
-            _write(path, ray.get(done[0]))
+            data = ray.get(done[0])
         except Exception as exc:
             if fail.again(k, exc):
                 refs[task.remote(job, k)] = (k, path)
                 continue
+        else:
+            _write(path, data)
         bar.update(sizes[k])
 
 

@@ -7,7 +7,9 @@ import importlib
 
 __all__ = ["COMMANDS", "load"]
 
-COMMANDS = ["run", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset"]
+COMMANDS = [
+    "run", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset", "clean"
+]  # fmt: skip
 
 
 def load(name: str):

@@ -9,10 +9,12 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import nullcontext
 
 import pytest
 
 from torchsar_eval.cli import main
+from torchsar_eval.output import StaleRunWarning, has_saved_work
 
 RUN_FILES = {"summary.csv", "roc.csv", "roc_pixel.csv", "summary.md", "config.json"}
 OLD_RUN = {"config.json": "old", "stale.csv": "old"}
@@ -73,7 +75,13 @@ def _kill_cases(tmp_path, cases, seed: int) -> None:
             assert err == (hint if code == 143 else ""), err
             # only its staging folder may stay (kept for --resume); the next start settles it
             assert all(".torchsar-partial-" in h.name for h in _hidden(parent))
-        assert main(["run", "--n", "0", "--out", str(parent / "next")]) == 2  # the next start
+        saved = [p for p in _hidden(parent) if p.is_dir() and has_saved_work(p)]
+        with pytest.warns(StaleRunWarning) if saved else nullcontext():
+            assert main(["run", "--n", "0", "--out", str(parent / "next")]) == 2  # next start
+        # what is left is only a killed run's saved work, kept for --resume, until cleaned
+        left = _hidden(parent)
+        assert left == saved
+        assert main(["clean", str(parent / "out")]) == 0
         assert _hidden(parent) == []
         assert _state(parent / "out") in (("old", "new") if old else ("none", "new"))
 

@@ -10,7 +10,17 @@ import sys
 import pytest
 
 from torchsar_eval.errors import EvalError
-from torchsar_eval.output import HOST, claim, file_slugs, recover, result_dir
+from torchsar_eval.output import (
+    HOST,
+    StaleRunWarning,
+    check_out,
+    claim,
+    clean,
+    file_slugs,
+    hidden_folders,
+    recover,
+    result_dir,
+)
 
 
 def _write_run(folder, files):
@@ -109,40 +119,148 @@ def test_overwrite_keeps_the_old_run_when_the_new_one_fails(tmp_path):
     assert list(tmp_path.iterdir()) == [out]
 
 
-def _hidden(parent, name, kind, pid, host=None):
+def _hidden(parent, name, kind, pid, host=None, resumable=False):
     path = parent / f".{name}.torchsar-{kind}-{pid}-0123abcd@{host or HOST}"
     path.mkdir()
     (path / "config.json").write_text(kind)
+    if resumable:
+        (path / "resume.json").write_text("{}")
+        (path / "shard-000000.state").write_text("state")
     return path
 
 
-def test_recover_settles_only_what_dead_runs_of_this_host_left(tmp_path):
-    dead, alive = _dead_pid(), os.getppid()
-    _hidden(tmp_path, "a", "partial", dead)  # staging of a killed run: deleted
+@pytest.fixture
+def holder():
+    """Hold lock files from another, live process (as a running run does)."""
+    procs = []
+
+    def hold_in_child(lock):
+        code = (
+            "import sys; from torchsar_eval.locks import hold\n"
+            f"with hold({str(lock)!r}):\n    print('held', flush=True); sys.stdin.read()"
+        )
+        proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, text=True)  # fmt: skip
+        assert proc.stdout.readline().strip() == "held"
+        procs.append(proc)
+        return proc
+
+    yield hold_in_child
+    for proc in procs:
+        proc.stdin.close()
+        proc.wait(timeout=30)
+
+
+def test_recover_settles_only_what_ended_runs_left(tmp_path, holder):
+    dead = _dead_pid()
+    _hidden(tmp_path, "a", "partial", dead)  # staging with nothing to resume: deleted
     _hidden(tmp_path, "b", "replaced", dead)  # old run aside, no new run: put back
     (tmp_path / "c").mkdir()
     _hidden(tmp_path, "c", "replaced", dead)  # old run aside, new one published: deleted
+    _hidden(tmp_path, "g", "partial", os.getpid(), host="renamed")  # a reused pid, old name
+    running = _hidden(tmp_path, "d", "partial", dead)
+    holder(running.with_name(running.name + ".lock"))
     keep = [
-        _hidden(tmp_path, "d", "partial", alive),
-        _hidden(tmp_path, "e", "partial", dead, host="elsewhere"),
+        running,  # its lock is held: the run still works, whatever its pid says
+        _hidden(tmp_path, "e", "partial", dead, resumable=True),  # saved work: kept, listed
         tmp_path / ".f.partial-123-abc",  # not named by us
     ]
     keep[-1].mkdir()
-    settled = recover(tmp_path)
-    assert sorted(h.name for h in settled) == ["a", "b", "c"]
+    stale_lock = tmp_path / f".h.torchsar-partial-{dead}-0123abcd@{HOST}.lock"
+    stale_lock.write_text("")  # killed between creating its lock and its folder
+    with pytest.warns(StaleRunWarning, match=r"\.e\.torchsar.*1 saved shard.*--resume --out"):
+        settled = recover(tmp_path)
+    assert sorted(h.name for h in settled) == ["a", "b", "c", "g"]
     assert (tmp_path / "b" / "config.json").read_text() == "replaced"
-    assert sorted(os.listdir(tmp_path)) == sorted(["b", "c", *(p.name for p in keep)])
+    names = sorted(os.listdir(tmp_path))
+    assert names == sorted(["b", "c", running.name + ".lock", *(p.name for p in keep)])
 
 
-def test_resume_adopts_the_staging_folder_of_a_dead_run(tmp_path):
+def test_resume_adopts_the_staging_folder_of_an_ended_run(tmp_path):
     out = tmp_path / "out"
-    left = _hidden(tmp_path, "out", "partial", _dead_pid())
-    (left / "shard-0.pt").write_text("state")
+    left = _hidden(tmp_path, "out", "partial", _dead_pid(), host="old-name", resumable=True)
     with claim(out, resume=True), result_dir(out, resume=True) as tmp:
-        assert (tmp / "shard-0.pt").read_text() == "state"
+        assert (tmp / "shard-000000.state").read_text() == "state"
         (tmp / "summary.csv").write_text("x")
-    assert sorted(os.listdir(out)) == ["config.json", "shard-0.pt", "summary.csv"]
+    assert not left.exists()
+    assert sorted(os.listdir(out)) == [
+        "config.json", "resume.json", "shard-000000.state", "summary.csv"
+    ]  # fmt: skip
     assert list(tmp_path.iterdir()) == [out]
+
+
+FAILURES = [EvalError("shard 3 failed"), OSError(28, "No space left on device"),
+            KeyboardInterrupt(), RuntimeError("a bug")]  # fmt: skip
+
+
+@pytest.mark.parametrize("error", FAILURES)
+def test_a_failed_run_keeps_its_saved_work_for_resume(tmp_path, error):
+    out = tmp_path / "out"
+    with (
+        pytest.raises((EvalError, type(error))) as caught,
+        claim(out),
+        result_dir(out, keep=True) as tmp,
+    ):
+        (tmp / "resume.json").write_text("{}")
+        (tmp / "shard-000000.state").write_text("state")
+        raise error
+    (kept,) = [h for h in hidden_folders(tmp_path)]
+    assert (kept.path / "shard-000000.state").read_text() == "state" and not kept.alive
+    if isinstance(error, EvalError | OSError):
+        message = str(caught.value)
+        assert f"kept in {kept.path}" in message and "resume=True" in message
+        assert "No space left" in message or "shard 3 failed" in message
+    # a new run of the same folder is refused; resume continues the saved work
+    with pytest.raises(EvalError, match="saved work .*resume=True.*discard=True"):
+        check_out(out)
+    with claim(out, resume=True), result_dir(out, resume=True, keep=True) as tmp:
+        assert (tmp / "shard-000000.state").read_text() == "state"
+        (tmp / "config.json").write_text("{}")
+    assert list(tmp_path.iterdir()) == [out]
+
+
+def test_without_keep_or_saved_work_a_failed_run_leaves_nothing(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(EvalError), claim(out), result_dir(out, keep=True) as tmp:
+        (tmp / "summary.csv").write_text("x")  # no resume.json: nothing to resume
+        raise EvalError("bad dataset")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_discard_deletes_the_saved_work(tmp_path):
+    out = tmp_path / "out"
+    left = _hidden(tmp_path, "out", "partial", _dead_pid(), resumable=True)
+    with claim(out, discard=True), result_dir(out) as tmp:
+        assert not left.exists() and list(tmp.iterdir()) == []
+        (tmp / "config.json").write_text("{}")
+    assert list(tmp_path.iterdir()) == [out]
+    with pytest.raises(EvalError, match="exclude each other"):
+        check_out(tmp_path / "x", resume=True, discard=True)
+
+
+def test_a_folder_another_run_writes_is_refused(tmp_path, holder):
+    out = tmp_path / "out"
+    running = _hidden(tmp_path, "out", "partial", 1, resumable=True)
+    holder(running.with_name(running.name + ".lock"))
+    for kwargs in ({}, {"resume": True}, {"discard": True}):
+        with pytest.raises(EvalError, match="being written by another run"):
+            check_out(out, **kwargs)
+    assert running.exists()
+
+
+def test_clean_deletes_ended_runs_only(tmp_path, holder):
+    runs = tmp_path / "results"
+    runs.mkdir()
+    ended = _hidden(runs, "a", "partial", _dead_pid(), resumable=True)
+    other = _hidden(runs, "b", "partial", _dead_pid(), resumable=True)
+    running = _hidden(runs, "c", "partial", 1, resumable=True)
+    holder(running.with_name(running.name + ".lock"))
+    assert [h.path for h in clean(runs / "a", dry_run=True)] == [ended]
+    assert ended.exists()
+    assert [h.path for h in clean(runs / "a")] == [ended]
+    assert not ended.exists() and other.exists()
+    assert [h.path for h in clean(runs)] == [other]
+    assert sorted(os.listdir(runs)) == sorted([running.name, running.name + ".lock"])
 
 
 # --- crash consistency: a process killed before any single file-system step -------------

@@ -121,6 +121,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "scored (the options must be the same)",
     )
     p.add_argument(
+        "--discard",
+        action="store_true",
+        help="delete the saved work an interrupted run of --out left, and start over "
+        "(without this or --resume, such a run is refused so its work is not lost)",
+    )
+    p.add_argument(
         "--engine",
         choices=["local", "ray"],
         default="local",
@@ -131,8 +137,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--skip-bad",
         action="store_true",
-        help="skip unreadable files and failing shards, counting and naming them in the "
-        "summary (default: stop at the first, naming it, and write no tables)",
+        help="skip the images that cannot be read or that a detector fails on, and shards "
+        "whose worker died twice, naming each in the summary (default: stop at the first, "
+        "naming it, and write no tables)",
+    )
+    p.add_argument(
+        "--max-bad",
+        type=float,
+        default=None,
+        metavar="SHARE",
+        help="with --skip-bad: the largest share (0-1) of a dataset's images that may be "
+        "skipped before the run fails (default: any share short of all)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run, claims_out=True)
@@ -222,7 +237,7 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The ``run`` sub-command: validate, evaluate, print the summary."""
-    check_out(args.out, overwrite=args.overwrite, resume=args.resume)  # before any other work
+    check_out(args.out, overwrite=args.overwrite, resume=args.resume, discard=args.discard)
     detectors, preprocess, despeckle_opts = check_run_args(args)
     scoring = scoring_from(args)
     if args.workers < 1 or args.shard_size < 1:
@@ -234,6 +249,7 @@ def run(args: argparse.Namespace) -> int:
         engine=args.engine,
         address=args.address,
         skip_bad=args.skip_bad,
+        max_bad=args.max_bad,
         progress=not args.no_progress,
         device=args.device,
     )
@@ -256,6 +272,7 @@ def run(args: argparse.Namespace) -> int:
         out=args.out,
         overwrite=args.overwrite,
         resume=args.resume,
+        discard=args.discard,
         n=args.n,
         seed=args.seed,
     )
