@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 TORCH_VERSION ?= 2.13.0
 
-.PHONY: setup eval test lint bench clean
+.PHONY: setup eval test lint bench wheel clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -33,5 +33,10 @@ lint: setup
 bench: setup
 	$(BIN)/python scripts/benchmark.py
 
+# A wheel of this repository (distribution torchsar-detect) in dist/, to install elsewhere:
+# pip install torch==$(TORCH_VERSION) && pip install 'dist/torchsar_detect-<version>-py3-none-any.whl[ray]'
+wheel: setup
+	$(BIN)/python -m pip wheel --quiet --no-deps --no-build-isolation --wheel-dir dist .
+
 clean:
-	rm -rf $(VENV) results
+	rm -rf $(VENV) results dist build

@@ -24,7 +24,8 @@ class Execution:
         shard_size: images per shard, the unit of work and of resume.
         workers: local worker processes (each with ``cores // workers`` torch threads);
             detectors must then be importable by name (see :func:`torchsar_eval.load`).
-        engine: ``"local"`` or ``"ray"`` (``pip install 'torchsar[ray]'``).
+        engine: ``"local"`` or ``"ray"`` (needs Ray; the engine ships torchsar to the
+            workers).
         address: Ray cluster address (default: a local Ray instance).
         skip_bad: skip the images that cannot be read or that a detector fails on (each
             named in the summary), and shards whose worker died twice; by default the

@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import pickle
 import signal
-import sys
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -344,57 +342,14 @@ def _pool_round(job, queue, paths, bar, sizes, fail, workers, threads, solo=Fals
 
 
 def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise EvalError("--engine ray needs Ray: pip install 'torchsar[ray]'") from None
-    if not ray.is_initialized():
-        env = None if address else {"env_vars": {"PYTHONPATH": os.pathsep.join(
-            p for p in sys.path if p)}}  # fmt: skip
-        ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                 configure_logging=False, runtime_env=env)  # fmt: skip
-    _ray_preflight(ray, job)
-    task = ray.remote(num_cpus=1, max_retries=0)(_scored_one_thread)  # retried here, counted
-    refs = {task.remote(job, k): (k, path) for k, path in todo}
-    while refs:
-        done, _ = ray.wait(list(refs), num_returns=1)
-        k, path = refs.pop(done[0])
-        try:
-            data = ray.get(done[0])
-        except Exception as exc:
-            if fail.again(k, exc):
-                refs[task.remote(job, k)] = (k, path)
-                continue
-        else:
+    from torchsar_eval.ray_engine import run_on_ray
+
+    def saved(k: int, path: Path, data: bytes | None) -> None:
+        if data is not None:
             _write(path, data)
         bar.update(sizes[k])
 
-
-def _detectors_load(detectors: bytes) -> str | None:
-    """In a Ray worker: rebuild a detector from the bytes Ray's own serializer made of it
-    (the driver's in-memory object, never a file); ``None`` or the error as one line."""
-    try:
-        pickle.loads(detectors)
-    except Exception as exc:
-        return f"{type(exc).__name__}: {exc}".splitlines()[0]
-    return None
-
-
-def _ray_preflight(ray, job: ShardJob) -> None:
-    """Refuse up front, in one line, detectors that a Ray worker cannot rebuild (a module
-    the nodes cannot import), instead of failing every shard."""
-    probe = ray.remote(num_cpus=1, max_retries=0)(_detectors_load)
-    for det in job.detectors:
-        error = ray.get(probe.remote(ray.cloudpickle.dumps(det)))
-        if error is not None:
-            raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker ({error}): "
-                            "install its package on every node, or give Ray its module "
-                            "through runtime_env")  # fmt: skip
-
-
-def _scored_one_thread(job: ShardJob, k: int) -> bytes:
-    torch.set_num_threads(1)  # one Ray CPU per task: never oversubscribe a node
-    return _scored(job, k)
+    run_on_ray(job, todo, saved, fail, address)
 
 
 def run_shards(

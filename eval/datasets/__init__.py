@@ -21,7 +21,7 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
 - ``hrsid:DIR``: HRSID ``<name>.png`` with ``<name>_instance_id_RGB.png`` colour ids.
 - ``phoenix:DIR``: MSTAR raw Phoenix files (pixel spacing from the header).
 - ``sicd:FILE``: a SICD/NITF complex product cut into ``chip=N`` (512) chips, no ground
-  truth (needs the optional ``sar`` extra: ``pip install 'torchsar[sar]'``).
+  truth (needs the optional sarpy package: ``pip install 'sarpy>=1.3'``).
 - ``store:DIR``: a store written by ``torchsar-eval make-dataset`` (see :mod:`torchsar_eval.store`).
 
 Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-bit images

@@ -1,6 +1,6 @@
 """``sicd:FILE[?chip=N]``: a SICD / NITF complex product cut into ``N x N`` chips (raster
 order, whole chips only; one chip when the image is smaller), read one chip at a time
-through the optional sarpy package (``pip install 'torchsar[sar]'``). No ground truth: use
+through the optional sarpy package (``pip install 'sarpy>=1.3'``). No ground truth: use
 it to measure clutter statistics and false alarms. Pixel spacing from the SICD grid."""
 
 from __future__ import annotations

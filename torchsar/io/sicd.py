@@ -31,7 +31,7 @@ def _open(path: str | Path):
         from sarpy.io.complex.converter import open_complex
     except ImportError as exc:
         raise ImportError(
-            "reading SICD/NITF needs the optional sarpy package: pip install 'torchsar[sar]'"
+            "reading SICD/NITF needs the optional sarpy package: pip install 'sarpy>=1.3'"
         ) from exc
     check_regular_file(path)
     try:

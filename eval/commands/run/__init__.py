@@ -130,8 +130,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--engine",
         choices=["local", "ray"],
         default="local",
-        help="run shards locally (--workers processes) or as Ray tasks (pip install "
-        "'torchsar[ray]')",
+        help="run shards locally (--workers processes) or as Ray tasks (needs Ray; "
+        "torchsar itself is shipped to the workers)",
     )
     p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
     p.add_argument(
