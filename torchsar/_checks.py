@@ -360,10 +360,13 @@ def check_real(value: object, name: str) -> Tensor:
         >>> check_real(2.0, "threshold")
         tensor(2., dtype=torch.float64)
     """
-    numeric = int | float | np.number | np.ndarray | Tensor
+    numeric = int | float | np.number | np.ndarray | Tensor | list | tuple
     if isinstance(value, bool) or not isinstance(value, numeric):
         raise InputTypeError(f"{name} must be a real number or tensor, got {value!r:.60}")
-    t = torch.as_tensor(value, dtype=torch.float64 if isinstance(value, int | float) else None)
+    try:
+        t = torch.as_tensor(value, dtype=torch.float64 if isinstance(value, int | float) else None)
+    except (TypeError, ValueError, RuntimeError):
+        raise InputTypeError(f"{name} must be a real number or tensor, got {value!r:.60}") from None
     if t.is_complex() or t.dtype == torch.bool:
         raise InputTypeError(f"{name} must be real, got dtype {t.dtype}")
     if t.is_floating_point() and t.numel() and has_nan(t):
