@@ -9,7 +9,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, all_finite, check_complex, check_int, check_positive
-from torchsar.imaging._scale import unit_scale
+from torchsar._scale import unit_scale
 from torchsar.imaging._solver import Settings, State, solve
 from torchsar.imaging.operators import FourierOperator, LinearOperator
 
@@ -106,7 +106,7 @@ class Problem:
         """Scale ``g`` and resolve ``lam`` (None: :func:`default_lam`) and ``eps`` (None:
         ``1e-4 tau^2``, ``tau`` the penalty's threshold amplitude) for the scaled problem."""
         b, real = g.shape[0], g.real.dtype
-        scale = unit_scale(g)
+        scale = unit_scale(g).reshape(b)
         gn = g / scale.reshape(b, 1, 1)
         s64 = scale.to(torch.float64)
         if lam is None:

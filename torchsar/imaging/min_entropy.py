@@ -8,8 +8,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int
+from torchsar._scale import unit_scale
 from torchsar.imaging._dtypes import as_complex
-from torchsar.imaging._scale import unit_scale
 from torchsar.imaging.focus import intensity_entropy
 from torchsar.imaging.fourier import ifft2c
 from torchsar.imaging.items import nonzero_items

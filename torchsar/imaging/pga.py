@@ -14,8 +14,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, ShapeError, check_image, check_int, check_positive
+from torchsar._scale import unit_scale
 from torchsar.imaging._dtypes import as_complex
-from torchsar.imaging._scale import unit_scale
 from torchsar.imaging.result import AutofocusResult
 
 __all__ = ["pga"]

@@ -16,8 +16,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import OptionError, check_complex, check_int, check_positive
+from torchsar._scale import unit_scale
 from torchsar.imaging._dtypes import as_complex
-from torchsar.imaging._scale import unit_scale
 from torchsar.imaging.focus import entropy_terms
 from torchsar.imaging.items import nonzero_items
 from torchsar.imaging.min_entropy import entropy_result, lbfgs_phases

@@ -29,6 +29,7 @@ from torchsar._checks import (
     check_window_fits,
     float_dtype,
 )
+from torchsar._scale import power_of_two
 from torchsar.windows import Rect, Sums, windowed
 
 __all__ = [
@@ -95,8 +96,7 @@ def _plane_scale(x: Tensor) -> Tensor | None:
     outside = (peak > 2.0**e) | ((peak > 0) & (peak < 2.0**-e))
     if not bool(outside.any()):
         return None
-    _, exponent = torch.frexp(peak)
-    return torch.where(outside, torch.ldexp(torch.ones_like(peak), exponent - 1), 1.0)
+    return torch.where(outside, power_of_two(peak), 1.0)
 
 
 def prepare(
