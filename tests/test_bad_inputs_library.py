@@ -21,6 +21,7 @@ from torchsar._checks import (
 from torchsar.imaging import (
     apply_phase_error,
     contrast,
+    default_lam,
     entropy,
     fft2c,
     ifft2c,
@@ -123,6 +124,8 @@ CASES = [
      OptionError, "lam"),
     ("lp_image-inf-lam", lambda: lp_image(_phase_history(), lam=torch.tensor([float("inf")])),
      OptionError, "lam"),
+    ("default_lam-nan-kappa", lambda: default_lam(_phase_history(), kappa=NAN), OptionError,
+     "kappa"),
     ("pga-several-channels",
      lambda: pga(ifft2c(_phase_history(2)).reshape(1, 2, 16, 16)), ShapeError, "image"),
     ("pga-nan-window_db",

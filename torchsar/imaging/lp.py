@@ -40,6 +40,9 @@ def default_lam(
     Returns:
         ``(B,)`` real tensor.
 
+    Raises:
+        OptionError: ``kappa`` is not a finite number > 0.
+
     Example:
         >>> g = torch.ones(2, 8, 8, dtype=torch.complex64)
         >>> default_lam(g)
@@ -110,6 +113,7 @@ class Problem:
         gn = g / scale.reshape(b, 1, 1)
         s64 = scale.to(torch.float64)
         if lam is None:
+            kappa = check_positive(kappa, "kappa")
             lam_n = _threshold_lam(op.adjoint(gn), p, kappa).to(real)
             lam_t = (lam_n.to(torch.float64) * s64.pow(2 - p)).to(real)
         else:
