@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -32,14 +33,17 @@ __all__ = [
     "check_choice",
     "check_complex",
     "check_device",
+    "check_ids",
     "check_image",
     "check_int",
     "check_mask",
     "check_odd",
     "check_pairs",
+    "check_per_plane",
     "check_positive",
     "check_probability",
     "check_range",
+    "check_real",
     "check_same_shape",
     "check_window_fits",
     "float_dtype",
@@ -83,16 +87,24 @@ def float_dtype(dtype: torch.dtype) -> torch.dtype:
     return torch.float64 if dtype in (torch.float64, torch.complex128) else torch.float32
 
 
+def _summable(x: Tensor) -> Tensor:
+    """``x``, or its complex64 copy for complex32 (half-precision complex), which torch
+    cannot sum or compare on every device."""
+    return x.to(torch.complex64) if x.dtype == torch.complex32 else x
+
+
 def all_finite(x: Tensor) -> bool:
     """Whether every value of ``x`` is finite. One summation decides the usual case (a sum
     is finite only if every term is); an overflowing sum falls back to the elementwise
     test."""
+    x = _summable(x)
     return bool(torch.isfinite(x.sum())) or bool(torch.isfinite(x).all())
 
 
 def has_nan(x: Tensor) -> bool:
     """Whether ``x`` holds a NaN. One summation decides the usual case (a NaN makes the sum
     NaN); a NaN sum (e.g. ``inf - inf``) falls back to the elementwise test."""
+    x = _summable(x)
     return bool(torch.isnan(x.sum())) and bool(torch.isnan(x).any())
 
 
@@ -163,8 +175,8 @@ def check_image(
     if x.numel() == 0:
         return x
     if not all_finite(x):
-        n_nan = int(torch.isnan(x).sum())
-        n_inf = int(torch.isinf(x).sum())
+        n_nan = int(torch.isnan(_summable(x)).sum())
+        n_inf = int(torch.isinf(_summable(x)).sum())
         raise InputValueError(
             f"{name} must be finite, got {n_nan} NaN and {n_inf} Inf values; "
             f"replace them (e.g. torch.nan_to_num) or mark them invalid with a `valid` mask"
@@ -334,3 +346,100 @@ def check_pairs(x: object, name: str, *, ndim: int, axes: str) -> Tensor:
     if x.dim() != ndim or x.shape[-1] != 2:
         raise ShapeError(f"{name} must have shape {axes}, got {tuple(x.shape)}")
     return x
+
+
+def check_real(value: object, name: str) -> Tensor:
+    """Validate a real number or a real tensor / array that may hold ``±inf`` but no NaN
+    (e.g. a detection threshold); return it as a tensor (a Python number as float64).
+
+    Raises:
+        InputTypeError: not a real number, or a complex, bool or non-numeric array.
+        InputValueError: a NaN value.
+
+    Example:
+        >>> check_real(2.0, "threshold")
+        tensor(2., dtype=torch.float64)
+    """
+    numeric = int | float | np.number | np.ndarray | Tensor | list | tuple
+    if isinstance(value, bool) or not isinstance(value, numeric):
+        raise InputTypeError(f"{name} must be a real number or tensor, got {value!r:.60}")
+    try:
+        t = torch.as_tensor(value, dtype=torch.float64 if isinstance(value, int | float) else None)
+    except (TypeError, ValueError, RuntimeError):
+        raise InputTypeError(f"{name} must be a real number or tensor, got {value!r:.60}") from None
+    if t.is_complex() or t.dtype == torch.bool:
+        raise InputTypeError(f"{name} must be real, got dtype {t.dtype}")
+    if t.is_floating_point() and t.numel() and has_nan(t):
+        n = int(torch.isnan(t).sum())
+        raise InputValueError(f"{name} must not be NaN, got {n} NaN value(s)")
+    return t
+
+
+def check_per_plane(value: object, name: str, planes: int) -> np.ndarray:
+    """Validate a finite number > 0, or one such value per image plane; return a float64
+    ``(planes,)`` array (a single value is used for every plane).
+
+    Raises:
+        InputTypeError: not real numbers.
+        ShapeError: neither one value nor ``planes`` values.
+        InputValueError: a NaN, infinite or non-positive value.
+
+    Example:
+        >>> check_per_plane(0.25, "pixel_area", 3).tolist()
+        [0.25, 0.25, 0.25]
+    """
+    if isinstance(value, Tensor):
+        value = value.detach().cpu().numpy()
+    arr = np.asarray(value)
+    if arr.dtype == bool or not (
+        np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
+    ):
+        raise InputTypeError(f"{name} must be a real number or one per plane, got {value!r:.60}")
+    arr = arr.astype(np.float64).reshape(-1)
+    if arr.size not in (1, planes):
+        raise ShapeError(
+            f"{name} must be one value or one per plane ({planes}), got {arr.size} values"
+        )
+    ok = np.isfinite(arr) & (arr > 0)
+    if not ok.all():
+        raise InputValueError(f"{name} must be finite and > 0, got {float(arr[~ok][0]):g}")
+    return np.broadcast_to(arr, (planes,)).copy()
+
+
+def check_ids(value: object, name: str, *, ndim: int = 3) -> np.ndarray:
+    """Validate instance / label ids (0 = none, positive ids) of ``ndim`` dimensions and
+    return them as an int64 array.
+
+    Integer and bool dtypes are accepted as they are; floating ids are accepted when every
+    value is a whole number (e.g. a label map read from a float image), else refused.
+
+    Raises:
+        InputTypeError: not numeric (complex, strings, objects), or floating ids that are
+            not whole numbers (or NaN / Inf).
+        ShapeError: wrong number of dimensions.
+        InputValueError: a negative id.
+
+    Example:
+        >>> check_ids(np.array([[[0.0, 2.0]]]), "instances").dtype
+        dtype('int64')
+    """
+    if isinstance(value, Tensor):
+        value = value.detach().cpu().numpy()
+    arr = np.asarray(value)
+    kind = arr.dtype.kind
+    if kind not in "biuf":
+        raise InputTypeError(f"{name} must hold integer ids, got dtype {arr.dtype}")
+    if arr.ndim != ndim:
+        axes = {3: "(N, H, W)", 2: "(H, W)"}.get(ndim, f"{ndim} dims")
+        raise ShapeError(f"{name} must have shape {axes} ({ndim} dims), got {arr.shape}")
+    if kind == "f":
+        whole = np.isfinite(arr) & (arr == np.floor(arr))
+        if not whole.all():
+            bad = float(arr[~whole].reshape(-1)[0])
+            raise InputTypeError(
+                f"{name} must hold whole-number ids, got {bad:g} (dtype {arr.dtype}); "
+                f"ids are integers: 0 = none, 1, 2, ... per instance"
+            )
+    if kind != "b" and arr.size and arr.min() < 0:
+        raise InputValueError(f"{name} must hold non-negative ids (0 = none), got {int(arr.min())}")
+    return arr.astype(np.int64, copy=False)

@@ -14,7 +14,7 @@ from torch import Tensor
 
 from torchsar._checks import check_choice, check_int
 from torchsar.imaging._solver import State, solve
-from torchsar.imaging.lp import initial_state, lam_tensor, resolve_operator, settings
+from torchsar.imaging.lp import Problem, initial_state, resolve_operator, settings
 from torchsar.imaging.operators import LinearOperator
 from torchsar.imaging.result import SparseAutofocusResult
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
@@ -49,14 +49,23 @@ def sparse_autofocus(
     With ``restarts > 0`` the problem is also solved from that many random initial phases
     (uniform in ``[-pi, pi]`` of the error's shape) and each item keeps the lowest final cost.
 
+    Each item is solved scaled to unit peak amplitude (an exact rewriting of the same
+    problem: image times the scale, cost times its square), so phase histories of any
+    magnitude are focused without overflow; with the default ``lam`` and ``eps`` the
+    result for ``s * g`` is ``s`` times the image (the same phase) for ``g``, to rounding.
+
     Args:
-        g: corrupted complex phase history ``(B, M, K)`` (``g = exp(1j phi) C f + noise``).
+        g: corrupted complex phase history ``(B, M, K)`` (``g = exp(1j phi) C f + noise``);
+            complex128 is computed in double precision, every other complex dtype
+            (complex64, complex32) in complex64, the dtype of the returned image.
         error: ``"1d"``, ``"2d-separable"`` or ``"2d"``.
         operator: observation operator (default: unitary :class:`FourierOperator`).
         p: L_p exponent in ``(0, 2]``.
         lam: float, ``(B,)`` tensor, or None (data-driven, :func:`default_lam` with
             ``kappa`` 1.5, or 1.0 for ``"2d"``, whose many unknowns need a lower threshold).
-        eps: smoothing of ``|f|`` in the penalty (default relative to the threshold).
+        eps: smoothing of ``|f|`` in the penalty (default ``1e-4 tau^2`` with ``tau`` the
+            amplitude the penalty thresholds at, ``(p lam / 2)^(1 / (2 - p))``, ``lam / 2``
+            for ``p = 1``).
         max_iter: outer iteration limit.
         tol: relative image change that stops an item.
         cg_iterations: CG iterations per image step when ``C^H C != I``.
@@ -75,7 +84,8 @@ def sparse_autofocus(
 
     Returns:
         :class:`SparseAutofocusResult`: ``image``, ``phase``, ``iterations``, and the final
-        ``cost``, its per-iteration ``history`` and the ``lam`` used.
+        ``cost``, its per-iteration ``history`` and the ``lam`` used, all in the units of
+        ``g`` (the cost overflows to ``inf`` where ``J`` exceeds the real dtype's range).
 
     Raises:
         InputTypeError, ShapeError: ``g`` is not complex ``(B, M, K)`` for the operator.
@@ -107,11 +117,12 @@ def sparse_autofocus(
     restarts = check_int(restarts, "restarts", minimum=0)
     seed = check_seed(seed)
     gens = [make_generator(image_seed(seed, i)) for i in range(g.shape[0] if restarts else 0)]
-    lam_t = lam_tensor(lam, g, op, cfg.p, kappa=1.0 if error == "2d" else 1.5)
-    best, history, iters = solve(g, initial_state(g, op, lam_t, eps), op, cfg)
+    prob = Problem.of(g, op, lam, eps, cfg.p, kappa=1.0 if error == "2d" else 1.5)
+    g = prob.g  # every item scaled to unit peak: the same problem, no overflow
+    best, history, iters = solve(g, initial_state(g, op, prob.lam_n, prob.eps_n), op, cfg)
     best_cost = history[:, -1]
     for _ in range(restarts):
-        start = _random_start(g, op, lam_t, eps, error, gens)
+        start = _random_start(g, op, prob, error, gens)
         s, h, it = solve(g, start, op, cfg)
         better = h[:, -1] < best_cost
         best.put(better.nonzero().flatten(), s.take(better))
@@ -119,21 +130,22 @@ def sparse_autofocus(
         iters[better] = it[better]
         best_cost = torch.minimum(best_cost, h[:, -1])
     phase = best.phi[..., 0] if error == "1d" else best.phi
+    history = prob.cost(history)
     return SparseAutofocusResult(
-        image=best.f, phase=phase, iterations=iters, cost=best_cost, history=history, lam=lam_t
+        image=prob.image(best.f),
+        phase=phase,
+        iterations=iters,
+        cost=history[:, -1].clone(),
+        history=history,
+        lam=prob.lam,
     )
 
 
 def _random_start(
-    g: Tensor,
-    op: LinearOperator,
-    lam: Tensor,
-    eps: float | None,
-    error: str,
-    gens: list[torch.Generator],
+    g: Tensor, op: LinearOperator, prob: Problem, error: str, gens: list[torch.Generator]
 ) -> State:
     """Initial state with a random phase of the error's structure, item ``i`` from ``gens[i]``."""
-    s = initial_state(g, op, lam, eps)
+    s = initial_state(g, op, prob.lam_n, prob.eps_n)
     b, m, k = g.shape
     shape = (m, k) if error == "2d" else (m, 1)
     u = torch.empty(b, *shape, dtype=s.phi.dtype)

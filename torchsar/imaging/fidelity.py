@@ -15,12 +15,17 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import InputValueError, ShapeError, check_same_shape
+from torchsar._scale import unit_scale
 
 __all__ = ["align", "magnitude_correlation", "phase_rmse", "remove_linear_phase"]
 
 
 def _standardise(a: Tensor) -> Tensor:
-    a = a.flatten(-2) - a.flatten(-2).mean(-1, keepdim=True)
+    """Each plane centred and scaled to unit norm; divided first by a power of two near its
+    peak (exact), so the squares in the norm cannot overflow."""
+    a = a.flatten(-2)
+    a = a / unit_scale(a, dims=1)
+    a = a - a.mean(-1, keepdim=True)
     return a / a.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(a.dtype).tiny)
 
 

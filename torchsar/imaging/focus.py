@@ -1,6 +1,7 @@
 """Focus metrics of formed SAR images: how sharp an image is, with no reference needed.
 
-Each takes real intensity images ``(B, C, H, W)`` and returns ``(B, C)``: :func:`entropy`
+Each takes real intensity images ``(B, C, H, W)`` of any magnitude (the metrics do not
+depend on the scale) and returns ``(B, C)``: :func:`entropy`
 (lower is better focused), :func:`contrast` and :func:`sharpness` (higher is better), and
 :func:`target_to_background` given a target mask. The minimum-entropy autofocus methods
 minimise :func:`intensity_entropy`, the same entropy without the input checks.
@@ -14,7 +15,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_image, check_same_shape
+from torchsar._checks import check_image, check_same_shape, float_dtype
+from torchsar._scale import unit_scale
 
 __all__ = [
     "contrast",
@@ -27,8 +29,12 @@ __all__ = [
 
 
 def _intensity(x: Tensor) -> Tensor:
+    """Flattened intensity ``(B, C, H W)`` in the policy dtype, each plane divided by a
+    power of two (exact) near its peak: every metric here is a ratio that does not depend on
+    the scale, and huge intensities would otherwise overflow their squares and sums."""
     x = check_image(x, "x")
-    return x.flatten(-2).to(torch.float64 if x.dtype == torch.float64 else torch.float32)
+    i = x.flatten(-2).to(float_dtype(x.dtype))
+    return i / unit_scale(i, dims=1)
 
 
 def entropy(x: Tensor) -> Tensor:

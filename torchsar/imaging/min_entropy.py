@@ -8,6 +8,8 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_complex, check_int
+from torchsar._scale import unit_scale
+from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.focus import intensity_entropy
 from torchsar.imaging.fourier import ifft2c
 from torchsar.imaging.items import nonzero_items
@@ -66,9 +68,15 @@ def lbfgs_phases(
     return phi.detach(), count
 
 
-def entropy_result(image: Tensor, phase: Tensor, iterations: Tensor) -> MinEntropyResult:
-    """:class:`MinEntropyResult` of a corrected complex ``image`` ``(B, 1, H, W)``."""
+def entropy_result(
+    image: Tensor, phase: Tensor, iterations: Tensor, scale: Tensor | None = None
+) -> MinEntropyResult:
+    """:class:`MinEntropyResult` of a corrected complex ``image`` ``(B, 1, H, W)``, computed
+    on data divided by ``scale`` (broadcastable per item; the image is scaled back, the
+    entropy does not depend on it)."""
     entropy = intensity_entropy(image.abs().square().flatten(1))
+    if scale is not None:
+        image = image * scale.reshape(-1, 1, 1, 1).to(image.real.dtype)
     return MinEntropyResult(image=image, phase=phase, iterations=iterations, entropy=entropy)
 
 
@@ -79,12 +87,17 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
     from autograd through :func:`ifft2c`. The sum of per-item entropies is minimised, which
     decouples across the batch (items share only the line search).
 
+    The entropy does not depend on the data's scale, and each item is processed scaled to
+    unit peak amplitude (by a power of two, exactly), so data of any magnitude is focused
+    without overflow: the result for ``s * g`` is the same phase and ``s`` times the image.
+
     Args:
-        g: complex phase history ``(B, M, K)``.
+        g: complex phase history ``(B, M, K)``; complex128 is computed in double
+            precision, every other complex dtype (complex64, complex32) in complex64.
         max_iter: L-BFGS iterations.
 
     Returns:
-        :class:`MinEntropyResult`.
+        :class:`MinEntropyResult` (image complex128 for complex128 data, else complex64).
 
     An all-zero item has nothing to focus: it is left out and gets phase 0, a zero image
     and entropy 0.
@@ -103,13 +116,14 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
         >>> float(min_entropy_autofocus(g).image.abs().max()) > 0.95
         True
     """
-    g = check_complex(g, "g", ndim=3)
+    g = as_complex(check_complex(g, "g", ndim=3).detach())
     check_int(max_iter, "max_iter", minimum=0)
-    g = g.detach()
     live = nonzero_items(g)
     if not bool(live.all()):
         return fill_result(live, min_entropy_autofocus(g[live], max_iter=max_iter))
+    scale = unit_scale(g).reshape(-1, 1, 1)
+    g = g / scale  # exact (a power of two); the entropy does not depend on the scale
     phi, iterations = lbfgs_phases(
         lambda phi: intensity_entropy(_intensity(g, phi)).sum(), g, max_iter=max_iter
     )
-    return entropy_result(_rotate(g, phi).unsqueeze(1), phi, iterations)
+    return entropy_result(_rotate(g, phi).unsqueeze(1), phi, iterations, scale)

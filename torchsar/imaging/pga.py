@@ -13,7 +13,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_image, check_int, check_positive
+from torchsar._checks import OptionError, ShapeError, check_image, check_int, check_positive
+from torchsar._scale import unit_scale
+from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.result import AutofocusResult
 
 __all__ = ["pga"]
@@ -69,8 +71,14 @@ def pga(
 ) -> AutofocusResult:
     """Phase gradient autofocus of complex images with per-pulse (row) phase errors.
 
+    PGA does not depend on the image's scale; each item is processed scaled to unit peak
+    amplitude (by a power of two, exactly), so images of any magnitude are focused without
+    overflow.
+
     Args:
-        image: complex image ``(B, 1, H, W)`` formed by :func:`ifft2c` (rows = pulses).
+        image: complex image ``(B, 1, H, W)`` formed by :func:`ifft2c` (rows = pulses);
+            complex128 is computed in double precision, every other complex dtype in
+            complex64.
         max_iter: iteration limit.
         tol: stop an item when the RMS phase update (radians) falls below this.
         window_db: the window spans the rows whose range-summed intensity is within this
@@ -99,12 +107,17 @@ def pga(
         True
     """
     image = check_image(image, "image", complex_ok=True, real_ok=False)
+    if image.shape[1] != 1:
+        raise ShapeError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
     check_int(max_iter, "max_iter", minimum=0)
     check_positive(tol, "tol", allow_zero=True)
-    if window_db >= 0:
-        raise OptionError(f"window_db must be negative (dB below the peak), got {window_db}")
+    bad_db = isinstance(window_db, bool) or not isinstance(window_db, int | float)
+    if bad_db or not window_db < 0:
+        raise OptionError(f"window_db must be negative (dB below the peak), got {window_db!r}")
     check_int(min_window, "min_window", minimum=1)
-    img = image[:, 0]
+    img = as_complex(image[:, 0])
+    scale = unit_scale(img).reshape(-1, 1, 1)
+    img = img / scale  # exact (a power of two): PGA does not depend on the scale
     total = torch.zeros(img.shape[0], img.shape[1], dtype=img.real.dtype, device=img.device)
     iters = torch.zeros(img.shape[0], dtype=torch.int64, device=img.device)
     active = torch.ones(img.shape[0], dtype=torch.bool, device=img.device)
@@ -117,4 +130,4 @@ def pga(
         total = total + est
         iters = torch.where(active, it, iters)
         active = active & (est.square().mean(-1).sqrt() > tol)
-    return AutofocusResult(image=img.unsqueeze(1), phase=total, iterations=iters)
+    return AutofocusResult(image=(img * scale).unsqueeze(1), phase=total, iterations=iters)

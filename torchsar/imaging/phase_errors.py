@@ -17,7 +17,15 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, ShapeError, check_complex, check_int, check_positive
+from torchsar._checks import (
+    InputValueError,
+    OptionError,
+    ShapeError,
+    all_finite,
+    check_complex,
+    check_int,
+    check_positive,
+)
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 
 __all__ = [
@@ -205,6 +213,7 @@ def apply_phase_error(g: Tensor, phi: Tensor) -> Tensor:
 
     Raises:
         ShapeError: ``phi`` matches neither ``(B, M)`` nor ``(B, M, K)``.
+        InputValueError: ``phi`` holds NaN or Inf.
 
     Example:
         >>> g = torch.ones(1, 2, 3, dtype=torch.complex64)
@@ -220,6 +229,8 @@ def _expand_phase(phi: Tensor, shape: torch.Size) -> Tensor:
     """Broadcast a ``(B, M)`` or ``(B, M, K)`` phase to ``(B, M, K)``-compatible shape."""
     if not isinstance(phi, Tensor) or phi.is_complex():
         raise ShapeError(f"phi must be a real tensor, got {type(phi).__name__}")
+    if not all_finite(phi):
+        raise InputValueError("phi must be finite, got NaN or Inf phases")
     if tuple(phi.shape) == tuple(shape[:2]):
         return phi.unsqueeze(-1)
     if tuple(phi.shape) == tuple(shape):

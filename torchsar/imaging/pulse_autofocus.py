@@ -15,7 +15,9 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_complex, check_int, check_positive
+from torchsar._checks import OptionError, check_complex, check_int, check_positive
+from torchsar._scale import unit_scale
+from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.focus import entropy_terms
 from torchsar.imaging.items import nonzero_items
 from torchsar.imaging.min_entropy import entropy_result, lbfgs_phases
@@ -41,9 +43,14 @@ def pulse_autofocus(
 ) -> AutofocusResult:
     """Sparsity-driven 1-D autofocus from per-pulse images (matched-filter image step).
 
+    Each item is processed scaled to unit peak amplitude (by a power of two, exactly; the
+    weight and smoothing follow the data's scale), so data of any magnitude is focused
+    without overflow: the result for ``s * b`` is the same phase and ``s`` times the image.
+
     Args:
-        pulse_images: complex ``(B, M, H, W)``.
-        p: L_p exponent.
+        pulse_images: complex ``(B, M, H, W)``; complex128 is computed in double precision,
+            every other complex dtype in complex64.
+        p: L_p exponent in ``(0, 2]``.
         kappa: threshold in RMS pixel amplitudes of the uncorrected image (as
             :func:`default_lam`).
         max_iter: iteration limit.
@@ -65,13 +72,19 @@ def pulse_autofocus(
         >>> float(pulse_autofocus(b).image.abs().max()) > 2.0
         True
     """
-    b = check_complex(pulse_images, "pulse_images", ndim=4)
+    b = as_complex(check_complex(pulse_images, "pulse_images", ndim=4))
     check_int(max_iter, "max_iter", minimum=0)
-    check_positive(p, "p")
+    check_int(inner, "inner", minimum=1)
+    if check_positive(p, "p") > 2:
+        raise OptionError(f"p must be in (0, 2], got {p}")
+    check_positive(kappa, "kappa")
+    check_positive(tol, "tol", allow_zero=True)
     live = nonzero_items(b)
     if not bool(live.all()):
         part = pulse_autofocus(b[live], p=p, kappa=kappa, max_iter=max_iter, tol=tol, inner=inner)
         return fill_result(live, part)
+    scale = unit_scale(b).reshape(-1, 1, 1, 1)
+    b = b / scale  # exact (a power of two); lam and eps follow the data's scale
     phi = torch.zeros(b.shape[:2], dtype=b.real.dtype, device=b.device)
     f = _form(b, phi)
     rms = f.flatten(1).norm(dim=1) / math.sqrt(max(1, f[0, 0].numel()))
@@ -93,14 +106,19 @@ def pulse_autofocus(
         phi = torch.where(active[:, None], phi_new, phi)
         iters = torch.where(active, it, iters)
         active = active & (change > tol)
-    return AutofocusResult(image=f, phase=phi, iterations=iters)
+    return AutofocusResult(image=f * scale, phase=phi, iterations=iters)
 
 
 def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> MinEntropyResult:
     """Minimum-entropy 1-D autofocus of ``sum_m exp(-1j phi_m) b_m`` (L-BFGS, autograd).
 
+    The entropy does not depend on the data's scale; each item is processed scaled to unit
+    peak amplitude (by a power of two, exactly), so data of any magnitude is focused without
+    overflow.
+
     Args:
-        pulse_images: complex ``(B, M, H, W)``.
+        pulse_images: complex ``(B, M, H, W)``; complex128 is computed in double precision,
+            every other complex dtype in complex64.
         max_iter: L-BFGS iterations.
 
     Returns:
@@ -114,11 +132,13 @@ def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> MinEntrop
         >>> out.image.shape, out.phase.shape
         (torch.Size([1, 1, 4, 4]), torch.Size([1, 3]))
     """
-    b = check_complex(pulse_images, "pulse_images", ndim=4).detach()
+    b = as_complex(check_complex(pulse_images, "pulse_images", ndim=4).detach())
     check_int(max_iter, "max_iter", minimum=0)
     live = nonzero_items(b)
     if not bool(live.all()):
         return fill_result(live, pulse_min_entropy(b[live], max_iter=max_iter))
+    scale = unit_scale(b)
+    b = b / scale.reshape(-1, 1, 1, 1)  # exact (a power of two); the entropy is scale-free
     # One flat sum over the batch's pixels (this method's loss since it was written; the sum
     # order sets the rounding, and so the L-BFGS path).
     phi, iterations = lbfgs_phases(
@@ -126,4 +146,4 @@ def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> MinEntrop
         b,
         max_iter=max_iter,
     )
-    return entropy_result(_form(b, phi), phi, iterations)
+    return entropy_result(_form(b, phi), phi, iterations, scale)

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from torchsar._checks import OptionError, check_choice
+from torchsar._checks import OptionError, check_choice, check_ids, check_same_shape
 
 __all__ = [
     "COCO_IOUS",
@@ -149,7 +149,8 @@ def ground_truth(
     """Build :class:`GroundTruth` from instance-id planes ``(N, H, W)``.
 
     Args:
-        instances: int ids per plane (0 = none; any positive ids).
+        instances: integer ids per plane (0 = none; any positive ids). Floating ids are
+            accepted when they are whole numbers.
         ignore: bool don't-care pixels, same shape (default none).
         classes: per plane, the class of local id ``k`` at position ``k - 1`` (default
             ``"target"``).
@@ -159,8 +160,16 @@ def ground_truth(
         spacing: ``(N, 2)`` pixel spacing per plane in metres (NaN: unknown).
         lengths: per plane, the length in metres of local id ``k`` at position ``k - 1``.
         areas: per plane, the declared area of local id ``k`` at position ``k - 1``.
+
+    Raises:
+        InputTypeError: ``instances`` is not numeric, or holds fractional, NaN or infinite
+            floating ids.
+        InputValueError: ``instances`` holds a negative id.
+        ShapeError: ``instances`` is not ``(N, H, W)``, or ``ignore`` has another shape.
     """
-    inst = np.asarray(instances)
+    inst = check_ids(instances, "instances", ndim=3)
+    if ignore is not None:
+        check_same_shape(np.asarray(ignore), inst, "ignore", "instances")
     n_planes = inst.shape[0]
     flat = inst.reshape(-1)
     idx = np.flatnonzero(flat)  # the labelled pixels: everything below works on them only

@@ -19,7 +19,16 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError, has_nan
+from torchsar._checks import (
+    InputTypeError,
+    InputValueError,
+    OptionError,
+    ShapeError,
+    WindowSizeError,
+    check_per_plane,
+    check_real,
+    has_nan,
+)
 from torchsar.objects.components import label_components
 from torchsar.objects.objects import Objects
 from torchsar.objects.properties import measure
@@ -116,7 +125,12 @@ def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, 
     return mask.reshape(b * c, h, w), full.reshape(b * c, h, w)
 
 
-def _check(statistic: object, pixel_area: object, rules: ObjectRules) -> None:
+def _check(
+    statistic: object, threshold: object, pixel_area: object, rules: ObjectRules
+) -> np.ndarray | None:
+    """Validate the arguments; return ``pixel_area`` as one value per plane (or None)."""
+    if not isinstance(rules, ObjectRules):
+        raise OptionError(f"rules must be an ObjectRules, got {type(rules).__name__}")
     if not isinstance(statistic, Tensor) or not statistic.is_floating_point():
         got = statistic.dtype if isinstance(statistic, Tensor) else type(statistic).__name__
         raise InputTypeError(f"statistic must be a floating torch.Tensor, got {got}")
@@ -124,15 +138,32 @@ def _check(statistic: object, pixel_area: object, rules: ObjectRules) -> None:
         raise ShapeError(f"statistic must have shape (B, C, H, W), got {tuple(statistic.shape)}")
     if has_nan(statistic):
         raise InputValueError("statistic must not hold NaN values")
+    thr = check_real(threshold, "threshold")
+    try:
+        torch.broadcast_shapes(thr.shape, statistic.shape)
+    except RuntimeError:
+        raise ShapeError(
+            f"threshold must broadcast to statistic {tuple(statistic.shape)}, "
+            f"got {tuple(thr.shape)}"
+        ) from None
+    h, w = statistic.shape[-2:]
+    if h * w and rules.closing > max(h, w):
+        raise WindowSizeError(
+            f"closing radius {rules.closing} is larger than the image ({h}x{w}); "
+            f"use closing <= {max(h, w)}"
+        )
     if rules.units == "m2" and pixel_area is None:
         raise OptionError("object areas in m2 need the pixel spacing: pass pixel_area")
+    planes = statistic.shape[0] * statistic.shape[1]
+    return None if pixel_area is None else check_per_plane(pixel_area, "pixel_area", planes)
 
 
 def _keep(area: np.ndarray, plane: np.ndarray, rules: ObjectRules, pixel_area) -> np.ndarray:
-    """Objects within ``[min_area, max_area]`` (pixels, or m^2 via each plane's pixel area)."""
+    """Objects within ``[min_area, max_area]`` (pixels, or m^2 via each plane's pixel area,
+    ``pixel_area`` one value per plane)."""
     size = area.astype(np.float64)
     if rules.units == "m2":
-        size = size * np.asarray(pixel_area, dtype=np.float64).reshape(-1)[plane]
+        size = size * pixel_area[plane]
     keep = size >= rules.min_area
     if rules.max_area is not None:
         keep &= size <= rules.max_area
@@ -151,16 +182,20 @@ def discriminate(
     Args:
         statistic: float ``(B, C, H, W)``, the detector's ``Detection.statistic``
             (``-inf`` allowed for untestable pixels, NaN refused).
-        threshold: the design threshold, broadcastable to ``statistic``.
-        rules: closing, size and connectivity rules (default :class:`ObjectRules`).
-        pixel_area: square metres per pixel, a scalar or one value per plane; needed when
-            ``rules.units == "m2"``.
+        threshold: the design threshold, broadcastable to ``statistic`` (``±inf`` allowed,
+            NaN refused).
+        rules: closing, size and connectivity rules (default :class:`ObjectRules`); the
+            closing radius may not exceed the image's larger side.
+        pixel_area: square metres per pixel (finite, > 0), a scalar used for every plane
+            or one value per plane (``B * C``); needed when ``rules.units == "m2"``.
 
     Returns:
         :class:`Objects` in id order (planes in order, then label order).
 
     Raises:
-        InputTypeError, ShapeError, InputValueError: bad ``statistic``.
+        InputTypeError, ShapeError, InputValueError: bad ``statistic``, ``threshold`` or
+            ``pixel_area``.
+        WindowSizeError: ``rules.closing`` larger than the image.
         OptionError: areas in m^2 without ``pixel_area``.
 
     Example:
@@ -170,7 +205,7 @@ def discriminate(
         (1, [4], [2.5])
     """
     rules = ObjectRules() if rules is None else rules
-    _check(statistic, pixel_area, rules)
+    pixel_area = _check(statistic, threshold, pixel_area, rules)
     b, c = statistic.shape[:2]
     mask, score = _score_map(statistic, threshold, rules.floor)
     mask = _close(mask, rules.closing)

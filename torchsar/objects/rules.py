@@ -26,8 +26,9 @@ class ObjectRules:
 
     Attributes:
         closing: radius in pixels of the morphological closing (disk) applied to the mask
-            before labelling; 0 = none. Joins fragments of one target (window CFARs often
-            detect a vehicle's bright scatterers as separate blobs).
+            before labelling; 0 = none, at most the image's larger side. Joins fragments of
+            one target (window CFARs often detect a vehicle's bright scatterers as separate
+            blobs).
         min_area: smallest object kept, in ``units``.
         max_area: largest object kept, in ``units`` (``None``: no limit). A flood of the
             whole image is then dropped rather than scored.

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_image, float_dtype
+from torchsar._checks import InputValueError, OptionError, all_finite, check_image, float_dtype
 from torchsar.detection import Detection
 from torchsar.region.detector import detect_image
 from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
@@ -45,6 +45,11 @@ def _despeckle(x: Tensor, how: Despeckle) -> Tensor:
     out = how(x)
     if not isinstance(out, Tensor) or out.shape != x.shape:
         raise OptionError(f"despeckle callable must return a tensor of shape {tuple(x.shape)}")
+    if not out.is_floating_point() or not all_finite(out):
+        raise InputValueError(
+            f"despeckle callable must return a finite floating image, got dtype {out.dtype} "
+            f"with {int((~torch.isfinite(out)).sum())} NaN or Inf values"
+        )
     return out
 
 

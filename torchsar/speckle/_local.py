@@ -6,6 +6,11 @@ window cells that lie inside the image (:func:`torchsar.windows.windowed` counti
 border pixel gets the textbook statistic of its truncated window and interior pixels are
 exact. ``Ci = sigma / mu`` with the population standard deviation; a window with zero mean
 (all zeros, since intensity is non-negative) has ``Ci = 0``.
+
+Scale: every filter is scale-equivariant (``filter(s x) = s filter(x)``); an image plane
+whose peak is so large (or small) that squares and window sums would overflow (or
+underflow) its dtype is filtered divided by a power of two and scaled back, which is exact.
+Planes of ordinary magnitude are filtered as they are.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from torchsar._checks import (
     check_window_fits,
     float_dtype,
 )
+from torchsar._scale import power_of_two
 from torchsar.windows import Rect, Sums, windowed
 
 __all__ = [
@@ -76,6 +82,21 @@ class Request:
     amplitude: bool
     dtype: torch.dtype
     damping: float | None = None
+    scale: Tensor | None = None  # (B, C, 1, 1) powers of two the input was divided by
+
+
+def _plane_scale(x: Tensor) -> Tensor | None:
+    """Per-plane powers of two ``(B, C, 1, 1)`` bringing the peak of every plane whose peak
+    lies outside ``[2^-e, 2^e]`` (``e = 3/8`` of the dtype's exponent range: 48 for float32)
+    into ``[1, 2)``, 1 for the other planes; None when no plane needs it."""
+    if x.numel() == 0:
+        return None
+    e = 48 if x.dtype == torch.float32 else 384  # 3/8 of the largest exponent (128, 1024)
+    peak = x.detach().abs().amax(dim=(-2, -1), keepdim=True)
+    outside = (peak > 2.0**e) | ((peak > 0) & (peak < 2.0**-e))
+    if not bool(outside.any()):
+        return None
+    return torch.where(outside, power_of_two(peak), 1.0)
 
 
 def prepare(
@@ -93,14 +114,21 @@ def prepare(
         damping = check_positive(damping, "damping", allow_zero=True)
     dtype = float_dtype(x.dtype)
     xi = x.to(dtype)
+    scale = _plane_scale(xi)
+    if scale is not None:
+        xi = xi / scale  # exact: a power of two
     intensity = xi.square() if amplitude else xi
-    return Request(intensity, window // 2, Speckle(looks), amplitude, dtype, damping)
+    return Request(intensity, window // 2, Speckle(looks), amplitude, dtype, damping, scale)
 
 
 def finish(req: Request, intensity: Tensor) -> Tensor:
-    """The filtered image in the caller's form (square root back to amplitude if asked)."""
+    """The filtered image in the caller's form (square root back to amplitude if asked,
+    times the scale the input was divided by)."""
     out = intensity.clamp_min_(0)
-    return sqrt(out) if req.amplitude else out
+    out = sqrt(out) if req.amplitude else out
+    if req.scale is None:
+        return out
+    return (out * req.scale).clamp_max(torch.finfo(out.dtype).max)
 
 
 def scratch(t: Tensor) -> Tensor:
