@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import sys
 import threading
@@ -115,8 +116,19 @@ def _signals_raise() -> Iterator[None]:
         sys.unraisablehook = hook
 
 
+LONGEST_WORD = 200
+"""Longer runs of non-blank characters in an error (an echoed 100k-character value) are
+shortened to their ends, so the error stays one readable line."""
+
+
+def _elide(word: re.Match) -> str:
+    w = word.group(0)
+    return f"{w[:60]}...[{len(w) - 80} characters]...{w[-20:]}"
+
+
 def _user_error(message: object) -> int:
     text = " ".join(line.strip() for line in str(message).strip().splitlines())
+    text = re.sub(rf"\S{{{LONGEST_WORD + 1},}}", _elide, text)
     print(f"{PROG}: error: {text}", file=sys.stderr)
     return 2
 
