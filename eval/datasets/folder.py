@@ -2,8 +2,10 @@
 
 Pairing: every ``<stem>.mask.png`` needs exactly one image ``<stem>.<ext>`` (or
 ``<stem>.<variant>.<ext>`` with ``?variant=``), ``ext`` one of png, jpg, jpeg, tif, tiff.
-A mask without an image, an image without a mask, and two images sharing one mask are
-errors naming the files; FIFOs and devices are refused without being opened.
+A mask without an image, an image without a mask, two images sharing one mask, and one
+image file reached twice (through a symlink, a hard link or a ``..`` path: it would be
+scored twice) are errors naming the files; FIFOs and devices are refused without being
+opened, sidecar text files over a few kilobytes without being read.
 Pixel spacing: ``?spacing=ROW[,COL]``, else a ``<stem>.spacing.txt`` sidecar holding
 ``ROW [COL]`` in metres, else a projected GeoTIFF's pixel scale, else unknown (``None``).
 """
@@ -19,13 +21,13 @@ from torchsar.io import (
     RASTER_EXTS,
     TIFF_EXTS,
     FileFormatError,
-    check_regular_file,
     decode_id_map,
     geotiff_pixel_spacing,
     read_raster,
     tiff_dtype,
 )
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.files import read_small, require_regular, same_files
 from torchsar_eval.datasets.images import check_same_size, read_labels, read_samples
 from torchsar_eval.datasets.semantics import (
     INSTANCE_MODES,
@@ -40,6 +42,7 @@ __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
 
 FOLDER_OPTIONS = ("variant", "type", "spacing", "shadow", "instances", "max_pixels")
 MASK, IDS, BOX, SPACING = ".mask.png", ".instances.png", ".box.txt", ".spacing.txt"
+SIDECAR_LIMIT = 256  # bytes of a spacing sidecar ("ROW [COL]" metres)
 
 
 def _stem_and_variant(img: Path, stems: set[Path]) -> tuple[Path, str | None] | None:
@@ -61,7 +64,7 @@ def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
     for f in files:
         if f.suffix.lower() not in RASTER_EXTS or f.name.endswith((MASK, IDS)):
             continue
-        check_regular_file(f)
+        require_regular(f, "image")
         found = _stem_and_variant(f, stems)
         if found is None:
             raise EvalError(f"image {f} has no mask {f.with_suffix('')}{MASK}")
@@ -81,6 +84,11 @@ def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
         pairs.append((imgs[0], mask))
     if not pairs:
         raise EvalError(f"no images with <stem>{MASK} masks found in {root}")
+    for first, again in same_files(img for img, _ in pairs):
+        raise EvalError(
+            f"image {again} is the same file as {first} (a symlink, hard link or '..' path "
+            "to it): it would be scored twice; keep one of them"
+        )
     return pairs
 
 
@@ -154,7 +162,8 @@ class FolderDataset(FileDataset):
         if not sidecar.exists():
             tiff = img.suffix.lower() in TIFF_EXTS
             return geotiff_pixel_spacing(img) if tiff else None
-        text = ",".join(sidecar.read_text().replace(",", " ").split())
+        data = read_small(sidecar, SIDECAR_LIMIT, "spacing sidecar")
+        text = ",".join(data.decode("utf-8", errors="replace").replace(",", " ").split())
         try:
             return parse_spacing(text)
         except EvalError as exc:
