@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.io import (
-    DEFAULT_MAX_PIXELS,
     RASTER_EXTS,
     TIFF_EXTS,
     FileFormatError,
@@ -35,7 +34,7 @@ from torchsar_eval.datasets.semantics import (
     form_instances,
     split_labels,
 )
-from torchsar_eval.datasets.spec import DatasetSpec, parse_spacing
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec, parse_spacing
 from torchsar_eval.errors import EvalError
 
 __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
@@ -185,6 +184,7 @@ class FolderDataset(FileDataset):
 
     def load(self, i: int) -> dict:
         img_path, mask_path = self.items[i]
+        self.check_pixels(img_path)
         check_same_size(img_path, mask_path)
         samples = read_samples(img_path, self.sample_type, max_pixels=self.max_pixels)
         target, ignore = split_labels(
@@ -210,5 +210,5 @@ def folder_from_spec(spec: DatasetSpec, limit: int | None) -> FolderDataset:
         spacing=spec.spacing(),
         shadow=spec.choice("shadow", SHADOW_MODES, "ignore"),
         instances=spec.choice("instances", INSTANCE_MODES, None),
-        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        max_pixels=spec.max_pixels(),
     )
