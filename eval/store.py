@@ -105,13 +105,15 @@ def _check_meta(meta: object, k: int) -> str | None:
         return f"meta is a {type(meta).__name__}, not a JSON object"
     boxes, classes = meta.get("boxes"), meta.get("classes")
     if boxes is not None:
-        if not isinstance(boxes, list) or len(boxes) != k:
-            return f"meta boxes must be a list of one box per instance ({k}), got {_short(boxes)}"
+        if not isinstance(boxes, list) or len(boxes) < k:
+            return f"meta boxes must be a list of a box per instance id 1..{k}, got {_short(boxes)}"
         for b in boxes:
             if not isinstance(b, list) or len(b) != 4 or not all(map(_number, b)):
                 return f"meta box {_short(b)} is not 4 numbers (r0, c0, r1, c1)"
-    if classes is not None and (not isinstance(classes, list) or len(classes) != k):
-        return f"meta classes must be a list of one class per instance ({k}), got {_short(classes)}"
+    if classes is not None and (not isinstance(classes, list) or len(classes) < k):
+        return (
+            f"meta classes must be a list of a class per instance id 1..{k}, got {_short(classes)}"
+        )
     sp = meta.get("pixel_spacing")
     if sp is not None and not (
         isinstance(sp, list) and len(sp) == 2 and all(_number(v) and v > 0 for v in sp)
@@ -128,8 +130,9 @@ def _check_meta(meta: object, k: int) -> str | None:
 def check_item(arrays: dict[str, np.ndarray], meta: object) -> str | None:
     """What breaks the item contract (see :mod:`torchsar_eval.datasets`), or ``None``:
     dtypes, equal ``(C, H, W)`` shapes, bools of 0 and 1, a finite non-negative image,
-    ids >= 0, a mask that marks exactly the instances' pixels, and a meta whose boxes and
-    classes count the instances."""
+    ids >= 0, a mask that marks exactly the instances' pixels, and a meta with a box and a
+    class for every id up to the largest (annotations whose objects got no pixels may
+    add more)."""
     for f in FIELDS:
         if f not in arrays:
             return f"has no {f}"

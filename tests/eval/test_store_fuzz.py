@@ -4,7 +4,7 @@ equal to the ones written, or raises an EvalError naming a file of the store; ne
 another exception. A store of the first format (no checksums) cannot tell changed data
 bytes, so there the contract is a *valid* item or the error: arrays that keep the item
 contract (dtypes, shapes, a finite non-negative image, the mask exactly the instances'
-pixels) and, where the meta has them, one box and one class per instance.
+pixels) and, where the meta has them, a box and a class for each instance id.
 
 ``python -m tests.eval.test_store_fuzz [CASES] [SEED]`` prints the outcome counts.
 """
@@ -187,7 +187,7 @@ def _valid(item: dict) -> bool:
         and image.shape == mask.shape == inst.shape == ignore.shape
         and torch.equal(mask, inst > 0) and bool(torch.isfinite(image).all())
         and bool((image >= 0).all()) and isinstance(meta, dict)
-        and all(isinstance(v := meta.get(key, [None] * k), list) and len(v) == k
+        and all(isinstance(v := meta.get(key, [None] * k), list) and len(v) >= k
                 for key in ("boxes", "classes"))
         and meta.get("gt", "mask") in ("mask", "box")
     )  # fmt: skip
