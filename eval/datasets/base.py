@@ -209,11 +209,21 @@ def require_dir(root: Path, scheme: str) -> None:
         raise EvalError(f"{scheme} dataset folder {root} does not exist or is not a folder")
 
 
+def _unlistable(exc: OSError) -> None:
+    """os.walk's error hook: a folder that cannot be listed would silently drop its files."""
+    raise EvalError(f"cannot list folder {exc.filename} ({exc.strerror}); its images would be "
+                    "left out")  # fmt: skip
+
+
 def walk_files(root: Path) -> list[Path]:
     """Every file under ``root`` in sorted order, without following directory symlinks
-    (file symlinks are kept; the manifest reports those that leave ``root``)."""
+    (file symlinks are kept; the manifest reports those that leave ``root``).
+
+    Raises:
+        EvalError: a folder under ``root`` cannot be listed (permissions).
+    """
     out = []
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+    for dirpath, dirnames, filenames in os.walk(root, onerror=_unlistable, followlinks=False):
         dirnames.sort()
         out.extend(Path(dirpath) / f for f in sorted(filenames))
     return sorted(out)

@@ -241,6 +241,30 @@ def _folder_big_blank_image(tmp_path):
     return _read_all(f"folder:{root}")
 
 
+def _folder_unlistable_subfolder(tmp_path):
+    """A subfolder that cannot be listed (permissions; simulated, as root may list all)."""
+    root = _folder(tmp_path)
+    write_pair(root / "locked", "b", np.full((16, 16), 40), np.zeros((16, 16)))
+    scandir = os.scandir
+
+    def denied(path="."):
+        if Path(path).name == "locked":
+            raise PermissionError(13, "Permission denied", str(path))
+        return scandir(path)
+
+    def attempt():
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(os, "scandir", denied)
+            return _read_all(f"folder:{root}")()
+
+    return attempt
+
+
+def _folder_fractional_n(tmp_path):
+    root = _folder(tmp_path)
+    return lambda: make_dataset(f"folder:{root}", n=2.5)
+
+
 def _datasets_sharing_a_file(tmp_path):
     """Two folder datasets that reach the same image through different paths."""
     root = _folder(tmp_path)
@@ -325,6 +349,9 @@ CASES = [
      r"b\.png is the same file as .*a\.png"),
     ("9000x9000 blank image", _folder_big_blank_image, BadItemError,
      r"a\.png: .*9000x9000.*max_pixels=\d+"),
+    ("unlistable subfolder", _folder_unlistable_subfolder, EvalError,
+     r"cannot list folder .*locked \(Permission denied\)"),
+    ("n of 2.5 items", _folder_fractional_n, EvalError, r"n=2\.5: must be a whole number"),
     ("datasets sharing files", _datasets_sharing_a_file, UserWarning,
      r"datasets A and B both read .*a\.png"),
 ]  # fmt: skip
