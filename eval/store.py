@@ -482,6 +482,8 @@ class StoreDataset(Dataset):
             raise EvalError(f"{self.root} is not a torchsar store (no store.json)")
         self.header = _read_header(head)
         self.version = int(self.header["version"])
+        if limit is not None and (not _whole(limit) or limit < 0):
+            raise EvalError(f"{{opt:n}}{_short(limit)}: must be a whole number >= 0")
         self._shape = _check_index(self.root, self.header)
         n = int(self.header["n"])
         self.n = n if limit is None else min(limit, n)
@@ -507,7 +509,11 @@ class StoreDataset(Dataset):
         """The item's bytes: from its first member's tar header to the end of its last
         member (they are consecutive in the tar), checked against the CRC-32."""
         first, end = int(rows[0, 0]) - _BLOCK, int(rows[len(MEMBERS) - 1].sum())
-        require_regular(shard, "store shard")
+        size = require_regular(shard, "store shard").st_size
+        if not 0 <= first < end <= size:  # checked on opening; the files changed since
+            raise self._bad(shard, key, f"its index row (bytes {first:,} to {end:,}) does not "
+                            f"fit the shard's {size:,} bytes: the store changed since it was "
+                            "opened")  # fmt: skip
         with open(shard, "rb") as f:
             f.seek(first)
             data = f.read(end - first)

@@ -16,6 +16,7 @@ import torch
 import torchsar as ts
 from torchsar_eval.cli import main
 from torchsar_eval.commands.make_dataset import sim_items
+from torchsar_eval.datasets import BadItemError
 from torchsar_eval.errors import EvalError
 from torchsar_eval.store import (
     StoreDataset,
@@ -137,3 +138,16 @@ def test_only_dead_writers_partial_stores_are_removed(tmp_path):
         proc.wait()
     assert remove_dead_partials(tmp_path) == [partial_path(live)]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_store_changed_after_opening_is_named_at_read(tmp_path):
+    out = write_store(sim_items("sim-chips", 2, 0), 2, tmp_path / "s")
+    ds = StoreDataset(out)  # checked here ...
+    index = np.load(out / "index.npy")
+    index[1, 0, 0] = 10**13
+    np.save(out / "index.npy", index)  # ... then changed before the first read
+    assert torch.equal(ds[0]["image"], next(sim_items("sim-chips", 1, 0))["image"])
+    with pytest.raises(BadItemError, match=r"shard-000000.tar: item 000000001: .*changed since"):
+        ds[1]
+    with pytest.raises(EvalError, match=r"n=-1: must be a whole number >= 0"):
+        StoreDataset(out, limit=-1)
