@@ -41,7 +41,7 @@ import torch
 
 import torchsar
 from torchsar_eval.errors import EvalError
-from torchsar_eval.locks import hold, is_held
+from torchsar_eval.locks import LockHeldError, hold, is_held
 
 __all__ = [
     "HOST",
@@ -211,8 +211,8 @@ def _remove_lock(lock: Path) -> None:
     try:
         with hold(lock):
             pass
-    except OSError:
-        pass
+    except (LockHeldError, OSError):
+        pass  # taken meanwhile: its run is alive
 
 
 def clean(target: Path, *, dry_run: bool = False) -> list[Hidden]:

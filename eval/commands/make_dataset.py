@@ -2,6 +2,13 @@
 
 Simulated kinds are generated block by block (item ``i`` depends only on the seed and ``i``),
 other datasets are read item by item, so memory does not grow with ``--n``.
+
+The store is built in a hidden ``.<name>.store-partial`` folder beside ``--out``, by a
+process holding the lock file ``.<name>.store-lock``, and renamed to ``--out`` when
+complete. A second make-dataset into the same ``--out`` is refused while the first runs.
+A make-dataset that was killed (SIGKILL, power loss) leaves its partial store behind with
+a free lock; the next make-dataset into the same folder removes it. To clean up by hand,
+delete ``.<name>.store-partial`` and ``.<name>.store-lock`` while no make-dataset runs.
 """
 
 from __future__ import annotations

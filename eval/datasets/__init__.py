@@ -29,7 +29,8 @@ Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-
 ``complex``, Phoenix ``amplitude``; ``display`` data get a :class:`DisplayScalingWarning`);
 ``spacing=ROW[,COL]`` metres (else from the files: Phoenix header, SICD grid, folder
 ``<stem>.spacing.txt`` sidecar or projected GeoTIFF; else ``None``); ``max_pixels=N``
-(default 100,000,000, checked from the header before decoding).
+(default 16,777,216 = 4096 x 4096 for folder datasets, sized to the evaluator's memory per
+image, and 100,000,000 for the others; checked from the header before decoding).
 
 Folder and Phoenix: ``shadow=ignore|clutter|target`` (what label 2 means; default
 ``ignore``), ``instances=components|one-per-image|idmap``

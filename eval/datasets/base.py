@@ -13,7 +13,7 @@ import torch
 from torch.utils.data import Dataset
 
 from torchsar._checks import TorchSARError
-from torchsar.io import FileFormatError, to_intensity
+from torchsar.io import FileFormatError, raster_shape, to_intensity
 from torchsar_eval.datasets.manifest import file_manifest
 from torchsar_eval.datasets.semantics import boxes_of, check_instance_counts
 from torchsar_eval.errors import EvalError
@@ -135,6 +135,20 @@ class FileDataset(Dataset, ABC):
         files = {f for i in range(len(self)) for f in self.item_files(i)}
         return file_manifest(self.root, sorted(files | set(self.shared_files)))
 
+    def check_pixels(self, path: Path) -> tuple[int, ...]:
+        """The raster's header shape, refused (naming the option that raises the limit)
+        when its ``H * W`` is over ``max_pixels``; nothing is decoded."""
+        shape = raster_shape(path)
+        pixels = shape[0] * shape[1] if len(shape) >= 2 else 0
+        if pixels > self.max_pixels:
+            raise FileFormatError(
+                path,
+                f"is {shape[1]}x{shape[0]} = {pixels:,} pixels, over the limit of "
+                f"{self.max_pixels:,}; raise it with the dataset option max_pixels=N, e.g. "
+                f"{self.scheme}:{self.root}?max_pixels={pixels}",
+            )
+        return shape
+
     def intensity(self, samples: np.ndarray, path: Path) -> np.ndarray:
         """The one conversion of this dataset's samples to intensity."""
         try:
@@ -195,11 +209,21 @@ def require_dir(root: Path, scheme: str) -> None:
         raise EvalError(f"{scheme} dataset folder {root} does not exist or is not a folder")
 
 
+def _unlistable(exc: OSError) -> None:
+    """os.walk's error hook: a folder that cannot be listed would silently drop its files."""
+    raise EvalError(f"cannot list folder {exc.filename} ({exc.strerror}); its images would be "
+                    "left out")  # fmt: skip
+
+
 def walk_files(root: Path) -> list[Path]:
     """Every file under ``root`` in sorted order, without following directory symlinks
-    (file symlinks are kept; the manifest reports those that leave ``root``)."""
+    (file symlinks are kept; the manifest reports those that leave ``root``).
+
+    Raises:
+        EvalError: a folder under ``root`` cannot be listed (permissions).
+    """
     out = []
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+    for dirpath, dirnames, filenames in os.walk(root, onerror=_unlistable, followlinks=False):
         dirnames.sort()
         out.extend(Path(dirpath) / f for f in sorted(filenames))
     return sorted(out)

@@ -2,8 +2,10 @@
 
 Pairing: every ``<stem>.mask.png`` needs exactly one image ``<stem>.<ext>`` (or
 ``<stem>.<variant>.<ext>`` with ``?variant=``), ``ext`` one of png, jpg, jpeg, tif, tiff.
-A mask without an image, an image without a mask, and two images sharing one mask are
-errors naming the files; FIFOs and devices are refused without being opened.
+A mask without an image, an image without a mask, two images sharing one mask, and one
+image file reached twice (through a symlink, a hard link or a ``..`` path: it would be
+scored twice) are errors naming the files; FIFOs and devices are refused without being
+opened, sidecar text files over a few kilobytes without being read.
 Pixel spacing: ``?spacing=ROW[,COL]``, else a ``<stem>.spacing.txt`` sidecar holding
 ``ROW [COL]`` in metres, else a projected GeoTIFF's pixel scale, else unknown (``None``).
 """
@@ -15,17 +17,16 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.io import (
-    DEFAULT_MAX_PIXELS,
     RASTER_EXTS,
     TIFF_EXTS,
     FileFormatError,
-    check_regular_file,
     decode_id_map,
     geotiff_pixel_spacing,
     read_raster,
     tiff_dtype,
 )
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
+from torchsar_eval.datasets.files import read_small, require_regular, same_files
 from torchsar_eval.datasets.images import check_same_size, read_labels, read_samples
 from torchsar_eval.datasets.semantics import (
     INSTANCE_MODES,
@@ -33,13 +34,14 @@ from torchsar_eval.datasets.semantics import (
     form_instances,
     split_labels,
 )
-from torchsar_eval.datasets.spec import DatasetSpec, parse_spacing
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec, parse_spacing
 from torchsar_eval.errors import EvalError
 
 __all__ = ["FOLDER_OPTIONS", "FolderDataset"]
 
 FOLDER_OPTIONS = ("variant", "type", "spacing", "shadow", "instances", "max_pixels")
 MASK, IDS, BOX, SPACING = ".mask.png", ".instances.png", ".box.txt", ".spacing.txt"
+SIDECAR_LIMIT = 256  # bytes of a spacing sidecar ("ROW [COL]" metres)
 
 
 def _stem_and_variant(img: Path, stems: set[Path]) -> tuple[Path, str | None] | None:
@@ -61,7 +63,7 @@ def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
     for f in files:
         if f.suffix.lower() not in RASTER_EXTS or f.name.endswith((MASK, IDS)):
             continue
-        check_regular_file(f)
+        require_regular(f, "image")
         found = _stem_and_variant(f, stems)
         if found is None:
             raise EvalError(f"image {f} has no mask {f.with_suffix('')}{MASK}")
@@ -81,6 +83,11 @@ def pair_files(root: Path, variant: str | None) -> list[tuple[Path, Path]]:
         pairs.append((imgs[0], mask))
     if not pairs:
         raise EvalError(f"no images with <stem>{MASK} masks found in {root}")
+    for first, again in same_files(img for img, _ in pairs):
+        raise EvalError(
+            f"image {again} is the same file as {first} (a symlink, hard link or '..' path "
+            "to it): it would be scored twice; keep one of them"
+        )
     return pairs
 
 
@@ -154,7 +161,8 @@ class FolderDataset(FileDataset):
         if not sidecar.exists():
             tiff = img.suffix.lower() in TIFF_EXTS
             return geotiff_pixel_spacing(img) if tiff else None
-        text = ",".join(sidecar.read_text().replace(",", " ").split())
+        data = read_small(sidecar, SIDECAR_LIMIT, "spacing sidecar")
+        text = ",".join(data.decode("utf-8", errors="replace").replace(",", " ").split())
         try:
             return parse_spacing(text)
         except EvalError as exc:
@@ -163,6 +171,10 @@ class FolderDataset(FileDataset):
     def _id_map(self, img: Path, mask: Path, target: np.ndarray) -> np.ndarray:
         """The decoded ``<stem>.instances.png``; every target pixel must have an id."""
         path = self._beside(mask, IDS)
+        if not (path.exists() or path.is_symlink()):
+            raise FileFormatError(path, "is missing: instances=idmap (the default when any "
+                                  "mask has one) needs an id map beside every mask; or "
+                                  "pass ?instances=components")  # fmt: skip
         check_same_size(img, path)
         ids = decode_id_map(read_raster(path, max_pixels=self.max_pixels), str(path))
         missing = int((target & (ids == 0)).sum())
@@ -176,6 +188,7 @@ class FolderDataset(FileDataset):
 
     def load(self, i: int) -> dict:
         img_path, mask_path = self.items[i]
+        self.check_pixels(img_path)
         check_same_size(img_path, mask_path)
         samples = read_samples(img_path, self.sample_type, max_pixels=self.max_pixels)
         target, ignore = split_labels(
@@ -201,5 +214,5 @@ def folder_from_spec(spec: DatasetSpec, limit: int | None) -> FolderDataset:
         spacing=spec.spacing(),
         shadow=spec.choice("shadow", SHADOW_MODES, "ignore"),
         instances=spec.choice("instances", INSTANCE_MODES, None),
-        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        max_pixels=spec.max_pixels(),
     )

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.io import (
-    DEFAULT_MAX_PIXELS,
     FileFormatError,
     raster_shape,
     read_raster,
     single_channel,
 )
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS
 from torchsar_eval.errors import EvalError
 
 __all__ = ["LABELS", "check_same_size", "read_image", "read_labels", "read_samples"]

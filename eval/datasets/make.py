@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 
 from torch.utils.data import Dataset
@@ -58,6 +59,8 @@ def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
         EvalError: unknown scheme or option, missing folder, unpairable files; a file that
             cannot be read while building raises :class:`BadItemError` naming it.
     """
+    if n is not None and (isinstance(n, bool) or not isinstance(n, numbers.Integral)):
+        raise EvalError(f"{{opt:n}}{n!r}: must be a whole number")
     if n is not None and n < 0:
         raise EvalError(f"{{opt:n}}{n}: must be >= 0")
     if spec in DEFAULT_N:

@@ -274,6 +274,9 @@ def test_id_maps_are_used_when_present(tmp_path):
     write_png(tmp_path / "a.instances.png", ids)
     with pytest.raises(BadItemError, match="a.instances.png: gives no instance id to 1 target"):
         ds[0]
+    write_pair(tmp_path, "b", np.zeros((16, 16)), lab)  # no id map beside this mask
+    with pytest.raises(BadItemError, match=r"b.instances.png: is missing: instances=idmap"):
+        _quiet(f"folder:{tmp_path}")[1]
 
 
 def test_manifest_and_symlinks_leaving_the_folder(tmp_path):

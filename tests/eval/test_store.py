@@ -2,18 +2,29 @@
 
 from __future__ import annotations
 
+import io
 import json
 import pickle
+import subprocess
+import sys
 import tarfile
 
+import numpy as np
 import pytest
 import torch
 
 import torchsar as ts
 from torchsar_eval.cli import main
 from torchsar_eval.commands.make_dataset import sim_items
+from torchsar_eval.datasets import BadItemError
 from torchsar_eval.errors import EvalError
-from torchsar_eval.store import StoreDataset, write_store
+from torchsar_eval.store import (
+    StoreDataset,
+    lock_path,
+    partial_path,
+    remove_dead_partials,
+    write_store,
+)
 
 
 def test_sim_items_equal_the_batch_generation():
@@ -70,3 +81,73 @@ def test_run_on_a_store_equals_run_on_its_source(tmp_path):
         rows_a = [r.split(",", 1)[1] for r in (a / name).read_text().splitlines()]
         rows_b = [r.split(",", 1)[1] for r in (b / name).read_text().splitlines()]
         assert rows_a == rows_b, name  # all but the dataset label
+
+
+def _legacy(root):
+    """The first store format: index rows 0-4 (no checksum), version 1."""
+    np.save(root / "index.npy", np.ascontiguousarray(np.load(root / "index.npy")[:, :5]))
+    head = json.loads((root / "store.json").read_text())
+    (root / "store.json").write_text(json.dumps({**head, "version": 1}))
+
+
+def test_first_format_stores_still_read(tmp_path):
+    src = list(sim_items("sim-chips", 3, 1))
+    out = write_store(iter(src), 3, tmp_path / "s", shard_size=2)
+    with tarfile.open(out / "shard-000000.tar") as tar:  # a plain tar for any reader
+        member = tar.extractfile("000000001.instances.npy").read()
+    assert torch.equal(torch.from_numpy(np.load(io.BytesIO(member))), src[1]["instances"])
+    _legacy(out)
+    ds = StoreDataset(out)
+    assert ds.version == 1
+    for i in range(3):
+        for k in ("image", "mask", "instances", "ignore"):
+            assert torch.equal(ds[i][k], src[i][k])
+
+
+def test_a_short_source_or_bad_counts_are_refused(tmp_path):
+    with pytest.raises(EvalError, match="the source ended after 1 of the 2 items"):
+        write_store(sim_items("sim-chips", 1, 0), 2, tmp_path / "s")
+    with pytest.raises(EvalError, match="shard_size=0: must be a whole number >= 1"):
+        write_store([], 0, tmp_path / "s", shard_size=0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing left behind
+
+
+HOLD = """
+import sys
+from torchsar_eval.locks import hold
+with hold(sys.argv[1]):
+    print("held", flush=True)
+    sys.stdin.read()
+"""
+
+
+def test_only_dead_writers_partial_stores_are_removed(tmp_path):
+    live, dead = tmp_path / "live", tmp_path / "dead"
+    for out in (live, dead):
+        partial_path(out).mkdir()
+        (partial_path(out) / "shard-000000.tar").write_bytes(b"x")
+    lock_path(dead).write_text("")  # a killed writer's lock file: there, but free
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(lock_path(live))],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        assert proc.stdout.readline().strip() == "held"
+        assert remove_dead_partials(tmp_path) == [partial_path(dead)]
+        assert partial_path(live).is_dir() and not lock_path(dead).exists()
+    finally:
+        proc.stdin.close()
+        proc.wait()
+    assert remove_dead_partials(tmp_path) == [partial_path(live)]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_store_changed_after_opening_is_named_at_read(tmp_path):
+    out = write_store(sim_items("sim-chips", 2, 0), 2, tmp_path / "s")
+    ds = StoreDataset(out)  # checked here ...
+    index = np.load(out / "index.npy")
+    index[1, 0, 0] = 10**13
+    np.save(out / "index.npy", index)  # ... then changed before the first read
+    assert torch.equal(ds[0]["image"], next(sim_items("sim-chips", 1, 0))["image"])
+    with pytest.raises(BadItemError, match=r"shard-000000.tar: item 000000001: .*changed since"):
+        ds[1]
+    with pytest.raises(EvalError, match=r"n=-1: must be a whole number >= 0"):
+        StoreDataset(out, limit=-1)
