@@ -99,6 +99,7 @@ MAX_N = 10_000_000
 def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     """``{name: dataset}`` from a name, a dataset, a list of them or a dict."""
     from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.datasets.files import warn_shared_files
 
     if isinstance(datasets, str | Dataset):
         datasets = [datasets]
@@ -119,6 +120,7 @@ def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
         out[name] = make_dataset(d, n=n, seed=seed) if isinstance(d, str) else d
     if not out:
         raise EvalError("{opt:datasets} is empty: give at least one dataset")
+    warn_shared_files(out)  # one image read by two datasets is counted in both
     return out
 
 

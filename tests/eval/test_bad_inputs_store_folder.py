@@ -283,6 +283,17 @@ def _datasets_sharing_a_file(tmp_path):
     return attempt
 
 
+def test_evaluate_warns_when_two_datasets_read_one_image(tmp_path):
+    from torchsar_eval import evaluate
+    from torchsar_eval.datasets.files import SharedFilesWarning
+
+    root = _folder(tmp_path)
+    (root / "sub").mkdir()
+    specs = [f"folder:{root}?type=intensity", f"folder:{root / 'sub' / '..'}?type=intensity"]
+    with pytest.warns(SharedFilesWarning, match="both read"):
+        evaluate(specs, ["ca"], progress=False)
+
+
 # --- the table ----------------------------------------------------------------------------
 
 SHARD0, SHARD1, INDEX, HEAD = (
