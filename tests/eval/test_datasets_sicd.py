@@ -59,5 +59,5 @@ def test_chips_regions_spacing_and_intensity(tmp_path, monkeypatch):
 def test_without_sarpy_the_error_says_what_to_install(tmp_path):
     product = tmp_path / "p.nitf"
     product.write_bytes(b"x")
-    with pytest.raises(EvalError, match=r"pip install 'torchsar\[sar\]'"):
+    with pytest.raises(EvalError, match=r"pip install 'sarpy>=1.3'"):
         make_dataset(f"sicd:{product}")
