@@ -8,9 +8,10 @@ Crowd annotations (``iscrowd=1``) are kept apart so callers can make them don't-
 decoder allocates in proportion to the coordinates it is given, so one polygon vertex at
 ``1e300`` would exhaust memory):
 
-- ``images``: objects with an integer ``id`` (each listed once), a ``file_name`` (each
-  named once), and positive integer ``height`` and ``width`` whose product is at most
-  ``max_pixels``.
+- ``images``: objects with an integer ``id`` (each listed once; the very same record
+  listed again is read once, with an :class:`~torchsar.io.errors.AnnotationWarning`), a
+  ``file_name`` (each named once), and positive integer ``height`` and ``width`` whose
+  product is at most ``max_pixels``.
 - ``categories``: objects with an integer ``id`` and a ``name``.
 - ``annotations``: objects with a known ``image_id`` and ``category_id``; a ``bbox`` of
   four finite numbers with non-negative width and height, inside the image; ``iscrowd``
@@ -168,14 +169,14 @@ def _dimension(im: dict, key: str, where: str, path) -> int:
 def _images(entries: list, path, max_pixels: int) -> list[dict]:
     """Validated image records in file order; ids and file names unique."""
     records: list[dict] = []
-    by_id: dict[int, int] = {}
-    by_name: dict[str, int] = {}
+    by_id: dict[int, tuple[int, dict]] = {}  # id -> (entry, record)
+    by_name: dict[str, tuple[int, int]] = {}  # file name -> (entry, id)
     for k, im in enumerate(entries):
         if not isinstance(im, dict):
             raise FileFormatError(path, f"images[{k}] is not an object: {_show(im)}")
         if not _is_int(im.get("id")):
             raise FileFormatError(path, f"images[{k}] has no integer id: {_show(im)}")
-        where = f"images[{k}] (id {im['id']})"
+        where = f"images[{k}] (id {_show(im['id'])})"
         name = im.get("file_name")
         if not isinstance(name, str) or not name:
             raise FileFormatError(path, f"{where} has no file_name (a string)")
@@ -185,16 +186,21 @@ def _images(entries: list, path, max_pixels: int) -> list[dict]:
                 path, f"{where} {name} is {w}x{h} = {w * h:,} pixels, over the limit of "
                 f"{max_pixels:,} (raise it with max_pixels)"
             )  # fmt: skip
+        rec = {"id": im["id"], "file_name": name, "height": h, "width": w}
         if im["id"] in by_id:
-            j = by_id[im["id"]]
+            j, first = by_id[im["id"]]
+            if first == rec:  # the same record again: harmless, but say so
+                warnings.warn(f"{path}: images[{j}] is listed again as images[{k}]; read once",
+                              AnnotationWarning, stacklevel=3)  # fmt: skip
+                continue
             raise FileFormatError(path, f"images[{j}] and images[{k}] both have id {im['id']} "
-                                  f"({records[j]['file_name']}, {name})")  # fmt: skip
+                                  f"({first['file_name']}, {name})")  # fmt: skip
         if name in by_name:
-            j = by_name[name]
-            raise FileFormatError(path, f"images[{j}] (id {records[j]['id']}) and {where} both "
-                                  f"name file {name}; an image is listed once")  # fmt: skip
-        by_id[im["id"]], by_name[name] = k, k
-        records.append({"id": im["id"], "file_name": name, "height": h, "width": w})
+            j, other = by_name[name]
+            raise FileFormatError(path, f"images[{j}] (id {other}) and {where} both name file "
+                                  f"{name}; an image is listed once")  # fmt: skip
+        by_id[im["id"]], by_name[name] = (k, rec), (k, im["id"])
+        records.append(rec)
     return records
 
 
