@@ -17,7 +17,8 @@ Names accepted by :func:`make_dataset` (options as ``?key=value&key=value``):
   ``<stem>.png|jpg|jpeg|tif|tiff`` images; ``variant=linear`` picks ``<stem>.linear.jpeg``.
 - ``coco:FILE.json``: COCO boxes, polygons and RLE; ``images=DIR`` (default: the JSON's folder).
 - ``voc:DIR``: Pascal VOC XML boxes (``gt="box"``); images in ``images=DIR``, VOC's
-  ``JPEGImages`` or beside the XML.
+  ``JPEGImages`` or beside the XML. COCO and VOC refuse an image name that resolves
+  outside its folder (``..``, an absolute path, a link elsewhere) unless ``outside=allow``.
 - ``hrsid:DIR``: HRSID ``<name>.png`` with ``<name>_instance_id_RGB.png`` colour ids.
 - ``phoenix:DIR``: MSTAR raw Phoenix files (pixel spacing from the header).
 - ``sicd:FILE``: a SICD/NITF complex product cut into ``chip=N`` (512) chips, no ground

@@ -2,6 +2,12 @@
 
 Instances are painted in annotation order (a later object wins where two overlap); boxes
 come from the annotations. COCO crowd regions and VOC ``difficult`` objects are don't-care.
+
+An image named by an annotation file must lie inside the image folder (``images=DIR``;
+by default the COCO file's folder, or VOC's ``JPEGImages`` / the XML's folder): a name
+with ``..``, an absolute path or a symbolic link that resolves outside it is refused, so an
+annotation file cannot make the run read (and record in its manifest) files elsewhere on the
+machine. ``outside=allow`` reads such images anyway.
 """
 
 from __future__ import annotations
@@ -26,7 +32,8 @@ from torchsar_eval.errors import EvalError
 
 __all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
 
-ANNOTATED_OPTIONS = ("images", "type", "spacing", "max_pixels")
+ANNOTATED_OPTIONS = ("images", "type", "spacing", "max_pixels", "outside")
+OUTSIDE = ("refuse", "allow")
 
 
 class AnnotatedDataset(FileDataset):
@@ -41,7 +48,7 @@ class AnnotatedDataset(FileDataset):
         super().__init__(root, **kw)
         self.items = entries
         self.image_ids = image_ids
-        missing = [str(e[0]) for e in entries if not e[0].is_file()]
+        missing = [str(e[0]) for e in entries if not _is_file(e[0])]
         if missing:
             raise EvalError(
                 f"{scheme} annotations refer to missing image {missing[0]} ({len(missing)} missing)"
@@ -108,6 +115,21 @@ class AnnotatedDataset(FileDataset):
         return make_item(samples, inst, ignore, meta, boxes=boxes)
 
 
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, false for a name the system refuses (too long, say)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except (OSError, ValueError):
+        return False
+
+
 def _painted(painter: _Painter, box) -> CocoAnnotation:
     """The annotation a painter paints (a bare box for VOC objects)."""
     if painter.ann is not None:
@@ -125,13 +147,35 @@ class _Painter:
         self.area = None if coco_annotation is None else coco_annotation.area
 
 
-def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> AnnotatedDataset:
-    """``coco:FILE.json``: images under ``images`` (default: the JSON's folder)."""
+def _inside(folder: Path, name: str, what: str) -> Path:
+    """``folder / name``, refused when it resolves outside ``folder`` (see the module
+    docstring); ``what`` names the file and field in the message."""
+    path = folder / name
     try:
-        coco = read_coco(path)
+        real, base = path.resolve(), folder.resolve()
+    except (OSError, RuntimeError) as exc:  # a link loop
+        raise EvalError(f"{what} {name!r} cannot be resolved ({exc})") from None
+    if base in real.parents:
+        return path
+    raise EvalError(
+        f"{what} {name!r} resolves to {real}, outside the image folder {folder}; refused "
+        "(the dataset option outside=allow reads images outside it)"
+    )
+
+
+def coco_dataset(
+    path: Path, images: Path | None, limit: int | None, *, outside: bool = False, **kw
+) -> AnnotatedDataset:
+    """``coco:FILE.json``: images under ``images`` (default: the JSON's folder); with
+    ``outside``, also images whose ``file_name`` resolves outside that folder."""
+    try:
+        coco = read_coco(path, max_pixels=kw.get("max_pixels", DEFAULT_MAX_PIXELS))
     except FileFormatError as exc:
         raise EvalError(str(exc)) from exc
     folder = images or path.parent
+    if not outside:
+        for k, im in enumerate(coco.images):
+            _inside(folder, im.file_name, f"{path}: images[{k}] (id {im.id}) file_name")
     ordered = sorted(coco.images, key=lambda im: im.id)  # pycocotools' image order
     entries = [
         (
@@ -144,7 +188,8 @@ def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> An
     ]
     ids = [im.id for im in ordered]
     ds = AnnotatedDataset("coco", path, entries, [path], image_ids=ids, **kw)
-    ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())))
+    ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())),
+                      outside=OUTSIDE[outside])  # fmt: skip
     ds.categories = dict(coco.categories)  # id -> name: saved predictions give ids
     if coco.categories:
         ds.default_class = coco.categories[min(coco.categories)]
@@ -153,16 +198,21 @@ def coco_dataset(path: Path, images: Path | None, limit: int | None, **kw) -> An
     return ds
 
 
-def _voc_image(xml: Path, filename: str, images: Path | None) -> Path:
-    """The image of a VOC file: ``images/filename``, else VOC's ``../JPEGImages``, else beside."""
-    for folder in (images, xml.parent.parent / "JPEGImages", xml.parent):
-        if folder is not None and (folder / filename).exists():
-            return folder / filename
-    return (images or xml.parent.parent / "JPEGImages") / filename
+def _voc_image(xml: Path, filename: str, images: Path | None, outside: bool) -> Path:
+    """The image of a VOC file: ``images/filename``, else VOC's ``../JPEGImages``, else
+    beside; inside the folder it is found in unless ``outside``."""
+    folders = [f for f in (images, xml.parent.parent / "JPEGImages", xml.parent) if f]
+    folder = next((f for f in folders if _exists(f / filename)), folders[0])
+    if outside:
+        return folder / filename
+    return _inside(folder, filename, f"{xml}: <filename>")
 
 
-def voc_dataset(root: Path, images: Path | None, limit: int | None, **kw) -> AnnotatedDataset:
-    """``voc:DIR``: every ``*.xml`` under ``DIR`` (e.g. ``DIR/Annotations``)."""
+def voc_dataset(
+    root: Path, images: Path | None, limit: int | None, *, outside: bool = False, **kw
+) -> AnnotatedDataset:
+    """``voc:DIR``: every ``*.xml`` under ``DIR`` (e.g. ``DIR/Annotations``); with
+    ``outside``, also images whose ``<filename>`` resolves outside their folder."""
     require_dir(root, "voc")
     xmls = [f for f in walk_files(root) if f.suffix.lower() == ".xml"]
     if not xmls:
@@ -170,14 +220,15 @@ def voc_dataset(root: Path, images: Path | None, limit: int | None, **kw) -> Ann
     entries = []
     for xml in xmls:
         try:
-            ann = read_voc(xml)
+            ann = read_voc(xml, max_pixels=kw.get("max_pixels", DEFAULT_MAX_PIXELS))
         except FileFormatError as exc:
             raise EvalError(str(exc)) from exc
         objs = [(o.name, o.box, _Painter(o.box), o.difficult) for o in ann.objects]
-        img = _voc_image(xml, ann.filename, images)
+        img = _voc_image(xml, ann.filename, images, outside)
         entries.append((img, (ann.height, ann.width), objs, str(xml.relative_to(root))))
     ds = AnnotatedDataset("voc", root, entries, xmls, **kw)
     ds.options["labels"] = "VOC boxes (gt=box); difficult = ignore"
+    ds.options["outside"] = OUTSIDE[outside]
     ds.finish("annotation", limit)
     return ds
 
@@ -188,16 +239,17 @@ def _kw(spec: DatasetSpec) -> dict:
         "sample_type": spec.sample_type("display"),
         "spacing": spec.spacing(),
         "max_pixels": spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        "outside": spec.choice("outside", OUTSIDE, "refuse") == "allow",
     }
 
 
 def coco_from_spec(spec: DatasetSpec, limit: int | None) -> AnnotatedDataset:
-    """``coco:FILE.json[?images=DIR]``."""
+    """``coco:FILE.json[?images=DIR&outside=allow]``."""
     images = spec.options.get("images")
     return coco_dataset(Path(spec.path), images and Path(images), limit, **_kw(spec))
 
 
 def voc_from_spec(spec: DatasetSpec, limit: int | None) -> AnnotatedDataset:
-    """``voc:DIR[?images=DIR]``."""
+    """``voc:DIR[?images=DIR&outside=allow]``."""
     images = spec.options.get("images")
     return voc_dataset(Path(spec.path), images and Path(images), limit, **_kw(spec))

@@ -14,6 +14,7 @@ from torch import Tensor
 from torch.utils.data import Dataset
 
 from torchsar.detection import Detection
+from torchsar.io.coco import segmentation_problems
 from torchsar.io.rle import counts_from_strings, rle_pixels
 from torchsar.objects import Objects
 from torchsar_eval.detector import Detector
@@ -79,9 +80,22 @@ def compressed_counts(seg: object, h: int, w: int) -> bytes:
     return counts.encode() if isinstance(counts, str) else counts
 
 
-def segmentation_pixels(segs: list, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+def segmentation_pixels(
+    segs: list, h: int, w: int, entries: list | None = None, path: Path | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``(mask index, flat row-major index)`` of the pixels of COCO segmentations of one
-    image size, decoded from their run lengths without dense masks."""
+    image size, decoded from their run lengths without dense masks.
+
+    Each is checked first (:func:`torchsar.io.coco.segmentation_problems`; a predicted
+    polygon may reach outside the image by up to the image's size, as a detector's output
+    at the border can, but not further, so no coordinate makes the decoder allocate
+    without bound); a bad one raises :class:`EvalError` naming ``path`` and its entry
+    number (from ``entries``).
+    """
+    for k, problem in enumerate(segmentation_problems(segs, h, w, tolerance=max(h, w))):
+        if problem is not None:
+            entry = entries[k] if entries is not None else k
+            raise EvalError(f"predictions {path}: entry {entry} {problem}")
     counts, owner = counts_from_strings([compressed_counts(s, h, w) for s in segs])
     return rle_pixels(counts, owner, len(segs), (h, w))
 
@@ -163,7 +177,8 @@ class SavedPredictions:
         classes = None if names is None else names[r]
         common = {"plane": plane, "planes": b * c, "classes": classes}
         if t.geometry == "mask":
-            owner, pixels = segmentation_pixels([t.segmentation[i] for i in r], h, w)
+            owner, pixels = segmentation_pixels([t.segmentation[i] for i in r], h, w,
+                                                r.tolist(), self.path)  # fmt: skip
             return Objects.from_pixels(owner, pixels, t.score[r], shape=(h, w), **common)
         if t.geometry == "box":
             return Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)

@@ -2,7 +2,7 @@
 
 from torchsar.io.channels import single_channel
 from torchsar.io.coco import CocoAnnotation, CocoImage, CocoSet, annotation_mask, read_coco
-from torchsar.io.errors import FileFormatError
+from torchsar.io.errors import AnnotationWarning, FileFormatError
 from torchsar.io.geotiff import geotiff_pixel_spacing
 from torchsar.io.gotcha import GotchaPass, gotcha_files, read_gotcha
 from torchsar.io.idmap import decode_id_map
@@ -25,6 +25,7 @@ __all__ = [
     "RASTER_EXTS",
     "SAMPLE_TYPES",
     "TIFF_EXTS",
+    "AnnotationWarning",
     "CocoAnnotation",
     "CocoImage",
     "CocoSet",

@@ -1,4 +1,5 @@
-"""The error every reader raises for a file it cannot read as the format it claims."""
+"""The error every reader raises for a file it cannot read as the format it claims, and the
+warning for an annotation file that reads but looks wrong."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from pathlib import Path
 
 from torchsar._checks import TorchSARError
 
-__all__ = ["FileFormatError"]
+__all__ = ["AnnotationWarning", "FileFormatError"]
 
 
 class FileFormatError(TorchSARError, ValueError):
@@ -21,3 +22,7 @@ class FileFormatError(TorchSARError, ValueError):
         self.path = str(path)
         self.problem = problem
         super().__init__(f"{self.path}: {problem}")
+
+
+class AnnotationWarning(UserWarning):
+    """An annotation file reads, but something in it is suspect (a repeated annotation id)."""

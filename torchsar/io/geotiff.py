@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from torchsar.io.errors import FileFormatError
-from torchsar.io.raster import check_regular_file
+from torchsar.io.raster import check_regular_file, tifffile_log
 
 __all__ = ["geotiff_pixel_spacing"]
 
@@ -38,14 +38,16 @@ def geotiff_pixel_spacing(path: str | Path) -> tuple[float, float] | None:
     check_regular_file(path)
     import tifffile
 
-    try:
-        with tifffile.TiffFile(path) as tif:
-            tags = tif.pages[0].tags
-            scale = tags.get(MODEL_PIXEL_SCALE)
-            keys = tags.get(GEO_KEY_DIRECTORY)
-            scale, keys = scale and scale.value, keys and keys.value
-    except Exception as exc:  # any decoder complaint: name the file
-        raise FileFormatError(path, f"cannot read image header ({exc})") from exc
+    with tifffile_log() as messages:
+        try:
+            with tifffile.TiffFile(path) as tif:
+                tags = tif.pages[0].tags
+                scale = tags.get(MODEL_PIXEL_SCALE)
+                keys = tags.get(GEO_KEY_DIRECTORY)
+                scale, keys = scale and scale.value, keys and keys.value
+        except Exception as exc:  # any decoder complaint: name the file
+            said = f"; tifffile: {'; '.join(messages[:3])}" if messages else ""
+            raise FileFormatError(path, f"cannot read image header ({exc}{said})") from exc
     if not scale or not keys:
         return None
     geo = _geokeys(tuple(int(k) for k in keys))

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["counts_from_strings", "rle_pixels"]
+__all__ = ["check_strings", "counts_from_strings", "rle_pixels"]
 
 
 def _segment_starts(ids: np.ndarray) -> np.ndarray:
@@ -84,3 +84,78 @@ def rle_pixels(
     p = base + np.arange(total)  # column-major position within its mask
     col, row = np.divmod(p, h)
     return np.repeat(owner[ones], length), row * w + col
+
+
+def _allowed_span(total: int) -> int:
+    """The most characters one run length of a ``total``-pixel mask can need (5 bits a
+    character, a sign, one to spare), at most 12 (60 bits: no overflow)."""
+    return min(12, -(-(int(total).bit_length() + 1) // 5) + 1)
+
+
+def check_strings(
+    strings: Sequence[bytes | str], totals: Sequence[int]
+) -> tuple[list[str | None], np.ndarray, np.ndarray]:
+    """Check compressed COCO RLE strings before decoding them, all in a few vectorised
+    passes: ``(problems, sums, minima)``. ``problems[i]`` says what keeps string ``i`` from
+    decoding (a character that is no code, ``'0'`` to ``'o'``; an end inside a run length;
+    a run length longer than a mask of ``totals[i]`` pixels needs) or is ``None``; then
+    ``sums[i]`` and ``minima[i]`` are the sum and the least of its run lengths (``0`` for
+    an empty string), for the caller to compare with ``totals[i]`` and zero.
+
+    Example:
+        >>> problems, sums, minima = check_strings(["52", "5~", "PPo"], [7, 7, 7])
+        >>> problems[0], int(sums[0]), int(minima[0])
+        (None, 7, 2)
+        >>> problems[1:]
+        ["character '~' at 1 is not a code ('0' to 'o')", 'it ends inside a run length']
+    """
+    n = len(strings)
+    problems: list[str | None] = [None] * n
+    raw: list[bytes] = []
+    for i, s in enumerate(strings):
+        try:
+            raw.append(s.encode("ascii") if isinstance(s, str) else bytes(s))
+        except UnicodeEncodeError:
+            raw.append(b"")
+            problems[i] = "it holds characters outside ASCII"
+    sums, minima = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    lengths = np.array([len(r) for r in raw], np.int64)
+    c = np.frombuffer(b"".join(raw), np.uint8).astype(np.int64) - 48
+    starts = np.cumsum(lengths) - lengths
+    bad = np.flatnonzero((c < 0) | (c > 63))
+    if bad.size:
+        owner = np.searchsorted(starts, bad, side="right") - 1
+        strings_hit, first = np.unique(owner, return_index=True)
+        for i, at in zip(strings_hit.tolist(), (bad[first] - starts[strings_hit]).tolist(),
+                         strict=True):  # fmt: skip
+            char = chr(raw[i][at])
+            problems[i] = f"character {char!r} at {at} is not a code ('0' to 'o')"
+    for i in np.flatnonzero(lengths > 0).tolist():
+        if problems[i] is None and c[starts[i] + lengths[i] - 1] & 0x20:
+            problems[i] = "it ends inside a run length"
+    keep = [i for i in range(n) if problems[i] is None and lengths[i]]
+    if not keep:
+        return problems, sums, minima
+    cc = np.concatenate([c[starts[i] : starts[i] + lengths[i]] for i in keep])
+    end = (cc & 0x20) == 0
+    group = np.concatenate([[0], np.cumsum(end)[:-1]])  # the run length of each character
+    span = np.bincount(group)  # characters of each run length
+    owner = np.repeat(np.arange(len(keep)), lengths[keep])[end]  # of each run length
+    longest = np.zeros(len(keep), np.int64)
+    np.maximum.at(longest, owner, span)
+    decodable = []
+    for j, i in enumerate(keep):
+        allowed = _allowed_span(totals[i])
+        if longest[j] > allowed:
+            problems[i] = (f"a run length spans {longest[j]} characters, more than the "
+                           f"{allowed} a mask of {totals[i]} pixels needs")  # fmt: skip
+        else:
+            decodable.append(i)
+    if decodable:
+        counts, owner = counts_from_strings([raw[i] for i in decodable])
+        got_sum = np.zeros(len(decodable), np.int64)
+        got_min = np.full(len(decodable), np.iinfo(np.int64).max)
+        np.add.at(got_sum, owner, counts)
+        np.minimum.at(got_min, owner, counts)
+        sums[decodable], minima[decodable] = got_sum, got_min
+    return problems, sums, minima
