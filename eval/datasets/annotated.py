@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.io import (
-    DEFAULT_MAX_PIXELS,
     FileFormatError,
     raster_shape,
     read_coco,
@@ -27,7 +26,7 @@ from torchsar.io import (
 from torchsar.io.coco import CocoAnnotation, annotation_pixels
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from torchsar_eval.datasets.images import read_samples
-from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
 
 __all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
@@ -238,7 +237,7 @@ def _kw(spec: DatasetSpec) -> dict:
     return {
         "sample_type": spec.sample_type("display"),
         "spacing": spec.spacing(),
-        "max_pixels": spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        "max_pixels": spec.max_pixels(),
         "outside": spec.choice("outside", OUTSIDE, "refuse") == "allow",
     }
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from torchsar.io import DEFAULT_MAX_PIXELS, decode_id_map, read_raster
+from torchsar.io import decode_id_map, read_raster
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from torchsar_eval.datasets.images import check_same_size, read_samples
-from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
 
 __all__ = ["HRSID_OPTIONS", "HrsidDataset"]
@@ -70,5 +70,5 @@ def hrsid_from_spec(spec: DatasetSpec, limit: int | None) -> HrsidDataset:
         limit=limit,
         sample_type=spec.sample_type("display"),
         spacing=spec.spacing(),
-        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        max_pixels=spec.max_pixels(),
     )

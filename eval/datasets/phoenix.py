@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torchsar.io import DEFAULT_MAX_PIXELS, RASTER_EXTS, FileFormatError, is_phoenix, read_phoenix
+from torchsar.io import RASTER_EXTS, FileFormatError, is_phoenix, read_phoenix
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from torchsar_eval.datasets.images import read_labels
 from torchsar_eval.datasets.semantics import (
@@ -22,7 +22,7 @@ from torchsar_eval.datasets.semantics import (
     form_instances,
     split_labels,
 )
-from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
 
 __all__ = ["PHOENIX_OPTIONS", "PhoenixDataset"]
@@ -103,5 +103,5 @@ def phoenix_from_spec(spec: DatasetSpec, limit: int | None) -> PhoenixDataset:
         spacing=spec.spacing(),
         shadow=spec.choice("shadow", SHADOW_MODES, "ignore"),
         instances=spec.choice("instances", INSTANCE_MODES[:2], "one-per-image"),
-        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        max_pixels=spec.max_pixels(),
     )

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from torchsar.io import DEFAULT_MAX_PIXELS, read_sicd, sicd_shape
+from torchsar.io import read_sicd, sicd_shape
 from torchsar_eval.datasets.base import FileDataset, make_item
-from torchsar_eval.datasets.spec import DatasetSpec
+from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
 
 __all__ = ["SICD_OPTIONS", "SicdDataset"]
@@ -79,5 +79,5 @@ def sicd_from_spec(spec: DatasetSpec, limit: int | None) -> SicdDataset:
         chip=spec.positive_int("chip", 512),
         limit=limit,
         spacing=spec.spacing(),
-        max_pixels=spec.positive_int("max_pixels", DEFAULT_MAX_PIXELS),
+        max_pixels=spec.max_pixels(),
     )
