@@ -7,7 +7,7 @@ import pandas as pd
 
 from torchsar.metrics.curves import RECALL_POINTS, suffix
 from torchsar.metrics.object_state import operating_point
-from torchsar.metrics.paired import PAIRED_METRICS, paired_differences
+from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals
 from torchsar_eval.result import DetectorResult
 
 __all__ = [
@@ -260,13 +260,12 @@ def errors_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return _frame(results, _errors_rows, ERRORS_COLUMNS)
 
 
-def _reference(rs: list[DetectorResult]) -> DetectorResult | None:
-    """The detector with the best F1 at its operating point (the first of equals)."""
+def _reference(metrics: list[dict]) -> int | None:
+    """The position of the best F1 (the first of equals; ``None``: no F1 at all)."""
     best, ref = -1.0, None
-    for r in rs:
-        f1 = r.objects.metrics(r.at)["f1"]
-        if f1 == f1 and f1 > best:
-            best, ref = f1, r
+    for k, m in enumerate(metrics):
+        if m["f1"] == m["f1"] and m["f1"] > best:
+            best, ref = m["f1"], k
     return ref
 
 
@@ -278,14 +277,15 @@ def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) 
     excludes 0 (NaN intervals without replicates)."""
     rows = []
     for ds, rs in results.items():
-        ref = _reference(rs)
-        for r in rs:
-            if ref is None or r is ref:
+        states = [(r.objects.metrics(r.at), r.objects.replicate_metrics(r.at)) for r in rs]
+        ref = _reference([m for m, _ in states])
+        for k, r in enumerate(rs):
+            if ref is None or k == ref:
                 continue
-            diffs = paired_differences(r.objects, ref.objects, r.at, ref.at, level)
+            diffs = difference_intervals(states[k], states[ref], level)
             for metric in PAIRED_METRICS:
                 d, lo, hi = diffs[metric]
-                rows.append([ds, r.detector.name, ref.detector.name, metric, d, lo, hi,
+                rows.append([ds, r.detector.name, rs[ref].detector.name, metric, d, lo, hi,
                              bool(lo > 0 or hi < 0)])  # fmt: skip
     return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
 

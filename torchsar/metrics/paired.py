@@ -15,7 +15,7 @@ import numpy as np
 from torchsar.metrics.bootstrap import interval
 from torchsar.metrics.object_state import ObjectState
 
-__all__ = ["PAIRED_METRICS", "paired_differences"]
+__all__ = ["PAIRED_METRICS", "difference_intervals", "paired_differences"]
 
 PAIRED_METRICS = ("f1", "recall", "pd_at_1_fa_per_image", "ap50")
 """The metrics compared: F1 and recall at each detector's operating point, Pd at 1 false
@@ -47,10 +47,22 @@ def paired_differences(
     """
     if (a.replicates, a.seed) != (b.replicates, b.seed):
         raise ValueError("paired differences need the same bootstrap replicates and seed")
-    ma, mb = a.metrics(at_a), b.metrics(at_b)
-    ra, rb = a.replicate_metrics(at_a), b.replicate_metrics(at_b)
+    return difference_intervals(
+        (a.metrics(at_a), a.replicate_metrics(at_a)),
+        (b.metrics(at_b), b.replicate_metrics(at_b)),
+        level,
+    )
+
+
+def difference_intervals(
+    a: tuple[dict, dict], b: tuple[dict, dict], level: float = 0.95
+) -> dict[str, tuple[float, float, float]]:
+    """:func:`paired_differences` from each state's ``(metrics, replicate_metrics)``
+    (computed once when one detector is compared with several)."""
+    (ma, ra), (mb, rb) = a, b
     out = {}
     for k in PAIRED_METRICS:
-        lo, hi = interval(ra[k] - rb[k], level) if a.replicates else (np.nan, np.nan)
+        reps = ra[k] - rb[k]
+        lo, hi = interval(reps, level) if reps.size else (np.nan, np.nan)
         out[k] = (float(ma[k] - mb[k]), lo, hi)
     return out
