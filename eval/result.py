@@ -63,9 +63,11 @@ class Scoring:
         seed: bootstrap seed.
         bootstrap_unit: what the bootstrap resamples: ``"image"`` (each image), or
             ``"group"`` (the groups of images in ``meta["group"]``, e.g. the scene each
-            image was cut from, so that images of one scene are drawn together; an image
-            without a group is its own unit). Every detector of a run gets the same
-            resampled units, which makes the comparisons in ``paired.csv`` paired.
+            image was cut from, so that images of one scene are drawn together; simulated
+            images are grouped by clutter model; an image without a group is its own
+            unit). Resampling needs many groups to mean anything. Every detector of a run
+            gets the same resampled units, which makes the comparisons in ``paired.csv``
+            paired.
         instances: ``"auto"`` scores each detector's own instances when it returns them
             (a region CFAR's regions, a CNN's boxes); ``"discriminate"`` sends every
             detector's statistic (or its objects' pixel scores) through the discrimination

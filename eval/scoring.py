@@ -19,7 +19,8 @@ __all__ = ["BOOTSTRAP_UNITS", "batch_truth", "declared_boxes", "image_rows", "kn
 
 BOOTSTRAP_UNITS = ("image", "group")
 """What the bootstrap resamples: images, or groups of images (``meta["group"]``, e.g. the
-scene an image was cut from; an image without a group is its own unit)."""
+scene an image was cut from; simulated images: their clutter model; an image without a
+group is its own unit)."""
 
 
 def _planes(batch: dict) -> tuple[int, int]:
@@ -102,7 +103,7 @@ def batch_truth(
         index = m.get("index")
         order = None if index is None else int(index) * c + k % c
         group = _group(m)
-        boot = group if unit == "group" and group else None
+        boot = f"group:{group}" if unit == "group" and group else None
         info.append(ImageInfo(name, m.get("class"), group, km2, order, boot))
     return gt, info
 

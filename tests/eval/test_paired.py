@@ -122,7 +122,7 @@ def test_group_unit_resamples_whole_scenes():
     replicate target counts are the scenes' counts weighted by the scenes' Poisson weights."""
     res = _run(12, 256, "group", 50)
     boot = res.states["sq"][0].objects.boot
-    w = poisson_weights([f"scene{k}" for k in range(3)], 50, seed=0)
+    w = poisson_weights([f"group:scene{k}" for k in range(3)], 50, seed=0)
     np.testing.assert_array_equal(boot["n_gt"], w @ np.full(3, 8))  # 4 images x 2 targets
     np.testing.assert_array_equal(boot["images"], w @ np.full(3, 4))
     image_unit = _run(12, 256, "image", 50).states["sq"][0].objects.boot
