@@ -49,6 +49,11 @@ class Results:
         summary: one row per dataset x detector (``summary.csv``).
         froc, pr, pixel_roc, breakdown, timing, per_image: the other tables.
         coco: ``pycocotools``' 12 stats (with ``Scoring(coco_compatible=True)``).
+        scr: Pd versus signal-to-clutter ratio per SCR bin, with Wilson intervals
+            (``scr.csv``).
+        errors: false alarms per type, misses per size and SCR bin (``errors.csv``).
+        paired: each detector against the dataset's best by F1, paired bootstrap
+            intervals of the differences (``paired.csv``).
         states: ``{dataset: [DetectorResult]}`` merged states (pixel counts and ROC,
             :class:`~torchsar.metrics.ObjectState`).
         stats: per dataset: images, wall time, shards done / resumed / retried / failed.
@@ -64,6 +69,9 @@ class Results:
     timing: pd.DataFrame
     coco: pd.DataFrame
     per_image: pd.DataFrame
+    scr: pd.DataFrame
+    errors: pd.DataFrame
+    paired: pd.DataFrame
     states: dict[str, list] = field(repr=False)
     stats: dict[str, dict] = field(repr=False)
     out: Path | None = None

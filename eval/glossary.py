@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pandas as pd
 
+from torchsar.metrics.scr import SCR_GUARD, SCR_WIDTH
+
 __all__ = ["glossary"]
 
 _RULES = {
@@ -38,6 +40,33 @@ _TERMS = [
 ]  # fmt: skip
 
 
+_FILES = [
+    ("scr.csv", "Pd per signal-to-clutter ratio bin at the operating point. SCR = 10 log10("
+     "target mean intensity / clutter mean) on the image before any speckle filter; the "
+     f"clutter is a ring {SCR_WIDTH} px wide starting {SCR_GUARD + 1} px outside the target's "
+     "bounding box (Chebyshev distance), other targets, ignore pixels and no-data left out. "
+     "`source` measured, or "
+     "known where the data declare it (the simulator's target level over its clutter mean). "
+     "Bins [lo, hi) dB: <0, 0-5, 5-10, 10-15, 15-20, >=20, n/a (no clutter in the ring); "
+     "pd_lo, pd_hi: 95 % Wilson interval, targets counted as independent trials. The same "
+     "bins are in `breakdown.csv` (by scr, scr_known)"),
+    ("errors.csv", "SAR error types at the operating point. Each false alarm (an unmatched "
+     "detection) gets the first that applies: **merge** touches two or more targets; "
+     "**duplicate** touches one target already matched by a higher-scored detection and "
+     "covers at least half of it; **fragment** the same but covering less than half; "
+     "**localisation** touches one target not matched by a higher-scored detection (it "
+     "overlaps but fails the matching rule); **shadow** touches no target but lies on a "
+     "target's radar shadow (simulated data, and folder / Phoenix data with shadow=ignore; "
+     "0 elsewhere: no shadow mask); **clutter** everything else. Touching: sharing a pixel "
+     "(boxes: intersecting; distance rule: within the tolerance). Misses by size bin and "
+     "SCR bin"),
+    ("paired.csv", "each detector minus the dataset's best by F1 (`reference`) in F1, recall, "
+     "Pd at 1 false alarm per image and AP50, with the 95 % interval of the paired "
+     "bootstrap (every detector's replicates resample the same images, or groups with "
+     "--bootstrap-unit group); `significant`: the interval excludes 0"),
+]  # fmt: skip
+
+
 def glossary(summary: pd.DataFrame, scoring) -> str:
     """Markdown glossary for a run's summary (the matching rule and the N targets)."""
     m = scoring.matching
@@ -61,5 +90,11 @@ def glossary(summary: pd.DataFrame, scoring) -> str:
         lines.append(f"- {ds}: {int(df['images'].iloc[0])} images, "
                      f"{int(df['targets'].iloc[0])} targets")  # fmt: skip
     lines += ["", "| column | meaning |", "|---|---|"]
-    lines += [f"| {k} | {v} |" for k, v in _TERMS]
+    unit = getattr(scoring, "bootstrap_unit", "image")
+    for k, v in _TERMS:
+        if unit == "group" and k == "X_lo, X_hi":
+            v = v.replace("over images", "over groups of images (meta group)")
+        lines.append(f"| {k} | {v} |")
+    lines += ["", "| file | meaning |", "|---|---|"]
+    lines += [f"| `{k}` | {v} |" for k, v in _FILES]
     return "\n".join(lines) + "\n"

@@ -16,11 +16,14 @@ from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,
     breakdown_table,
     coco_table,
+    errors_table,
     froc_table,
     headline_table,
     markdown,
+    paired_table,
     pixel_roc_table,
     pr_table,
+    scr_table,
     summary_table,
     timing_table,
 )
@@ -35,6 +38,9 @@ TABLE_FILES = {
     "breakdown": "breakdown.csv",
     "timing": "timing.csv",
     "coco": "coco.csv",
+    "scr": "scr.csv",
+    "errors": "errors.csv",
+    "paired": "paired.csv",
 }
 """Each table of :func:`result_tables` and its file in a run folder."""
 
@@ -50,6 +56,9 @@ def result_tables(results: dict) -> dict[str, pd.DataFrame]:
         "breakdown": breakdown_table(results),
         "timing": timing_table(results),
         "coco": coco_table(results),
+        "scr": scr_table(results),
+        "errors": errors_table(results),
+        "paired": paired_table(results),
     }
 
 

@@ -23,11 +23,14 @@ from torchsar.metrics import (
 )
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
+from torchsar.metrics.curves import score_bins
+from torchsar.metrics.error_types import ErrorCounts, false_alarm_types
 from torchsar.metrics.object_state import normalise
+from torchsar.metrics.scr import ScrCounts
 from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
-from torchsar_eval.scoring import image_rows, pixel_areas
+from torchsar_eval.scoring import BOOTSTRAP_UNITS, image_rows, pixel_areas
 
 __all__ = [
     "DEFAULT_MATCH",
@@ -58,6 +61,13 @@ class Scoring:
         matching: the matching rule of the operating point and the FROC.
         replicates: bootstrap replicates of the intervals (0: none).
         seed: bootstrap seed.
+        bootstrap_unit: what the bootstrap resamples: ``"image"`` (each image), or
+            ``"group"`` (the groups of images in ``meta["group"]``, e.g. the scene each
+            image was cut from, so that images of one scene are drawn together; simulated
+            images are grouped by clutter model; an image without a group is its own
+            unit). Resampling needs many groups to mean anything. Every detector of a run
+            gets the same resampled units, which makes the comparisons in ``paired.csv``
+            paired.
         instances: ``"auto"`` scores each detector's own instances when it returns them
             (a region CFAR's regions, a CNN's boxes); ``"discriminate"`` sends every
             detector's statistic (or its objects' pixel scores) through the discrimination
@@ -72,8 +82,12 @@ class Scoring:
     seed: int = 0
     instances: str = "auto"
     coco_compatible: bool = False
+    bootstrap_unit: str = "image"
 
     def __post_init__(self) -> None:
+        if self.bootstrap_unit not in BOOTSTRAP_UNITS:
+            raise EvalError(f"{{opt:bootstrap_unit}}{self.bootstrap_unit!r}: expected "
+                            f"{' or '.join(map(repr, BOOTSTRAP_UNITS))}")  # fmt: skip
         if self.instances not in ("auto", "discriminate"):
             raise EvalError(f"{{opt:instances}}{self.instances!r}: expected 'auto' or "
                             "'discriminate'")  # fmt: skip
@@ -86,7 +100,11 @@ class Scoring:
         return {
             "objects": self.rules.as_dict(),
             "matching": self.matching.as_dict(),
-            "bootstrap": {"replicates": self.replicates, "seed": self.seed},
+            "bootstrap": {
+                "replicates": self.replicates,
+                "seed": self.seed,
+                "unit": self.bootstrap_unit,
+            },
             "instances": self.instances,
             "coco_compatible": self.coco_compatible,
         }
@@ -107,6 +125,9 @@ class DetectorResult:
     ``op_bin`` is the operating point's score bin when it was chosen (calibrated), else
     ``None``: the design point of the objects (:attr:`ObjectState.op_bin`).
     ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
+    ``scr`` counts the targets and their detections per signal-to-clutter ratio bin
+    (:class:`~torchsar.metrics.scr.ScrCounts`), ``errors`` the false alarms per type
+    (:class:`~torchsar.metrics.error_types.ErrorCounts`).
     """
 
     detector: Detector | DetectorName
@@ -124,6 +145,8 @@ class DetectorResult:
     default_class: str = "target"
     coco: CocoState | None = None
     coco_iou_type: str | None = None
+    scr: ScrCounts = field(default_factory=ScrCounts)
+    errors: ErrorCounts = field(default_factory=ErrorCounts)
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
@@ -157,11 +180,24 @@ class DetectorResult:
         gt, info = truth
         m = match_batch(obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info)
+        self._add_errors(m, obj, gt)
         self.rows += image_rows(m, obj, gt, info)
         if self.coco is not None:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
         return obj
+
+    def _add_errors(self, m, obj: Objects, gt) -> None:
+        """The targets per SCR bin with the score bin of the detection that found them, and
+        the false alarms per type (both read at any operating point)."""
+        bins = score_bins(normalise(obj.score, obj.threshold))
+        found = np.where(m.gt_det >= 0, bins[np.maximum(m.gt_det, 0)] if bins.size else 0, -1)
+        if gt.scr_db is not None:
+            self.scr.update("measured", gt.scr_db, found)
+        if gt.known_scr_db is not None:  # only the targets that declare one
+            declared = ~np.isnan(gt.known_scr_db)
+            self.scr.update("known", gt.known_scr_db[declared], found[declared])
+        self.errors.update(false_alarm_types(m, obj, gt, self.scoring.matching), bins)
 
     def _add_coco(self, obj: Objects, gt, info) -> None:
         """COCO's own evaluation of the batch: segm IoU for objects with masks (unless the
@@ -193,6 +229,8 @@ class DetectorResult:
         out.rows = self.rows + other.rows
         out.skipped = self.skipped + other.skipped
         out.pixel_level = self.pixel_level or other.pixel_level
+        out.scr = self.scr + other.scr
+        out.errors = self.errors + other.errors
         return out
 
     def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:

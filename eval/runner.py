@@ -96,7 +96,7 @@ def run_detectors(
             parts = list(_one_by_one(results, batch, preprocess, device, skipped))
         for part, (outs, seconds) in parts:
             t0 = time.perf_counter()
-            truth = batch_truth(part, name or desc)
+            truth = batch_truth(part, name or desc, scoring.bootstrap_unit)
             t_truth = (time.perf_counter() - t0) / max(len(results), 1)  # shared
             found = {}
             for res, out, sec in zip(results, outs, seconds, strict=True):

@@ -3,15 +3,24 @@ per-image rows of ``per_image.csv``."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
 from torchsar.metrics.curves import OP_BIN, score_bins
 from torchsar.metrics.matching import GroundTruth, ground_truth
 from torchsar.metrics.object_state import ImageInfo, normalise
+from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import Objects
 
-__all__ = ["batch_truth", "declared_boxes", "image_rows", "pixel_areas"]
+__all__ = ["BOOTSTRAP_UNITS", "batch_truth", "declared_boxes", "image_rows", "known_scr",
+           "pixel_areas"]  # fmt: skip
+
+BOOTSTRAP_UNITS = ("image", "group")
+"""What the bootstrap resamples: images, or groups of images (``meta["group"]``, e.g. the
+scene an image was cut from; simulated images: their clutter model; an image without a
+group is its own unit)."""
 
 
 def _planes(batch: dict) -> tuple[int, int]:
@@ -37,10 +46,32 @@ def declared_boxes(meta: dict) -> bool:
     return meta.get("gt") == "box" or meta.get("box_source") == "annotation"
 
 
-def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]]:
+def known_scr(meta: dict) -> list | None:
+    """The known signal-to-clutter ratio in dB of each instance (``None`` where unknown):
+    ``meta["scr_db"]`` (one per id), else each ``meta["targets"][j]["scr_db"]`` (the
+    simulator's); ``None`` when the item declares none."""
+    declared = meta.get("scr_db")
+    if declared is None:
+        targets = meta.get("targets")
+        if not isinstance(targets, list | tuple):
+            return None
+        declared = [t.get("scr_db") if isinstance(t, dict) else None for t in targets]
+        if all(v is None for v in declared):
+            return None
+    return [None if v is None else float(v) for v in declared]
+
+
+def batch_truth(
+    batch: dict, dataset: str, unit: str = "image"
+) -> tuple[GroundTruth, list[ImageInfo]]:
     """Ground truth of a batch (one plane per image channel) and each plane's facts: the
-    bootstrap key (the image name, so a store and its source agree), image-level class,
-    group, area in km^2 and order in the dataset (``meta["index"]`` and the channel)."""
+    image key (the image name, so a store and its source agree), image-level class,
+    group, area in km^2, order in the dataset (``meta["index"]`` and the channel) and the
+    bootstrap's unit (``unit="group"``: the image's group). The ground truth carries each
+    instance's measured SCR (on ``batch["image"]``, the intensity before any
+    preprocessing: :func:`torchsar.metrics.scr.target_scr_db`), its known SCR
+    (:func:`known_scr`) and which planes' ignore pixels are radar shadow
+    (``meta["shadow"] == "ignore"``)."""
     b, c = _planes(batch)
     h, w = batch["instances"].shape[-2:]
     metas = [m for m in batch["meta"] for _ in range(c)]
@@ -48,6 +79,7 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
     ignore = batch["ignore"].reshape(b * c, h, w).cpu().numpy()
     box_only = np.array([m.get("gt") == "box" for m in metas])
     spacing = [_spacing(m) or (np.nan, np.nan) for m in metas]
+    known = [known_scr(m) for m in metas]
     gt = ground_truth(
         inst,
         ignore,
@@ -57,7 +89,12 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
         spacing=np.array(spacing, dtype=np.float64).reshape(len(metas), 2),
         lengths=[list(m.get("lengths_m") or []) for m in metas],
         areas=[list(m.get("areas") or []) for m in metas],
-    )
+        known_scr_db=[k or [] for k in known] if any(known) else None,
+        shadow=np.array([m.get("shadow") == "ignore" for m in metas]),
+    )  # fmt: skip
+    if "image" in batch and len(gt):
+        image = batch["image"].reshape(b * c, h, w).cpu().numpy()
+        gt = replace(gt, scr_db=target_scr_db(image, gt.ids, gt.ignore, gt.box, gt.plane))
     info = []
     for k, m in enumerate(metas):
         sp = _spacing(m)
@@ -65,7 +102,9 @@ def batch_truth(batch: dict, dataset: str) -> tuple[GroundTruth, list[ImageInfo]
         km2 = None if sp is None else h * w * sp[0] * sp[1] / 1e6
         index = m.get("index")
         order = None if index is None else int(index) * c + k % c
-        info.append(ImageInfo(name, m.get("class"), _group(m), km2, order))
+        group = _group(m)
+        boot = f"group:{group}" if unit == "group" and group else None
+        info.append(ImageInfo(name, m.get("class"), group, km2, order, boot))
     return gt, info
 
 

@@ -29,9 +29,11 @@ from tqdm.auto import tqdm
 from torchsar.metrics import ObjectState, PixelCounts, RocAccumulator
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.distance import LengthErrors
+from torchsar.metrics.error_types import ErrorCounts
 from torchsar.metrics.matching import Matching
 from torchsar.metrics.object_state import KeyCounts
 from torchsar.metrics.ranked import RankedDetections
+from torchsar.metrics.scr import ScrCounts
 from torchsar.objects import ObjectRules
 from torchsar_eval import statefile
 from torchsar_eval.batches import Indexed
@@ -127,6 +129,8 @@ for _cls in (
     statefile.register(_cls)  # fmt: skip
 statefile.register(RocAccumulator, transient=("_log_grid",))
 statefile.register(CocoState, transient=("_cache", "_consolidated"))
+statefile.register(ScrCounts)
+statefile.register(ErrorCounts)
 
 
 def _save(path: Path, state: ShardState) -> None:

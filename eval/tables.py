@@ -7,6 +7,7 @@ import pandas as pd
 
 from torchsar.metrics.curves import RECALL_POINTS, suffix
 from torchsar.metrics.object_state import operating_point
+from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals
 from torchsar_eval.result import DetectorResult
 
 __all__ = [
@@ -14,19 +15,25 @@ __all__ = [
     "COCO_COLUMNS",
     "COCO_STATS",
     "CONSOLE_COLUMNS",
+    "ERRORS_COLUMNS",
     "FROC_COLUMNS",
+    "PAIRED_COLUMNS",
     "PER_IMAGE_COLUMNS",
     "PR_COLUMNS",
+    "SCR_COLUMNS",
     "SUMMARY_COLUMNS",
     "TIMING_COLUMNS",
     "breakdown_table",
     "coco_table",
+    "errors_table",
     "froc_table",
     "headline_table",
     "markdown",
+    "paired_table",
     "per_image_table",
     "pixel_roc_table",
     "pr_table",
+    "scr_table",
     "summary_table",
     "timing_table",
 ]
@@ -79,6 +86,11 @@ COCO_STATS = ["AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large", "AR1", 
 COCO_COLUMNS = ["dataset", "detector", "iou_type", *COCO_STATS]
 PER_IMAGE_COLUMNS = ["dataset", "detector", "image", "targets", "tp", "fp", "fn", "objects",
                      "max_score"]  # fmt: skip
+SCR_COLUMNS = ["dataset", "detector", "source", "scr_bin", "scr_lo_db", "scr_hi_db",
+               "scr_mean_db", "targets", "detected", "pd", "pd_lo", "pd_hi"]  # fmt: skip
+ERRORS_COLUMNS = ["dataset", "detector", "error", "type", "count"]
+PAIRED_COLUMNS = ["dataset", "detector", "reference", "metric", "difference", "lo", "hi",
+                  "significant"]  # fmt: skip
 
 
 def summary_row(dataset: str, r: DetectorResult) -> dict:
@@ -192,9 +204,90 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     return rows
 
 
+def _scr_breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
+    """Per SCR bin (``by`` ``scr``: measured, ``scr_known``: declared by the data): targets,
+    found and missed; false alarms have no SCR, so precision and F1 are NaN."""
+    nan = float("nan")
+    return [
+        [ds, r.detector.name, "scr" if row["source"] == "measured" else f"scr_{row['source']}",
+         row["scr_bin"], None, row["targets"], row["detected"], nan,
+         row["targets"] - row["detected"], nan, row["pd"], nan]
+        for row in r.scr.rows(r.at)
+    ]  # fmt: skip
+
+
 def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
-    """Operating-point counts per ground-truth class, size bin, image class and group."""
-    return _frame(results, _breakdown_rows, BREAKDOWN_COLUMNS)
+    """Operating-point counts per ground-truth class, size bin, image class, group and
+    signal-to-clutter ratio bin (measured, and known where the data declare it)."""
+    return _frame(results, lambda ds, r: _breakdown_rows(ds, r) + _scr_breakdown_rows(ds, r),
+                  BREAKDOWN_COLUMNS)  # fmt: skip
+
+
+def _scr_rows(ds: str, r: DetectorResult) -> list[list]:
+    return [[ds, r.detector.name, *row.values()] for row in r.scr.rows(r.at)]
+
+
+def scr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """Pd versus signal-to-clutter ratio at the operating point: per SCR source
+    (``measured`` on the image; ``known``: declared by the data, e.g. the simulator's) and
+    bin, the targets, those detected, Pd with its 95 % Wilson score interval (targets
+    counted as independent trials) and the bin's mean SCR; see
+    :mod:`torchsar.metrics.scr` for the measurement and the bins."""
+    return _frame(results, _scr_rows, SCR_COLUMNS)
+
+
+def _errors_rows(ds: str, r: DetectorResult) -> list[list]:
+    """False alarms per type, misses per size bin and per SCR bin, at the operating
+    point (each family sums to the false alarms, resp. the missed targets)."""
+    det, at = r.detector.name, r.at
+    rows = [[ds, det, "false_alarm", t, n] for t, n in r.errors.counts(at).items()]
+    for name in r.objects.size_names:
+        k = r.objects.keys.get(f"size:{name}")
+        missed = 0 if k is None else k.n_gt - int(k.tp[at:].sum())
+        rows.append([ds, det, "miss", f"size:{name}", missed])
+    for row in r.scr.rows(at):
+        prefix = "scr" if row["source"] == "measured" else f"scr_{row['source']}"
+        rows.append([ds, det, "miss", f"{prefix}:{row['scr_bin']}",
+                     row["targets"] - row["detected"]])  # fmt: skip
+    return rows
+
+
+def errors_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
+    """SAR error types at the operating point: each false alarm counted under exactly one
+    type (:data:`~torchsar.metrics.error_types.FA_TYPES`, see
+    :mod:`torchsar.metrics.error_types`), and the missed targets by size bin and by SCR bin
+    (bins without targets are left out)."""
+    return _frame(results, _errors_rows, ERRORS_COLUMNS)
+
+
+def _reference(metrics: list[dict]) -> int | None:
+    """The position of the best F1 (the first of equals; ``None``: no F1 at all)."""
+    best, ref = -1.0, None
+    for k, m in enumerate(metrics):
+        if m["f1"] == m["f1"] and m["f1"] > best:
+            best, ref = m["f1"], k
+    return ref
+
+
+def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) -> pd.DataFrame:
+    """Each detector against the dataset's best (by F1): the difference ``detector -
+    reference`` of F1 and recall at each one's operating point, Pd at 1 false alarm per
+    image and AP50, with the percentile interval of the paired bootstrap (every detector's
+    replicate ``r`` resamples the same images or groups); ``significant`` when the interval
+    excludes 0 (NaN intervals without replicates)."""
+    rows = []
+    for ds, rs in results.items():
+        states = [(r.objects.metrics(r.at), r.objects.replicate_metrics(r.at)) for r in rs]
+        ref = _reference([m for m, _ in states])
+        for k, r in enumerate(rs):
+            if ref is None or k == ref:
+                continue
+            diffs = difference_intervals(states[k], states[ref], level)
+            for metric in PAIRED_METRICS:
+                d, lo, hi = diffs[metric]
+                rows.append([ds, r.detector.name, rs[ref].detector.name, metric, d, lo, hi,
+                             bool(lo > 0 or hi < 0)])  # fmt: skip
+    return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
 
 
 def _coco_rows(ds: str, r: DetectorResult) -> list[list]:

@@ -38,6 +38,9 @@ Folder and Phoenix: ``shadow=ignore|clutter|target`` (what label 2 means; defaul
 (folder default: ``idmap`` when ``<stem>.instances.png`` exist, ``one-per-image`` when every
 mask has a ``<stem>.box.txt`` target box as in MSTAR SARBake, else 8-connected
 ``components``). The image-level class of a folder item is its parent folder's name.
+Their items record the choice in ``meta["shadow"]``; ``"ignore"`` (as the simulated data)
+tells the scorer that the ignore pixels are radar shadow (the ``shadow`` false-alarm type
+of ``errors.csv``). Other datasets have no shadow masks: that type is 0 there.
 
 Building a dataset checks its structure (pairing, annotations) and warns when the
 instances of its first readable items look split or merged; an unreadable item raises

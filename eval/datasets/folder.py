@@ -200,6 +200,7 @@ class FolderDataset(FileDataset):
         meta = self.base_meta(str(img_path.relative_to(self.root)), img_path, cls)
         meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
         meta["pixel_spacing"] = self._spacing(img_path, mask_path)
+        meta["shadow"] = self.shadow  # "ignore": the ignore pixels are radar shadow
         return make_item(self.intensity(samples, img_path), inst, ignore, meta)
 
 

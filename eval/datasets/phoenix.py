@@ -90,6 +90,7 @@ class PhoenixDataset(FileDataset):
         meta = self.base_meta(str(path.relative_to(self.root)), path, cls)
         meta["pixel_spacing"] = self.spacing or chip.pixel_spacing
         meta["classes"] = [cls or "target"] * int(inst.max(initial=0))
+        meta["shadow"] = self.shadow  # "ignore": the ignore pixels are radar shadow
         return make_item(self.intensity(samples, path), inst, ignore, meta)
 
 

@@ -17,9 +17,12 @@ from torchsar_eval.result import Scoring
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import (
     breakdown_table,
+    errors_table,
     froc_table,
+    paired_table,
     pixel_roc_table,
     pr_table,
+    scr_table,
     summary_table,
 )
 
@@ -42,7 +45,7 @@ class Chips(torch.utils.data.Dataset):
 def _tables(results) -> list[pd.DataFrame]:
     r = {"chips": results}
     return [f(r) for f in (summary_table, froc_table, pr_table, pixel_roc_table,
-                           breakdown_table)]  # fmt: skip
+                           breakdown_table, scr_table, errors_table, paired_table)]  # fmt: skip
 
 
 def _job(n: int, shard_size: int, export_coco: bool = False) -> ShardJob:

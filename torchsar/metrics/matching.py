@@ -117,6 +117,12 @@ class GroundTruth:
         length_m: float64 ``(G,)`` declared lengths in metres (NaN where unknown).
         declared_area: float64 ``(G,)`` areas the annotations declare (COCO ``area``; NaN
             where unknown), used for COCO's area ranges.
+        known_scr_db: float64 ``(G,)`` signal-to-clutter ratios in dB the data declare
+            (a simulator's known value; NaN where unknown), or ``None``.
+        scr_db: float64 ``(G,)`` signal-to-clutter ratios in dB measured on the image
+            (:func:`torchsar.metrics.scr.target_scr_db`), or ``None`` (not measured).
+        shadow: bool ``(N,)`` planes whose ignore pixels are radar shadow, or ``None``
+            (unknown: no plane's).
     """
 
     ids: np.ndarray
@@ -130,6 +136,9 @@ class GroundTruth:
     spacing: np.ndarray | None = None
     length_m: np.ndarray | None = None
     declared_area: np.ndarray | None = None
+    known_scr_db: np.ndarray | None = None
+    scr_db: np.ndarray | None = None
+    shadow: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.plane.shape[0])
@@ -145,6 +154,8 @@ def ground_truth(
     spacing: np.ndarray | None = None,
     lengths: list[list] | None = None,
     areas: list[list] | None = None,
+    known_scr_db: list[list] | None = None,
+    shadow: np.ndarray | None = None,
 ) -> GroundTruth:
     """Build :class:`GroundTruth` from instance-id planes ``(N, H, W)``.
 
@@ -160,6 +171,9 @@ def ground_truth(
         spacing: ``(N, 2)`` pixel spacing per plane in metres (NaN: unknown).
         lengths: per plane, the length in metres of local id ``k`` at position ``k - 1``.
         areas: per plane, the declared area of local id ``k`` at position ``k - 1``.
+        known_scr_db: per plane, the known signal-to-clutter ratio in dB of local id ``k``
+            at position ``k - 1`` (``None``: unknown).
+        shadow: bool per plane: its ignore pixels are radar shadow (default: unknown).
 
     Raises:
         InputTypeError: ``instances`` is not numeric, or holds fractional, NaN or infinite
@@ -187,6 +201,7 @@ def ground_truth(
     cls = np.array(["target"] * n, dtype=object)
     length_m = np.full(n, np.nan)
     declared = np.full(n, np.nan)
+    known = np.full(n, np.nan)
     for k in range(n):
         p, i = int(plane[k]), int(local[k]) - 1
         if classes is not None and i < len(classes[p]):
@@ -197,13 +212,18 @@ def ground_truth(
             length_m[k] = float(lengths[p][i])
         if areas is not None and i < len(areas[p]) and areas[p][i] is not None:
             declared[k] = float(areas[p][i])
+        if known_scr_db is not None and i < len(known_scr_db[p]) and (
+                known_scr_db[p][i] is not None):  # fmt: skip
+            known[k] = float(known_scr_db[p][i])
     ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
     bo = np.zeros(n_planes, bool) if box_only is None else np.asarray(box_only, bool)
     sp = np.full((n_planes, 2), np.nan) if spacing is None else np.asarray(spacing, np.float64)
     on_box = bo[plane] if n else np.zeros(0, bool)
     centroid[on_box] = 0.5 * (box[on_box, :2] + box[on_box, 2:]) - 0.5
+    shade = None if shadow is None else np.asarray(shadow, bool).reshape(n_planes)
     return GroundTruth(ids, plane.astype(np.int64), area, box, cls, ig & (ids == 0), bo,
-                       centroid, sp.reshape(n_planes, 2), length_m, declared)  # fmt: skip
+                       centroid, sp.reshape(n_planes, 2), length_m, declared,
+                       None if known_scr_db is None else known, None, shade)  # fmt: skip
 
 
 def _boxes_and_centroids(idx: np.ndarray, inv: np.ndarray, hw, n: int, area: np.ndarray):

@@ -70,6 +70,9 @@ class ImageInfo:
     order: int | None = None
     """Global order of the plane in its dataset (ties in score are ranked by it, as
     ``pycocotools`` ranks them by image id); default: its position in the batch."""
+    boot_key: str | None = None
+    """The bootstrap's resampling unit of the plane (planes with the same ``boot_key`` get the
+    same replicate weights, e.g. the images of one scene); default: ``key``."""
 
 
 def normalise(score: np.ndarray, threshold: float | None) -> np.ndarray:
@@ -272,7 +275,7 @@ class ObjectState:
         return names[size_bin(area, self.size_edges)]
 
     def _update_boot(self, m, obj, gt, info, bins) -> None:
-        w = poisson_weights([i.key for i in info], self.replicates, self.seed)
+        w = poisson_weights([i.boot_key or i.key for i in info], self.replicates, self.seed)
         for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
                           ("tp50", m.ap[0] >= 0), ("fp50", m.ap[0] == -1)):  # fmt: skip
             _add_weighted(self.boot[name], w, obj.plane[sel], bins[sel])
@@ -355,6 +358,13 @@ class ObjectState:
     ) -> dict[str, tuple[float, float]]:
         """Bootstrap percentile intervals of the headline metrics (every replicate at
         once)."""
+        reps = self.replicate_metrics(at)
+        return {k: interval(v, level) for k, v in reps.items()}
+
+    def replicate_metrics(self, at: int | None = None) -> dict[str, np.ndarray]:
+        """The headline metrics of every bootstrap replicate (``(replicates,)`` each, NaN
+        where undefined): ``precision``, ``recall``, ``f1`` at score bin ``at``, ``ap50``
+        and ``pd_at_1_fa_per_image``."""
         at = self.op_bin if at is None else at
         b, nan = self.boot, float("nan")
         n_gt, images = b["n_gt"].astype(np.float64), b["images"].astype(np.float64)
@@ -371,7 +381,7 @@ class ObjectState:
                         else np.full(n_gt.size, nan))  # fmt: skip
         best = np.where(fa <= 1.0, pd, 0.0).max(axis=1, initial=0.0)
         reps["pd_at_1_fa_per_image"] = np.where(n_gt > 0, best, nan)
-        return {k: interval(v, level) for k, v in reps.items()}
+        return reps
 
     def score_at(self, at: int) -> float:
         """The threshold, on the objects' own score scale, of an operating point starting at

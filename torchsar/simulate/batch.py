@@ -33,7 +33,10 @@ class SimBatch:
         meta: one dict per image: ``boxes`` (``(r0, c0, r1, c1)`` end-exclusive, one per
             instance in id order), ``classes``, ``targets`` (per-instance details),
             ``clutter`` (model, looks, shape_param), ``seed`` (the per-image seed), ``index``,
-            ``batch_seed``, ``pixel_m``, ``regions`` (description of the background).
+            ``batch_seed``, ``pixel_m``, ``regions`` (description of the background),
+            ``shadow`` (``"ignore"``: the ignore pixels are the targets' radar shadows).
+            Each ``targets`` entry holds ``scr_db``, the target's known signal-to-clutter
+            ratio (mean clean intensity over its pixels / clutter mean at its centre, dB).
 
     Example:
         >>> from torchsar.simulate import chips
@@ -128,6 +131,7 @@ def speckle_canvas(
         "targets": canvas.targets,
         "clutter": opts.clutter.as_dict(),
         "pixel_m": opts.pixel_m,
+        "shadow": "ignore",
         **meta,
     }
     fields = (image, clean, mask, instances, ignore)

@@ -119,8 +119,11 @@ class Canvas:
 
 
 def _describe(target: Placed, box: Box) -> dict:
-    """Per-instance metadata (plain Python values)."""
+    """Per-instance metadata (plain Python values). ``scr_db`` is the target's known
+    signal-to-clutter ratio: its mean clean intensity over its pixels relative to the clutter
+    mean at its centre, in dB (the speckle multiplies both by unit-mean noise)."""
     rect = target.rect
+    gain = torch.pow(10.0, target.level_db[target.body].double() / 10.0)
     return {
         "box": box,
         "class": target.kind,
@@ -130,6 +133,7 @@ def _describe(target: Placed, box: Box) -> dict:
         "heading_deg": math.degrees(rect.heading),
         "clutter_mean": target.clutter_mean,
         "peak_db": float(target.level_db[target.body].max()),
+        "scr_db": float(10.0 * torch.log10(gain.mean())),
         "shadow_px": target.shadow_px,
         "shadow_gain": target.shadow_gain,
         "group": -1,

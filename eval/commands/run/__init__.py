@@ -224,6 +224,14 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         help="bootstrap replicates for the intervals (0: none)",
     )
     g.add_argument(
+        "--bootstrap-unit",
+        choices=["image", "group"],
+        default="image",
+        help="what the bootstrap resamples: images, or groups of images (meta group, e.g. "
+        "the scene each image was cut from); the same for every detector, so paired.csv "
+        "compares detectors on the same resampled data (default image)",
+    )
+    g.add_argument(
         "--calibrate-on",
         metavar="TARGET",
         default=None,

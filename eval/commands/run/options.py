@@ -129,4 +129,5 @@ def scoring_from(args: argparse.Namespace) -> Scoring:
     except TorchSARError as exc:
         raise EvalError(f"bad object/matching option: {exc}") from exc
     return Scoring(rules, matching, args.bootstrap, args.seed, instances=args.instances,
-                   coco_compatible=args.coco_compatible)  # fmt: skip
+                   coco_compatible=args.coco_compatible,
+                   bootstrap_unit=getattr(args, "bootstrap_unit", "image"))  # fmt: skip

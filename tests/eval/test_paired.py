@@ -1,0 +1,141 @@
+"""Paired comparison of detectors: a detector against itself is exactly 0, detectors that
+differ by construction differ significantly, the bootstrap resamples images or groups, and
+the new tables do not depend on the shard size."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+import torchsar_eval as te
+from torchsar.detection import detection_from
+from torchsar.metrics.bootstrap import poisson_weights
+from torchsar.metrics.paired import PAIRED_METRICS, paired_differences
+from torchsar_eval.cli import build_parser
+from torchsar_eval.commands.run.options import scoring_from
+from torchsar_eval.errors import EvalError
+
+SIZE = 48
+
+
+class Squares(torch.utils.data.Dataset):
+    """Two 5 x 5 targets per image on a dark background, one bright (intensity 300) and
+    one dim (100); images ``4k .. 4k + 3`` form scene ``k`` (``meta["group"]``)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, i: int) -> dict:
+        rng = np.random.default_rng(i)
+        image = torch.ones(1, SIZE, SIZE)
+        inst = torch.zeros(1, SIZE, SIZE, dtype=torch.int32)
+        r = int(rng.integers(2, 16))
+        inst[0, r : r + 5, 4:9] = 1
+        inst[0, 30:35, r + 20 : r + 25] = 2
+        image[inst == 1], image[inst == 2] = 300.0, 100.0
+        return {"image": image, "mask": inst > 0, "instances": inst,
+                "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
+                "meta": {"name": f"sq/{i}", "group": f"scene{i // 4}"}}  # fmt: skip
+
+
+def every_target(x):
+    """Finds both targets."""
+    return detection_from(x / 50.0, 1.0)
+
+
+def bright_only(x):
+    """Finds the bright targets only: a strict subset of :func:`every_target`'s."""
+    return detection_from(x / 200.0, 1.0)
+
+
+def with_false_alarms(x):
+    """:func:`every_target` plus two bright false alarms in every image."""
+    stat = x / 50.0
+    stat[..., 42:45, 2:5] = 5.0
+    stat[..., 42:45, 40:43] = 5.0
+    return detection_from(stat, 1.0)
+
+
+DETECTORS = {"all": every_target, "bright": bright_only, "fa": with_false_alarms}
+
+
+def _run(n=24, shard_size=256, unit="image", replicates=200):
+    scoring = te.Scoring(replicates=replicates, bootstrap_unit=unit)
+    return te.evaluate({"sq": Squares(n)}, DETECTORS, scoring=scoring,
+                       execution=te.Execution(shard_size=shard_size), progress=False)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def results():
+    return _run()
+
+
+def test_a_detector_against_itself_is_exactly_zero(results):
+    for r in results.states["sq"]:
+        for metric, (d, lo, hi) in paired_differences(r.objects, r.objects, r.at, r.at).items():
+            assert (d, lo, hi) == (0.0, 0.0, 0.0), metric
+
+
+def test_detectors_that_differ_by_construction_differ_significantly(results):
+    p = results.paired.set_index(["detector", "metric"])
+    assert set(results.paired.reference) == {"all"}  # the best F1: every target, no false alarm
+    assert set(results.paired.detector) == {"bright", "fa"}
+    assert list(results.paired.columns) == ["dataset", "detector", "reference", "metric",
+                                            "difference", "lo", "hi", "significant"]  # fmt: skip
+    bright = p.loc["bright"]
+    assert bright.loc["recall", "difference"] == pytest.approx(-0.5)
+    assert bright.loc["recall", "hi"] < 0 and bright.loc["recall", "significant"]
+    fa = p.loc["fa"]
+    assert fa.loc["f1", "difference"] < 0 and fa.loc["f1", "hi"] < 0 and fa.loc["f1", "significant"]
+    # the same targets found: no recall difference in any replicate
+    assert tuple(fa.loc["recall", ["difference", "lo", "hi"]]) == (0.0, 0.0, 0.0)
+    assert not fa.loc["recall", "significant"]
+    for metric in PAIRED_METRICS:
+        row = p.loc[("fa", metric)]
+        assert row.lo <= row.difference <= row.hi or row.lo == row.hi
+
+
+def test_the_paired_interval_is_the_percentile_of_replicate_differences(results):
+    """Against a direct reading of the two states' replicates."""
+    ref, fa = results.states["sq"][0], results.states["sq"][2]
+    a, b = fa.objects.replicate_metrics(fa.at), ref.objects.replicate_metrics(ref.at)
+    diff = a["f1"] - b["f1"]
+    lo, hi = np.percentile(diff[np.isfinite(diff)], [2.5, 97.5])
+    row = results.paired.set_index(["detector", "metric"]).loc[("fa", "f1")]
+    assert (row.lo, row.hi) == pytest.approx((lo, hi))
+
+
+@pytest.mark.parametrize("unit", ["image", "group"])
+def test_new_tables_do_not_depend_on_the_shard_size(unit):
+    a, b = _run(12, 2, unit, 50), _run(12, 256, unit, 50)
+    for name in ("scr", "errors", "paired", "breakdown", "summary"):
+        pd.testing.assert_frame_equal(getattr(a, name), getattr(b, name))
+
+
+def test_group_unit_resamples_whole_scenes():
+    """With ``bootstrap_unit="group"`` every image of a scene gets its scene's weights: the
+    replicate target counts are the scenes' counts weighted by the scenes' Poisson weights."""
+    res = _run(12, 256, "group", 50)
+    boot = res.states["sq"][0].objects.boot
+    w = poisson_weights([f"group:scene{k}" for k in range(3)], 50, seed=0)
+    np.testing.assert_array_equal(boot["n_gt"], w @ np.full(3, 8))  # 4 images x 2 targets
+    np.testing.assert_array_equal(boot["images"], w @ np.full(3, 4))
+    image_unit = _run(12, 256, "image", 50).states["sq"][0].objects.boot
+    assert not np.array_equal(image_unit["n_gt"], boot["n_gt"])
+
+
+def test_bootstrap_unit_option_and_flag():
+    with pytest.raises(EvalError, match="bootstrap_unit.*'scene'"):
+        te.Scoring(bootstrap_unit="scene")
+    parser = build_parser()
+    args = parser.parse_args(["run", "--bootstrap-unit", "group"])
+    assert scoring_from(args).bootstrap_unit == "group"
+    assert scoring_from(parser.parse_args(["run"])).bootstrap_unit == "image"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["run", "--bootstrap-unit", "scene"])
+    assert te.Scoring(bootstrap_unit="group").as_dict()["bootstrap"]["unit"] == "group"
