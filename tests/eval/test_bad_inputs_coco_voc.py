@@ -221,7 +221,7 @@ CASES = [
          EvalError, A + r"images\[0\] \(id 7\) height '32' must be a positive integer"),
     Case("coco-image-huge", coco(image(height=HUGE, width=HUGE)),
          EvalError, A + r"images\[0\] \(id 7\) a\.png is 1000000x1000000 = 1,000,000,000,000 "
-         r"pixels, over the limit of 100,000,000"),
+         r"pixels, over the limit of 16,777,216"),
     Case("coco-file-name-dotdot", escaping("dotdot"),
          EvalError, r"ann\.json: images\[0\] \(id 7\) file_name '\.\./x\.png' .*outside the "
          r"image folder .*outside=allow"),
@@ -243,7 +243,7 @@ CASES = [
          EvalError, r"a\.xml: <size> <width> '31\.5' must be a positive integer"),
     Case("voc-size-huge", voc(voc_text(size=(HUGE, HUGE), objects=())),
          EvalError, r"a\.xml: <size> is 1000000x1000000 = 1,000,000,000,000 pixels, over the "
-         r"limit of 100,000,000"),
+         r"limit of 16,777,216"),
     Case("voc-filename-dotdot", voc_escaping,
          EvalError, r"a\.xml: <filename> '\.\./x\.png' .*outside the image folder"),
 ]  # fmt: skip
