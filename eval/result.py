@@ -27,6 +27,7 @@ from torchsar.metrics.object_state import normalise
 from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
+from torchsar_eval.gallery import Gallery
 from torchsar_eval.scoring import image_rows, pixel_areas
 
 __all__ = [
@@ -107,6 +108,7 @@ class DetectorResult:
     ``op_bin`` is the operating point's score bin when it was chosen (calibrated), else
     ``None``: the design point of the objects (:attr:`ObjectState.op_bin`).
     ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
+    ``gallery`` holds the detector's worst cases (:class:`~torchsar_eval.gallery.Gallery`).
     """
 
     detector: Detector | DetectorName
@@ -124,9 +126,12 @@ class DetectorResult:
     default_class: str = "target"
     coco: CocoState | None = None
     coco_iou_type: str | None = None
+    gallery: Gallery | None = None
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
+        if self.gallery is None:
+            self.gallery = Gallery()
         if self.scoring.coco_compatible and self.coco is None:
             self.coco = CocoState()
 
@@ -158,6 +163,8 @@ class DetectorResult:
         m = match_batch(obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info)
         self.rows += image_rows(m, obj, gt, info)
+        if self.gallery is not None:
+            self.gallery.add(obj, gt, info, m, batch.get("image"))
         if self.coco is not None:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
@@ -193,6 +200,10 @@ class DetectorResult:
         out.rows = self.rows + other.rows
         out.skipped = self.skipped + other.skipped
         out.pixel_level = self.pixel_level or other.pixel_level
+        if self.gallery is not None and other.gallery is not None:
+            out.gallery = self.gallery + other.gallery
+        else:  # a state saved without one
+            out.gallery = self.gallery or other.gallery
         return out
 
     def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:
