@@ -43,7 +43,7 @@ def first_column(df: pd.DataFrame, names: list[str]) -> str | None:
 
 def _numeric(values: pd.Series) -> np.ndarray:
     """Numbers of a column; interval labels such as ``[0, 5)`` become their midpoints."""
-    out = pd.to_numeric(values, errors="coerce").to_numpy(dtype=float)
+    out = np.array(pd.to_numeric(values, errors="coerce"), dtype=float)
     for i, v in enumerate(values):
         if np.isnan(out[i]) and isinstance(v, str):
             nums = re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", v)

@@ -496,7 +496,7 @@ def _breakdown(board: _Board) -> str:
         head = ['<th class="l">detector</th>']
         for by, key in keys:
             n = bd[(bd["by"] == by) & (bd["key"] == key)]["targets"].iloc[0]
-            head.append(f"<th>{_e(by)}: {_e(key)}<br><span class='lohi'>"
+            head.append(f'<th>{_e(by)}: {_e(key)}<br><span class="lohi">'
                         f"{_fmt('targets', n)} targets</span></th>")  # fmt: skip
         body = []
         for det in _order(board, run):
@@ -522,7 +522,7 @@ def _breakdown(board: _Board) -> str:
     if not out:
         return ""
     return (
-        "<h3>Breakdown</h3><p class='note'>Targets found / targets at the operating point "
+        '<h3>Breakdown</h3><p class="note">Targets found / targets at the operating point '
         "(shaded by recall), false alarms where they can be attributed.</p>" + "".join(out)
     )
 
@@ -583,7 +583,7 @@ def _paired(board: _Board) -> str:
                    + "".join(body) + "</tbody></table></div>")  # fmt: skip
     if not out:
         return ""
-    return ("<h3>Paired differences</h3><p class='note'>Differences to the reference detector "
+    return ('<h3>Paired differences</h3><p class="note">Differences to the reference detector '
             "on the same images (paired bootstrap); the bar is centred on zero.</p>"
             + "".join(out))  # fmt: skip
 
@@ -644,7 +644,7 @@ def _gallery(board: _Board) -> str:
     if not out:
         return ""
     return (
-        "<h3>Worst cases</h3><p class='note'>At the design operating point, chosen over "
+        '<h3>Worst cases</h3><p class="note">At the design operating point, chosen over '
         "the whole dataset. Green: ground truth; magenta: detections; yellow: don't-care "
         "pixels; the case's own object is outlined twice as thick.</p>" + "".join(out)
     )
@@ -666,7 +666,7 @@ def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:
             f"{r.name}" + (f" ({r.config['time']})" if r.config.get("time") else "")
             for r in runs)]  # fmt: skip
     sub.append(f"ranked by {LABELS.get(rank_by, rank_by)}")
-    return title, f"<h1>{_e(title)}</h1><p class='sub'>{_e(' · '.join(sub))}</p>"
+    return title, f'<h1>{_e(title)}</h1><p class="sub">{_e(" · ".join(sub))}</p>'
 
 
 def _datasets(runs: list[RunFiles]) -> list[str]:
@@ -718,9 +718,9 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
-        f"<header>{header}<nav><ul>{nav}<li><a href='#glossary'>glossary</a></li></ul></nav>"
+        f'<header>{header}<nav><ul>{nav}<li><a href="#glossary">glossary</a></li></ul></nav>'
         f"</header><main>{''.join(sections)}{_others(runs)}"
-        f"<div id='glossary'>{_glossary()}</div></main>"
+        f'<div id="glossary">{_glossary()}</div></main>'
         "<footer>Written by torchsar-eval from the run folder's files; rebuild it with "
         "<code>torchsar-eval report RUN</code>.</footer></body></html>\n"
     )
