@@ -609,7 +609,7 @@ def _caption(kind: str, rank: int, r: pd.Series) -> str:
     if kind == "false_alarm":
         what = f"score {score:.3g}" + ("" if math.isnan(area) else f" · {area:.0f} px")
     else:
-        found = "not found" if math.isnan(score) else f"found below threshold (score {score:.3g})"
+        found = "no match" if math.isnan(score) else f"matched below threshold ({score:.3g})"
         what = ("" if math.isnan(area) else f"{area:.0f} px{cls} · ") + found
     return f"<b>#{rank}</b> {where}<br>{what}"
 
