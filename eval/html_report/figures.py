@@ -53,7 +53,7 @@ def _numeric(values: pd.Series) -> np.ndarray:
     return out
 
 
-def _svg(fig: plt.Figure, salt: str) -> str:
+def _svg(fig: plt.Figure, salt: str, label: str) -> str:
     """The figure as an inline ``<svg>`` element (no XML prolog, no metadata, scalable)."""
     buf = io.StringIO()
     with plt.rc_context({"svg.hashsalt": salt, "svg.fonttype": "none"}):
@@ -65,7 +65,8 @@ def _svg(fig: plt.Figure, salt: str) -> str:
     text = re.sub(r"<metadata>.*?</metadata>\s*", "", text, flags=re.S)
     head_end = text.index(">")
     head = re.sub(r'\s(width|height)="[^"]*"', "", text[:head_end])
-    head = head.replace("<svg", '<svg class="fig" role="img"', 1)
+    label = label.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;")
+    head = head.replace("<svg", f'<svg class="fig" role="img" aria-label="{label}"', 1)
     text = head + text[head_end:]
     # ids unique in the page (several figures inline): every id and reference prefixed
     pre = re.sub(r"[^A-Za-z0-9_-]+", "-", salt) + "-"
@@ -189,4 +190,4 @@ def figure_svg(kind: str, table: pd.DataFrame, series: list[Series], salt: str) 
     if not draw(ax, table, series):
         plt.close(fig)
         return None
-    return _svg(fig, f"{salt}-{kind}")
+    return _svg(fig, f"{salt}-{kind}", title)
