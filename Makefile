@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 TORCH_VERSION ?= 2.13.0
 
-.PHONY: setup eval test lint bench wheel clean
+.PHONY: setup eval test test-browser browser lint bench wheel clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,8 +24,24 @@ setup: $(BIN)/.installed
 eval: setup
 	$(BIN)/torchsar-eval run
 
-test: setup $(BIN)/.ray
+# The browser test of report.html (slow, skipped without Chromium) needs a headless Chromium:
+# `make browser` installs Debian's with apt-get when none is on PATH (root, or sudo without a
+# password). In CI (CI set) `make test` does so and runs the browser test too.
+BROWSERS     := chromium chromium-browser google-chrome google-chrome-stable
+BROWSER_TEST := tests/eval/test_report_browser.py
+
+browser:
+	@for b in $(BROWSERS); do command -v $$b >/dev/null 2>&1 && exit 0; done; \
+	SUDO=$$([ "$$(id -u)" = 0 ] || echo "sudo -n"); \
+	$$SUDO apt-get update -qq && \
+	DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium
+
+test: setup $(BIN)/.ray $(if $(CI),browser)
 	$(BIN)/python -m pytest -q
+	$(if $(CI),$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST))
+
+test-browser: setup browser
+	$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST)
 
 lint: setup
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .

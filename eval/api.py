@@ -28,6 +28,8 @@ from torchsar_eval.batches import SkipBad, TruthOnly
 from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
 from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
+from torchsar_eval.gallery import observed_facts
+from torchsar_eval.html_report import DEFAULT_RANK, check_rank_by
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
 from torchsar_eval.report import per_image_rows, result_tables, write_run
@@ -98,6 +100,7 @@ class _Plan:
     window_units: str
     export_coco: bool
     seed: int
+    rank_by: str = DEFAULT_RANK
 
 
 MAX_N = 10_000_000
@@ -180,6 +183,7 @@ def evaluate(
     n: int | None = None,
     seed: int = 0,
     progress: bool | None = None,
+    rank_by: str = DEFAULT_RANK,
 ) -> Results:
     """Score detectors on datasets: every detector's output through the same matching,
     states, intervals and tables.
@@ -214,6 +218,9 @@ def evaluate(
         n: images per named dataset (default: the dataset's own size).
         seed: seed of the simulated datasets.
         progress: shorthand for ``execution.progress``.
+        rank_by: the metric that ranks the leaderboards of the run folder's
+            ``report.html`` (a ``summary.csv`` column such as ``"f1"``, ``"ap50"``,
+            ``"pd_at_1_fa_per_image"``, or ``"ms_per_image"``; default F1).
 
     Returns:
         :class:`Results`: the tables as DataFrames, the merged states, the run statistics.
@@ -249,6 +256,7 @@ def evaluate(
         scoring=scoring or Scoring(), execution=execution, calibration=calibration,
         preprocess=preprocess, despeckle=None if despeckle is None else dict(despeckle),
         window_units=window_units, export_coco=export_coco, seed=seed,
+        rank_by=check_rank_by(rank_by),
     )  # fmt: skip
     named = _datasets(datasets, n, seed)
     with ExitStack() as stack:
@@ -297,8 +305,10 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     files: list[str] = []
     if out is not None:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
-        files = write_run(tmp, tables, rows, plan.scoring, stats, labels)
-        write_config(tmp, "run", config(plan, datasets, windows, stats, out))
+        observed = {n: observed_facts(rs) for n, rs in results.items()}
+        write_config(tmp, "run", config(plan, datasets, windows, stats, out, observed))
+        files = write_run(tmp, tables, rows, plan.scoring, stats, labels, results=results,
+                          rank_by=plan.rank_by)  # fmt: skip
         per_image = pd.read_csv(tmp / "per_image.csv")
     else:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
@@ -313,8 +323,10 @@ def _bound(det: Detector, ds: Dataset, name: str) -> Detector:
     return det if bind is None else replace(det, fn=bind(ds, name))
 
 
-def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path) -> dict:
-    """The ``config.json`` record of a run."""
+def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path,
+           observed: dict | None = None) -> dict:  # fmt: skip
+    """The ``config.json`` record of a run (``observed``: per dataset, the image sizes and
+    pixel spacings the images had)."""
     ex, cal = plan.execution, plan.calibration
     return {
         "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
@@ -333,6 +345,8 @@ def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path) -
         "batch_size": ex.batch_size,
         "seed": plan.seed,
         "out": str(out),
+        "observed": observed or {},
+        "rank_by": plan.rank_by,
     }
 
 

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from torchsar_eval.gallery import write_gallery
 from torchsar_eval.glossary import glossary
+from torchsar_eval.html_report import DEFAULT_RANK, REPORT_FILE, write_report
 from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
@@ -94,9 +96,15 @@ def write_run(
     scoring: Scoring,
     stats: dict,
     labels: dict[str, str],
+    *,
+    results: dict | None = None,
+    rank_by: str = DEFAULT_RANK,
 ) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names. ``per_image``
-    is streamed to ``per_image.csv`` (memory independent of the dataset size)."""
+    is streamed to ``per_image.csv`` (memory independent of the dataset size). With the
+    merged ``results`` (``{dataset: [DetectorResult]}``), each detector's worst cases go to
+    ``gallery/``; last, ``report.html`` is built from the folder's files (and its
+    ``config.json``, when written first), its leaderboards ranked by ``rank_by``."""
     written = [f for k, f in TABLE_FILES.items() if k != "coco" or not tables[k].empty]
     for key, fname in TABLE_FILES.items():
         if fname in written:
@@ -122,4 +130,7 @@ def write_run(
             sel["pixel_roc"], sel["froc"], sel["pr"], sel["summary"],
             tmp / f"roc_{label}.png", name,
         )  # fmt: skip
-    return files
+    if results is not None:
+        files += write_gallery(tmp, results, labels)
+    write_report(tmp, tmp / REPORT_FILE, rank_by=rank_by)
+    return [*files, REPORT_FILE]

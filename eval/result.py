@@ -30,6 +30,7 @@ from torchsar.metrics.scr import ScrCounts
 from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
+from torchsar_eval.gallery import Gallery
 from torchsar_eval.scoring import BOOTSTRAP_UNITS, image_rows, pixel_areas
 
 __all__ = [
@@ -128,6 +129,7 @@ class DetectorResult:
     ``scr`` counts the targets and their detections per signal-to-clutter ratio bin
     (:class:`~torchsar.metrics.scr.ScrCounts`), ``errors`` the false alarms per type
     (:class:`~torchsar.metrics.error_types.ErrorCounts`).
+    ``gallery`` holds the detector's worst cases (:class:`~torchsar_eval.gallery.Gallery`).
     """
 
     detector: Detector | DetectorName
@@ -147,9 +149,12 @@ class DetectorResult:
     coco_iou_type: str | None = None
     scr: ScrCounts = field(default_factory=ScrCounts)
     errors: ErrorCounts = field(default_factory=ErrorCounts)
+    gallery: Gallery | None = None
 
     def __post_init__(self) -> None:
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
+        if self.gallery is None:
+            self.gallery = Gallery()
         if self.scoring.coco_compatible and self.coco is None:
             self.coco = CocoState()
 
@@ -182,6 +187,8 @@ class DetectorResult:
         self.objects.update(m, obj, gt, info)
         self._add_errors(m, obj, gt)
         self.rows += image_rows(m, obj, gt, info)
+        if self.gallery is not None:
+            self.gallery.add(obj, gt, info, m, batch.get("image"))
         if self.coco is not None:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
@@ -231,6 +238,10 @@ class DetectorResult:
         out.pixel_level = self.pixel_level or other.pixel_level
         out.scr = self.scr + other.scr
         out.errors = self.errors + other.errors
+        if self.gallery is not None and other.gallery is not None:
+            out.gallery = self.gallery + other.gallery
+        else:  # a state saved without one
+            out.gallery = self.gallery or other.gallery
         return out
 
     def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:

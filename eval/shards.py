@@ -40,6 +40,7 @@ from torchsar_eval.batches import Indexed
 from torchsar_eval.coco import CocoExport
 from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
+from torchsar_eval.gallery import Cases, Gallery
 from torchsar_eval.memory import release_memory, tune_allocator
 from torchsar_eval.result import DetectorName, DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
@@ -125,6 +126,8 @@ for _cls in (
     RankedDetections,
     LengthErrors,
     CocoExport,
+    Gallery,
+    Cases,
 ):
     statefile.register(_cls)  # fmt: skip
 statefile.register(RocAccumulator, transient=("_log_grid",))

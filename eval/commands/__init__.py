@@ -8,7 +8,8 @@ import importlib
 __all__ = ["COMMANDS", "load"]
 
 COMMANDS = [
-    "run", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset", "clean"
+    "run", "report", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset",
+    "clean",
 ]  # fmt: skip
 
 

@@ -48,6 +48,8 @@ CASES = {
     "resume and discard": (["--resume", "--discard"], None, r"--resume and --discard exclude"),
     "max-bad beyond 1": (["--skip-bad", "--max-bad", "2"], None,
                          r"--max-bad 2\.0: must be a share from 0 to 1"),
+    "rank-by not a metric": (["--rank-by", "speed"], None,
+                             r"--rank-by 'speed': not a metric; choose one of f1, precision"),
     "saved work, no --resume": ([], _saved_work,
                                 r"an interrupted run left its saved work in .*1 saved shard.*"
                                 r"continue it with --resume, or start over with --discard"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
@@ -71,6 +72,12 @@ def _rows(folder) -> dict[str, list]:
 def _assert_same(a, b, folder_a=None, folder_b=None) -> None:
     for x, y in zip(_tables(a), _tables(b), strict=True):
         pd.testing.assert_frame_equal(x, y)
+    for ra, rb in zip(a, b, strict=True):  # the worst-case galleries too
+        for ca, cb in ((ra.gallery.false_alarms, rb.gallery.false_alarms),
+                       (ra.gallery.misses, rb.gallery.misses)):  # fmt: skip
+            assert ca.keys == cb.keys and ca.info == cb.info
+            assert np.array_equal(ca.image, cb.image, equal_nan=True)
+            assert np.array_equal(ca.masks, cb.masks)
     if folder_a is not None:
         rows = _rows(folder_a)
         assert rows == _rows(folder_b) and all(len(v) == a[0].images for v in rows.values())

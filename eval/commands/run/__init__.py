@@ -16,6 +16,7 @@ from torchsar_eval.api import Results, evaluate
 from torchsar_eval.commands.run.options import check_run_args, scoring_from
 from torchsar_eval.datasets import DATASETS
 from torchsar_eval.errors import EvalError
+from torchsar_eval.html_report import DEFAULT_RANK, RANK_METRICS
 from torchsar_eval.output import check_out
 from torchsar_eval.registry import available
 from torchsar_eval.result import DEFAULT_MATCH, DEFAULT_RULES
@@ -32,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "run",
         help="evaluate detectors on datasets (the default: every detector on simulated data)",
         description="Score detectors against ground-truth masks; write summary.csv, roc.csv, "
-        "summary.md, roc_<dataset>.png and config.json.",
+        "summary.md, roc_<dataset>.png, report.html, gallery/ and config.json.",
     )
     p.add_argument(
         "--dataset",
@@ -68,6 +69,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, default=16)
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated datasets")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/run-*)")
+    p.add_argument(
+        "--rank-by",
+        default=DEFAULT_RANK,
+        metavar="METRIC",
+        help=f"metric that ranks the leaderboards of report.html: {', '.join(RANK_METRICS)} "
+        f"(default {DEFAULT_RANK})",
+    )
     p.add_argument(
         "--param",
         action="append",
@@ -283,6 +291,7 @@ def run(args: argparse.Namespace) -> int:
         discard=args.discard,
         n=args.n,
         seed=args.seed,
+        rank_by=args.rank_by,
     )
     print_summary(results)
     return 0

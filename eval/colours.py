@@ -1,0 +1,44 @@
+"""One colour per detector NAME, the same in every figure, table and run: the built-in
+detectors have fixed, distinct colours; any other name is hashed into the same palette (and
+gets a line style from the hash too, so two names that share a colour still differ)."""
+
+from __future__ import annotations
+
+import hashlib
+
+__all__ = ["PALETTE", "detector_colour", "detector_dash"]
+
+PALETTE = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    "#bcbd22", "#17becf", "#393b79", "#637939", "#222222", "#843c39", "#7b4173", "#e7ba52",
+    "#3a9e8f", "#a55194", "#6b6ecf", "#b35806",
+]  # fmt: skip
+"""Twenty colours readable on white (hex)."""
+
+_BUILTIN = {
+    "ca": 0, "two_parameter": 1, "go": 2, "so": 3, "os": 4, "vi": 5, "ac": 6,
+    "lognormal": 7, "weibull": 8, "gamma": 9, "k": 10, "g0": 11, "region": 12,
+}  # fmt: skip
+_DASHES = ["-", "--", "-.", ":"]
+
+
+def _digest(name: str) -> int:
+    return int.from_bytes(hashlib.blake2b(name.encode(), digest_size=8).digest(), "big")
+
+
+def detector_colour(name: str) -> str:
+    """The colour (``"#rrggbb"``) of detector ``name``: fixed for the built-in detectors,
+    otherwise a hash of the name into :data:`PALETTE` (stable across runs and processes).
+
+    Example:
+        >>> detector_colour("ca"), detector_colour("ca") == detector_colour("ca")
+        ('#1f77b4', True)
+    """
+    k = _BUILTIN.get(name)
+    return PALETTE[_digest(name) % len(PALETTE) if k is None else k]
+
+
+def detector_dash(name: str) -> str:
+    """The matplotlib line style of detector ``name``: solid for the built-in detectors,
+    otherwise one of four styles chosen by a hash of the name."""
+    return "-" if name in _BUILTIN else _DASHES[(_digest(name) // len(PALETTE)) % len(_DASHES)]

@@ -1,0 +1,380 @@
+"""A detector's worst cases, chosen while scoring: its highest-scoring false alarms and its
+largest missed targets, each kept as a small crop of the image with the ground truth and the
+detections around it.
+
+:class:`Gallery` is a mergeable state of bounded size: each kind keeps at most
+:data:`GALLERY_CASES` cases, ranked by a total order (false alarms: score, highest first;
+misses: target area in pixels, largest first; ties: the image's position in the dataset, its
+name, then the position in the image), so merging shards keeps the global top cases whatever
+the shard size, batch size or worker count. Both kinds are taken at the design operating
+point, like ``per_image.csv``. :func:`write_gallery` renders the cases as PNGs in
+``gallery/`` with a ``gallery/cases.csv`` index.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from torchsar.metrics.assign import BatchMatch
+from torchsar.metrics.curves import OP_BIN, score_bins
+from torchsar.metrics.matching import GroundTruth
+from torchsar.metrics.object_state import ImageInfo, normalise
+from torchsar.objects import Objects
+
+__all__ = [
+    "CASE_COLUMNS",
+    "CROP",
+    "GALLERY_CASES",
+    "Cases",
+    "Gallery",
+    "at_operating_point",
+    "observed_facts",
+    "render_case",
+    "write_gallery",
+]
+
+GALLERY_CASES = 8
+"""Cases kept per kind (false alarms, misses) and detector."""
+CROP = 64
+"""Side of a case's crop in samples (a larger object is shown whole, resampled)."""
+TRUTH, FOUND, FOCUS, IGNORE, OUTSIDE = 1, 2, 4, 8, 16
+"""Bits of a crop's mask: ground truth, detections at the operating point, the case's own
+object, don't-care pixels, outside the image."""
+CASE_COLUMNS = ["dataset", "detector", "kind", "rank", "image", "row", "col", "score", "area",
+                "class", "file"]  # fmt: skip
+"""Columns of ``gallery/cases.csv``."""
+_MAX_FACTS = 6
+
+
+@dataclass
+class Cases:
+    """Up to ``size`` cases of one kind, best first.
+
+    Attributes:
+        kind: ``"false_alarm"`` or ``"miss"``.
+        size: the most cases kept.
+        keys: each case's rank key (smaller first; a total order).
+        info: each case's facts: image name, centre row and column, score, area, class.
+        image: float16 ``(n, CROP, CROP)`` the crop in dB (``10 log10`` of the intensity;
+            NaN outside the image).
+        masks: uint8 ``(n, CROP, CROP)`` bits ``TRUTH | FOUND | FOCUS | IGNORE | OUTSIDE``.
+    """
+
+    kind: str
+    size: int = GALLERY_CASES
+    keys: list = field(default_factory=list)
+    info: list = field(default_factory=list)
+    image: np.ndarray = field(default_factory=lambda: np.zeros((0, CROP, CROP), np.float16))
+    masks: np.ndarray = field(default_factory=lambda: np.zeros((0, CROP, CROP), np.uint8))
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def __add__(self, other: Cases) -> Cases:
+        """The best ``size`` cases of both (disjoint parts of a dataset)."""
+        keys = self.keys + other.keys
+        order = sorted(range(len(keys)), key=keys.__getitem__)[: self.size]
+        info = self.info + other.info
+        image = np.concatenate([self.image, other.image])[order]
+        masks = np.concatenate([self.masks, other.masks])[order]
+        return Cases(self.kind, self.size, [keys[i] for i in order], [info[i] for i in order],
+                     image, masks)  # fmt: skip
+
+    def offer(self, keys: list[tuple], make: Callable[[int], tuple[dict, np.ndarray, np.ndarray]]):
+        """Add the candidates ``keys`` that make the cut; ``make(j)`` builds candidate
+        ``j``'s ``(info, image, masks)`` (called only for those kept)."""
+        if not keys:
+            return
+        kept = sorted(range(len(keys)), key=keys.__getitem__)[: self.size]
+        if len(self.keys) >= self.size:
+            worst = self.keys[-1]
+            kept = [j for j in kept if keys[j] < worst]
+        if not kept:
+            return
+        built = [make(j) for j in kept]
+        new = Cases(self.kind, self.size, [keys[j] for j in kept], [b[0] for b in built],
+                    np.stack([b[1] for b in built]), np.stack([b[2] for b in built]))  # fmt: skip
+        merged = self + new
+        self.keys, self.info, self.image, self.masks = (merged.keys, merged.info, merged.image,
+                                                        merged.masks)  # fmt: skip
+
+
+def _facts(a: list, b: list) -> list:
+    """The smallest distinct values of both (bounded; associative)."""
+    return sorted({tuple(v) for v in a} | {tuple(v) for v in b})[:_MAX_FACTS]
+
+
+@dataclass
+class Gallery:
+    """A detector's worst cases on a dataset (mergeable by ``+``), and what the images
+    were: their distinct sizes and pixel spacings (a few at most)."""
+
+    false_alarms: Cases = field(default_factory=lambda: Cases("false_alarm"))
+    misses: Cases = field(default_factory=lambda: Cases("miss"))
+    shapes: list = field(default_factory=list)
+    spacings: list = field(default_factory=list)
+
+    def __add__(self, other: Gallery) -> Gallery:
+        return Gallery(self.false_alarms + other.false_alarms, self.misses + other.misses,
+                       _facts(self.shapes, other.shapes),
+                       _facts(self.spacings, other.spacings))  # fmt: skip
+
+    def add(self, obj: Objects, gt: GroundTruth, info: list[ImageInfo], m: BatchMatch,
+            image) -> None:  # fmt: skip
+        """Offer one batch's false alarms and misses at the design operating point
+        (``image``: the batch's ``(B, C, H, W)`` images)."""
+        n = len(info)
+        h, w = gt.ids.shape[-2:]
+        self.shapes = _facts(self.shapes, [(h, w)] * bool(n))
+        sp = gt.spacing if gt.spacing is not None else np.full((n, 2), np.nan)
+        self.spacings = _facts(self.spacings, [tuple(map(float, s)) for s in sp
+                                               if np.isfinite(s).all()])  # fmt: skip
+        at_op = at_operating_point(obj)
+        fa = np.flatnonzero(at_op & (m.op == -1))
+        found = np.zeros(len(gt), bool)
+        found[m.op[at_op & (m.op >= 0)]] = True
+        missed = np.flatnonzero(~found)
+        planes = _Planes(image, gt, obj, at_op, info)
+        score = np.nan_to_num(obj.score.astype(np.float64), nan=-np.inf)
+        keys, idx = _keys(-score[fa], obj.plane[fa], obj.box[fa], info, self.false_alarms)
+        self.false_alarms.offer(keys, lambda j: planes.case(
+            fa[idx[j]], obj.box[fa[idx[j]]], float(score[fa[idx[j]]]), int(obj.area[fa[idx[j]]]),
+            _class(obj.classes, fa[idx[j]]), obj.plane, "det"))  # fmt: skip
+        gt_score = np.where(found, -np.inf, m.gt_score)
+        area = gt.area[missed].astype(np.float64)
+        keys, idx = _keys(-area, gt.plane[missed], gt.box[missed], info, self.misses)
+        self.misses.offer(keys, lambda j: planes.case(
+            missed[idx[j]], gt.box[missed[idx[j]]], float(gt_score[missed[idx[j]]]),
+            int(gt.area[missed[idx[j]]]), _class(gt.classes, missed[idx[j]]), gt.plane,
+            "gt"))  # fmt: skip
+
+
+def observed_facts(results: list) -> dict:
+    """What the images of a dataset were (from its first detector's gallery): the distinct
+    image sizes ``[[H, W], ...]`` and pixel spacings ``[[row, col], ...]`` in metres, a few at
+    most (``config.json`` records them as ``observed``)."""
+    gallery = next((r.gallery for r in results if getattr(r, "gallery", None) is not None), None)
+    if gallery is None:
+        return {}
+    return {"image_size": [list(v) for v in gallery.shapes],
+            "pixel_spacing": [list(v) for v in gallery.spacings]}  # fmt: skip
+
+
+def at_operating_point(obj: Objects) -> np.ndarray:
+    """Which objects count at the design operating point (scores above the objects'
+    threshold, or every object when they declare none)."""
+    if obj.threshold is None:
+        return np.ones(len(obj), bool)
+    return score_bins(normalise(obj.score, obj.threshold)) >= OP_BIN
+
+
+def _class(classes, k: int) -> str:
+    return "" if classes is None or classes[k] is None else str(classes[k])
+
+
+def _keys(value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[ImageInfo],
+          cases: Cases) -> tuple[list[tuple], np.ndarray]:  # fmt: skip
+    """Rank keys ``(value, image order, image name, centre row, centre col, box)`` of the
+    candidates that may make the cut (value within the batch's best ``size`` and not worse
+    than the worst kept case), and their positions among the candidates."""
+    if value.size == 0:
+        return [], np.zeros(0, np.int64)
+    n = min(cases.size, value.size)
+    cut = np.partition(value, n - 1)[n - 1]
+    if len(cases) >= cases.size:
+        cut = min(cut, cases.keys[-1][0])
+    idx = np.flatnonzero(value <= cut)
+    keys = []
+    for j in idx:
+        i = info[int(plane[j])]
+        r0, c0, r1, c1 = (float(v) for v in box[j])
+        order = -1 if i.order is None else int(i.order)
+        keys.append((float(value[j]), order, str(i.key), (r0 + r1) / 2, (c0 + c1) / 2, r0, c0,
+                     r1, c1))  # fmt: skip
+    return keys, idx
+
+
+class _Planes:
+    """Crops of one batch's planes."""
+
+    def __init__(self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info) -> None:
+        self.image, self.gt, self.obj, self.at_op, self.info = image, gt, obj, at_op, info
+        self.channels = gt.ids.shape[0] // max(1, int(image.shape[0])) if image is not None else 1
+
+    def _plane_image(self, p: int) -> np.ndarray | None:
+        img = self.image
+        if img is None or getattr(img, "numel", lambda: 0)() == 0:
+            return None
+        c = self.channels
+        b, ch = divmod(p, c)
+        x = img[b]
+        x = x[ch] if x.shape[0] == c else x.abs().mean(0)
+        return x.detach().cpu().numpy().astype(np.float64, copy=False)
+
+    def case(self, k: int, box, score: float, area: int, cls: str, planes: np.ndarray,
+             own: str):  # fmt: skip
+        """``(info, image, masks)`` of the case of object or instance ``k`` (``own``:
+        ``"det"`` or ``"gt"``; ``planes``: the plane of each)."""
+        k = int(k)
+        p = int(planes[k])
+        h, w = self.gt.ids.shape[-2:]
+        r0, c0, r1, c1 = (float(v) for v in box)
+        cr, cc = (r0 + r1) / 2, (c0 + c1) / 2
+        side = max(CROP, math.ceil(1.25 * max(r1 - r0, c1 - c0)) + 8)
+        step = side / CROP
+        rr = np.floor(cr - side / 2 + (np.arange(CROP) + 0.5) * step).astype(np.int64)
+        cs = np.floor(cc - side / 2 + (np.arange(CROP) + 0.5) * step).astype(np.int64)
+        inside = ((rr >= 0) & (rr < h))[:, None] & ((cs >= 0) & (cs < w))[None, :]
+        ri, ci = np.clip(rr, 0, h - 1), np.clip(cs, 0, w - 1)
+        masks = np.where(inside, 0, OUTSIDE).astype(np.uint8)
+        truth = self.gt.ids[p][np.ix_(ri, ci)] > 0
+        if self.gt.box_only[p]:
+            for g in np.flatnonzero(self.gt.plane == p):
+                truth |= _in_box(self.gt.box[g], rr, cs)
+        masks |= np.where(truth, TRUTH, 0).astype(np.uint8)
+        masks |= np.where(self.gt.ignore[p][np.ix_(ri, ci)], IGNORE, 0).astype(np.uint8)
+        found = np.zeros((CROP, CROP), bool)
+        for d in np.flatnonzero((self.obj.plane == p) & self.at_op):
+            if _overlaps(self.obj.box[d], rr, cs):
+                found |= self._object(d, rr, cs, ri, ci, step)
+        masks |= np.where(found, FOUND, 0).astype(np.uint8)
+        if own == "det":
+            focus = self._object(k, rr, cs, ri, ci, step)
+        elif self.gt.box_only[p]:
+            focus = _in_box(box, rr, cs)
+        else:
+            focus = self.gt.ids[p][np.ix_(ri, ci)] == k + 1
+        masks |= np.where(focus, FOCUS, 0).astype(np.uint8)
+        masks[~inside] &= OUTSIDE
+        x = self._plane_image(p)
+        if x is None:
+            crop = np.full((CROP, CROP), np.nan)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                crop = 10 * np.log10(np.maximum(x[np.ix_(ri, ci)], 1e-30))
+            crop[~inside] = np.nan
+        info = {"image": self.info[p].key, "row": round(cr, 1), "col": round(cc, 1),
+                "score": score if math.isfinite(score) else None, "area": area,
+                "class": cls}  # fmt: skip
+        return info, crop.astype(np.float16), masks
+
+    def _object(self, d: int, rr, cs, ri, ci, step: float) -> np.ndarray:
+        """Detection ``d``'s pixels on the crop grid (a point: a small disc)."""
+        obj = self.obj
+        if obj.geometry == "point":
+            r, c = obj.centroid[d]
+            rad = max(1.5, 1.5 * step)
+            return (rr[:, None] - r) ** 2 + (cs[None, :] - c) ** 2 <= rad**2
+        if obj.geometry == "box":
+            return _in_box(obj.box[d], rr, cs)
+        return obj.mask_of(int(d))[np.ix_(ri, ci)]
+
+
+def _in_box(box, rr: np.ndarray, cs: np.ndarray) -> np.ndarray:
+    r0, c0, r1, c1 = (float(v) for v in box)
+    return ((rr >= math.floor(r0)) & (rr < max(math.ceil(r1), math.floor(r0) + 1)))[:, None] & (
+        (cs >= math.floor(c0)) & (cs < max(math.ceil(c1), math.floor(c0) + 1))
+    )[None, :]
+
+
+def _overlaps(box, rr: np.ndarray, cs: np.ndarray) -> bool:
+    r0, c0, r1, c1 = (float(v) for v in box)
+    return r1 >= rr[0] and r0 <= rr[-1] + 1 and c1 >= cs[0] and c0 <= cs[-1] + 1
+
+
+_GREYS = 64  # grey levels (plenty for speckle; fewer bytes per PNG)
+_OUTSIDE, _TRUTH, _FOUND, _IGNORE = 64, 65, 66, 67
+_PALETTE = [v for g in range(_GREYS) for v in (round(g * 255 / (_GREYS - 1)),) * 3] + [
+    223, 228, 234,  # outside the image
+    0, 230, 118,  # ground truth outline
+    255, 64, 255,  # detection outline
+    255, 212, 0,  # don't-care outline
+]  # fmt: skip
+SCALE = 2
+"""Crops are drawn at twice their size (outlines fall between samples)."""
+
+
+def _dilate(mask: np.ndarray) -> np.ndarray:
+    p = np.pad(mask, 1)
+    h, w = mask.shape
+    return np.logical_or.reduce([p[i : i + h, j : j + w] for i in range(3) for j in range(3)])
+
+
+def _ring(mask: np.ndarray, width: int) -> np.ndarray:
+    """The ``width``-pixel band just outside ``mask``."""
+    grown = mask
+    for _ in range(width):
+        grown = _dilate(grown)
+    return grown & ~mask
+
+
+def render_case(image: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """Palette indices ``(SCALE * CROP, SCALE * CROP)`` of one case: the crop in grey
+    (2nd to 99.5th percentile of its dB values), outlines of the don't-care pixels
+    (yellow), the ground truth (green) and the detections at the operating point
+    (magenta), the case's own object outlined twice as thick."""
+    img = np.asarray(image, np.float64)
+    finite = np.isfinite(img)
+    grey = np.full(img.shape, _GREYS // 2, np.uint8)
+    if finite.any():
+        lo, hi = np.percentile(img[finite], [2, 99.5])
+        if hi > lo:
+            grey = np.clip((img - lo) / (hi - lo), 0, 1)
+            grey = np.round(np.nan_to_num(grey) * (_GREYS - 1)).astype(np.uint8)
+    big = np.kron(grey, np.ones((SCALE, SCALE), np.uint8))
+    bits = np.kron(masks, np.ones((SCALE, SCALE), np.uint8))
+    big[(bits & OUTSIDE) > 0] = _OUTSIDE
+    focus = (bits & FOCUS) > 0
+    for bit, colour in ((IGNORE, _IGNORE), (TRUTH, _TRUTH), (FOUND, _FOUND)):
+        m = (bits & bit) > 0
+        big[_ring(m, 1)] = colour
+        if bit != IGNORE and (focus & m).any():
+            big[_ring(focus, 2)] = colour
+    return big
+
+
+def _png(indices: np.ndarray, path: Path) -> None:
+    from PIL import Image
+
+    im = Image.fromarray(indices, "P")
+    im.putpalette(_PALETTE)
+    im.save(path, optimize=True)
+
+
+def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[str]:
+    """Each detector's cases as PNGs ``gallery/<dataset>/<detector>/<kind>-NN.png`` and
+    their index ``gallery/cases.csv`` (columns :data:`CASE_COLUMNS`); returns
+    ``["gallery/"]``, or ``[]`` when no result holds a gallery."""
+    from torchsar_eval.output import file_slugs
+    from torchsar_eval.plots import slug
+
+    rows = []
+    for name, rs in results.items():
+        dets = file_slugs([r.detector.name for r in rs], slug)
+        for r in rs:
+            gallery = getattr(r, "gallery", None)
+            if gallery is None:
+                continue
+            for cases, short in ((gallery.false_alarms, "fa"), (gallery.misses, "miss")):
+                sub = Path("gallery") / labels[name] / dets[r.detector.name]
+                for rank, info in enumerate(cases.info, 1):
+                    rel = sub / f"{short}-{rank:02d}.png"
+                    (folder / sub).mkdir(parents=True, exist_ok=True)
+                    _png(render_case(cases.image[rank - 1], cases.masks[rank - 1]), folder / rel)
+                    rows.append([name, r.detector.name, cases.kind, rank, info["image"],
+                                 info["row"], info["col"], info["score"], info["area"],
+                                 info["class"], rel.as_posix()])  # fmt: skip
+    if not rows and not any(getattr(r, "gallery", None) for rs in results.values() for r in rs):
+        return []
+    (folder / "gallery").mkdir(exist_ok=True)
+    with open(folder / "gallery" / "cases.csv", "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(CASE_COLUMNS)
+        out.writerows(rows)
+    return ["gallery/"]

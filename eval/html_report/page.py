@@ -1,0 +1,726 @@
+"""The report page: one self-contained HTML file (inline CSS, inline SVG figures, PNG images
+as ``data:`` URIs, no script) built from one or more run folders' files."""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from torchsar_eval.colours import detector_colour, detector_dash
+from torchsar_eval.errors import EvalError
+from torchsar_eval.glossary import _RULES, _TERMS
+from torchsar_eval.html_report.figures import FIGURES, Series, figure_svg, first_column
+from torchsar_eval.html_report.runfiles import RunFiles
+
+__all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
+
+DEFAULT_RANK = "f1"
+RANK_METRICS = [
+    "f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
+    "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou", "pd_object",
+    "pd_pixel", "pfa_pixel", "false_alarms_per_image", "fa_per_km2", "false_alarms", "tp",
+    "fp", "fn", "fragmentation", "length_score", "ms_per_image", "images_per_s",
+]  # fmt: skip
+"""Metrics a leaderboard can be ranked by (``summary.csv`` and ``timing.csv`` columns)."""
+LOWER_IS_BETTER = {
+    "false_alarms_per_image", "false_alarms", "fp", "fn", "pfa_pixel", "fa_per_km2",
+    "fragmentation", "ms_per_image", "object_ms_per_image",
+}  # fmt: skip
+_UNIT = {"f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
+         "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou",
+         "pd_object", "pd_pixel"}  # fmt: skip
+LABELS = {
+    "f1": "F1", "precision": "precision", "recall": "recall", "ap50": "AP50",
+    "ap50_95": "AP50:95", "pd_at_0.1_fa_per_image": "Pd @ 0.1 FA/img",
+    "pd_at_1_fa_per_image": "Pd @ 1 FA/img", "pd_at_10_fa_per_image": "Pd @ 10 FA/img",
+    "pauc": "pAUC", "fom": "FoM", "mean_iou": "mean IoU", "pd_object": "Pd (object)",
+    "pd_pixel": "Pd pixel", "pfa_pixel": "Pfa pixel", "false_alarms_per_image": "FA/img",
+    "fa_per_km2": "FA/km²", "false_alarms": "false alarms", "tp": "TP", "fp": "FP",
+    "fn": "FN", "fragmentation": "fragments", "length_score": "length score",
+    "ms_per_image": "ms/img", "images_per_s": "images/s",
+}  # fmt: skip
+SHOWN = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image", "false_alarms_per_image",
+         "tp", "fp", "fn", "pd_pixel", "pfa_pixel", "ms_per_image"]  # fmt: skip
+"""Leaderboard columns after the ranking metric (those a run has)."""
+_NOT_COMPARED = {"dataset", "detector", "score_threshold", "run"}
+_SAMPLE_TYPES = {
+    "intensity": "intensity (power), used as is",
+    "amplitude": "amplitude, squared to intensity",
+    "db": "dB, converted to intensity (10^(x/10))",
+    "complex": "complex, |z|² intensity",
+    "display": "display rendering (8/16-bit, unknown transfer), scaled to [0, 1] and squared",
+}
+NO_DETECTION = "no detection above its threshold on this data"
+
+CSS = """
+:root{--fg:#1b1f24;--muted:#5a6472;--line:#d8dee6;--band:#f4f6f9;--best:#e3f4e6;--bar:#9fb3c8;}
+*{box-sizing:border-box}
+body{margin:0;font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;
+color:var(--fg);background:#fff}
+header,main,footer{max-width:1240px;margin:0 auto;padding:0 20px}
+header{padding-top:18px;border-bottom:1px solid var(--line)}
+h1{font-size:22px;margin:0 0 4px}h2{font-size:19px;margin:28px 0 8px;padding-top:8px;
+border-top:3px solid var(--fg)}h3{font-size:15px;margin:20px 0 6px}
+h4{font-size:14px;margin:14px 0 4px}
+.sub,.note,figcaption,.muted{color:var(--muted)}.sub{margin:0 0 8px}
+nav ul{list-style:none;padding:0;margin:6px 0 12px;display:flex;flex-wrap:wrap;gap:6px 16px}
+a{color:#0b5cad}
+.card{background:var(--band);border:1px solid var(--line);border-radius:6px;padding:10px 14px;
+display:grid;grid-template-columns:repeat(auto-fill,minmax(260px,1fr));gap:4px 24px}
+.card dt{font-weight:600;font-size:12px;color:var(--muted);text-transform:uppercase;
+letter-spacing:.03em}.card dd{margin:0 0 6px}
+.caveats{margin:8px 0 0;padding-left:20px}.caveats li{color:#8a3b00}
+.wrap{overflow-x:auto}
+table{border-collapse:collapse;font-size:13px;margin:4px 0}
+th,td{padding:3px 8px;border-bottom:1px solid var(--line);text-align:right;white-space:nowrap}
+th{background:var(--band);font-weight:600;position:sticky;top:0}
+td.l,th.l{text-align:left}.why{white-space:normal;color:var(--muted);font-size:11px;
+font-weight:400;max-width:230px;line-height:1.25}
+td.best{background:var(--best);font-weight:700}
+.sw{display:inline-block;width:22px;height:0;border-top:3px solid;vertical-align:middle;
+margin-right:6px}
+.ci{display:inline-flex;align-items:center;gap:6px}
+.bar{position:relative;display:inline-block;width:120px;height:10px;background:var(--band);
+border:1px solid var(--line);border-radius:2px}
+.bar .iv{position:absolute;top:1px;bottom:1px;background:var(--bar);border-radius:2px}
+.bar .pt{position:absolute;top:-2px;bottom:-2px;width:2px;margin-left:-1px;background:var(--fg)}
+.bar .zero{position:absolute;top:-3px;bottom:-3px;width:1px;background:var(--muted)}
+.lohi{font-size:11px;color:var(--muted)}
+.figs{display:grid;grid-template-columns:repeat(auto-fill,minmax(340px,1fr));gap:12px}
+svg.fig{width:100%;height:auto;display:block}
+figure{margin:0}
+.legend{display:flex;flex-wrap:wrap;gap:4px 14px;font-size:12px;margin:4px 0 8px}
+.cases{display:flex;flex-wrap:wrap;gap:8px}
+.case{width:136px;font-size:11px;line-height:1.3}
+.case img{width:128px;height:128px;image-rendering:pixelated;border:1px solid var(--line);
+display:block}
+.kind{font-weight:600;font-size:12px;margin:6px 0 2px}
+img.other{max-width:100%;height:auto;border:1px solid var(--line)}
+.heat{font-variant-numeric:tabular-nums}
+footer{margin-top:36px;padding:12px 20px 28px;border-top:1px solid var(--line);font-size:12px}
+@media print{
+ body{font-size:11px}header,main,footer{max-width:none;padding:0}nav{display:none}
+ section.dataset{break-before:page}h2{break-after:avoid}h3,h4{break-after:avoid}
+ figure,.case,tr,.card{break-inside:avoid}.wrap{overflow:visible}th{position:static}
+ *{-webkit-print-color-adjust:exact;print-color-adjust:exact}
+ .figs{grid-template-columns:repeat(2,1fr)}
+}
+"""
+
+
+def check_rank_by(metric: str, columns: Iterable[str] = ()) -> str:
+    """``metric`` if a leaderboard can be ranked by it (:data:`RANK_METRICS`, or a numeric
+    column ``columns`` of the run's summary); :class:`EvalError` otherwise."""
+    if metric in RANK_METRICS or metric in set(columns) - _NOT_COMPARED - {"images", "targets"}:
+        return metric
+    raise EvalError(f"{{opt:rank_by}}{metric!r}: not a metric; choose one of "
+                    f"{', '.join(RANK_METRICS)}")  # fmt: skip
+
+
+def _e(v: object) -> str:
+    return html.escape(str(v), quote=True)
+
+
+def _num(v: object) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return x
+
+
+def _fmt(metric: str, v: object) -> str:
+    x = _num(v)
+    if math.isnan(x):
+        return "–"
+    if metric in ("tp", "fp", "fn", "false_alarms", "images", "targets"):
+        return f"{x:.0f}"
+    if x == 0:
+        return "0"
+    if metric in ("pfa_pixel",) or abs(x) < 1e-3:
+        return f"{x:.2e}"
+    if metric in _UNIT:
+        return f"{x:.3f}"
+    return f"{x:.3g}" if abs(x) < 1000 else f"{x:,.0f}"
+
+
+def _png_uri(path: Path) -> str | None:
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "x"
+
+
+class _Board:
+    """One dataset's rows over the runs (one row per run x detector)."""
+
+    def __init__(self, runs: list[RunFiles], dataset: str, rank_by: str) -> None:
+        self.runs, self.dataset, self.rank_by = runs, dataset, rank_by
+        frames = []
+        for k, run in enumerate(runs):
+            s = run.table("summary", dataset).copy()
+            if s.empty:
+                continue
+            t = run.table("timing", dataset)
+            extra = [c for c in ("ms_per_image", "images_per_s") if c in t.columns]
+            if extra and "detector" in t.columns:
+                s = s.merge(t[["detector", *extra]].drop_duplicates("detector"), on="detector",
+                            how="left", suffixes=("", "_timing"))  # fmt: skip
+            s["run"], s["_run"] = run.name, k
+            frames.append(s)
+        self.rows = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+        many = len(runs) > 1
+        pairs = zip(self.rows["detector"], self.rows["run"], strict=True)
+        self.rows["label"] = [f"{d} ({r})" if many else d for d, r in pairs]
+        self._rank()
+        self.notes = self._notes()
+
+    def _rank(self) -> None:
+        m = self.rank_by
+        values = (pd.to_numeric(self.rows[m], errors="coerce") if m in self.rows.columns
+                  else pd.Series(np.nan, index=self.rows.index))  # fmt: skip
+        sign = 1.0 if m in LOWER_IS_BETTER else -1.0
+        key = (sign * values).fillna(np.inf)
+        order = np.argsort(key.to_numpy(), kind="stable")
+        self.rows = self.rows.iloc[order].reset_index(drop=True)
+        k = key.to_numpy()[order]
+        self.rank = [1 + int(np.sum(k < v)) if np.isfinite(v) else None for v in k]
+
+    def _curve(self, run: int, detector: str) -> tuple:
+        froc = self.runs[run].table("froc", self.dataset)
+        cols = [c for c in ("tp", "fp") if c in froc.columns]
+        if "detector" not in froc.columns or not cols:
+            return ()
+        return tuple(map(tuple, froc.loc[froc["detector"] == detector, cols].to_numpy().tolist()))
+
+    def _notes(self) -> list[str]:
+        """Why a row is what it is: no detection at all, or the same results as a row
+        ranked above it."""
+        cols = [
+            c
+            for c in self.rows.columns
+            if c not in _NOT_COMPARED
+            and not c.startswith("_")
+            and c not in ("label", "ms_per_image", "images_per_s", "object_ms_per_image")
+        ]
+        seen: dict[tuple, str] = {}
+        notes = []
+        for _, r in self.rows.iterrows():
+            if _num(r.get("tp")) == 0 and _num(r.get("fp")) == 0:
+                notes.append(NO_DETECTION)
+                continue
+            key = tuple(None if isinstance(v, float) and math.isnan(v) else v
+                        for v in (r[c] for c in cols))  # fmt: skip
+            key += self._curve(int(r["_run"]), r["detector"])
+            if key in seen:
+                notes.append(f"identical results to {seen[key]}")
+            else:
+                seen[key] = r["label"]
+                notes.append("")
+        return notes
+
+    def series(self) -> list[Series]:
+        out = []
+        for _, r in self.rows.sort_values(["_run"], kind="stable").iterrows():
+            dash = detector_dash(r["detector"]) if len(self.runs) == 1 else (
+                ["-", "--", ":", "-."][int(r["_run"]) % 4])  # fmt: skip
+            out.append(Series(r["label"], r["detector"], detector_colour(r["detector"]), dash, r))
+        return out
+
+
+def _swatch(detector: str, dash: str = "-") -> str:
+    style = {"-": "solid", "--": "dashed", ":": "dotted", "-.": "dashed"}[dash]
+    return (f'<span class="sw" style="border-top-color:{detector_colour(detector)};'
+            f'border-top-style:{style}"></span>')  # fmt: skip
+
+
+def _bar(value: float, lo: float, hi: float, top: float, zero: float | None = None) -> str:
+    """An interval bar on ``[0, top]`` (or ``[-top, top]`` when ``zero`` is given)."""
+    base = -top if zero is not None else 0.0
+    span = (top - base) or 1.0
+
+    def pos(x: float) -> float:
+        return 100 * min(max((x - base) / span, 0.0), 1.0)
+
+    parts = ['<span class="bar">']
+    if zero is not None:
+        parts.append(f'<span class="zero" style="left:{pos(0):.1f}%"></span>')
+    if not (math.isnan(lo) or math.isnan(hi)):
+        parts.append(f'<span class="iv" style="left:{pos(lo):.1f}%;'
+                     f'width:{max(pos(hi) - pos(lo), 0.8):.1f}%"></span>')  # fmt: skip
+    if not math.isnan(value):
+        parts.append(f'<span class="pt" style="left:{pos(value):.1f}%"></span>')
+    return "".join(parts) + "</span>"
+
+
+def _best(values: list[float], metric: str) -> float | None:
+    finite = [v for v in values if not math.isnan(v)]
+    if len(set(finite)) < 2:
+        return None
+    return min(finite) if metric in LOWER_IS_BETTER else max(finite)
+
+
+def _leaderboard(board: _Board) -> str:
+    rows, m = board.rows, board.rank_by
+    if rows.empty:
+        return '<p class="muted">No rows.</p>'
+    shown = [c for c in SHOWN if c in rows.columns and c != m]
+    many = len(board.runs) > 1
+    val = {c: [_num(v) for v in rows[c]] for c in [m, *shown] if c in rows.columns}
+    silent = [n == NO_DETECTION for n in board.notes]  # fewest false alarms, trivially
+    best = {
+        c: _best(
+            [math.nan if q and c in LOWER_IS_BETTER else x for x, q in zip(v, silent, strict=True)],
+            c,
+        )
+        for c, v in val.items()
+    }
+    has_ci = f"{m}_lo" in rows.columns and f"{m}_hi" in rows.columns
+    lo = [_num(v) for v in rows[f"{m}_lo"]] if has_ci else [math.nan] * len(rows)
+    hi = [_num(v) for v in rows[f"{m}_hi"]] if has_ci else [math.nan] * len(rows)
+    top = 1.0 if m in _UNIT else max([x for x in [*val.get(m, []), *hi] if not math.isnan(x)]
+                                     or [1.0]) or 1.0  # fmt: skip
+    head = ['<th class="l">#</th>', '<th class="l">detector</th>']
+    head += ['<th class="l">run</th>'] if many else []
+    arrow = "↓ lower is better" if m in LOWER_IS_BETTER else "↑ higher is better"
+    head.append(f'<th class="l" title="{_e(arrow)}">{_e(LABELS.get(m, m))} '
+                f'<span class="lohi">95 % interval</span></th>')  # fmt: skip
+    head += [f'<th title="{_e(c)}">{_e(LABELS.get(c, c))}</th>' for c in shown]
+    body = []
+    for i, r in rows.iterrows():
+        rank = board.rank[i]
+        v = val[m][i] if m in val else math.nan
+        cls = ' class="l best"' if best.get(m) is not None and v == best[m] else ' class="l"'
+        interval = (f'<span class="lohi">{_fmt(m, lo[i])}–{_fmt(m, hi[i])}</span>'
+                    if has_ci and not math.isnan(lo[i]) else "")  # fmt: skip
+        why = f'<div class="why">{_e(board.notes[i])}</div>' if board.notes[i] else ""
+        cells = [
+            f'<td class="l">{"" if rank is None else rank}</td>',
+            f'<td class="l det">{_swatch(r["detector"])}{_e(r["detector"])}{why}</td>',
+        ]
+        if many:
+            cells.append(f'<td class="l">{_e(r["run"])}</td>')
+        cells.append(f'<td{cls}><span class="ci"><b>{_fmt(m, v)}</b>'
+                     f'{_bar(v, lo[i], hi[i], top)}{interval}</span></td>')  # fmt: skip
+        for c in shown:
+            x = val[c][i]
+            mark = ' class="best"' if best[c] is not None and x == best[c] else ""
+            cells.append(f"<td{mark}>{_fmt(c, x)}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return ('<div class="wrap"><table class="leaderboard"><thead><tr>' + "".join(head)
+            + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+
+
+def _card(run: RunFiles, dataset: str, board: _Board, label: str | None) -> str:
+    opts = run.options
+    ds_opts = (opts.get("datasets") or {}).get(dataset) or {}
+    manifest = (opts.get("manifests") or {}).get(dataset) or {}
+    observed = (opts.get("observed") or {}).get(dataset) or {}
+    summary = run.table("summary", dataset)
+    first = summary.iloc[0] if not summary.empty else pd.Series(dtype=object)
+    facts: list[tuple[str, str]] = []
+    if label:
+        facts.append(("run", label))
+    source = manifest.get("generator") or ds_opts.get("root") or ""
+    if source:
+        scheme = ds_opts.get("scheme")
+        files = manifest.get("files")
+        facts.append(("source", f"{scheme + ': ' if scheme else ''}{source}"
+                      + (f" ({files} files)" if files is not None else "")))  # fmt: skip
+    facts.append(("images", _fmt("images", first.get("images"))))
+    facts.append(("targets", _fmt("targets", first.get("targets"))))
+    bd = run.table("breakdown", dataset)
+    if {"by", "key", "targets", "detector"} <= set(bd.columns) and not bd.empty:
+        one = bd[(bd["detector"] == bd["detector"].iloc[0]) & (bd["by"] == "class")]
+        if not one.empty:
+            pairs = zip(one["key"], one["targets"], strict=True)
+            facts.append(("classes", ", ".join(f"{k} ({_fmt('targets', t)})" for k, t in pairs)))
+    sizes = observed.get("image_size") or []
+    if sizes:
+        facts.append(("image size", ", ".join(f"{h} × {w} px" for h, w in sizes)))
+    sample = ds_opts.get("sample_type")
+    if sample:
+        facts.append(("samples", _SAMPLE_TYPES.get(sample, str(sample))))
+    declared = ds_opts.get("pixel_spacing")
+    spacing = observed.get("pixel_spacing") or ([declared] if declared else [])
+    facts.append(
+        (
+            "pixel spacing",
+            ", ".join(
+                f"{_num(s[0]):g} × {_num(s[1]):g} m"
+                if isinstance(s, list | tuple)
+                else f"{_num(s):g} m"
+                for s in spacing
+            )
+            if spacing
+            else "unknown (no false alarms per km², no sizes in m)",
+        )
+    )
+    if ds_opts.get("gt") or ds_opts.get("instances"):
+        facts.append(("ground truth", " · ".join(str(ds_opts[k]) for k in ("gt", "instances")
+                                                 if ds_opts.get(k))))  # fmt: skip
+    scoring = opts.get("scoring") or {}
+    match = scoring.get("matching") or {}
+    if match:
+        rule = _RULES.get(match.get("kind"))
+        try:
+            text = rule.format(**match) if rule else None
+        except (KeyError, ValueError):
+            text = None
+        if text is None:
+            text = f"{match.get('kind')}" + (f", within {match.get('max_distance')} "
+                                             f"{match.get('distance_units', '')}"
+                                             if match.get("max_distance") else "")  # fmt: skip
+        facts.append(("matching rule", text))
+    rules = scoring.get("objects") or {}
+    if rules:
+        facts.append(("objects", f"closing {rules.get('closing')} px, components of score > "
+                      f"{_num(rules.get('floor', 1)):g}, area ≥ {_num(rules.get('min_area')):g} "
+                      f"{rules.get('units', 'px')}"))  # fmt: skip
+    boot = scoring.get("bootstrap") or {}
+    if boot:
+        facts.append(("intervals", f"95 % Poisson bootstrap over images, "
+                      f"{boot.get('replicates')} replicates" if boot.get("replicates")
+                      else "none (bootstrap off)"))  # fmt: skip
+    cal = opts.get("calibration")
+    facts.append(("operating point", f"calibrated on {cal.get('fraction')} of the images for "
+                  f"{cal.get('target')}, reported on the rest" if isinstance(cal, dict)
+                  else "each detector's design threshold"))  # fmt: skip
+    if opts.get("despeckle"):
+        facts.append(("despeckling", ", ".join(f"{k}={v}" for k, v in opts["despeckle"].items())))
+    thr = (opts.get("throughput") or {}).get(dataset) or {}
+    if thr.get("wall_s") is not None:
+        facts.append(("time", f"{_num(thr['wall_s']):.1f} s ({_num(thr.get('images_per_s')):.3g}"
+                      " images/s)"))  # fmt: skip
+    caveats = []
+    if sample == "display":
+        caveats.append("display data: the detectors' design Pfa is not meaningful on it")
+    if ds_opts.get("gt") == "box":
+        caveats.append("box ground truth: no pixel metrics, AP at box IoU")
+    n_targets = _num(first.get("targets"))
+    if not math.isnan(n_targets) and n_targets < 30:
+        caveats.append(f"only {n_targets:.0f} targets: intervals are wide")
+    if isinstance(cal, dict):
+        caveats.append("the worst cases below are at the design operating point")
+    failed, skipped = thr.get("failed") or [], thr.get("skipped_items") or []
+    if failed or skipped:
+        caveats.append(f"{len(failed)} failed shard(s) and {len(skipped)} unreadable file(s) "
+                       "left out")  # fmt: skip
+    same = sorted({n.removeprefix("identical results to ") for n in board.notes
+                   if n.startswith("identical")})  # fmt: skip
+    if same:
+        caveats.append("some detectors give identical results (see the notes)")
+    out = ['<dl class="card">']
+    out += [f"<div><dt>{_e(k)}</dt><dd>{_e(v)}</dd></div>" for k, v in facts]
+    out.append("</dl>")
+    if caveats:
+        out.append('<ul class="caveats">' + "".join(f"<li>{_e(c)}</li>" for c in caveats)
+                   + "</ul>")  # fmt: skip
+    return "".join(out)
+
+
+def _legend(series: list[Series]) -> str:
+    items = [f"<span>{_swatch(s.detector, s.dash)}{_e(s.label)}</span>" for s in series]
+    return '<div class="legend">' + "".join(items) + "</div>"
+
+
+def _figures(board: _Board, salt: str) -> str:
+    series = board.series()
+    figs = []
+    for kind, (_, _, _, table, _) in FIGURES.items():
+        frames = [run.table(table, board.dataset) for run in board.runs]
+        if len(board.runs) > 1:
+            frames = [_relabel(f, run.name) for f, run in zip(frames, board.runs, strict=True)]
+            ser = [Series(s.label, s.label, s.colour, s.dash, s.summary) for s in series]
+        else:
+            ser = series
+        frames = [f for f in frames if not f.empty]
+        if not frames:
+            continue
+        svg = figure_svg(kind, pd.concat(frames, ignore_index=True), ser, salt)
+        if svg:
+            figs.append(f"<figure>{svg}</figure>")
+    if not figs:
+        return '<p class="muted">No curves in this run.</p>'
+    note = ('<p class="note">Filled dots: each detector\'s operating point. Colours are '
+            "fixed per detector name.</p>")  # fmt: skip
+    return _legend(series) + '<div class="figs">' + "".join(figs) + "</div>" + note
+
+
+def _relabel(df: pd.DataFrame, run: str) -> pd.DataFrame:
+    if "detector" not in df.columns:
+        return df
+    df = df.copy()
+    df["detector"] = [f"{d} ({run})" for d in df["detector"]]
+    return df
+
+
+def _table(df: pd.DataFrame, left: int = 1) -> str:
+    head = "".join(f'<th{" class=l" if i < left else ""}>{_e(c)}</th>'
+                   for i, c in enumerate(df.columns))  # fmt: skip
+    body = []
+    for row in df.itertuples(index=False):
+        cells = []
+        for i, v in enumerate(row):
+            text = _fmt(str(df.columns[i]), v) if isinstance(v, float) else str(v)
+            cells.append(f"<td{' class=l' if i < left else ''}>{_e(text)}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return ('<div class="wrap"><table><thead><tr>' + head + "</tr></thead><tbody>"
+            + "".join(body) + "</tbody></table></div>")  # fmt: skip
+
+
+def _order(board: _Board, run: RunFiles) -> list[str]:
+    """The run's detectors in leaderboard order."""
+    r = board.rows[board.rows["run"] == run.name]
+    return list(dict.fromkeys(r["detector"]))
+
+
+def _breakdown(board: _Board) -> str:
+    out = []
+    for run in board.runs:
+        bd = run.table("breakdown", board.dataset)
+        if bd.empty or not {"detector", "by", "key", "tp", "targets"} <= set(bd.columns):
+            continue
+        keys = list(dict.fromkeys(zip(bd["by"], bd["key"], strict=True)))
+        head = ['<th class="l">detector</th>']
+        for by, key in keys:
+            n = bd[(bd["by"] == by) & (bd["key"] == key)]["targets"].iloc[0]
+            head.append(f'<th>{_e(by)}: {_e(key)}<br><span class="lohi">'
+                        f"{_fmt('targets', n)} targets</span></th>")  # fmt: skip
+        body = []
+        for det in _order(board, run):
+            d = bd[bd["detector"] == det]
+            cells = [f'<td class="l">{_swatch(det)}{_e(det)}</td>']
+            for by, key in keys:
+                row = d[(d["by"] == by) & (d["key"] == key)]
+                if row.empty:
+                    cells.append("<td>–</td>")
+                    continue
+                tp, n = _num(row["tp"].iloc[0]), _num(row["targets"].iloc[0])
+                fp = _num(row["fp"].iloc[0]) if "fp" in row else math.nan
+                rec = tp / n if n else math.nan
+                shade = "" if math.isnan(rec) else (
+                    f' style="background:rgba(46,160,67,{0.08 + 0.32 * rec:.2f})"')  # fmt: skip
+                extra = "" if math.isnan(fp) else f" · {fp:.0f} FA"
+                cells.append(f'<td class="heat"{shade}>{tp:.0f}/{n:.0f}<span class="lohi">'
+                             f"{extra}</span></td>")  # fmt: skip
+            body.append("<tr>" + "".join(cells) + "</tr>")
+        title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
+        out.append(title + '<div class="wrap"><table><thead><tr>' + "".join(head)
+                   + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+    if not out:
+        return ""
+    return (
+        '<h3>Breakdown</h3><p class="note">Targets found / targets at the operating point '
+        "(shaded by recall), false alarms where they can be attributed.</p>" + "".join(out)
+    )
+
+
+def _errors(board: _Board) -> str:
+    out = []
+    for run in board.runs:
+        df = run.table("errors", board.dataset)
+        if df.empty:
+            continue
+        count = first_column(df, ["count", "n", "errors", "value"])
+        kind = first_column(df, ["type", "error", "kind"])
+        if count is None or kind is None or "detector" not in df.columns:
+            table = _table(df.drop(columns=[c for c in ("dataset",) if c in df.columns]))
+        else:
+            piv = df.pivot_table(index="detector", columns=kind, values=count, aggfunc="sum",
+                                 sort=False)  # fmt: skip
+            order = [d for d in _order(board, run) if d in piv.index]
+            piv = piv.reindex(order + [d for d in piv.index if d not in order])
+            table = _table(piv.reset_index())
+        out.append((f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else "") + table)
+    return "<h3>Error types</h3>" + "".join(out) if out else ""
+
+
+def _paired(board: _Board) -> str:
+    out = []
+    for run in board.runs:
+        df = run.table("paired", board.dataset)
+        if df.empty:
+            continue
+        diff = first_column(df, ["difference", "diff", "delta", "mean_difference"])
+        lo = first_column(df, ["lo", "difference_lo", "diff_lo", "ci_lo", "lower"])
+        hi = first_column(df, ["hi", "difference_hi", "diff_hi", "ci_hi", "upper"])
+        sig = first_column(df, ["significant", "sig"])
+        names = [c for c in ("detector", "reference", "metric") if c in df.columns]
+        if diff is None:
+            out.append(_table(df.drop(columns=[c for c in ("dataset",) if c in df.columns])))
+            continue
+        vals = [abs(_num(v)) for c in (diff, lo, hi) if c for v in df[c]]
+        top = max([v for v in vals if not math.isnan(v)] or [1.0]) or 1.0
+        head = "".join(f'<th class="l">{_e(c)}</th>' for c in names)
+        head += '<th class="l">difference <span class="lohi">95 % interval</span></th>'
+        head += '<th class="l">significant</th>' if sig else ""
+        body = []
+        for _, r in df.iterrows():
+            d = _num(r[diff])
+            a, b = (_num(r[lo]) if lo else math.nan), (_num(r[hi]) if hi else math.nan)
+            cells = "".join(f'<td class="l">{_e(r[c])}</td>' for c in names)
+            interval = "" if math.isnan(a) else f'<span class="lohi">{a:+.3g} … {b:+.3g}</span>'
+            cells += (f'<td class="l"><span class="ci"><b>{d:+.3g}</b>'
+                      f"{_bar(d, a, b, top, zero=0.0)}{interval}</span></td>")  # fmt: skip
+            if sig:
+                yes = str(r[sig]).strip().lower() in ("true", "1", "yes", "1.0")
+                cells += f'<td class="l">{"<b>yes</b>" if yes else "no"}</td>'
+            body.append("<tr>" + cells + "</tr>")
+        out.append((f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else "")
+                   + '<div class="wrap"><table><thead><tr>' + head + "</tr></thead><tbody>"
+                   + "".join(body) + "</tbody></table></div>")  # fmt: skip
+    if not out:
+        return ""
+    return ('<h3>Paired differences</h3><p class="note">Differences to the reference detector '
+            "on the same images (paired bootstrap); the bar is centred on zero.</p>"
+            + "".join(out))  # fmt: skip
+
+
+def _coco(board: _Board) -> str:
+    out = []
+    for run in board.runs:
+        df = run.table("coco", board.dataset)
+        if not df.empty:
+            out.append(_table(df.drop(columns=[c for c in ("dataset",) if c in df.columns]), 2))
+    return "<h3>COCO-compatible statistics</h3>" + "".join(out) if out else ""
+
+
+_KINDS = [("false_alarm", "highest-scoring false alarms"), ("miss", "largest missed targets")]
+
+
+def _caption(kind: str, rank: int, r: pd.Series) -> str:
+    where = f"{_e(r.get('image', ''))} (row {_num(r.get('row')):.0f}, col {_num(r.get('col')):.0f})"
+    score = _num(r.get("score"))
+    area = _num(r.get("area"))
+    cls = r.get("class")
+    cls = "" if cls is None or (isinstance(cls, float) and math.isnan(cls)) else f" {_e(cls)}"
+    if kind == "false_alarm":
+        what = f"score {score:.3g}" + ("" if math.isnan(area) else f" · {area:.0f} px")
+    else:
+        found = "no match" if math.isnan(score) else f"matched below threshold ({score:.3g})"
+        what = ("" if math.isnan(area) else f"{area:.0f} px{cls} · ") + found
+    return f"<b>#{rank}</b> {where}<br>{what}"
+
+
+def _gallery(board: _Board) -> str:
+    out = []
+    for run in board.runs:
+        cases = run.table("cases", board.dataset)
+        need = {"detector", "kind", "file"}
+        if cases.empty or not need <= set(cases.columns):
+            continue
+        for det in _order(board, run):
+            d = cases[cases["detector"] == det]
+            label = det if len(board.runs) == 1 else f"{det} ({run.name})"
+            parts = [f"<h4>{_swatch(det)}{_e(label)}</h4>"]
+            for kind, title in _KINDS:
+                k = d[d["kind"] == kind]
+                figs = []
+                for rank, (_, r) in enumerate(k.iterrows(), 1):
+                    uri = _png_uri(run.folder / str(r["file"]))
+                    if uri is None:
+                        continue
+                    alt = f"{kind.replace('_', ' ')} {rank} of {det}"
+                    figs.append(f'<figure class="case"><img src="{uri}" width="128" '
+                                f'height="128" alt="{_e(alt)}"><figcaption>'
+                                f"{_caption(kind, rank, r)}</figcaption></figure>")  # fmt: skip
+                count = f"{len(figs)} shown" if figs else "none"
+                parts.append(f'<div class="kind">{_e(title)}: {count}</div>')
+                if figs:
+                    parts.append('<div class="cases">' + "".join(figs) + "</div>")
+            out.append("".join(parts))
+    if not out:
+        return ""
+    return (
+        '<h3>Worst cases</h3><p class="note">At the design operating point, chosen over '
+        "the whole dataset. Green: ground truth; magenta: detections; yellow: don't-care "
+        "pixels; the case's own object is outlined twice as thick.</p>" + "".join(out)
+    )
+
+
+def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:
+    if len(runs) == 1:
+        run = runs[0]
+        cfg = run.config
+        title = f"Evaluation report: {run.name}"
+        sub = [f"run {run.name}"]
+        if cfg.get("time"):
+            sub.append(f"created {cfg['time']}")
+        if cfg.get("torchsar_version"):
+            sub.append(f"torchsar {cfg['torchsar_version']}, torch {cfg.get('torch_version')}")
+    else:
+        title = "Evaluation report: " + " vs ".join(r.name for r in runs)
+        sub = [f"{len(runs)} runs: " + ", ".join(
+            f"{r.name}" + (f" ({r.config['time']})" if r.config.get("time") else "")
+            for r in runs)]  # fmt: skip
+    sub.append(f"ranked by {LABELS.get(rank_by, rank_by)}")
+    return title, f'<h1>{_e(title)}</h1><p class="sub">{_e(" · ".join(sub))}</p>'
+
+
+def _datasets(runs: list[RunFiles]) -> list[str]:
+    return list(dict.fromkeys(d for run in runs for d in run.datasets))
+
+
+def _others(runs: list[RunFiles]) -> str:
+    out = []
+    for run in runs:
+        for path in run.figures:
+            uri = _png_uri(path)
+            if uri:
+                name = path.name if len(runs) == 1 else f"{run.name}/{path.name}"
+                out.append(f'<figure><img class="other" src="{uri}" alt="{_e(name)}">'
+                           f"<figcaption>{_e(name)}</figcaption></figure>")  # fmt: skip
+    return "<section><h2>Other figures</h2>" + "".join(out) + "</section>" if out else ""
+
+
+def _glossary() -> str:
+    rows = "".join(f'<tr><td class="l">{_e(k)}</td><td class="l" style="white-space:normal">'
+                   f"{_e(v)}</td></tr>" for k, v in _TERMS)  # fmt: skip
+    return ('<section><h2>Glossary</h2><div class="wrap"><table><tbody>' + rows
+            + "</tbody></table></div></section>")  # fmt: skip
+
+
+def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
+    """The report of ``runs`` (one run, or several compared) as one HTML document."""
+    if not runs:
+        raise EvalError("no run folder given")
+    columns = {c for run in runs for c in run.tables["summary"].columns}
+    columns |= {c for run in runs for c in run.tables["timing"].columns}
+    check_rank_by(rank_by, columns)
+    title, header = _header(runs, rank_by)
+    names = _datasets(runs)
+    nav = "".join(f'<li><a href="#ds-{i}">{_e(n)}</a></li>' for i, n in enumerate(names, 1))
+    sections = []
+    for i, name in enumerate(names, 1):
+        board = _Board(runs, name, rank_by)
+        cards = "".join(_card(run, name, board, run.name if len(runs) > 1 else None)
+                        for run in runs if name in run.datasets)  # fmt: skip
+        sections.append(
+            f'<section class="dataset" id="ds-{i}"><h2>{_e(name)}</h2>{cards}'
+            f"<h3>Leaderboard</h3>{_leaderboard(board)}"
+            f"<h3>Curves</h3>{_figures(board, f'ds{i}-{_slug(name)}')}"
+            f"{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"
+            f"{_gallery(board)}</section>"
+        )
+    return (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
+        f'<header>{header}<nav><ul>{nav}<li><a href="#glossary">glossary</a></li></ul></nav>'
+        f"</header><main>{''.join(sections)}{_others(runs)}"
+        f'<div id="glossary">{_glossary()}</div></main>'
+        "<footer>Written by torchsar-eval from the run folder's files; rebuild it with "
+        "<code>torchsar-eval report RUN</code>.</footer></body></html>\n"
+    )

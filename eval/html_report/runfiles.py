@@ -1,0 +1,110 @@
+"""A run folder read back from its files (CSV tables, ``config.json``, figures, the
+gallery), tolerant of what older or newer runs lack: a missing table is empty, a missing
+column is skipped by whoever needs it."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from torchsar_eval.errors import EvalError
+
+__all__ = ["RUN_TABLES", "RunFiles", "read_run"]
+
+RUN_TABLES = {
+    "summary": "summary.csv",
+    "froc": "roc.csv",
+    "pr": "pr.csv",
+    "pixel_roc": "roc_pixel.csv",
+    "breakdown": "breakdown.csv",
+    "timing": "timing.csv",
+    "coco": "coco.csv",
+    "scr": "scr.csv",
+    "errors": "errors.csv",
+    "paired": "paired.csv",
+    "cases": "gallery/cases.csv",
+}
+"""The files a report reads (all optional but ``summary.csv``)."""
+REDRAWN = ("roc_",)
+"""Figures of a run folder the report draws afresh (so it does not show them twice)."""
+
+
+@dataclass
+class RunFiles:
+    """What a report needs of one run folder.
+
+    Attributes:
+        folder: the run folder.
+        name: the run's name (its ``--out`` folder name as recorded, else the folder's).
+        config: ``config.json`` (``{}`` when missing or unreadable).
+        tables: the tables of :data:`RUN_TABLES` (empty DataFrames when missing).
+        figures: the folder's other PNG figures (those the report does not redraw).
+    """
+
+    folder: Path
+    name: str
+    config: dict = field(default_factory=dict)
+    tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+    figures: list[Path] = field(default_factory=list)
+
+    @property
+    def options(self) -> dict:
+        return self.config.get("options") or {}
+
+    def table(self, key: str, dataset: str | None = None) -> pd.DataFrame:
+        """Table ``key``, only the rows of ``dataset`` when given (and it has the column)."""
+        df = self.tables.get(key, pd.DataFrame())
+        if dataset is not None and "dataset" in df.columns:
+            df = df[df["dataset"].astype(str) == dataset]
+        return df
+
+    @property
+    def datasets(self) -> list[str]:
+        """The datasets of the run, in summary order."""
+        return list(dict.fromkeys(self.tables["summary"]["dataset"].astype(str)))
+
+
+def _read_csv(path: Path) -> pd.DataFrame:
+    if not path.is_file():
+        return pd.DataFrame()
+    try:
+        return pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
+        warnings.warn(f"{path}: unreadable table, left out of the report ({exc})", UserWarning,
+                      stacklevel=3)  # fmt: skip
+        return pd.DataFrame()
+
+
+def read_run(folder: str | Path) -> RunFiles:
+    """Read run folder ``folder`` (a ``torchsar-eval run`` output): its tables,
+    ``config.json`` and figures. :class:`EvalError` when it has no readable
+    ``summary.csv`` with ``dataset`` and ``detector`` columns."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise EvalError(f"{folder} is not a folder: give a run folder (torchsar-eval run --out)")
+    tables = {k: _read_csv(folder / f) for k, f in RUN_TABLES.items()}
+    summary = tables["summary"]
+    if summary.empty or not {"dataset", "detector"} <= set(summary.columns):
+        raise EvalError(f"{folder} is not a run folder of torchsar-eval run: it has no "
+                        "summary.csv with dataset and detector columns")  # fmt: skip
+    for df in tables.values():
+        for col in ("dataset", "detector"):
+            if col in df.columns:
+                df[col] = df[col].astype(str)
+    config: dict = {}
+    if (folder / "config.json").is_file():
+        try:
+            config = json.loads((folder / "config.json").read_text())
+        except (ValueError, OSError):
+            config = {}
+        if not isinstance(config, dict):
+            config = {}
+    options = config.get("options")
+    out = options.get("out") if isinstance(options, dict) else None
+    name = Path(str(out)).name if out else folder.resolve().name
+    figures = sorted(p for p in folder.glob("*.png") if not p.name.startswith(REDRAWN))
+    return RunFiles(folder, name, config, tables, figures)

@@ -1,0 +1,106 @@
+"""``report.html`` in a real browser (headless Chromium, network off): it loads without a
+console message, every image decodes, the leaderboard and every figure are laid out with a
+size, and a screenshot shows them.
+
+Slow (a run and a few browser starts): run with ``pytest -m slow tests/eval/test_report_browser.py``.
+Skipped when no Chromium is installed (Debian: ``apt-get install chromium``; any other
+binary: set ``TORCHSAR_BROWSER``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import torchsar_eval as te
+from torchsar_eval.colours import detector_colour
+
+pytestmark = pytest.mark.slow
+
+NAMES = ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome"]
+WIDTH, HEIGHT = 1366, 2600
+
+
+def _browser() -> str:
+    found = os.environ.get("TORCHSAR_BROWSER") or next(filter(None, map(shutil.which, NAMES)),
+                                                        None)  # fmt: skip
+    if not found:
+        pytest.skip("no Chromium installed (apt-get install chromium, or set TORCHSAR_BROWSER)")
+    return found
+
+
+def _chromium(tmp_path, *args: str) -> subprocess.CompletedProcess:
+    """Headless Chromium with its own profile, no network (every host unresolvable)."""
+    argv = [_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+            f"--user-data-dir={tmp_path / 'profile'}", "--host-resolver-rules=MAP * ~NOTFOUND",
+            "--enable-logging=stderr", "--v=0", "--virtual-time-budget=5000", *args]  # fmt: skip
+    return subprocess.run(argv, capture_output=True, text=True, timeout=180, cwd=tmp_path)
+
+
+PROBE = """<script>
+window.__errors = [];
+window.addEventListener("error", e => window.__errors.push(String(e.message || e.type)), true);
+window.addEventListener("load", () => {
+  const size = el => { const b = el.getBoundingClientRect(); return [b.width, b.height]; };
+  const board = document.querySelector("table.leaderboard");
+  const r = {errors: window.__errors,
+             images: [...document.images].map(i => [i.naturalWidth, ...size(i)]),
+             figures: [...document.querySelectorAll("svg.fig")].map(size),
+             board: board ? [...size(board), board.tBodies[0].rows.length] : null};
+  const pre = document.createElement("pre");
+  pre.id = "probe";
+  pre.textContent = JSON.stringify(r);
+  document.body.appendChild(pre);
+});
+</script>"""
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    _browser()  # skip before the run when there is no browser
+    out = tmp_path_factory.mktemp("browser") / "run"
+    te.evaluate("sim-chips", ["ca", "so"], n=4, out=out, progress=False)
+    return out / "report.html"
+
+
+def test_the_report_loads_without_console_messages(report, tmp_path):
+    done = _chromium(tmp_path, "--dump-dom", report.as_uri())
+    assert done.returncode == 0, done.stderr[-2000:]
+    console = [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
+    assert not console, console
+    assert 'class="leaderboard"' in done.stdout
+
+
+def test_leaderboard_figures_and_images_are_laid_out(report, tmp_path):
+    probe = tmp_path / "probe.html"
+    probe.write_text(report.read_text().replace("<head>", "<head>" + PROBE, 1))
+    done = _chromium(tmp_path, f"--window-size={WIDTH},{HEIGHT}", "--dump-dom", probe.as_uri())
+    found = re.search(r'<pre id="probe">(.*?)</pre>', done.stdout, re.S)
+    assert found, done.stderr[-2000:]
+    r = json.loads(found.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    assert r["errors"] == []
+    width, height, rows = r["board"]
+    assert width > 300 and height > 0 and rows == 2
+    assert len(r["figures"]) == 3 and all(w > 100 and h > 100 for w, h in r["figures"])
+    assert r["images"] and all(n > 0 and w > 0 and h > 0 for n, w, h in r["images"])
+
+
+def test_a_screenshot_shows_the_page(report, tmp_path):
+    shot = tmp_path / "shot.png"
+    done = _chromium(tmp_path, f"--window-size={WIDTH},{HEIGHT}", f"--screenshot={shot}",
+                     report.as_uri())  # fmt: skip
+    assert shot.is_file(), done.stderr[-2000:]
+    with Image.open(shot) as im:
+        rgb = np.asarray(im.convert("RGB")).astype(int)
+    assert rgb.shape[:2] == (HEIGHT, WIDTH)
+    ink = (rgb < 200).any(axis=-1).mean()
+    assert 0.02 < ink < 0.9, ink  # neither blank nor one block of colour
+    for name in ("ca", "so"):  # the detectors' own colours are drawn (swatches, curves)
+        want = np.array([int(detector_colour(name)[i : i + 2], 16) for i in (1, 3, 5)])
+        assert (np.abs(rgb - want).max(axis=-1) <= 8).sum() > 50, name
