@@ -9,23 +9,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+from torchsar_eval.choices import BUILTIN_DETECTORS
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import pandas as pd
-from tqdm import tqdm
+if TYPE_CHECKING:
+    import pandas as pd
 
-from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
-from torchsar_eval.datasets import make_dataset
-from torchsar_eval.options import at_least, floats, names
-from torchsar_eval.output import default_out, result_dir, write_config
-from torchsar_eval.plots import detector_style, save, slug
-from torchsar_eval.registry import BUILTIN
-from torchsar_eval.tables import markdown
-
-DEFAULT_DETECTORS = [n for n in BUILTIN if n != "region"]
+DEFAULT_DETECTORS = [n for n in BUILTIN_DETECTORS if n != "region"]
 DEFAULT_PFAS = (1e-2, 1e-3, 1e-4)
 
 
@@ -41,7 +32,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=256, help="image side (default 256)")
     p.add_argument("--images", type=int, default=4, help="images per clutter model (default 4)")
     p.add_argument("--pfa", default=",".join(map(str, DEFAULT_PFAS)), help="design Pfa list")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated clutter")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/pfa-*)")
     p.add_argument(
         "--dataset",
@@ -51,12 +42,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "clutter (repeatable; e.g. folder:PATH, hrsid:DIR): real clutter vs the models",
     )
     p.add_argument("--n", type=int, default=None, help="images per --dataset (default: all)")
-    p.add_argument("--batch-size", type=int, default=8)
+    p.add_argument("--batch-size", type=int, default=8, help="images per detector call")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import pandas as pd
+    from tqdm import tqdm
+
+    from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.options import at_least, floats, names
+    from torchsar_eval.output import default_out, result_dir, write_config
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.tables import markdown
+
     wanted = ",".join(DEFAULT_DETECTORS) if args.detectors is None else args.detectors
     specs = [BUILTIN[n] for n in names(wanted, "--detectors", BUILTIN, what="detector")]
     pfas = floats(args.pfa, "--pfa", above=0, below=1)
@@ -109,6 +110,10 @@ def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     """One panel per clutter model: measured vs design Pfa (log-log) with 95 % intervals;
     a detector without any false alarm is drawn as an open triangle at the interval's upper
     bound."""
+    import matplotlib.pyplot as plt
+
+    from torchsar_eval.plots import detector_style, save, slug
+
     cases = list(dict.fromkeys(table["clutter"]))
     cols = 3
     rows = (len(cases) + cols - 1) // cols
