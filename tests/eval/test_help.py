@@ -166,3 +166,19 @@ def test_cli_prints_a_warning_as_one_line(tmp_path):
     lines = out.stderr.splitlines()
     assert lines[0] == "torchsar-eval: warning: first line second line"
     assert "UserWarning: after main" in lines[1]  # library users keep Python's format
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_run_stays_the_command_function_once_its_submodules_are_imported(command):
+    """Commands import their heavy submodules when they run; none may be named ``run``
+    (importing it would replace the package's ``run`` function)."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    from torchsar_eval.commands import load
+
+    module = load(command)
+    for sub in pkgutil.iter_modules(getattr(module, "__path__", [])):
+        importlib.import_module(f"{module.__name__}.{sub.name}")
+    assert inspect.isfunction(module.run) and inspect.isfunction(module.add_parser)

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from torchsar_eval.errors import EvalError
 
 if TYPE_CHECKING:
-    from torchsar_eval.commands.movers.run import LadderConfig
+    from torchsar_eval.commands.movers.experiment import LadderConfig
 
 __all__ = ["SPEEDS", "add_parser", "run"]
 
@@ -80,7 +80,7 @@ def floats(text: str, name: str, *, allow_empty: bool = False) -> tuple[float, .
 
 def config(args: argparse.Namespace) -> LadderConfig:
     """Validate the options (one-line errors) and freeze them."""
-    from torchsar_eval.commands.movers.run import LadderConfig
+    from torchsar_eval.commands.movers.experiment import LadderConfig
 
     speeds = floats(args.speeds, "--speeds")
     if min(speeds) <= 0:
@@ -113,7 +113,7 @@ def config(args: argparse.Namespace) -> LadderConfig:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from torchsar_eval.commands.movers.run import run_ladder
+    from torchsar_eval.commands.movers.experiment import run_ladder
     from torchsar_eval.output import default_out
 
     cfg = config(args)
