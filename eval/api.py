@@ -19,9 +19,8 @@ from collections.abc import Callable, Iterable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 from torch.utils.data import Dataset
 
 from torchsar_eval.batches import SkipBad, TruthOnly
@@ -30,12 +29,13 @@ from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
-from torchsar_eval.report import per_image_rows, result_tables, write_run
 from torchsar_eval.result import Scoring
 from torchsar_eval.resume import check_resumable, fingerprint
 from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
-from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
+if TYPE_CHECKING:
+    import pandas as pd  # the tables: imported once the scoring is done
 
 __all__ = ["Results", "evaluate"]
 
@@ -268,6 +268,11 @@ def _cap_workers(ex: Execution) -> Execution:
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
     """Score every dataset into the folder ``tmp`` (a run's staging folder, or a temporary
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
+    import pandas as pd
+
+    from torchsar_eval.report import per_image_rows, result_tables, write_run
+    from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
     check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
     results, stats, windows = {}, {}, {}
     labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
