@@ -383,7 +383,10 @@ def _check_failures(name: str, total: int, bad: list, counts: dict, ex: Executio
 def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
     """Score one dataset shard by shard; with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
-    Returns the merged results and the dataset's run statistics (wall time, shards)."""
+    Returns the merged results and the dataset's run statistics: images (of the reported
+    split), scored (images scored in this run, calibration split included) and reused
+    (found in the saved shards of an interrupted run), wall time, throughput of the scored
+    images, shards."""
     t0 = time.perf_counter()
     ex, cal = plan.execution, plan.calibration
     indices = list(range(len(ds)))
@@ -401,14 +404,14 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
                           address=ex.address, skip_bad=ex.skip_bad,
                           progress=ex.progress)  # fmt: skip
 
-    chosen = None
+    chosen, calib_counts = None, {"scored_images": 0, "reused_images": 0}
     if cal is not None:
         target = parse_target(cal.target)
         calib, indices = split_indices(len(ds), name, cal.fraction)
         if not calib or not indices:
             raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
                             f"split of {cal.fraction:g}")  # fmt: skip
-        tuned, _ = shards(calib, state / "calibration")
+        tuned, calib_counts = shards(calib, state / "calibration")
         chosen = [choose_bin(r.objects, target) for r in tuned]
     results, counts = shards(indices, state / "test", plan.export_coco)
     for r, det in zip(results, detectors, strict=True):
@@ -419,7 +422,10 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)
-    stats = {"images": len(indices), "wall_s": wall, **counts, "export": exporter,
+    scored = counts.pop("scored_images") + calib_counts["scored_images"]
+    reused = counts.pop("reused_images") + calib_counts["reused_images"]
+    stats = {"images": len(indices), "scored": scored, "reused": reused,
+             "wall_s": wall, **counts, "export": exporter,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
-             "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
+             "images_per_s": scored / wall if scored and wall > 0 else float("nan")}  # fmt: skip
     return results, stats

@@ -294,20 +294,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(results: Results) -> None:
-    """The console summary: the headline columns, each dataset's throughput and problems."""
+    """The console summary: the headline columns, each dataset's throughput and problems;
+    datasets by their short labels (the tables keep the full names)."""
+    from torchsar_eval.labels import short_labels
+    from torchsar_eval.report import throughput
     from torchsar_eval.tables import CONSOLE_COLUMNS
 
     summary = results.summary.merge(results.timing, on=["dataset", "detector", "images"])
+    labels = short_labels([*summary["dataset"], *results.stats])
+    summary["dataset"] = summary["dataset"].map(labels)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         print(summary[CONSOLE_COLUMNS].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for name, st in results.stats.items():
-        print(
-            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
-            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
-            f"(done {st['done']}, resumed {st['skipped']}, retried {st['retried']}, "
-            f"failed {len(st['failed'])})"
-        )
+        print(f"{labels[name]}: {throughput(st)}")
         for f in st["failed"]:
             print(f"  FAILED shard {f['shard']}: {f['error']}")
         for b in st["skipped_items"]:
