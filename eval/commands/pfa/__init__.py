@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
     from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
     from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.labels import short_labels
     from torchsar_eval.options import at_least, floats, names
     from torchsar_eval.output import default_out, result_dir, write_config
     from torchsar_eval.registry import BUILTIN
@@ -92,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
                 "note": "detectors with a looks option get the clutter's looks",
             },
         )
-    print(_wide(table).to_string(float_format=lambda v: f"{v:.3g}"))
+    shown = table.assign(clutter=table["clutter"].map(short_labels(table["clutter"])))
+    print(_wide(shown).to_string(float_format=lambda v: f"{v:.3g}"))
     print(f"\nwrote {out}/: pfa.csv pfa.md pfa.png config.json")
     return 0
 

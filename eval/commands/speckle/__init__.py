@@ -128,6 +128,7 @@ def evaluate(opts: SpeckleOptions) -> int:
     from torchsar_eval.commands.speckle.panel import despeckling_panel
     from torchsar_eval.commands.speckle.scoring import samples, score_dataset
     from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.labels import short_labels
     from torchsar_eval.output import result_dir, write_config
     from torchsar_eval.plots import slug
     from torchsar_eval.tables import markdown
@@ -165,7 +166,8 @@ def evaluate(opts: SpeckleOptions) -> int:
                 "out": str(opts.out),
             },
         )
-    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    shown = table.assign(dataset=table["dataset"].map(short_labels(table["dataset"])))
+    print(shown.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(
         f"\nwrote {opts.out}/: speckle.csv speckle.md config.json "
         + " ".join(f"speckle_{slug(n)}.png" for n in datasets)
