@@ -182,3 +182,24 @@ def test_run_stays_the_command_function_once_its_submodules_are_imported(command
     for sub in pkgutil.iter_modules(getattr(module, "__path__", [])):
         importlib.import_module(f"{module.__name__}.{sub.name}")
     assert inspect.isfunction(module.run) and inspect.isfunction(module.add_parser)
+
+
+@pytest.mark.parametrize(
+    ("argv", "code"),
+    [
+        (["run", "--n", "0"], 2),
+        (["run", "--workers", "0"], 2),
+        (["clean", "--dry-run"], 0),
+    ],
+)
+def test_light_work_imports_no_torch(tmp_path, argv, code):
+    """A plain-number mistake fails, and ``clean`` does its work, before torch loads."""
+    extra = ["--out", str(tmp_path / "out")] if argv[0] == "run" else [str(tmp_path)]
+    script = (
+        "import json, sys\n"
+        "from torchsar_eval.cli import main\n"
+        f"code = main({argv + extra!r})\n"
+        f"print(json.dumps([code, [m for m in {HEAVY!r} if m in sys.modules]]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert json.loads(out.stdout.splitlines()[-1]) == [code, []], out.stderr

@@ -244,17 +244,23 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The ``run`` sub-command: validate, evaluate, print the summary."""
-    from torchsar_eval.api import evaluate
-    from torchsar_eval.commands.run import options
+    """The ``run`` sub-command: validate, evaluate, print the summary. The checks that need
+    no library come first, so a mistyped number fails at once."""
+    from torchsar_eval.options import at_least
     from torchsar_eval.output import check_out
-    from torchsar_eval.settings import Calibration, Execution
 
     check_out(args.out, overwrite=args.overwrite, resume=args.resume, discard=args.discard)
-    detectors, preprocess, despeckle_opts = options.check_run_args(args)
-    scoring = options.scoring_from(args)
+    at_least(args.n, "--n", 1)
+    at_least(args.batch_size, "--batch-size", 1)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
+
+    from torchsar_eval.api import evaluate
+    from torchsar_eval.commands.run import options
+    from torchsar_eval.settings import Calibration, Execution
+
+    detectors, preprocess, despeckle_opts = options.check_run_args(args)
+    scoring = options.scoring_from(args)
     execution = Execution(
         batch_size=args.batch_size,
         shard_size=args.shard_size,
