@@ -19,9 +19,8 @@ from collections.abc import Callable, Iterable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 from torch.utils.data import Dataset
 
 from torchsar_eval.batches import SkipBad, TruthOnly
@@ -32,12 +31,13 @@ from torchsar_eval.gallery import observed_facts
 from torchsar_eval.html_report import DEFAULT_RANK, check_rank_by
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
 from torchsar_eval.plots import slug
-from torchsar_eval.report import per_image_rows, result_tables, write_run
 from torchsar_eval.result import Scoring
 from torchsar_eval.resume import check_resumable, fingerprint
 from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
-from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
+if TYPE_CHECKING:
+    import pandas as pd  # the tables: imported once the scoring is done
 
 __all__ = ["Results", "evaluate"]
 
@@ -286,6 +286,11 @@ def _cap_workers(ex: Execution) -> Execution:
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
     """Score every dataset into the folder ``tmp`` (a run's staging folder, or a temporary
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
+    import pandas as pd
+
+    from torchsar_eval.report import per_image_rows, result_tables, write_run
+    from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
     check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
     results, stats, windows = {}, {}, {}
     labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
@@ -402,7 +407,10 @@ def _check_failures(name: str, total: int, bad: list, counts: dict, ex: Executio
 def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
     """Score one dataset shard by shard; with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
-    Returns the merged results and the dataset's run statistics (wall time, shards)."""
+    Returns the merged results and the dataset's run statistics: images (of the reported
+    split), scored (images scored in this run, calibration split included) and reused
+    (found in the saved shards of an interrupted run), wall time, throughput of the scored
+    images, shards."""
     t0 = time.perf_counter()
     ex, cal = plan.execution, plan.calibration
     indices = list(range(len(ds)))
@@ -420,14 +428,14 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
                           address=ex.address, skip_bad=ex.skip_bad,
                           progress=ex.progress)  # fmt: skip
 
-    chosen = None
+    chosen, calib_counts = None, {"scored_images": 0, "reused_images": 0}
     if cal is not None:
         target = parse_target(cal.target)
         calib, indices = split_indices(len(ds), name, cal.fraction)
         if not calib or not indices:
             raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
                             f"split of {cal.fraction:g}")  # fmt: skip
-        tuned, _ = shards(calib, state / "calibration")
+        tuned, calib_counts = shards(calib, state / "calibration")
         chosen = [choose_bin(r.objects, target) for r in tuned]
     results, counts = shards(indices, state / "test", plan.export_coco)
     for r, det in zip(results, detectors, strict=True):
@@ -438,7 +446,10 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)
-    stats = {"images": len(indices), "wall_s": wall, **counts, "export": exporter,
+    scored = counts.pop("scored_images") + calib_counts["scored_images"]
+    reused = counts.pop("reused_images") + calib_counts["reused_images"]
+    stats = {"images": len(indices), "scored": scored, "reused": reused,
+             "wall_s": wall, **counts, "export": exporter,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
-             "images_per_s": len(indices) / wall if wall > 0 else float("nan")}  # fmt: skip
+             "images_per_s": scored / wall if scored and wall > 0 else float("nan")}  # fmt: skip
     return results, stats

@@ -7,7 +7,9 @@ One error policy for every command: a user error (a bad option, dataset or outpu
 exits with status 2 and one line ``torchsar-eval: error: ...``; Ctrl-C exits with 130 and
 SIGTERM with 143, each with one line, after the run's temporary folders are removed. Any
 other exception is a bug and shows its traceback. The heavy imports (torch, the commands)
-happen inside :func:`main`, so even an early Ctrl-C gets the one line.
+happen inside :func:`main`, so even an early Ctrl-C gets the one line, and the parsers
+import nothing heavy, so ``--help`` is instant. Warnings are printed as one line
+``torchsar-eval: warning: ...`` while :func:`main` runs (Python's own format otherwise).
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ import os
 import re
 import signal
 import sys
+import textwrap
 import threading
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -26,7 +30,7 @@ from typing import NoReturn
 from torchsar_eval.commands import COMMANDS, load
 from torchsar_eval.errors import EvalError, cli_spelling
 
-__all__ = ["Terminated", "build_parser", "main"]
+__all__ = ["HelpFormatter", "Terminated", "build_parser", "main", "plain"]
 
 PROG = "torchsar-eval"
 
@@ -38,8 +42,66 @@ class Terminated(BaseException):
     """Raised in the main thread when the process receives SIGTERM."""
 
 
+_MARKUP = re.compile(r":\w+:`~?([^`]*)`|``([^`]*)``")
+"""Docstring markup (roles such as :func: and double backquotes) that help texts leave out."""
+
+
+def plain(text: str) -> str:
+    """``text`` without docstring markup.
+
+    Example:
+        >>> plain("``torchsar-eval run``: see :func:`~torchsar_eval.evaluate`")
+        'torchsar-eval run: see torchsar_eval.evaluate'
+    """
+    return _MARKUP.sub(lambda m: m.group(1) if m.group(1) is not None else m.group(2), text)
+
+
+def _shown(value: object) -> str:
+    """A default as the help text shows it."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, list | tuple):
+        return " ".join(map(_shown, value))
+    return str(value)
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Help without docstring markup, wrapped between words only (never inside a long name),
+    and every option's default named, where it has one."""
+
+    def _wrap(self, text: str) -> str:
+        return self._whitespace_matcher.sub(" ", plain(text)).strip()
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        return textwrap.wrap(self._wrap(text), width, break_long_words=False,
+                             break_on_hyphens=False)  # fmt: skip
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return textwrap.fill(self._wrap(text), width, initial_indent=indent,
+                             subsequent_indent=indent, break_long_words=False,
+                             break_on_hyphens=False)  # fmt: skip
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (
+            "default" in text
+            or default is None
+            or default is argparse.SUPPRESS
+            or isinstance(default, bool)
+            or default == []
+        ):
+            return text
+        return f"{text} (default: {_shown(default).replace('%', '%%')})".lstrip()
+
+
 class _Parser(argparse.ArgumentParser):
-    """Argument errors as one line (no usage block), exit status 2."""
+    """Argument errors as one line (no usage block), exit status 2; help in
+    :class:`HelpFormatter`."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         print(f"{PROG}: error: {message}", file=sys.stderr)
@@ -126,11 +188,32 @@ def _elide(word: re.Match) -> str:
     return f"{w[:60]}...[{len(w) - 80} characters]...{w[-20:]}"
 
 
-def _user_error(message: object) -> int:
+def _one_line(message: object) -> str:
     text = " ".join(line.strip() for line in str(message).strip().splitlines())
-    text = re.sub(rf"\S{{{LONGEST_WORD + 1},}}", _elide, text)
-    print(f"{PROG}: error: {text}", file=sys.stderr)
+    return re.sub(rf"\S{{{LONGEST_WORD + 1},}}", _elide, text)
+
+
+def _user_error(message: object) -> int:
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
     return 2
+
+
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    """A warning as the command line prints it: one line, without the Python source line
+    and the path of the module that warned."""
+    return f"{PROG}: warning: {_one_line(message)}\n"
+
+
+@contextmanager
+def _one_line_warnings() -> Iterator[None]:
+    """Print warnings as ``torchsar-eval: warning: ...`` for the duration (recorded
+    warnings, e.g. under ``warnings.catch_warnings(record=True)``, are not formatted)."""
+    previous = warnings.formatwarning
+    warnings.formatwarning = _warning_line
+    try:
+        yield
+    finally:
+        warnings.formatwarning = previous
 
 
 def _dispatch(args: argparse.Namespace) -> int:
@@ -153,14 +236,13 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 for user errors, with a one-line message)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        with _signals_raise():
+        with _signals_raise(), _one_line_warnings():
             return _dispatch(_parse(argv))
     except Exception as exc:
-        from torchsar._checks import TorchSARError
-
+        checks = sys.modules.get("torchsar._checks")  # not imported: not a torchsar error
         if isinstance(exc, EvalError):
             return _user_error(exc.render(cli_spelling(FLAGS)))
-        if isinstance(exc, TorchSARError):
+        if checks is not None and isinstance(exc, checks.TorchSARError):
             return _user_error(exc)
         raise  # a bug: show the traceback
     except SystemExit as exc:

@@ -26,9 +26,6 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any, TypeVar
 
-from torchsar.simulate import clutter
-from torchsar.speckle import FILTERS
-from torchsar_eval.detector import check_options
 from torchsar_eval.errors import EvalError
 
 __all__ = [
@@ -180,6 +177,8 @@ def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
     """Call ``fn(image, **options)`` once on a small clutter image, so a bad option value
     (out of range, wrong type, a threshold that cannot be computed) fails before any
     work, as an :class:`EvalError` naming ``what`` and the options."""
+    from torchsar.simulate import clutter
+
     try:
         reach = 2 * (int(options.get("guard") or 0) + int(options.get("train") or 0))
         side = max(32, reach + int(options.get("window") or 0) + 1)
@@ -197,6 +196,9 @@ def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
 def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict[str, Any]]:
     """The optional speckle-filter stage of ``--despeckle NAME --despeckle-param K=V`` and its
     resolved options, checked against the filter and tried once."""
+    from torchsar.speckle import FILTERS
+    from torchsar_eval.detector import check_options
+
     if name is None:
         if items:
             raise EvalError("--despeckle-param given without --despeckle")

@@ -37,9 +37,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import torch
-
-import torchsar
 from torchsar_eval.errors import EvalError
 from torchsar_eval.locks import LockHeldError, hold, is_held
 
@@ -424,6 +421,10 @@ def file_slugs(names: Iterable[str], slug: Callable[[str], str]) -> dict[str, st
 
 def write_config(folder: Path, command: str, options: dict[str, Any]) -> None:
     """Write ``config.json``: every resolved option plus versions and the command line."""
+    import torch
+
+    import torchsar
+
     cfg = {
         "command": command,
         "argv": sys.argv,

@@ -1,27 +1,228 @@
-"""Plots (matplotlib, headless) in one style: every detector keeps one colour and line style
-in every figure, distinct for 20+ detectors; figures are saved as PNG and PDF."""
+"""Plots (matplotlib, headless) in one style, fit for a paper.
+
+- Every detector keeps its colour, line style and marker in every figure, whatever the other
+  detectors of the run (:func:`detector_style`, keyed by name; colour-blind-safe colours).
+- Log axes carry enough labelled ticks to read a value: 1-2-5 per decade (or finer) when
+  the data span few decades, and a symmetric-log axis when 0 is among the values
+  (:func:`log_axis`).
+- A panel that leaves a detector out says which and why (:func:`not_shown`).
+
+matplotlib is imported when a figure is drawn, not when this module is.
+"""
 
 from __future__ import annotations
 
+import hashlib
+import math
 import re
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import pandas as pd
+__all__ = [
+    "STYLES",
+    "detector_style",
+    "legend_handles",
+    "log_axis",
+    "log_ticks",
+    "not_shown",
+    "plot_roc",
+    "pyplot",
+    "roc_figure",
+    "save",
+    "slug",
+    "titled",
+]
 
-__all__ = ["detector_style", "plot_roc", "save", "slug"]
+# Okabe & Ito's colour-blind-safe palette (yellow left out: too faint on white).
+BLUE, SKY, GREEN, ORANGE, VERMILION, PURPLE, BLACK = (
+    "#0072B2", "#56B4E9", "#009E73", "#E69F00", "#D55E00", "#CC79A7", "#000000"
+)  # fmt: skip
 
-_COLOURS = [plt.cm.tab10(i) for i in range(10)]
-_LINES = ["-", "--", "-.", ":"]
+STYLES: dict[str, tuple[str, str, str]] = {
+    # mean-level window CFARs: blues
+    "ca": (BLUE, "-", "o"),
+    "two_parameter": (BLUE, "--", "s"),
+    "go": (SKY, "-", "^"),
+    "so": (SKY, "--", "v"),
+    # order statistic and heterogeneity-aware: orange, green
+    "os": (ORANGE, "-", "D"),
+    "vi": (GREEN, "-", "P"),
+    "ac": (GREEN, "--", "X"),
+    # distribution CFARs: vermilion (log-normal, Weibull), purple (gamma family)
+    "lognormal": (VERMILION, "-", "<"),
+    "weibull": (VERMILION, "--", ">"),
+    "gamma": (PURPLE, "-", "h"),
+    "k": (PURPLE, "--", "p"),
+    "g0": (PURPLE, ":", "*"),
+    # the region-growing CFAR, and its published preset (compare-region)
+    "region": (BLACK, "-", "d"),
+    "region-paper": (BLACK, "--", "H"),
+}
+"""(colour, line style, marker) of the built-in detectors: pairwise distinct, fixed."""
+
+# Other names: Paul Tol's colour-blind-safe "muted" palette and dash-dot patterns that no
+# built-in uses, so an unknown detector never looks like a built-in one.
+_OTHER_COLOURS = ["#332288", "#88CCEE", "#44AA99", "#117733", "#999933", "#DDCC77", "#CC6677",
+                  "#882255", "#AA4499"]  # fmt: skip
+_OTHER_LINES: list[Any] = ["-.", (0, (5, 1, 1, 1)), (0, (3, 1, 1, 1, 1, 1)), (0, (8, 2, 1, 2))]
+_OTHER_MARKERS = ["o", "s", "^", "v", "D", "P", "X", "<", ">", "h", "p", "*", "d", "H", "8"]
 
 
-def detector_style(i: int) -> dict:
-    """Colour and line style of the ``i``-th detector: both change from one detector to the
-    next (ten colours x four line styles: 20 distinct pairs before one repeats)."""
-    return {"color": _COLOURS[i % 10], "linestyle": _LINES[i % len(_LINES)]}
+def detector_style(name: str) -> dict:
+    """``{"color", "linestyle", "marker"}`` of a detector, by name: the same in every figure
+    and run. The built-ins have fixed distinct styles (:data:`STYLES`); any other name gets
+    one from a hash of the name (stable across processes).
+
+    Example:
+        >>> detector_style("ca")
+        {'color': '#0072B2', 'linestyle': '-', 'marker': 'o'}
+        >>> detector_style("my-cnn") == detector_style("my-cnn")
+        True
+    """
+    if name in STYLES:
+        color, line, marker = STYLES[name]
+    else:
+        h = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "big")
+        color = _OTHER_COLOURS[h % len(_OTHER_COLOURS)]
+        h //= len(_OTHER_COLOURS)
+        line = _OTHER_LINES[h % len(_OTHER_LINES)]
+        marker = _OTHER_MARKERS[(h // len(_OTHER_LINES)) % len(_OTHER_MARKERS)]
+    return {"color": color, "linestyle": line, "marker": marker}
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the headless Agg backend (imported on first use)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def legend_handles(names: Iterable[str]) -> list:
+    """One legend entry per detector in its style (whether or not a panel shows it)."""
+    from matplotlib.lines import Line2D
+
+    return [Line2D([], [], label=n, **detector_style(n)) for n in names]
+
+
+def not_shown(left_out: Mapping[str, str]) -> str:
+    """The note of a panel that leaves detectors out, grouped by reason (``""`` if none).
+
+    Example:
+        >>> not_shown({"lognormal": "AP50 = 0", "g0": "AP50 = 0", "x": "no objects"})
+        'not shown: lognormal, g0 (AP50 = 0); x (no objects)'
+    """
+    if not left_out:
+        return ""
+    reasons: dict[str, list[str]] = {}
+    for name, why in left_out.items():
+        reasons.setdefault(why, []).append(name)
+    return "not shown: " + "; ".join(f"{', '.join(n)} ({why})" for why, n in reasons.items())
+
+
+def titled(ax: Axes, title: str, left_out: Mapping[str, str], width: int = 64) -> None:
+    """Set a panel's title, with the :func:`not_shown` note below it (wrapped)."""
+    import textwrap
+
+    note = textwrap.fill(not_shown(left_out), width, break_long_words=False)
+    ax.set_title(title if not note else f"{title}\n{note}", fontsize=10 if not note else 9)
+
+
+# -- log axes ---------------------------------------------------------------------------
+
+_SUBS = [(1.0,), (1.0, 2.0, 5.0), (1.0, 2.0, 3.0, 5.0), tuple(float(m) for m in range(1, 10))]
+MAX_DECADE_TICKS = 8
+
+
+def _candidates(lo: float, hi: float, subs: Sequence[float]) -> list[float]:
+    out = []
+    for k in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1):
+        for m in subs:
+            t = float(f"{m * 10.0**k:.12g}")
+            if lo * (1 - 1e-9) <= t <= hi * (1 + 1e-9):
+                out.append(t)
+    return out
+
+
+def log_ticks(lo: float, hi: float, least: int = 3) -> list[float]:
+    """Labelled tick positions for a log axis over ``[lo, hi]`` (both > 0): the decades
+    when the range spans two or more (every second or third one when they are many), else
+    1-2-5 per decade, or finer where that leaves fewer than ``least`` in the range.
+
+    Example:
+        >>> log_ticks(2, 6)
+        [2.0, 3.0, 5.0]
+        >>> log_ticks(0.02, 1)
+        [0.02, 0.05, 0.1, 0.2, 0.5, 1.0]
+        >>> log_ticks(1e-6, 1)
+        [1e-06, 1e-05, 0.0001, 0.001, 0.01, 0.1, 1.0]
+    """
+    if not (0 < lo <= hi and math.isfinite(hi)):
+        raise ValueError(f"log_ticks needs 0 < lo <= hi, got {lo}, {hi}")
+    ticks: list[float] = []
+    first = 0 if math.log10(hi / lo) >= 2 else 1
+    for subs in _SUBS[first:]:
+        ticks = _candidates(lo, hi, subs)
+        if len(ticks) >= least:
+            break
+    if len(ticks) > MAX_DECADE_TICKS:
+        step = math.ceil(len(ticks) / MAX_DECADE_TICKS)
+        ticks = ticks[::step]
+    return ticks
+
+
+def _tick_label(v: float) -> str:
+    if v == 0:
+        return "0"
+    if 1e-3 <= abs(v) < 1e4:
+        return f"{v:g}"
+    k = math.floor(math.log10(abs(v)))
+    m = v / 10.0**k
+    return rf"$10^{{{k}}}$" if abs(m - 1) < 1e-9 else rf"${m:g}\times10^{{{k}}}$"
+
+
+def _nice_below(v: float) -> float:
+    """The largest 1, 2 or 5 x 10^k that is <= ``v`` (> 0)."""
+    k = math.floor(math.log10(v))
+    return max(m * 10.0**k for m in (1, 2, 5) if m * 10.0**k <= v * (1 + 1e-12))
+
+
+def log_axis(ax: Axes, which: str, values: Iterable[float], least: int = 3) -> None:
+    """Make the ``x`` or ``y`` axis of ``ax`` logarithmic with readable ticks for
+    ``values``: a log axis labelled by :func:`log_ticks`, or a symmetric-log axis (linear
+    near 0) when 0 is among the values, so no point is dropped."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+
+    vals = [float(v) for v in values if v == v and math.isfinite(float(v))]
+    pos = [v for v in vals if v > 0]
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    set_scale = ax.set_xscale if which == "x" else ax.set_yscale
+    if not pos:
+        return
+    lo, hi = min(pos), max(pos)
+    if any(v <= 0 for v in vals):
+        linthresh = _nice_below(lo)
+        set_scale("symlog", linthresh=linthresh, linscale=0.5)
+        ticks = [0.0, *log_ticks(linthresh, max(hi, linthresh), max(least - 1, 1))]
+        axis.set_minor_locator(FixedLocator([]))
+    else:
+        set_scale("log")
+        ticks = log_ticks(lo, hi, least) if hi > lo else [lo]
+        axis.set_minor_locator(LogLocator(base=10, subs="auto"))
+    axis.set_major_locator(FixedLocator(ticks))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: _tick_label(v)))
+    axis.set_minor_formatter(NullFormatter())
+
+
+# -- files ------------------------------------------------------------------------------
 
 
 def slug(name: str) -> str:
@@ -32,9 +233,10 @@ def slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def save(fig: plt.Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) -> list[str]:
+def save(fig: Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) -> list[str]:
     """Save ``fig`` as ``path`` (PNG) and beside it as PDF; return the file names.
     ``rect`` is the area the axes may fill (room for a figure legend)."""
+    plt = pyplot()
     fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=110)
     fig.savefig(path.with_suffix(".pdf"))
@@ -42,8 +244,77 @@ def save(fig: plt.Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) ->
     return [path.name, path.with_suffix(".pdf").name]
 
 
-def _short(name: str) -> str:
-    return slug(name) if len(name) > 24 else name
+# -- the run's ROC figure ---------------------------------------------------------------
+
+LEGEND_COLUMNS = 7
+
+
+def _ap50(summary: pd.DataFrame, name: str) -> float:
+    if "ap50" not in summary:
+        return float("nan")
+    values = summary.loc[summary["detector"] == name, "ap50"]
+    return float(values.iloc[0]) if len(values) else float("nan")
+
+
+def roc_figure(
+    pixel: pd.DataFrame,
+    froc: pd.DataFrame,
+    pr: pd.DataFrame,
+    summary: pd.DataFrame,
+    title: str,
+) -> Figure:
+    """The three panels of :func:`plot_roc` as a figure."""
+    from torchsar_eval.labels import short_label
+
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
+    names = list(dict.fromkeys(summary["detector"]))
+    left: list[dict[str, str]] = [{}, {}, {}]
+    marks = {"markevery": 0.1, "markersize": 5}
+    for name in names:
+        st = detector_style(name)
+        op = summary[summary["detector"] == name]
+        point = {"color": st["color"], "marker": st["marker"], "markersize": 9,
+                 "markeredgecolor": "black", "linestyle": "none", "zorder": 3}  # fmt: skip
+        px_all = pixel[pixel["detector"] == name]
+        px = px_all[px_all["pfa_pixel"] > 0]
+        if px.empty:
+            left[0][name] = "no pixel mask" if px_all.empty else "Pfa = 0 at every threshold"
+        else:
+            axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=name, **st, **marks)
+            shown_op = op[op["pfa_pixel"] > 0]
+            axes[0].plot(shown_op["pfa_pixel"], shown_op["pd_pixel"], **point)
+        fr = froc[froc["detector"] == name]
+        if fr.empty:
+            left[1][name] = "no object scored"
+        else:
+            axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post",
+                         label=name, **st, **marks)  # fmt: skip
+            axes[1].plot(op["false_alarms_per_image"], op["pd_object"], **point)
+        p = pr[pr["detector"] == name]
+        ap = _ap50(summary, name)
+        if p.empty or not ap > 0:
+            left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"
+        else:
+            axes[2].plot(p["recall"], p["precision"], label=name, **st, **marks)
+    log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
+    log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
+    axes[0].set(xlabel="Pfa (pixel)", ylabel="Pd (pixel)")
+    axes[1].set(xlabel="false alarms per image", ylabel="Pd (object)")
+    axes[2].set(xlabel="recall", ylabel="precision", xlim=(0, 1.02))
+    panel_titles = ["pixel ROC", "FROC (matching rule)", "precision-recall, IoU 0.5"]
+    for ax, panel, out in zip(axes, panel_titles, left, strict=True):
+        ax.set_ylim(0, 1.02)
+        ax.grid(True, which="major", alpha=0.3)
+        titled(ax, panel, out)
+    from matplotlib.lines import Line2D
+
+    handles = legend_handles(names)
+    handles.append(Line2D([], [], color="grey", marker="o", markeredgecolor="black",
+                          linestyle="none", label="design operating point"))  # fmt: skip
+    fig.legend(handles=handles, loc="lower center", ncol=LEGEND_COLUMNS, fontsize=8)
+    fig.suptitle(short_label(title))
+    return fig
 
 
 def plot_roc(
@@ -55,30 +326,10 @@ def plot_roc(
     title: str,
 ) -> list[str]:
     """Three panels for one dataset: pixel ROC (Pd vs Pfa), FROC (Pd vs false alarms per
-    image, matching rule) and precision-recall at IoU 0.5; a filled marker on each curve is
-    the detector's design operating point."""
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
-    names = list(dict.fromkeys(summary["detector"]))
-    for i, name in enumerate(names):
-        st = detector_style(i)
-        op = summary[summary["detector"] == name]
-        px = pixel[(pixel["detector"] == name) & (pixel["pfa_pixel"] > 0)]
-        axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=name, **st)
-        axes[0].plot(op["pfa_pixel"], op["pd_pixel"], "o", color=st["color"])
-        fr = froc[froc["detector"] == name]
-        axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post", label=name, **st)
-        axes[1].plot(op["false_alarms_per_image"], op["pd_object"], "o", color=st["color"])
-        p = pr[pr["detector"] == name]
-        axes[2].plot(p["recall"], p["precision"], label=name, **st)
-    axes[0].set(xscale="log", xlabel="Pfa (pixel)", ylabel="Pd (pixel)", title="pixel ROC")
-    axes[1].set(xscale="symlog", xlabel="false alarms per image", ylabel="Pd (object)",
-                title="FROC (matching rule)")  # fmt: skip
-    axes[2].set(xlabel="recall", ylabel="precision", title="precision-recall, IoU 0.5")
-    for ax in axes:
-        ax.set_ylim(0, 1.02)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].plot([], [], "o", color="grey", label="design operating point")
-    rows = -(-(len(names) + 1) // 7)
-    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=7, fontsize=8)
-    fig.suptitle(_short(title))
+    image, matching rule) and precision-recall at IoU 0.5 (detectors with AP50 > 0); a
+    large marker on each curve is the detector's design operating point. Each panel names
+    the detectors it leaves out and why."""
+    fig = roc_figure(pixel, froc, pr, summary, title)
+    entries = len(dict.fromkeys(summary["detector"])) + 1
+    rows = -(-entries // LEGEND_COLUMNS)
     return save(fig, path, rect=(0, 0.05 * rows + 0.02, 1, 1))

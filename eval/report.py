@@ -4,8 +4,12 @@ plots."""
 from __future__ import annotations
 
 import csv
+import pickle
+import tempfile
 from collections.abc import Iterable, Iterator
+from contextlib import ExitStack
 from pathlib import Path
+from typing import IO
 
 import pandas as pd
 
@@ -30,7 +34,7 @@ from torchsar_eval.tables import (
     timing_table,
 )
 
-__all__ = ["TABLE_FILES", "per_image_rows", "result_tables", "write_run"]
+__all__ = ["TABLE_FILES", "per_image_rows", "result_tables", "throughput", "write_run"]
 
 TABLE_FILES = {
     "summary": "summary.csv",
@@ -66,18 +70,64 @@ def result_tables(results: dict) -> dict[str, pd.DataFrame]:
 
 def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[list]:
     """``per_image.csv`` rows from each dataset's ``(detector, rows)`` stream (the saved
-    shards, in order)."""
+    shards, in order), sorted by dataset, then detector (the run's order), then image (the
+    dataset's order): the same file for any shard size, worker count or resume.
+
+    Each detector's rows are spooled to a temporary file while the shards are read once, so
+    memory does not grow with the dataset.
+
+    Example:
+        >>> shards = [("ca", [("a", 1)]), ("so", [("a", 2)]), ("ca", [("b", 3)]),
+        ...           ("so", [("b", 4)])]
+        >>> list(per_image_rows({"d": shards}))
+        [['d', 'ca', 'a', 1], ['d', 'ca', 'b', 3], ['d', 'so', 'a', 2], ['d', 'so', 'b', 4]]
+    """
     for name, parts in folders.items():
-        for det, rows in parts:
-            for row in rows:
-                yield [name, det, *row]
+        with ExitStack() as stack:
+            spools: dict[str, IO[bytes]] = {}
+            for det, rows in parts:
+                if det not in spools:
+                    spools[det] = stack.enter_context(tempfile.TemporaryFile())
+                pickle.dump(list(rows), spools[det])
+            for det, spool in spools.items():
+                spool.seek(0)
+                while True:
+                    try:
+                        rows = pickle.load(spool)  # our own spool of this run's rows
+                    except EOFError:
+                        break
+                    for row in rows:
+                        yield [name, det, *row]
+
+
+def throughput(st: dict) -> str:
+    """How a dataset's images were scored: those scored in this run apart from those reused
+    from an interrupted run's saved shards (``--resume``), and the shards.
+
+    Example:
+        >>> st = {"images": 3000, "scored": 1000, "reused": 2000, "wall_s": 28.3,
+        ...       "images_per_s": 35.3, "shards": 12, "done": 4, "skipped": 8, "retried": 0,
+        ...       "failed": []}
+        >>> for part in throughput(st).split("; "):
+        ...     print(part)
+        1000 scored in 28.3 s (35.3 images/s), 2000 reused from the saved run
+        shards 12: done 4, resumed 8, retried 0, failed 0
+    """
+    scored, reused = st.get("scored", st["images"]), st.get("reused", 0)
+    if scored:
+        text = (f"{scored} {'scored' if reused else 'images'} in {st['wall_s']:.1f} s "
+                f"({st['images_per_s']:.3g} images/s)")  # fmt: skip
+    else:
+        text = f"nothing scored ({st['wall_s']:.1f} s)"
+    if reused:
+        text += f", {reused} reused from the saved run"
+    return (f"{text}; shards {st['shards']}: done {st['done']}, resumed {st['skipped']}, "
+            f"retried {st['retried']}, failed {len(st['failed'])}")  # fmt: skip
 
 
 def _stats_lines(stats: dict) -> str:
     return "".join(
-        f"\n- {name}: {st['images']} images in {st['wall_s']:.1f} s "
-        f"({st['images_per_s']:.3g} images/s); shards {st['shards']}: done {st['done']}, "
-        f"resumed {st['skipped']}, retried {st['retried']}, failed {len(st['failed'])}"
+        f"\n- {name}: {throughput(st)}"
         + "".join(f"\n  - FAILED shard {f['shard']}: {f['error']}" for f in st["failed"])
         + (
             f"\n  - skipped {len(st['skipped_items'])} unreadable file(s)"

@@ -41,6 +41,7 @@ from torchsar_eval.coco import CocoExport
 from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import Cases, Gallery
+from torchsar_eval.labels import short_label
 from torchsar_eval.memory import release_memory, tune_allocator
 from torchsar_eval.result import DetectorName, DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
@@ -381,15 +382,17 @@ def run_shards(
         progress: one progress bar over images.
 
     Returns:
-        The merged results and counts ``{"shards", "done", "skipped", "retried", "failed"}``
-        (skipped = found saved already, e.g. on resume; retried = shards that failed once
-        and were run again; failed = list of shards that failed twice).
+        The merged results and counts ``{"shards", "done", "skipped", "retried", "failed",
+        "scored_images", "reused_images"}`` (skipped = found saved already, e.g. on resume;
+        retried = shards that failed once and were run again; failed = list of shards that
+        failed twice; the images of the shards scored now and of those found saved).
     """
     folder.mkdir(parents=True, exist_ok=True)
     sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
     todo = _pending(job, folder)
     fail = _Failures(skip_bad)
-    bar = tqdm(total=len(job.indices), desc=job.name, disable=not progress, unit="img")
+    bar = tqdm(total=len(job.indices), desc=short_label(job.name), disable=not progress,
+               unit="img")  # fmt: skip
     bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
     try:
         if engine == "ray":
@@ -403,7 +406,11 @@ def run_shards(
     merged = merge(_load(p).results for p in shard_files(folder))
     merged = merged or [DetectorResult(d, job.scoring, default_class=job.default_class)
                         for d in job.detectors]  # fmt: skip
+    lost = {f["shard"] for f in fail.failed}
+    scored = sum(sizes[k] for k, _ in todo if k not in lost)
+    reused = len(job.indices) - sum(sizes[k] for k, _ in todo)
     counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
               "skipped": len(sizes) - len(todo), "retried": len(fail.retried),
-              "failed": fail.failed}  # fmt: skip
+              "failed": fail.failed, "scored_images": scored,
+              "reused_images": reused}  # fmt: skip
     return merged, counts

@@ -17,16 +17,12 @@ import argparse
 from collections.abc import Iterator
 from pathlib import Path
 
-from tqdm.auto import tqdm
-
-import torchsar as ts
-from torchsar_eval.datasets import make_dataset
 from torchsar_eval.errors import EvalError
-from torchsar_eval.store import write_store
 
 __all__ = ["add_parser", "run", "sim_items"]
 
-SIM = {"sim-chips": ts.simulate.chips, "sim-scenes": ts.simulate.scenes}
+SIM = ("sim-chips", "sim-scenes")
+"""The simulated kinds, generated block by block (``torchsar.simulate.chips`` / ``scenes``)."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -42,14 +38,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of simulated kinds")
     p.add_argument("--shard-size", type=int, default=1000, help="items per tar shard")
     p.add_argument("--out", type=Path, required=True, help="the new store folder")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)  # fmt: skip
 
 
 def sim_items(kind: str, n: int, seed: int, block: int = 64) -> Iterator[dict]:
     """Simulated items ``0 .. n - 1``, generated ``block`` at a time."""
+    import torchsar as ts
+
+    simulate = {"sim-chips": ts.simulate.chips, "sim-scenes": ts.simulate.scenes}[kind]
     for start in range(0, n, block):
-        b = SIM[kind](min(block, n - start), seed=seed, start=start)
+        b = simulate(min(block, n - start), seed=seed, start=start)
         for j in range(len(b)):
             item = b[j]
             item["meta"] = {"name": f"{kind}/{start + j}", **item["meta"]}
@@ -57,6 +56,11 @@ def sim_items(kind: str, n: int, seed: int, block: int = 64) -> Iterator[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tqdm.auto import tqdm
+
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.store import write_store
+
     if args.n is not None and args.n < 1:
         raise EvalError(f"--n must be >= 1, got {args.n}")
     if args.shard_size < 1:

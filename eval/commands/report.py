@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from torchsar_eval.choices import RANK_METRICS, REPORT_FILE
 from torchsar_eval.errors import EvalError
-from torchsar_eval.html_report import RANK_METRICS, REPORT_FILE, write_report
 
 __all__ = ["WRITES_OUT", "add_parser", "run"]
 
@@ -55,6 +55,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The ``report`` sub-command: build and write the page, print where it is."""
+    from torchsar_eval.html_report import write_report
+
     if args.file is None and len(args.runs) > 1:
         raise EvalError(f"comparing {len(args.runs)} runs: name the page with --out FILE.html")
     if args.file is not None:

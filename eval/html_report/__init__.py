@@ -24,6 +24,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from torchsar_eval.choices import REPORT_FILE
 from torchsar_eval.html_report.page import (
     DEFAULT_RANK,
     LOWER_IS_BETTER,
@@ -44,8 +45,6 @@ __all__ = [
     "read_run",
     "write_report",
 ]
-
-REPORT_FILE = "report.html"
 
 
 def _rank_of(runs: list[RunFiles], rank_by: str | None) -> str:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from torchsar_eval.choices import DEFAULT_RANK, RANK_METRICS
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import _RULES, _TERMS
@@ -20,14 +21,6 @@ from torchsar_eval.html_report.runfiles import RunFiles
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
 
-DEFAULT_RANK = "f1"
-RANK_METRICS = [
-    "f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
-    "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou", "pd_object",
-    "pd_pixel", "pfa_pixel", "false_alarms_per_image", "fa_per_km2", "false_alarms", "tp",
-    "fp", "fn", "fragmentation", "length_score", "ms_per_image", "images_per_s",
-]  # fmt: skip
-"""Metrics a leaderboard can be ranked by (``summary.csv`` and ``timing.csv`` columns)."""
 LOWER_IS_BETTER = {
     "false_alarms_per_image", "false_alarms", "fp", "fn", "pfa_pixel", "fa_per_km2",
     "fragmentation", "ms_per_image", "object_ms_per_image",

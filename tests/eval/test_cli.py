@@ -309,7 +309,9 @@ def _tiny_run(tiny_folder, out, *extra):
     ],
 )
 def test_bad_out_is_refused_at_once(tiny_folder, tmp_path, capsys, monkeypatch, prepare, message):
-    monkeypatch.setattr("torchsar_eval.commands.run.check_run_args", pytest.fail)  # no work at all
+    monkeypatch.setattr(
+        "torchsar_eval.commands.run.options.check_run_args", pytest.fail
+    )  # no work at all
     out = tmp_path / "out"
     prepare(out)
     target = out if out.exists() else tmp_path / "f" / "out"

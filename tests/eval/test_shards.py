@@ -92,7 +92,8 @@ def test_shard_ranges_cover_every_item_once():
 def test_any_shard_size_gives_the_same_tables(tmp_path, size):
     whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
     parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
-    assert counts == {"shards": 1, "done": 1, "skipped": 0, "retried": 0, "failed": []}
+    assert counts == {"shards": 1, "done": 1, "skipped": 0, "retried": 0, "failed": [],
+                      "scored_images": 9, "reused_images": 0}  # fmt: skip
     assert counts_p["shards"] == -(-9 // size)
     _assert_same(whole, parts, tmp_path / "a", tmp_path / "b")
 
@@ -101,7 +102,8 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
     (tmp_path / "shard-000001.state").unlink()  # as if killed before shard 1 was saved
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
-    assert counts == {"shards": 3, "done": 1, "skipped": 2, "retried": 0, "failed": []}
+    assert counts == {"shards": 3, "done": 1, "skipped": 2, "retried": 0, "failed": [],
+                      "scored_images": 3, "reused_images": 5}  # shard 1 scored again  # fmt: skip
     _assert_same(first, again)
 
 

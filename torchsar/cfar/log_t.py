@@ -38,7 +38,7 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import optimize, special
 
 __all__ = ["LOG_T_SHAPES", "log_t_exact", "log_t_table", "trigamma_table"]
 
@@ -71,6 +71,8 @@ def _log_survival(law: str, shape: float, looks: float, log_u: np.ndarray) -> np
     if law == "weibull":
         return -u
     if law == "g0":
+        from scipy import stats  # slow to import: only the G0 law needs it
+
         return stats.f.logsf(shape * u, 2.0 * looks, 2.0 * shape)
     s = np.linspace(math.log(1e-10), math.log(max(80.0 / shape, 80.0)), 701)
     xs = np.exp(s)

@@ -10,31 +10,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from collections.abc import Collection
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import pandas as pd
-import torch
-from tqdm import tqdm
-
-import torchsar.imaging as ti
-from torchsar.io.gotcha import GotchaPass, read_gotcha
-from torchsar_eval.commands.autofocus.experiment import (
-    DEFAULT_METHODS,
-    ERROR_CASES,
-    METHODS,
-    Config,
-    run_error_case,
+from torchsar_eval.choices import (
+    AUTOFOCUS_DEFAULTS,
+    AUTOFOCUS_ERRORS,
+    AUTOFOCUS_METHODS,
+    DEFAULT_AUTOFOCUS_METHODS,
 )
-from torchsar_eval.commands.autofocus.gotcha import run_gotcha
 from torchsar_eval.errors import EvalError
-from torchsar_eval.output import default_out, result_dir, write_config
 from torchsar_eval.paths import SHARED_DATA
-from torchsar_eval.plots import save, slug
-from torchsar_eval.tables import markdown
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import torch
+
+    from torchsar.io.gotcha import GotchaPass
 
 METRICS = [
     "corr",
@@ -56,25 +49,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="sparse autofocus vs conventional / L_p / PGA / min-entropy on simulated scenes",
         description=__doc__.splitlines()[0],
     )
-    d = Config()
-    p.add_argument("--out", type=Path, default=None, help="output folder")
-    p.add_argument("--scenes", type=int, default=d.scenes, help="random scenes per error type")
-    p.add_argument("--size", type=int, default=d.size, help="image size (pixels, square)")
-    p.add_argument("--density", type=float, default=d.density, help="fraction of bright pixels")
-    p.add_argument("--snr", type=float, default=d.snr_db, help="phase-history SNR in dB")
-    p.add_argument("--seed", type=int, default=d.seed)
+    d = AUTOFOCUS_DEFAULTS
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: results/autofocus-*)")  # fmt: skip
+    p.add_argument("--scenes", type=int, default=d["scenes"], help="random scenes per error type")
+    p.add_argument("--size", type=int, default=d["size"], help="image size (pixels, square)")
+    p.add_argument("--density", type=float, default=d["density"],
+                   help="fraction of bright pixels")  # fmt: skip
+    p.add_argument("--snr", type=float, default=d["snr_db"], help="phase-history SNR in dB")
+    p.add_argument("--seed", type=int, default=d["seed"], help="seed of the simulated scenes")
     p.add_argument(
         "--errors",
-        default=",".join(ERROR_CASES),
-        help=f"comma-separated error types: {','.join(ERROR_CASES)}",
+        default=",".join(AUTOFOCUS_ERRORS),
+        help=f"comma-separated error types (default: all): {', '.join(AUTOFOCUS_ERRORS)}",
     )
     p.add_argument(
         "--methods",
-        default=",".join(DEFAULT_METHODS),
+        default=",".join(DEFAULT_AUTOFOCUS_METHODS),
         help=f"comma-separated methods (default: all but sparse-keep-restarts): "
-        f"{','.join(METHODS)}",
+        f"{', '.join(AUTOFOCUS_METHODS)}",
     )
-    p.add_argument("--pfa", type=float, default=d.pfa, help="CA-CFAR design Pfa")
+    p.add_argument("--pfa", type=float, default=d["pfa"], help="CA-CFAR design Pfa")
     p.add_argument(
         "--gotcha",
         type=Path,
@@ -84,11 +79,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--gotcha-trials", type=int, default=3, help="injected errors per type")
     p.add_argument("--no-gotcha", action="store_true", help="skip the GOTCHA experiment")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
 
-def _names(text: str, allowed: dict, what: str) -> list[str]:
+def _names(text: str, allowed: Collection[str], what: str) -> list[str]:
     names = [t.strip() for t in text.split(",") if t.strip()]
     bad = [n for n in names if n not in allowed]
     if bad:
@@ -98,6 +93,8 @@ def _names(text: str, allowed: dict, what: str) -> list[str]:
 
 def summarise(rows: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
     """Mean and standard deviation per (error, method), in the run order."""
+    import pandas as pd
+
     g = rows.groupby(["error", "method"], sort=False)[columns]
     mean, std = g.mean().add_suffix("_mean"), g.std().add_suffix("_std")
     out = pd.concat([mean, std], axis=1)
@@ -108,31 +105,66 @@ def summarise(rows: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
 
 
 def _db(x: torch.Tensor) -> torch.Tensor:
+    import torch
+
     a = x.abs()
     return 20 * torch.log10(a / a.max().clamp_min(1e-30) + 1e-6).clamp_min(-40)
 
 
-def autofocus_panel(name: str, data: dict, formed: dict, path: Path) -> None:
-    """Seed figure layout for scene 0: truth, clean conventional / L_p, corrupted, proposed."""
+PANEL_METHODS = {
+    "conventional": "conventional, with error",
+    "lp": "L_p, with error",
+    "sparse-autofocus": "proposed (sparse autofocus)",
+}
+"""The methods the seed figure shows (the table has every method)."""
+
+
+def panel_images(name: str, data: dict, formed: dict) -> list[tuple[str, torch.Tensor]]:
+    """The seed figure's images of scene 0, magnitudes ``(H, W)``: the true scene, the
+    clean conventional and L_p images, then the corrupted conventional and L_p images and
+    the sparse-autofocus image where those methods ran.
+
+    A constant plus linear phase error is a circular shift of the image that no method can
+    observe (the estimate's linear part is arbitrary), so every image is shown circularly
+    shifted to best match the true scene (and, for 2-D errors, possibly as its twin, the
+    flipped image), as the table scores it.
+    """
+    import torchsar.imaging as ti
+    from torchsar_eval.commands.autofocus.experiment import ERROR_CASES
+
+    truth = data["f"][:1].abs()
+    flip = ERROR_CASES[name].kind == "2d"
     clean = data["clean"][:1]
-    panels = [
-        ("true scene", data["f"][0, 0]),
-        ("conventional, no error", ti.ifft2c(clean)[0]),
-        ("L_p, no error", ti.lp_image(clean)[0, 0]),
+    images = [
+        ("conventional, no error", ti.ifft2c(clean).unsqueeze(1)),
+        ("L_p, no error", ti.lp_image(clean)),
     ]
-    for method, title in [
-        ("conventional", "conventional, with error"),
-        ("lp", "L_p, with error"),
-        ("sparse-autofocus", "proposed (sparse autofocus)"),
-    ]:
-        if method in formed:
-            panels.append((title, formed[method].image[0, 0]))
-    fig, axes = plt.subplots(1, len(panels), figsize=(2.6 * len(panels), 2.9))
+    images += [(title, formed[m].image[:1]) for m, title in PANEL_METHODS.items() if m in formed]
+    shown = [("true scene", truth[0, 0])]
+    for title, img in images:
+        aligned, _ = ti.align(img.abs().to(truth.dtype), truth, flip=flip)
+        shown.append((title, aligned[0, 0]))
+    return shown
+
+
+def autofocus_panel(name: str, data: dict, formed: dict, path: Path) -> None:
+    """Seed figure layout for scene 0: truth, clean conventional / L_p, corrupted, proposed
+    (see :func:`panel_images`); the methods left out are named."""
+    from torchsar_eval.plots import not_shown, pyplot, save
+
+    plt = pyplot()
+    panels = panel_images(name, data, formed)
+    left = {m: "in autofocus.csv" for m in formed if m not in PANEL_METHODS}
+    left.update({m: "not run" for m in PANEL_METHODS if m not in formed})
+    fig, axes = plt.subplots(1, len(panels), figsize=(2.6 * len(panels), 3.2))
     for ax, (title, img) in zip(axes, panels, strict=True):
         ax.imshow(_db(img).numpy(), cmap="gray", vmin=-40, vmax=0)
         ax.set_title(title, fontsize=8)
         ax.axis("off")
-    fig.suptitle(f"phase error {name} (dB, 40 dB range)", fontsize=9)
+    note = not_shown(left)
+    fig.suptitle(f"phase error {name} (dB, 40 dB range; each image circularly shifted to the "
+                 "true scene: a linear phase error is an unobservable shift)"
+                 + (f"\n{note}" if note else ""), fontsize=8)  # fmt: skip
     save(fig, path)
 
 
@@ -142,6 +174,8 @@ def gotcha_data(folder: Path | None, enabled: bool) -> tuple[GotchaPass | None, 
     An explicit folder must exist and hold readable GOTCHA files (else :class:`EvalError`,
     one line); the default folder is skipped with a note when absent.
     """
+    from torchsar.io.gotcha import read_gotcha
+
     if not enabled:
         return None, "GOTCHA experiment skipped (--no-gotcha)"
     path = DEFAULT_GOTCHA if folder is None else Path(folder)
@@ -157,23 +191,59 @@ def gotcha_data(folder: Path | None, enabled: bool) -> tuple[GotchaPass | None, 
 
 def gotcha_table(data: GotchaPass, tmp: Path, *, trials: int, seed: int) -> None:
     """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
+    import pandas as pd
+
+    from torchsar_eval.commands.autofocus.gotcha import run_gotcha
+
     rows, panel = run_gotcha(data, trials=trials, seed=seed)
     trials = pd.DataFrame(rows)
     trials.to_csv(tmp / "gotcha_trials.csv", index=False)
     cols = ["phase_rmse", "entropy", "reference_entropy", "reflector_peak_ratio", "seconds"]
     summarise(trials, cols).to_csv(tmp / "gotcha.csv", index=False)
-    names = list(panel)
-    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 2.9))
-    for ax, name in zip(axes, names, strict=True):
-        ax.imshow(_db(panel[name].sqrt()).numpy(), cmap="gray", vmin=-40, vmax=0, origin="lower")
-        ax.set_title(name, fontsize=6)
+    gotcha_figure(panel, tmp / "gotcha.png")
+
+
+def gotcha_figure(panel: dict[str, torch.Tensor], path: Path) -> None:
+    """The GOTCHA images as a grid: one row per injected error type, one column per
+    correction method (``"error / method"`` keys), the reference image first."""
+    from torchsar_eval.plots import pyplot, save
+
+    plt = pyplot()
+    cells = [k.split(" / ", 1) for k in panel if " / " in k]
+    errors = list(dict.fromkeys(e for e, _ in cells))
+    methods = list(dict.fromkeys(m for _, m in cells))
+    rows, cols = max(1, len(errors)), 1 + len(methods)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.5 * cols, 3.1 * rows + 0.5), squeeze=False)
+    for ax in axes.flat:
         ax.axis("off")
-    save(fig, tmp / "gotcha.png")
+
+    def show(ax, image: torch.Tensor, title: str) -> None:
+        ax.imshow(_db(image.sqrt()).numpy(), cmap="gray", vmin=-40, vmax=0, origin="lower")
+        ax.set_title(title, fontsize=8)
+
+    if "reference" in panel:
+        show(axes[0, 0], panel["reference"], "reference (AFRL autofocus)")
+    for r, error in enumerate(errors):
+        for c, method in enumerate(methods, start=1):
+            key = f"{error} / {method}"
+            if key in panel:
+                show(axes[r, c], panel[key], f"{error}\n{method}")
+    fig.suptitle("GOTCHA pass 1 HH: injected phase error (rows) corrected by each method "
+                 "(columns); dB, 40 dB range", fontsize=9)  # fmt: skip
+    save(fig, path)
 
 
 def run(args: argparse.Namespace) -> int:
-    errors = _names(args.errors, ERROR_CASES, "error types")
-    methods = _names(args.methods, METHODS, "methods")
+    import pandas as pd
+    from tqdm import tqdm
+
+    from torchsar_eval.commands.autofocus.experiment import Config, run_error_case
+    from torchsar_eval.output import default_out, result_dir, write_config
+    from torchsar_eval.plots import slug
+    from torchsar_eval.tables import markdown
+
+    errors = _names(args.errors, AUTOFOCUS_ERRORS, "error types")
+    methods = _names(args.methods, AUTOFOCUS_METHODS, "methods")
     if args.scenes < 1 or args.size < 8:
         raise EvalError("need --scenes >= 1 and --size >= 8")
     gotcha, gotcha_note = gotcha_data(args.gotcha, not args.no_gotcha)

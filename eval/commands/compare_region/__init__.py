@@ -15,23 +15,14 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from torch.utils.data import Subset
-
-import torchsar as ts
-from torchsar_eval.batches import batches
-from torchsar_eval.commands.compare_region.panel import detection_panel
-from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
-from torchsar_eval.datasets import make_dataset
-from torchsar_eval.detector import Detector
+from torchsar_eval.choices import BUILTIN_DETECTORS
 from torchsar_eval.errors import EvalError
-from torchsar_eval.options import at_least, floats, ints, names
-from torchsar_eval.output import default_out, file_slugs, result_dir, write_config
 from torchsar_eval.paths import SHARED_DATA
-from torchsar_eval.plots import slug
-from torchsar_eval.registry import BUILTIN
-from torchsar_eval.runner import run_detectors
-from torchsar_eval.tables import markdown, summary_table, timing_table
+
+if TYPE_CHECKING:
+    from torchsar_eval.detector import Detector
 
 WINDOW_CFARS = ["ca", "os", "go", "so", "vi", "ac", "two_parameter"]
 TUNE_EVERY = 5
@@ -57,12 +48,14 @@ class Sweep:
 
 def _sweep(args: argparse.Namespace) -> Sweep:
     """Check every option before any work; the parsed sweep."""
+    from torchsar_eval.options import at_least, floats, ints, names
+
     at_least(args.n, "--n", 1)
     at_least(args.n_tune, "--n-tune", 1)
     at_least(args.mstar_n, "--mstar-n", 2)
     at_least(args.batch_size, "--batch-size", 1)
     at_least(args.max_ring, "--max-ring", 1)
-    window_cfars = [d for d in BUILTIN if d != "region"]
+    window_cfars = [d for d in BUILTIN_DETECTORS if d != "region"]
     return Sweep(
         guards=ints(args.guards, "--guards", minimum=0),
         trains=ints(args.trains, "--trains", minimum=1),
@@ -79,7 +72,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="region-growing CFAR vs window CFARs at their best settings",
         description=__doc__.splitlines()[0],
     )
-    p.add_argument("--out", type=Path, default=None, help="output folder")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: results/compare-region-*)")  # fmt: skip
     p.add_argument(
         "--sim",
         action="append",
@@ -99,8 +93,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--window-cfars",
         default=",".join(WINDOW_CFARS),
-        help="comma-separated window CFARs to compare (default: all; GO/SO solve their exact "
-        "threshold per window, pfa and border count: seconds each for large windows)",
+        help=f"comma-separated window CFARs to compare (default: {', '.join(WINDOW_CFARS)}; "
+        "GO/SO solve their exact threshold per window, pfa and border count: seconds each "
+        "for large windows)",
     )
     p.add_argument(
         "--max-ring",
@@ -109,13 +104,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="skip OS-CFAR windows with more training cells than this (its cost grows with "
         "the ring; the other detectors cost the same for every window)",
     )
-    p.add_argument("--batch-size", type=int, default=4)
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--batch-size", type=int, default=4, help="images per detector call")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.set_defaults(func=run)
 
 
 def _datasets(args: argparse.Namespace, notes: list[str]) -> dict[str, tuple[object, object]]:
     """``{name: (tuning dataset, evaluation dataset)}``."""
+    from torch.utils.data import Subset
+
+    from torchsar_eval.datasets import make_dataset
+
     out = {
         sim: (
             make_dataset(sim, n=args.n_tune, seed=args.seed + 1000),
@@ -144,6 +143,9 @@ def _ring(q: dict) -> int:
 
 
 def _region_specs() -> list[Detector]:
+    import torchsar as ts
+    from torchsar_eval.detector import Detector
+
     return [
         Detector("region-paper", ts.region.region_cfar, {"preset": "paper"}),
         Detector("region", ts.region.region_cfar, {}),
@@ -152,6 +154,11 @@ def _region_specs() -> list[Detector]:
 
 def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detector], list]:
     """Each requested window CFAR at its best grid point on the tuning set."""
+    from torchsar_eval.batches import batches
+    from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
+    from torchsar_eval.detector import Detector
+    from torchsar_eval.registry import BUILTIN
+
     tb = list(batches(tune, sweep.batch_size))
     grid = window_grid(sweep.guards, sweep.trains, sweep.pfas)
     specs, chosen = [], []
@@ -168,6 +175,12 @@ def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detect
 
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
+
+    from torchsar_eval.commands.compare_region.panel import detection_panel
+    from torchsar_eval.output import default_out, file_slugs, result_dir, write_config
+    from torchsar_eval.plots import slug
+    from torchsar_eval.runner import run_detectors
+    from torchsar_eval.tables import markdown, summary_table, timing_table
 
     sweep = _sweep(args)
     notes: list[str] = []

@@ -5,23 +5,39 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
 from torchsar_eval.detector import Detector
-from torchsar_eval.plots import save
+from torchsar_eval.plots import pyplot, save
 
-__all__ = ["detection_panel"]
+__all__ = ["db_display", "detection_panel"]
+
+DB_PERCENTILES = (2.0, 99.8)
+"""The dB range shown: these percentiles of the image's positive pixels."""
 
 
-def _db(img: torch.Tensor) -> np.ndarray:
-    a = 10 * np.log10(img.double().numpy() + 1e-12)
-    lo, hi = np.percentile(a, [1, 99.5])
-    return np.clip((a - lo) / max(hi - lo, 1e-9), 0, 1)
+def db_display(img: torch.Tensor | np.ndarray) -> np.ndarray:
+    """An image in dB mapped to [0, 1] over a robust range: the percentiles
+    :data:`DB_PERCENTILES` of its *positive* pixels, so that zeros (a display-scaled chip's
+    black pixels, a masked border) neither stretch the range to -120 dB and wash the
+    image out nor take part in it (they show black).
+
+    Example:
+        >>> x = np.r_[np.zeros(50), np.geomspace(1e-3, 1, 950)]
+        >>> d = db_display(x)
+        >>> float(d[:50].max()), float(np.median(d[50:])) > 0.3
+        (0.0, True)
+    """
+    a = img.double().numpy() if isinstance(img, torch.Tensor) else np.asarray(img, np.float64)
+    pos = a[np.isfinite(a) & (a > 0)]
+    if pos.size == 0:
+        return np.zeros(a.shape)
+    db = 10 * np.log10(np.where(np.isfinite(a) & (a > 0), a, pos.min()))
+    lo, hi = np.percentile(10 * np.log10(pos), DB_PERCENTILES)
+    out = np.clip((db - lo) / max(hi - lo, 1e-9), 0, 1)
+    out[~(np.isfinite(a) & (a > 0))] = 0.0
+    return out
 
 
 def _overlay(ax, img: np.ndarray, mask: np.ndarray, title: str) -> None:
@@ -34,12 +50,13 @@ def _overlay(ax, img: np.ndarray, mask: np.ndarray, title: str) -> None:
 
 def detection_panel(items: list[dict], specs: list[Detector], path: Path) -> None:
     """Draw ``items`` (dataset dicts with ``image``, ``mask``) against every detector."""
+    plt = pyplot()
     cols = 2 + len(specs)
     fig, axes = plt.subplots(len(items), cols, figsize=(2.1 * cols, 2.2 * len(items)))
     axes = np.atleast_2d(axes)
     for row, item in zip(axes, items, strict=True):
         x = item["image"][None]
-        img = _db(item["image"][0])
+        img = db_display(item["image"][0])
         row[0].imshow(img, cmap="gray", interpolation="nearest")
         row[0].set_title(item["meta"].get("name", "image"), fontsize=8)
         row[0].axis("off")

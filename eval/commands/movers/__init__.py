@@ -16,11 +16,12 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import torch
-
-from torchsar_eval.commands.movers.run import LadderConfig, run_ladder
 from torchsar_eval.errors import EvalError
+
+if TYPE_CHECKING:
+    from torchsar_eval.commands.movers.experiment import LadderConfig
 
 __all__ = ["SPEEDS", "add_parser", "run"]
 
@@ -43,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--azimuth-resolution", type=float, default=0.3,
                    help="sets the aperture: 0.3 m = 2.5 s, the seed's Table 1 (m)")  # fmt: skip
     p.add_argument("--speeds", default=",".join(map(str, SPEEDS)),
-                   help="comma-separated mover speeds in m/s (default: 0.39..15.6)")  # fmt: skip
+                   help="comma-separated mover speeds in m/s")  # fmt: skip
     p.add_argument("--directions", default="along-track,range", help="along-track, range or both")
     p.add_argument("--snr-db", type=float, default=30.0, help="image peak SNR of every target")
     p.add_argument("--snr-ladder", default="15,20,25",
@@ -60,7 +61,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-subpatch", dest="subpatch", action="store_false",
                    help="skip the subpatch test (it forms four more images per scene)")  # fmt: skip
     p.add_argument("--batch-size", type=int, default=4, help="scenes imaged at once")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated scenes")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
@@ -79,6 +80,8 @@ def floats(text: str, name: str, *, allow_empty: bool = False) -> tuple[float, .
 
 def config(args: argparse.Namespace) -> LadderConfig:
     """Validate the options (one-line errors) and freeze them."""
+    from torchsar_eval.commands.movers.experiment import LadderConfig
+
     speeds = floats(args.speeds, "--speeds")
     if min(speeds) <= 0:
         raise EvalError(f"--speeds must be > 0 m/s, got {args.speeds!r}")
@@ -108,9 +111,12 @@ def config(args: argparse.Namespace) -> LadderConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    cfg = config(args)
+    import torch
+
+    from torchsar_eval.commands.movers.experiment import run_ladder
     from torchsar_eval.output import default_out
 
+    cfg = config(args)
     out = args.out or default_out("movers")
     t0 = time.perf_counter()
     summary = run_ladder(cfg, out)

@@ -4,13 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import pandas as pd
 
-from torchsar_eval.plots import save
+from torchsar_eval.plots import log_axis, pyplot, save
 
 __all__ = ["plot_displacement"]
 
@@ -21,7 +17,7 @@ def plot_displacement(table: pd.DataFrame, path: Path) -> None:
     folds found marked. Right: velocity estimates of the look and focus tests vs the true
     along-track speed."""
     ladder = table[table.kind == "ladder"]
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 4.5))
+    fig, (ax1, ax2, ax3) = pyplot().subplots(1, 3, figsize=(15, 4.5))
     for direction, marker in (("along-track", "o"), ("range", "s")):
         part = ladder[ladder.direction == direction].sort_values("speed_mps")
         if part.empty:
@@ -34,10 +30,14 @@ def plot_displacement(table: pd.DataFrame, path: Path) -> None:
             ax3.plot(part.speed_mps, part.speed_mps, "-", color="grey", label="true")
         else:
             _plot_walk(ax2, part)
-    ax1.set(xscale="log", yscale="symlog", xlabel="mover speed (m/s)",
-            ylabel="|azimuth displacement| first to last look (m)")  # fmt: skip
+    speeds = ladder.speed_mps
+    log_axis(ax1, "x", speeds)
+    theory = ladder[ladder.direction == "along-track"].theory_look_shift_m.dropna()
+    log_axis(ax1, "y", [*ladder.look_shift_m.abs().dropna(), *theory])
+    log_axis(ax3, "x", speeds)
+    ax1.set(xlabel="mover speed (m/s)", ylabel="|azimuth displacement| first to last look (m)")
     ax2.set(xlabel="radial speed (m/s)", ylabel="range walk between looks (m/s)")
-    ax3.set(xscale="log", xlabel="true along-track speed (m/s)", ylabel="estimated speed (m/s)")
+    ax3.set(xlabel="true along-track speed (m/s)", ylabel="estimated speed (m/s)")
     for ax in (ax1, ax2, ax3):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)

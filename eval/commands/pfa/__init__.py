@@ -9,23 +9,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+from torchsar_eval.choices import BUILTIN_DETECTORS
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import pandas as pd
-from tqdm import tqdm
+if TYPE_CHECKING:
+    import pandas as pd
 
-from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
-from torchsar_eval.datasets import make_dataset
-from torchsar_eval.options import at_least, floats, names
-from torchsar_eval.output import default_out, result_dir, write_config
-from torchsar_eval.plots import detector_style, save, slug
-from torchsar_eval.registry import BUILTIN
-from torchsar_eval.tables import markdown
-
-DEFAULT_DETECTORS = [n for n in BUILTIN if n != "region"]
+DEFAULT_DETECTORS = [n for n in BUILTIN_DETECTORS if n != "region"]
 DEFAULT_PFAS = (1e-2, 1e-3, 1e-4)
 
 
@@ -41,7 +32,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=256, help="image side (default 256)")
     p.add_argument("--images", type=int, default=4, help="images per clutter model (default 4)")
     p.add_argument("--pfa", default=",".join(map(str, DEFAULT_PFAS)), help="design Pfa list")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated clutter")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/pfa-*)")
     p.add_argument(
         "--dataset",
@@ -51,12 +42,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "clutter (repeatable; e.g. folder:PATH, hrsid:DIR): real clutter vs the models",
     )
     p.add_argument("--n", type=int, default=None, help="images per --dataset (default: all)")
-    p.add_argument("--batch-size", type=int, default=8)
+    p.add_argument("--batch-size", type=int, default=8, help="images per detector call")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import pandas as pd
+    from tqdm import tqdm
+
+    from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.labels import short_labels
+    from torchsar_eval.options import at_least, floats, names
+    from torchsar_eval.output import default_out, result_dir, write_config
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.tables import markdown
+
     wanted = ",".join(DEFAULT_DETECTORS) if args.detectors is None else args.detectors
     specs = [BUILTIN[n] for n in names(wanted, "--detectors", BUILTIN, what="detector")]
     pfas = floats(args.pfa, "--pfa", above=0, below=1)
@@ -91,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
                 "note": "detectors with a looks option get the clutter's looks",
             },
         )
-    print(_wide(table).to_string(float_format=lambda v: f"{v:.3g}"))
+    shown = table.assign(clutter=table["clutter"].map(short_labels(table["clutter"])))
+    print(_wide(shown).to_string(float_format=lambda v: f"{v:.3g}"))
     print(f"\nwrote {out}/: pfa.csv pfa.md pfa.png config.json")
     return 0
 
@@ -108,29 +111,41 @@ def _wide(table: pd.DataFrame) -> pd.DataFrame:
 def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     """One panel per clutter model: measured vs design Pfa (log-log) with 95 % intervals;
     a detector without any false alarm is drawn as an open triangle at the interval's upper
-    bound."""
+    bound. A detector missing from a panel is named there."""
+    from torchsar_eval.labels import short_label
+    from torchsar_eval.plots import detector_style, legend_handles, log_axis, pyplot, save, titled
+
+    plt = pyplot()
     cases = list(dict.fromkeys(table["clutter"]))
-    cols = 3
+    everyone = list(dict.fromkeys(table["detector"]))
+    cols = min(3, len(cases))
     rows = (len(cases) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.8 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.9 * rows + 0.6), squeeze=False)
     for ax, case in zip(axes.flat, cases, strict=False):
         sub = table[table["clutter"] == case]
-        for i, (name, df) in enumerate(sub.groupby("detector", sort=False)):
-            st = detector_style(i)
-            color = st["color"]
+        for name, df in sub.groupby("detector", sort=False):
+            st = detector_style(name)
             seen = df[df["false_alarms"] > 0]
             y = seen["measured_pfa"]
             err = [y - seen["ci_low"], seen["ci_high"] - y]
-            ax.errorbar(seen["design_pfa"], y, yerr=err, marker="o", ms=3, label=name, capsize=2,
-                        **st)  # fmt: skip
+            ax.errorbar(seen["design_pfa"], y, yerr=err, ms=4, capsize=2, **st)
             none = df[df["false_alarms"] == 0]  # no false alarm: mark the 95 % upper bound
-            ax.plot(none["design_pfa"], none["ci_high"], "v", ms=5, color=color, mfc="none")
+            ax.plot(none["design_pfa"], none["ci_high"], "v", ms=5, color=st["color"], mfc="none")
         lim = [sub["design_pfa"].min() / 3, sub["design_pfa"].max() * 3]
         ax.plot(lim, lim, "k--", lw=0.8)
-        ax.set(xscale="log", yscale="log", title=slug(case) if len(case) > 30 else case,
-               xlabel="design Pfa", ylabel="measured Pfa")  # fmt: skip
-        ax.grid(True, which="both", alpha=0.3)
+        measured = sub.loc[sub["false_alarms"] > 0, "measured_pfa"]
+        log_axis(ax, "x", sub["design_pfa"])
+        low = sub.loc[sub["false_alarms"] > 0, "ci_low"]
+        log_axis(ax, "y", [*sub["design_pfa"], *measured, *low, *sub["ci_high"]])
+        ax.set(xlabel="design Pfa", ylabel="measured Pfa")
+        missing = {n: "not measured" for n in everyone if n not in set(sub["detector"])}
+        titled(ax, short_label(case), missing, width=48)
+        ax.grid(True, which="major", alpha=0.3)
     for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=7, ncol=2)
-    save(fig, path)
+    handles = legend_handles(everyone)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8,
+               title="open triangle: no false alarm (95 % upper bound)",
+               title_fontsize=8)  # fmt: skip
+    legend_rows = -(-len(handles) // 7)
+    save(fig, path, rect=(0, (0.06 * legend_rows + 0.05) / rows, 1, 1))

@@ -2,30 +2,35 @@
 
 The command-line edge of :func:`torchsar_eval.evaluate`: options are parsed and validated
 here (:mod:`torchsar_eval.commands.run.options`), turned into the typed settings of the
-Python API and handed to it; this module prints the summary.
+Python API and handed to it; this module prints the summary. The parser imports nothing
+heavy (its names and defaults come from :mod:`torchsar_eval.choices`).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from torchsar.speckle import FILTERS
-from torchsar_eval.api import Results, evaluate
-from torchsar_eval.commands.run.options import check_run_args, scoring_from
-from torchsar_eval.datasets import DATASETS
+from torchsar_eval import choices
 from torchsar_eval.errors import EvalError
-from torchsar_eval.html_report import DEFAULT_RANK, RANK_METRICS
-from torchsar_eval.output import check_out
-from torchsar_eval.registry import available
-from torchsar_eval.result import DEFAULT_MATCH, DEFAULT_RULES
-from torchsar_eval.settings import Calibration, Execution
-from torchsar_eval.tables import CONSOLE_COLUMNS
+
+if TYPE_CHECKING:
+    from torchsar_eval.api import Results
 
 __all__ = ["DEFAULT_DATASETS", "DEFAULT_MATCH", "DEFAULT_RULES", "add_parser", "run"]
 
 DEFAULT_DATASETS = ["sim-chips", "sim-scenes"]
+
+_LAZY = {"DEFAULT_MATCH": "torchsar_eval.result", "DEFAULT_RULES": "torchsar_eval.result"}
+
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -39,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--dataset",
         action="append",
         metavar="NAME",
-        help=f"dataset (repeatable): {', '.join(DATASETS)}; "
+        help=f"dataset (repeatable): {', '.join(choices.DATASET_SCHEMES)}; "
         f"default: {' and '.join(DEFAULT_DATASETS)}",
     )
     p.add_argument(
@@ -47,8 +52,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="LIST",
         help="comma-separated detectors: built-in or registered names "
-        f"({', '.join(available())}), import paths package.module:name, or NAME=REFERENCE "
-        "to name a row (default: every built-in)",
+        f"({', '.join(choices.detector_names())}), import paths package.module:name, or "
+        "NAME=REFERENCE to name a row (default: every built-in)",
     )
     p.add_argument(
         "--predictions",
@@ -66,15 +71,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "the CPU; default: cpu)",
     )
     p.add_argument("--n", type=int, default=None, help="images per dataset (default: per dataset)")
-    p.add_argument("--batch-size", type=int, default=16)
+    p.add_argument("--batch-size", type=int, default=16, help="images per detector call")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated datasets")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/run-*)")
     p.add_argument(
         "--rank-by",
-        default=DEFAULT_RANK,
+        default=choices.DEFAULT_RANK,
         metavar="METRIC",
-        help=f"metric that ranks the leaderboards of report.html: {', '.join(RANK_METRICS)} "
-        f"(default {DEFAULT_RANK})",
+        help="metric that ranks the leaderboards of report.html: "
+        f"{', '.join(choices.RANK_METRICS)} (default {choices.DEFAULT_RANK})",
     )
     p.add_argument(
         "--param",
@@ -85,7 +90,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--despeckle",
-        choices=sorted(FILTERS),
+        choices=sorted(choices.SPECKLE_FILTERS),
         default=None,
         help="speckle filter applied before every detector (default: none)",
     )
@@ -167,22 +172,24 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--closing",
         type=int,
-        default=DEFAULT_RULES.closing,
-        help=f"closing radius in px before labelling (default {DEFAULT_RULES.closing})",
+        default=choices.DEFAULT_CLOSING,
+        help="closing radius in px before labelling",
     )
     g.add_argument(
         "--min-area",
         type=float,
-        default=DEFAULT_RULES.min_area,
-        help=f"smallest object, in --area-units (default {DEFAULT_RULES.min_area:g})",
+        default=choices.DEFAULT_MIN_AREA,
+        help="smallest object, in --area-units",
     )
     g.add_argument(
         "--max-area",
         type=float,
-        default=DEFAULT_RULES.max_area,
+        default=choices.DEFAULT_MAX_AREA,
         help="largest object, in --area-units (default: no limit)",
     )
-    g.add_argument("--area-units", choices=["px", "m2"], default="px")
+    g.add_argument("--area-units", choices=["px", "m2"], default="px",
+                   help="units of --min-area and --max-area: pixels, or square metres with "
+                   "the pixel spacing")  # fmt: skip
     g.add_argument(
         "--floor",
         type=float,
@@ -193,9 +200,9 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--match",
         choices=["centroid", "mask", "box", "distance"],
-        default=DEFAULT_MATCH.kind,
-        help=f"matching rule of the operating point and FROC (default "
-        f"{DEFAULT_MATCH.kind}); AP uses IoU, or the distance rule with --match distance",
+        default=choices.DEFAULT_MATCH_KIND,
+        help="matching rule of the operating point and FROC; AP uses IoU, or the distance "
+        "rule with --match distance",
     )
     g.add_argument("--iou", type=float, default=0.5, help="IoU threshold of --match mask|box")
     g.add_argument(
@@ -252,12 +259,23 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The ``run`` sub-command: validate, evaluate, print the summary."""
+    """The ``run`` sub-command: validate, evaluate, print the summary. The checks that need
+    no library come first, so a mistyped number fails at once."""
+    from torchsar_eval.options import at_least
+    from torchsar_eval.output import check_out
+
     check_out(args.out, overwrite=args.overwrite, resume=args.resume, discard=args.discard)
-    detectors, preprocess, despeckle_opts = check_run_args(args)
-    scoring = scoring_from(args)
+    at_least(args.n, "--n", 1)
+    at_least(args.batch_size, "--batch-size", 1)
     if args.workers < 1 or args.shard_size < 1:
         raise EvalError("--workers and --shard-size must be >= 1")
+
+    from torchsar_eval.api import evaluate
+    from torchsar_eval.commands.run import options
+    from torchsar_eval.settings import Calibration, Execution
+
+    detectors, preprocess, despeckle_opts = options.check_run_args(args)
+    scoring = options.scoring_from(args)
     execution = Execution(
         batch_size=args.batch_size,
         shard_size=args.shard_size,
@@ -298,18 +316,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(results: Results) -> None:
-    """The console summary: the headline columns, each dataset's throughput and problems."""
+    """The console summary: the headline columns, each dataset's throughput and problems;
+    datasets by their short labels (the tables keep the full names)."""
+    from torchsar_eval.labels import short_labels
+    from torchsar_eval.report import throughput
+    from torchsar_eval.tables import CONSOLE_COLUMNS
+
     summary = results.summary.merge(results.timing, on=["dataset", "detector", "images"])
+    labels = short_labels([*summary["dataset"], *results.stats])
+    summary["dataset"] = summary["dataset"].map(labels)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         print(summary[CONSOLE_COLUMNS].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     for name, st in results.stats.items():
-        print(
-            f"{name}: {st['images']} images in {st['wall_s']:.1f} s "
-            f"({st['images_per_s']:.3g} images/s), shards {st['shards']} "
-            f"(done {st['done']}, resumed {st['skipped']}, retried {st['retried']}, "
-            f"failed {len(st['failed'])})"
-        )
+        print(f"{labels[name]}: {throughput(st)}")
         for f in st["failed"]:
             print(f"  FAILED shard {f['shard']}: {f['error']}")
         for b in st["skipped_items"]:

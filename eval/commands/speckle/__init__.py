@@ -17,17 +17,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
-import torch
-
-import torchsar as ts
-from torchsar_eval.commands.speckle.panel import despeckling_panel
-from torchsar_eval.commands.speckle.scoring import samples, score_dataset
-from torchsar_eval.datasets import DATASETS, make_dataset
+from torchsar_eval.choices import DATASET_SCHEMES, SPECKLE_FILTERS
 from torchsar_eval.errors import EvalError
-from torchsar_eval.output import default_out, result_dir, write_config
-from torchsar_eval.plots import slug
-from torchsar_eval.tables import markdown
 
 __all__ = ["SpeckleOptions", "add_parser", "evaluate", "parse_options", "run"]
 
@@ -49,12 +40,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--dataset",
         action="append",
         metavar="NAME",
-        help=f"dataset (repeatable): {', '.join(DATASETS)}; default: sim-scenes",
+        help=f"dataset (repeatable): {', '.join(DATASET_SCHEMES)}; default: sim-scenes",
     )
     p.add_argument(
         "--filters",
-        default=",".join(ts.speckle.FILTERS),
-        help=f"comma-separated filters (default: all): {','.join(ts.speckle.FILTERS)}",
+        default=",".join(SPECKLE_FILTERS),
+        help=f"comma-separated filters (default: all): {', '.join(SPECKLE_FILTERS)}",
     )
     p.add_argument("--windows", default="5,7", help="comma-separated odd windows (default 5,7)")
     p.add_argument(
@@ -88,6 +79,9 @@ class SpeckleOptions:
 
 def parse_options(args: argparse.Namespace) -> SpeckleOptions:
     """Check the parsed command line and turn it into :class:`SpeckleOptions`."""
+    import torchsar as ts
+    from torchsar_eval.output import default_out
+
     filters = _csv_list(args.filters)
     valid = ", ".join(ts.speckle.FILTERS)
     if not filters:
@@ -128,6 +122,17 @@ def run(args: argparse.Namespace) -> int:
 
 def evaluate(opts: SpeckleOptions) -> int:
     """Score every filter and window on every dataset; write the run folder; print the table."""
+    import pandas as pd
+    import torch
+
+    from torchsar_eval.commands.speckle.panel import despeckling_panel
+    from torchsar_eval.commands.speckle.scoring import samples, score_dataset
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.labels import short_labels
+    from torchsar_eval.output import result_dir, write_config
+    from torchsar_eval.plots import slug
+    from torchsar_eval.tables import markdown
+
     datasets = {name: make_dataset(name, n=opts.n, seed=opts.seed) for name in opts.datasets}
     with result_dir(opts.out) as tmp:
         tables = []
@@ -161,7 +166,8 @@ def evaluate(opts: SpeckleOptions) -> int:
                 "out": str(opts.out),
             },
         )
-    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    shown = table.assign(dataset=table["dataset"].map(short_labels(table["dataset"])))
+    print(shown.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(
         f"\nwrote {opts.out}/: speckle.csv speckle.md config.json "
         + " ".join(f"speckle_{slug(n)}.png" for n in datasets)
