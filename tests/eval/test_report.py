@@ -127,7 +127,7 @@ def test_the_leaderboard_is_in_ranked_order_with_its_intervals(run):
 def test_every_figure_is_embedded(run):
     out, _ = run
     page = Page((out / "report.html").read_text())
-    assert page.figures == 3  # FROC, precision-recall, pixel ROC of the one dataset
+    assert page.figures == 4  # FROC, precision-recall, pixel ROC, Pd vs SCR of the one dataset
     cases = pd.read_csv(out / "gallery" / "cases.csv")
     assert len(cases) > 0
     assert len(page.images) == len(cases)
@@ -232,7 +232,7 @@ def test_an_old_run_without_gallery_or_config_is_reported(run, tmp_path):
     (copy / "report.html").unlink()
     assert main(["report", str(copy)]) == 0
     page = Page((copy / "report.html").read_text())
-    assert len(page.boards) == 1 and page.figures == 3 and not page.images
+    assert len(page.boards) == 1 and page.figures == 4 and not page.images
 
 
 def test_two_runs_compared_in_one_page(run, other, tmp_path):
@@ -248,7 +248,7 @@ def test_two_runs_compared_in_one_page(run, other, tmp_path):
     # ca scored twice on the same images: the lower row says so
     assert labels[("ca", "b")] == "ca identical results to ca (a)"
     assert "ca (a)" in text and "vi (b)" in text
-    assert page.figures == 3
+    assert page.figures == 4
     for d in ("ca", "so", "vi"):
         assert detector_colour(d) in text
     # several runs need --out, and a bad metric or folder is one error line
