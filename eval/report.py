@@ -16,6 +16,7 @@ import pandas as pd
 from torchsar_eval.gallery import write_gallery
 from torchsar_eval.glossary import glossary
 from torchsar_eval.html_report import DEFAULT_RANK, REPORT_FILE, write_report
+from torchsar_eval.html_report.runfiles import RUN_TABLES
 from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
@@ -36,18 +37,7 @@ from torchsar_eval.tables import (
 
 __all__ = ["TABLE_FILES", "per_image_rows", "result_tables", "throughput", "write_run"]
 
-TABLE_FILES = {
-    "summary": "summary.csv",
-    "froc": "roc.csv",
-    "pr": "pr.csv",
-    "pixel_roc": "roc_pixel.csv",
-    "breakdown": "breakdown.csv",
-    "timing": "timing.csv",
-    "coco": "coco.csv",
-    "scr": "scr.csv",
-    "errors": "errors.csv",
-    "paired": "paired.csv",
-}
+TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k != "cases"}
 """Each table of :func:`result_tables` and its file in a run folder."""
 
 
