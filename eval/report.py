@@ -4,7 +4,7 @@ plots."""
 from __future__ import annotations
 
 import csv
-import pickle
+import json
 import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import ExitStack
@@ -74,19 +74,15 @@ def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[l
     """
     for name, parts in folders.items():
         with ExitStack() as stack:
-            spools: dict[str, IO[bytes]] = {}
+            spools: dict[str, IO[str]] = {}
             for det, rows in parts:
                 if det not in spools:
-                    spools[det] = stack.enter_context(tempfile.TemporaryFile())
-                pickle.dump(list(rows), spools[det])
+                    spools[det] = stack.enter_context(tempfile.TemporaryFile("w+"))
+                spools[det].write(json.dumps(list(rows)) + "\n")  # data only: JSON lines
             for det, spool in spools.items():
                 spool.seek(0)
-                while True:
-                    try:
-                        rows = pickle.load(spool)  # our own spool of this run's rows
-                    except EOFError:
-                        break
-                    for row in rows:
+                for line in spool:
+                    for row in json.loads(line):
                         yield [name, det, *row]
 
 
