@@ -253,7 +253,9 @@ def region_cfar(
         fill_holes: give enclosed pixels to an adjacent accepted region (paper False,
             torchsar True).
         budget: pixels grown by the Python heap before the exact flood-fill finish (64;
-            None = heap only; same result).
+            None = heap only; same result). Only the Python path uses it: with numba
+            installed the whole per-seed loop is compiled (:mod:`torchsar.region._kernels`,
+            the same result bit for bit; ``TORCHSAR_NUMBA=0`` switches it off).
         workers: > 1 runs the images of a batch in a process pool (1; same result).
 
     Returns:
