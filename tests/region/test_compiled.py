@@ -19,6 +19,7 @@ from tests.region.test_steps import _painted, _state
 from torchsar import _jit
 from torchsar.region import region_search
 from torchsar.region.grow import Grid, grow
+from torchsar.region.seeds import local_maxima, seed_order
 
 pytest.importorskip("numba")
 from torchsar.region import _kernels as K  # only with numba
@@ -85,6 +86,24 @@ class TestGrow:
         got = _unpad(region[:n], w)
         assert got[0] == start
         np.testing.assert_array_equal(np.sort(got), np.sort(want))
+
+
+class TestSeeds:
+    @settings(max_examples=60)
+    @given(
+        st.integers(0, 2**31 - 1),
+        st.sampled_from([1, 3, 5, 7]),
+        st.integers(1, 14),
+        st.integers(1, 14),
+        st.booleans(),
+    )
+    def test_equal_local_maxima_in_seed_order_and_reference(self, seed, window, h, w, plateaus):
+        rng = np.random.default_rng(seed)
+        f = rng.integers(0, 3, (h, w)).astype(float) if plateaus else rng.random((h, w))
+        got = K.seeds(f.reshape(-1), h, w, window).tolist()
+        ft = torch.from_numpy(f)
+        assert got == seed_order(ft, local_maxima(ft[None, None], window)[0, 0]).tolist()
+        assert got == ref.seeds(f, window)
 
 
 class TestComponents:

@@ -550,3 +550,37 @@ def merged_labels(mask, h, w, merge):
         if m[a]:
             out[(r0 + a // bw) * w + c0 + a % bw] = lab[a]
     return out
+
+
+@njit(**_JIT)
+def seeds(f, h, w, window):
+    """Steps a–b on the flat float64 ``(h * w,)`` image F: the flat indices of the pixels
+    equal to the maximum of their ``window x window`` neighbourhood (cells outside the
+    image not counted), brightest first, ties by index: ``seed_order(f, local_maxima(f))``
+    of :mod:`torchsar.region.seeds`."""
+    r = window // 2
+    rows = f.copy()  # running maximum along rows, then along columns: shifted whole lines
+    for i in range(h):
+        line = f[i * w : (i + 1) * w]
+        out = rows[i * w : (i + 1) * w]
+        for d in range(1, r + 1):
+            for j in range(w - d):
+                a, b = line[j + d], line[j]
+                out[j] = a if a > out[j] else out[j]
+                out[j + d] = b if b > out[j + d] else out[j + d]
+    peak = rows.copy()
+    for d in range(1, r + 1):
+        for i in range(h - d):
+            for j in range(w):
+                a, b = rows[(i + d) * w + j], rows[i * w + j]
+                q, q2 = i * w + j, (i + d) * w + j
+                peak[q] = a if a > peak[q] else peak[q]
+                peak[q2] = b if b > peak[q2] else peak[q2]
+    idx = np.empty(h * w, dtype=np.int64)
+    n = 0
+    for q in range(h * w):
+        if f[q] == peak[q]:
+            idx[n] = q
+            n += 1
+    idx = idx[:n]
+    return idx[np.argsort(-f[idx], kind="mergesort")]

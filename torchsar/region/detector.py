@@ -24,7 +24,7 @@ from torchsar.region.boxes import mask_box
 from torchsar.region.grow import Grid, grow
 from torchsar.region.params import RegionParams
 from torchsar.region.rings import crop_around, ring_stats
-from torchsar.region.seeds import seed_order
+from torchsar.region.seeds import local_maxima, seed_order
 from torchsar.region.table import REASONS, RegionRow, RegionTable
 
 __all__ = ["detect_image"]
@@ -124,6 +124,17 @@ def _visit_python(
     for s in seeds.tolist():
         if not g.covered[s]:
             _visit(st, g, s, imgs, p)
+
+
+def _compiled_seeds(f: Tensor, peaks: Tensor | None, p: RegionParams) -> np.ndarray:
+    """The seeds, brightest first: from ``peaks`` if given, else found by the kernel."""
+    if peaks is not None:
+        return seed_order(f, peaks)
+    from torchsar.region import _kernels
+
+    h, w = f.shape
+    flat = np.ascontiguousarray(f.numpy(), dtype=np.float64).reshape(-1)
+    return _kernels.seeds(flat, h, w, p.seed_window)
 
 
 def _visit_compiled(
@@ -279,23 +290,24 @@ def detect_image(
     low: Tensor,
     p: RegionParams,
     dtype: np.dtype,
-    peaks: Tensor,
+    peaks: Tensor | None,
 ) -> tuple[np.ndarray, np.ndarray, RegionTable]:
     """Run steps b–j on one image (``(H, W)`` float64 CPU tensors); ``peaks`` is the bool
     ``(H, W)`` seed mask of step a (:func:`~torchsar.region.seeds.local_maxima` of ``f``,
-    computed by the caller for a whole batch at once).
+    computed by the caller for a whole batch at once), or None: found here (by the kernel
+    on the compiled path).
 
     Returns the painted statistic ``(H, W)`` in ``dtype``, the labels ``(H, W)`` int64 (of
     the pixels where ``statistic > k`` in that dtype) and the region table.
     """
     st = _ImageState(f, p)
-    seeds = seed_order(f, peaks)
     imgs = (raw.numpy(), target_img.numpy(), low.numpy())
     if _jit.enabled():
-        _visit_compiled(st, f.numpy(), seeds, imgs, p)
+        _visit_compiled(st, f.numpy(), _compiled_seeds(f, peaks, p), imgs, p)
         fill, drop, label = _fill_holes_compiled, _drop_small_compiled, _labels_compiled
     else:
-        _visit_python(st, f.numpy(), seeds, imgs, p)
+        peaks = local_maxima(f[None, None], p.seed_window)[0, 0] if peaks is None else peaks
+        _visit_python(st, f.numpy(), seed_order(f, peaks), imgs, p)
         fill, drop, label = _fill_holes, _drop_small_objects, _labels
     if p.fill_holes:
         fill(st)
