@@ -59,25 +59,26 @@ def _lowest_bit(typingctx, x):
 
 
 @njit(**_JIT)
-def _keys(vals, n, out):
-    """Order-preserving keys of ``vals[:n]`` (float32 or float64) into ``out`` (int64):
-    compared as unsigned numbers they order as the floats do, ``-0.0`` as ``+0.0``. float32
-    keys fit 32 bits (four radix digits), float64 keys use all 64. Returns the digit count."""
-    if vals.itemsize == 4:
-        bits32 = vals[:n].view(np.int32)
-        for i in range(n):
-            b = np.int64(bits32[i])
-            if b == -(2**31):
-                b = 0
-            out[i] = (b ^ ((b >> 31) & 0x7FFFFFFF)) + 2**31
-        return 4
+def _keys32(vals, n, out):
+    """Order-preserving keys of float32 ``vals[:n]`` into the uint32 ``out``: compared as
+    unsigned numbers they order as the floats do (``-0.0`` as ``+0.0``)."""
+    bits = vals[:n].view(np.int32)
+    for i in range(n):
+        b = np.int64(bits[i])
+        if b == -(2**31):
+            b = 0
+        out[i] = (b ^ ((b >> 31) & 0x7FFFFFFF)) + 2**31
+
+
+@njit(**_JIT)
+def _keys64(vals, n, out):
+    """:func:`_keys32` for float64 ``vals`` into an int64 ``out`` (read as unsigned)."""
     bits = vals[:n].view(np.int64)
     for i in range(n):
         b = bits[i]
         if b == _MIN:
             b = 0
         out[i] = b ^ ((b >> 63) | _MIN)
-    return 8
 
 
 @njit(**_JIT)
@@ -85,9 +86,9 @@ def _radix_argsort(keys, n, digits, order, tmp_order, tmp_keys):
     """Stable argsort of ``keys[:n]`` (unsigned order, ``digits`` bytes) into ``order[:n]``;
     ``keys`` is overwritten. LSD radix with 8-bit digits; a digit equal for every key is
     skipped."""
-    counts = np.zeros((digits, 256), dtype=np.int64)
+    counts = np.zeros((digits, 256), dtype=np.int32)
     for i in range(n):
-        k = keys[i]
+        k = np.int64(keys[i])
         for d in range(digits):
             counts[d, (k >> (8 * d)) & 255] += 1
     for i in range(n):
@@ -125,7 +126,7 @@ def _insert(rank, start, step, count, bits, wp, below):
         r = rank[start + i * step]
         wi = r >> 6
         bits[wi] ^= np.int64(1) << (r & 63)
-        below += wi < wp
+        below -= (np.int64(wi) - wp) >> 63  # + (wi < wp), without a branch
     return below
 
 
@@ -136,16 +137,17 @@ def _remove(rank, start, step, count, bits, wp, below):
         r = rank[start + i * step]
         wi = r >> 6
         bits[wi] ^= np.int64(1) << (r & 63)
-        below -= wi < wp
+        below += (np.int64(wi) - wp) >> 63  # - (wi < wp)
     return below
 
 
 @njit(**_JIT)
-def _sweep(rank, srt, tw, th, g, o, kk, out):
-    """Visit the ``th x tw`` pixels of a ranked tile (``rank`` over the tile with its halo,
-    column-major, columns ``th + 2o`` long) in serpentine order, rows left to right then
-    right to left; ``out[y, x]`` = the ``kk[y, x]``-th smallest ring value (0 where
-    ``kk <= 0``). Column-major, the four lines a horizontal step changes are contiguous."""
+def _sweep(rank, srt, tw, th, g, o, kk, out, y0, x0):
+    """Visit the ``th x tw`` pixels of a ranked tile at ``(y0, x0)`` of its plane (``rank``
+    over the tile with its halo, column-major, columns ``th + 2o`` long) in serpentine
+    order, rows left to right then right to left; ``out[y0 + y, x0 + x]`` = the
+    ``kk[y0 + y, x0 + x]``-th smallest ring value (0 where ``kk <= 0``). Column-major, the
+    four lines a horizontal step changes are contiguous."""
     hh = th + 2 * o
     nwords = (srt.size + 63) >> 6
     bits = np.zeros(nwords, dtype=np.int64)
@@ -176,9 +178,9 @@ def _sweep(rank, srt, tw, th, g, o, kk, out):
                     below = _remove(rank, at(y - g, x - g - 1), 1, band, bits, wp, below)
                     below = _insert(rank, at(y - g, x + g), 1, band, bits, wp, below)
                 x += step
-            k = kk[y, x]
+            k = kk[y0 + y, x0 + x]
             if k <= 0:
-                out[y, x] = 0
+                out[y0 + y, x0 + x] = 0
                 continue
             here = _popcount(bits[wp])
             while below + here < k and wp < nwords - 1:  # the pointer follows the answer
@@ -191,7 +193,7 @@ def _sweep(rank, srt, tw, th, g, o, kk, out):
             word = bits[wp]
             for _ in range(k - below - 1):
                 word &= word - 1
-            out[y, x] = srt[(wp << 6) + _lowest_bit(word)]
+            out[y0 + y, x0 + x] = srt[(wp << 6) + _lowest_bit(word)]
         if y + 1 < th:  # down: outer rows y-o out, y+o+1 in; guard y+g+1 in, y-g out
             below = _remove(rank, at(y - o, x - o), hh, side, bits, wp, below)
             below = _insert(rank, at(y + o + 1, x - o), hh, side, bits, wp, below)
@@ -206,11 +208,14 @@ def _select_plane(plane, kk, valid, has_valid, g, o, tile, out):
     h, w = plane.shape
     span = (tile + 2 * o) * (tile + 2 * o)
     vals = np.empty(span, dtype=plane.dtype)
-    keys = np.empty(span, dtype=np.int64)
-    tmp_keys = np.empty(span, dtype=np.int64)
-    order = np.empty(span, dtype=np.int64)
-    tmp_order = np.empty(span, dtype=np.int64)
-    rank = np.empty(span, dtype=np.int32)
+    narrow = plane.itemsize == 4  # float32: 32-bit keys, four radix passes at most
+    keys32 = np.empty(span if narrow else 0, dtype=np.uint32)
+    tmp32 = np.empty(span if narrow else 0, dtype=np.uint32)
+    keys64 = np.empty(0 if narrow else span, dtype=np.int64)
+    tmp64 = np.empty(0 if narrow else span, dtype=np.int64)
+    order = np.empty(span, dtype=np.int32)
+    tmp_order = np.empty(span, dtype=np.int32)
+    rank = np.empty(span, dtype=np.uint32)  # unsigned: no negative-index wraparound
     srt = np.empty(span, dtype=plane.dtype)
     for y0 in range(0, h, tile):
         for x0 in range(0, w, tile):
@@ -224,15 +229,16 @@ def _select_plane(plane, kk, valid, has_valid, g, o, tile, out):
                     if 0 <= y < h and 0 <= x < w and (not has_valid or valid[y, x]):
                         v = plane[y, x]
                     vals[j * hh + i] = v
-            digits = _keys(vals, m, keys)
-            _radix_argsort(keys, m, digits, order, tmp_order, tmp_keys)
+            if narrow:
+                _keys32(vals, m, keys32)
+                _radix_argsort(keys32, m, 4, order, tmp_order, tmp32)
+            else:
+                _keys64(vals, m, keys64)
+                _radix_argsort(keys64, m, 8, order, tmp_order, tmp64)
             for i in range(m):
                 rank[order[i]] = i
                 srt[i] = vals[order[i]]
-            _sweep(
-                rank[:m], srt[:m], tw, th, g, o,
-                kk[y0 : y0 + th, x0 : x0 + tw], out[y0 : y0 + th, x0 : x0 + tw],
-            )  # fmt: skip
+            _sweep(rank[:m], srt[:m], tw, th, g, o, kk, out, y0, x0)
 
 
 def tile_side(h: int, w: int, o: int) -> int:
