@@ -19,9 +19,15 @@ import os
 
 __all__ = ["ENABLED", "enabled"]
 
-ENABLED: bool = (
-    os.environ.get("TORCHSAR_NUMBA", "1") != "0" and importlib.util.find_spec("numba") is not None
-)
+
+def _numba_installed() -> bool:
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):  # a broken or blocked numba counts as absent
+        return False
+
+
+ENABLED: bool = os.environ.get("TORCHSAR_NUMBA", "1") != "0" and _numba_installed()
 
 
 def enabled() -> bool:
