@@ -239,3 +239,18 @@ def test_compiled_equals_python_on_odd_shapes(options):
         if min(h, w) >= 5:  # the default filter's window
             _assert_same(x, **options)
         _assert_same(x.float(), despeckle=None, **options)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["gamma", "k", "weibull", "lognormal"])
+def test_compiled_equals_python_on_many_chips_and_scenes(model):
+    """The broad check (``-m slow``): 64 chips and two 512x512 scenes (buildings, roads,
+    clutter edges: floods larger than the pairwise sums' blocks) per clutter model, both
+    presets."""
+    for seed in range(8):
+        x = ts.simulate.chips(8, seed=seed, model=model).image
+        for options in ({}, {"preset": "paper"}):
+            _assert_same(x, **options)
+    scenes = ts.simulate.scenes(2, seed=1, model=model).image
+    for options in ({}, {"preset": "paper"}, {"max_size": None, "max_fraction": None}):
+        _assert_same(scenes, **options)
