@@ -203,20 +203,29 @@ def _sweep(rank, srt, tw, th, g, o, kk, out, y0, x0):
 
 
 @njit(**_JIT)
-def _select_plane(plane, kk, valid, has_valid, g, o, tile, out):
+def _scratch(plane, span):
+    """The buffers of :func:`_select_plane` for tiles of ``span`` cells, allocated once per
+    call (fresh large arrays per tile would cost page faults)."""
+    narrow = plane.itemsize == 4  # float32: 32-bit keys, four radix passes at most
+    return (
+        np.empty(span, dtype=plane.dtype),  # cell values
+        np.empty(span if narrow else 0, dtype=np.uint32),  # keys, float32
+        np.empty(span if narrow else 0, dtype=np.uint32),
+        np.empty(0 if narrow else span, dtype=np.int64),  # keys, float64
+        np.empty(0 if narrow else span, dtype=np.int64),
+        np.empty(span, dtype=np.int32),  # order
+        np.empty(span, dtype=np.int32),
+        np.empty(span, dtype=np.uint32),  # ranks (unsigned: no negative-index wraparound)
+        np.empty(span, dtype=plane.dtype),  # sorted values
+    )
+
+
+@njit(**_JIT)
+def _select_plane(plane, kk, valid, has_valid, g, o, tile, out, scratch):
     """Every tile of one ``(H, W)`` plane: rank its halo'd cells, then sweep it."""
     h, w = plane.shape
-    span = (tile + 2 * o) * (tile + 2 * o)
-    vals = np.empty(span, dtype=plane.dtype)
-    narrow = plane.itemsize == 4  # float32: 32-bit keys, four radix passes at most
-    keys32 = np.empty(span if narrow else 0, dtype=np.uint32)
-    tmp32 = np.empty(span if narrow else 0, dtype=np.uint32)
-    keys64 = np.empty(0 if narrow else span, dtype=np.int64)
-    tmp64 = np.empty(0 if narrow else span, dtype=np.int64)
-    order = np.empty(span, dtype=np.int32)
-    tmp_order = np.empty(span, dtype=np.int32)
-    rank = np.empty(span, dtype=np.uint32)  # unsigned: no negative-index wraparound
-    srt = np.empty(span, dtype=plane.dtype)
+    vals, keys32, tmp32, keys64, tmp64, order, tmp_order, rank, srt = scratch
+    narrow = plane.itemsize == 4
     for y0 in range(0, h, tile):
         for x0 in range(0, w, tile):
             th, tw = min(tile, h - y0), min(tile, w - x0)
@@ -253,9 +262,11 @@ def tile_side(h: int, w: int, o: int) -> int:
 def _select_planes(planes, kk, valid, has_valid, g, o, tile, out):
     """:func:`_select_plane` for every plane (``kk`` and ``valid`` may have one plane for
     all)."""
+    scratch = _scratch(planes, (tile + 2 * o) * (tile + 2 * o))
     for p in range(planes.shape[0]):
         kp = kk[p if kk.shape[0] > 1 else 0]
-        _select_plane(planes[p], kp, valid[p if has_valid else 0], has_valid, g, o, tile, out[p])
+        vp = valid[p if has_valid else 0]
+        _select_plane(planes[p], kp, vp, has_valid, g, o, tile, out[p], scratch)
 
 
 def ring_select(
