@@ -1,9 +1,14 @@
-"""Root pytest configuration: names available to every doctest."""
+"""Root pytest configuration: names available to every doctest; without numba, the compiled
+kernels' modules (which import it) are not collected."""
+
+import importlib.util
 
 import pytest
 import torch
 
 import torchsar
+
+collect_ignore_glob = [] if importlib.util.find_spec("numba") else ["torchsar/*/_kernels.py"]
 
 
 @pytest.fixture(autouse=True)

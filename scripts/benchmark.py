@@ -1,9 +1,12 @@
 """Speed ratios of torchsar against reference implementations, measured in the same run.
 
 Every file in ``scripts/benchmarks/`` defines ``cases() -> [(name, ours, reference), ...]``.
-Each callable is timed on 1 thread (best of ``--repeat`` runs after a warm-up, wall and CPU
-time; CPU time is the fairer figure on a busy host) and the ratio ``reference / ours`` of
-wall times is printed (> 1 means torchsar is faster).
+Each pair is timed on 1 thread, A/B interleaved (one warm-up each, then ``--repeat`` rounds
+of ours, reference, ours, ...), so both see the same machine load; the medians of wall and
+CPU (thread) time are printed with the ratio ``reference / ours`` of the medians (> 1 means
+torchsar is faster). CPU time is the fairer figure on a busy host. A reference may be an
+older implementation of ours (e.g. ``region`` and ``cfar_family`` time the compiled numba
+path against the numpy/torch path it replaces, see :mod:`torchsar._jit`).
 
 Usage: ``python scripts/benchmark.py [--topic FILE_STEM] [--only SUBSTRING] [--repeat N]
 [--csv PATH]``
@@ -14,6 +17,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
+import statistics
 import sys
 import time
 from collections.abc import Callable
@@ -26,16 +30,30 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 
-def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
-    """Best wall and best CPU time of ``repeat`` runs after one warm-up run."""
+def _timed(fn: Callable[[], object]) -> tuple[float, float]:
+    t0, c0 = time.perf_counter(), time.thread_time()
     fn()
-    wall, cpu = [], []
+    return time.perf_counter() - t0, time.thread_time() - c0
+
+
+def interleaved(
+    ours: Callable[[], object], ref: Callable[[], object], repeat: int
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Median (wall, CPU) seconds of ``ours`` and of ``ref``, run alternately ``repeat``
+    times each after one warm-up run of each."""
+    ours(), ref()
+    runs: dict[str, list[tuple[float, float]]] = {"ours": [], "ref": []}
     for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-    return min(wall), min(cpu)
+        runs["ours"].append(_timed(ours))
+        runs["ref"].append(_timed(ref))
+
+    def median(key: str) -> tuple[float, float]:
+        return (
+            statistics.median(t[0] for t in runs[key]),
+            statistics.median(t[1] for t in runs[key]),
+        )
+
+    return median("ours"), median("ref")
 
 
 def load_cases(only: str | None, topic: str | None = None) -> list[tuple[str, Callable, Callable]]:
@@ -58,11 +76,15 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     rows = []
     for name, ours, ref in load_cases(args.only, args.topic):
-        (t_ours, c_ours), (t_ref, c_ref) = best_time(ours, args.repeat), best_time(ref, args.repeat)
-        rows.append((name, t_ours * 1e3, t_ref * 1e3, c_ours * 1e3, c_ref * 1e3, t_ref / t_ours))
+        (t_ours, c_ours), (t_ref, c_ref) = interleaved(ours, ref, args.repeat)
+        rows.append(
+            (name, t_ours * 1e3, t_ref * 1e3, c_ours * 1e3, c_ref * 1e3, t_ref / t_ours,
+             c_ref / max(c_ours, 1e-9))
+        )  # fmt: skip
         print(
             f"{name:<70s} ours {t_ours * 1e3:9.2f} ms  ref {t_ref * 1e3:9.2f} ms  "
-            f"ratio {t_ref / t_ours:6.2f}x  (cpu ratio {c_ref / max(c_ours, 1e-9):6.2f}x)",
+            f"ratio {t_ref / t_ours:6.2f}x  (cpu {c_ours * 1e3:9.2f} / {c_ref * 1e3:9.2f} ms, "
+            f"ratio {c_ref / max(c_ours, 1e-9):6.2f}x)",
             flush=True,
         )
     if args.csv:
@@ -77,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                 "ours_cpu_ms",
                 "reference_cpu_ms",
                 "speedup",
+                "cpu_speedup",
             ],
         ).to_csv(args.csv, index=False)
     return 0

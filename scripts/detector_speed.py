@@ -1,18 +1,24 @@
-"""Milliseconds per megapixel of each detector, as ``torchsar-eval run`` configures it.
+"""Milliseconds per megapixel and per image (chip) of each detector, as ``torchsar-eval run``
+configures it.
 
 Two image kinds: 128x128 simulated chips (a batch of 64) and 800x800 real images (the HRSID
 samples, display values squared, when the sample data are present, else simulated scenes).
-Each detector is timed on 1 thread, best of ``--repeat`` runs after a warm-up; CPU time is
-reported beside wall time because it is the fairer figure on a busy host. Run the same
-script on two checkouts to get before/after figures.
+Each detector is timed on 1 thread, the median of ``--repeat`` runs after a warm-up; CPU
+(thread) time is reported beside wall time because it is the fairer figure on a busy host.
+``--python-path`` also times every detector with the compiled numba kernels switched off
+(:mod:`torchsar._jit`; the numpy/torch code they replace, same results), interleaved with
+the default run so both see the same load, and prints the ratio. Run the same script on
+two checkouts to compare anything else.
 
-Usage: ``python scripts/detector_speed.py [--detectors ca,os,...] [--repeat N] [--csv PATH]``
+Usage: ``python scripts/detector_speed.py [--detectors ca,os,...] [--repeat N]
+[--python-path] [--csv PATH]``
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -24,6 +30,7 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from torchsar import _jit
 from torchsar_eval.datasets import make_dataset
 from torchsar_eval.registry import BUILTIN
 
@@ -45,22 +52,45 @@ def images(hrsid: Path) -> dict[str, torch.Tensor]:
     return out
 
 
-def best(fn, x: torch.Tensor, repeat: int) -> tuple[float, float]:
-    """Best wall and CPU seconds of ``repeat`` runs of ``fn(x)`` after one warm-up."""
+def _timed(fn, x: torch.Tensor) -> tuple[float, float]:
+    t0, c0 = time.perf_counter(), time.thread_time()
     fn(x)
-    wall, cpu = [], []
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
+    return time.perf_counter() - t0, time.thread_time() - c0
+
+
+def python_path(fn):
+    """``fn`` with the compiled kernels switched off."""
+
+    def run(x: torch.Tensor):
+        old, _jit.ENABLED = _jit.ENABLED, False
+        try:
+            return fn(x)
+        finally:
+            _jit.ENABLED = old
+
+    return run
+
+
+def medians(fns: dict, x: torch.Tensor, repeat: int) -> dict[str, tuple[float, float]]:
+    """Median wall and CPU seconds of each function of ``fns`` on ``x``: one warm-up each,
+    then ``repeat`` interleaved rounds."""
+    for fn in fns.values():
         fn(x)
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-    return min(wall), min(cpu)
+    runs: dict[str, list[tuple[float, float]]] = {k: [] for k in fns}
+    for _ in range(repeat):
+        for k, fn in fns.items():
+            runs[k].append(_timed(fn, x))
+    return {
+        k: (statistics.median(t[0] for t in v), statistics.median(t[1] for t in v))
+        for k, v in runs.items()
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--detectors", default=DEFAULT)
     p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--python-path", action="store_true", help="also time without numba")
     p.add_argument("--csv", type=Path)
     p.add_argument("--hrsid", type=Path, default=HRSID, help="folder of HRSID PNG samples")
     args = p.parse_args(argv)
@@ -68,15 +98,31 @@ def main(argv: list[str] | None = None) -> int:
     specs = [BUILTIN[n] for n in args.detectors.split(",")]
     rows = []
     for kind, x in images(args.hrsid).items():
-        mp = x[:, 0].numel() / 1e6
+        n_img, mp = x.shape[0], x[:, 0].numel() / 1e6
         for spec in specs:
-            wall, cpu = best(spec, x, args.repeat)
-            rows.append((kind, spec.name, wall * 1e3 / mp, cpu * 1e3 / mp))
-            print(f"{kind:28s} {spec.name:14s} {rows[-1][2]:9.1f} ms/MP  (cpu {rows[-1][3]:9.1f})")
+            fns = {"compiled": spec}
+            if args.python_path:
+                fns["python"] = python_path(spec)
+            got = medians(fns, x, args.repeat)
+            for path, (wall, cpu) in got.items():
+                rows.append(
+                    (kind, spec.name, path, wall * 1e3 / mp, cpu * 1e3 / mp,
+                     wall * 1e3 / n_img, cpu * 1e3 / n_img)
+                )  # fmt: skip
+                print(
+                    f"{kind:24s} {spec.name:14s} {path:8s} {rows[-1][3]:8.1f} ms/MP "
+                    f"(cpu {rows[-1][4]:8.1f})  {rows[-1][5]:8.2f} ms/image "
+                    f"(cpu {rows[-1][6]:8.2f})",
+                    flush=True,
+                )
+            if args.python_path:
+                ratio = got["python"][1] / max(got["compiled"][1], 1e-12)
+                print(f"{'':24s} {spec.name:14s} python / compiled cpu time: {ratio:.2f}x")
     if args.csv:
         import pandas as pd
 
-        cols = ["images", "detector", "ms_per_mp", "cpu_ms_per_mp"]
+        cols = ["images", "detector", "path", "ms_per_mp", "cpu_ms_per_mp", "ms_per_image",
+                "cpu_ms_per_image"]  # fmt: skip
         pd.DataFrame(rows, columns=cols).to_csv(args.csv, index=False)
     return 0
 

@@ -1,19 +1,38 @@
-"""The exact ring order statistic: both algorithms against sorting, across tile boundaries."""
+"""The exact ring order statistic: every algorithm (bisection, histogram, the compiled rank
+bitset) against sorting and scipy's rank_filter, across tile boundaries, for ties, extreme
+values, tiny images, every rank and every dtype."""
 
 from __future__ import annotations
+
+import importlib.util
 
 import numpy as np
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from tests.reference.cfar import kth_smallest, ring_cells
+from torchsar import _jit
 from torchsar.order_statistics import bisection, ring_order_statistic
 from torchsar.order_statistics.histogram import histogram_select
 from torchsar.windows import Ring
 
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+
+
+def compiled_select(planes: torch.Tensor, ring: Ring, kk: torch.Tensor, vm) -> torch.Tensor:
+    """The compiled rank bitset, as :func:`ring_order_statistic` calls it on CPU."""
+    from torchsar.order_statistics.ring import _compiled
+
+    return _compiled(planes, ring, kk, vm)
+
+
 ALGORITHMS = {"bisection": bisection.bisection_select, "histogram": histogram_select}
+if HAVE_NUMBA:
+    ALGORITHMS["compiled"] = compiled_select
 
 
 def reference(img: np.ndarray, ring: Ring, k: np.ndarray, valid: np.ndarray | None = None):
@@ -49,8 +68,12 @@ def run(algorithm: str, imgs: np.ndarray, ring: Ring, k: np.ndarray, valid=None)
 @pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
 @pytest.mark.parametrize("budget", [None, 700])
 def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorithm, budget):
-    if budget is not None:  # force many small bisection tiles (planes, rows and columns)
+    if budget is not None:  # force many small tiles (planes, rows and columns)
         monkeypatch.setattr(bisection, "CELL_BUDGET", budget)
+        if HAVE_NUMBA:
+            from torchsar.order_statistics import _kernels
+
+            monkeypatch.setattr(_kernels, "TILE_CELLS", budget)
     rng = np.random.default_rng(7)
     imgs = rng.exponential(size=(3, 19, 23))
     valid = rng.random(imgs.shape) > 0.2
@@ -137,3 +160,119 @@ def test_input_requiring_grad_is_read_not_differentiated():
     got = ring_order_statistic(x, Ring(1, 1), torch.full((1, 1, 12, 12), 2))
     assert not got.requires_grad
     assert torch.equal(got, ring_order_statistic(x.detach(), Ring(1, 1), torch.full(x.shape, 2)))
+
+
+def _reference_all(img: np.ndarray, ring: Ring, rank: int) -> np.ndarray:
+    """Every pixel's ``min(rank, count)``-th smallest in-image ring value (sorting)."""
+    h, w = img.shape
+    out = np.zeros(img.shape, dtype=np.float64)
+    for i in range(h):
+        for j in range(w):
+            cells = ring_cells(img, i, j, ring.guard, ring.train)
+            if cells.size:
+                out[i, j] = kth_smallest(cells, min(rank, cells.size))
+    return out
+
+
+def _ranks_for(img: np.ndarray, ring: Ring, rank: int) -> torch.Tensor:
+    return torch.from_numpy(np.minimum(counts(img, ring), rank))[None, None]
+
+
+@needs_numba
+class TestCompiled:
+    """The compiled path of :func:`ring_order_statistic` (CPU, numba)."""
+
+    @pytest.mark.parametrize(("guard", "train"), [(0, 1), (1, 1), (2, 4), (1, 3)])
+    def test_every_rank_equals_rank_filter_and_sorting(self, guard, train):
+        ring = Ring(guard, train)
+        o = ring.outer
+        img = np.random.default_rng(ring.n).exponential(size=(2 * o + 9, 2 * o + 6))
+        x = torch.from_numpy(img)[None, None]
+        fp = np.ones((2 * o + 1,) * 2, bool)
+        fp[train : train + 2 * guard + 1, train : train + 2 * guard + 1] = False
+        for rank in range(1, ring.n + 1):
+            got = ring_order_statistic(x, ring, _ranks_for(img, ring, rank))[0, 0].numpy()
+            want = ndimage.rank_filter(img, rank - 1, footprint=fp)
+            np.testing.assert_array_equal(got[o:-o, o:-o], want[o:-o, o:-o])
+            np.testing.assert_array_equal(got, _reference_all(img, ring, rank))
+
+    @settings(max_examples=40, deadline=None)
+    @given(
+        h=st.integers(1, 16),
+        w=st.integers(1, 16),
+        guard=st.integers(0, 3),
+        train=st.integers(1, 4),
+        kind=st.sampled_from(["ties", "constant", "extremes", "signed", "exponential"]),
+        frac=st.floats(0.0, 1.0),
+        seed=st.integers(0, 2**16),
+    )
+    def test_property_equals_sorting(self, h, w, guard, train, kind, frac, seed):
+        """Tiny images (the window as large as or larger than the image), ties, constant
+        images, extreme magnitudes (subnormals to the largest float, zeros of both signs,
+        infinities), negative values, any rank up to the pixel's count."""
+        rng = np.random.default_rng(seed)
+        ring = Ring(guard, train)
+        if kind == "ties":
+            img = rng.integers(0, 3, (h, w)).astype(np.float64)
+        elif kind == "constant":
+            img = np.full((h, w), 2.5)
+        elif kind == "extremes":
+            pool = np.array([0.0, -0.0, 5e-324, 1e-310, np.finfo(float).tiny, 1.0,
+                             np.finfo(float).max, np.inf, -np.inf, -np.finfo(float).max])  # fmt: skip
+            img = rng.choice(pool, size=(h, w))
+        elif kind == "signed":
+            img = rng.normal(size=(h, w))
+        else:
+            img = rng.exponential(size=(h, w))
+        rank = max(1, round(frac * ring.n))
+        for dtype in (np.float64, np.float32):
+            with np.errstate(over="ignore"):  # the largest float64 becomes inf in float32
+                a = img.astype(dtype)
+            got = ring_order_statistic(
+                torch.from_numpy(a)[None, None], ring, _ranks_for(a, ring, rank)
+            )[0, 0].numpy()
+            np.testing.assert_array_equal(got, _reference_all(a, ring, rank).astype(dtype))
+
+    @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float32, torch.float64])
+    def test_every_dtype_equals_the_python_path(self, dtype):
+        x = torch.empty(3, 2, 21, 26).exponential_(generator=torch.Generator().manual_seed(1))
+        x = x.to(dtype)
+        ring = Ring(1, 3)
+        k = torch.randint(0, ring.n + 1, x.shape, generator=torch.Generator().manual_seed(2))
+        k = torch.minimum(k, torch.from_numpy(counts(np.zeros((21, 26)), ring)))
+        valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(3)) > 0.1
+        low = (torch.rand(x.shape, generator=torch.Generator().manual_seed(4)) > 0.5).long()
+        for vm, kv in ((None, k), (valid, low)):  # with a mask: ranks 0 and 1 (always valid)
+            got = ring_order_statistic(x, ring, kv, valid=vm)
+            old, _jit.ENABLED = _jit.ENABLED, False
+            try:
+                want = ring_order_statistic(x, ring, kv, valid=vm)
+            finally:
+                _jit.ENABLED = old
+            assert got.dtype == dtype
+            assert torch.equal(got, want)
+
+    @pytest.mark.parametrize("cells", [200, 700, 2000])
+    def test_tiles_equal_one_tile(self, monkeypatch, cells):
+        """Planes cut into tiles (a halo each) give the same values as one tile."""
+        from torchsar.order_statistics import _kernels
+
+        x = torch.empty(2, 1, 45, 52).exponential_(generator=torch.Generator().manual_seed(6))
+        ring = Ring(2, 3)
+        k = torch.full((45, 52), 20)
+        whole = ring_order_statistic(x, ring, k)
+        monkeypatch.setattr(_kernels, "TILE_CELLS", cells)
+        assert _kernels.tile_side(45, 52, ring.outer) < 45
+        assert torch.equal(ring_order_statistic(x, ring, k), whole)
+
+    def test_per_plane_ranks(self):
+        """A rank map per image and channel, not one shared map."""
+        x = torch.empty(2, 3, 15, 17).exponential_(generator=torch.Generator().manual_seed(8))
+        ring = Ring(1, 2)
+        k = torch.arange(6).reshape(2, 3, 1, 1) + 1
+        got = ring_order_statistic(x, ring, k)
+        for b in range(2):
+            for c in range(3):
+                img = x[b, c].double().numpy()
+                want = _reference_all(img, ring, int(k[b, c]))
+                np.testing.assert_array_equal(got[b, c].double().numpy(), want)

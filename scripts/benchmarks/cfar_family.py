@@ -2,7 +2,12 @@
 
 - ``os``: the exact ring order statistic (``torchsar.order_statistics.ring_order_statistic``)
   and the whole OS-CFAR vs ``scipy.ndimage.rank_filter`` with the same ring footprint (equal
-  on every interior pixel; checked here before timing).
+  on every interior pixel; checked here before timing), on 512x512 with the default ring
+  (g=2, t=4, N=144) and a wide one (g=4, t=8: 25^2 - 9^2 = 544 cells; target >= 8x).
+- ``os ... torch path``: OS-CFAR with the compiled order statistic (numba, the default on
+  CPU) vs the torch bisection / histogram it replaces (same output bit for bit), on 16
+  simulated 128x128 chips (divide by 16 for ms/chip; target <= 3 ms/chip), with CA-CFAR on
+  the same chips as a box-filter yardstick.
 - ``os cost curve``: the ring order statistic on 256x256 for ``train`` = 4, 10, 15, 20, 25,
   40 (g=2): its cost must grow with the ring side, not with the ring area (the reference's
   does), so the ratio grows with ``train``. Run just the curve with ``--only "os curve"``.
@@ -25,8 +30,23 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import torchsar as ts
+from torchsar import _jit
 from torchsar.order_statistics import ring_order_statistic
 from torchsar.windows import Ring
+
+
+def torch_path(fn: Callable[[], object]) -> Callable[[], object]:
+    """``fn`` run with the compiled kernels switched off (the torch algorithms)."""
+
+    def run() -> object:
+        old, _jit.ENABLED = _jit.ENABLED, False
+        try:
+            return fn()
+        finally:
+            _jit.ENABLED = old
+
+    return run
+
 
 GUARD, TRAIN = 2, 4
 
@@ -47,11 +67,11 @@ def _image(size: int) -> torch.Tensor:
     return torch.empty(1, 1, size, size).exponential_(generator=torch.Generator().manual_seed(0))
 
 
-def _check_os_exact(x: torch.Tensor, rank: int, train: int = TRAIN) -> None:
+def _check_os_exact(x: torch.Tensor, rank: int, train: int = TRAIN, guard: int = GUARD) -> None:
     """The benchmark is only meaningful if both compute the same thing: assert equality."""
-    ring, o = Ring(GUARD, train), GUARD + train
+    ring, o = Ring(guard, train), guard + train
     ours = ring_order_statistic(x, ring, torch.full(x.shape, rank))[0, 0].numpy()
-    ref = ndimage.rank_filter(x[0, 0].numpy(), rank - 1, footprint=ring_footprint(GUARD, train))
+    ref = ndimage.rank_filter(x[0, 0].numpy(), rank - 1, footprint=ring_footprint(guard, train))
     if not np.array_equal(ours[o:-o, o:-o], ref[o:-o, o:-o]):
         raise AssertionError("ring_order_statistic differs from scipy.ndimage.rank_filter")
 
@@ -84,6 +104,10 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     k512 = torch.full(x512.shape, rank)
     a512 = x512[0, 0].numpy()
     fp = ring_footprint(GUARD, TRAIN)
+    wide = Ring(4, 8)
+    wide_rank = round(3 * wide.n / 4)
+    _check_os_exact(x512, wide_rank, train=8, guard=4)
+    chips = ts.simulate.chips(16, seed=0).image
     return [
         *curve_cases(),
         (
@@ -92,8 +116,23 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             lambda: ndimage.rank_filter(a512, rank - 1, footprint=fp),
         ),
         (
+            f"os ring order statistic 512x512 (g=4,t=8,N={wide.n}) vs scipy rank_filter",
+            partial(ring_order_statistic, x512, wide, torch.full(x512.shape, wide_rank)),
+            partial(ndimage.rank_filter, a512, wide_rank - 1, footprint=ring_footprint(4, 8)),
+        ),
+        (
             "os cfar 512x512 f32 (g=2,t=4) vs scipy rank_filter statistic",
             lambda: ts.cfar.os(x512, guard=GUARD, train=TRAIN),
             lambda: scipy_os(a512, rank),
+        ),
+        (
+            "os cfar 16 chips 128x128 (g=2,t=4) vs torch path",
+            lambda: ts.cfar.os(chips, guard=GUARD, train=TRAIN),
+            torch_path(lambda: ts.cfar.os(chips, guard=GUARD, train=TRAIN)),
+        ),
+        (
+            "os cfar 16 chips 128x128 (g=2,t=4) vs ca cfar (box-filter yardstick)",
+            lambda: ts.cfar.os(chips, guard=GUARD, train=TRAIN),
+            lambda: ts.cfar.ca(chips, guard=GUARD, train=TRAIN),
         ),
     ]

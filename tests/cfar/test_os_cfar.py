@@ -3,6 +3,8 @@ factor, the border rank rule."""
 
 from __future__ import annotations
 
+import importlib.util
+
 import numpy as np
 import pytest
 import torch
@@ -131,3 +133,23 @@ class TestOS:
 )
 def test_os_factor_matches_product_formula(n, rank, pfa):
     assert os_factor(n, rank, pfa) == pytest.approx(os_alpha(n, rank, pfa), rel=1e-9)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed")
+@pytest.mark.parametrize(("guard", "train", "rank"), [(2, 4, None), (1, 2, 1), (3, 9, 500)])
+def test_compiled_path_equals_the_torch_path(guard, train, rank):
+    """The CPU order statistic compiled with numba (the default when installed) and the
+    torch algorithms give the same statistic, mask and threshold, bit for bit."""
+    from torchsar import _jit
+
+    x = ts.simulate.chips(3, seed=4).image
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(1)) > 0.05
+    for vm in (None, valid):
+        a = ts.cfar.os(x, guard=guard, train=train, rank=rank, valid=vm)
+        old, _jit.ENABLED = _jit.ENABLED, False
+        try:
+            b = ts.cfar.os(x, guard=guard, train=train, rank=rank, valid=vm)
+        finally:
+            _jit.ENABLED = old
+        assert torch.equal(a.statistic, b.statistic) and torch.equal(a.mask, b.mask)
+        assert torch.equal(a.threshold, b.threshold)

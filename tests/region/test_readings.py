@@ -19,6 +19,7 @@ def _row_of(result, seed):
     return next(r for r in result.tables[0].rows if r.seed == seed)
 
 
+@pytest.mark.usefixtures("path")
 class TestMinimumBackground:
     def _case(self, **kw):
         x = _textured(9, 9)
@@ -37,6 +38,7 @@ class TestMinimumBackground:
         assert bool((r.detection.statistic[0, 0, 2:7, 2:7] == -np.inf).all())
 
 
+@pytest.mark.usefixtures("path")
 class TestFinalTest:
     def test_hand_computed_statistic(self):
         x = torch.ones(1, 1, 9, 9, dtype=torch.float64)
@@ -56,6 +58,7 @@ class TestFinalTest:
         assert not _row_of(kept, (3, 3)).accepted
 
 
+@pytest.mark.usefixtures("path")
 class TestTargetsNeverInLaterBackground:
     def test_earlier_target_censored(self):
         x = _textured(12, 16)
@@ -67,6 +70,7 @@ class TestTargetsNeverInLaterBackground:
         assert b.mu_c < 1.2  # only textured clutter: A's 100s are not in B's background
 
 
+@pytest.mark.usefixtures("path")
 class TestBlocking:
     def _case(self, blocking):
         x = torch.tensor([[[[10.0, 7.5, 6.5, 6.5, 6.5, 6.5, 7.8, 5.0, 5.0]]]])
@@ -83,6 +87,7 @@ class TestBlocking:
         assert [r.size for r in rows] == [2, 9]  # the second region regrows the rejected first
 
 
+@pytest.mark.usefixtures("path")
 class TestMerge:
     def _case(self, merge):
         x = _textured(12, 14)
@@ -97,6 +102,7 @@ class TestMerge:
         assert [r.label for r in merged.tables[0].rows if r.accepted] == [1, 1]
 
 
+@pytest.mark.usefixtures("path")
 class TestSizeLimits:
     def _case(self, **kw):
         x = _textured(12, 12)
@@ -124,6 +130,7 @@ class TestSizeLimits:
         assert _row_of(self._case(min_size=9, max_size=9), (4, 4)).accepted
 
 
+@pytest.mark.usefixtures("path")
 class TestTargetImage:
     def test_mu_t_on_raw_or_despeckled(self):
         x = _textured(12, 12)
@@ -155,6 +162,7 @@ def test_paper_preset_is_the_paper():
     assert p == RegionParams()
 
 
+@pytest.mark.usefixtures("path")
 class TestFillHoles:
     def _case(self, fill):
         x = _textured(20, 20)

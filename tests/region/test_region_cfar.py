@@ -35,6 +35,7 @@ def _box3(x: torch.Tensor) -> torch.Tensor:
     return ts.windows.box_sums(x, 1, moments=1).mean().to(x.dtype)
 
 
+@pytest.mark.usefixtures("path")
 class TestAgainstReference:
     @settings(max_examples=8)
     @given(
@@ -65,6 +66,7 @@ class TestAgainstReference:
         np.testing.assert_allclose(r.statistic[0, 0].numpy(), stat, rtol=1e-9)
 
 
+@pytest.mark.usefixtures("path")
 class TestContract:
     def test_mask_is_statistic_above_threshold(self):
         d = region_cfar(_speckle_scene(1), despeckle=_box3)

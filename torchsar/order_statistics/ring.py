@@ -4,8 +4,13 @@ It is the window statistic that sums cannot give, so it lives beside
 :mod:`torchsar.windows` with the same geometry (:class:`~torchsar.windows.Ring`) and border
 semantics: cells outside the image or marked invalid are not counted.
 
-Two exact algorithms share the work, chosen by the ring's size only (never by the data or
-the batch, and both return the same values bit for bit):
+On CPU with numba installed (:mod:`torchsar._jit`), one compiled algorithm does every
+ring: a sliding bitset of tile ranks with a pointer that follows the answer
+(:mod:`torchsar.order_statistics._kernels`), ``2(2(g+t)+1) + 2(2g+1)`` bit flips per pixel
+plus a radix sort per tile. Otherwise (other devices, or no numba) two exact torch
+algorithms share the work, chosen by the ring's size only (never by the data or the batch).
+All three return the same values bit for bit (one caveat: where the answer is a zero and
+the ring holds both ``+0.0`` and ``-0.0``, which of the two is returned may differ):
 
 - small rings (``N <= BISECTION_MAX_CELLS``): bit-wise bisection of tile ranks
   (:mod:`torchsar.order_statistics.bisection`), ``16 N`` byte operations per pixel;
@@ -23,6 +28,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar.order_statistics import bisection
 from torchsar.order_statistics.histogram import histogram_select
 from torchsar.windows import Ring
@@ -54,13 +60,37 @@ def ring_order_statistic(
         40.0
     """
     b, c, h, w = x.shape
-    kk = torch.as_tensor(k, device=x.device).expand(b, c, h, w).reshape(b * c, h, w)
+    k = torch.as_tensor(k, device=x.device)
     planes = x.detach().reshape(b * c, h, w)
     vm = None if valid is None else valid.expand(b, c, h, w).reshape(b * c, h, w)
     if planes.numel() == 0:
         return torch.zeros_like(x)
+    if planes.device.type == "cpu" and _jit.enabled():
+        if k.dim() <= 2 or all(d == 1 for d in k.shape[:-2]):  # one rank map for all planes
+            kk = k.reshape(k.shape[-2:] if k.dim() >= 2 else k.shape).expand(h, w)[None]
+        else:
+            kk = k.expand(b, c, h, w).reshape(b * c, h, w)
+        return _compiled(planes, ring, kk, vm).reshape(b, c, h, w)
+    kk = k.expand(b, c, h, w).reshape(b * c, h, w)
     if ring.n <= BISECTION_MAX_CELLS and bisection.fits(ring):
         out = bisection.bisection_select(planes, ring, kk, vm)
     else:
         out = histogram_select(planes, ring, kk, vm)
     return out.reshape(b, c, h, w)
+
+
+def _compiled(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) -> Tensor:
+    """The sliding rank bitset of :mod:`torchsar.order_statistics._kernels` (CPU, numba);
+    ``kk`` is ``(P, H, W)`` or ``(1, H, W)`` (one map for every plane). float16 and
+    bfloat16 go through an exact float32 copy."""
+    from torchsar.order_statistics import _kernels
+
+    work = planes if planes.dtype in (torch.float32, torch.float64) else planes.float()
+    out = _kernels.ring_select(
+        work.contiguous().numpy(),
+        ring.guard,
+        ring.train,
+        kk.to(torch.int64).contiguous().numpy(),
+        None if vm is None else vm.to(torch.bool).contiguous().numpy(),
+    )
+    return torch.from_numpy(out).to(planes.dtype)

@@ -5,6 +5,10 @@ batch), then per image: for each seed, brightest first, skipping seeds already i
 grown region: grow T on the despeckled image F (CPU heap, :mod:`torchsar.region.grow`) →
 guard area K and background ring C by dilation on a crop → censor C → ``mu_C``, ``sigma_C``
 on the unfiltered image → accept T iff ``(mu_T - mu_C) / sigma_C > k``.
+
+Two paths compute the same result bit for bit (statistic, labels, table): the Python one
+below, and, when numba is installed (:mod:`torchsar._jit`), one compiled loop per image
+(:mod:`torchsar.region._kernels`) with compiled hole filling, object sizes and labels.
 """
 
 from __future__ import annotations
@@ -15,30 +19,39 @@ import numpy as np
 from scipy import ndimage
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar.region.boxes import mask_box
 from torchsar.region.grow import Grid, grow
 from torchsar.region.params import RegionParams
 from torchsar.region.rings import crop_around, ring_stats
-from torchsar.region.seeds import seed_order
-from torchsar.region.table import RegionRow, RegionTable
+from torchsar.region.seeds import local_maxima, seed_order
+from torchsar.region.table import REASONS, RegionRow, RegionTable
 
 __all__ = ["detect_image"]
 
 
 class _ImageState:
-    """Mutable state of one image while its seeds are visited."""
+    """The per-pixel results of one image while its seeds are visited, and its table."""
 
     def __init__(self, f: Tensor, p: RegionParams) -> None:
         h, w = f.shape
         self.shape = (h, w)
-        self.grid = Grid.new(f.numpy(), p.connectivity)
-        self.free = np.frombuffer(self.grid.free, dtype=np.uint8)
-        self.covered = np.zeros(h * w, dtype=bool)
-        self.taken = np.zeros((h, w), dtype=bool)
         self.stat = np.full(h * w, -np.inf)
         self.region_id = np.zeros(h * w, dtype=np.int32)
         self.table = RegionTable()
         self.k = p.k
+
+
+class _Growth:
+    """The Python path's growth state of one image: the grid (free flags, stamps) and which
+    pixels are covered by a region or taken by a target."""
+
+    def __init__(self, f: np.ndarray, p: RegionParams) -> None:
+        h, w = f.shape
+        self.grid = Grid.new(f, p.connectivity)
+        self.free = np.frombuffer(self.grid.free, dtype=np.uint8)
+        self.covered = np.zeros(h * w, dtype=bool)
+        self.taken = np.zeros((h, w), dtype=bool)
 
 
 def _statistic(mu_t: float, mu_c: float, sigma_c: float) -> float:
@@ -59,7 +72,7 @@ def _too_large(size: int, image_area: int, p: RegionParams) -> bool:
 
 
 def _test_region(
-    st: _ImageState, idx: np.ndarray, imgs: tuple[np.ndarray, ...], p: RegionParams
+    st: _ImageState, g: _Growth, idx: np.ndarray, imgs: tuple[np.ndarray, ...], p: RegionParams
 ) -> RegionRow:
     """Steps d–i for one grown region; returns its table row (label filled in later)."""
     h, w = st.shape
@@ -69,7 +82,7 @@ def _test_region(
         return RegionRow(seed, int(idx.size), nan, nan, nan, 0, -math.inf, False, "too_large")
     crop = crop_around(idx, (h, w), p.guard + p.background)
     raw, target_img, low = imgs
-    rs = ring_stats(crop, raw, target_img, low, st.taken, p.guard, p.background)
+    rs = ring_stats(crop, raw, target_img, low, g.taken, p.guard, p.background)
     if rs.n_background < p.min_background:
         return RegionRow(
             seed, int(idx.size), rs.mu_t, rs.mu_c, rs.sigma_c, rs.n_background, -math.inf,
@@ -83,21 +96,69 @@ def _test_region(
     )  # fmt: skip
 
 
-def _visit(st: _ImageState, seed: int, imgs: tuple[np.ndarray, ...], p: RegionParams) -> None:
+def _visit(
+    st: _ImageState, g: _Growth, seed: int, imgs: tuple[np.ndarray, ...], p: RegionParams
+) -> None:
     """Grow, test and record the region of one seed (steps c–i)."""
     tag = len(st.table) + 1
-    idx = grow(st.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget)
-    st.covered[idx] = True
+    idx = grow(g.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget)
+    g.covered[idx] = True
     if p.blocking == "all":
-        st.free[idx] = 0
-    row = _test_region(st, idx, imgs, p)
+        g.free[idx] = 0
+    row = _test_region(st, g, idx, imgs, p)
     if row.accepted:
-        st.taken.reshape(-1)[idx] = True
-        st.free[idx] = 0
+        g.taken.reshape(-1)[idx] = True
+        g.free[idx] = 0
     better = st.stat[idx] < row.statistic
     st.stat[idx[better]] = row.statistic
     st.region_id[idx[better]] = tag
     st.table.rows.append(row)
+
+
+def _visit_python(
+    st: _ImageState, f: np.ndarray, seeds: np.ndarray, imgs: tuple[np.ndarray, ...],
+    p: RegionParams,
+) -> None:  # fmt: skip
+    """Steps b–i for every seed with the Python heap, flood fills and numpy rings."""
+    g = _Growth(f, p)
+    for s in seeds.tolist():
+        if not g.covered[s]:
+            _visit(st, g, s, imgs, p)
+
+
+def _compiled_seeds(f: Tensor, peaks: Tensor | None, p: RegionParams) -> np.ndarray:
+    """The seeds, brightest first: from ``peaks`` if given, else found by the kernel."""
+    if peaks is not None:
+        return seed_order(f, peaks)
+    from torchsar.region import _kernels
+
+    h, w = f.shape
+    flat = np.ascontiguousarray(f.numpy(), dtype=np.float64).reshape(-1)
+    return _kernels.seeds(flat, h, w, p.seed_window)
+
+
+def _visit_compiled(
+    st: _ImageState, f: np.ndarray, seeds: np.ndarray, imgs: tuple[np.ndarray, ...],
+    p: RegionParams,
+) -> None:  # fmt: skip
+    """Steps b–i for every seed in one compiled loop (:mod:`torchsar.region._kernels`);
+    the same painted statistic, region ids and table as :func:`_visit_python`."""
+    from torchsar.region import _kernels
+
+    h, w = st.shape
+    flat = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1) for a in (f, *imgs)]
+    out = _kernels.detect_loop(
+        *flat, h, w, np.ascontiguousarray(seeds, dtype=np.int64), float(p.tau), p.n_init,
+        p.guard, p.background, float(p.k), p.min_background, p.connectivity,
+        p.blocking == "all", -1 if p.max_size is None else p.max_size,
+        -1.0 if p.max_fraction is None else float(p.max_fraction),
+    )  # fmt: skip
+    st.stat, st.region_id = out[0], out[1]
+    seed, size, mu_t, mu_c, sigma_c, n_bg, z, ok, reason = (a.tolist() for a in out[2:])
+    st.table.rows.extend(
+        RegionRow(divmod(s, w), *row, REASONS[c])
+        for s, c, *row in zip(seed, reason, size, mu_t, mu_c, sigma_c, n_bg, z, ok, strict=True)
+    )
 
 
 _EIGHT = np.ones((3, 3), dtype=bool)
@@ -183,6 +244,37 @@ def _labels(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
     return out
 
 
+def _fill_holes_compiled(st: _ImageState) -> None:
+    """:func:`_fill_holes`, compiled (the same result)."""
+    from torchsar.region import _kernels
+
+    z = np.array([r.statistic for r in st.table.rows], dtype=np.float64)
+    _kernels.fill_holes(st.stat, st.region_id, *st.shape, float(st.k), z)
+
+
+def _drop_small_compiled(st: _ImageState, min_size: int) -> None:
+    """:func:`_drop_small_objects`, compiled (the same result)."""
+    from torchsar.region import _kernels
+
+    if min_size <= 1:
+        return
+    rows = st.table.rows
+    dropped = _kernels.drop_small_objects(
+        st.stat, st.region_id, *st.shape, float(st.k), min_size, len(rows)
+    )
+    for t in np.flatnonzero(dropped[1:]).tolist():
+        rows[t] = RegionRow(**{**rows[t].__dict__, "accepted": False, "reason": "too_small"})
+
+
+def _labels_compiled(st: _ImageState, mask: np.ndarray, merge: int | None) -> np.ndarray:
+    """:func:`_labels`, compiled for ``merge`` not None (the same result)."""
+    from torchsar.region import _kernels
+
+    if merge is None:
+        return _labels(st, mask, merge)
+    return _kernels.merged_labels(mask, *st.shape, merge).reshape(st.shape)
+
+
 def _finish_table(st: _ImageState, labels: np.ndarray) -> None:
     """Write each accepted region's final label into its table row."""
     rows = st.table.rows
@@ -198,26 +290,30 @@ def detect_image(
     low: Tensor,
     p: RegionParams,
     dtype: np.dtype,
-    peaks: Tensor,
+    peaks: Tensor | None,
 ) -> tuple[np.ndarray, np.ndarray, RegionTable]:
     """Run steps b–j on one image (``(H, W)`` float64 CPU tensors); ``peaks`` is the bool
     ``(H, W)`` seed mask of step a (:func:`~torchsar.region.seeds.local_maxima` of ``f``,
-    computed by the caller for a whole batch at once).
+    computed by the caller for a whole batch at once), or None: found here (by the kernel
+    on the compiled path).
 
     Returns the painted statistic ``(H, W)`` in ``dtype``, the labels ``(H, W)`` int64 (of
     the pixels where ``statistic > k`` in that dtype) and the region table.
     """
     st = _ImageState(f, p)
-    seeds = seed_order(f, peaks)
     imgs = (raw.numpy(), target_img.numpy(), low.numpy())
-    for s in seeds.tolist():
-        if not st.covered[s]:
-            _visit(st, s, imgs, p)
+    if _jit.enabled():
+        _visit_compiled(st, f.numpy(), _compiled_seeds(f, peaks, p), imgs, p)
+        fill, drop, label = _fill_holes_compiled, _drop_small_compiled, _labels_compiled
+    else:
+        peaks = local_maxima(f[None, None], p.seed_window)[0, 0] if peaks is None else peaks
+        _visit_python(st, f.numpy(), seed_order(f, peaks), imgs, p)
+        fill, drop, label = _fill_holes, _drop_small_objects, _labels
     if p.fill_holes:
-        _fill_holes(st)
-    _drop_small_objects(st, p.min_size)
+        fill(st)
+    drop(st, p.min_size)
     stat = st.stat.astype(dtype)
     mask = stat > dtype.type(p.k)
-    labels = _labels(st, mask, p.merge)
+    labels = label(st, mask, p.merge)
     _finish_table(st, labels)
     return stat.reshape(st.shape), labels, st.table

@@ -114,10 +114,11 @@ class Grid:
 
 def _first_n(
     grid: Grid, seed: int, tag: int, tau: float, n_init: int, nbrs: Callable[[int], list[int]]
-) -> tuple[list[int], list[int], float, bool]:
+) -> tuple[list[int], list[int], float, float, bool]:
     """Grow the first ``n_init`` pixels with the running mean as reference.
 
-    Returns the region, the queued candidates, ``beta`` and whether growth may continue.
+    Returns the region, the queued candidates, the sum of F over the region (added in the
+    order of joining), ``beta`` and whether growth may continue.
     """
     f, free, stamp = grid.f, grid.free, grid.stamp
     region, total, beta = [seed], f[seed], f[seed]
@@ -129,13 +130,13 @@ def _first_n(
         j = min(range(len(cand)), key=lambda i: (abs(f[cand[i]] - mu), cand[i]))
         p = cand[j]
         if abs(f[p] - mu) > tau * beta:
-            return region, cand, beta, False
+            return region, cand, total, beta, False
         cand.pop(j)
         region.append(p)
         total += f[p]
         beta = max(beta, f[p])
         _queue(p, cand, nbrs, free, stamp, tag)
-    return region, cand, beta, True
+    return region, cand, total, beta, True
 
 
 def _queue(
@@ -187,10 +188,10 @@ def grow(
     """
     f = grid.f
     nbrs = grid.neighbours()
-    region, cand, beta, go_on = _first_n(grid, seed, tag, tau, n_init, nbrs)
+    region, cand, total, beta, go_on = _first_n(grid, seed, tag, tau, n_init, nbrs)
     if not go_on:
         return np.asarray(region, dtype=np.int64)
-    mu_n = sum(f[p] for p in region) / len(region)
+    mu_n = total / len(region)  # a plain running sum (the compiled kernel's, bit for bit)
     heap = [(abs(f[q] - mu_n), q) for q in cand]
     heapq.heapify(heap)
     limit = tau * beta

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import InputValueError, OptionError, all_finite, check_image, float_dtype
 from torchsar.detection import Detection
 from torchsar.region.detector import detect_image
@@ -99,9 +100,10 @@ def _run(x: Tensor, p: RegionParams) -> tuple[Detection, list[RegionTable]]:
     tables: list[RegionTable] = []
     if x.numel():
         raw, f, target, low = _images(x, p)
-        peaks = local_maxima(f, p.seed_window)  # step a for the whole batch at once
+        # step a for the whole batch at once (the compiled path finds them per image)
+        peaks = None if _jit.enabled() else local_maxima(f, p.seed_window)
         planes = [
-            (raw[i, j], f[i, j], target[i, j], low[i, j], peaks[i, j])
+            (raw[i, j], f[i, j], target[i, j], low[i, j], None if peaks is None else peaks[i, j])
             for i in range(b)
             for j in range(c)
         ]
@@ -253,7 +255,9 @@ def region_cfar(
         fill_holes: give enclosed pixels to an adjacent accepted region (paper False,
             torchsar True).
         budget: pixels grown by the Python heap before the exact flood-fill finish (64;
-            None = heap only; same result).
+            None = heap only; same result). Only the Python path uses it: with numba
+            installed the whole per-seed loop is compiled (:mod:`torchsar.region._kernels`,
+            the same result bit for bit; ``TORCHSAR_NUMBA=0`` switches it off).
         workers: > 1 runs the images of a batch in a process pool (1; same result).
 
     Returns:

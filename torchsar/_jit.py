@@ -1,0 +1,35 @@
+"""Whether the compiled CPU kernels (numba) are used.
+
+Two CPU loops of torchsar are sequential by nature and dominated by Python overhead when
+written with numpy: the region-growing CFAR's per-seed work (heap growth, rings, test) and
+the OS-CFAR's sliding order statistic. Both have numba kernels
+(:mod:`torchsar.region._kernels`, :mod:`torchsar.order_statistics._kernels`) that return
+the same values bit for bit as the numpy/torch code, which stays as the fallback and as the
+reference the tests compare against.
+
+The kernels are imported (and compiled, or loaded from numba's on-disk cache) on first use
+only, so ``import torchsar`` does not import numba. Set the environment variable
+``TORCHSAR_NUMBA=0`` to never use them; tests switch them with :data:`ENABLED`.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+
+__all__ = ["ENABLED", "enabled"]
+
+
+def _numba_installed() -> bool:
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):  # a broken or blocked numba counts as absent
+        return False
+
+
+ENABLED: bool = os.environ.get("TORCHSAR_NUMBA", "1") != "0" and _numba_installed()
+
+
+def enabled() -> bool:
+    """Whether the numba kernels are to be used (numba installed and not switched off)."""
+    return ENABLED
