@@ -128,17 +128,21 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
 
 def interval_note(ci: dict, replicates: int) -> str:
     """What a summary row's intervals need said: no bootstrap, too few resampling units
-    (once), metrics without an interval and why, replicates where a metric was undefined."""
+    (once), metrics without an interval and why, and replicates where metrics were
+    undefined (grouped by count)."""
     if not replicates:
         return "no intervals (bootstrap off)"
-    notes = []
+    notes: list[str] = []
+    undefined: dict[int, list[str]] = {}
     for k, iv in ci.items():
         if iv.method == "none" and iv.note:
             notes.append(f"{k}: {iv.note}")
         elif iv.note and iv.note not in notes:
             notes.insert(0, iv.note)
         if iv.undefined:
-            notes.append(f"{k}: {iv.undefined}/{replicates} replicates undefined")
+            undefined.setdefault(iv.undefined, []).append(k)
+    for count, names in sorted(undefined.items(), reverse=True):
+        notes.append(f"{count}/{replicates} replicates undefined: {', '.join(names)}")
     return "; ".join(notes)
 
 

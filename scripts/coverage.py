@@ -202,6 +202,37 @@ def report(folders: list[str], rules: list[str]) -> None:
                     )
 
 
+def compact(folders: list[str], rule: str = "default") -> None:
+    """One row per cell: the coverage of each metric under ``rule`` (its Monte-Carlo
+    standard error in the header: the largest of the row), and the zero-width intervals."""
+    print(f"| data | images | detector | datasets | {' | '.join(METRICS)} | MC se | zero-width |")
+    print("|---|---|---|---|" + "---|" * len(METRICS) + "---|---|")
+    for folder in folders:
+        out = Path(folder)
+        kind = json.loads((out / "progress.json").read_text())["settings"]["kind"]
+        states = statefile.loads((out / "truth.state").read_bytes())
+        truth = {k: _truth(v) for k, v in states.items()}
+        recs = [json.loads(line) for line in (out / "records.jsonl").read_text().splitlines()]
+        cells: dict = {}
+        for r in recs:
+            cells.setdefault((r["size"], r["detector"]), []).append(r)
+        for (n, det), rs in sorted(cells.items()):
+            cols, ses, zero = [], [], 0
+            for metric in METRICS:
+                t = truth[det][metric]
+                ivs = np.array([_interval(metric, r, rule) for r in rs], dtype=np.float64)
+                ok = np.isfinite(ivs).all(axis=1)
+                c = float(((ivs[ok, 0] <= t) & (t <= ivs[ok, 1])).mean())
+                ses.append(math.sqrt(max(c * (1 - c), 0.05 * 0.95) / ok.sum()))
+                zero += int((ivs[ok, 1] == ivs[ok, 0]).sum())
+                cols.append(f"{c:.3f}" + ("" if ok.all() else f" ({ok.sum()} defined)"))
+            print(
+                f"| {kind} | {n} | {det} (truth P {truth[det]['precision']:.3f}, "
+                f"AP50 {truth[det]['ap50']:.3f}) | {len(rs)} | {' | '.join(cols)} | "
+                f"{max(ses):.3f} | {zero} |"
+            )
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--kind", choices=["sim-chips", "sim-scenes"], default="sim-chips")
@@ -213,8 +244,13 @@ def main() -> None:
     p.add_argument("--out", default="coverage-run")
     p.add_argument("--report", nargs="+", default=None, metavar="FOLDER")
     p.add_argument("--rules", nargs="+", default=["pct", "default"])
+    p.add_argument("--compact", action="store_true", help="with --report: one row per cell")
     args = p.parse_args()
-    if args.report:
+    if args.report and args.compact:
+        for rule in args.rules:
+            print(f"\nrule: {rule}\n")
+            compact(args.report, rule)
+    elif args.report:
         report(args.report, args.rules)
     else:
         score(args)

@@ -63,7 +63,7 @@ def test_undefined_replicates_are_reported():
     reps = res.states["sq"][0].objects.replicate_metrics()["precision"]
     undefined = int(np.isnan(reps).sum())
     assert undefined > 0
-    assert f"precision: {undefined}/100 replicates undefined" in row.interval_note
+    assert f"{undefined}/100 replicates undefined: precision" in row.interval_note
 
 
 def test_few_images_are_flagged():
