@@ -213,7 +213,8 @@ class TiffScene(SceneReader):
                 )
         if self._page.compression == 1 and used.any():
             p = self._page
-            pixel = self.raw_dtype.itemsize * (1 if p.planarconfig == 2 else p.samplesperpixel)
+            stored = int(p.bitspersample) // 8  # complex int16: 4 bytes, not 8
+            pixel = stored * (1 if p.planarconfig == 2 else p.samplesperpixel)
             rows = np.full(len(self._counts), self._th, np.int64)
             if not p.is_tiled:  # the last strip of each plane may be shorter
                 rows[self._nty - 1 :: self._nty] = self.shape[0] - (self._nty - 1) * self._th
