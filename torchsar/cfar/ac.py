@@ -90,8 +90,8 @@ def ac(
     if clutter_mean is None:
         mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
     else:
-        mu = x.new_full((*x.shape[:2], 1, 1), check_positive(clutter_mean, "clutter_mean", allow_zero=True),
-                        dtype=torch.float64)  # fmt: skip
+        given = check_positive(clutter_mean, "clutter_mean", allow_zero=True)
+        mu = x.new_full((*x.shape[:2], 1, 1), given, dtype=torch.float64)
         thr = mu * math.log(1.0 / p_c)
     keep = x <= thr if vmask is None else vmask & (x <= thr)
     alpha = ac_threshold(
