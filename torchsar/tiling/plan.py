@@ -14,11 +14,13 @@ image the operator accepts; extra context beyond the footprint changes nothing o
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import groupby
 
 from torchsar._checks import OptionError, WindowSizeError, check_int
 
-__all__ = ["Tile", "check_tile", "plan_tiles"]
+__all__ = ["Tile", "batches", "check_tile", "plan_tiles", "widen"]
 
 
 @dataclass(frozen=True)
@@ -107,3 +109,20 @@ def plan_tiles(
                 Tile((i, j), (rows, cols), (wr, _span(cols.start, cols.stop, halo, w, min_side)))
             )
     return tiles
+
+
+def widen(tile: Tile, halo: int, shape: tuple[int, int], min_side: int = 1) -> Tile:
+    """``tile`` with its window re-cut for another ``halo`` (same core)."""
+    (cr, cc) = tile.core
+    rows = _span(cr.start, cr.stop, halo, shape[0], min_side)
+    return Tile(tile.index, tile.core, (rows, _span(cc.start, cc.stop, halo, shape[1], min_side)))
+
+
+def batches(tiles: list[Tile], batch: int) -> Iterator[list[Tile]]:
+    """Tiles grouped by window shape (stackable), in chunks of ``batch``; deterministic:
+    by window shape, then raster order."""
+    order = sorted(tiles, key=lambda t: (t.window_shape, t.index))
+    for _, group in groupby(order, key=lambda t: t.window_shape):
+        g = list(group)
+        for i in range(0, len(g), batch):
+            yield g[i : i + batch]

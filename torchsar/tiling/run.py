@@ -12,18 +12,17 @@ whatever the scene size; outputs written to a caller's array (e.g. a memmap) add
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
-from itertools import groupby
+from collections.abc import Iterator
 
 import numpy as np
 import torch
 
 from torchsar._checks import OptionError, check_device, check_int
 from torchsar.tiling.footprint import Operator, operator, to_batch
-from torchsar.tiling.plan import Tile, check_tile, plan_tiles
+from torchsar.tiling.plan import Tile, batches, check_tile, plan_tiles
 from torchsar.tiling.source import Scene, as_scene
 
-__all__ = ["iter_tiles", "run_scene", "scene_clutter_mean"]
+__all__ = ["check_halo", "iter_tiles", "scene_clutter_mean"]
 
 DEFAULT_TILE = 1024
 DEFAULT_BATCH = 4
@@ -87,15 +86,6 @@ def _prepared(op: Operator, scene: Scene, tiles: list[Tile]) -> Operator:
     return op.with_options(clutter_mean=scene_clutter_mean(scene, tiles, p_c, iterations))
 
 
-def _batches(tiles: list[Tile], batch: int) -> Iterator[list[Tile]]:
-    """Tiles grouped by window shape (stackable), in chunks of ``batch``; deterministic."""
-    order = sorted(tiles, key=lambda t: (t.window_shape, t.index))
-    for _, group in groupby(order, key=lambda t: t.window_shape):
-        g = list(group)
-        for i in range(0, len(g), batch):
-            yield g[i : i + batch]
-
-
 def iter_tiles(
     scene: object,
     detector: str | Operator,
@@ -138,67 +128,8 @@ def iter_tiles(
     dev = check_device(device)
     tiles = plan_tiles(sc.shape, size, hal, op.min_side)
     op = _prepared(op, sc, tiles)
-    for group in _batches(tiles, batch):
+    for group in batches(tiles, batch):
         x = to_batch([sc.read(*t.window) for t in group], dev)
         out = op.apply(x)
         for i, t in enumerate(group):
             yield t, {k: v[i, 0][t.inner].cpu().numpy() for k, v in out.items()}
-
-
-def _out_arrays(
-    op: Operator, shape: tuple[int, int], dtype: np.dtype, out: Mapping[str, object] | None
-) -> dict[str, object]:
-    arrays: dict[str, object] = {}
-    for name in op.outputs:
-        if out is not None and name in out:
-            a = out[name]
-            if tuple(getattr(a, "shape", ())) != shape:
-                raise OptionError(f"out[{name!r}] must have shape {shape}")
-            arrays[name] = a
-        else:
-            arrays[name] = np.empty(shape, dtype=bool if name == "mask" else dtype)
-    return arrays
-
-
-def run_scene(
-    scene: object,
-    detector: str,
-    *,
-    tile: int | tuple[int, int] = DEFAULT_TILE,
-    halo: int | None = None,
-    batch: int = DEFAULT_BATCH,
-    device: str | torch.device | None = None,
-    out: Mapping[str, object] | None = None,
-    **options: object,
-) -> dict[str, object]:
-    """Run a window CFAR or speckle filter over a whole scene in tiles; the stitched
-    outputs equal the operator on the whole image.
-
-    Detectors give ``{"mask", "statistic"}``, filters ``{"image"}``, each ``(H, W)``: new
-    numpy arrays, or the caller's arrays passed in ``out`` by name (e.g. numpy memmaps, so
-    no full-scene array is ever held in memory). Memory: see :mod:`torchsar.tiling.run`.
-
-    Args:
-        scene: 2-D intensity scene (tensor, array, memmap or windowed reader).
-        detector: window CFAR name (``"ca"``, ``"os"``, ...) or speckle filter name.
-        tile, halo, batch, device, **options: as :func:`iter_tiles`.
-        out: optional writable arrays by output name, shape ``(H, W)``.
-
-    Returns:
-        The outputs by name.
-
-    Example:
-        >>> x = np.random.default_rng(0).exponential(size=(40, 50)).astype(np.float32)
-        >>> x[20, 25] = 300.0
-        >>> r = run_scene(x, "ca", tile=16, guard=1, train=2)
-        >>> full = ts.cfar.ca(torch.from_numpy(x)[None, None], guard=1, train=2)
-        >>> bool((r["mask"] == full.mask[0, 0].numpy()).all())
-        True
-    """
-    sc = as_scene(scene)
-    op = operator(detector, **options)
-    arrays = _out_arrays(op, sc.shape, sc.dtype, out)
-    for t, res in iter_tiles(sc, op, tile=tile, halo=halo, batch=batch, device=device):
-        for name, v in res.items():
-            arrays[name][t.core] = v  # type: ignore[index]
-    return arrays
