@@ -207,19 +207,48 @@ def iter_region_tiles(
     dev = check_device(device)
     opts = _options(replace(p, min_size=1))  # min_size: on scene objects, after merging
     min_side = 2 * reach + 1
+    settle = _Settle(sc, opts, dev, p.k, ring, d0, max_halo, min_side)
     for group in batches(plan_tiles(sc.shape, size, first, min_side), batch):
-        for t, stat in zip(group, _run_windows(sc, group, opts, dev), strict=True):
-            halo_now = first
-            while not _settled(stat, p.k, t, sc.shape, ring, d0):
-                if halo_now >= max_halo:
-                    raise UnsettledError(
-                        f"region CFAR tile {t.index} (scene rows {t.core[0].start}:"
-                        f"{t.core[0].stop}, cols {t.core[1].start}:{t.core[1].stop}) has "
-                        f"regions reaching its window's cut side at max_halo={max_halo}; "
-                        f"pass a larger max_halo (or a max_size limiting floods)"
-                    )
-                halo_now = min(2 * halo_now, max_halo)
-                t = widen(t, halo_now, sc.shape, min_side)
-                stat = _run_windows(sc, [t], opts, dev)[0]
+        second = [widen(t, min(2 * first, max_halo), sc.shape, min_side) for t in group]
+        firsts = _run_windows(sc, group, opts, dev)
+        seconds = [] if first >= max_halo else _run_windows(sc, second, opts, dev)
+        for i, t in enumerate(group):
+            if first >= max_halo:
+                t_done, core = settle(t, firsts[i], None, first)
+            else:
+                t_done, core = settle(second[i], seconds[i], firsts[i][t.inner], 2 * first)
+            yield t_done, {"mask": core > core.dtype.type(p.k), "statistic": core}
+
+
+class _Settle:
+    """The enlarge-and-redo loop of one tile (see the module docstring)."""
+
+    def __init__(self, sc, opts, dev, k, ring, d0, max_halo, min_side) -> None:
+        self.sc, self.opts, self.dev, self.k = sc, opts, dev, k
+        self.ring, self.d0, self.max_halo, self.min_side = ring, d0, max_halo, min_side
+
+    def __call__(
+        self, t: Tile, stat: np.ndarray, prev: np.ndarray | None, halo: int
+    ) -> tuple[Tile, np.ndarray]:
+        """Settle tile ``t`` whose window (for ``halo``) gave ``stat``; ``prev`` is the core
+        at the previous halo (None: none yet). Returns the tile and its settled core."""
+        shape = self.sc.shape
+        while True:
             core = stat[t.inner]
-            yield t, {"mask": core > core.dtype.type(p.k), "statistic": core}
+            whole = t.window_shape == shape
+            if whole or (
+                _settled(stat, self.k, t, shape, self.ring, self.d0)
+                and prev is not None
+                and np.array_equal(prev, core)
+            ):
+                return t, core
+            if halo >= self.max_halo:
+                raise UnsettledError(
+                    f"region CFAR tile {t.index} (scene rows {t.core[0].start}:"
+                    f"{t.core[0].stop}, cols {t.core[1].start}:{t.core[1].stop}) is not settled "
+                    f"at max_halo={self.max_halo}: its regions reach a cut side of the window or "
+                    f"its core still changes with the halo; pass a larger max_halo"
+                )
+            prev, halo = core, min(2 * halo, self.max_halo)
+            t = widen(t, halo, shape, self.min_side)
+            stat = _run_windows(self.sc, [t], self.opts, self.dev)[0]
