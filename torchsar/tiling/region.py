@@ -207,7 +207,7 @@ def iter_region_tiles(
     dev = check_device(device)
     opts = _options(replace(p, min_size=1))  # min_size: on scene objects, after merging
     min_side = 2 * reach + 1
-    settle = _Settle(sc, opts, dev, p.k, ring, d0, max_halo, min_side)
+    settle = _Settle(sc, opts, dev, p.k, ring, d0, max_halo, min_side, p.min_size)
     for group in batches(plan_tiles(sc.shape, size, first, min_side), batch):
         second = [widen(t, min(2 * first, max_halo), sc.shape, min_side) for t in group]
         firsts = _run_windows(sc, group, opts, dev)
@@ -216,16 +216,29 @@ def iter_region_tiles(
             if first >= max_halo:
                 t_done, core = settle(t, firsts[i], None, first)
             else:
-                t_done, core = settle(second[i], seconds[i], firsts[i][t.inner], 2 * first)
+                before = settle.detected(firsts[i], t)
+                t_done, core = settle(second[i], seconds[i], before, 2 * first)
             yield t_done, {"mask": core > core.dtype.type(p.k), "statistic": core}
 
 
 class _Settle:
     """The enlarge-and-redo loop of one tile (see the module docstring)."""
 
-    def __init__(self, sc, opts, dev, k, ring, d0, max_halo, min_side) -> None:
+    def __init__(self, sc, opts, dev, k, ring, d0, max_halo, min_side, min_size) -> None:
         self.sc, self.opts, self.dev, self.k = sc, opts, dev, k
         self.ring, self.d0, self.max_halo, self.min_side = ring, d0, max_halo, min_side
+        self.min_size = min_size
+
+    def detected(self, stat: np.ndarray, t: Tile) -> np.ndarray:
+        """The core's detections after the object-size rule applied in the window: the
+        statistic on pixels of accepted objects of ``min_size`` pixels or more, ``-inf``
+        elsewhere (what the settled output is compared on)."""
+        mask = stat > stat.dtype.type(self.k)
+        lab, n = ndimage.label(mask, structure=_EIGHT)
+        big = np.bincount(lab.reshape(-1), minlength=n + 1) >= self.min_size
+        big[0] = False
+        core = stat[t.inner]
+        return np.where(big[lab[t.inner]], core, -np.inf)
 
     def __call__(
         self, t: Tile, stat: np.ndarray, prev: np.ndarray | None, halo: int
@@ -234,14 +247,13 @@ class _Settle:
         at the previous halo (None: none yet). Returns the tile and its settled core."""
         shape = self.sc.shape
         while True:
-            core = stat[t.inner]
-            whole = t.window_shape == shape
-            if whole or (
+            found = self.detected(stat, t)
+            if t.window_shape == shape or (
                 _settled(stat, self.k, t, shape, self.ring, self.d0)
                 and prev is not None
-                and np.array_equal(prev, core)
+                and np.array_equal(prev, found)
             ):
-                return t, core
+                return t, stat[t.inner]
             if halo >= self.max_halo:
                 raise UnsettledError(
                     f"region CFAR tile {t.index} (scene rows {t.core[0].start}:"
@@ -249,6 +261,6 @@ class _Settle:
                     f"at max_halo={self.max_halo}: its regions reach a cut side of the window or "
                     f"its core still changes with the halo; pass a larger max_halo"
                 )
-            prev, halo = core, min(2 * halo, self.max_halo)
+            prev, halo = found, min(2 * halo, self.max_halo)
             t = widen(t, halo, shape, self.min_side)
             stat = _run_windows(self.sc, [t], self.opts, self.dev)[0]
