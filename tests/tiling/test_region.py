@@ -39,5 +39,5 @@ def test_region_scene_objects_equal_untiled_components(case):
 
 def test_unsettled_tile_raises_instead_of_approximating():
     x = scene(160, 160, 0, seams=(40, 40), n_boxes=0, n_points=0, big=120)
-    with pytest.raises(UnsettledError, match="max_halo=16"):
-        run_scene(x, "region", tile=40, halo=16, max_halo=16)
+    with pytest.raises(UnsettledError, match="max_halo=32"):  # the object spans 120 px
+        run_scene(x, "region", tile=40, halo=16, max_halo=32)

@@ -102,7 +102,7 @@ def run_scene(
         scene: 2-D intensity scene (tensor, numpy array, memmap or windowed reader; see
             :func:`~torchsar.tiling.as_scene`).
         detector: a window CFAR (``"ca"``, ``"os"``, ...), ``"region"`` or a speckle filter.
-        tile: core side or ``(rows, cols)`` (default 1024; region 512).
+        tile: core side or ``(rows, cols)`` (default 1024).
         halo: pixels read around each core (default: the footprint reach; region: its first
             halo, see :mod:`torchsar.tiling.region`).
         batch: windows per call (default 4; region 1); results do not depend on it.
@@ -115,7 +115,7 @@ def run_scene(
         The outputs by name.
 
     Memory: window operators about ``60-100 * batch * (tile + 2 halo)^2`` bytes
-    (:mod:`torchsar.tiling.run`); region about ``150 * (tile + 2 halo)^2`` per window
+    (:mod:`torchsar.tiling.run`); region about ``150 * ((tile + 2 halo)^2 + (tile + 4 halo)^2)`` per tile
     (:mod:`torchsar.tiling.region`); plus the outputs unless ``out`` holds them.
 
     Example:
