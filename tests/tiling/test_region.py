@@ -12,14 +12,17 @@ from torchsar.region import region_cfar
 from torchsar.tiling import UnsettledError, run_scene, scene_objects
 
 
-@pytest.fixture(scope="module", params=[0, 1, 2])
+@pytest.fixture(
+    scope="module",
+    params=[0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)],
+)
 def case(request):
     seed = request.param
     x = scene(150 + 7 * seed, 170 + 5 * seed, seed, seams=(40, 48), n_boxes=14, big=60)
     return x, region_cfar(torch.from_numpy(x)[None, None])
 
 
-@pytest.mark.parametrize("tile", [(40, 48), 33, (57, 90)])
+@pytest.mark.parametrize("tile", [(40, 48), pytest.param(33, marks=pytest.mark.slow), (57, 90)])
 def test_tiled_region_cfar_equals_untiled(case, tile):
     x, full = case
     got = run_scene(x, "region", tile=tile, halo=32, max_halo=256)

@@ -12,7 +12,8 @@ from torchsar.speckle import FILTERS
 from torchsar.tiling import DETECTORS, iter_tiles, run_scene
 
 H, W = 61, 75
-TILINGS = [7, (9, 16), (25, 30), (61, 75), (100, 100)]
+TILINGS = [7, (25, 30)]  # the footprint's side; a tile not dividing the scene
+MORE_TILINGS = [(9, 16), (61, 75), (100, 100)]  # slow: uneven, exactly one, larger
 CFAR_OPTS = {"guard": 1, "train": 2}  # reach 3: footprint 7 x 7
 
 
@@ -25,12 +26,13 @@ def _untiled(fn, x: np.ndarray, **kw):
     return fn(torch.from_numpy(x)[None, None], **kw)
 
 
+@pytest.mark.parametrize("more", [False, pytest.param(True, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", sorted(DETECTORS))
-def test_every_window_cfar(name, x):
+def test_every_window_cfar(name, more, x):
     full = _untiled(DETECTORS[name], x, **CFAR_OPTS)
     want_mask = full.mask[0, 0].numpy()
     assert want_mask.any() and not want_mask.all()  # a non-trivial comparison
-    for tile in TILINGS:
+    for tile in MORE_TILINGS if more else TILINGS:
         got = run_scene(x, name, tile=tile, batch=3, **CFAR_OPTS)
         np.testing.assert_array_equal(got["mask"], want_mask, err_msg=f"{name} tile={tile}")
         np.testing.assert_allclose(
@@ -38,10 +40,11 @@ def test_every_window_cfar(name, x):
         )
 
 
+@pytest.mark.parametrize("more", [False, pytest.param(True, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", sorted(FILTERS))
-def test_every_speckle_filter(name, x):
+def test_every_speckle_filter(name, more, x):
     want = _untiled(FILTERS[name], x, window=7)[0, 0].numpy()
-    for tile in TILINGS:
+    for tile in MORE_TILINGS if more else TILINGS:
         got = run_scene(x, name, tile=tile, batch=2, window=7)["image"]
         np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-6, err_msg=f"tile={tile}")
 
