@@ -233,9 +233,10 @@ def iter_region_tiles(
     for group in batches(plan_tiles(sc.shape, size, first, min_side), batch):
         second = [widen(t, min(2 * first, max_halo), sc.shape, min_side) for t in group]
         firsts = _run_windows(sc, group, opts, dev)
-        seconds = [] if first >= max_halo else _run_windows(sc, second, opts, dev)
+        once = first >= max_halo or group[0].window_shape == sc.shape  # nothing to compare
+        seconds = [] if once else _run_windows(sc, second, opts, dev)
         for i, t in enumerate(group):
-            if first >= max_halo:
+            if once:
                 t_done, core = settle(t, firsts[i], None, first)
             else:
                 before = settle.detected(firsts[i], t)
