@@ -83,3 +83,21 @@ def test_every_tile_is_yielded_once_and_cores_partition_the_scene(x):
         seen[t.core] += 1
         assert res["mask"].shape == seen[t.core].shape
     assert (seen == 1).all()
+
+
+def test_ac_scene_clutter_mean_is_the_whole_image_estimate(x):
+    from torchsar._checks import OptionError
+    from torchsar.cfar.ac import ac, global_censor_threshold
+    from torchsar.tiling.plan import plan_tiles
+    from torchsar.tiling.run import scene_clutter_mean
+    from torchsar.tiling.source import as_scene
+
+    t = torch.from_numpy(x)[None, None]
+    mu, _ = global_censor_threshold(t, 1e-3, iterations=3)
+    streamed = scene_clutter_mean(as_scene(x), plan_tiles(x.shape, (10, 17), 0), 1e-3, 3)
+    assert streamed == pytest.approx(mu.item(), rel=1e-12)
+    given = ac(t, guard=1, train=2, clutter_mean=mu.item())
+    own = ac(t, guard=1, train=2)
+    assert torch.equal(given.statistic, own.statistic)
+    with pytest.raises(OptionError, match="clutter_mean"):
+        ac(t, clutter_mean=-1.0)
