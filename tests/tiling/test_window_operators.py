@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.tiling._scenes import scene
 from torchsar.speckle import FILTERS
@@ -101,3 +103,25 @@ def test_ac_scene_clutter_mean_is_the_whole_image_estimate(x):
     assert torch.equal(given.statistic, own.statistic)
     with pytest.raises(OptionError, match="clutter_mean"):
         ac(t, clutter_mean=-1.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    h=st.integers(5, 40),
+    w=st.integers(5, 40),
+    th=st.integers(5, 30),
+    tw=st.integers(5, 30),
+    name=st.sampled_from(["ca", "go", "two_parameter", "lee"]),
+)
+def test_any_tiling_of_any_scene(seed, h, w, th, tw, name):
+    x = np.random.default_rng(seed).exponential(size=(h, w)).astype(np.float32)
+    opts = {"guard": 0, "train": 2} if name != "lee" else {"window": 5}
+    got = run_scene(x, name, tile=(th, tw), **opts)
+    fn = DETECTORS.get(name) or FILTERS[name]
+    full = _untiled(fn, x, **opts)
+    if name == "lee":
+        np.testing.assert_allclose(got["image"], full[0, 0].numpy(), rtol=2e-6, atol=1e-6)
+    else:
+        np.testing.assert_array_equal(got["mask"], full.mask[0, 0].numpy())
+        np.testing.assert_allclose(got["statistic"], full.statistic[0, 0].numpy(), rtol=1e-6)
