@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from torchsar.tiling import run_scene
+from tests.tiling._scenes import reference_objects, same_objects
+from torchsar import cfar
+from torchsar.tiling import run_scene, scene_objects
 
 X = np.random.default_rng(1).exponential(size=(45, 52)).astype(np.float32)
 X[20, 20] = 200.0
@@ -42,3 +44,17 @@ def test_integer_scene_reads_as_float32():
     want = run_scene(q.astype(np.float32), "ca", tile=20, guard=1, train=2)
     assert got["statistic"].dtype == np.float32
     np.testing.assert_array_equal(got["statistic"], want["statistic"])
+
+
+def test_a_tiff_scene_reader(tmp_path):
+    from torchsar.io.tiff_scene import TiffScene
+    from torchsar.simulate.scene_file import write_scene_file
+
+    sf = write_scene_file(tmp_path / "s.tif", shape=(300, 260), tile=64, n_targets=6)
+    with TiffScene(sf.path, as_intensity=True) as r:  # a windowed reader of the io package
+        whole = r[0:300, 0:260]
+        got = scene_objects(r, "ca", tile=(100, 90), pfa=1e-5)
+    full = cfar.ca(torch.from_numpy(whole)[None, None], pfa=1e-5)
+    want = reference_objects(full.mask[0, 0].numpy(), full.statistic[0, 0].numpy())
+    assert len(want) >= 6
+    same_objects(got, want)
