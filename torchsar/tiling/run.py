@@ -4,9 +4,10 @@ Memory rule (window CFARs and speckle filters): a batch holds ``batch`` windows 
 ``(tile + 2 halo)^2`` pixels; the operator's own work per window is strip-bounded, so the
 peak is about ``c * batch * (tile + 2 * halo)^2`` bytes over the interpreter and torch
 (about 0.3 GB), with ``c`` around 60 for the ring CFARs and speckle filters (the window, its
-float64 statistic and the outputs) and up to about 100 for OS-CFAR (its ring order
-statistic). Defaults (``tile=1024``, ``batch=4``, halo of a few pixels) stay under 0.6 GB
-whatever the scene size; outputs written to a caller's array (e.g. a memmap) add nothing.
+float64 statistic and the outputs) and about 120 for OS-CFAR (its ring order statistic).
+Defaults (``tile=1024``, ``batch=4``, halo of a few pixels), measured on a 4096 x 4096
+memmap: 0.56 GB peak RSS for CA-CFAR, 0.81 GB for OS-CFAR, whatever the scene size;
+outputs written to a caller's array (e.g. a memmap) add nothing.
 """
 
 from __future__ import annotations

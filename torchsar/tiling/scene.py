@@ -16,7 +16,7 @@ from torchsar.tiling import run as _run
 from torchsar.tiling.footprint import operator
 from torchsar.tiling.objects import SeamMerger
 from torchsar.tiling.plan import Tile
-from torchsar.tiling.source import Scene, as_scene
+from torchsar.tiling.source import Scene, as_scene, release
 
 __all__ = ["run_scene", "scene_objects"]
 
@@ -114,7 +114,7 @@ def run_scene(
     Returns:
         The outputs by name.
 
-    Memory: window operators about ``60-100 * batch * (tile + 2 halo)^2`` bytes
+    Memory: window operators about ``60-120 * batch * (tile + 2 halo)^2`` bytes
     (:mod:`torchsar.tiling.run`); region about
     ``150 * ((tile + 2 halo)^2 + (tile + 4 halo)^2)`` bytes per tile
     (:mod:`torchsar.tiling.region`); plus the outputs unless ``out`` holds them.
@@ -135,6 +135,7 @@ def run_scene(
     for t, res in _tiles(sc, detector, tile, halo, batch, device, dict(options)):
         for name, v in res.items():
             arrays[name][t.core] = v  # type: ignore[index]
+            release(arrays[name])  # a memmap's written pages leave the resident set
         if merger is not None:
             merger.add(t, res["mask"], res["statistic"])
             done.append(t)

@@ -70,14 +70,16 @@ class Scene:
                 f"{arr.shape}, expected {expect}: __getitem__ must return the window asked for"
             )
         _check_window(arr, self.name, rows, cols)
-        _release(self.data)
+        release(self.data)
         return arr
 
 
-def _release(data: object) -> None:
-    """Unmap the pages a shared numpy memmap read so far (they stay in the page cache):
-    otherwise every page of the scene read once counts in the process's resident memory
-    until the end of the run. Copy-on-write maps (``mode="c"``) are left alone."""
+def release(data: object) -> None:
+    """Unmap the pages of a shared numpy memmap touched so far (they stay in the page
+    cache, and written pages are written back to the file as usual): otherwise every page
+    of a scene read once, or of an output written once, counts in the process's resident
+    memory until the end of the run. Anything else, and copy-on-write maps
+    (``mode="c"``), are left alone."""
     mm = getattr(data, "_mmap", None)
     if isinstance(data, np.memmap) and mm is not None and getattr(data, "mode", "c") != "c":
         with contextlib.suppress(AttributeError, OSError, ValueError):  # no madvise here
