@@ -8,6 +8,7 @@ from collections.abc import Iterator, Mapping
 import numpy as np
 import pandas as pd
 import torch
+from scipy import ndimage
 
 from torchsar._checks import OptionError
 from torchsar.region.params import resolve_params
@@ -133,6 +134,7 @@ def run_scene(
     merger = SeamMerger(sc.shape) if min_size > 1 else None
     done: list[Tile] = []
     for t, res in _tiles(sc, detector, tile, halo, batch, device, dict(options)):
+        res = _drop_inner_small(res, min_size)
         for name, v in res.items():
             arrays[name][t.core] = v  # type: ignore[index]
             release(arrays[name])  # a memmap's written pages leave the resident set
@@ -142,6 +144,27 @@ def run_scene(
     if merger is not None:
         _drop_small(arrays, merger, done, min_size)
     return arrays
+
+
+def _drop_inner_small(res: dict[str, np.ndarray], min_size: int) -> dict[str, np.ndarray]:
+    """The object-size rule on the objects that lie inside the core without touching its
+    edge lines (they cannot merge with another tile's): dropped at once, so that the
+    merger only keeps objects on seams and objects that stay (memory bounded by the tile
+    perimeter and the detections, not by the clutter peaks of the whole scene)."""
+    if min_size <= 1 or not res["mask"].any():
+        return res
+    mask = res["mask"]
+    lab, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    small = np.bincount(lab.reshape(-1), minlength=n + 1) < min_size
+    small[np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])] = False
+    small[0] = False
+    drop = small[lab]
+    if not drop.any():
+        return res
+    return {
+        "mask": mask & ~drop,
+        "statistic": np.where(drop, -np.inf, res["statistic"]).astype(res["statistic"].dtype),
+    }
 
 
 def _drop_small(arrays: dict, merger: SeamMerger, tiles: list[Tile], min_size: int) -> None:
@@ -202,6 +225,7 @@ def scene_objects(
         )
     merger = SeamMerger(sc.shape, connectivity)
     for t, res in _tiles(sc, detector, tile, halo, batch, device, dict(options)):
+        res = _drop_inner_small(res, min_size)
         merger.add(t, res["mask"], res["statistic"])
     table = merger.table()
     return table[table["area"] >= min_size].reset_index(drop=True)
