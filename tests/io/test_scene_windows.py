@@ -251,3 +251,18 @@ def test_unsupported_codec_is_a_clear_error(tmp_path):
         tif.pages[0].tags[259].overwrite(5)  # claim LZW
     with open_scene(path) as scene, pytest.raises(FileFormatError, match="segment"):
         scene[0:4, 0:4]
+
+
+def test_tile_cache_is_bounded_and_changes_nothing(tmp_path):
+    a = scene_array((300, 300), "uint16", seed=12)
+    path = tmp_path / "c.tif"
+    tifffile.imwrite(path, a, tile=(32, 32), compression="zlib")
+    tile_bytes = 32 * 32 * 2
+    plain = TiffScene(path, cache_mb=0)
+    small = TiffScene(path, cache_mb=5.5 * tile_bytes / 1e6)
+    for r0, r1, c0, c1 in windows((300, 300), (32, 32), 30, seed=4) * 2:
+        expected = a[r0:r1, c0:c1]
+        np.testing.assert_array_equal(plain[r0:r1, c0:c1], expected)
+        np.testing.assert_array_equal(small[r0:r1, c0:c1], expected)
+        assert 0 < small._cache_bytes <= 5.5 * tile_bytes
+    assert not plain._cache

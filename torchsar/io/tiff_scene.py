@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import math
 import os
+import threading
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +69,8 @@ class TiffScene(SceneReader):
             complex samples and Sentinel-1 GRD (amplitude), else ``None``.
         as_intensity: return float32 intensity windows (amplitude squared, ``|z|**2``...).
         memmap: memory-map uncompressed contiguous files (``False`` reads them by strips).
+        cache_mb: keep up to this many MB of decoded tiles (least recently used dropped), so
+            overlapping or neighbouring windows do not decode a tile twice; 0 disables.
 
     Raises:
         FileFormatError: not a TIFF, truncated, an unsupported layout or sample type.
@@ -90,6 +94,7 @@ class TiffScene(SceneReader):
         sample_type: str | None = None,
         as_intensity: bool = False,
         memmap: bool = True,
+        cache_mb: float = 64,
     ) -> None:
         self.path = str(path)
         self._options = {
@@ -97,7 +102,11 @@ class TiffScene(SceneReader):
             "sample_type": sample_type,
             "as_intensity": as_intensity,
             "memmap": memmap,
+            "cache_mb": cache_mb,
         }
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._cache_bytes, self._cache_limit = 0, int(max(float(cache_mb), 0.0) * 1e6)
+        self._lock = threading.Lock()
         self._tif = None
         self._memmap = None
         check_regular_file(path)
@@ -278,35 +287,42 @@ class TiffScene(SceneReader):
         if self._memmap is not None:
             return np.array(self._memmap[r0:r1, c0:c1], dtype=self.raw_dtype)
         out = np.empty((r1 - r0, c1 - c0), self.raw_dtype)
-        index = self.segments(r0, r1, c0, c1)
+        wanted = self.segments(r0, r1, c0, c1)
+        with self._lock:
+            cached = {i: self._cache[i] for i in wanted if i in self._cache}
+            for i in cached:
+                self._cache.move_to_end(i)
+        for i, seg in cached.items():
+            self._copy(out, seg, i, (r0, r1, c0, c1))
+        index = [i for i in wanted if i not in cached]
         if not index:
             return out
         offsets = [int(self._offsets[i]) for i in index]
         counts = [int(self._counts[i]) for i in index]
-        decode = self._page.decode
         with tifffile_log() as messages:
             for data, i in self._tif.filehandle.read_segments(offsets, counts, indices=index):
-                self._place(out, data, i, decode, messages, (r0, r1, c0, c1))
+                seg = self._decode(data, i, messages)
+                self._copy(out, seg, i, (r0, r1, c0, c1))
+                self._remember(i, seg)
         return out
 
-    def _place(self, out, data, i, decode, messages, box) -> None:
-        """Decode segment ``i`` and copy its part of the window into ``out``."""
-        r0, r1, c0, c1 = box
+    def _origin(self, i: int) -> tuple[int, int]:
         ty, tx = divmod(i - self._base, self._ntx)
-        top, left = ty * self._th, tx * self._tw
-        rs, re = max(r0, top), min(r1, top + self._th)
-        cs, ce = max(c0, left), min(c1, left + self._tw)
-        target = out[rs - r0 : re - r0, cs - c0 : ce - c0]
+        return ty * self._th, tx * self._tw
+
+    def _decode(self, data: bytes | None, i: int, messages: list[str]) -> np.ndarray:
+        """Segment ``i`` as a 2-D array of our band, clipped to the image (0 if sparse)."""
+        top, left = self._origin(i)
+        rows = min(self._th, self.shape[0] - top)
+        cols = min(self._tw, self.shape[1] - left)
         if data is None:
-            target[...] = 0
-            return
+            return np.zeros((rows, cols), self.raw_dtype)
         try:
-            seg = decode(data, i)[0]
+            seg = self._page.decode(data, i)[0]
             seg = seg.reshape(seg.shape[-3], seg.shape[-2], seg.shape[-1])
-            part = seg[rs - top : re - top, cs - left : ce - left, self._contig]
-            if part.shape != target.shape:
-                raise ValueError(f"decoded to {seg.shape[:2]}, short of the window's part")
-            target[...] = part
+            if seg.shape[0] < rows or seg.shape[1] < cols:
+                raise ValueError(f"decoded to {seg.shape[:2]}, short of {rows}x{cols}")
+            return seg[:rows, :cols, self._contig]
         except Exception as exc:  # corrupt or short segment: name file and place
             raise FileFormatError(
                 self.path,
@@ -314,10 +330,35 @@ class TiffScene(SceneReader):
                 f"{left}:{left + self._tw}): {exc}{_said(messages)}",
             ) from exc
 
+    def _copy(self, out: np.ndarray, seg: np.ndarray, i: int, box: tuple) -> None:
+        """Copy the part of segment ``i`` that lies in the window ``box`` into ``out``."""
+        r0, r1, c0, c1 = box
+        top, left = self._origin(i)
+        rs, re = max(r0, top), min(r1, top + seg.shape[0])
+        cs, ce = max(c0, left), min(c1, left + seg.shape[1])
+        out[rs - r0 : re - r0, cs - c0 : ce - c0] = seg[rs - top : re - top, cs - left : ce - left]
+
+    def _remember(self, i: int, seg: np.ndarray) -> None:
+        """Keep a decoded segment, dropping the least recently used past the limit."""
+        if seg.nbytes > self._cache_limit:
+            return
+        seg = np.ascontiguousarray(seg)
+        with self._lock:
+            if i in self._cache:
+                return
+            self._cache[i] = seg
+            self._cache_bytes += seg.nbytes
+            while self._cache_bytes > self._cache_limit:
+                _, old = self._cache.popitem(last=False)
+                self._cache_bytes -= old.nbytes
+
     # -- life cycle ------------------------------------------------------------------------
 
     def _close(self) -> None:
         self._memmap = None
+        if hasattr(self, "_cache"):
+            self._cache.clear()
+            self._cache_bytes = 0
         if self._tif is not None:
             self._tif.close()
             self._tif = None
