@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -168,6 +168,7 @@ def iter_region_tiles(
     device: str | torch.device | None = None,
     despeckle_reach: int | None = None,
     preset: str = "torchsar",
+    only: Collection[tuple[int, int]] | None = None,
     **options: object,
 ) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:
     """Run the region CFAR over ``scene`` tile by tile, each tile settled by the rule of
@@ -183,6 +184,7 @@ def iter_region_tiles(
         batch: windows per region_search call at the first halo (same result).
         device: where the despeckling runs (the growth runs on the CPU).
         despeckle_reach: radius of a callable ``despeckle`` (names are known).
+        only: run just the tiles of these indices ``(tile row, tile column)`` (None: all).
         preset, **options: as :func:`~torchsar.region.region_cfar`.
 
     Raises:
@@ -207,7 +209,11 @@ def iter_region_tiles(
     dev = check_device(device)
     opts = _options(replace(p, min_size=1))  # min_size: on scene objects, after merging
     min_side = 2 * reach + 1
-    for group in batches(plan_tiles(sc.shape, size, first, min_side), batch):
+    tiles = plan_tiles(sc.shape, size, first, min_side)
+    if only is not None:
+        keep = {tuple(int(v) for v in i) for i in only}
+        tiles = [t for t in tiles if t.index in keep]
+    for group in batches(tiles, batch):
         for t, stat in zip(group, _run_windows(sc, group, opts, dev), strict=True):
             halo_now = first
             while not _settled(stat, p.k, t, sc.shape, ring, d0):
