@@ -30,8 +30,8 @@ from torchsar_eval.commands.detect.plan import DetectJob, min_size
 from torchsar_eval.errors import EvalError
 
 __all__ = [
-    "chunks", "close_readers", "load_record", "pending", "record_path", "run_tasks", "scene_reader",
-    "run_tiles", "scene_objects",
+    "chunks", "close_readers", "load_record", "pending", "record_path", "run_tasks",
+    "run_tiles", "scene_objects", "scene_reader",
 ]  # fmt: skip
 
 Task = tuple[DetectJob, list[tuple[int, int]], Path]
