@@ -170,6 +170,8 @@ def test_bad_inputs_one_line_exit_2(scene, tmp_path, capsys):
     text = tmp_path / "notes.txt"
     text.write_text("not a scene\n")
     cases = [
+        (CA, "--scene is required"),
+        (["--scene", str(scene.path)], "--detector is required"),
         (["--scene", str(tmp_path / "missing.tif"), *CA], "no such file"),
         (["--scene", str(text), *CA], "neither a TIFF"),
         (["--scene", str(scene.path), "--detector", "cfar9"], "--detector must be one of"),

@@ -36,17 +36,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--scene",
-        required=True,
         metavar="FILE[,FILE...]",
-        help="scene files (GeoTIFF, BigTIFF, COG, Sentinel-1 GRD, SICD); the scene id is "
-        "each file's stem",
+        help="scene files (GeoTIFF, BigTIFF, COG, Sentinel-1 GRD, SICD; required); the scene "
+        "id is each file's stem",
     )
     p.add_argument(
         "--detector",
-        required=True,
         metavar="NAME",
         help="a window CFAR (ca, go, so, os, vi, ac, two_parameter, lognormal, weibull, "
-        "gamma, k, g0) or region",
+        "gamma, k, g0) or region (required)",
     )
     p.add_argument(
         "--param",
@@ -97,6 +95,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _check_args(args: argparse.Namespace) -> None:
     from torchsar_eval.options import at_least
 
+    for flag, value in (("--scene", args.scene), ("--detector", args.detector)):
+        if not value:
+            raise EvalError(f"{flag} is required (see torchsar-eval detect --help)")
     if args.engine == "ray":
         raise EvalError("--engine ray is not supported by detect yet: use --workers N (local "
                         "processes)")  # fmt: skip
@@ -108,8 +109,8 @@ def run(args: argparse.Namespace) -> int:
     """The ``detect`` sub-command: check everything, run the tiles, write the tables."""
     from torchsar_eval.output import check_out
 
-    check_out(args.out, overwrite=args.overwrite, resume=args.resume, discard=args.discard)
     _check_args(args)
+    check_out(args.out, overwrite=args.overwrite, resume=args.resume, discard=args.discard)
 
     from torchsar._checks import check_device
     from torchsar_eval.commands.detect import plan
