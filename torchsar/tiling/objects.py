@@ -247,7 +247,7 @@ def components_table(mask: np.ndarray, score: np.ndarray, connectivity: int = 2)
         >>> m = np.array([[1, 1, 0], [0, 0, 1]], bool)
         >>> s = np.array([[2.0, 5.0, 0.0], [0.0, 0.0, 3.0]])
         >>> t = components_table(m, s)
-        >>> t.loc[0, ["peak_row", "peak_col", "area", "row_max"]].tolist(), t.loc[0, "score"]
+        >>> t.loc[0, ["peak_row", "peak_col", "area", "row_max"]].tolist(), float(t.score[0])
         ([0, 1, 3, 1], 5.0)
     """
     h, w = mask.shape

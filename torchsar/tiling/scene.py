@@ -102,7 +102,7 @@ def run_scene(
         scene: 2-D intensity scene (tensor, numpy array, memmap or windowed reader; see
             :func:`~torchsar.tiling.as_scene`).
         detector: a window CFAR (``"ca"``, ``"os"``, ...), ``"region"`` or a speckle filter.
-        tile: core side or ``(rows, cols)`` (default 1024; region 512).
+        tile: core side or ``(rows, cols)`` (default 1024).
         halo: pixels read around each core (default: the footprint reach; region: its first
             halo, see :mod:`torchsar.tiling.region`).
         batch: windows per call (default 4; region 1); results do not depend on it.
@@ -115,7 +115,8 @@ def run_scene(
         The outputs by name.
 
     Memory: window operators about ``60-100 * batch * (tile + 2 halo)^2`` bytes
-    (:mod:`torchsar.tiling.run`); region about ``150 * (tile + 2 halo)^2`` per window
+    (:mod:`torchsar.tiling.run`); region about
+    ``150 * ((tile + 2 halo)^2 + (tile + 4 halo)^2)`` bytes per tile
     (:mod:`torchsar.tiling.region`); plus the outputs unless ``out`` holds them.
 
     Example:
@@ -184,10 +185,10 @@ def scene_objects(
 
     Example:
         >>> x = np.random.default_rng(0).exponential(size=(40, 50)).astype(np.float32)
-        >>> x[18:23, 14:30] = 500.0  # an object straddling the tile seams at 16 and 32
+        >>> x[15, 15] = x[16, 16] = 500.0  # touching diagonally across a tile corner
         >>> t = scene_objects(x, "ca", tile=16, guard=1, train=2, pfa=1e-6)
-        >>> t.loc[0, ["area", "row_min", "row_max", "col_min", "col_max"]].tolist()
-        [80, 18, 22, 14, 29]
+        >>> t[["area", "row_min", "row_max", "col_min", "col_max"]].values.tolist()
+        [[2, 15, 16, 15, 16]]
     """
     sc = as_scene(scene)
     if "image" in _outputs(detector):

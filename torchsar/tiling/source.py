@@ -13,6 +13,8 @@ float64 (the operators then compute in float64, as they do on a float64 tensor).
 
 from __future__ import annotations
 
+import contextlib
+import mmap
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,7 +70,18 @@ class Scene:
                 f"{arr.shape}, expected {expect}: __getitem__ must return the window asked for"
             )
         _check_window(arr, self.name, rows, cols)
+        _release(self.data)
         return arr
+
+
+def _release(data: object) -> None:
+    """Unmap the pages a shared numpy memmap read so far (they stay in the page cache):
+    otherwise every page of the scene read once counts in the process's resident memory
+    until the end of the run. Copy-on-write maps (``mode="c"``) are left alone."""
+    mm = getattr(data, "_mmap", None)
+    if isinstance(data, np.memmap) and mm is not None and getattr(data, "mode", "c") != "c":
+        with contextlib.suppress(AttributeError, OSError, ValueError):  # no madvise here
+            mm.madvise(mmap.MADV_DONTNEED)
 
 
 def _check_window(arr: np.ndarray, name: str, rows: slice, cols: slice) -> None:
