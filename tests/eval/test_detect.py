@@ -178,6 +178,7 @@ def test_bad_inputs_one_line_exit_2(scene, tmp_path, capsys):
         (["--scene", str(scene.path), *CA, "--tile", "8"], "smaller than"),
         (["--scene", str(scene.path), *CA, "--param", "colour=3"], "unknown option"),
         (["--scene", str(scene.path), *CA, "--param", "guard"], "NAME=VALUE"),
+        (["--scene", str(scene.path), *CA, "--param", "tile=64"], "use --tile"),
         (["--scene", str(scene.path), *CA, "--param", "pfa=2"], "pfa"),
         (["--scene", str(scene.path), *CA, "--engine", "ray"], "--engine ray is not supported"),
         (["--scene", str(scene.path), *CA, "--workers", "0"], "--workers"),

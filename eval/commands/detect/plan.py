@@ -19,6 +19,7 @@ size and modification time, what tells a changed file on ``--resume`` without re
 every byte of a multi-GB scene."""
 
 _REGION_ONLY = ("max_halo", "despeckle_reach", "preset")
+_RUNNER = ("tile", "halo", "batch", "device", "only", "out", "valid", "clutter_mean")
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,9 @@ def parse_options(items: list[str]) -> dict:
             value = ast.literal_eval(raw)
         except (ValueError, SyntaxError, RecursionError, MemoryError):
             value = raw
+        if key.strip() in _RUNNER:
+            raise EvalError(f"--param {key.strip()}: set by detect itself (use --tile, "
+                            "--device); not a detector option")  # fmt: skip
         out[key.strip()] = value
     return out
 
