@@ -219,3 +219,30 @@ def test_a_scene_without_georeferencing_writes_no_geojson(tmp_path, capsys):
     assert (got.detect_scene_row[0], got.detect_scene_column[0]) == (100, 70)
     assert got["lat"].isna().all() and got["length_m"].isna().all()
     assert not (tmp_path / "r" / "detections.geojson").exists()
+
+
+@pytest.mark.slow
+def test_a_task_that_kills_its_worker_fails_alone(tmp_path):
+    """The pool breaks; the tasks that were running run again one at a time, and the one
+    that kills its worker again is the one blamed, by its tiles (the run stops there; saved
+    records are kept for --resume)."""
+    from tests.eval.detect_workers import die_on_second
+    from torchsar_eval.commands.detect.plan import DetectJob, Scene
+    from torchsar_eval.commands.detect.tiles import run_tasks
+    from torchsar_eval.errors import EvalError
+
+    class Bar:
+        n = 0
+
+        def update(self, k):
+            self.n += k
+
+    job = DetectJob(Scene("s", "unused.tif", (10, 40), "intensity", (1, 4)), "ca")
+    tasks = [(job, [(0, j)], tmp_path) for j in range(4)]
+    bar = Bar()
+    with (
+        pytest.warns(RuntimeWarning, match="worker process died"),
+        pytest.raises(EvalError, match=r"tiles 0,1: a worker process died .* twice"),
+    ):
+        run_tasks(tasks, 2, bar, fn=die_on_second)
+    assert bar.n >= 1  # tasks that shared the pool finished

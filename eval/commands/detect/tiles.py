@@ -19,6 +19,7 @@ import multiprocessing
 import os
 import signal
 import warnings
+from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -168,26 +169,27 @@ def _tiles_text(indices: list[tuple[int, int]]) -> str:
 _DIED = "a worker process died (killed or out of memory)"
 
 
-def run_tasks(tasks: list[Task], workers: int, bar) -> None:
+def run_tasks(tasks: list[Task], workers: int, bar, fn: Callable = _task) -> None:
     """Run every task, saving each tile's record as its task finishes (see the module
-    docstring for workers and dead workers)."""
+    docstring for workers and dead workers). ``fn(job, indices)`` runs one task (a
+    module-level function: workers import it)."""
     if workers == 1:
         for task in tasks:
-            _done(task, _task(task[0], task[1]), bar)
+            _done(task, fn(task[0], task[1]), bar)
         return
     threads = max(1, (os.cpu_count() or 1) // workers)
     workers = min(workers, len(tasks)) or 1
     queue = list(range(len(tasks)))
     while queue:
-        suspects = _round(tasks, queue, workers, threads, bar)
+        suspects = _round(fn, tasks, queue, workers, threads, bar)
         if suspects:
             warnings.warn(f"{_DIED}: running its {len(suspects)} task(s) again one at a "
                           "time", RuntimeWarning, stacklevel=2)  # fmt: skip
         for k in suspects:
-            _round(tasks, [k], 1, threads, bar, solo=True)
+            _round(fn, tasks, [k], 1, threads, bar, solo=True)
 
 
-def _round(tasks, queue, workers, threads, bar, solo: bool = False) -> list[int]:
+def _round(fn, tasks, queue, workers, threads, bar, solo: bool = False) -> list[int]:
     """Run the tasks of ``queue`` (consumed) in one pool until done or the pool breaks;
     returns the tasks that were running when it broke (``solo``: raises instead)."""
     ctx = multiprocessing.get_context("spawn")
@@ -200,7 +202,7 @@ def _round(tasks, queue, workers, threads, bar, solo: bool = False) -> list[int]
             try:
                 while queue and len(running) < workers:
                     k = queue[0]
-                    running[pool.submit(_task, tasks[k][0], tasks[k][1])] = k
+                    running[pool.submit(fn, tasks[k][0], tasks[k][1])] = k
                     queue.pop(0)
             except BrokenProcessPool:
                 done = set(running)
