@@ -74,6 +74,19 @@ def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
         "config.json", "detections.csv", "detections.geojson"]  # fmt: skip
 
 
+def test_region_table_equals_scene_objects(scene, tmp_path):
+    argv = ["detect", "--scene", str(scene.path), "--detector", "region", "--param",
+            "min_size=2", "--tile", "300", "--out", str(tmp_path / "r"), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    got = pd.read_csv(tmp_path / "r" / "detections.csv", dtype={"scene_id": str})
+    with open_scene(scene.path, as_intensity=True) as reader:
+        objects = scene_objects(reader, "region", tile=300, min_size=2)
+        expect = detection_table(objects, "small", georef=reader.georef,
+                                 pixel_spacing=reader.pixel_spacing)  # fmt: skip
+    assert (objects["area"] >= 2).all() and len(objects) > 0
+    pd.testing.assert_frame_equal(got, expect, check_dtype=False)
+
+
 def _outputs(folder: Path) -> dict[str, bytes]:
     return {n: (folder / n).read_bytes() for n in ("detections.csv", "detections.geojson")}
 
