@@ -74,6 +74,28 @@ def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
         "config.json", "detections.csv", "detections.geojson"]  # fmt: skip
 
 
+def test_ac_scene_clutter_mean_computed_once_and_shared(scene, tmp_path, monkeypatch):
+    """AC-CFAR's scene-level clutter mean: computed by the driver once and passed to every
+    tile (not re-estimated per task); the table equals scene_objects'."""
+    from torchsar.tiling import run as trun
+
+    passes = []
+    original = trun.scene_clutter_mean
+    monkeypatch.setattr(trun, "scene_clutter_mean",
+                        lambda *a, **k: passes.append(1) or original(*a, **k))  # fmt: skip
+    opts = ["--param", "guard=2", "--param", "train=4", "--param", "pfa=1e-6"]
+    argv = ["detect", "--scene", str(scene.path), "--detector", "ac", *opts, "--tile", "128",
+            "--out", str(tmp_path / "r"), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    assert len(passes) == 1  # 30 tiles in 8 tasks, one estimate
+    got = pd.read_csv(tmp_path / "r" / "detections.csv", dtype={"scene_id": str})
+    with open_scene(scene.path, as_intensity=True) as reader:
+        objects = scene_objects(reader, "ac", tile=128, guard=2, train=4, pfa=1e-6)
+        expect = detection_table(objects, "small", georef=reader.georef,
+                                 pixel_spacing=reader.pixel_spacing)  # fmt: skip
+    pd.testing.assert_frame_equal(got, expect, check_dtype=False)
+
+
 def test_region_table_equals_scene_objects(scene, tmp_path):
     argv = ["detect", "--scene", str(scene.path), "--detector", "region", "--param",
             "min_size=2", "--tile", "300", "--out", str(tmp_path / "r"), "--no-progress"]  # fmt: skip

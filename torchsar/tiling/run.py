@@ -74,8 +74,9 @@ def scene_clutter_mean(
 
 
 def _prepared(op: Operator, scene: Scene, tiles: list[Tile]) -> Operator:
-    """``op`` with its scene-level statistics (AC: the clutter mean) filled in."""
-    if op.name != "ac" or not tiles:
+    """``op`` with its scene-level statistics (AC: the clutter mean) filled in, unless the
+    caller filled them already (:func:`prepare`)."""
+    if op.name != "ac" or not tiles or "clutter_mean" in op.options:
         return op
     from torchsar._checks import check_probability
 
