@@ -34,7 +34,7 @@ BUILTIN_DETECTORS = (
 
 DATASET_SCHEMES = (
     "sim-chips", "sim-scenes", "folder:PATH", "coco:FILE.json", "voc:DIR", "hrsid:DIR",
-    "phoenix:DIR", "sicd:FILE", "store:DIR",
+    "phoenix:DIR", "sicd:FILE", "scene:FILE", "store:DIR",
 )  # fmt: skip
 """The dataset names and schemes ``make_dataset`` reads (``torchsar_eval.datasets.DATASETS``)."""
 

@@ -258,8 +258,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _resume_hint(argv: list[str]) -> str:
-    """How to continue an interrupted ``run`` (its saved shards are kept)."""
-    if not argv or argv[0] != "run" or "--out" not in argv:
+    """How to continue an interrupted ``run`` or ``detect`` (its saved shards or tiles are
+    kept)."""
+    if not argv or argv[0] not in ("run", "detect") or "--out" not in argv:
         return ""
     return "; continue with the same command plus --resume" if "--resume" not in argv else ""
 

@@ -14,6 +14,8 @@ _RULES = {
     "{max_size_ratio:g}x the target box",
     "mask": "mask IoU >= {iou:g}",
     "box": "box IoU >= {iou:g}",
+    "distance": "distance rule: a detection's point or centroid and a target's centroid closer "
+    "than {max_distance:g} {distance_units}, assigned {assign} at the operating point",
 }
 
 _TERMS = [

@@ -8,8 +8,8 @@ import importlib
 __all__ = ["COMMANDS", "load"]
 
 COMMANDS = [
-    "run", "report", "pfa", "speckle", "autofocus", "movers", "compare-region", "make-dataset",
-    "clean",
+    "run", "detect", "report", "pfa", "speckle", "autofocus", "movers", "compare-region",
+    "make-dataset", "clean",
 ]  # fmt: skip
 
 

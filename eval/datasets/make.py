@@ -13,6 +13,7 @@ from torchsar_eval.datasets.base import BadItemError
 from torchsar_eval.datasets.folder import folder_from_spec
 from torchsar_eval.datasets.hrsid import hrsid_from_spec
 from torchsar_eval.datasets.phoenix import phoenix_from_spec
+from torchsar_eval.datasets.scene import scene_from_spec
 from torchsar_eval.datasets.sicd import sicd_from_spec
 from torchsar_eval.datasets.sim import DEFAULT_N, SimDataset
 from torchsar_eval.datasets.spec import DatasetSpec, parse_spec
@@ -32,6 +33,7 @@ DATASETS = (
     "hrsid:DIR",
     "phoenix:DIR",
     "sicd:FILE",
+    "scene:FILE",
     "store:DIR",
 )
 
@@ -51,6 +53,7 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
     "hrsid": hrsid_from_spec,
     "phoenix": phoenix_from_spec,
     "sicd": sicd_from_spec,
+    "scene": scene_from_spec,
     "store": store_from_spec,
 }
 

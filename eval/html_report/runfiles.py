@@ -71,8 +71,8 @@ class RunFiles:
 def _read_csv(path: Path) -> pd.DataFrame:
     if not path.is_file():
         return pd.DataFrame()
-    try:
-        return pd.read_csv(path)
+    try:  # only empty cells are missing: "n/a" is a bin name (SCR not measurable)
+        return pd.read_csv(path, keep_default_na=False, na_values=[""])
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
         warnings.warn(f"{path}: unreadable table, left out of the report ({exc})", UserWarning,
                       stacklevel=3)  # fmt: skip

@@ -141,8 +141,14 @@ class SavedPredictions:
         """These predictions with each row's dataset item (every row must have one)."""
         bound = SavedPredictions.__new__(SavedPredictions)
         bound.__dict__.update(self.__dict__)
-        items = locate(self.table.refs, dataset_keys(dataset), f"predictions {self.path} on "
-                       f"dataset {name}")  # fmt: skip
+        what = f"predictions {self.path} on dataset {name}"
+        place = getattr(dataset, "locate_points", None)
+        bound._point_offset = None
+        if place is not None and getattr(self.table, "geometry", None) == "point":
+            # whole-scene points (scene: datasets): each goes to the chip holding it
+            items, bound._point_offset = place(self.table.refs, self.table.point, what)
+        else:
+            items = locate(self.table.refs, dataset_keys(dataset), what)
         order = np.argsort(items, kind="stable")
         bound._item_rows = (items[order], order)
         bound._classes = _class_names(getattr(self.table, "classes", None), dataset)
@@ -183,7 +189,9 @@ class SavedPredictions:
         if t.geometry == "box":
             return Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)
         length = None if t.length_m is None else t.length_m[r]
-        return Objects.from_points(t.point[r], t.score[r], shape=(h, w), length_m=length,
+        offset = getattr(self, "_point_offset", None)
+        point = t.point[r] if offset is None else t.point[r] - offset[r]
+        return Objects.from_points(point, t.score[r], shape=(h, w), length_m=length,
                                    **common)  # fmt: skip
 
 

@@ -89,15 +89,60 @@ class SeamMerger:
 
     def add(self, tile: Tile, mask: np.ndarray, score: np.ndarray) -> None:
         """Label one core (``mask``, ``score`` of the core's shape) and keep its aggregates
-        and edge lines (labels offset to be unique across tiles)."""
+        and edge lines (labels offset to be unique across tiles): :meth:`summarise`, then
+        :meth:`merge`."""
+        self.merge(self.summarise(tile, mask, score))
+
+    def summarise(self, tile: Tile, mask: np.ndarray, score: np.ndarray) -> dict:
+        """The compact record of one core: everything :meth:`merge` needs, and nothing of
+        this merger's state (so it can be computed in another process, saved and merged
+        later; merging records in a fixed tile order gives the same table whatever order
+        they were computed in).
+
+        Returns:
+            ``{"index": (i, j) int64, "core": (r0, r1, c0, c1) int64, "n": components,
+            "edges": four int32 lines (first row, last row, first column, last column) of
+            local labels 1..n (0 background), "aggregates": nine per-component arrays}``,
+            numpy arrays and ints only.
+
+        Example:
+            >>> m = SeamMerger((2, 4))
+            >>> t = Tile((0, 0), (slice(0, 2), slice(0, 4)), (slice(0, 2), slice(0, 4)))
+            >>> rec = m.summarise(t, np.array([[1, 0, 0, 1], [1, 0, 0, 0]], bool), np.ones((2, 4)))
+            >>> rec["n"], rec["edges"][2].tolist()
+            (2, [1, 1])
+        """
         lab, n = ndimage.label(mask, structure=_STRUCT[self.connectivity])
-        r0, c0 = tile.core[0].start, tile.core[1].start
-        g = np.where(lab > 0, lab.astype(np.int64) + self._count, 0)
-        self._offsets[tile.index] = (self._count, n)
-        self._merged = None
-        self._edges[tile.index] = (g[0].copy(), g[-1].copy(), g[:, 0].copy(), g[:, -1].copy())
+        (rows, cols) = tile.core
+        r0, c0 = rows.start, cols.start
+        lab32 = lab.astype(np.int32, copy=False)
+        edges = tuple(
+            np.ascontiguousarray(e) for e in (lab32[0], lab32[-1], lab32[:, 0], lab32[:, -1])
+        )
         if n:
-            self._parts.append(_aggregates(lab, n, score, r0, c0, self.shape[1]))
+            parts = _aggregates(lab, n, score, r0, c0, self.shape[1])
+        else:
+            parts = tuple(np.zeros(0, np.float64 if k in (1, 2, 7) else np.int64) for k in range(9))
+        return {
+            "index": np.array(tile.index, np.int64),
+            "core": np.array([rows.start, rows.stop, cols.start, cols.stop], np.int64),
+            "n": int(n),
+            "edges": edges,
+            "aggregates": tuple(parts),
+        }
+
+    def merge(self, record: dict) -> None:
+        """Take one core's record (:meth:`summarise`); each tile once, in any order (a fixed
+        order gives bit-identical tables)."""
+        index = tuple(int(v) for v in record["index"])
+        n = int(record["n"])
+        self._offsets[index] = (self._count, n)
+        self._merged = None
+        self._edges[index] = tuple(
+            np.where(e > 0, e.astype(np.int64) + self._count, 0) for e in record["edges"]
+        )
+        if n:
+            self._parts.append(tuple(record["aggregates"]))
         self._count += n
 
     def _pairs(self) -> np.ndarray:

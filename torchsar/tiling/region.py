@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -190,6 +190,7 @@ def iter_region_tiles(
     device: str | torch.device | None = None,
     despeckle_reach: int | None = None,
     preset: str = "torchsar",
+    only: Collection[tuple[int, int]] | None = None,
     **options: object,
 ) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:
     """Run the region CFAR over ``scene`` tile by tile, each tile settled by the rule of
@@ -205,6 +206,7 @@ def iter_region_tiles(
         batch: windows per region_search call at the first halo (same result).
         device: where the despeckling runs (the growth runs on the CPU).
         despeckle_reach: radius of a callable ``despeckle`` (names are known).
+        only: run just the tiles of these indices ``(tile row, tile column)`` (None: all).
         preset, **options: as :func:`~torchsar.region.region_cfar`.
 
     Raises:
@@ -230,7 +232,11 @@ def iter_region_tiles(
     opts = _options(replace(p, min_size=1))  # min_size: on scene objects, after merging
     min_side = 2 * reach + 1
     settle = _Settle(sc, opts, dev, p.k, ring, d0, max_halo, min_side, p.min_size)
-    for group in batches(plan_tiles(sc.shape, size, first, min_side), batch):
+    tiles = plan_tiles(sc.shape, size, first, min_side)
+    if only is not None:
+        keep = {tuple(int(v) for v in i) for i in only}
+        tiles = [t for t in tiles if t.index in keep]
+    for group in batches(tiles, batch):
         second = [widen(t, min(2 * first, max_halo), sc.shape, min_side) for t in group]
         firsts = _run_windows(sc, group, opts, dev)
         once = first >= max_halo or group[0].window_shape == sc.shape  # nothing to compare

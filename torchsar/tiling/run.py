@@ -13,7 +13,7 @@ outputs written to a caller's array (e.g. a memmap) add nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 
 import numpy as np
 import torch
@@ -23,7 +23,7 @@ from torchsar.tiling.footprint import Operator, operator, to_batch
 from torchsar.tiling.plan import Tile, batches, check_tile, plan_tiles
 from torchsar.tiling.source import Scene, as_scene
 
-__all__ = ["check_halo", "iter_tiles", "scene_clutter_mean"]
+__all__ = ["check_halo", "iter_tiles", "prepare", "scene_clutter_mean"]
 
 DEFAULT_TILE = 1024
 DEFAULT_BATCH = 4
@@ -75,8 +75,9 @@ def scene_clutter_mean(
 
 
 def _prepared(op: Operator, scene: Scene, tiles: list[Tile]) -> Operator:
-    """``op`` with its scene-level statistics (AC: the clutter mean) filled in."""
-    if op.name != "ac" or not tiles:
+    """``op`` with its scene-level statistics (AC: the clutter mean) filled in, unless the
+    caller filled them already (:func:`prepare`)."""
+    if op.name != "ac" or not tiles or "clutter_mean" in op.options:
         return op
     from torchsar._checks import check_probability
 
@@ -87,6 +88,21 @@ def _prepared(op: Operator, scene: Scene, tiles: list[Tile]) -> Operator:
     return op.with_options(clutter_mean=scene_clutter_mean(scene, tiles, p_c, iterations))
 
 
+def prepare(scene: object, op: Operator, *, tile: int | tuple[int, int] = DEFAULT_TILE) -> Operator:
+    """``op`` with its scene-level statistics computed once over the whole ``scene`` (AC:
+    the clutter mean; other operators unchanged), so that tiles run separately
+    (:func:`iter_tiles` with ``only``, other processes) share them.
+
+    Example:
+        >>> x = np.ones((40, 40), np.float32)
+        >>> op = prepare(x, operator("ac", guard=1, train=2), tile=16)
+        >>> round(op.options["clutter_mean"], 4)  # the mean, corrected for censoring
+        1.007
+    """
+    sc = as_scene(scene)
+    return _prepared(op, sc, plan_tiles(sc.shape, check_tile(tile), 0))
+
+
 def iter_tiles(
     scene: object,
     detector: str | Operator,
@@ -95,6 +111,7 @@ def iter_tiles(
     halo: int | None = None,
     batch: int = DEFAULT_BATCH,
     device: str | torch.device | None = None,
+    only: Collection[tuple[int, int]] | None = None,
     **options: object,
 ) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:
     """Run a window operator over ``scene`` tile by tile; yield each tile and its core
@@ -112,6 +129,8 @@ def iter_tiles(
         halo: pixels read around each core (default and minimum: the footprint reach).
         batch: windows per operator call (>= 1); the results do not depend on it.
         device: where the operator runs (None: CPU); outputs come back as numpy.
+        only: run just the tiles of these indices ``(tile row, tile column)`` (None: all);
+            scene-level statistics still cover the whole scene (:func:`prepare`).
         **options: the operator's options (``guard``, ``train``, ``pfa``, ``window``, ...).
 
     Raises:
@@ -129,6 +148,9 @@ def iter_tiles(
     dev = check_device(device)
     tiles = plan_tiles(sc.shape, size, hal, op.min_side)
     op = _prepared(op, sc, tiles)
+    if only is not None:
+        keep = {tuple(int(v) for v in i) for i in only}
+        tiles = [t for t in tiles if t.index in keep]
     for group in batches(tiles, batch):
         x = to_batch([sc.read(*t.window) for t in group], dev)
         out = op.apply(x)

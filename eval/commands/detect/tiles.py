@@ -1,0 +1,256 @@
+"""Tiles as the unit of work of ``detect``: each finished tile leaves a compact record (its
+components' aggregates and the labels of its core's four edge lines,
+:meth:`torchsar.tiling.SeamMerger.summarise`) saved atomically as a data-only state file
+(:mod:`torchsar_eval.statefile`: a compressed NPZ with a content hash, never pickle) in
+the run's staging folder. The driver merges the records of a scene in raster tile order,
+so the table is byte-identical whatever the worker count, the order tiles finished in, or
+how many runs (``--resume``) it took.
+
+Workers: tiles run in this process (``workers=1``) or in ``workers`` spawned processes,
+each with ``cores // workers`` torch threads, at most ``workers`` tasks at a time (a task is
+a few consecutive tiles). A worker that dies (killed, out of memory) breaks the pool: the
+tasks that were running run again one at a time in fresh processes, so a task that kills
+its worker fails alone, with an error naming its tiles; the others go on in a fresh pool.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import warnings
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+
+import pandas as pd
+
+from torchsar_eval import statefile
+from torchsar_eval.commands.detect.plan import DetectJob, min_size
+from torchsar_eval.errors import EvalError
+
+__all__ = [
+    "chunks", "close_readers", "load_record", "pending", "record_path", "run_tasks",
+    "run_tiles", "scene_objects", "scene_reader",
+]  # fmt: skip
+
+Task = tuple[DetectJob, list[tuple[int, int]], Path]
+"""A job, the indices of some of its scene's tiles, and the folder of their records."""
+
+_READER: dict[str, object] = {}
+"""The scene reader open in this process (one at a time)."""
+
+
+def record_path(folder: Path, index: tuple[int, int]) -> Path:
+    """Where tile ``index``'s record is saved."""
+    return folder / f"tile-{index[0]:05d}-{index[1]:05d}.state"
+
+
+def scene_reader(job: DetectJob) -> object:
+    """The job's scene, opened for intensity windows (kept open in this process)."""
+    from torchsar.io import open_scene
+
+    sc = job.scene
+    if sc.path not in _READER:
+        close_readers()
+        _READER[sc.path] = open_scene(sc.path, sample_type=sc.sample_type, as_intensity=True)
+    return _READER[sc.path]
+
+
+def close_readers() -> None:
+    """Close the scene reader this process holds."""
+    while _READER:
+        _READER.popitem()[1].close()  # type: ignore[attr-defined]
+
+
+def _iterate(job: DetectJob, indices: list[tuple[int, int]]):
+    from torchsar.tiling import iter_region_tiles, iter_tiles, operator
+
+    reader = scene_reader(job)
+    if job.detector == "region":
+        return iter_region_tiles(reader, tile=job.tile, device=job.device, only=indices,
+                                 **job.options)  # fmt: skip
+    op = operator(job.detector, **job.options)
+    if job.clutter_mean is not None:
+        op = op.with_options(clutter_mean=job.clutter_mean)
+    return iter_tiles(reader, op, tile=job.tile, batch=job.batch, device=job.device,
+                      only=indices)  # fmt: skip
+
+
+def run_tiles(job: DetectJob, indices: list[tuple[int, int]]) -> list[tuple[tuple, bytes]]:
+    """Run the tiles ``indices`` of the job's scene; each tile's record as state-file bytes
+    (what a worker sends back), by tile index."""
+    from torchsar.tiling import SeamMerger
+
+    merger = SeamMerger(job.scene.shape, job.connectivity)
+    out = []
+    for t, res in _iterate(job, indices):
+        record = merger.summarise(t, res["mask"], res["statistic"])
+        out.append((t.index, statefile.dumps(record)))
+    return sorted(out)
+
+
+def _task(job: DetectJob, indices: list[tuple[int, int]]) -> tuple[str, object]:
+    """:func:`run_tiles` in a worker: a library error (bad data in a tile, a region tile
+    that does not settle) comes back as its message, to be raised as a user error."""
+    from torchsar._checks import TorchSARError
+
+    try:
+        return "ok", run_tiles(job, indices)
+    except TorchSARError as exc:
+        return "error", f"{type(exc).__name__}: {exc}"
+
+
+def _save(path: Path, data: bytes) -> None:
+    """Write a record atomically (temporary name in the same folder, then rename)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise EvalError(
+            f"cannot save {path.name} in {path.parent} ({exc.strerror or exc})"
+        ) from exc
+
+
+def load_record(path: Path) -> dict:
+    """A saved tile record (data only, content hash checked: ``CorruptStateError``)."""
+    with open(path, "rb") as f:
+        rec = statefile.loads(f.read(), f"tile record {path}")
+    if not isinstance(rec, dict) or not {"index", "n", "edges", "aggregates"} <= set(rec):
+        raise statefile.CorruptStateError(f"tile record {path} does not hold a tile")
+    return rec
+
+
+def pending(job: DetectJob, folder: Path) -> list[tuple[int, int]]:
+    """The tiles of the job's scene without a usable record (a corrupt one is deleted,
+    with a warning naming it, and its tile run again)."""
+    todo = []
+    for index in job.scene.tiles():
+        path = record_path(folder, index)
+        if path.exists():
+            try:
+                load_record(path)
+                continue
+            except statefile.CorruptStateError as exc:
+                warnings.warn(f"{exc}: running that tile again", RuntimeWarning, stacklevel=2)
+                path.unlink()
+        todo.append(index)
+    return todo
+
+
+def _init_worker(threads: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def _done(task: Task, result: tuple[str, object], bar) -> None:
+    """Save a finished task's records (or raise its error)."""
+    job, indices, folder = task
+    kind, value = result
+    if kind == "error":
+        raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {value}")
+    for index, data in value:  # type: ignore[union-attr]
+        _save(record_path(folder, index), data)
+    bar.update(len(indices))
+
+
+def _tiles_text(indices: list[tuple[int, int]]) -> str:
+    return ", ".join(f"{i},{j}" for i, j in indices)
+
+
+_DIED = "a worker process died (killed or out of memory)"
+
+
+def run_tasks(tasks: list[Task], workers: int, bar, fn: Callable = _task) -> None:
+    """Run every task, saving each tile's record as its task finishes (see the module
+    docstring for workers and dead workers). ``fn(job, indices)`` runs one task (a
+    module-level function: workers import it)."""
+    if workers == 1:
+        for task in tasks:
+            _done(task, fn(task[0], task[1]), bar)
+        return
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    workers = min(workers, len(tasks)) or 1
+    queue = list(range(len(tasks)))
+    while queue:
+        suspects = _round(fn, tasks, queue, workers, threads, bar)
+        if suspects:
+            warnings.warn(f"{_DIED}: running its {len(suspects)} task(s) again one at a "
+                          "time", RuntimeWarning, stacklevel=2)  # fmt: skip
+        for k in suspects:
+            _round(fn, tasks, [k], 1, threads, bar, solo=True)
+
+
+def _round(fn, tasks, queue, workers, threads, bar, solo: bool = False) -> list[int]:
+    """Run the tasks of ``queue`` (consumed) in one pool until done or the pool breaks;
+    returns the tasks that were running when it broke (``solo``: raises instead)."""
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                               initargs=(threads,))  # fmt: skip
+    finished, broken = False, []
+    running: dict = {}
+    try:
+        while queue or running:
+            try:
+                while queue and len(running) < workers:
+                    k = queue[0]
+                    running[pool.submit(fn, tasks[k][0], tasks[k][1])] = k
+                    queue.pop(0)
+            except BrokenProcessPool:
+                done = set(running)
+                if not running:
+                    broken.append(queue.pop(0))
+            else:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in done:
+                k = running.pop(fut)
+                try:
+                    result = fut.result()
+                except BrokenProcessPool:
+                    broken.append(k)
+                    continue
+                _done(tasks[k], result, bar)
+            if broken:
+                broken += running.values()
+                running.clear()
+                break
+        finished = True
+    finally:
+        if not finished or broken:  # do not wait for running tasks
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+        pool.shutdown(wait=finished and not broken, cancel_futures=True)
+    if solo and broken:
+        job, indices, _ = tasks[broken[0]]
+        raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {_DIED} "
+                        "twice; the other tiles' records are kept")  # fmt: skip
+    return sorted(broken)
+
+
+def scene_objects(job: DetectJob, folder: Path) -> pd.DataFrame:
+    """The object table of a scene from its saved records, merged in raster tile order
+    (what :func:`torchsar.tiling.scene_objects` gives on the same scene and options)."""
+    from torchsar.tiling import SeamMerger
+
+    merger = SeamMerger(job.scene.shape, job.connectivity)
+    for index in job.scene.tiles():
+        path = record_path(folder, index)
+        rec = load_record(path)
+        if tuple(int(v) for v in rec["index"]) != index:
+            raise statefile.CorruptStateError(f"tile record {path} holds tile {rec['index']}")
+        merger.merge(rec)
+    table = merger.table()
+    return table[table["area"] >= min_size(job.detector, job.options)].reset_index(drop=True)
+
+
+def chunks(indices: list[tuple[int, int]], size: int) -> list[list[tuple[int, int]]]:
+    """Consecutive runs of ``size`` tiles (raster order), the tasks of a scene."""
+    return [indices[k : k + size] for k in range(0, len(indices), size)]
