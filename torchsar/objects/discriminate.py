@@ -57,16 +57,21 @@ def _candidates(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray,
     b, c, h, w = statistic.shape
     stat = statistic.detach().cpu().numpy().reshape(-1)
     thr = torch.as_tensor(threshold).detach().cpu().to(torch.float64).numpy()
-    scalar = thr.size == 1  # the usual case: no need to compare a full-size plane
-    thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
-    if thr.size and (scalar or np.all(thr == thr[0])):
-        t = float(thr[0])
-        loose = floor * t * (1 - 1e-5) - 1e-30 if t > 0 else t + floor - 1.0 - 1e-5
+    if thr.size == 1 and stat.size:  # the usual case: no full-size threshold plane
+        one = float(thr.reshape(-1)[0])
+        thr = None
+    else:
+        thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
+        one = float(thr[0]) if thr.size and np.all(thr == thr[0]) else None
+    if one is not None:
+        loose = floor * one * (1 - 1e-5) - 1e-30 if one > 0 else one + floor - 1.0 - 1e-5
         idx = np.flatnonzero(stat >= loose)
+        t = np.full(idx.size, one)
     else:
         loose = np.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
         idx = np.flatnonzero(stat >= loose)
-    s, t = stat[idx].astype(np.float64), thr[idx]
+        t = thr[idx]
+    s = stat[idx].astype(np.float64)
     return idx, normalised_score(torch.from_numpy(s), torch.from_numpy(t)).numpy()
 
 
