@@ -15,9 +15,10 @@ from hypothesis import strategies as st
 from tests.objects.test_components import _reference as reference_labels
 from tests.objects.test_discriminate import _reference_closing
 from torchsar import _jit
-from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar.objects.closing import close_pixels
 from torchsar.objects.components import label_pixels
+from torchsar.objects.discriminate import own_regions
 
 PATHS = ["numpy"] + (["numba"] if importlib.util.find_spec("numba") else [])
 
@@ -100,3 +101,17 @@ def test_known_pixel_lists_are_the_label_maps(path):
     made = Objects.from_labels(lab, np.ones(lab.shape))
     owner, idx = made.pixel_lists()
     assert np.array_equal(idx, np.flatnonzero(made.labels)) and owner.tolist() == [0] * 6 + [1]
+
+
+@pytest.mark.parametrize("threshold", [2.0, -0.5, "per image"])
+def test_own_regions_equal_labels_scored_on_the_whole_map(threshold):
+    rng = np.random.default_rng(3)
+    stat = torch.as_tensor(rng.gamma(1.0, 2.0, (2, 2, 9, 11)))
+    labels = torch.as_tensor(rng.integers(0, 4, (2, 2, 9, 11)) * (rng.random((2, 2, 9, 11)) < 0.3))
+    thr = torch.tensor([1.5, 3.0]).reshape(2, 1, 1, 1) if threshold == "per image" else threshold
+    got = own_regions(stat, thr, labels)
+    want = Objects.from_labels(labels.reshape(4, 9, 11).numpy(),
+                               normalised_score(stat, thr).reshape(4, 9, 11).numpy())  # fmt: skip
+    for a, b in zip(_fields(want), _fields(got), strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert np.array_equal(got.pixel_lists()[1], np.flatnonzero(got.labels))

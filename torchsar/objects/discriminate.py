@@ -33,7 +33,7 @@ from torchsar.objects.objects import Objects
 from torchsar.objects.properties import measure_pixels
 from torchsar.objects.rules import ObjectRules
 
-__all__ = ["discriminate", "normalised_score"]
+__all__ = ["discriminate", "normalised_score", "own_regions"]
 
 
 def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
@@ -47,6 +47,29 @@ def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
     s = statistic.to(torch.float64)
     t = torch.as_tensor(threshold, dtype=torch.float64, device=s.device)
     return torch.where(t > 0, s / torch.where(t > 0, t, 1.0), 1.0 + s - t)
+
+
+def own_regions(statistic: Tensor, threshold: Tensor | float, labels: Tensor) -> Objects:
+    """A detector's own regions (``Detection.labels``, ``(B, C, H, W)`` ids, 0 = none) as
+    :class:`Objects`, each scored by the peak of its :func:`normalised_score` (computed on
+    the labelled pixels only); operating threshold 1.
+
+    Example:
+        >>> lab = torch.zeros(1, 1, 4, 4, dtype=torch.int64); lab[0, 0, :2, :2] = 3
+        >>> o = own_regions(torch.arange(16.0).reshape(1, 1, 4, 4), 2.0, lab)
+        >>> o.area.tolist(), o.score.tolist()
+        ([4], [2.5])
+    """
+    b, c, h, w = statistic.shape
+    flat = labels.reshape(-1).cpu().numpy()
+    idx = np.flatnonzero(flat > 0)
+    at = torch.from_numpy(idx)
+    stat = statistic.reshape(-1).cpu()[at]
+    thr = torch.as_tensor(threshold).cpu()
+    if thr.numel() > 1:  # a threshold per pixel or per image: its value at each pixel
+        thr = thr.broadcast_to(statistic.shape).reshape(-1)[at]
+    score = normalised_score(stat, thr).numpy()
+    return Objects.from_label_pixels(flat[idx], idx, score, (b * c, h, w))
 
 
 def _candidates(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, np.ndarray]:

@@ -194,18 +194,41 @@ class Objects:
         if smap.shape != lab.shape:
             raise ShapeError(f"score_map must have the shape of labels {lab.shape}, "
                              f"got {smap.shape}")  # fmt: skip
-        n_planes, h, w = lab.shape
         flat = lab.reshape(-1)
         idx = np.flatnonzero(flat > 0)  # the labelled pixels (the rest stays 0)
-        local = flat[idx].astype(np.int64)
+        return cls.from_label_pixels(flat[idx], idx, smap.reshape(-1)[idx], lab.shape,
+                                     threshold=threshold)  # fmt: skip
+
+    @classmethod
+    def from_label_pixels(
+        cls,
+        local: np.ndarray,
+        idx: np.ndarray,
+        values: np.ndarray,
+        shape: tuple[int, int, int],
+        *,
+        threshold: float | None = 1.0,
+    ) -> Objects:
+        """:meth:`from_labels` from the labelled pixels only: their flat indices ``idx``
+        (ascending) into a stack of ``shape`` ``(N, H, W)``, their positive ids ``local``
+        (per plane; need not be consecutive) and their scores ``values``.
+
+        Example:
+            >>> o = Objects.from_label_pixels(np.array([7, 7, 2]), np.array([0, 1, 15]),
+            ...                               np.array([1.0, 3.0, 2.0]), (1, 4, 4))
+            >>> o.area.tolist(), o.score.tolist()
+            ([1, 2], [2.0, 3.0])
+        """
+        n_planes, h, w = shape
+        local = np.asarray(local).astype(np.int64)
         key = local + (int(local.max(initial=0)) + 1) * (idx // (h * w))
         used = np.unique(key)
         new = np.searchsorted(used, key) + 1
-        ids = np.zeros(lab.size, np.int32)
+        ids = np.zeros(n_planes * h * w, np.int32)
         ids[idx] = new
-        props = measure_pixels(new, idx, (h, w), used.size, smap.reshape(-1)[idx])
+        props = measure_pixels(new, idx, (h, w), used.size, np.asarray(values, np.float64))
         _check_scores(props["score"], "score_map")
-        built = _build(ids.reshape(lab.shape), None, props, n_planes, (h, w), "mask", threshold,
+        built = _build(ids.reshape(shape), None, props, n_planes, (h, w), "mask", threshold,
                        None, None)  # fmt: skip
         return built.with_pixel_lists(new - 1, idx)
 
