@@ -103,14 +103,11 @@ class _Plan:
     rank_by: str = DEFAULT_RANK
 
 
-MAX_N = 10_000_000
-"""Most images per named dataset in one run (larger datasets: split them into runs)."""
-
-
 def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     """``{name: dataset}`` from a name, a dataset, a list of them or a dict."""
     from torchsar_eval.datasets import make_dataset
     from torchsar_eval.datasets.files import warn_shared_files
+    from torchsar_eval.datasets.make import MAX_N
 
     if isinstance(datasets, str | Dataset):
         datasets = [datasets]

@@ -1,6 +1,7 @@
-"""One colour per detector NAME, the same in every figure, table and run: the built-in
-detectors have fixed, distinct colours; any other name is hashed into the same palette (and
-gets a line style from the hash too, so two names that share a colour still differ)."""
+"""One colour per detector NAME, the same in every figure (``report.html`` and the PNG/PDF
+plots), table and run: the built-in detectors have fixed, distinct colours; any other name
+is hashed into the palette's other colours (never a built-in's) and gets a dashed line
+style from the hash too, so two such names that share a colour still differ."""
 
 from __future__ import annotations
 
@@ -13,13 +14,16 @@ PALETTE = [
     "#bcbd22", "#17becf", "#393b79", "#637939", "#222222", "#843c39", "#7b4173", "#e7ba52",
     "#3a9e8f", "#a55194", "#6b6ecf", "#b35806",
 ]  # fmt: skip
-"""Twenty colours readable on white (hex)."""
+"""Twenty colours readable on white (hex): the first 13 are the built-ins', the rest
+(with ``"region-paper"``'s, the region CFAR's colour dashed) go to other names."""
 
 _BUILTIN = {
     "ca": 0, "two_parameter": 1, "go": 2, "so": 3, "os": 4, "vi": 5, "ac": 6,
     "lognormal": 7, "weibull": 8, "gamma": 9, "k": 10, "g0": 11, "region": 12,
 }  # fmt: skip
-_DASHES = ["-", "--", "-.", ":"]
+_SAME_AS = {"region-paper": "region"}  # the published preset of compare-region
+_OTHERS = PALETTE[len(_BUILTIN) :]
+_DASHES = ["--", "-.", ":"]
 
 
 def _digest(name: str) -> int:
@@ -34,11 +38,16 @@ def detector_colour(name: str) -> str:
         >>> detector_colour("ca"), detector_colour("ca") == detector_colour("ca")
         ('#1f77b4', True)
     """
-    k = _BUILTIN.get(name)
-    return PALETTE[_digest(name) % len(PALETTE) if k is None else k]
+    k = _BUILTIN.get(_SAME_AS.get(name, name))
+    return _OTHERS[_digest(name) % len(_OTHERS)] if k is None else PALETTE[k]
 
 
 def detector_dash(name: str) -> str:
-    """The matplotlib line style of detector ``name``: solid for the built-in detectors,
-    otherwise one of four styles chosen by a hash of the name."""
-    return "-" if name in _BUILTIN else _DASHES[(_digest(name) // len(PALETTE)) % len(_DASHES)]
+    """The line style of detector ``name`` (matplotlib's ``"-"``, ``"--"``, ``"-."``,
+    ``":"``): solid for the built-in detectors, dashed for ``region-paper``, otherwise one
+    of the three non-solid styles chosen by a hash of the name."""
+    if name in _BUILTIN:
+        return "-"
+    if name in _SAME_AS:
+        return "--"
+    return _DASHES[(_digest(name) // len(_OTHERS)) % len(_DASHES)]

@@ -1,7 +1,8 @@
 """Plots (matplotlib, headless) in one style, fit for a paper.
 
 - Every detector keeps its colour, line style and marker in every figure, whatever the other
-  detectors of the run (:func:`detector_style`, keyed by name; colour-blind-safe colours).
+  detectors of the run (:func:`detector_style`, keyed by name: the report's colours, and a
+  distinct marker per built-in so curves stay apart for colour-blind readers and in grey).
 - Log axes carry enough labelled ticks to read a value: 1-2-5 per decade (or finer) when
   the data span few decades, and a symmetric-log axis when 0 is among the values
   (:func:`log_axis`).
@@ -17,7 +18,9 @@ import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from torchsar_eval.colours import detector_colour, detector_dash
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -39,60 +42,38 @@ __all__ = [
     "titled",
 ]
 
-# Okabe & Ito's colour-blind-safe palette (yellow left out: too faint on white).
-BLUE, SKY, GREEN, ORANGE, VERMILION, PURPLE, BLACK = (
-    "#0072B2", "#56B4E9", "#009E73", "#E69F00", "#D55E00", "#CC79A7", "#000000"
-)  # fmt: skip
-
-STYLES: dict[str, tuple[str, str, str]] = {
-    # mean-level window CFARs: blues
-    "ca": (BLUE, "-", "o"),
-    "two_parameter": (BLUE, "--", "s"),
-    "go": (SKY, "-", "^"),
-    "so": (SKY, "--", "v"),
-    # order statistic and heterogeneity-aware: orange, green
-    "os": (ORANGE, "-", "D"),
-    "vi": (GREEN, "-", "P"),
-    "ac": (GREEN, "--", "X"),
-    # distribution CFARs: vermilion (log-normal, Weibull), purple (gamma family)
-    "lognormal": (VERMILION, "-", "<"),
-    "weibull": (VERMILION, "--", ">"),
-    "gamma": (PURPLE, "-", "h"),
-    "k": (PURPLE, "--", "p"),
-    "g0": (PURPLE, ":", "*"),
-    # the region-growing CFAR, and its published preset (compare-region)
-    "region": (BLACK, "-", "d"),
-    "region-paper": (BLACK, "--", "H"),
-}
-"""(colour, line style, marker) of the built-in detectors: pairwise distinct, fixed."""
-
-# Other names: Paul Tol's colour-blind-safe "muted" palette and dash-dot patterns that no
-# built-in uses, so an unknown detector never looks like a built-in one.
-_OTHER_COLOURS = ["#332288", "#88CCEE", "#44AA99", "#117733", "#999933", "#DDCC77", "#CC6677",
-                  "#882255", "#AA4499"]  # fmt: skip
-_OTHER_LINES: list[Any] = ["-.", (0, (5, 1, 1, 1)), (0, (3, 1, 1, 1, 1, 1)), (0, (8, 2, 1, 2))]
+MARKERS: dict[str, str] = {
+    "ca": "o", "two_parameter": "s", "go": "^", "so": "v", "os": "D", "vi": "P", "ac": "X",
+    "lognormal": "<", "weibull": ">", "gamma": "h", "k": "p", "g0": "*", "region": "d",
+    "region-paper": "H",
+}  # fmt: skip
+"""The built-in detectors' markers: pairwise distinct, so curves stay apart in grey print
+and for colour-blind readers even where colours are close."""
 _OTHER_MARKERS = ["o", "s", "^", "v", "D", "P", "X", "<", ">", "h", "p", "*", "d", "H", "8"]
+STYLES: dict[str, tuple[str, str, str]] = {
+    n: (detector_colour(n), detector_dash(n), m) for n, m in MARKERS.items()
+}
+"""(colour, line style, marker) of the built-in detectors: the colours and line styles of
+:mod:`torchsar_eval.colours` (the report's), these markers."""
 
 
 def detector_style(name: str) -> dict:
     """``{"color", "linestyle", "marker"}`` of a detector, by name: the same in every figure
-    and run. The built-ins have fixed distinct styles (:data:`STYLES`); any other name gets
-    one from a hash of the name (stable across processes).
+    (PNG, PDF and ``report.html``) and run. The built-ins have fixed distinct styles
+    (:data:`STYLES`); any other name gets one from a hash of the name (stable across
+    processes), never a built-in's colour.
 
     Example:
         >>> detector_style("ca")
-        {'color': '#0072B2', 'linestyle': '-', 'marker': 'o'}
+        {'color': '#1f77b4', 'linestyle': '-', 'marker': 'o'}
         >>> detector_style("my-cnn") == detector_style("my-cnn")
         True
     """
-    if name in STYLES:
-        color, line, marker = STYLES[name]
-    else:
-        h = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "big")
-        color = _OTHER_COLOURS[h % len(_OTHER_COLOURS)]
-        h //= len(_OTHER_COLOURS)
-        line = _OTHER_LINES[h % len(_OTHER_LINES)]
-        marker = _OTHER_MARKERS[(h // len(_OTHER_LINES)) % len(_OTHER_MARKERS)]
+    marker = MARKERS.get(name)
+    if marker is None:
+        marker = _OTHER_MARKERS[int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "big")
+                                % len(_OTHER_MARKERS)]  # fmt: skip
+    color, line = detector_colour(name), detector_dash(name)
     return {"color": color, "linestyle": line, "marker": marker}
 
 

@@ -16,7 +16,8 @@ import pandas as pd
 from torchsar_eval.gallery import write_gallery
 from torchsar_eval.glossary import glossary
 from torchsar_eval.html_report import DEFAULT_RANK, REPORT_FILE, write_report
-from torchsar_eval.html_report.runfiles import RUN_TABLES
+from torchsar_eval.html_report.runfiles import RUN_TABLES, read_run
+from torchsar_eval.leaderboard import LOWER_IS_BETTER, Board, caveats
 from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
@@ -35,7 +36,14 @@ from torchsar_eval.tables import (
     timing_table,
 )
 
-__all__ = ["TABLE_FILES", "per_image_rows", "result_tables", "throughput", "write_run"]
+__all__ = [
+    "TABLE_FILES",
+    "per_image_rows",
+    "ranked_summary",
+    "result_tables",
+    "throughput",
+    "write_run",
+]
 
 TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k != "cases"}
 """Each table of :func:`result_tables` and its file in a run folder."""
@@ -125,6 +133,29 @@ def _stats_lines(stats: dict) -> str:
     )
 
 
+def ranked_summary(folder: Path, summary: pd.DataFrame, rank_by: str) -> str:
+    """``summary.md``'s tables: per dataset, its detectors best first by ``rank_by`` (the
+    same ranking, notes and caveats as ``report.html``), from the tables already written
+    to ``folder``."""
+    run = read_run(folder)
+    head = headline_table(summary)
+    arrow = "lower is better" if rank_by in LOWER_IS_BETTER else "higher is better"
+    parts = []
+    for dataset in run.datasets:
+        board = Board([run], dataset, rank_by)
+        rows = head[head["dataset"].astype(str) == dataset].drop(columns="dataset")
+        rows = rows.set_index(rows["detector"].astype(str)).loc[board.rows["detector"]]
+        rows.insert(0, "rank", ["–" if r is None else r for r in board.rank])
+        if rank_by in board.rows.columns and rank_by not in rows.columns:
+            rows.insert(2, rank_by, board.rows[rank_by].to_numpy())
+        rows["note"] = board.notes
+        parts.append(f"\n## {dataset}: ranked by {rank_by} ({arrow})\n\n"
+                     + markdown(rows.reset_index(drop=True)))  # fmt: skip
+        notes = caveats(run, dataset, board)
+        parts += ["\n"] + [f"- {c}\n" for c in notes] if notes else []
+    return "".join(parts)
+
+
 def write_run(
     tmp: Path,
     tables: dict[str, pd.DataFrame],
@@ -150,7 +181,7 @@ def write_run(
         out.writerow(PER_IMAGE_COLUMNS)
         out.writerows(per_image)
     summary = tables["summary"]
-    text = glossary(summary, scoring) + "\n" + markdown(headline_table(summary))
+    text = glossary(summary, scoring) + ranked_summary(tmp, summary, rank_by)
     text += "\nEvery column, for every detector, is in `summary.csv`.\n"
     if not tables["coco"].empty:
         text += (

@@ -30,8 +30,10 @@ Common options: ``type=intensity|amplitude|db|complex|display`` (defaults: 8/16-
 ``complex``, Phoenix ``amplitude``; ``display`` data get a :class:`DisplayScalingWarning`);
 ``spacing=ROW[,COL]`` metres (else from the files: Phoenix header, SICD grid, folder
 ``<stem>.spacing.txt`` sidecar or projected GeoTIFF; else ``None``); ``max_pixels=N``
-(default 16,777,216 = 4096 x 4096 for folder datasets, sized to the evaluator's memory per
-image, and 100,000,000 for the others; checked from the header before decoding).
+(default 16,777,216 = 4096 x 4096, sized to the evaluator's memory per image; checked from
+the header before decoding); ``n=N``, the dataset's own image count (also on ``sim-chips``
+and ``sim-scenes``: ``sim-scenes?n=16``), which takes precedence over ``make_dataset(n=)``
+and the CLI's ``--n``.
 
 Folder and Phoenix: ``shadow=ignore|clutter|target`` (what label 2 means; default
 ``ignore``), ``instances=components|one-per-image|idmap``

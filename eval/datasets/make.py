@@ -18,7 +18,10 @@ from torchsar_eval.datasets.sim import DEFAULT_N, SimDataset
 from torchsar_eval.datasets.spec import DatasetSpec, parse_spec
 from torchsar_eval.errors import EvalError
 
-__all__ = ["DATASETS", "make_dataset"]
+__all__ = ["DATASETS", "MAX_N", "make_dataset", "own_count"]
+
+MAX_N = 10_000_000
+"""Most images per named dataset in one run (larger datasets: split them into runs)."""
 
 DATASETS = (
     "sim-chips",
@@ -52,8 +55,35 @@ _SCHEMES: dict[str, Callable[[DatasetSpec, int | None], Dataset]] = {
 }
 
 
+def own_count(spec: str) -> tuple[str, int | None]:
+    """Split a dataset's own ``n=N`` option off its name: ``"sim-scenes?n=4"`` -> ``("sim-scenes",
+    4)``; the other options stay in place.
+
+    Examples:
+        >>> own_count("folder:imgs?n=10&type=display")
+        ('folder:imgs?type=display', 10)
+        >>> own_count("sim-chips")
+        ('sim-chips', None)
+    """
+    head, _, query = spec.partition("?")
+    kept, own = [], None
+    for kv in filter(None, query.split("&")):
+        key, _, value = kv.partition("=")
+        if key != "n":
+            kept.append(kv)
+            continue
+        if not (value.isascii() and value.isdigit()) or int(value) > MAX_N:
+            raise EvalError(f"dataset option n={value[:20]!r} in {spec[:80]!r} must be a whole "
+                            f"number from 0 to {MAX_N:,}")  # fmt: skip
+        own = int(value)
+    return head + ("?" + "&".join(kept) if kept else ""), own
+
+
 def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
     """Build a dataset from its name (see :mod:`torchsar_eval.datasets`); ``n`` limits its size.
+
+    A dataset's own ``n=N`` option (``"sim-scenes?n=16"``, ``"folder:imgs?n=100"``) takes
+    precedence over ``n``, so one run can take 1,000 chips and 4 scenes.
 
     Raises:
         EvalError: unknown scheme or option, missing folder, unpairable files; a file that
@@ -63,6 +93,8 @@ def make_dataset(spec: str, *, n: int | None = None, seed: int = 0) -> Dataset:
         raise EvalError(f"{{opt:n}}{n!r}: must be a whole number")
     if n is not None and n < 0:
         raise EvalError(f"{{opt:n}}{n}: must be >= 0")
+    spec, own = own_count(spec)
+    n = n if own is None else own
     if spec in DEFAULT_N:
         return SimDataset(spec, DEFAULT_N[spec] if n is None else n, seed)
     build = _SCHEMES.get(spec.partition(":")[0]) if ":" in spec else None

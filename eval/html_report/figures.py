@@ -163,7 +163,8 @@ def _scr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
         if {"pd_lo", "pd_hi"} <= set(d.columns):
             lo, hi = _numeric(d["pd_lo"])[order], _numeric(d["pd_hi"])[order]
             ok = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(y)
-            ax.errorbar(x[ok], y[ok], yerr=[y[ok] - lo[ok], hi[ok] - y[ok]], fmt="none",
+            err = [np.maximum(y[ok] - lo[ok], 0.0), np.maximum(hi[ok] - y[ok], 0.0)]
+            ax.errorbar(x[ok], y[ok], yerr=err, fmt="none",
                         ecolor=s.colour, elinewidth=0.8, capsize=2, alpha=0.7)  # fmt: skip
         drawn = True
     ax.set_ylim(0, 1.02)

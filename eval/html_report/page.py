@@ -6,25 +6,28 @@ from __future__ import annotations
 import base64
 import html
 import math
-from collections.abc import Iterable
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from torchsar_eval.choices import DEFAULT_RANK, RANK_METRICS
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import _RULES, _TERMS
 from torchsar_eval.html_report.figures import FIGURES, Series, figure_svg, first_column
 from torchsar_eval.html_report.runfiles import RunFiles
+from torchsar_eval.leaderboard import (
+    DEFAULT_RANK,
+    LOWER_IS_BETTER,
+    NO_DETECTION,
+    RANK_METRICS,
+    Board,
+    caveats,
+    check_rank_by,
+)
+from torchsar_eval.leaderboard import number as _num
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
 
-LOWER_IS_BETTER = {
-    "false_alarms_per_image", "false_alarms", "fp", "fn", "pfa_pixel", "fa_per_km2",
-    "fragmentation", "ms_per_image", "object_ms_per_image",
-}  # fmt: skip
 _UNIT = {"f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
          "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou",
          "pd_object", "pd_pixel"}  # fmt: skip
@@ -41,7 +44,6 @@ LABELS = {
 SHOWN = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image", "false_alarms_per_image",
          "tp", "fp", "fn", "pd_pixel", "pfa_pixel", "ms_per_image"]  # fmt: skip
 """Leaderboard columns after the ranking metric (those a run has)."""
-_NOT_COMPARED = {"dataset", "detector", "score_threshold", "run"}
 _SAMPLE_TYPES = {
     "intensity": "intensity (power), used as is",
     "amplitude": "amplitude, squared to intensity",
@@ -49,7 +51,6 @@ _SAMPLE_TYPES = {
     "complex": "complex, |z|² intensity",
     "display": "display rendering (8/16-bit, unknown transfer), scaled to [0, 1] and squared",
 }
-NO_DETECTION = "no detection above its threshold on this data"
 
 CSS = """
 :root{--fg:#1b1f24;--muted:#5a6472;--line:#d8dee6;--band:#f4f6f9;--best:#e3f4e6;--bar:#9fb3c8;}
@@ -107,25 +108,8 @@ footer{margin-top:36px;padding:12px 20px 28px;border-top:1px solid var(--line);f
 """
 
 
-def check_rank_by(metric: str, columns: Iterable[str] = ()) -> str:
-    """``metric`` if a leaderboard can be ranked by it (:data:`RANK_METRICS`, or a numeric
-    column ``columns`` of the run's summary); :class:`EvalError` otherwise."""
-    if metric in RANK_METRICS or metric in set(columns) - _NOT_COMPARED - {"images", "targets"}:
-        return metric
-    raise EvalError(f"{{opt:rank_by}}{metric!r}: not a metric; choose one of "
-                    f"{', '.join(RANK_METRICS)}")  # fmt: skip
-
-
 def _e(v: object) -> str:
     return html.escape(str(v), quote=True)
-
-
-def _num(v: object) -> float:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        return math.nan
-    return x
 
 
 def _fmt(metric: str, v: object) -> str:
@@ -155,81 +139,15 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "x"
 
 
-class _Board:
-    """One dataset's rows over the runs (one row per run x detector)."""
-
-    def __init__(self, runs: list[RunFiles], dataset: str, rank_by: str) -> None:
-        self.runs, self.dataset, self.rank_by = runs, dataset, rank_by
-        frames = []
-        for k, run in enumerate(runs):
-            s = run.table("summary", dataset).copy()
-            if s.empty:
-                continue
-            t = run.table("timing", dataset)
-            extra = [c for c in ("ms_per_image", "images_per_s") if c in t.columns]
-            if extra and "detector" in t.columns:
-                s = s.merge(t[["detector", *extra]].drop_duplicates("detector"), on="detector",
-                            how="left", suffixes=("", "_timing"))  # fmt: skip
-            s["run"], s["_run"] = run.name, k
-            frames.append(s)
-        self.rows = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-        many = len(runs) > 1
-        pairs = zip(self.rows["detector"], self.rows["run"], strict=True)
-        self.rows["label"] = [f"{d} ({r})" if many else d for d, r in pairs]
-        self._rank()
-        self.notes = self._notes()
-
-    def _rank(self) -> None:
-        m = self.rank_by
-        values = (pd.to_numeric(self.rows[m], errors="coerce") if m in self.rows.columns
-                  else pd.Series(np.nan, index=self.rows.index))  # fmt: skip
-        sign = 1.0 if m in LOWER_IS_BETTER else -1.0
-        key = (sign * values).fillna(np.inf)
-        order = np.argsort(key.to_numpy(), kind="stable")
-        self.rows = self.rows.iloc[order].reset_index(drop=True)
-        k = key.to_numpy()[order]
-        self.rank = [1 + int(np.sum(k < v)) if np.isfinite(v) else None for v in k]
-
-    def _curve(self, run: int, detector: str) -> tuple:
-        froc = self.runs[run].table("froc", self.dataset)
-        cols = [c for c in ("tp", "fp") if c in froc.columns]
-        if "detector" not in froc.columns or not cols:
-            return ()
-        return tuple(map(tuple, froc.loc[froc["detector"] == detector, cols].to_numpy().tolist()))
-
-    def _notes(self) -> list[str]:
-        """Why a row is what it is: no detection at all, or the same results as a row
-        ranked above it."""
-        cols = [
-            c
-            for c in self.rows.columns
-            if c not in _NOT_COMPARED
-            and not c.startswith("_")
-            and c not in ("label", "ms_per_image", "images_per_s", "object_ms_per_image")
-        ]
-        seen: dict[tuple, str] = {}
-        notes = []
-        for _, r in self.rows.iterrows():
-            if _num(r.get("tp")) == 0 and _num(r.get("fp")) == 0:
-                notes.append(NO_DETECTION)
-                continue
-            key = tuple(None if isinstance(v, float) and math.isnan(v) else v
-                        for v in (r[c] for c in cols))  # fmt: skip
-            key += self._curve(int(r["_run"]), r["detector"])
-            if key in seen:
-                notes.append(f"identical results to {seen[key]}")
-            else:
-                seen[key] = r["label"]
-                notes.append("")
-        return notes
-
-    def series(self) -> list[Series]:
-        out = []
-        for _, r in self.rows.sort_values(["_run"], kind="stable").iterrows():
-            dash = detector_dash(r["detector"]) if len(self.runs) == 1 else (
-                ["-", "--", ":", "-."][int(r["_run"]) % 4])  # fmt: skip
-            out.append(Series(r["label"], r["detector"], detector_colour(r["detector"]), dash, r))
-        return out
+def _series(board: Board) -> list[Series]:
+    """One curve per row of ``board``, coloured by detector name (dashed by run when the
+    board compares runs)."""
+    out = []
+    for _, r in board.rows.sort_values(["_run"], kind="stable").iterrows():
+        dash = detector_dash(r["detector"]) if len(board.runs) == 1 else (
+            ["-", "--", ":", "-."][int(r["_run"]) % 4])  # fmt: skip
+        out.append(Series(r["label"], r["detector"], detector_colour(r["detector"]), dash, r))
+    return out
 
 
 def _swatch(detector: str, dash: str = "-") -> str:
@@ -264,7 +182,7 @@ def _best(values: list[float], metric: str) -> float | None:
     return min(finite) if metric in LOWER_IS_BETTER else max(finite)
 
 
-def _leaderboard(board: _Board) -> str:
+def _leaderboard(board: Board) -> str:
     rows, m = board.rows, board.rank_by
     if rows.empty:
         return '<p class="muted">No rows.</p>'
@@ -315,7 +233,7 @@ def _leaderboard(board: _Board) -> str:
             + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
 
 
-def _card(run: RunFiles, dataset: str, board: _Board, label: str | None) -> str:
+def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
     opts = run.options
     ds_opts = (opts.get("datasets") or {}).get(dataset) or {}
     manifest = (opts.get("manifests") or {}).get(dataset) or {}
@@ -396,29 +314,12 @@ def _card(run: RunFiles, dataset: str, board: _Board, label: str | None) -> str:
     if thr.get("wall_s") is not None:
         facts.append(("time", f"{_num(thr['wall_s']):.1f} s ({_num(thr.get('images_per_s')):.3g}"
                       " images/s)"))  # fmt: skip
-    caveats = []
-    if sample == "display":
-        caveats.append("display data: the detectors' design Pfa is not meaningful on it")
-    if ds_opts.get("gt") == "box":
-        caveats.append("box ground truth: no pixel metrics, AP at box IoU")
-    n_targets = _num(first.get("targets"))
-    if not math.isnan(n_targets) and n_targets < 30:
-        caveats.append(f"only {n_targets:.0f} targets: intervals are wide")
-    if isinstance(cal, dict):
-        caveats.append("the worst cases below are at the design operating point")
-    failed, skipped = thr.get("failed") or [], thr.get("skipped_items") or []
-    if failed or skipped:
-        caveats.append(f"{len(failed)} failed shard(s) and {len(skipped)} unreadable file(s) "
-                       "left out")  # fmt: skip
-    same = sorted({n.removeprefix("identical results to ") for n in board.notes
-                   if n.startswith("identical")})  # fmt: skip
-    if same:
-        caveats.append("some detectors give identical results (see the notes)")
+    notes = caveats(run, dataset, board)
     out = ['<dl class="card">']
     out += [f"<div><dt>{_e(k)}</dt><dd>{_e(v)}</dd></div>" for k, v in facts]
     out.append("</dl>")
-    if caveats:
-        out.append('<ul class="caveats">' + "".join(f"<li>{_e(c)}</li>" for c in caveats)
+    if notes:
+        out.append('<ul class="caveats">' + "".join(f"<li>{_e(c)}</li>" for c in notes)
                    + "</ul>")  # fmt: skip
     return "".join(out)
 
@@ -428,8 +329,8 @@ def _legend(series: list[Series]) -> str:
     return '<div class="legend">' + "".join(items) + "</div>"
 
 
-def _figures(board: _Board, salt: str) -> str:
-    series = board.series()
+def _figures(board: Board, salt: str) -> str:
+    series = _series(board)
     figs = []
     for kind, (_, _, _, table, _) in FIGURES.items():
         frames = [run.table(table, board.dataset) for run in board.runs]
@@ -473,13 +374,13 @@ def _table(df: pd.DataFrame, left: int = 1) -> str:
             + "".join(body) + "</tbody></table></div>")  # fmt: skip
 
 
-def _order(board: _Board, run: RunFiles) -> list[str]:
+def _order(board: Board, run: RunFiles) -> list[str]:
     """The run's detectors in leaderboard order."""
     r = board.rows[board.rows["run"] == run.name]
     return list(dict.fromkeys(r["detector"]))
 
 
-def _breakdown(board: _Board) -> str:
+def _breakdown(board: Board) -> str:
     out = []
     for run in board.runs:
         bd = run.table("breakdown", board.dataset)
@@ -520,7 +421,7 @@ def _breakdown(board: _Board) -> str:
     )
 
 
-def _errors(board: _Board) -> str:
+def _errors(board: Board) -> str:
     out = []
     for run in board.runs:
         df = run.table("errors", board.dataset)
@@ -540,7 +441,7 @@ def _errors(board: _Board) -> str:
     return "<h3>Error types</h3>" + "".join(out) if out else ""
 
 
-def _paired(board: _Board) -> str:
+def _paired(board: Board) -> str:
     out = []
     for run in board.runs:
         df = run.table("paired", board.dataset)
@@ -581,7 +482,7 @@ def _paired(board: _Board) -> str:
             + "".join(out))  # fmt: skip
 
 
-def _coco(board: _Board) -> str:
+def _coco(board: Board) -> str:
     out = []
     for run in board.runs:
         df = run.table("coco", board.dataset)
@@ -607,7 +508,7 @@ def _caption(kind: str, rank: int, r: pd.Series) -> str:
     return f"<b>#{rank}</b> {where}<br>{what}"
 
 
-def _gallery(board: _Board) -> str:
+def _gallery(board: Board) -> str:
     out = []
     for run in board.runs:
         cases = run.table("cases", board.dataset)
@@ -697,7 +598,7 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
     nav = "".join(f'<li><a href="#ds-{i}">{_e(n)}</a></li>' for i, n in enumerate(names, 1))
     sections = []
     for i, name in enumerate(names, 1):
-        board = _Board(runs, name, rank_by)
+        board = Board(runs, name, rank_by)
         cards = "".join(_card(run, name, board, run.name if len(runs) > 1 else None)
                         for run in runs if name in run.datasets)  # fmt: skip
         sections.append(

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 import torch
 
+from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.plots import (
     STYLES,
     detector_style,
@@ -43,9 +44,14 @@ def test_the_13_builtins_have_pairwise_distinct_styles():
         assert sa[2] != sb[2], f"{a} and {b} share a marker"
 
 
-def test_colour_blind_safe_palette_only():
-    okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7", "#000000"}
-    assert {STYLES[n][0] for n in BUILTIN} <= okabe_ito
+def test_plots_and_the_report_draw_a_detector_alike():
+    """The PNG/PDF plots and report.html take a detector's colour and line style from one
+    place; every built-in has its own colour and marker."""
+    for n in [*BUILTIN, "region-paper", "my-cnn"]:
+        st = detector_style(n)
+        assert (st["color"], st["linestyle"]) == (detector_colour(n), detector_dash(n))
+    assert len({STYLES[n][0] for n in BUILTIN}) == len(BUILTIN)
+    assert len({STYLES[n][2] for n in BUILTIN}) == len(BUILTIN)
 
 
 def test_unknown_names_get_a_stable_style_unlike_any_builtin():
@@ -64,7 +70,7 @@ def test_unknown_names_get_a_stable_style_unlike_any_builtin():
     for n in names:
         s = detector_style(n)
         assert (s["color"], s["linestyle"]) not in builtin
-        assert s["linestyle"] not in {line for _, line, _ in STYLES.values()}
+        assert s["color"] not in {STYLES[b][0] for b in BUILTIN}
 
 
 def _tables(names: list[str], ap50: dict[str, float] | None = None):

@@ -269,5 +269,6 @@ def test_detector_colours_are_stable_and_distinct():
     assert len(set(colours)) == len(colours)  # every built-in its own colour
     for name in ["mine", "pkg.mod:Det", "ca (b)", ""]:
         assert detector_colour(name) in PALETTE and detector_colour(name) == detector_colour(name)
-        assert detector_dash(name) in ("-", "--", "-.", ":")
+        assert detector_colour(name) not in colours  # never a built-in's colour
+        assert detector_dash(name) in ("--", "-.", ":")
     assert all(re.fullmatch(r"#[0-9a-f]{6}", c) for c in PALETTE)

@@ -211,3 +211,15 @@ def test_ca_cfar_pd_versus_scr_follows_the_textbook_curve():
         for off in (-1.5, 1.5):
             ref = _textbook_pd(level + off, n, alpha)
             assert not strict.loc[name, "pd_lo"] <= ref <= strict.loc[name, "pd_hi"]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 7, 11, 36, 1000])
+def test_wilson_bounds_are_exact_at_none_and_all(n):
+    """At k = 0 the lower bound is exactly 0 and at k = n the upper is exactly 1 (rounding
+    once left 5.6e-17 at 0 / 3, which broke the Pd-vs-SCR error bars)."""
+    lo, hi = wilson(np.array([0, n]), np.array([n, n]))
+    assert lo[0] == 0.0 and hi[1] == 1.0
+    assert 0 < hi[0] < 1 and 0 < lo[1] < 1
+    k = np.arange(n + 1)
+    lo, hi = wilson(k, np.full(n + 1, n))
+    assert (lo <= k / n).all() and (hi >= k / n).all()

@@ -1,8 +1,10 @@
-"""Readers of SAR data files: rasters, annotations, MSTAR Phoenix, SICD, GOTCHA."""
+"""Readers of SAR data files: rasters, annotations, MSTAR Phoenix, SICD, GOTCHA, and
+windowed readers of whole scenes (:func:`open_scene`)."""
 
 from torchsar.io.channels import single_channel
 from torchsar.io.coco import CocoAnnotation, CocoImage, CocoSet, annotation_mask, read_coco
 from torchsar.io.errors import AnnotationWarning, FileFormatError
+from torchsar.io.georef import AffineGeoref, GeorefError, TiePointGrid
 from torchsar.io.geotiff import geotiff_pixel_spacing
 from torchsar.io.gotcha import GotchaPass, gotcha_files, read_gotcha
 from torchsar.io.idmap import decode_id_map
@@ -17,30 +19,42 @@ from torchsar.io.raster import (
     tiff_dtype,
 )
 from torchsar.io.scaling import SAMPLE_TYPES, to_intensity
-from torchsar.io.sicd import SicdChip, read_sicd, sicd_shape
+from torchsar.io.scene import open_scene
+from torchsar.io.scene_reader import SceneReader
+from torchsar.io.sicd import SicdChip, SicdScene, read_sicd, sicd_shape
+from torchsar.io.tiff_scene import TiffScene
 from torchsar.io.voc import VocAnnotation, VocObject, read_voc
+from torchsar.io.window import WindowError
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
     "RASTER_EXTS",
     "SAMPLE_TYPES",
     "TIFF_EXTS",
+    "AffineGeoref",
     "AnnotationWarning",
     "CocoAnnotation",
     "CocoImage",
     "CocoSet",
     "FileFormatError",
+    "GeorefError",
     "GotchaPass",
     "PhoenixChip",
+    "SceneReader",
     "SicdChip",
+    "SicdScene",
+    "TiePointGrid",
+    "TiffScene",
     "VocAnnotation",
     "VocObject",
+    "WindowError",
     "annotation_mask",
     "check_regular_file",
     "decode_id_map",
     "geotiff_pixel_spacing",
     "gotcha_files",
     "is_phoenix",
+    "open_scene",
     "raster_shape",
     "read_coco",
     "read_gotcha",

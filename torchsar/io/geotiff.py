@@ -11,22 +11,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from torchsar.io.errors import FileFormatError
+from torchsar.io.georef import geokeys
 from torchsar.io.raster import check_regular_file, tifffile_log
 
-__all__ = ["geotiff_pixel_spacing"]
+__all__ = ["geotiff_pixel_spacing", "spacing_from_tags"]
 
 MODEL_PIXEL_SCALE, GEO_KEY_DIRECTORY = 33550, 34735
 MODEL_TYPE, LINEAR_UNITS = 1024, 3076
 PROJECTED, METRE = 1, 9001
-
-
-def _geokeys(directory: tuple[int, ...]) -> dict[int, int]:
-    """Short-valued keys of a GeoKeyDirectory (header of 4, then 4 shorts per key)."""
-    n = directory[3] if len(directory) >= 4 else 0
-    entries = directory[4 : 4 + 4 * n]
-    return {
-        entries[i]: entries[i + 3] for i in range(0, len(entries) - 3, 4) if entries[i + 1] == 0
-    }
 
 
 def geotiff_pixel_spacing(path: str | Path) -> tuple[float, float] | None:
@@ -48,9 +40,20 @@ def geotiff_pixel_spacing(path: str | Path) -> tuple[float, float] | None:
         except Exception as exc:  # any decoder complaint: name the file
             said = f"; tifffile: {'; '.join(messages[:3])}" if messages else ""
             raise FileFormatError(path, f"cannot read image header ({exc}{said})") from exc
+    return spacing_from_tags(scale, keys)
+
+
+def spacing_from_tags(scale: tuple | None, keys: tuple | None) -> tuple[float, float] | None:
+    """``(row_m, col_m)`` from ModelPixelScale and GeoKeyDirectory tag values, or ``None``
+    unless the model is projected in metres.
+
+    Example:
+        >>> spacing_from_tags((0.75, 0.5, 0.0), (1, 1, 0, 1, 1024, 0, 1, 1))
+        (0.5, 0.75)
+    """
     if not scale or not keys:
         return None
-    geo = _geokeys(tuple(int(k) for k in keys))
+    geo = geokeys(tuple(int(k) for k in keys))
     if geo.get(MODEL_TYPE) != PROJECTED or geo.get(LINEAR_UNITS, METRE) != METRE:
         return None
     col, row = float(scale[0]), float(scale[1])

@@ -2,6 +2,8 @@
 
 Read-only, one chip at a time: ``region=(r0, c0, r1, c1)`` (end-exclusive) is read without
 loading the whole product. The pixel spacing is the SICD ``Grid.Row.SS`` x ``Grid.Col.SS``.
+:class:`SicdScene` is the same product as a scene reader (``scene[r0:r1, c0:c1]``), with
+lon/lat of pixels by sarpy's image-to-ground projection onto the scene's reference height.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ import numpy as np
 
 from torchsar.io.errors import FileFormatError
 from torchsar.io.raster import DEFAULT_MAX_PIXELS, check_regular_file
+from torchsar.io.scene_reader import SceneReader
 
-__all__ = ["SicdChip", "read_sicd", "sicd_shape"]
+__all__ = ["SicdChip", "SicdScene", "read_sicd", "sicd_shape"]
 
 
 @dataclass(frozen=True)
@@ -66,9 +69,81 @@ def read_sicd(
     if (r1 - r0) * (c1 - c0) > max_pixels:
         raise FileFormatError(path, f"region of {(r1 - r0) * (c1 - c0):,} pixels > max_pixels")
     samples = np.asarray(reader[r0:r1, c0:c1], dtype=np.complex64)
-    grid = getattr(reader.get_sicds_as_tuple()[0], "Grid", None)
+    return SicdChip(samples, _spacing(reader.get_sicds_as_tuple()[0]))
+
+
+def _spacing(sicd: object) -> tuple[float, float] | None:
+    """``Grid.Row.SS`` x ``Grid.Col.SS`` of a SICD structure, or ``None``."""
+    grid = getattr(sicd, "Grid", None)
     try:
-        spacing = (float(grid.Row.SS), float(grid.Col.SS))
+        return (float(grid.Row.SS), float(grid.Col.SS))
     except (AttributeError, TypeError):
-        spacing = None
-    return SicdChip(samples, spacing)
+        return None
+
+
+class _SicdGeoref:
+    """Lon/lat of SICD pixels by sarpy's projection to the scene reference point height."""
+
+    has_lonlat = True
+    geographic = True
+    epsg = 4326
+
+    def __init__(self, sicd: object) -> None:
+        self._sicd = sicd
+
+    def pixel_to_lonlat(self, rows: object, cols: object) -> tuple[np.ndarray, np.ndarray]:
+        from sarpy.geometry.point_projection import image_to_ground_geo
+
+        r, c = np.broadcast_arrays(np.asarray(rows, np.float64), np.asarray(cols, np.float64))
+        points = np.stack([r.ravel(), c.ravel()], axis=-1)
+        llh = np.asarray(image_to_ground_geo(points, self._sicd), np.float64).reshape(-1, 3)
+        return llh[:, 1].reshape(r.shape), llh[:, 0].reshape(r.shape)
+
+    pixel_to_xy = pixel_to_lonlat
+
+
+class SicdScene(SceneReader):
+    """A SICD product read window by window (complex64 samples, ``sample_type="complex"``).
+
+    Args:
+        path: the NITF file.
+        sample_type: ``"complex"`` or ``None``.
+        as_intensity: return ``|z|**2`` as float32.
+
+    Raises:
+        ImportError: sarpy is not installed.
+        FileFormatError: not a readable SICD product.
+    """
+
+    def __init__(
+        self, path: str | Path, *, sample_type: str | None = None, as_intensity: bool = False
+    ) -> None:
+        self.path = str(path)
+        self._options = {"sample_type": sample_type, "as_intensity": as_intensity}
+        self._reader = _open(path)
+        rows, cols = (int(v) for v in self._reader.get_data_size_as_tuple()[0])
+        self.shape = (rows, cols)
+        self.raw_dtype = np.dtype(np.complex64)
+        self.sample_type = "complex"
+        sicd = self._reader.get_sicds_as_tuple()[0]
+        self.pixel_spacing = _spacing(sicd)
+        self.georef = _SicdGeoref(sicd)
+        self._set_intensity(as_intensity, sample_type)
+
+    def _read(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        if self._reader is None:
+            raise ValueError(f"{self.path} is closed")
+        if r0 == r1 or c0 == c1:
+            return np.empty((r1 - r0, c1 - c0), np.complex64)
+        return np.asarray(self._reader[r0:r1, c0:c1], dtype=np.complex64)
+
+    def _close(self) -> None:
+        reader, self._reader = getattr(self, "_reader", None), None
+        if reader is not None and hasattr(reader, "close"):
+            reader.close()
+
+    def __getstate__(self) -> dict:
+        return {"path": self.path, "options": self._options}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["path"], **state["options"])

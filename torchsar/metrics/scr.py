@@ -133,7 +133,8 @@ def scr_bins(scr_db: np.ndarray, edges: tuple[float, ...] = SCR_EDGES) -> np.nda
 
 
 def wilson(k: np.ndarray, n: np.ndarray, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
-    """Wilson score interval of a proportion ``k / n`` (NaN where ``n == 0``).
+    """Wilson score interval of a proportion ``k / n`` (NaN where ``n == 0``); it contains
+    ``k / n``, and its bound at ``k = 0`` (``k = n``) is exactly 0 (1).
 
     Example:
         >>> lo, hi = wilson(np.array([0, 10]), np.array([10, 10]))
@@ -149,7 +150,9 @@ def wilson(k: np.ndarray, n: np.ndarray, level: float = 0.95) -> tuple[np.ndarra
         den = 1 + z * z / n
         mid = (p + z * z / (2 * n)) / den
         half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    lo, hi = np.clip(mid - half, 0.0, 1.0), np.clip(mid + half, 0.0, 1.0)
+    # rounding leaves mid - half ~ 1e-17 at k = 0: the bounds are pinned to the point there
+    lo = np.where(k <= 0, 0.0, np.clip(np.minimum(mid - half, p), 0.0, 1.0))
+    hi = np.where(k >= n, 1.0, np.clip(np.maximum(mid + half, p), 0.0, 1.0))
     return np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan)
 
 

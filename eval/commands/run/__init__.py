@@ -70,7 +70,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="where detectors run: cpu, cuda, cuda:N (batches move there; scoring stays on "
         "the CPU; default: cpu)",
     )
-    p.add_argument("--n", type=int, default=None, help="images per dataset (default: per dataset)")
+    p.add_argument(
+        "--n",
+        type=int,
+        default=None,
+        help="images per dataset without its own n= option (sim-scenes?n=16); "
+        "default: sim-chips 64, sim-scenes 4, files all",
+    )
     p.add_argument("--batch-size", type=int, default=16, help="images per detector call")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated datasets")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/run-*)")

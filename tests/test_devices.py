@@ -1,0 +1,104 @@
+"""The library and the evaluator on every available device, against the CPU.
+
+On a machine without CUDA only ``cpu`` is tested (the test logic and API stay exercised:
+every comparison is then CPU against CPU); where CUDA is present, ``cuda`` runs too and
+these are the GPU checks: every window CFAR, every speckle filter, the region CFAR (tensor
+parts on the device, its heap on the CPU), the imaging routines and a default evaluator run.
+
+Tolerances: detection masks are compared exactly up to pixels whose statistic lies within
+``1e-5`` (relative) of the threshold (float64 integral images summed in another order on
+the GPU may flip such a near-tie); statistics agree to ``1e-5`` relative; speckle filters
+to ``1e-4``; imaging to ``1e-3`` of the image peak (float32 FFTs in another order).
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+import torch
+
+import torchsar as ts
+import torchsar_eval as te
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+CFARS = ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "lognormal", "weibull", "gamma",
+         "k", "g0"]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def chips() -> torch.Tensor:
+    """Two 64 x 64 speckled chips with targets (gamma clutter, seeded)."""
+    return ts.simulate.chips(2, size=64, length_px=(8, 20), seed=3).image
+
+
+def _same_detection(got, want) -> None:
+    got_s, want_s = got.statistic.cpu().double(), want.statistic.double()
+    finite = torch.isfinite(want_s)
+    assert torch.equal(torch.isfinite(got_s), finite)
+    assert torch.allclose(got_s[finite], want_s[finite], rtol=1e-5, atol=1e-8)
+    thr = want.threshold.double()
+    near = ((want_s - thr).abs() <= 1e-5 * thr.abs().clamp_min(1e-12)) & finite
+    differ = got.mask.cpu() != want.mask
+    assert not (differ & ~near).any(), f"{int((differ & ~near).sum())} mask pixels differ"
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("name", CFARS)
+def test_window_cfars(name, device, chips):
+    fn = getattr(ts.cfar, name)
+    want = fn(chips)
+    got = fn(chips.to(device))
+    assert got.mask.device.type == device and got.statistic.device.type == device
+    _same_detection(got, want)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("name", sorted(ts.speckle.FILTERS))
+def test_speckle_filters(name, device, chips):
+    fn = ts.speckle.FILTERS[name]
+    want = fn(chips)
+    got = fn(chips.to(device))
+    assert got.device.type == device
+    assert torch.allclose(got.cpu(), want, rtol=1e-4, atol=1e-6 * float(want.abs().max()))
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_region_cfar(device, chips):
+    want = ts.region.region_cfar(chips)
+    got = ts.region.region_cfar(chips.to(device))
+    assert got.statistic.device.type == device
+    _same_detection(got, want)
+    assert torch.equal(got.labels.cpu(), want.labels)
+
+
+def _close_images(got: torch.Tensor, want: torch.Tensor) -> None:
+    peak = float(want.abs().max())
+    assert got.device.type in DEVICES
+    assert float((got.cpu() - want).abs().max()) <= 1e-3 * peak
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_imaging(device):
+    scene, _ = ts.imaging.point_scene(2, size=(32, 32), points=6, seed=1)
+    g = ts.imaging.fft2c(scene[:, 0])  # (B, M, K) phase history
+    g_err = ts.imaging.apply_phase_error(g, ts.imaging.quadratic_phase_error(2, 32, seed=2))
+    on = g_err.to(device)
+    _close_images(ts.imaging.lp_image(on, max_iter=5), ts.imaging.lp_image(g_err, max_iter=5))
+    got = ts.imaging.sparse_autofocus(on, max_iter=5)
+    want = ts.imaging.sparse_autofocus(g_err, max_iter=5)
+    _close_images(got.image, want.image)
+    _close_images(ts.imaging.pga(ts.imaging.ifft2c(on)[:, None]).image,
+                  ts.imaging.pga(ts.imaging.ifft2c(g_err)[:, None]).image)  # fmt: skip
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_default_run_gives_the_same_tables(device):
+    dets = ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "region"]
+    if device == "cpu":  # CPU against CPU only checks that the option is honoured
+        dets = ["ca", "region"]
+    want = te.evaluate("sim-chips", dets, n=6, progress=False)
+    got = te.evaluate("sim-chips", dets, n=6, progress=False,
+                      execution=te.Execution(device=device))  # fmt: skip
+    for table in ("summary", "froc", "pr", "breakdown"):
+        pd.testing.assert_frame_equal(getattr(got, table), getattr(want, table),
+                                      check_exact=False, rtol=1e-6)  # fmt: skip
