@@ -207,9 +207,7 @@ class _Planes:
         self.image, self.gt, self.obj, self.at_op, self.info = image, gt, obj, at_op, info
         self.channels = gt.ids.shape[0] // max(1, int(image.shape[0])) if image is not None else 1
 
-    def _plane_image(self, p: int, ri: np.ndarray, ci: np.ndarray) -> np.ndarray | None:
-        """Plane ``p``'s intensity at rows ``ri`` and columns ``ci`` (float64), or ``None``
-        without images."""
+    def _plane_image(self, p: int) -> np.ndarray | None:
         img = self.image
         if img is None or getattr(img, "numel", lambda: 0)() == 0:
             return None
@@ -217,7 +215,7 @@ class _Planes:
         b, ch = divmod(p, c)
         x = img[b]
         x = x[ch] if x.shape[0] == c else x.abs().mean(0)
-        return x.detach().cpu().numpy()[np.ix_(ri, ci)].astype(np.float64, copy=False)
+        return x.detach().cpu().numpy().astype(np.float64, copy=False)
 
     def case(self, k: int, box, score: float, area: int, cls: str, planes: np.ndarray,
              own: str):  # fmt: skip
@@ -254,12 +252,12 @@ class _Planes:
             focus = self.gt.ids[p][np.ix_(ri, ci)] == k + 1
         masks |= np.where(focus, FOCUS, 0).astype(np.uint8)
         masks[~inside] &= OUTSIDE
-        x = self._plane_image(p, ri, ci)
+        x = self._plane_image(p)
         if x is None:
             crop = np.full((CROP, CROP), np.nan)
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
-                crop = 10 * np.log10(np.maximum(x, 1e-30))
+                crop = 10 * np.log10(np.maximum(x[np.ix_(ri, ci)], 1e-30))
             crop[~inside] = np.nan
         info = {"image": self.info[p].key, "row": round(cr, 1), "col": round(cc, 1),
                 "score": score if math.isfinite(score) else None, "area": area,
@@ -275,8 +273,6 @@ class _Planes:
             return (rr[:, None] - r) ** 2 + (cs[None, :] - c) ** 2 <= rad**2
         if obj.geometry == "box":
             return _in_box(obj.box[d], rr, cs)
-        if obj.labels is not None:  # the crop of the label map, not the whole plane's mask
-            return obj.labels[int(obj.plane[d])][np.ix_(ri, ci)] == int(d) + 1
         return obj.mask_of(int(d))[np.ix_(ri, ci)]
 
 
