@@ -32,7 +32,19 @@ _TERMS = [
     ("pd_at_F_fa_per_image", "FROC read at F false alarms per image: best recall with at "
      "most F false alarms per image, objects ranked by score"),
     ("pauc", "mean recall over 0-1 false alarms per image (area under the FROC, normalised)"),
-    ("X_lo, X_hi", "95 % Poisson-bootstrap interval over images"),
+    ("X_lo, X_hi", "95 % interval over images, from a Poisson bootstrap that resamples whole "
+     "images (the targets of one image stay together): for precision, recall, f1, fom, "
+     "ap50, pd_at_F_fa_per_image and pauc, Jeffreys' interval on the effective count (the "
+     "count divided by the design effect the bootstrap's variance shows, shrunk by "
+     "(z/t)² for few images; Clopper-Pearson's bound at 0 and at 1, so never zero width), "
+     "f1, ap50, pd_at_F and pauc centred on the bootstrap's bias-corrected point; for "
+     "false_alarms_per_image, Garwood's exact Poisson interval on the effective number of "
+     "images (fa_per_km2: the same per km²). No interval: ap50_95 (not resampled), pixel "
+     "pd/pfa, mean_iou, fragmentation, length_score (descriptive). Coverage measured on "
+     "simulated data: README"),
+    ("interval_note", "what to know about a row's intervals: fewer than 10 resampling "
+     "units (the level rests on the Student factor), a metric without an interval and why, "
+     "bootstrap replicates where a metric was undefined (left out of the variance)"),
     ("mean_iou, fragmentation", "mean IoU of the matched pairs; objects touching each "
      "found target"),
     ("ms_per_image, object_ms_per_image", "detector time (incl. despeckling); object "
@@ -61,9 +73,11 @@ _FILES = [
      "(boxes: intersecting; distance rule: within the tolerance). Misses by size bin and "
      "SCR bin"),
     ("paired.csv", "each detector minus the dataset's best by F1 (`reference`) in F1, recall, "
-     "Pd at 1 false alarm per image and AP50, with the 95 % interval of the paired "
-     "bootstrap (every detector's replicates resample the same images, or groups with "
-     "--bootstrap-unit group); `significant`: the interval excludes 0"),
+     "Pd at 1 false alarm per image and AP50, with a 95 % interval: the two detectors' own "
+     "intervals (as in the summary) combined by square-and-add with the correlation of "
+     "their paired bootstrap replicates (every detector's replicates resample the same "
+     "images, or groups with --bootstrap-unit group); exactly 0 where the two agree on the "
+     "sample and on every replicate; `significant`: the interval excludes 0"),
 ]  # fmt: skip
 
 
@@ -94,6 +108,10 @@ def glossary(summary: pd.DataFrame, scoring) -> str:
     for k, v in _TERMS:
         if unit == "group" and k == "X_lo, X_hi":
             v = v.replace("over images", "over groups of images (meta group)")
+            v = v.replace(
+                "resamples whole images (the targets of one image stay together)",
+                "resamples whole groups (the images of one group stay together)",
+            )
         lines.append(f"| {k} | {v} |")
     lines += ["", "| file | meaning |", "|---|---|"]
     lines += [f"| `{k}` | {v} |" for k, v in _FILES]

@@ -80,7 +80,7 @@ class Scoring:
 
     rules: ObjectRules = DEFAULT_RULES
     matching: Matching = DEFAULT_MATCH
-    replicates: int = 100
+    replicates: int = 200
     seed: int = 0
     instances: str = "auto"
     coco_compatible: bool = False

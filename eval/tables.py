@@ -7,7 +7,7 @@ import pandas as pd
 
 from torchsar.metrics.curves import RECALL_POINTS, suffix
 from torchsar.metrics.object_state import operating_point
-from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals
+from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals, side
 from torchsar_eval.result import DetectorResult
 
 __all__ = [
@@ -39,6 +39,11 @@ __all__ = [
 ]
 
 HEADLINE = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image"]
+INTERVALS = [*HEADLINE, "false_alarms_per_image", "fa_per_km2", "fom", "ap50_95",
+             "pd_at_0.1_fa_per_image", "pd_at_10_fa_per_image", "pauc"]  # fmt: skip
+"""The summary columns with ``_lo`` / ``_hi`` bounds (NaN with the reason in
+``interval_note`` where there is none)."""
+_STATE_NAME = {"false_alarms_per_image": "fa_per_image"}
 SUMMARY_COLUMNS = [
     "dataset",
     "detector",
@@ -66,7 +71,8 @@ SUMMARY_COLUMNS = [
     "pauc",
     "fa_per_km2",
     "length_score",
-    *[f"{m}_{end}" for m in HEADLINE for end in ("lo", "hi")],
+    *[f"{m}_{end}" for m in INTERVALS for end in ("lo", "hi")],
+    "interval_note",
     "score_threshold",
 ]
 CONSOLE_COLUMNS = ["dataset", "detector", "images", "pd_pixel", "pfa_pixel", "tp", "fp", "fn",
@@ -113,9 +119,31 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
         "score_threshold": r.objects.score_at(r.at),
     }
-    for k in HEADLINE:
-        row[f"{k}_lo"], row[f"{k}_hi"] = ci.get(k, (float("nan"), float("nan")))
+    for k in INTERVALS:
+        iv = ci.get(_STATE_NAME.get(k, k))
+        row[f"{k}_lo"], row[f"{k}_hi"] = (nan, nan) if iv is None else (iv.lo, iv.hi)
+    row["interval_note"] = interval_note(ci, r.objects.replicates)
     return row
+
+
+def interval_note(ci: dict, replicates: int) -> str:
+    """What a summary row's intervals need said: no bootstrap, too few resampling units
+    (once), metrics without an interval and why, and replicates where metrics were
+    undefined (grouped by count)."""
+    if not replicates:
+        return "no intervals (bootstrap off)"
+    notes: list[str] = []
+    undefined: dict[int, list[str]] = {}
+    for k, iv in ci.items():
+        if iv.method == "none" and iv.note:
+            notes.append(f"{k}: {iv.note}")
+        elif iv.note and iv.note not in notes:
+            notes.insert(0, iv.note)
+        if iv.undefined:
+            undefined.setdefault(iv.undefined, []).append(k)
+    for count, names in sorted(undefined.items(), reverse=True):
+        notes.append(f"{count}/{replicates} replicates undefined: {', '.join(names)}")
+    return "; ".join(notes)
 
 
 def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
@@ -272,17 +300,18 @@ def _reference(metrics: list[dict]) -> int | None:
 def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) -> pd.DataFrame:
     """Each detector against the dataset's best (by F1): the difference ``detector -
     reference`` of F1 and recall at each one's operating point, Pd at 1 false alarm per
-    image and AP50, with the percentile interval of the paired bootstrap (every detector's
-    replicate ``r`` resamples the same images or groups); ``significant`` when the interval
-    excludes 0 (NaN intervals without replicates)."""
+    image and AP50, with its paired interval (:mod:`torchsar.metrics.paired`: the two
+    detectors' own intervals and their correlation over the paired bootstrap, whose
+    replicate ``r`` resamples the same images or groups for every detector);
+    ``significant`` when the interval excludes 0 (NaN intervals without replicates)."""
     rows = []
     for ds, rs in results.items():
-        states = [(r.objects.metrics(r.at), r.objects.replicate_metrics(r.at)) for r in rs]
-        ref = _reference([m for m, _ in states])
+        states = [side(r.objects, r.at, level) for r in rs]
+        ref = _reference([m for m, _, _ in states])
         for k, r in enumerate(rs):
             if ref is None or k == ref:
                 continue
-            diffs = difference_intervals(states[k], states[ref], level)
+            diffs = difference_intervals(states[k], states[ref])
             for metric in PAIRED_METRICS:
                 d, lo, hi = diffs[metric]
                 rows.append([ds, r.detector.name, rs[ref].detector.name, metric, d, lo, hi,
@@ -329,14 +358,22 @@ HEADLINE_SHOWN = ["dataset", "detector", "images", "targets", "tp", "fp", "fn", 
 
 
 def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """The compact table of ``summary.md``: counts, then the headline metrics with their
-    bootstrap intervals as ``value [lo, hi]``."""
+    """The compact table of ``summary.md``: counts, then the headline metrics and false
+    alarms per image with their intervals as ``value [lo, hi]``, and the intervals' note."""
     out = summary[HEADLINE_SHOWN].copy()
-    for m in HEADLINE:
-        out[m] = [f"{v:.3g} [{lo:.3g}, {hi:.3g}]" for v, lo, hi in
+    for m in [*HEADLINE, "false_alarms_per_image"]:
+        out[m] = [_with_interval(v, lo, hi) for v, lo, hi in
                   zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)]  # fmt: skip
     out["ap50_95"] = summary["ap50_95"]
+    out["interval_note"] = summary["interval_note"]
     return out
+
+
+def _with_interval(v: float, lo: float, hi: float) -> str:
+    """``value [lo, hi]``, or the value alone without an interval."""
+    if lo != lo or hi != hi:
+        return f"{v:.3g}"
+    return f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
 
 
 def markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:

@@ -11,6 +11,7 @@ from torchsar import (
     sar,
     simulate,
     speckle,
+    tiling,
     windows,
 )
 
@@ -28,5 +29,6 @@ __all__ = [
     "sar",
     "simulate",
     "speckle",
+    "tiling",
     "windows",
 ]

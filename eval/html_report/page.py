@@ -301,8 +301,9 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
                       f"{rules.get('units', 'px')}"))  # fmt: skip
     boot = scoring.get("bootstrap") or {}
     if boot:
-        facts.append(("intervals", f"95 % Poisson bootstrap over images, "
-                      f"{boot.get('replicates')} replicates" if boot.get("replicates")
+        facts.append(("intervals", f"95 %, effective-count Jeffreys / Poisson from a Poisson "
+                      f"bootstrap over images, {boot.get('replicates')} replicates"
+                      if boot.get("replicates")
                       else "none (bootstrap off)"))  # fmt: skip
     cal = opts.get("calibration")
     facts.append(("operating point", f"calibrated on {cal.get('fraction')} of the images for "

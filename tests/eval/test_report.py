@@ -163,7 +163,7 @@ def test_the_dataset_card(run, tmp_path):
     out, _ = run
     text = (out / "report.html").read_text()
     for fact in ("intensity (power), used as is", "128 × 128 px", "0.3 × 0.3 m",
-                 "vehicle (4)", "prescreening rule", "100 replicates",
+                 "vehicle (4)", "prescreening rule", "200 replicates",
                  "only 4 targets: intervals are wide"):  # fmt: skip
         assert fact in text, fact
     assert "design Pfa is not meaningful" not in text

@@ -188,24 +188,29 @@ def test_ap_of_many_rows_equals_ap_row_by_row(seed, rows, n_gt):
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
 
 
-def test_intervals_equal_the_replicate_by_replicate_metrics():
-    """The vectorised bootstrap intervals are the percentiles of each replicate's metrics
+def test_replicate_metrics_equal_the_scalar_helpers_replicate_by_replicate():
+    """The vectorised replicate metrics behind the intervals equal each replicate's metrics
     computed one by one with the scalar helpers."""
-    from torchsar.metrics.bootstrap import interval
     from torchsar.metrics.object_state import operating_point
 
     inst, ignore, stat = _scene(np.random.default_rng(11), n_img=6)
     state, _ = _state(inst, ignore, stat, Matching(kind="centroid"), replicates=50)
     b, at = state.boot, OP_BIN
-    reps = {k: [] for k in ("precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image")}
+    got = state.replicate_metrics()
+    assert set(got) == {"precision", "recall", "f1", "fom", "fa_per_image", "ap50",
+                        "pd_at_0.1_fa_per_image", "pd_at_1_fa_per_image",
+                        "pd_at_10_fa_per_image", "pauc"}  # fmt: skip
     for r in range(50):
         n_gt, images = int(b["n_gt"][r]), int(b["images"][r])
         op = operating_point(b["tp"][r], b["fp"][r], n_gt, images, at)
         fa, pd = froc(b["tp"][r], b["fp"][r], n_gt, images)
-        for k in ("precision", "recall", "f1"):
-            reps[k].append(op[k])
-        reps["ap50"].append(coco_ap(b["tp50"][r], b["fp50"][r], n_gt))
-        reps["pd_at_1_fa_per_image"].append(pd_at_fa(fa, pd, 1.0) if n_gt else float("nan"))
-    got = state.intervals()
-    for k, v in reps.items():
-        assert got[k] == pytest.approx(interval(np.array(v)), nan_ok=True), k
+        nan = float("nan")
+        ref = {k: op[k] for k in ("precision", "recall", "f1")}
+        ref["fom"] = op["tp"] / (op["fp"] + n_gt) if op["fp"] + n_gt else nan
+        ref["fa_per_image"] = op["fa_per_image"]
+        ref["ap50"] = coco_ap(b["tp50"][r], b["fp50"][r], n_gt)
+        for level in (0.1, 1.0, 10.0):
+            ref[f"pd_at_{level:g}_fa_per_image"] = pd_at_fa(fa, pd, level) if n_gt else nan
+        ref["pauc"] = partial_auc(fa, pd, 1.0) if n_gt else nan
+        for k, v in ref.items():
+            assert got[k][r] == pytest.approx(v, abs=1e-12, nan_ok=True), (k, r)

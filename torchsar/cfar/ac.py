@@ -8,7 +8,7 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_int, check_probability
+from torchsar._checks import check_int, check_positive, check_probability
 from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
 from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import ca_factor
@@ -26,6 +26,7 @@ def ac(
     censor_pfa: float | None = None,
     iterations: int = 3,
     valid: Tensor | None = None,
+    clutter_mean: float | None = None,
 ) -> Detection:
     """Automatic-censoring CFAR: censor likely targets from the ring, then CA on the rest.
 
@@ -57,6 +58,10 @@ def ac(
         censor_pfa: false-alarm rate of the global pre-threshold (default: ``pfa``).
         iterations: re-estimations of the global clutter mean (>= 0).
         valid: optional bool mask of usable cells.
+        clutter_mean: the global clutter mean ``mu`` of step 1, given instead of estimated
+            from ``x`` (finite, >= 0). For ``x`` a piece of a larger image: the tiled
+            runner (:mod:`torchsar.tiling`) estimates it over the whole scene, so every tile
+            is censored as the whole image would be.
 
     Returns:
         :class:`Detection` with ``threshold = ca_factor(N, pfa)``.
@@ -82,7 +87,12 @@ def ac(
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ac")
     p_c = pfa if censor_pfa is None else check_probability(censor_pfa, "censor_pfa")
     iterations = check_int(iterations, "iterations", minimum=0)
-    mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
+    if clutter_mean is None:
+        mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
+    else:
+        given = check_positive(clutter_mean, "clutter_mean", allow_zero=True)
+        mu = x.new_full((*x.shape[:2], 1, 1), given, dtype=torch.float64)
+        thr = mu * math.log(1.0 / p_c)
     keep = x <= thr if vmask is None else vmask & (x <= thr)
     alpha = ac_threshold(
         guard=guard, train=train, pfa=pfa, censor_pfa=censor_pfa, iterations=iterations

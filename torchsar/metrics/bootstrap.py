@@ -5,7 +5,8 @@ generator seeded by ``(seed, image key)`` only. Replicate states are sums of wei
 per-image contributions, so they add up across batches, shards and workers, their size does
 not grow with the dataset, and any split gives the same intervals (Hanley & MacGibbon,
 "Creating non-parametric bootstrap samples using Poisson frequencies", Comput. Methods
-Programs Biomed. 83(1), 2006, doi:10.1016/j.cmpb.2006.04.006).
+Programs Biomed. 83(1), 2006, doi:10.1016/j.cmpb.2006.04.006). The intervals built on the
+replicates are in :mod:`torchsar.metrics.intervals`.
 """
 
 from __future__ import annotations
@@ -46,7 +47,9 @@ def _weights(key: str, replicates: int, seed: int) -> np.ndarray:
 
 
 def interval(values: np.ndarray, level: float = 0.95) -> tuple[float, float]:
-    """Percentile interval of replicate values (NaN replicates left out)."""
+    """Plain percentile interval of replicate values (NaN replicates left out). Not what the
+    tables report (zero width at a perfect count, too narrow at small samples): see
+    :mod:`torchsar.metrics.intervals`; kept to compare against."""
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     if v.size == 0:

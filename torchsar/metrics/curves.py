@@ -18,6 +18,7 @@ __all__ = [
     "froc",
     "interpolated_precision",
     "partial_auc",
+    "partial_auc_rows",
     "pd_at_fa",
     "score_bins",
     "suffix",
@@ -154,3 +155,18 @@ def partial_auc(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> float:
     xs = np.concatenate([fa[fa < limit], [limit]])
     held = np.array([pd_at_fa(fa, pd, x) for x in xs[:-1]])
     return float(np.sum(held * np.diff(xs)) / limit) if xs.size > 1 else 0.0
+
+
+def partial_auc_rows(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> np.ndarray:
+    """:func:`partial_auc` of every row of FROC points ``(R, K)`` at once (each row's false
+    alarms non-decreasing from its first point, e.g. bootstrap replicates).
+
+    Example:
+        >>> fa = np.array([[0.0, 0.5, 2.0]]); pd = np.array([[0.0, 0.4, 0.8]])
+        >>> partial_auc_rows(fa, pd).tolist() == [partial_auc(fa[0], pd[0])]
+        True
+    """
+    fa, pd = np.atleast_2d(fa), np.atleast_2d(pd)
+    end = np.minimum(np.hstack([fa[:, 1:], np.full((fa.shape[0], 1), limit)]), limit)
+    width = np.where(fa < limit, np.maximum(end - fa, 0.0), 0.0)
+    return np.nansum(pd * width, axis=1) / limit

@@ -28,18 +28,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
-from torchsar.metrics.bootstrap import interval, poisson_weights
+from torchsar.metrics.bootstrap import poisson_weights
 from torchsar.metrics.curves import (
     OP_BIN,
     SCORE_GRID,
     coco_ap_rows,
     froc,
     partial_auc,
+    partial_auc_rows,
     pd_at_fa,
     score_bins,
     suffix,
 )
 from torchsar.metrics.distance import LengthErrors
+from torchsar.metrics.intervals import Interval, headline_intervals
 from torchsar.metrics.matching import COCO_IOUS, GroundTruth
 from torchsar.metrics.ranked import RankedDetections, plane_ranks
 from torchsar.objects import Objects
@@ -180,6 +182,8 @@ class ObjectState:
     lengths: LengthErrors = field(default_factory=LengthErrors)
     keys: dict[str, KeyCounts] = field(default_factory=dict)
     boot: dict[str, np.ndarray] = field(default_factory=dict)
+    grouped: bool = False
+    """Whether some planes were resampled by a group key (:attr:`ImageInfo.boot_key`)."""
 
     def __post_init__(self) -> None:
         if len(self.size_names) != len(self.size_edges) + 1:
@@ -276,6 +280,7 @@ class ObjectState:
         return names[size_bin(area, self.size_edges)]
 
     def _update_boot(self, m, obj, gt, info, bins) -> None:
+        self.grouped = self.grouped or any(i.boot_key for i in info)
         w = poisson_weights([i.boot_key or i.key for i in info], self.replicates, self.seed)
         w = w.astype(np.int64)  # once for the four histograms (integer sums: exact)
         for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
@@ -310,7 +315,7 @@ class ObjectState:
         return ObjectState(
             replicates=self.replicates, seed=self.seed, size_edges=self.size_edges,
             size_names=self.size_names, thresholded=declared, ap_kind=kind,
-            threshold=threshold, keys=keys,
+            threshold=threshold, keys=keys, grouped=self.grouped or other.grouped,
             boot={k: self.boot[k] + other.boot[k] for k in self.boot}, **summed,
         )  # fmt: skip
 
@@ -355,18 +360,28 @@ class ObjectState:
             return np.full(len(COCO_IOUS), np.nan)
         return self.ranked.ap(self.n_gt)
 
-    def intervals(
-        self, at: int | None = None, level: float = 0.95
-    ) -> dict[str, tuple[float, float]]:
-        """Bootstrap percentile intervals of the headline metrics (every replicate at
-        once)."""
-        reps = self.replicate_metrics(at)
-        return {k: interval(v, level) for k, v in reps.items()}
+    @property
+    def units(self) -> int:
+        """Resampling units of the bootstrap: the images, or (planes resampled by group)
+        the groups plus the images without one."""
+        if not self.grouped:
+            return self.images
+        groups = [k for name, k in self.keys.items() if name.startswith("group:")]
+        return len(groups) + self.images - sum(k.images for k in groups)
+
+    def intervals(self, at: int | None = None, level: float = 0.95) -> dict[str, Interval]:
+        """Intervals of the headline metrics at score bin ``at`` (see
+        :func:`~torchsar.metrics.intervals.headline_intervals`)."""
+        km2 = self.area_mm2 / 1e12
+        per_km2 = self.images / km2 if self.images_km2 == self.images and km2 > 0 else None
+        return headline_intervals(self.metrics(at), self.replicate_metrics(at), self.units,
+                                  self.n_gt, level, per_km2)  # fmt: skip
 
     def replicate_metrics(self, at: int | None = None) -> dict[str, np.ndarray]:
         """The headline metrics of every bootstrap replicate (``(replicates,)`` each, NaN
-        where undefined): ``precision``, ``recall``, ``f1`` at score bin ``at``, ``ap50``
-        and ``pd_at_1_fa_per_image``."""
+        where undefined): ``precision``, ``recall``, ``f1``, ``fom`` and
+        ``fa_per_image`` at score bin ``at``, ``ap50``, Pd at each of :data:`FA_LEVELS`
+        false alarms per image and ``pauc``."""
         at = self.op_bin if at is None else at
         b, nan = self.boot, float("nan")
         n_gt, images = b["n_gt"].astype(np.float64), b["images"].astype(np.float64)
@@ -376,13 +391,18 @@ class ObjectState:
                 "precision": np.where(t + f > 0, t / (t + f), nan),
                 "recall": np.where(n_gt > 0, t / n_gt, nan),
                 "f1": np.where(t + f + n_gt > 0, 2 * t / (2 * t + f + (n_gt - t)), nan),
+                "fom": np.where(f + n_gt > 0, t / (f + n_gt), nan),
+                "fa_per_image": np.where(images > 0, f / images, nan),
             }
-            fa = suffix(b["fp"]) / np.maximum(images, 1)[:, None]
-            pd = suffix(b["tp"]) / n_gt[:, None]
+            zero = np.zeros((n_gt.size, 1))
+            fa = np.hstack([zero, suffix(b["fp"])[:, ::-1]]) / np.maximum(images, 1)[:, None]
+            pd = np.hstack([zero, suffix(b["tp"])[:, ::-1]]) / n_gt[:, None]
         reps["ap50"] = (coco_ap_rows(b["tp50"], b["fp50"], n_gt) if self.ap_kind != "none"
                         else np.full(n_gt.size, nan))  # fmt: skip
-        best = np.where(fa <= 1.0, pd, 0.0).max(axis=1, initial=0.0)
-        reps["pd_at_1_fa_per_image"] = np.where(n_gt > 0, best, nan)
+        for level in FA_LEVELS:
+            best = np.where(fa <= level, pd, 0.0).max(axis=1, initial=0.0)
+            reps[f"pd_at_{level:g}_fa_per_image"] = np.where(n_gt > 0, best, nan)
+        reps["pauc"] = np.where(n_gt > 0, partial_auc_rows(fa, pd, 1.0), nan)
         return reps
 
     def score_at(self, at: int) -> float:

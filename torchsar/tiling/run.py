@@ -1,0 +1,136 @@
+"""Run a window operator over a scene tile by tile, batched, and stitch the cores.
+
+Memory rule (window CFARs and speckle filters): a batch holds ``batch`` windows of
+``(tile + 2 halo)^2`` pixels; the operator's own work per window is strip-bounded, so the
+peak is about ``c * batch * (tile + 2 * halo)^2`` bytes over the interpreter and torch
+(about 0.3 GB), with ``c`` around 60 for the ring CFARs and speckle filters (the window, its
+float64 statistic and the outputs) and about 120 for OS-CFAR (its ring order statistic).
+Defaults (``tile=1024``, ``batch=4``, halo of a few pixels), measured on a 4096 x 4096
+memmap: 0.56 GB peak RSS for CA-CFAR, 0.81 GB for OS-CFAR, whatever the scene size;
+outputs written to a caller's array (e.g. a memmap) add nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import torch
+
+from torchsar._checks import OptionError, check_device, check_int
+from torchsar.tiling.footprint import Operator, operator, to_batch
+from torchsar.tiling.plan import Tile, batches, check_tile, plan_tiles
+from torchsar.tiling.source import Scene, as_scene
+
+__all__ = ["check_halo", "iter_tiles", "scene_clutter_mean"]
+
+DEFAULT_TILE = 1024
+DEFAULT_BATCH = 4
+
+
+def check_halo(halo: object, reach: int, name: str = "halo") -> int:
+    """``halo`` (None: ``reach``) validated: an int ``>= reach``."""
+    if halo is None:
+        return reach
+    h = check_int(halo, name, minimum=0)
+    if h < reach:
+        raise OptionError(
+            f"{name}={h} is smaller than the operator's footprint reach ({reach} px): tiles "
+            f"would not see every cell their core depends on; use {name} >= {reach} or None"
+        )
+    return h
+
+
+def check_tile_fits(tile: tuple[int, int], op_min_side: int, name: str = "tile") -> None:
+    """A tile smaller than the operator's footprint is refused (its window would hold more
+    halo than core: wasteful, and a sign of a unit mistake)."""
+    if min(tile) < op_min_side:
+        raise OptionError(
+            f"{name}={tile} is smaller than the operator's {op_min_side}x{op_min_side} "
+            f"footprint; use {name} >= {op_min_side} (default {DEFAULT_TILE})"
+        )
+
+
+def scene_clutter_mean(
+    scene: Scene, tiles: list[Tile], censor_pfa: float, iterations: int
+) -> float:
+    """AC-CFAR's global clutter mean ``mu`` over the whole scene (its step 1), streamed over
+    the tile cores: one pass for the mean, one per re-estimation (the same rule as
+    :func:`torchsar.cfar.ac.global_censor_threshold`)."""
+    q = math.log(1.0 / censor_pfa)
+    ratio_kept = 1.0 - censor_pfa * q / (1.0 - censor_pfa)
+    limit = math.inf
+    mu = 0.0
+    for it in range(iterations + 1):
+        total, count = 0.0, 0
+        for t in tiles:
+            x = scene.read(*t.core).astype(np.float64, copy=False)
+            keep = x if it == 0 else x[x <= limit]
+            total += float(keep.sum())
+            count += keep.size
+        mu = total / max(count, 1) / (1.0 if it == 0 else ratio_kept)
+        limit = mu * q
+    return mu
+
+
+def _prepared(op: Operator, scene: Scene, tiles: list[Tile]) -> Operator:
+    """``op`` with its scene-level statistics (AC: the clutter mean) filled in."""
+    if op.name != "ac" or not tiles:
+        return op
+    from torchsar._checks import check_probability
+
+    pfa = check_probability(op.options.get("pfa", 1e-3), "pfa")
+    cp = op.options.get("censor_pfa")
+    p_c = pfa if cp is None else check_probability(cp, "censor_pfa")
+    iterations = check_int(op.options.get("iterations", 3), "iterations", minimum=0)
+    return op.with_options(clutter_mean=scene_clutter_mean(scene, tiles, p_c, iterations))
+
+
+def iter_tiles(
+    scene: object,
+    detector: str | Operator,
+    *,
+    tile: int | tuple[int, int] = DEFAULT_TILE,
+    halo: int | None = None,
+    batch: int = DEFAULT_BATCH,
+    device: str | torch.device | None = None,
+    **options: object,
+) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:
+    """Run a window operator over ``scene`` tile by tile; yield each tile and its core
+    outputs (numpy, the core's shape).
+
+    Tiles sharing a window shape run together, ``batch`` per call, on ``device`` (default:
+    the CPU); the yield order is by window shape, then raster order. Every core equals the
+    same pixels of the operator run on the whole scene (masks bit for bit, statistics to
+    float rounding: the window sums are accumulated from a different origin).
+
+    Args:
+        scene: 2-D intensity scene (see :func:`~torchsar.tiling.source.as_scene`).
+        detector: a window CFAR or speckle-filter name, or an :class:`Operator`.
+        tile: core side, or ``(rows, cols)``, >= the operator's footprint side.
+        halo: pixels read around each core (default and minimum: the footprint reach).
+        batch: windows per operator call (>= 1); the results do not depend on it.
+        device: where the operator runs (None: CPU); outputs come back as numpy.
+        **options: the operator's options (``guard``, ``train``, ``pfa``, ``window``, ...).
+
+    Raises:
+        OptionError: bad ``tile``, ``halo``, ``batch``, ``device`` or operator option.
+        InputTypeError, ShapeError, InputValueError, WindowSizeError: bad scene.
+    """
+    sc = as_scene(scene)
+    op = detector if isinstance(detector, Operator) else operator(detector, **options)
+    if isinstance(detector, Operator) and options:
+        op = op.with_options(**options)
+    size = check_tile(tile)
+    check_tile_fits(size, op.min_side)
+    hal = check_halo(halo, op.reach)
+    batch = check_int(batch, "batch", minimum=1)
+    dev = check_device(device)
+    tiles = plan_tiles(sc.shape, size, hal, op.min_side)
+    op = _prepared(op, sc, tiles)
+    for group in batches(tiles, batch):
+        x = to_batch([sc.read(*t.window) for t in group], dev)
+        out = op.apply(x)
+        for i, t in enumerate(group):
+            yield t, {k: v[i, 0][t.inner].cpu().numpy() for k, v in out.items()}
