@@ -27,7 +27,8 @@ from torchsar.metrics.curves import score_bins
 from torchsar.metrics.error_types import ErrorCounts, false_alarm_types
 from torchsar.metrics.object_state import normalise
 from torchsar.metrics.scr import ScrCounts
-from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
+from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar.objects.discriminate import own_regions
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import Gallery
@@ -260,10 +261,7 @@ class DetectorResult:
             statistic, threshold = view[0], 1.0 if out.threshold is not None else -np.inf
         else:
             if own and out.labels is not None:
-                score = normalised_score(out.statistic, out.threshold)
-                b, c, h, w = score.shape
-                return Objects.from_labels(out.labels.reshape(b * c, h, w).numpy(),
-                                           score.reshape(b * c, h, w).numpy())  # fmt: skip
+                return own_regions(out.statistic, out.threshold, out.labels)
             statistic, threshold = out.statistic, out.threshold
         rules = self.scoring.rules
         area = pixel_areas(batch) if rules.units == "m2" else None

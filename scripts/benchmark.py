@@ -1,15 +1,18 @@
 """Speed ratios of torchsar against reference implementations, measured in the same run.
 
-Every file in ``scripts/benchmarks/`` defines ``cases() -> [(name, ours, reference), ...]``.
-Each pair is timed on 1 thread, A/B interleaved (one warm-up each, then ``--repeat`` rounds
-of ours, reference, ours, ...), so both see the same machine load; the medians of wall and
-CPU (thread) time are printed with the ratio ``reference / ours`` of the medians (> 1 means
-torchsar is faster). CPU time is the fairer figure on a busy host. A reference may be an
-older implementation of ours (e.g. ``region`` and ``cfar_family`` time the compiled numba
-path against the numpy/torch path it replaces, see :mod:`torchsar._jit`).
+Every file in ``scripts/benchmarks/`` defines ``cases() -> [(name, ours, reference), ...]``,
+or is a report that measures one thing at several settings and defines ``report(n, workers,
+device) -> [row, ...]`` and ``format_rows(rows) -> str`` instead (``throughput``: images per
+second of the evaluator; run it by ``--topic``, with ``--n``, ``--workers`` and
+``--device``). Each pair is timed on 1 thread, A/B interleaved (one warm-up each, then
+``--repeat`` rounds of ours, reference, ours, ...), so both see the same machine load; the
+medians of wall and CPU (thread) time are printed with the ratio ``reference / ours`` of the
+medians (> 1 means torchsar is faster). CPU time is the fairer figure on a busy host. A
+reference may be an older implementation of ours (e.g. ``region`` and ``cfar_family`` time
+the compiled numba path against the numpy/torch path it replaces, see :mod:`torchsar._jit`).
 
 Usage: ``python scripts/benchmark.py [--topic FILE_STEM] [--only SUBSTRING] [--repeat N]
-[--csv PATH]``
+[--csv PATH] [--n N] [--workers W ...] [--device DEVICE]``
 """
 
 from __future__ import annotations
@@ -56,14 +59,41 @@ def interleaved(
     return median("ours"), median("ref")
 
 
+def load_topic(path: Path):
+    """The benchmark module ``path`` (a file of ``scripts/benchmarks/``)."""
+    spec = importlib.util.spec_from_file_location(f"bench_{path.stem}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def load_cases(only: str | None, topic: str | None = None) -> list[tuple[str, Callable, Callable]]:
+    """The A/B cases of every topic (or of ``topic``) whose name contains ``only``; report
+    topics (without ``cases``) are left out."""
     out = []
     for path in sorted((HERE / "benchmarks").glob(f"{topic or '*'}.py")):
-        spec = importlib.util.spec_from_file_location(f"bench_{path.stem}", path)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        out += [c for c in mod.cases() if only is None or only in c[0]]
+        mod = load_topic(path)
+        if hasattr(mod, "cases"):
+            out += [c for c in mod.cases() if only is None or only in c[0]]
     return out
+
+
+def run_report(mod, n: int | None, workers: list[int] | None, device: str | None,
+               csv: Path | None) -> int:  # fmt: skip
+    """Run a report topic (a module with ``report``), print its table, optionally write it
+    as CSV."""
+    kwargs = {"device": device}
+    if n is not None:
+        kwargs["n"] = n
+    if workers:
+        kwargs["workers"] = tuple(workers)
+    rows = mod.report(**kwargs)
+    print(mod.format_rows(rows), flush=True)
+    if csv:
+        import pandas as pd
+
+        pd.DataFrame(rows).to_csv(csv, index=False)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,8 +102,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", help="run cases whose name contains this substring")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
+    p.add_argument("--n", type=int, help="images of a report topic (throughput: default 256)")
+    p.add_argument("--workers", type=int, nargs="+", help="worker counts of a report topic "
+                   "(throughput: default 1 2)")  # fmt: skip
+    p.add_argument("--device", help="where a report topic's detectors run (cpu, cuda, ...)")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
+    path = HERE / "benchmarks" / f"{args.topic}.py"
+    if args.topic and path.is_file() and hasattr(mod := load_topic(path), "report"):
+        return run_report(mod, args.n, args.workers, args.device, args.csv)
     rows = []
     for name, ours, ref in load_cases(args.only, args.topic):
         (t_ours, c_ours), (t_ref, c_ref) = interleaved(ours, ref, args.repeat)

@@ -14,7 +14,6 @@ from torchsar.metrics.matching import (
     box_iou,
     first_reach,
     greedy_match_planes,
-    mask_overlaps,
     pair_box_iou,
 )
 from torchsar.objects import Objects
@@ -54,16 +53,6 @@ def by_plane(plane: np.ndarray, n_planes: int) -> list[np.ndarray]:
     return [order[cuts[p] : cuts[p + 1]] for p in range(n_planes)]
 
 
-def _ignore_boxes(ignore: np.ndarray) -> np.ndarray:
-    """Bounding box of each plane's ignore pixels ``(N, 4)`` (zero box when none)."""
-    rows, cols = ignore.any(axis=2), ignore.any(axis=1)
-    out = np.zeros((ignore.shape[0], 4))
-    for p in np.flatnonzero(rows.any(axis=1)):
-        r, c = np.flatnonzero(rows[p]), np.flatnonzero(cols[p])
-        out[p] = (r[0], c[0], r[-1] + 1, c[-1] + 1)
-    return out
-
-
 def _centroid_quality(obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray, m: Matching):
     """Prescreening quality matrix ``(len(d), len(g))``, see :func:`_centroid_pairs`."""
     return _centroid_pairs(obj.centroid[d][:, None, :], obj.box[d][:, None, :],
@@ -92,22 +81,18 @@ def _centroid_pairs(cen: np.ndarray, db: np.ndarray, gb: np.ndarray, m: Matching
 
 class Overlaps:
     """Pixel intersections of the batch's objects with its instances and ignore pixels
-    (objects with masks; a box or a point covers no pixel here, see :func:`_touching`)."""
+    (objects with masks, from their pixel lists; a box or a point covers no pixel here, see
+    :func:`_touching`)."""
 
     def __init__(self, obj: Objects, gt: GroundTruth) -> None:
         n_d, n_g = len(obj), len(gt)
-        if obj.labels is not None:  # non-overlapping objects: one label map
-            self.d, self.g, self.inter = mask_overlaps(obj.labels, n_d, gt.ids, n_g)
-            lab = obj.labels.reshape(-1)
-            self.ignored = np.bincount(lab[gt.ignore.reshape(-1)], minlength=n_d + 1)[1:]
-        else:  # pixel lists, possibly overlapping (none for boxes and points)
-            owner, idx = obj.pixel_lists()
-            gid = gt.ids.reshape(-1)[idx]
-            both = gid > 0
-            key = owner[both] * (n_g + 1) + gid[both]
-            pairs, self.inter = np.unique(key, return_counts=True)
-            self.d, self.g = pairs // (n_g + 1), pairs % (n_g + 1) - 1
-            self.ignored = np.bincount(owner[gt.ignore.reshape(-1)[idx]], minlength=n_d)
+        owner, idx = obj.pixel_lists()  # (none for boxes and points)
+        gid = gt.ids.reshape(-1)[idx]
+        both = gid > 0
+        key = owner[both] * (n_g + 1) + gid[both]
+        pairs, self.inter = np.unique(key, return_counts=True)
+        self.d, self.g = pairs // (n_g + 1), pairs % (n_g + 1) - 1
+        self.ignored = np.bincount(owner[gt.ignore.reshape(-1)[idx]], minlength=n_d)
         self.touch = np.bincount(self.g, minlength=n_g) if obj.has_masks else _touching(obj, gt)
 
     def mask_iou(self, obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray):
@@ -307,7 +292,7 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     op = np.full(n_d, -1, dtype=np.int64)
     op_iou = np.zeros(n_d)
     ov = Overlaps(obj, gt)
-    ig_box = _ignore_boxes(gt.ignore)
+    ig_box = gt.ignore_boxes
     single = np.bincount(gt.plane, minlength=obj.planes) <= 1
     _match_single_planes(obj, gt, ov, ig_box, rule, single, (ap, op, op_iou))
     _match_multi_planes(obj, gt, ov, ig_box, rule, np.flatnonzero(~single), (ap, op, op_iou))

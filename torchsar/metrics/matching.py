@@ -23,6 +23,7 @@ metres with each image's pixel spacing); see :mod:`torchsar.metrics.points`.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -37,6 +38,7 @@ __all__ = [
     "greedy_match",
     "greedy_match_planes",
     "ground_truth",
+    "ignore_boxes",
     "mask_overlaps",
     "pair_box_iou",
 ]
@@ -142,6 +144,28 @@ class GroundTruth:
 
     def __len__(self) -> int:
         return int(self.plane.shape[0])
+
+    @cached_property
+    def ignore_boxes(self) -> np.ndarray:
+        """Bounding box ``(r0, c0, r1, c1)`` of each plane's ignore pixels ``(N, 4)`` (zero
+        box when none), computed once for every detector matched against these."""
+        return ignore_boxes(self.ignore)
+
+
+def ignore_boxes(ignore: np.ndarray) -> np.ndarray:
+    """Bounding box of each plane's ignore pixels ``(N, 4)`` (zero box when none).
+
+    Example:
+        >>> ig = np.zeros((2, 4, 4), bool); ig[1, 1:3, 2] = True
+        >>> ignore_boxes(ig).tolist()
+        [[0.0, 0.0, 0.0, 0.0], [1.0, 2.0, 3.0, 3.0]]
+    """
+    rows, cols = ignore.any(axis=2), ignore.any(axis=1)
+    out = np.zeros((ignore.shape[0], 4))
+    for p in np.flatnonzero(rows.any(axis=1)):
+        r, c = np.flatnonzero(rows[p]), np.flatnonzero(cols[p])
+        out[p] = (r[0], c[0], r[-1] + 1, c[-1] + 1)
+    return out
 
 
 def ground_truth(

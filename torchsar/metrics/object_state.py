@@ -112,13 +112,14 @@ def _iou_units(bins: np.ndarray, iou: np.ndarray) -> np.ndarray:
 
 def _add_weighted(out: np.ndarray, w: np.ndarray, plane: np.ndarray, bins: np.ndarray) -> None:
     """``out[r, bins[i]] += w[r, plane[i]]`` for every object ``i``, as one integer product
-    ``w @ counts`` over the bins present (``counts``: objects per plane and bin)."""
+    ``w @ counts`` over the bins present (``counts``: objects per plane and bin; ``w``
+    int64)."""
     if bins.size == 0:
         return
     cols, at = np.unique(bins, return_inverse=True)
     n = w.shape[1]
     counts = np.bincount(at * n + plane, minlength=cols.size * n).reshape(cols.size, n)
-    out[:, cols] += w.astype(np.int64) @ counts.T
+    out[:, cols] += w @ counts.T
 
 
 def _planes_by_key(info: list[ImageInfo]) -> dict[str, np.ndarray]:
@@ -281,6 +282,7 @@ class ObjectState:
     def _update_boot(self, m, obj, gt, info, bins) -> None:
         self.grouped = self.grouped or any(i.boot_key for i in info)
         w = poisson_weights([i.boot_key or i.key for i in info], self.replicates, self.seed)
+        w = w.astype(np.int64)  # once for the four histograms (integer sums: exact)
         for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
                           ("tp50", m.ap[0] >= 0), ("fp50", m.ap[0] == -1)):  # fmt: skip
             _add_weighted(self.boot[name], w, obj.plane[sel], bins[sel])

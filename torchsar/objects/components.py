@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 from skimage.measure import label
 
+from torchsar import _jit
 from torchsar._checks import OptionError
 
-__all__ = ["label_components"]
+__all__ = ["label_components", "label_pixels"]
 
 
 def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarray, int]:
@@ -46,3 +47,30 @@ def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarra
     stack[:, :h] = mask.reshape(-1, h, w)
     labels, n = label(stack.reshape(-1, w), connectivity=connectivity, return_num=True)
     return labels.reshape(stack.shape)[:, :h].reshape(mask.shape).astype(np.int32), int(n)
+
+
+def label_pixels(
+    idx: np.ndarray, shape: tuple[int, int, int], connectivity: int = 2
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`label_components` of the stack ``shape`` ``(N, H, W)`` whose set pixels are
+    ``idx`` (flat indices, ascending): ``(labels, n, lab)`` with ``lab`` the label of each
+    pixel of ``idx`` (the numba kernel of :mod:`torchsar.objects._kernels` when
+    :func:`torchsar._jit.enabled`, which visits only those pixels).
+
+    Example:
+        >>> labels, n, lab = label_pixels(np.array([0, 1, 8]), (1, 3, 3), connectivity=2)
+        >>> n, lab.tolist()
+        (2, [1, 1, 2])
+    """
+    if connectivity not in (1, 2) or isinstance(connectivity, bool):
+        raise OptionError(
+            f"connectivity must be 1 (4-connected) or 2 (8-connected), got {connectivity!r}"
+        )
+    if _jit.enabled():
+        from torchsar.objects import _kernels
+
+        return _kernels.label_planes(idx, shape, connectivity)
+    mask = np.zeros(int(np.prod(shape)), bool)
+    mask[idx] = True
+    labels, n = label_components(mask.reshape(shape), connectivity)
+    return labels, n, labels.reshape(-1)[idx].astype(np.int64)

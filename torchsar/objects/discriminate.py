@@ -13,8 +13,6 @@ For a threshold ``<= 0`` (a z-score detector at ``pfa >= 0.5``) the ratio is mea
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 from torch import Tensor
@@ -29,12 +27,13 @@ from torchsar._checks import (
     check_real,
     has_nan,
 )
-from torchsar.objects.components import label_components
+from torchsar.objects.closing import close_pixels
+from torchsar.objects.components import label_pixels
 from torchsar.objects.objects import Objects
-from torchsar.objects.properties import measure
+from torchsar.objects.properties import measure_pixels
 from torchsar.objects.rules import ObjectRules
 
-__all__ = ["discriminate", "normalised_score"]
+__all__ = ["discriminate", "normalised_score", "own_regions"]
 
 
 def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
@@ -50,79 +49,61 @@ def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
     return torch.where(t > 0, s / torch.where(t > 0, t, 1.0), 1.0 + s - t)
 
 
-def _disk_rectangles(radius: int) -> list[tuple[int, int]]:
-    """Half-sizes ``(dy, dx)`` of rectangles whose union is the digital disk of ``radius``
-    (pixels with ``dy^2 + dx^2 <= radius^2``)."""
-    return [(dy, math.isqrt(radius * radius - dy * dy)) for dy in range(radius + 1)]
+def own_regions(statistic: Tensor, threshold: Tensor | float, labels: Tensor) -> Objects:
+    """A detector's own regions (``Detection.labels``, ``(B, C, H, W)`` ids, 0 = none) as
+    :class:`Objects`, each scored by the peak of its :func:`normalised_score` (computed on
+    the labelled pixels only); operating threshold 1.
+
+    Example:
+        >>> lab = torch.zeros(1, 1, 4, 4, dtype=torch.int64); lab[0, 0, :2, :2] = 3
+        >>> o = own_regions(torch.arange(16.0).reshape(1, 1, 4, 4), 2.0, lab)
+        >>> o.area.tolist(), o.score.tolist()
+        ([4], [2.5])
+    """
+    b, c, h, w = statistic.shape
+    flat = labels.reshape(-1).cpu().numpy()
+    idx = np.flatnonzero(flat > 0)
+    at = torch.from_numpy(idx)
+    stat = statistic.reshape(-1).cpu()[at]
+    thr = torch.as_tensor(threshold).cpu()
+    if thr.numel() > 1:  # a threshold per pixel or per image: its value at each pixel
+        thr = thr.broadcast_to(statistic.shape).reshape(-1)[at]
+    score = normalised_score(stat, thr).numpy()
+    return Objects.from_label_pixels(flat[idx], idx, score, (b * c, h, w))
 
 
-def _spread(x: np.ndarray, d: int, axis: int) -> np.ndarray:
-    """OR of ``x`` shifted by ``-d..d`` along ``axis`` (values beyond the edge count as 0);
-    ``x`` itself when ``d == 0``."""
-    if d == 0:
-        return x
-    out = x.copy()
-    n = x.shape[axis]
-    for k in range(1, min(d, n - 1) + 1):
-        lo = [slice(None)] * x.ndim
-        hi = [slice(None)] * x.ndim
-        lo[axis], hi[axis] = slice(0, n - k), slice(k, n)
-        out[tuple(hi)] |= x[tuple(lo)]
-        out[tuple(lo)] |= x[tuple(hi)]
-    return out
-
-
-def _dilate(x: np.ndarray, rects: list[tuple[int, int]]) -> np.ndarray:
-    """Dilation of bool planes ``(N, H, W)`` by a union of rectangles ``(dy, dx)`` sorted by
-    ``dy`` (separable shifts, the row spreads built on each other; outside the planes
-    counts as unset)."""
-    out, rows, at = None, x, 0
-    for dy, dx in rects:
-        rows, at = _spread(rows, dy - at, -2), dy
-        part = _spread(rows, dx, -1)
-        if out is None:
-            out = part.copy() if part is x else part
-        else:
-            out |= part
-    return np.zeros_like(x) if out is None else out
-
-
-def _close(mask: np.ndarray, radius: int) -> np.ndarray:
-    """Binary closing of bool planes ``(N, H, W)`` with a disk of ``radius``, extensive (never
-    removes a pixel) also at the image border: dilation of the zero-padded mask, then
-    erosion as the complement of the dilated complement (the outside counting as set).
-    Plain NumPy: many small passes, which intra-op threading only slows down."""
-    if radius == 0 or not mask.any():
-        return mask
-    rects = _disk_rectangles(radius)
-    x = np.pad(mask, ((0, 0), (radius, radius), (radius, radius)))
-    closed = ~_dilate(~_dilate(x, rects), rects)
-    return closed[:, radius:-radius, radius:-radius] | mask
-
-
-def _score_map(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mask ``score > floor`` ``(N, H, W)`` and the float64 score, computed only on candidate
-    pixels (a loose float32 pre-filter; the exact test on the candidates). NumPy, single
+def _candidates(statistic: Tensor, threshold, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate pixels (flat indices into the ``(N, H, W)`` stack, ascending) and their
+    float64 scores: a loose float32 pre-filter of ``score > floor`` (every other pixel's
+    score is at most ``floor``; the exact test is left to the caller). NumPy, single
     threaded: a handful of full-size passes."""
     b, c, h, w = statistic.shape
     stat = statistic.detach().cpu().numpy().reshape(-1)
     thr = torch.as_tensor(threshold).detach().cpu().to(torch.float64).numpy()
-    scalar = thr.size == 1  # the usual case: no need to compare a full-size plane
-    thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
-    if thr.size and (scalar or np.all(thr == thr[0])):
-        t = float(thr[0])
-        loose = floor * t * (1 - 1e-5) - 1e-30 if t > 0 else t + floor - 1.0 - 1e-5
+    if thr.size == 1 and stat.size:  # the usual case: no full-size threshold plane
+        one = float(thr.reshape(-1)[0])
+        thr = None
+    else:
+        thr = np.broadcast_to(thr, (b, c, h, w)).reshape(-1)
+        one = float(thr[0]) if thr.size and np.all(thr == thr[0]) else None
+    if one is not None:
+        loose = floor * one * (1 - 1e-5) - 1e-30 if one > 0 else one + floor - 1.0 - 1e-5
         idx = np.flatnonzero(stat >= loose)
+        t = np.full(idx.size, one)
     else:
         loose = np.where(thr > 0, floor * thr * (1 - 1e-5) - 1e-30, thr + floor - 1.0 - 1e-5)
         idx = np.flatnonzero(stat >= loose)
-    s, t = stat[idx].astype(np.float64), thr[idx]
-    score = normalised_score(torch.from_numpy(s), torch.from_numpy(t)).numpy()  # candidates
-    mask = np.zeros(stat.size, dtype=bool)
-    mask[idx[score > floor]] = True
-    full = np.full(stat.size, -np.inf)
-    full[idx] = score
-    return mask.reshape(b * c, h, w), full.reshape(b * c, h, w)
+        t = thr[idx]
+    s = stat[idx].astype(np.float64)
+    return idx, normalised_score(torch.from_numpy(s), torch.from_numpy(t)).numpy()
+
+
+def _scores_at(idx: np.ndarray, cand: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """The score of each pixel ``idx``: its candidate's (``cand``, ascending), else
+    ``-inf`` (pixels the closing added)."""
+    pos = np.minimum(np.searchsorted(cand, idx), max(cand.size - 1, 0))
+    hit = cand[pos] == idx if cand.size else np.zeros(idx.size, bool)
+    return np.where(hit, score[pos] if cand.size else -np.inf, -np.inf)
 
 
 def _check(
@@ -207,17 +188,27 @@ def discriminate(
     rules = ObjectRules() if rules is None else rules
     pixel_area = _check(statistic, threshold, pixel_area, rules)
     b, c = statistic.shape[:2]
-    mask, score = _score_map(statistic, threshold, rules.floor)
-    mask = _close(mask, rules.closing)
-    labels, n = label_components(mask, 2 if rules.connectivity == 8 else 1)
-    props = measure(labels, n, score)
+    h, w = statistic.shape[-2:]
+    shape = (b * c, h, w)
+    cand, score = _candidates(statistic, threshold, rules.floor)
+    idx = close_pixels(cand[score > rules.floor], shape, rules.closing)
+    labels, n, lab = label_pixels(idx, shape, 2 if rules.connectivity == 8 else 1)
+    props = measure_pixels(lab, idx, (h, w), n, _scores_at(idx, cand, score))
     keep = _keep(props["area"], props["plane"], rules, pixel_area)
-    lut = np.zeros(n + 1, dtype=np.int32)
-    lut[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
-    return Objects(
-        labels=lut[labels],
-        **{k: v[keep] for k, v in props.items()},
-        planes=b * c,
-        shape=tuple(statistic.shape[-2:]),
-        threshold=1.0,
-    )
+    if not keep.all():
+        labels, lab, idx = _renumber(keep, lab, idx, shape)
+    obj = Objects(labels=labels, **{k: v[keep] for k, v in props.items()}, planes=b * c,
+                  shape=(h, w), threshold=1.0)  # fmt: skip
+    return obj.with_pixel_lists(lab - 1, idx)
+
+
+def _renumber(keep: np.ndarray, lab: np.ndarray, idx: np.ndarray, shape):
+    """The label stack of the kept objects ``keep`` (numbered ``1..`` in order) and their
+    pixels ``(lab, idx)``."""
+    lut = np.zeros(keep.size + 1, dtype=np.int64)
+    lut[1:][keep] = np.arange(1, int(keep.sum()) + 1)
+    new = lut[lab]
+    on = new > 0
+    labels = np.zeros(int(np.prod(shape)), np.int32)
+    labels[idx[on]] = new[on]
+    return labels.reshape(shape), new[on], idx[on]

@@ -117,12 +117,23 @@ class Objects:
         """``(owner, flat index)`` of every object pixel: the object index and the flat
         index into the ``(N, H, W)`` stack (ascending by object for ``masks``)."""
         if self.labels is not None:
-            flat = self.labels.reshape(-1)
-            idx = np.flatnonzero(flat)
-            return flat[idx].astype(np.int64) - 1, idx
+            known = self.__dict__.get("_pixel_lists")
+            if known is None:
+                flat = self.labels.reshape(-1)
+                idx = np.flatnonzero(flat)
+                known = (flat[idx].astype(np.int64) - 1, idx)
+                object.__setattr__(self, "_pixel_lists", known)  # a label map never changes
+            return known
         if self.masks is not None:
             return self.masks.owner(), self.masks.pixels
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
+
+    def with_pixel_lists(self, owner: np.ndarray, idx: np.ndarray) -> Objects:
+        """These objects, knowing their :meth:`pixel_lists` (of their label map: what a
+        constructor that has them at hand passes on, so no one searches the map again)."""
+        if self.labels is not None:
+            object.__setattr__(self, "_pixel_lists", (owner, idx))
+        return self
 
     def mask_of(self, k: int) -> np.ndarray:
         """Bool ``(H, W)`` mask of object ``k`` (its box or point for other geometries)."""
@@ -183,20 +194,43 @@ class Objects:
         if smap.shape != lab.shape:
             raise ShapeError(f"score_map must have the shape of labels {lab.shape}, "
                              f"got {smap.shape}")  # fmt: skip
-        n_planes, h, w = lab.shape
-        flat = lab.reshape(n_planes, -1).astype(np.int64)
-        key = flat + (flat.max(initial=0) + 1) * np.arange(n_planes)[:, None]
-        key = np.where(flat > 0, key, 0).reshape(-1)
-        used = np.unique(key[key > 0])
-        ids = np.zeros(lab.size, np.int32)
-        sel = key > 0
-        ids[sel] = np.searchsorted(used, key[sel]) + 1
-        ids = ids.reshape(lab.shape)
-        idx = np.flatnonzero(ids)
-        props = measure_pixels(ids.reshape(-1)[idx].astype(np.int64), idx, (h, w), used.size,
-                               smap.reshape(-1)[idx])  # fmt: skip
+        flat = lab.reshape(-1)
+        idx = np.flatnonzero(flat > 0)  # the labelled pixels (the rest stays 0)
+        return cls.from_label_pixels(flat[idx], idx, smap.reshape(-1)[idx], lab.shape,
+                                     threshold=threshold)  # fmt: skip
+
+    @classmethod
+    def from_label_pixels(
+        cls,
+        local: np.ndarray,
+        idx: np.ndarray,
+        values: np.ndarray,
+        shape: tuple[int, int, int],
+        *,
+        threshold: float | None = 1.0,
+    ) -> Objects:
+        """:meth:`from_labels` from the labelled pixels only: their flat indices ``idx``
+        (ascending) into a stack of ``shape`` ``(N, H, W)``, their positive ids ``local``
+        (per plane; need not be consecutive) and their scores ``values``.
+
+        Example:
+            >>> o = Objects.from_label_pixels(np.array([7, 7, 2]), np.array([0, 1, 15]),
+            ...                               np.array([1.0, 3.0, 2.0]), (1, 4, 4))
+            >>> o.area.tolist(), o.score.tolist()
+            ([1, 2], [2.0, 3.0])
+        """
+        n_planes, h, w = shape
+        local = np.asarray(local).astype(np.int64)
+        key = local + (int(local.max(initial=0)) + 1) * (idx // (h * w))
+        used = np.unique(key)
+        new = np.searchsorted(used, key) + 1
+        ids = np.zeros(n_planes * h * w, np.int32)
+        ids[idx] = new
+        props = measure_pixels(new, idx, (h, w), used.size, np.asarray(values, np.float64))
         _check_scores(props["score"], "score_map")
-        return _build(ids, None, props, n_planes, (h, w), "mask", threshold, None, None)
+        built = _build(ids.reshape(shape), None, props, n_planes, (h, w), "mask", threshold,
+                       None, None)  # fmt: skip
+        return built.with_pixel_lists(new - 1, idx)
 
     @classmethod
     def from_masks(

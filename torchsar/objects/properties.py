@@ -8,23 +8,24 @@ __all__ = ["label_boxes", "measure", "measure_pixels"]
 
 
 class _Groups:
-    """Per-label reductions of pixel values (labels ``1..n``): by contiguous runs when the
-    labels come sorted (objects given pixel list by pixel list), else by scatter."""
+    """Per-label reductions of pixel values (labels ``1..n``): minima and maxima by
+    contiguous runs of the labels (sorted once, stably, unless they come sorted: objects
+    given pixel list by pixel list); sums by contiguous runs only when the labels come
+    sorted, else by scatter in pixel order (a sum's rounding depends on its order)."""
 
     def __init__(self, lab: np.ndarray, n: int) -> None:
         self.lab, self.n = lab, n
         self.runs = lab.size < 2 or bool((lab[1:] >= lab[:-1]).all())
-        if self.runs:
-            self.starts = np.flatnonzero(np.diff(lab, prepend=-1) != 0)
-            self.labels = lab[self.starts]
+        self.order = None if self.runs else np.argsort(lab, kind="stable")
+        ordered = lab if self.order is None else lab[self.order]
+        self.starts = np.flatnonzero(np.diff(ordered, prepend=-1) != 0)
+        self.labels = ordered[self.starts]
 
     def _reduce(self, ufunc: np.ufunc, values: np.ndarray, fill) -> np.ndarray:
         out = np.full(self.n + 1, fill, dtype=np.result_type(values, type(fill)))
-        if self.runs:
-            if self.starts.size:
-                out[self.labels] = ufunc.reduceat(values, self.starts)
-        else:
-            ufunc.at(out, self.lab, values)
+        if self.starts.size:
+            ordered = values if self.order is None else values[self.order]
+            out[self.labels] = ufunc.reduceat(ordered, self.starts)
         return out[1:]
 
     def sum(self, values: np.ndarray) -> np.ndarray:
