@@ -4,7 +4,7 @@ A seeded store of simulated 128x128 chips (``sim-chips``, written once into a te
 folder as ``torchsar-eval make-dataset`` writes it) is evaluated by
 :func:`torchsar_eval.evaluate` with the detectors ``ca, two_parameter, go, so, os, vi, ac,
 region`` and the default scoring (discrimination, matching, AP records, FROC, SCR, error
-types, per-image rows, 100 bootstrap replicates), once per worker count. Each row gives
+types, per-image rows, 200 bootstrap replicates), once per worker count. Each row gives
 the wall time and images per second of the whole run, and from its timing table the
 split of the per-image cost: detector milliseconds and scoring (object stage)
 milliseconds summed over the eight detectors, and the scoring cost per chip and detector.
