@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import warnings
 
 __all__ = ["ENABLED", "enabled"]
 
@@ -30,6 +31,28 @@ def _numba_installed() -> bool:
 ENABLED: bool = os.environ.get("TORCHSAR_NUMBA", "1") != "0" and _numba_installed()
 
 
+_IMPORTS: bool | None = None
+
+
+def _numba_imports() -> bool:
+    """Whether ``import numba`` works (tried once, on the first compiled call): an installed
+    numba that fails to import (a broken install, a local module shadowing one of its
+    dependencies) counts as absent, with one warning, instead of failing the detector."""
+    global _IMPORTS
+    if _IMPORTS is None:
+        try:
+            import numba  # noqa: F401
+        except Exception as exc:  # any failure of a third-party import: fall back
+            warnings.warn(f"numba is installed but cannot be imported ({type(exc).__name__}: "
+                          f"{exc}); torchsar uses its numpy/torch code instead (same results, "
+                          "slower)", UserWarning, stacklevel=3)  # fmt: skip
+            _IMPORTS = False
+        else:
+            _IMPORTS = True
+    return _IMPORTS
+
+
 def enabled() -> bool:
-    """Whether the numba kernels are to be used (numba installed and not switched off)."""
-    return ENABLED
+    """Whether the numba kernels are to be used (numba installed, importable and not
+    switched off)."""
+    return ENABLED and _numba_imports()

@@ -28,7 +28,7 @@ the percentiles collapse to a point when every image agrees (a perfect or an emp
 
 The choice (Jeffreys over Clopper-Pearson, no cap of the effective count at the real one,
 the Student factor) was made by measuring coverage on many small simulated datasets
-(``scripts/coverage.py``): Clopper-Pearson and the cap covered 0.99-1.00 with intervals up
+(``scripts/interval_coverage.py``): Clopper-Pearson and the cap covered 0.99-1.00 with intervals up
 to twice as wide; the plain percentile covered 0.34-0.72 at a near-perfect count.
 """
 

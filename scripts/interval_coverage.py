@@ -14,9 +14,9 @@ after every block of the largest size; a rerun with the same options continues.
 
 Usage::
 
-    python scripts/coverage.py --kind sim-chips --sizes 36 200 --datasets 200 --out cov-chips
-    python scripts/coverage.py --kind sim-scenes --sizes 4 36 --datasets 40 --out cov-scenes
-    python scripts/coverage.py --report cov-chips cov-scenes
+    python scripts/interval_coverage.py --kind sim-chips --sizes 36 200 --datasets 200 --out cov-chips
+    python scripts/interval_coverage.py --kind sim-scenes --sizes 4 36 --datasets 40 --out cov-scenes
+    python scripts/interval_coverage.py --report cov-chips cov-scenes
 """
 
 from __future__ import annotations

@@ -1,0 +1,55 @@
+"""A numba that is installed but cannot be imported falls back to the numpy/torch code
+(one warning, the same results), and no script in ``scripts/`` shadows an importable module
+(``scripts/coverage.py`` once hid the ``coverage`` package from numba when a script ran)."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+import torchsar as ts
+from torchsar import _jit
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+def test_an_unimportable_numba_falls_back_with_one_warning(monkeypatch):
+    x = torch.empty(2, 1, 24, 24).exponential_(generator=torch.Generator().manual_seed(0))
+    monkeypatch.setattr(_jit, "ENABLED", False)
+    want = ts.cfar.os(x)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    monkeypatch.setattr(_jit, "_IMPORTS", None)
+    monkeypatch.setitem(sys.modules, "numba", None)  # `import numba` raises ImportError
+    with pytest.warns(UserWarning, match="numba is installed but cannot be imported"):
+        got = ts.cfar.os(x)
+    assert torch.equal(got.mask, want.mask) and torch.equal(got.statistic, want.statistic)
+    assert _jit.enabled() is False  # tried once, remembered
+
+
+DEPENDENCIES = ("numba", "scipy", "skimage", "pandas", "kornia", "matplotlib", "tifffile")
+
+
+def test_no_script_shadows_a_module_that_a_dependency_imports():
+    """Running ``python scripts/X.py`` puts ``scripts/`` first on ``sys.path``: a script named
+    like a module that a dependency imports, even optionally (``coverage``, which numba
+    tries), replaces that module in every process the script starts."""
+    stems = sorted(p.stem for p in SCRIPTS.glob("*.py"))
+    for stem in stems:
+        assert importlib.util.find_spec(stem) is None, f"scripts/{stem}.py: an importable name"
+    pattern = re.compile(rf"^\s*(?:import|from)\s+({'|'.join(map(re.escape, stems))})\b", re.M)
+    hits = []
+    for dep in DEPENDENCIES:
+        spec = importlib.util.find_spec(dep)
+        if spec is None or not spec.submodule_search_locations:
+            continue
+        for root in spec.submodule_search_locations:
+            for f in Path(root).rglob("*.py"):
+                found = pattern.search(f.read_text(errors="ignore"))
+                if found:
+                    hits.append(f"scripts/{found.group(1)}.py shadows a module {f} imports")
+    assert not hits, hits[:5]
