@@ -12,17 +12,12 @@ A saved shard is never recomputed, which is what ``--resume`` relies on.
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-import signal
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-import torch
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
@@ -43,6 +38,7 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import Cases, Gallery
 from torchsar_eval.labels import short_label
 from torchsar_eval.memory import release_memory, tune_allocator
+from torchsar_eval.pool import DIED, run_in_processes
 from torchsar_eval.result import DetectorName, DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
 
@@ -180,13 +176,6 @@ def shard_coco(folder: Path, name: str) -> CocoExport:
     return CocoExport.merge(name, (s.coco for s in map(_load, shard_files(folder)) if s.coco))
 
 
-def _init_worker(threads: int) -> None:
-    """Worker set-up: its share of the cores, and Ctrl-C left to the parent (which stops
-    the pool) instead of a traceback per worker."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    torch.set_num_threads(threads)
-
-
 def _scored(job: ShardJob, k: int) -> bytes:
     """A shard's state as the bytes of its state file (what a worker sends back)."""
     return statefile.dumps(_score_shard(job, k))
@@ -272,81 +261,29 @@ def _local(job, todo, bar, sizes, fail) -> None:
         bar.update(sizes[k])
 
 
-_DIED = "a worker process died (killed or out of memory)"
-
-
 def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
-    """Shards in ``workers`` spawned processes, at most ``workers`` at a time, a failed shard
-    resubmitted once. A worker that dies (killed, out of memory) breaks the pool: the shards
-    that were running are run again one at a time, each in a fresh process of its own (so a
-    shard that kills its worker is told from those that only shared the pool with it and
-    fails alone), and the rest go on in a fresh pool. Leaving early (an error, Ctrl-C,
-    SIGTERM) stops the pool at once instead of waiting for running shards."""
+    """Shards in ``workers`` spawned processes (:func:`torchsar_eval.pool.run_in_processes`:
+    a dead worker's shards run again one at a time, so only the shard that kills its worker
+    fails), a failed shard resubmitted once."""
     check_portable(job.detectors)
-    threads = max(1, (os.cpu_count() or 1) // workers)
-    workers = min(workers, len(todo))  # no idle processes
     paths = dict(todo)
-    queue = list(paths)
-    while queue:
-        suspects = _pool_round(job, queue, paths, bar, sizes, fail, workers, threads)
-        if suspects:
-            warnings.warn(f"{_DIED}: running its {len(suspects)} shard(s) again one at a "
-                          "time", RuntimeWarning, stacklevel=2)  # fmt: skip
-        for k in suspects:
-            _pool_round(job, [k], paths, bar, sizes, fail, 1, threads, solo=True)
 
-
-def _pool_round(job, queue, paths, bar, sizes, fail, workers, threads, solo=False) -> list:
-    """Run the shards of ``queue`` (consumed) in one pool of ``workers`` processes until
-    they are done or the pool breaks; returns the shards that were running when it broke
-    (with ``solo``, the shard is failed instead and ``[]`` returned)."""
-    ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(threads,))  # fmt: skip
-    finished, broken = False, []
-    running: dict = {}
-    try:
-        while queue or running:
-            try:
-                while queue and len(running) < workers:
-                    running[pool.submit(_scored, job, queue[0])] = queue[0]
-                    queue.pop(0)
-            except BrokenProcessPool:  # broke before we noticed: settle what ran
-                done = set(running)
-                if not running:  # no worker even started
-                    broken.append(queue.pop(0))
-            else:
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for fut in done:
-                k = running.pop(fut)
-                try:
-                    data = fut.result()
-                except BrokenProcessPool:
-                    broken.append(k)
-                    continue
-                except Exception as exc:
-                    if fail.again(k, exc):
-                        queue.insert(0, k)
-                        continue
-                else:
-                    _write(paths[k], data)
-                bar.update(sizes[k])
-            if broken:
-                broken += running.values()
-                running.clear()
-                break
-        finished = True
-    finally:
-        if not finished or broken:  # do not wait for running shards
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-        pool.shutdown(wait=finished and not broken, cancel_futures=True)
-    if solo and broken:
-        (k,) = broken
-        fail(k, RuntimeError(_DIED))
+    def saved(k: int, data: bytes) -> None:
+        _write(paths[k], data)
         bar.update(sizes[k])
-        return []
-    return sorted(broken)
+
+    def failed(k: int, exc: BaseException) -> bool:
+        if fail.again(k, exc):
+            return True
+        bar.update(sizes[k])
+        return False
+
+    def died(k: int) -> None:
+        fail(k, RuntimeError(DIED))
+        bar.update(sizes[k])
+
+    run_in_processes(_scored, {k: (job, k) for k in paths}, workers, on_result=saved,
+                     on_error=failed, on_died=died, what="shard")  # fmt: skip
 
 
 def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:

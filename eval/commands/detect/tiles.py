@@ -15,13 +15,9 @@ its worker fails alone, with an error naming its tiles; the others go on in a fr
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-import signal
 import warnings
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import pandas as pd
@@ -29,6 +25,7 @@ import pandas as pd
 from torchsar_eval import statefile
 from torchsar_eval.commands.detect.plan import DetectJob, min_size
 from torchsar_eval.errors import EvalError
+from torchsar_eval.pool import DIED, run_in_processes
 
 __all__ = [
     "chunks", "close_readers", "load_record", "pending", "record_path", "run_tasks",
@@ -144,13 +141,6 @@ def pending(job: DetectJob, folder: Path) -> list[tuple[int, int]]:
     return todo
 
 
-def _init_worker(threads: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
-    import torch
-
-    torch.set_num_threads(threads)
-
-
 def _done(task: Task, result: tuple[str, object], bar) -> None:
     """Save a finished task's records (or raise its error)."""
     job, indices, folder = task
@@ -166,9 +156,6 @@ def _tiles_text(indices: list[tuple[int, int]]) -> str:
     return ", ".join(f"{i},{j}" for i, j in indices)
 
 
-_DIED = "a worker process died (killed or out of memory)"
-
-
 def run_tasks(tasks: list[Task], workers: int, bar, fn: Callable = _task) -> None:
     """Run every task, saving each tile's record as its task finishes (see the module
     docstring for workers and dead workers). ``fn(job, indices)`` runs one task (a
@@ -177,62 +164,15 @@ def run_tasks(tasks: list[Task], workers: int, bar, fn: Callable = _task) -> Non
         for task in tasks:
             _done(task, fn(task[0], task[1]), bar)
         return
-    threads = max(1, (os.cpu_count() or 1) // workers)
-    workers = min(workers, len(tasks)) or 1
-    queue = list(range(len(tasks)))
-    while queue:
-        suspects = _round(fn, tasks, queue, workers, threads, bar)
-        if suspects:
-            warnings.warn(f"{_DIED}: running its {len(suspects)} task(s) again one at a "
-                          "time", RuntimeWarning, stacklevel=2)  # fmt: skip
-        for k in suspects:
-            _round(fn, tasks, [k], 1, threads, bar, solo=True)
 
-
-def _round(fn, tasks, queue, workers, threads, bar, solo: bool = False) -> list[int]:
-    """Run the tasks of ``queue`` (consumed) in one pool until done or the pool breaks;
-    returns the tasks that were running when it broke (``solo``: raises instead)."""
-    ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(threads,))  # fmt: skip
-    finished, broken = False, []
-    running: dict = {}
-    try:
-        while queue or running:
-            try:
-                while queue and len(running) < workers:
-                    k = queue[0]
-                    running[pool.submit(fn, tasks[k][0], tasks[k][1])] = k
-                    queue.pop(0)
-            except BrokenProcessPool:
-                done = set(running)
-                if not running:
-                    broken.append(queue.pop(0))
-            else:
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for fut in done:
-                k = running.pop(fut)
-                try:
-                    result = fut.result()
-                except BrokenProcessPool:
-                    broken.append(k)
-                    continue
-                _done(tasks[k], result, bar)
-            if broken:
-                broken += running.values()
-                running.clear()
-                break
-        finished = True
-    finally:
-        if not finished or broken:  # do not wait for running tasks
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-        pool.shutdown(wait=finished and not broken, cancel_futures=True)
-    if solo and broken:
-        job, indices, _ = tasks[broken[0]]
-        raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {_DIED} "
+    def died(k: int) -> None:
+        job, indices, _ = tasks[k]
+        raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {DIED} "
                         "twice; the other tiles' records are kept")  # fmt: skip
-    return sorted(broken)
+
+    run_in_processes(fn, {k: (t[0], t[1]) for k, t in enumerate(tasks)}, workers,
+                     on_result=lambda k, result: _done(tasks[k], result, bar), on_died=died,
+                     what="task")  # fmt: skip
 
 
 def scene_objects(job: DetectJob, folder: Path) -> pd.DataFrame:

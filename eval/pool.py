@@ -1,0 +1,116 @@
+"""Work items in spawned worker processes, surviving a worker that dies: the one pool
+mechanism of ``run`` (shards) and ``detect`` (tiles).
+
+At most ``workers`` items run at a time. A worker that dies (killed, out of memory) breaks
+the pool: the items that were running are run again one at a time, each in a fresh process
+of its own (so the item that kills its worker is told from those that only shared the pool
+with it), and the rest go on in a fresh pool. Leaving early (an error, Ctrl-C, SIGTERM)
+stops the pool at once instead of waiting for running items. Workers ignore Ctrl-C (the
+driver handles it) and get their share of the cores as torch threads."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import warnings
+from collections.abc import Callable, Hashable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+__all__ = ["DIED", "run_in_processes"]
+
+DIED = "a worker process died (killed or out of memory)"
+
+
+def _init_worker(threads: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def _reraise(key: Hashable, exc: BaseException) -> bool:
+    raise exc
+
+
+def run_in_processes(
+    fn: Callable,
+    items: dict[Hashable, tuple],
+    workers: int,
+    *,
+    on_result: Callable[[Hashable, object], None],
+    on_died: Callable[[Hashable], None],
+    on_error: Callable[[Hashable, BaseException], bool] = _reraise,
+    what: str = "item",
+) -> None:
+    """Run ``fn(*items[key])`` for every key in ``workers`` spawned processes (``fn`` a
+    module-level function: workers import it), in key order as far as workers allow.
+
+    Args:
+        on_result: called in the driver with each finished key and its value.
+        on_died: called with the key whose worker died again when it ran alone.
+        on_error: called with a key whose ``fn`` raised; True runs it again (first in
+            line), False settles it; by default the error is raised.
+        what: the items' name in the warning about a dead worker.
+    """
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    queue = list(items)
+    workers = min(workers, len(queue)) or 1  # no idle processes
+    hooks = (on_result, on_error, on_died)
+    while queue:
+        suspects = _round(fn, items, queue, workers, threads, hooks)
+        if suspects:
+            warnings.warn(f"{DIED}: running its {len(suspects)} {what}(s) again one at a time",
+                          RuntimeWarning, stacklevel=2)  # fmt: skip
+        for key in suspects:
+            _round(fn, items, [key], 1, threads, hooks, solo=True)
+
+
+def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> list:
+    """Run the keys of ``queue`` (consumed) in one pool until done or the pool breaks;
+    returns the keys that were running when it broke (``solo``: ``on_died`` instead)."""
+    on_result, on_error, on_died = hooks
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                               initargs=(threads,))  # fmt: skip
+    finished, broken = False, []
+    running: dict = {}
+    try:
+        while queue or running:
+            try:
+                while queue and len(running) < workers:
+                    running[pool.submit(fn, *items[queue[0]])] = queue[0]
+                    queue.pop(0)
+            except BrokenProcessPool:  # broke before we noticed: settle what ran
+                done = set(running)
+                if not running:  # no worker even started
+                    broken.append(queue.pop(0))
+            else:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in done:
+                key = running.pop(fut)
+                try:
+                    value = fut.result()
+                except BrokenProcessPool:
+                    broken.append(key)
+                    continue
+                except Exception as exc:
+                    if on_error(key, exc):
+                        queue.insert(0, key)
+                    continue
+                on_result(key, value)
+            if broken:
+                broken += running.values()
+                running.clear()
+                break
+        finished = True
+    finally:
+        if not finished or broken:  # do not wait for running items
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+        pool.shutdown(wait=finished and not broken, cancel_futures=True)
+    if solo and broken:
+        on_died(broken[0])
+        return []
+    return sorted(broken)
