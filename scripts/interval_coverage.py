@@ -14,8 +14,10 @@ after every block of the largest size; a rerun with the same options continues.
 
 Usage::
 
-    python scripts/interval_coverage.py --kind sim-chips --sizes 36 200 --datasets 200 --out cov-chips
-    python scripts/interval_coverage.py --kind sim-scenes --sizes 4 36 --datasets 40 --out cov-scenes
+    python scripts/interval_coverage.py --kind sim-chips --sizes 36 200 --datasets 200 \
+        --out cov-chips
+    python scripts/interval_coverage.py --kind sim-scenes --sizes 4 36 --datasets 40 \
+        --out cov-scenes
     python scripts/interval_coverage.py --report cov-chips cov-scenes
 """
 
