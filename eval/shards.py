@@ -12,7 +12,6 @@ A saved shard is never recomputed, which is what ``--resume`` relies on.
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -134,9 +133,8 @@ statefile.register(ErrorCounts)
 
 
 def _save(path: Path, state: ShardState) -> None:
-    """Write a shard state atomically (see :func:`_write`), as data only
-    (:mod:`torchsar_eval.statefile`)."""
-    _write(path, statefile.dumps(state))
+    """Write a shard state atomically, as data only (:mod:`torchsar_eval.statefile`)."""
+    statefile.save(path, statefile.dumps(state))
 
 
 def _load(path: Path) -> ShardState:
@@ -179,22 +177,6 @@ def shard_coco(folder: Path, name: str) -> CocoExport:
 def _scored(job: ShardJob, k: int) -> bytes:
     """A shard's state as the bytes of its state file (what a worker sends back)."""
     return statefile.dumps(_score_shard(job, k))
-
-
-def _write(path: Path, data: bytes) -> None:
-    """Save shard bytes atomically: a temporary name in the same folder, then rename. A
-    failure to save (a full disk) stops the run: it is no fault of the shard's."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        reason = exc.strerror or exc
-        raise EvalError(f"cannot save {path.name} in {path.parent} ({reason})") from exc
 
 
 def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
@@ -256,7 +238,7 @@ def _local(job, todo, bar, sizes, fail) -> None:
                 if not fail.again(k, exc):
                     break
             else:
-                _write(path, data)
+                statefile.save(path, data)
                 break
         bar.update(sizes[k])
 
@@ -269,7 +251,7 @@ def _processes(job, todo, bar, sizes, fail, workers: int) -> None:
     paths = dict(todo)
 
     def saved(k: int, data: bytes) -> None:
-        _write(paths[k], data)
+        statefile.save(paths[k], data)
         bar.update(sizes[k])
 
     def failed(k: int, exc: BaseException) -> bool:
@@ -291,7 +273,7 @@ def _ray(job, todo, bar, sizes, fail, address: str | None) -> None:
 
     def saved(k: int, path: Path, data: bytes | None) -> None:
         if data is not None:
-            _write(path, data)
+            statefile.save(path, data)
         bar.update(sizes[k])
 
     run_on_ray(job, todo, saved, fail, address)

@@ -15,8 +15,10 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import os
 import zipfile
 import zlib
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,7 +26,7 @@ import torch
 
 from torchsar_eval.errors import EvalError
 
-__all__ = ["FORMAT", "VERSION", "CorruptStateError", "dumps", "loads", "register"]
+__all__ = ["FORMAT", "VERSION", "CorruptStateError", "dumps", "loads", "register", "save"]
 
 FORMAT = "torchsar-state"
 VERSION = 1
@@ -161,3 +163,20 @@ def loads(data: bytes, what: str = "state") -> Any:
     except (zlib.error, ValueError, KeyError, TypeError, OSError, zipfile.BadZipFile,
             EOFError) as exc:  # fmt: skip
         raise CorruptStateError(f"{what} holds an unexpected structure ({exc})") from None
+
+
+def save(path: Path, data: bytes) -> None:
+    """Write state bytes atomically (a temporary name in the same folder, fsync, rename):
+    a reader sees the whole file or none. :class:`EvalError` naming the file when it cannot
+    be saved (a full disk): no fault of the state's."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        reason = exc.strerror or exc
+        raise EvalError(f"cannot save {path.name} in {path.parent} ({reason})") from exc

@@ -137,11 +137,11 @@ def _kill_after_records(cmd: list[str], parent: Path, records: int) -> None:
 def test_same_bytes_after_an_interruption_and_resume(scene, tmp_path, monkeypatch, capsys):
     """Ctrl-C after some tiles keeps their records; ``--resume`` runs the rest and writes
     what an uninterrupted run writes, byte for byte."""
-    from torchsar_eval.commands.detect import tiles
+    from torchsar_eval import statefile
 
     tile = ["--tile", "64"]  # 11 x 10 tiles
     assert _detect(scene, tmp_path / "one", *tile) == 0
-    save, calls = tiles._save, []
+    save, calls = statefile.save, []
 
     def interrupted(path, data):
         if len(calls) == 25:
@@ -149,11 +149,11 @@ def test_same_bytes_after_an_interruption_and_resume(scene, tmp_path, monkeypatc
         calls.append(path)
         save(path, data)
 
-    monkeypatch.setattr(tiles, "_save", interrupted)
+    monkeypatch.setattr(statefile, "save", interrupted)
     out = tmp_path / "cut"
     assert _detect(scene, out, *tile) == 130
     assert "--resume" in capsys.readouterr().err
-    monkeypatch.setattr(tiles, "_save", save)
+    monkeypatch.setattr(statefile, "save", save)
     assert not out.exists()
     (staging,) = _hidden(tmp_path)
     assert len(list(staging.rglob("tile-*.state"))) == 25

@@ -98,7 +98,7 @@ def test_a_dead_worker_keeps_the_saved_shards(tmp_path, whole, monkeypatch):
 @pytest.mark.parametrize("where", ["shard", "final"])
 def test_a_full_disk_keeps_the_saved_shards(tmp_path, whole, monkeypatch, where):
     import torchsar_eval.report
-    import torchsar_eval.shards
+    import torchsar_eval.statefile
 
     out = tmp_path / "run"
     full = OSError(errno.ENOSPC, "No space left on device")
@@ -111,7 +111,7 @@ def test_a_full_disk_keeps_the_saved_shards(tmp_path, whole, monkeypatch, where)
                 raise full
             real(fd)
 
-        monkeypatch.setattr(torchsar_eval.shards.os, "fsync", fsync)
+        monkeypatch.setattr(torchsar_eval.statefile.os, "fsync", fsync)
     else:
         monkeypatch.setattr(
             torchsar_eval.report, "write_run", lambda *a, **k: (_ for _ in ()).throw(full)

@@ -15,7 +15,6 @@ its worker fails alone, with an error naming its tiles; the others go on in a fr
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -99,22 +98,6 @@ def _task(job: DetectJob, indices: list[tuple[int, int]]) -> tuple[str, object]:
         return "error", f"{type(exc).__name__}: {exc}"
 
 
-def _save(path: Path, data: bytes) -> None:
-    """Write a record atomically (temporary name in the same folder, then rename)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise EvalError(
-            f"cannot save {path.name} in {path.parent} ({exc.strerror or exc})"
-        ) from exc
-
-
 def load_record(path: Path) -> dict:
     """A saved tile record (data only, content hash checked: ``CorruptStateError``)."""
     with open(path, "rb") as f:
@@ -148,7 +131,7 @@ def _done(task: Task, result: tuple[str, object], bar) -> None:
     if kind == "error":
         raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {value}")
     for index, data in value:  # type: ignore[union-attr]
-        _save(record_path(folder, index), data)
+        statefile.save(record_path(folder, index), data)
     bar.update(len(indices))
 
 
