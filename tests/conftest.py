@@ -22,3 +22,13 @@ def data_dir() -> Path:
     if not DATA.is_dir():
         pytest.skip(f"real-data folder {DATA} not present")
     return DATA
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread for the test (the test machine is shared; results do not depend on
+    it), restored afterwards."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

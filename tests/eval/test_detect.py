@@ -28,13 +28,7 @@ CA = ["--detector", "ca", "--param", "guard=4", "--param", "train=8", "--param",
 CA_OPTS = {"guard": 4, "train": 8, "pfa": 1e-8}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One torch thread: the test machine is shared (and results do not depend on it)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

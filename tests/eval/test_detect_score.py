@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import torch
 
 from torchsar.simulate.scene_file import write_scene_file
 from torchsar_eval.cli import main
@@ -31,12 +30,7 @@ TOLERANCE_PX = 0
 highest statistic of its object: reported exactly (0 px) by both detectors."""
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ A scene reader is a lazily read ``(H, W)`` raster. Its contract:
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,7 @@ from torchsar.io.window import window_bounds
 __all__ = ["SceneReader"]
 
 
-class SceneReader:
+class SceneReader(ABC):
     """Base of the scene readers: subclasses set ``shape``, ``raw_dtype``, ``georef``,
     ``pixel_spacing``, ``path`` and ``sample_type`` and implement ``_read(r0, r1, c0, c1)``
     (bounds already checked) and ``_close()``."""
@@ -89,11 +90,13 @@ class SceneReader:
     def _out(self, a: np.ndarray) -> np.ndarray:
         return to_intensity(a, self.sample_type) if self.intensity else a
 
+    @abstractmethod
     def _read(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
-        raise NotImplementedError
+        """The window ``[r0:r1, c0:c1]`` as stored (bounds already checked)."""
 
+    @abstractmethod
     def _close(self) -> None:
-        raise NotImplementedError
+        """Release the file (called once per :meth:`close`; must be idempotent)."""
 
     def close(self) -> None:
         """Release the file (idempotent)."""
