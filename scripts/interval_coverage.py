@@ -39,12 +39,15 @@ import torch  # noqa: E402
 from torchsar.metrics import ObjectState  # noqa: E402
 from torchsar.metrics.assign import match_batch  # noqa: E402
 from torchsar.metrics.bootstrap import interval as percentile  # noqa: E402
+from torchsar.metrics.bootstrap import poisson_weights  # noqa: E402
+from torchsar.metrics.curves import coco_ap_rows, score_bins  # noqa: E402
 from torchsar.metrics.intervals import (  # noqa: E402
     PROPORTIONS,
     ReplicateSpread,
     proportion_interval,
     rate_interval,
 )
+from torchsar.metrics.object_state import N_BINS, normalise  # noqa: E402
 from torchsar_eval import shards, statefile  # noqa: E402, F401  (shards registers the states)
 from torchsar_eval.batches import Indexed, batches  # noqa: E402
 from torchsar_eval.datasets.sim import SimDataset  # noqa: E402
@@ -55,9 +58,10 @@ from torchsar_eval.scoring import batch_truth  # noqa: E402
 METRICS = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image", "fa_per_image"]
 
 
-def _record(state: ObjectState) -> dict:
-    """What one small dataset says about each metric (see the module docstring)."""
-    m, reps = state.metrics(), state.replicate_metrics()
+def _record(state: ObjectState, m: dict | None = None) -> dict:
+    """What one small dataset says about each metric (see the module docstring); ``m``:
+    its point metrics where not the state's own."""
+    m, reps = m or state.metrics(), state.replicate_metrics()
     out = {"units": state.units, "n_gt": state.n_gt, "tp": m["tp"], "fp": m["fp"]}
     for k in METRICS:
         v = np.asarray(reps[k], dtype=np.float64)
@@ -71,6 +75,23 @@ def _record(state: ObjectState) -> dict:
             "undefined": int((~ok).sum()),
             "pct": [lo, hi],
         }
+    return out
+
+
+def _per_image(m, obj, gt, info: list, first: int) -> list[dict]:
+    """Each plane's own sufficient statistics: its resampling key, targets and the TP / FP
+    histograms (sparse ``{bin: count}``) under the rule and at IoU 0.5, from which any
+    dataset of planes can be re-formed and bootstrapped without scoring again."""
+    bins = score_bins(normalise(obj.score, obj.threshold))
+    n_gt = np.bincount(gt.plane, minlength=len(info)) if len(gt) else np.zeros(len(info), int)
+    sel = {"tp": m.op >= 0, "fp": m.op == -1, "tp50": m.ap[0] >= 0, "fp50": m.ap[0] == -1}
+    out = []
+    for p, i in enumerate(info):
+        rec = {"index": first + p, "key": i.boot_key or i.key, "n_gt": int(n_gt[p])}
+        for name, s in sel.items():
+            b, c = np.unique(bins[s & (obj.plane == p)], return_counts=True)
+            rec[name] = {int(k): int(v) for k, v in zip(b, c, strict=True)}
+        out.append(rec)
     return out
 
 
@@ -106,12 +127,14 @@ def score(args) -> None:
         truth = statefile.loads(truth_path.read_bytes())
     else:
         rec_path.unlink(missing_ok=True)
+        (out / "planes.jsonl").unlink(missing_ok=True)
     scoring = Scoring(replicates=args.replicates, seed=args.seed)
     dets = [load(d) for d in args.detectors]
     shells = {d.name: DetectorResult(d, scoring) for d in dets}
     truth = truth or {d.name: ObjectState(replicates=0) for d in dets}
     ds = SimDataset(args.kind, total, args.seed)
     open_states: dict[tuple[str, int], ObjectState] = {}
+    planes: list[dict] = []  # per-plane records, written with the progress
     t0 = time.perf_counter()
     for i in range(start, total, step):
         sub = Indexed(ds, range(i, i + step))
@@ -121,6 +144,7 @@ def score(args) -> None:
             obj = shells[d.name].objects_of(d(batch["image"], batch["meta"]), batch)
             m = match_batch(obj, gt, scoring.matching)
             truth[d.name].update(m, obj, gt, info)
+            planes.extend({"detector": d.name, **r} for r in _per_image(m, obj, gt, info, i))
             for n in sizes:
                 st = open_states.setdefault((d.name, n), ObjectState(args.replicates, args.seed))
                 st.update(m, obj, gt, info)
@@ -134,11 +158,95 @@ def score(args) -> None:
             with rec_path.open("a") as f:
                 f.writelines(json.dumps(r) + "\n" for r in lines)
         if end % big == 0:
+            with (out / "planes.jsonl").open("a") as f:
+                f.writelines(json.dumps(r) + "\n" for r in planes)
+            planes.clear()
             truth_path.write_bytes(statefile.dumps(truth))
             done_path.write_text(json.dumps({"settings": settings, "images": end}))
             rate = (end - start) / (time.perf_counter() - t0)
             print(f"{end}/{total} images ({rate:.1f}/s)", flush=True)
     print(json.dumps({k: _truth(v) for k, v in truth.items()}))
+
+
+def _pool(folder: Path) -> dict[str, dict]:
+    """The per-plane records of a run as dense arrays, per detector: resampling ``keys``,
+    targets ``n_gt`` ``(P,)`` and the histograms ``tp``, ``fp``, ``tp50``, ``fp50``
+    ``(P, bins)``."""
+    raw: dict[str, list[dict]] = {}
+    with (folder / "planes.jsonl").open() as f:
+        for line in f:
+            r = json.loads(line)
+            raw.setdefault(r["detector"], []).append(r)
+    out = {}
+    for det, rs in raw.items():
+        rs.sort(key=lambda r: r["index"])
+        pool = {"keys": [r["key"] for r in rs],
+                "n_gt": np.array([r["n_gt"] for r in rs], np.int64)}  # fmt: skip
+        for name in ("tp", "fp", "tp50", "fp50"):
+            h = np.zeros((len(rs), N_BINS), np.int64)
+            for j, r in enumerate(rs):
+                for b, c in r[name].items():
+                    h[j, int(b)] = c
+            pool[name] = h
+        out[det] = pool
+    return out
+
+
+def _formed(pool: dict, idx: np.ndarray, replicates: int, seed: int, op_bin: int) -> dict:
+    """The record (as :func:`_record`) of the dataset formed by planes ``idx`` of a pool,
+    plus each unit's TP, FP and targets at the operating point (``unit_tp``, ``unit_fp``,
+    ``unit_gt``) for rules that need them. AP50 is the histogram's (ties within a score bin
+    ranked together), the same for the truth."""
+    st = ObjectState(replicates=0, thresholded=op_bin > 0, ap_kind="iou")
+    st.images, st.n_gt = len(idx), int(pool["n_gt"][idx].sum())
+    st.tp, st.fp = pool["tp"][idx].sum(axis=0), pool["fp"][idx].sum(axis=0)
+    if replicates:
+        w = poisson_weights([pool["keys"][i] for i in idx], replicates, seed).astype(np.int64)
+        st.replicates = replicates
+        st.boot = {k: w @ pool[k][idx] for k in ("tp", "fp", "tp50", "fp50")}
+        st.boot.update(n_gt=w @ pool["n_gt"][idx], images=w.sum(axis=1))
+    m = st.metrics()
+    m["ap50"] = float(coco_ap_rows(pool["tp50"][idx].sum(0), pool["fp50"][idx].sum(0),
+                                   np.array([st.n_gt]))[0])  # fmt: skip
+    if not replicates:
+        return m
+    out = _record(st, m)
+    out["unit_tp"] = pool["tp"][idx, op_bin:].sum(axis=1).tolist()
+    out["unit_fp"] = pool["fp"][idx, op_bin:].sum(axis=1).tolist()
+    out["unit_gt"] = pool["n_gt"][idx].tolist()
+    return out
+
+
+def formed(folder: str, draws: int) -> tuple[dict, list[dict]]:
+    """Truth and records of datasets formed from a run's planes: the consecutive blocks of
+    each size ``n`` (as scored), topped up to ``draws`` datasets per size by sets of ``n``
+    planes drawn without replacement from the whole pool (seeded), cached in
+    ``FOLDER/formed-DRAWS.jsonl``."""
+    out = Path(folder)
+    settings = json.loads((out / "progress.json").read_text())["settings"]
+    states = statefile.loads((out / "truth.state").read_bytes())
+    pools = _pool(out)
+    truth = {}
+    cache = out / f"formed-{draws}.jsonl"
+    recs = [json.loads(x) for x in cache.read_text().splitlines()] if cache.exists() else []
+    rng = np.random.default_rng([settings["seed"], draws])
+    for det, pool in pools.items():
+        op_bin = states[det].op_bin
+        size = len(pool["keys"])
+        truth[det] = _formed(pool, np.arange(size), 0, 0, op_bin)
+        if cache.exists():
+            continue
+        for n in settings["sizes"]:
+            blocks = [np.arange(i, i + n) for i in range(0, size - n + 1, n)]
+            extra = max(draws - len(blocks), 0)
+            drawn = [np.sort(rng.choice(size, n, replace=False)) for _ in range(extra)]
+            for j, idx in enumerate(blocks + drawn):
+                r = _formed(pool, idx, settings["replicates"], settings["seed"], op_bin)
+                recs.append({"detector": det, "size": n, "dataset": j,
+                             "drawn": j >= len(blocks), **r})  # fmt: skip
+    if not cache.exists():
+        cache.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    return truth, recs
 
 
 def _interval(metric: str, r: dict, rule: str) -> tuple[float, float]:
@@ -172,66 +280,85 @@ def _interval(metric: str, r: dict, rule: str) -> tuple[float, float]:
     return iv.lo, iv.hi
 
 
-def report(folders: list[str], rules: list[str]) -> None:
-    """Coverage per cell (kind, size, detector), metric and rule, with its Monte-Carlo
-    standard error, mean width and zero-width count."""
-    print("| data | n | detector | metric | truth | rule | coverage ± MC se | mean width | "
-          "zero-width | datasets |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for folder in folders:
-        out = Path(folder)
-        settings = json.loads((out / "progress.json").read_text())["settings"]
+def _cells(folder: str, draws: int) -> tuple[str, dict, dict]:
+    """``(kind, truth, {(size, detector): records})`` of a run: the scored blocks'
+    records, or (``draws > 0`` and per-plane records present) the datasets :func:`formed`
+    from its planes."""
+    out = Path(folder)
+    kind = json.loads((out / "progress.json").read_text())["settings"]["kind"]
+    if draws and (out / "planes.jsonl").exists():
+        truth, recs = formed(folder, draws)
+    else:
         states = statefile.loads((out / "truth.state").read_bytes())  # up to the last block
         truth = {k: _truth(v) for k, v in states.items()}
         recs = [json.loads(line) for line in (out / "records.jsonl").read_text().splitlines()]
-        cells: dict = {}
-        for r in recs:
-            cells.setdefault((r["size"], r["detector"]), []).append(r)
+    cells: dict = {}
+    for r in recs:
+        cells.setdefault((r["size"], r["detector"]), []).append(r)
+    return kind, truth, cells
+
+
+def _coverage(metric: str, truth: float, rs: list[dict], rule: str) -> dict:
+    """Coverage of ``truth`` by the intervals of ``rs`` under ``rule``: its Monte-Carlo
+    standard error, the misses above and below, mean width, zero-width and defined
+    intervals."""
+    ivs = np.array([_interval(metric, r, rule) for r in rs], dtype=np.float64)
+    ok = np.isfinite(ivs).all(axis=1)
+    lo, hi = ivs[ok, 0], ivs[ok, 1]
+    c = float(((lo <= truth) & (truth <= hi)).mean()) if ok.any() else math.nan
+    return {
+        "c": c,
+        "se": math.sqrt(max(c * (1 - c), 0.05 * 0.95) / ok.sum()) if ok.any() else math.nan,
+        "low": float((hi < truth).mean()) if ok.any() else math.nan,
+        "high": float((lo > truth).mean()) if ok.any() else math.nan,
+        "width": float((hi - lo).mean()) if ok.any() else math.nan,
+        "zero": int((hi == lo).sum()),
+        "defined": int(ok.sum()),
+    }
+
+
+def report(folders: list[str], rules: list[str], draws: int = 0) -> None:
+    """Coverage per cell (kind, size, detector), metric and rule, with its Monte-Carlo
+    standard error (at least that of a coverage of 0.95), the share of intervals wholly
+    below / above the truth, mean width and zero-width count."""
+    print("| data | n | detector | metric | truth | rule | coverage ± MC se | below | above | "
+          "mean width | zero-width | datasets |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for folder in folders:
+        kind, truth, cells = _cells(folder, draws)
         for (n, det), rs in sorted(cells.items()):
             for metric in METRICS:
                 t = truth[det][metric]
                 for rule in rules:
-                    ivs = np.array([_interval(metric, r, rule) for r in rs], dtype=np.float64)
-                    ok = np.isfinite(ivs).all(axis=1)
-                    cover = (ivs[ok, 0] <= t) & (t <= ivs[ok, 1])
-                    c = cover.mean() if ok.any() else math.nan
-                    se = math.sqrt(c * (1 - c) / ok.sum()) if ok.any() else math.nan
-                    zero = int((ivs[ok, 1] - ivs[ok, 0] == 0).sum())
-                    width = float((ivs[ok, 1] - ivs[ok, 0]).mean()) if ok.any() else math.nan
+                    v = _coverage(metric, t, rs, rule)
                     print(
-                        f"| {settings['kind']} | {n} | {det} | {metric} | {t:.4g} | {rule} | "
-                        f"{c:.3f} ± {se:.3f} | {width:.3g} | {zero} | {ok.sum()}/{len(rs)} |"
+                        f"| {kind} | {n} | {det} | {metric} | {t:.4g} | {rule} | "
+                        f"{v['c']:.3f} ± {v['se']:.3f} | {v['low']:.3f} | {v['high']:.3f} | "
+                        f"{v['width']:.3g} | {v['zero']} | {v['defined']}/{len(rs)} |"
                     )
 
 
-def compact(folders: list[str], rule: str = "default") -> None:
-    """One row per cell: the coverage of each metric under ``rule`` (its Monte-Carlo
-    standard error in the header: the largest of the row), and the zero-width intervals."""
+def compact(folders: list[str], rule: str = "default", draws: int = 0) -> None:
+    """One row per cell: the coverage of each metric under ``rule`` (the Monte-Carlo
+    standard error in the header: the largest of the row), and the zero-width intervals.
+    Datasets are counted as ``blocks + drawn``."""
     print(f"| data | images | detector | datasets | {' | '.join(METRICS)} | MC se | zero-width |")
     print("|---|---|---|---|" + "---|" * len(METRICS) + "---|---|")
     for folder in folders:
-        out = Path(folder)
-        kind = json.loads((out / "progress.json").read_text())["settings"]["kind"]
-        states = statefile.loads((out / "truth.state").read_bytes())
-        truth = {k: _truth(v) for k, v in states.items()}
-        recs = [json.loads(line) for line in (out / "records.jsonl").read_text().splitlines()]
-        cells: dict = {}
-        for r in recs:
-            cells.setdefault((r["size"], r["detector"]), []).append(r)
+        kind, truth, cells = _cells(folder, draws)
         for (n, det), rs in sorted(cells.items()):
             cols, ses, zero = [], [], 0
             for metric in METRICS:
-                t = truth[det][metric]
-                ivs = np.array([_interval(metric, r, rule) for r in rs], dtype=np.float64)
-                ok = np.isfinite(ivs).all(axis=1)
-                c = float(((ivs[ok, 0] <= t) & (t <= ivs[ok, 1])).mean())
-                ses.append(math.sqrt(max(c * (1 - c), 0.05 * 0.95) / ok.sum()))
-                zero += int((ivs[ok, 1] == ivs[ok, 0]).sum())
-                cols.append(f"{c:.3f}" + ("" if ok.all() else f" ({ok.sum()} defined)"))
+                v = _coverage(metric, truth[det][metric], rs, rule)
+                ses.append(v["se"])
+                zero += v["zero"]
+                defined = "" if v["defined"] == len(rs) else f" ({v['defined']} defined)"
+                cols.append(f"{v['c']:.3f}{defined}")
+            drawn = sum(bool(r.get("drawn")) for r in rs)
             print(
                 f"| {kind} | {n} | {det} (truth P {truth[det]['precision']:.3f}, "
-                f"AP50 {truth[det]['ap50']:.3f}) | {len(rs)} | {' | '.join(cols)} | "
-                f"{max(ses):.3f} | {zero} |"
+                f"AP50 {truth[det]['ap50']:.3f}) | {len(rs) - drawn} + {drawn} | "
+                f"{' | '.join(cols)} | {max(ses):.3f} | {zero} |"
             )
 
 
@@ -247,13 +374,16 @@ def main() -> None:
     p.add_argument("--report", nargs="+", default=None, metavar="FOLDER")
     p.add_argument("--rules", nargs="+", default=["pct", "default"])
     p.add_argument("--compact", action="store_true", help="with --report: one row per cell")
+    p.add_argument("--draws", type=int, default=0,
+                   help="with --report: form datasets from the per-plane records, at least "
+                   "this many per size (blocks, then draws from the pool)")  # fmt: skip
     args = p.parse_args()
     if args.report and args.compact:
         for rule in args.rules:
             print(f"\nrule: {rule}\n")
-            compact(args.report, rule)
+            compact(args.report, rule, args.draws)
     elif args.report:
-        report(args.report, args.rules)
+        report(args.report, args.rules, args.draws)
     else:
         score(args)
 
