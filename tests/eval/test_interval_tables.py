@@ -104,14 +104,15 @@ def bright(x):
 
 def test_one_target_per_image_agrees_with_jeffreys():
     """Independent images with one target each: recall's interval is (up to the
-    bootstrap's Monte-Carlo error) Jeffreys' on the number of images, shrunk by
-    (z / t_{n-1})^2 (the slow reference: scipy's beta quantiles)."""
+    bootstrap's Monte-Carlo error) Jeffreys' on the number of images, with no Student
+    factor (count = units; the slow reference: scipy's beta quantiles)."""
     n = 60
     res = te.evaluate({"one": OneTarget(n)}, {"bright": bright},
                       scoring=te.Scoring(replicates=2000), progress=False)  # fmt: skip
     row = res.summary.iloc[0]
     assert row.recall == 0.8
-    m = n * t_shrink(n, 0.95)
+    m = n * t_shrink(n, 0.95, count=n)
+    assert m == n
     x = 0.8 * m
     lo, hi = stats.beta.ppf([0.025, 0.975], x + 0.5, m - x + 0.5)
     width = hi - lo

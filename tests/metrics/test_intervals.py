@@ -34,21 +34,42 @@ def _jeffreys(x: float, n: float, level: float = 0.95) -> tuple[float, float]:
     return stats.beta.ppf(a, x + 0.5, n - x + 0.5), stats.beta.ppf(1 - a, x + 0.5, n - x + 0.5)
 
 
-def _t_factor(units: int, level: float = 0.95) -> float:
+def _t_factor(units: int, count: float | None = None, level: float = 0.95) -> float:
+    """Korn & Graubard's factor written out with scipy: (t_{n-1} / t_{units-1})^2, n the
+    count (at least the units; None: the normal quantile)."""
     a = (1 - level) / 2
-    return (stats.norm.ppf(1 - a) / stats.t.ppf(1 - a, units - 1)) ** 2
+    top = (stats.norm.ppf(1 - a) if count is None
+           else stats.t.ppf(1 - a, max(count, units) - 1))  # fmt: skip
+    return (top / stats.t.ppf(1 - a, units - 1)) ** 2
+
+
+@pytest.mark.parametrize("units", [2, 4, 10, 36, 200])
+@pytest.mark.parametrize("count", [None, 1, 36, 37, 700])
+def test_t_shrink_is_korn_graubards_factor(units, count):
+    assert t_shrink(units, 0.95, count) == pytest.approx(_t_factor(units, count), rel=1e-9)
+    assert t_shrink(units, 0.95, count) <= 1.0
 
 
 @pytest.mark.parametrize("n", [5, 36, 200, 2000])
 @pytest.mark.parametrize("x", [0, 1, 3])
-def test_one_target_per_image_is_jeffreys_on_the_t_shrunk_count(x, n):
-    """Independent images with one trial each: the effective count is the real one, shrunk
-    by (z / t_{n-1})^2, and the bounds are Jeffreys' (Clopper-Pearson's at 0 and n)."""
+def test_one_target_per_image_is_plain_jeffreys(x, n):
+    """Independent images with one trial each: the effective count is the real one, the
+    Student factor is 1 (count = units: the binomial variance is known from the
+    proportion), and the bounds are Jeffreys' (Clopper-Pearson's at 0 and n)."""
     for k in (x, n - x):
         p = k / n
         iv = proportion_interval(p, n, _binomial_spread(p, n), units=n)
-        m = n * _t_factor(n)
-        assert (iv.lo, iv.hi) == pytest.approx(_jeffreys(p * m, m), abs=1e-9), (k, n)
+        assert (iv.lo, iv.hi) == pytest.approx(_jeffreys(k, n), abs=1e-9), (k, n)
+
+
+def test_clustered_targets_get_the_student_factor_on_the_effective_count():
+    """1000 targets in 10 images with a design effect of 5: Jeffreys on 200 effective
+    trials shrunk by (t_999 / t_9)^2."""
+    p, count, units = 0.7, 1000, 10
+    var = 5 * p * (1 - p) / count * (units - 1) / units
+    iv = proportion_interval(p, count, ReplicateSpread(p, var, 1000, 0), units=units)
+    m = 200 * _t_factor(units, count)
+    assert (iv.lo, iv.hi) == pytest.approx(_jeffreys(p * m, m), abs=1e-9)
 
 
 @pytest.mark.parametrize("n", [1, 2, 10, 36, 500])
@@ -68,27 +89,46 @@ def test_no_zero_width_at_zero_or_at_all_successes(n):
         assert fa.lo == 0.0 and fa.hi > 0.0
 
 
+def _poisson(k: float, kind: str, level: float = 0.95) -> tuple[float, float]:
+    """The slow obvious reference: chi-square quantiles (Garwood: 2k and 2k + 2 degrees
+    of freedom; Jeffreys: 2k + 1 for both, Garwood's upper bound at 0)."""
+    a = (1 - level) / 2
+    if kind == "jeffreys" and k > 0:
+        return stats.chi2.ppf(a, 2 * k + 1) / 2, stats.chi2.ppf(1 - a, 2 * k + 1) / 2
+    lo = 0.0 if k == 0 else stats.chi2.ppf(a, 2 * k) / 2
+    return lo, stats.chi2.ppf(1 - a, 2 * k + 2) / 2
+
+
 def test_zero_false_alarms_is_the_exact_poisson_bound():
-    """No false alarm in n images (independent): the upper bound is Garwood's exact one,
-    chi2(2) / 2 at 97.5 %, per t-shrunk image."""
+    """No false alarm in n independent images: [0, chi2_2(97.5 %) / 2 / n] (3.69 / n), the
+    Student factor 1 (count = units)."""
     for n in (10, 36, 400):
         iv = rate_interval(0, n, np.zeros(50))
-        m = n * _t_factor(n)
-        assert iv.hi == pytest.approx(stats.chi2.ppf(0.975, 2) / 2 / m, rel=1e-9)
+        assert (iv.lo, iv.hi) == pytest.approx((0.0, stats.chi2.ppf(0.975, 2) / 2 / n), rel=1e-9)
 
 
-def test_poisson_counts_per_image_give_the_exact_poisson_interval():
-    """Independent images with a bootstrap variance exactly Poisson: Garwood's interval on
-    the t-shrunk number of images."""
-    n, total = 50, 120
+@pytest.mark.parametrize("kind", ["jeffreys", "exact"])
+@pytest.mark.parametrize(("n", "total"), [(50, 1), (50, 3), (36, 120), (4, 170)])
+def test_poisson_counts_per_image_give_the_poisson_interval(kind, n, total):
+    """Independent images with a bootstrap variance exactly Poisson: the Poisson interval
+    on the number of images, shrunk by (t_{total-1} / t_{n-1})^2 where the false alarms
+    outnumber the images."""
     rate = total / n
     s = ReplicateSpread(rate, rate / n * (n - 1) / n, 1000, 0)
-    iv = rate_interval(total, n, s)
-    m = n * _t_factor(n)
-    k = rate * m
-    lo = stats.chi2.ppf(0.025, 2 * k) / 2 / m
-    hi = stats.chi2.ppf(0.975, 2 * (k + 1)) / 2 / m
-    assert (iv.lo, iv.hi) == pytest.approx((lo, hi), rel=1e-9)
+    iv = rate_interval(total, n, s, kind=kind)
+    m = n * _t_factor(n, total)
+    lo, hi = _poisson(rate * m, kind)
+    assert (iv.lo, iv.hi) == pytest.approx((lo / m, hi / m), rel=1e-9)
+
+
+def test_jeffreys_poisson_is_inside_garwoods():
+    """Jeffreys' Poisson interval lies inside Garwood's exact one (which covers at least
+    the level for every mean, so is wider) and shares its bounds at zero events."""
+    for total in (0, 1, 2, 5, 40):
+        s = ReplicateSpread(total / 30, total / 900 * 29 / 30, 1000, 0)
+        j, g = rate_interval(total, 30, s), rate_interval(total, 30, s, kind="exact")
+        assert g.lo <= j.lo <= j.hi <= g.hi
+        assert (j.hi == g.hi) == (total == 0)
 
 
 def test_overdispersion_widens_and_underdispersion_narrows():
