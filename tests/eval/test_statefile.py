@@ -12,6 +12,7 @@ import zlib
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 
 import torchsar_eval as te
 from torchsar_eval import statefile
@@ -120,3 +121,41 @@ def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
     data = _pack(header, {"__structure__": np.frombuffer(structure.encode(), np.uint8)})
     with pytest.raises(statefile.CorruptStateError, match="unexpected structure"):
         statefile.loads(data, "crafted")
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.uint64])
+def test_wide_integer_arrays_come_back_in_their_own_type_and_values(dtype):
+    info = np.iinfo(dtype)
+    arrays = [np.array(v, dtype=dtype) for v in (
+        [0, 1, 127], [200, 0], [70_000], [info.max, 0], [info.min, 3], [])]  # fmt: skip
+    if dtype is np.int64:
+        arrays += [np.array([-128, 127], dtype), np.array([-(2**31), 2**31 - 1], dtype)]
+    tensors = [torch.from_numpy(a.astype(np.int64)) for a in arrays if dtype is np.int64]
+    back = statefile.loads(statefile.dumps((arrays, tensors)), "test")
+    for a, b in zip(arrays, back[0], strict=True):
+        assert b.dtype == a.dtype and np.array_equal(a, b)
+    for a, b in zip(tensors, back[1], strict=True):
+        assert b.dtype == a.dtype and torch.equal(a, b)
+
+
+def test_small_counts_are_stored_narrow():
+    counts = np.zeros((200, 1000), np.int64)
+    counts[:, ::7] = 3
+    assert len(statefile.dumps(counts)) < len(statefile.dumps(counts.astype(np.float64))) / 4
+
+
+def test_a_stored_type_other_than_a_wide_integer_is_refused():
+    data = statefile.dumps(np.arange(3, dtype=np.int64))
+    line, _, body = data[len(statefile.MAGIC) :].partition(b"\n")
+    raw = zlib.decompress(body)
+    with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    tree = json.loads(arrays.pop("__structure__").tobytes())
+    tree["__as__"] = "<f8"
+    buf = io.BytesIO()
+    np.savez(buf, __structure__=np.frombuffer(json.dumps(tree).encode(), np.uint8), **arrays)
+    body = zlib.compress(buf.getvalue(), 1)
+    head = json.dumps({"format": statefile.FORMAT, "version": statefile.VERSION,
+                       "blake2b": statefile._digest(body)}).encode()  # fmt: skip
+    with pytest.raises(statefile.CorruptStateError, match="unexpected"):
+        statefile.loads(statefile.MAGIC + head + b"\n" + body, "test")
