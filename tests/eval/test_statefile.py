@@ -146,7 +146,7 @@ def test_small_counts_are_stored_narrow():
 
 def test_a_stored_type_other_than_a_wide_integer_is_refused():
     data = statefile.dumps(np.arange(3, dtype=np.int64))
-    line, _, body = data[len(statefile.MAGIC) :].partition(b"\n")
+    body = data[len(statefile.MAGIC) :].partition(b"\n")[2]
     raw = zlib.decompress(body)
     with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}
