@@ -126,7 +126,7 @@ for _cls in (
     Cases,
 ):
     statefile.register(_cls)  # fmt: skip
-statefile.register(RocAccumulator, transient=("_log_grid",))
+statefile.register(RocAccumulator, transient=("_log_grid", "_starts"))
 statefile.register(CocoState, transient=("_cache", "_consolidated"))
 statefile.register(ScrCounts)
 statefile.register(ErrorCounts)
