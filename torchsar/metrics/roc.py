@@ -130,9 +130,10 @@ class RocAccumulator:
             from torchsar.metrics.log_bins import _SURE
 
             lg = self._log_grid
-            hist = _kernels.log_grid_histogram(flat.astype(np.float64, copy=False), tgt, ign,
-                                               ignore is not None, g.astype(np.float64),
-                                               lg.m, float(lg.low), float(lg.ppd), _SURE)  # fmt: skip
+            args = (lg.m, float(lg.low), float(lg.ppd), _SURE)
+            hist = _kernels.log_grid_histogram(
+                flat.astype(np.float64, copy=False), tgt, ign, ignore is not None, g, *args
+            )
         return torch.from_numpy(hist)
 
     def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
