@@ -23,23 +23,25 @@ _JIT = {"cache": True, "nogil": True}
 
 @njit(**_JIT)
 def _integral(buf):
+    """Running sums along each row, then down each column (each element gets the same
+    additions, in the same order, as ``cumsum`` along the last axis and then the one before;
+    the column pass runs row by row so it vectorises across columns)."""
     hb, wb = buf.shape
     for i in range(hb):
         acc = 0.0
         for j in range(wb):
             acc += buf[i, j]
             buf[i, j] = acc
-    for j in range(wb):
-        acc = 0.0
-        for i in range(hb):
-            acc += buf[i, j]
-            buf[i, j] = acc
+    for i in range(1, hb):
+        for j in range(wb):
+            buf[i, j] = buf[i - 1, j] + buf[i, j]
 
 
 @njit(**_JIT)
 def _corners(s, rects, q, out):
     """Signed corner sums of region ``q`` of ``rects`` (rows: region, sign, top, bot, left,
-    right) from the integral image ``s`` into ``out`` ``(rr, W)``."""
+    right) from the integral image ``s`` into ``out`` ``(rr, W)``: the first corner is copied
+    (or negated), the others added or subtracted in turn, one branch-free pass each."""
     rr, w = out.shape
     first = True
     for k in range(rects.shape[0]):
@@ -54,23 +56,28 @@ def _corners(s, rects, q, out):
         )
         for corner in range(4):
             if corner == 0:
-                sg, rr0, cc0 = sign, bot, right
+                sg, r0, c0 = sign, bot, right
             elif corner == 1:
-                sg, rr0, cc0 = -sign, top, right
+                sg, r0, c0 = -sign, top, right
             elif corner == 2:
-                sg, rr0, cc0 = -sign, bot, left
+                sg, r0, c0 = -sign, bot, left
             else:
-                sg, rr0, cc0 = sign, top, left
-            for i in range(rr):
-                for j in range(w):
-                    v = s[rr0 + i, cc0 + j]
-                    if first:
-                        out[i, j] = v if sg > 0 else -v
-                    elif sg > 0:
-                        out[i, j] = out[i, j] + v
-                    else:
-                        out[i, j] = out[i, j] - v
-            first = False
+                sg, r0, c0 = sign, top, left
+            src = s[r0 : r0 + rr, c0 : c0 + w]
+            if first:
+                if sg > 0:
+                    out[:, :] = src
+                else:
+                    out[:, :] = -src
+                first = False
+            elif sg > 0:
+                for i in range(rr):
+                    for j in range(w):
+                        out[i, j] = out[i, j] + src[i, j]
+            else:
+                for i in range(rr):
+                    for j in range(w):
+                        out[i, j] = out[i, j] - src[i, j]
 
 
 @njit(**_JIT)
