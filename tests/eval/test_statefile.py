@@ -159,3 +159,18 @@ def test_a_stored_type_other_than_a_wide_integer_is_refused():
                        "blake2b": statefile._digest(body)}).encode()  # fmt: skip
     with pytest.raises(statefile.CorruptStateError, match="unexpected"):
         statefile.loads(statefile.MAGIC + head + b"\n" + body, "test")
+
+
+@pytest.mark.parametrize("rows", [
+    [("a", 1, 1, 0, 0, 2, 0.5), ("b", 0, 0, 1, 0, 1, float("-inf"))],
+    [],
+    [("odd", 1)],
+])  # fmt: skip
+def test_per_image_rows_come_back_as_the_same_tuples(rows):
+    res = _one_run(None)
+    result = res.states["sim-chips"][0]
+    result.rows = list(rows)
+    back = statefile.loads(statefile.dumps(ShardState([result])), "test").results[0]
+    assert back.rows == rows
+    for a, b in zip(rows, back.rows, strict=True):
+        assert [type(v) for v in a] == [type(v) for v in b]
