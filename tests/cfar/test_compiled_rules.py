@@ -1,6 +1,6 @@
-"""The compiled per-pixel rules of GO, SO and VI give the tensor code's statistic and mask
-bit for bit: clutter edges, flat zero images, bright targets, no-data masks that empty whole
-halves, both float dtypes and a strip split."""
+"""The compiled per-pixel rules of GO, SO, VI and of CA over a masked ring (CA with
+no-data, AC) give the tensor code's statistic and mask bit for bit: clutter edges, flat
+zero images, bright targets, no-data masks that empty whole halves, both float dtypes."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def _both(monkeypatch, fn):
     return out
 
 
-@pytest.mark.parametrize("name", ["go", "so", "vi"])
+@pytest.mark.parametrize("name", ["go", "so", "vi", "ca", "ac"])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("masked", [False, True])
 def test_compiled_rules_equal_the_tensor_code(monkeypatch, name, dtype, masked):

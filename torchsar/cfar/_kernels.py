@@ -14,7 +14,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["block_extreme_ratio", "vi_rule_ratio"]
+__all__ = [
+    "block_extreme_ratio",
+    "counts_present",
+    "ring_mean_ratio_masked",
+    "vi_rule_ratio",
+]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # x / 0: inf or NaN, as torch
 
@@ -127,4 +132,37 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
                         est = mb
                     stat = _ratio(np.float64(x[b, c, i, j]), est)
                     out[b, c, i, j] = stat * scale[rule, sb, sc, i, j]
+    return out
+
+
+@njit(**_JIT)
+def counts_present(count, size):
+    """Which integer counts ``0 .. size - 1`` occur in ``count`` (rounded)."""
+    seen = np.zeros(size, np.bool_)
+    flat = count.ravel()
+    for i in range(flat.size):
+        seen[int(np.rint(flat[i]))] = True
+    return seen
+
+
+@njit(**_JIT)
+def ring_mean_ratio_masked(x, count, s1, shift, n, scale):
+    """CA's statistic over a masked ring (:func:`torchsar.cfar.ca.ring_mean_ratio` with a
+    mask): ``x / mean`` with the border rule (``scale[c] = factor(n) / factor(c)`` where the
+    count ``c != n``) and ``-inf`` where no cell counted; float64 ``(B, C, rr, W)``."""
+    b_, c_, rr, w = s1.shape
+    out = np.empty((b_, c_, rr, w))
+    for b in range(b_):
+        for c in range(c_):
+            sh = shift[b, c]
+            for i in range(rr):
+                for j in range(w):
+                    cnt = count[b, c, i, j]
+                    if cnt <= 0:
+                        out[b, c, i, j] = -np.inf
+                        continue
+                    stat = _ratio(np.float64(x[b, c, i, j]), s1[b, c, i, j] / max(cnt, 1.0) + sh)
+                    if cnt != n:
+                        stat = stat * scale[int(np.rint(cnt))]
+                    out[b, c, i, j] = stat
     return out
