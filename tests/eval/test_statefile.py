@@ -174,3 +174,19 @@ def test_per_image_rows_come_back_as_the_same_tuples(rows):
     assert back.rows == rows
     for a, b in zip(rows, back.rows, strict=True):
         assert [type(v) for v in a] == [type(v) for v in b]
+
+
+def test_rows_written_while_merging_are_the_saved_shards_rows(tmp_path):
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.shards import ROWS_FILE, ShardJob, shard_rows
+
+    job = ShardJob("chips", make_dataset("sim-chips", n=7), list(range(7)),
+                   [BUILTIN["ca"], BUILTIN["so"]], te.Scoring(replicates=0), 2, None, 3)  # fmt: skip
+    folder = tmp_path / "shards"
+    run_shards(job, folder, progress=False)
+    written = [(d, [tuple(r) for r in rows]) for d, rows in shard_rows(folder)]
+    (folder / ROWS_FILE).unlink()
+    saved = list(shard_rows(folder))  # read from the states
+    assert written == saved and len(saved) == 3 * 2  # shards x detectors
+    assert sum(len(rows) for _, rows in saved) == 7 * 2
