@@ -17,6 +17,7 @@ import csv
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -73,11 +74,47 @@ class Cases:
     image: np.ndarray = field(default_factory=lambda: np.zeros((0, CROP, CROP), np.float16))
     masks: np.ndarray = field(default_factory=lambda: np.zeros((0, CROP, CROP), np.uint8))
 
+    def __post_init__(self) -> None:
+        self._pending: list[tuple[tuple, Callable[[], tuple]]] = []
+
     def __len__(self) -> int:
-        return len(self.keys)
+        return len(self.keys) + len(self._pending)
+
+    def __getstate__(self) -> dict:
+        """Saved (and pickled) with every pending case built."""
+        self.settle()
+        return {k: v for k, v in self.__dict__.items() if k != "_pending"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._pending = []
+
+    def ranked_keys(self) -> list:
+        """The keys of the kept cases, built or pending, best first."""
+        return sorted(self.keys + [k for k, _ in self._pending])[: self.size]
+
+    def settle(self) -> Cases:
+        """Build the pending cases that still make the cut (see :meth:`offer`); returns
+        ``self``."""
+        if self._pending:
+            cut = self.ranked_keys()[-1]
+            todo = [(k, make) for k, make in self._pending if k <= cut]
+            self._pending = []
+            self._take(self + self._built([k for k, _ in todo], [make() for _, make in todo]))
+        return self
+
+    def _built(self, keys: list, built: list[tuple]) -> Cases:
+        """Cases of this kind from ``keys`` and their built ``(info, image, masks)``."""
+        return Cases(self.kind, self.size, keys, [b[0] for b in built],
+                     np.stack([b[1] for b in built]), np.stack([b[2] for b in built]))  # fmt: skip
+
+    def _take(self, other: Cases) -> None:
+        self.keys, self.info, self.image, self.masks = (other.keys, other.info, other.image,
+                                                        other.masks)  # fmt: skip
 
     def __add__(self, other: Cases) -> Cases:
         """The best ``size`` cases of both (disjoint parts of a dataset)."""
+        self.settle(), other.settle()
         keys = self.keys + other.keys
         order = sorted(range(len(keys)), key=keys.__getitem__)[: self.size]
         info = self.info + other.info
@@ -86,23 +123,28 @@ class Cases:
         return Cases(self.kind, self.size, [keys[i] for i in order], [info[i] for i in order],
                      image, masks)  # fmt: skip
 
-    def offer(self, keys: list[tuple], make: Callable[[int], tuple[dict, np.ndarray, np.ndarray]]):
+    def offer(self, keys: list[tuple], make: Callable[[int], tuple[dict, np.ndarray, np.ndarray]],
+              defer: bool = False) -> None:  # fmt: skip
         """Add the candidates ``keys`` that make the cut; ``make(j)`` builds candidate
-        ``j``'s ``(info, image, masks)`` (called only for those kept)."""
+        ``j``'s ``(info, image, masks)``, only for those kept. With ``defer`` a kept
+        candidate is built when the cases are next merged, saved or read (:meth:`settle`),
+        and only if it is still among the best then: while a shard is scored most early
+        candidates are pushed out by later ones (``make`` must not depend on state that
+        changes meanwhile)."""
         if not keys:
             return
         kept = sorted(range(len(keys)), key=keys.__getitem__)[: self.size]
-        if len(self.keys) >= self.size:
-            worst = self.keys[-1]
-            kept = [j for j in kept if keys[j] < worst]
+        ranked = self.ranked_keys()
+        if len(ranked) >= self.size:
+            kept = [j for j in kept if keys[j] < ranked[-1]]
         if not kept:
             return
-        built = [make(j) for j in kept]
-        new = Cases(self.kind, self.size, [keys[j] for j in kept], [b[0] for b in built],
-                    np.stack([b[1] for b in built]), np.stack([b[2] for b in built]))  # fmt: skip
-        merged = self + new
-        self.keys, self.info, self.image, self.masks = (merged.keys, merged.info, merged.image,
-                                                        merged.masks)  # fmt: skip
+        if defer:
+            self._pending += [(keys[j], partial(make, j)) for j in kept]
+            cut = self.ranked_keys()[-1]
+            self._pending = [(k, m) for k, m in self._pending if k <= cut]
+            return
+        self._take(self + self._built([keys[j] for j in kept], [make(j) for j in kept]))
 
 
 def _facts(a: list, b: list) -> list:
@@ -125,6 +167,11 @@ class Gallery:
                        _facts(self.shapes, other.shapes),
                        _facts(self.spacings, other.spacings))  # fmt: skip
 
+    def settle(self) -> Gallery:
+        """Build the pending cases of both kinds (:meth:`Cases.settle`); returns ``self``."""
+        self.false_alarms.settle(), self.misses.settle()
+        return self
+
     def add(self, obj: Objects, gt: GroundTruth, info: list[ImageInfo], m: BatchMatch,
             image) -> None:  # fmt: skip
         """Offer one batch's false alarms and misses at the design operating point
@@ -141,18 +188,39 @@ class Gallery:
         found[m.op[at_op & (m.op >= 0)]] = True
         missed = np.flatnonzero(~found)
         planes = _Planes(image, gt, obj, at_op, info)
+        defer = _deferrable(image)
         score = np.nan_to_num(obj.score.astype(np.float64), nan=-np.inf)
         keys, idx = _keys(-score[fa], obj.plane[fa], obj.box[fa], info, self.false_alarms)
-        self.false_alarms.offer(keys, lambda j: planes.case(
-            fa[idx[j]], obj.box[fa[idx[j]]], float(score[fa[idx[j]]]), int(obj.area[fa[idx[j]]]),
-            _class(obj.classes, fa[idx[j]]), obj.plane, "det"))  # fmt: skip
+        self.false_alarms.offer(keys, _maker(planes, fa[idx], obj.box, score, obj.area,
+                                             obj.classes, obj.plane, "det"), defer)  # fmt: skip
         gt_score = np.where(found, -np.inf, m.gt_score)
         area = gt.area[missed].astype(np.float64)
         keys, idx = _keys(-area, gt.plane[missed], gt.box[missed], info, self.misses)
-        self.misses.offer(keys, lambda j: planes.case(
-            missed[idx[j]], gt.box[missed[idx[j]]], float(gt_score[missed[idx[j]]]),
-            int(gt.area[missed[idx[j]]]), _class(gt.classes, missed[idx[j]]), gt.plane,
-            "gt"))  # fmt: skip
+        self.misses.offer(keys, _maker(planes, missed[idx], gt.box, gt_score, gt.area,
+                                       gt.classes, gt.plane, "gt"), defer)  # fmt: skip
+
+
+DEFER_BYTES = 8 << 20
+"""Cases of a batch whose images take at most this many bytes (on the CPU) are built only if
+they are still among the best when the gallery is saved or merged (:meth:`Cases.offer`): the
+gallery then holds on to at most a few such batches."""
+
+
+def _deferrable(image) -> bool:
+    if image is None or not hasattr(image, "element_size"):
+        return False
+    return image.device.type == "cpu" and image.numel() * image.element_size() <= DEFER_BYTES
+
+
+def _maker(planes: _Planes, which: np.ndarray, box, score, area, classes, plane, own: str):
+    """``make(j)`` of :meth:`Cases.offer` for the candidates ``which`` (objects or targets)."""
+
+    def make(j: int) -> tuple[dict, np.ndarray, np.ndarray]:
+        k = which[j]
+        return planes.case(k, box[k], float(score[k]), int(area[k]), _class(classes, k), plane,
+                           own)  # fmt: skip
+
+    return make
 
 
 def observed_facts(results: list) -> dict:
@@ -187,8 +255,9 @@ def _keys(value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[Imag
         return [], np.zeros(0, np.int64)
     n = min(cases.size, value.size)
     cut = np.partition(value, n - 1)[n - 1]
-    if len(cases) >= cases.size:
-        cut = min(cut, cases.keys[-1][0])
+    ranked = cases.ranked_keys()
+    if len(ranked) >= cases.size:
+        cut = min(cut, ranked[-1][0])
     idx = np.flatnonzero(value <= cut)
     keys = []
     for j in idx:
@@ -362,6 +431,7 @@ def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[s
             if gallery is None:
                 continue
             for cases, short in ((gallery.false_alarms, "fa"), (gallery.misses, "miss")):
+                cases.settle()
                 sub = Path("gallery") / labels[name] / dets[r.detector.name]
                 for rank, info in enumerate(cases.info, 1):
                     rel = sub / f"{short}-{rank:02d}.png"

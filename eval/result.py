@@ -164,7 +164,13 @@ class DetectorResult:
         lambda, a network, a file reader): data only."""
         state = dict(self.__dict__)
         state["detector"] = DetectorName(self.detector.name, self.detector.instances)
+        state["rows"] = _row_columns(self.rows)
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        state = dict(state)
+        state["rows"] = _column_rows(state.get("rows", []))
+        self.__dict__.update(state)
 
     @property
     def at(self) -> int:
@@ -321,3 +327,23 @@ def _sparse_pixel_metrics(res: DetectorResult, out: Objects, batch: dict) -> boo
                                           n_target, n_clutter)  # fmt: skip
     res.roc.update_sparse(torch.from_numpy(best), t, ig, n_target, n_clutter)
     return True
+
+
+def _row_columns(rows: list) -> dict | list:
+    """Per-image rows ``(image, n_gt, tp, fp, fn, objects, max_score)`` as columns (a list
+    of names, an int64 ``(n, 5)`` array, a float64 array): a few values to save instead of a
+    structure per row. Rows of another shape stay a list."""
+    if not all(len(r) == 7 and isinstance(r[0], str) for r in rows):
+        return rows
+    counts = np.array([r[1:6] for r in rows], dtype=np.int64).reshape(len(rows), 5)
+    return {"image": [r[0] for r in rows], "counts": counts,
+            "max_score": np.array([r[6] for r in rows], dtype=np.float64)}  # fmt: skip
+
+
+def _column_rows(rows: dict | list) -> list:
+    """The rows of :func:`_row_columns` again, as the tuples of plain values they were."""
+    if not isinstance(rows, dict):
+        return list(rows)
+    counts = rows["counts"].tolist()
+    return [(k, *c, s) for k, c, s in zip(rows["image"], counts, rows["max_score"].tolist(),
+                                          strict=True)]  # fmt: skip

@@ -12,10 +12,13 @@ A saved shard is never recomputed, which is what ``--resume`` relies on.
 
 from __future__ import annotations
 
+import json
+import os
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
@@ -126,7 +129,7 @@ for _cls in (
     Cases,
 ):
     statefile.register(_cls)  # fmt: skip
-statefile.register(RocAccumulator, transient=("_log_grid",))
+statefile.register(RocAccumulator, transient=("_log_grid", "_starts"))
 statefile.register(CocoState, transient=("_cache", "_consolidated"))
 statefile.register(ScrCounts)
 statefile.register(ErrorCounts)
@@ -146,12 +149,20 @@ def _load(path: Path) -> ShardState:
     return state
 
 
-def merge(parts: Iterable[list[DetectorResult]]) -> list[DetectorResult]:
+ROWS_FILE = "rows.jsonl"
+"""The per-image rows of a folder's shards, in shard order, written while they are merged."""
+
+
+def merge(parts: Iterable[list[DetectorResult]], rows_to: IO[str] | None = None
+          ) -> list[DetectorResult]:  # fmt: skip
     """Add shard results detector by detector, in shard order (one shard in memory at a
-    time; the per-image rows are dropped: :func:`shard_rows` streams them from disk)."""
+    time; the per-image rows are dropped, after being written to ``rows_to`` as JSON lines
+    ``[detector, rows]`` when given: :func:`shard_rows` streams them from there)."""
     out = None
     for part in parts:
         for r in part:
+            if rows_to is not None:
+                rows_to.write(json.dumps([r.detector.name, list(r.rows)]) + "\n")
             r.rows = []
         out = part if out is None else [a + b for a, b in zip(out, part, strict=True)]
     return out or []
@@ -163,10 +174,33 @@ def shard_files(folder: Path) -> list[Path]:
 
 
 def shard_rows(folder: Path) -> Iterator[tuple[str, list]]:
-    """``(detector, per-image rows)`` of every saved shard, in shard order."""
+    """``(detector, per-image rows)`` of every saved shard, in shard order: from the rows
+    written when the shards were last merged (:func:`run_shards`), else from the states."""
+    written = folder / ROWS_FILE
+    if written.exists():
+        with open(written) as f:
+            for line in f:
+                det, rows = json.loads(line)
+                yield det, rows
+        return
     for path in shard_files(folder):
         for r in _load(path).results:
             yield r.detector.name, r.rows
+
+
+def _merge_saved(folder: Path) -> list[DetectorResult]:
+    """Merge the folder's saved shards, reading each once: the rows go to
+    :data:`ROWS_FILE` (replaced atomically; removed first, so a failed merge leaves none)."""
+    written = folder / ROWS_FILE
+    written.unlink(missing_ok=True)
+    tmp = folder / f".{ROWS_FILE}.{os.getpid()}.tmp"
+    try:
+        with open(tmp, "w") as f:
+            merged = merge((_load(p).results for p in shard_files(folder)), f)
+        os.replace(tmp, written)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return merged
 
 
 def shard_coco(folder: Path, name: str) -> CocoExport:
@@ -322,7 +356,7 @@ def run_shards(
             _processes(job, todo, bar, sizes, fail, workers)
     finally:
         bar.close()
-    merged = merge(_load(p).results for p in shard_files(folder))
+    merged = _merge_saved(folder)
     merged = merged or [DetectorResult(d, job.scoring, default_class=job.default_class)
                         for d in job.detectors]  # fmt: skip
     lost = {f["shard"] for f in fail.failed}

@@ -60,12 +60,21 @@ class _Encoder:
     def __init__(self) -> None:
         self.arrays: dict[str, np.ndarray] = {}
 
-    def array(self, a: np.ndarray) -> str:
+    def array(self, a: np.ndarray, kind: str) -> dict:
+        """``{kind: key}`` for an array stored under ``key``; a wide integer array whose values
+        fit a narrower integer type is stored in it, with its own dtype named beside the key
+        (the counts of a shard, held in int64, are mostly small: 8 times fewer bytes to
+        compress, write and read)."""
         if a.dtype.hasobject:
             raise TypeError("object arrays cannot be saved as data")
         key = f"a{len(self.arrays)}"
+        out: dict[str, Any] = {kind: key}
+        narrow = _narrow(a)
+        if narrow is not None:
+            out["__as__"] = np.lib.format.dtype_to_descr(a.dtype)
+            a = a.astype(narrow)
         self.arrays[key] = np.ascontiguousarray(a)
-        return key
+        return out
 
     def __call__(self, obj: Any) -> Any:
         if obj is None or isinstance(obj, bool | int | float | str):
@@ -75,9 +84,9 @@ class _Encoder:
         if isinstance(obj, np.dtype):
             return {"__dtype__": self(np.lib.format.dtype_to_descr(obj))}
         if isinstance(obj, np.ndarray):
-            return {"__array__": self.array(obj)}
+            return self.array(obj, "__array__")
         if isinstance(obj, torch.Tensor):
-            return {"__tensor__": self.array(obj.detach().cpu().numpy())}
+            return self.array(obj.detach().cpu().numpy(), "__tensor__")
         if isinstance(obj, list):
             return [self(v) for v in obj]
         if isinstance(obj, tuple):
@@ -94,6 +103,34 @@ class _Encoder:
         return {"__type__": name, "state": self(state)}
 
 
+_NARROW = (np.int8, np.int16, np.int32)
+
+
+def _narrow(a: np.ndarray) -> np.dtype | None:
+    """The narrowest signed integer type holding every value of a 64-bit integer array, when
+    narrower than its own (``None``: stored as it is)."""
+    if a.dtype.kind not in "iu" or a.dtype.itemsize != 8 or a.size == 0:
+        return None
+    lo, hi = int(a.min()), int(a.max())
+    for t in _NARROW:
+        info = np.iinfo(t)
+        if info.min <= lo and hi <= info.max:
+            return np.dtype(t)
+    return None
+
+
+def _stored(tree: dict, kind: str, arrays: dict[str, np.ndarray]) -> np.ndarray:
+    """The array a ``{kind: key}`` node refers to, in its own dtype again when it was stored
+    narrower (``__as__``; only a widening to a 64-bit integer type is accepted)."""
+    a = arrays[tree[kind]]
+    if "__as__" not in tree:
+        return a
+    dtype = np.lib.format.descr_to_dtype(tree["__as__"])
+    if dtype.kind not in "iu" or dtype.itemsize != 8 or a.dtype.kind != "i":
+        raise ValueError(f"unexpected stored type {tree['__as__']!r}")
+    return a.astype(dtype)
+
+
 def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     if tree is None or isinstance(tree, bool | int | float | str):
         return tree
@@ -102,9 +139,9 @@ def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     if not isinstance(tree, dict) or len(tree) not in (1, 2):
         raise ValueError("unexpected structure")
     if "__array__" in tree:
-        return arrays[tree["__array__"]]
+        return _stored(tree, "__array__", arrays)
     if "__tensor__" in tree:
-        return torch.from_numpy(np.array(arrays[tree["__tensor__"]]))
+        return torch.from_numpy(np.array(_stored(tree, "__tensor__", arrays)))
     if "__dtype__" in tree:
         return np.lib.format.descr_to_dtype(_decode(tree["__dtype__"], arrays))
     if "__tuple__" in tree:

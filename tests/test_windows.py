@@ -7,6 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.reference.windows import rect_cells, ring_cells
+from torchsar import _jit
 from torchsar.windows import Rect, Region, Ring, pinwheel_rects, rect_sums, ring_sums, windowed
 
 
@@ -137,3 +138,36 @@ def test_mean_in_place_equals_mean(masked):
     want = s.mean()
     assert masked == bool((s.count == 0).any())  # the masked case has empty rings
     assert torch.equal(s.mean_(), want)
+
+
+@pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("masked", [False, True])
+@pytest.mark.parametrize("moments", [1, 2])
+@pytest.mark.parametrize("strip", [None, 5])
+def test_compiled_strip_sums_equal_the_tensor_code_bit_for_bit(
+    monkeypatch, dtype, masked, moments, strip
+):
+    g = torch.Generator().manual_seed(3)
+    x = (torch.rand(3, 2, 23, 17, generator=g, dtype=torch.float64) * 1e3).to(dtype)
+    valid = torch.rand(x.shape, generator=g) > 0.3 if masked else None
+    shapes = [Ring(1, 2).region, *pinwheel_rects(1, 2), Rect(-4, -1, 0, 3), Rect.box(0)]
+
+    def collect(_xs, sums):
+        out = []
+        for s in sums:
+            out += [s.count.expand_as(s.s1), s.s1] + ([s.s2] if moments == 2 else [])
+        return tuple(out)
+
+    got = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        got.append(windowed(x, shapes, collect, valid=valid, moments=moments, strip=strip))
+    for a, b in zip(*got, strict=True):
+        assert a.dtype == b.dtype == torch.float64 and torch.equal(a, b)
+
+
+def test_strip_sums_of_a_tensor_needing_gradients_use_the_tensor_code():
+    x = _image(2, 10, 10).requires_grad_()
+    ring_sums(x, 1, 1).s1.sum().backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all()

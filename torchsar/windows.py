@@ -26,9 +26,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_int, check_window_fits
 
 __all__ = [
@@ -278,6 +280,8 @@ def _strip_sums(
 ) -> list[Sums]:
     """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
     h, w = x.shape[-2:]
+    if _compiled(x):
+        return _compiled_strip_sums(x, rects, r, rr, pad, shift, vmask, moments)
     buf = _strip_buffer(x, r, rr, pad, shift)
     cnt = None
     if vmask is not None:
@@ -300,6 +304,49 @@ def _strip_sums(
                 shift,
             )
         )
+    return out
+
+
+def _compiled(x: Tensor) -> bool:
+    """Whether the strip sums of ``x`` come from the compiled kernel (CPU float tensors that
+    need no gradient; same values as the tensor code, bit for bit)."""
+    return (
+        x.device.type == "cpu"
+        and x.dtype in (torch.float32, torch.float64)
+        and not x.requires_grad
+        and _jit.enabled()
+    )
+
+
+def _compiled_strip_sums(
+    x: Tensor,
+    rects: tuple[Region, ...],
+    r: int,
+    rr: int,
+    pad: int,
+    shift: Tensor,
+    vmask: Tensor | None,
+    moments: int,
+) -> list[Sums]:
+    """:func:`_strip_sums` by :func:`torchsar._windows_kernels.strip_sums`."""
+    from torchsar import _windows_kernels
+
+    b, c, h, w = x.shape
+    table = np.array(
+        [(q, sign, pad + t.r0, pad + t.r1 + 1, pad + t.c0, pad + t.c1 + 1)
+         for q, reg in enumerate(rects) for sign, t in reg.signed()],
+        dtype=np.int64,
+    )  # fmt: skip
+    mask = np.zeros((1, 1, 1, 1), np.bool_) if vmask is None else vmask.contiguous().numpy()
+    cnt, s1, s2 = _windows_kernels.strip_sums(
+        x.detach().contiguous().numpy(), r, rr, pad, shift.reshape(b, c).numpy(), mask,
+        vmask is not None, moments, table, len(rects),
+    )  # fmt: skip
+    cnt, s1, s2 = torch.from_numpy(cnt), torch.from_numpy(s1), torch.from_numpy(s2)
+    out = []
+    for q, rect in enumerate(rects):
+        count = _region_count(rect, h, w, r, rr, x.device) if vmask is None else cnt[q]
+        out.append(Sums(count, s1[q], s2[q] if moments >= 2 else None, shift))
     return out
 
 

@@ -11,6 +11,7 @@ from PIL import Image
 
 import torchsar as ts
 from torchsar.metrics import match_batch
+from torchsar_eval import statefile
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from torchsar_eval.gallery import (
     CROP,
@@ -176,3 +177,35 @@ def test_written_gallery_matches_its_index(tmp_path, reference):
     first_fa = index[(index.detector == "so") & (index.kind == "false_alarm")].file.iloc[0]
     with Image.open(tmp_path / first_fa) as im:
         assert (np.asarray(im.convert("RGB")) == magenta).all(axis=-1).any()  # outlined
+
+
+@pytest.mark.parametrize("defer_bytes", [0, 1 << 40])
+def test_deferred_cases_are_the_cases_built_at_once(tmp_path, reference, monkeypatch,
+                                                    defer_bytes):  # fmt: skip
+    """Cases built only when the gallery is saved (candidates pushed out meanwhile never
+    built) equal those built as offered, batch after batch."""
+    import torchsar_eval.gallery as gallery_module
+
+    monkeypatch.setattr(gallery_module, "DEFER_BYTES", defer_bytes)
+    results = run_detectors(Chips(N), [BUILTIN[d] for d in DETECTORS], batch_size=2,
+                            scoring=SCORING, progress=False)  # fmt: skip
+    for r in results:
+        whole = reference[1][r.detector.name]
+        _same(whole.false_alarms, r.gallery.false_alarms)
+        _same(whole.misses, r.gallery.misses)
+
+
+def test_pending_cases_are_built_when_saved_or_merged():
+    built = []
+
+    def make(j):
+        built.append(j)
+        return {"j": j}, np.zeros((CROP, CROP), np.float16), np.zeros((CROP, CROP), np.uint8)
+
+    a = Cases("false_alarm", 2)
+    a.offer([(3.0,), (1.0,), (2.0,)], make, defer=True)
+    a.offer([(0.5,)], make, defer=True)  # pushes (2.0,) out before it was ever built
+    assert built == [] and len(a) == 2
+    back = statefile.loads(statefile.dumps(a), "test")
+    assert built == [1, 0] and back.keys == [(0.5,), (1.0,)]
+    assert [i["j"] for i in back.info] == [0, 1]

@@ -12,6 +12,7 @@ import zlib
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 
 import torchsar_eval as te
 from torchsar_eval import statefile
@@ -120,3 +121,72 @@ def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
     data = _pack(header, {"__structure__": np.frombuffer(structure.encode(), np.uint8)})
     with pytest.raises(statefile.CorruptStateError, match="unexpected structure"):
         statefile.loads(data, "crafted")
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.uint64])
+def test_wide_integer_arrays_come_back_in_their_own_type_and_values(dtype):
+    info = np.iinfo(dtype)
+    arrays = [np.array(v, dtype=dtype) for v in (
+        [0, 1, 127], [200, 0], [70_000], [info.max, 0], [info.min, 3], [])]  # fmt: skip
+    if dtype is np.int64:
+        arrays += [np.array([-128, 127], dtype), np.array([-(2**31), 2**31 - 1], dtype)]
+    tensors = [torch.from_numpy(a.astype(np.int64)) for a in arrays if dtype is np.int64]
+    back = statefile.loads(statefile.dumps((arrays, tensors)), "test")
+    for a, b in zip(arrays, back[0], strict=True):
+        assert b.dtype == a.dtype and np.array_equal(a, b)
+    for a, b in zip(tensors, back[1], strict=True):
+        assert b.dtype == a.dtype and torch.equal(a, b)
+
+
+def test_small_counts_are_stored_narrow():
+    counts = np.zeros((200, 1000), np.int64)
+    counts[:, ::7] = 3
+    assert len(statefile.dumps(counts)) < len(statefile.dumps(counts.astype(np.float64))) / 4
+
+
+def test_a_stored_type_other_than_a_wide_integer_is_refused():
+    data = statefile.dumps(np.arange(3, dtype=np.int64))
+    body = data[len(statefile.MAGIC) :].partition(b"\n")[2]
+    raw = zlib.decompress(body)
+    with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    tree = json.loads(arrays.pop("__structure__").tobytes())
+    tree["__as__"] = "<f8"
+    buf = io.BytesIO()
+    np.savez(buf, __structure__=np.frombuffer(json.dumps(tree).encode(), np.uint8), **arrays)
+    body = zlib.compress(buf.getvalue(), 1)
+    head = json.dumps({"format": statefile.FORMAT, "version": statefile.VERSION,
+                       "blake2b": statefile._digest(body)}).encode()  # fmt: skip
+    with pytest.raises(statefile.CorruptStateError, match="unexpected"):
+        statefile.loads(statefile.MAGIC + head + b"\n" + body, "test")
+
+
+@pytest.mark.parametrize("rows", [
+    [("a", 1, 1, 0, 0, 2, 0.5), ("b", 0, 0, 1, 0, 1, float("-inf"))],
+    [],
+    [("odd", 1)],
+])  # fmt: skip
+def test_per_image_rows_come_back_as_the_same_tuples(rows):
+    res = _one_run(None)
+    result = res.states["sim-chips"][0]
+    result.rows = list(rows)
+    back = statefile.loads(statefile.dumps(ShardState([result])), "test").results[0]
+    assert back.rows == rows
+    for a, b in zip(rows, back.rows, strict=True):
+        assert [type(v) for v in a] == [type(v) for v in b]
+
+
+def test_rows_written_while_merging_are_the_saved_shards_rows(tmp_path):
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.registry import BUILTIN
+    from torchsar_eval.shards import ROWS_FILE, ShardJob, shard_rows
+
+    job = ShardJob("chips", make_dataset("sim-chips", n=7), list(range(7)),
+                   [BUILTIN["ca"], BUILTIN["so"]], te.Scoring(replicates=0), 2, None, 3)  # fmt: skip
+    folder = tmp_path / "shards"
+    run_shards(job, folder, progress=False)
+    written = [(d, [tuple(r) for r in rows]) for d, rows in shard_rows(folder)]
+    (folder / ROWS_FILE).unlink()
+    saved = list(shard_rows(folder))  # read from the states
+    assert written == saved and len(saved) == 3 * 2  # shards x detectors
+    assert sum(len(rows) for _, rows in saved) == 7 * 2

@@ -5,6 +5,7 @@ import pytest
 import torch
 from sklearn.metrics import roc_curve
 
+from torchsar import _jit
 from torchsar._checks import InputTypeError, InputValueError, ShapeError
 from torchsar.metrics import RocAccumulator, default_pixel_grid
 from torchsar.metrics.log_bins import LogGrid
@@ -67,22 +68,58 @@ def test_update_validates():
         acc.update(torch.zeros(1, 1, 2, 2), torch.zeros(1, 1, 2, 3, dtype=torch.bool))
 
 
-@pytest.mark.parametrize("ppd", [10, 40, 50])
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_log_grid_bins_equal_bucketize(ppd, dtype):
-    grid64 = default_pixel_grid(ppd)
-    log_grid = LogGrid.matching(grid64)
-    assert log_grid is not None
-    grid = grid64.to(dtype)
+def _extreme_values(ppd, dtype):
+    """Grid values, their float neighbours, zeros, infinities, subnormals and a wide random
+    sweep; and the grid in ``dtype``."""
+    grid = default_pixel_grid(ppd).to(dtype)
     g = torch.Generator().manual_seed(ppd)
-    # grid values, their float neighbours, zeros, infinities, subnormals and a wide random sweep
     on = torch.cat([grid, torch.nextafter(grid, grid + 1), torch.nextafter(grid, grid - 1)])
     special = torch.tensor([0.0, -0.0, torch.inf, -torch.inf, 1e-45, -1e-45, 1e-30, 3e38])
     sweep = torch.randn(20000, generator=g, dtype=torch.float64) * 10 ** (
         torch.rand(20000, generator=g, dtype=torch.float64) * 18 - 9
     )
-    x = torch.cat([on, special.to(dtype), sweep.to(dtype)])
+    return torch.cat([on, special.to(dtype), sweep.to(dtype)]), grid
+
+
+@pytest.mark.parametrize("ppd", [10, 40, 50])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_log_grid_bins_equal_bucketize(ppd, dtype):
+    log_grid = LogGrid.matching(default_pixel_grid(ppd))
+    assert log_grid is not None
+    x, grid = _extreme_values(ppd, dtype)
     assert torch.equal(log_grid.bucketize(x, grid), torch.bucketize(x, grid))
+
+
+@pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
+@pytest.mark.parametrize("ppd", [10, 40])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("with_ignore", [False, True])
+def test_compiled_histogram_equals_bucketize_counts(ppd, dtype, with_ignore):
+    x, grid = _extreme_values(ppd, dtype)
+    g = torch.Generator().manual_seed(7)
+    target = torch.rand(x.shape, generator=g) < 0.3
+    ignore = (torch.rand(x.shape, generator=g) < 0.2) if with_ignore else None
+    cls = (~target).long() if ignore is None else (~target).long().masked_fill(ignore, 2)
+    n = grid.numel() + 1
+    literal = torch.bincount(cls * n + torch.bucketize(x, grid), minlength=3 * n).view(3, n)
+    acc = RocAccumulator(default_pixel_grid(ppd))
+    assert torch.equal(acc._compiled_histogram(x, target, ignore, grid), literal)
+
+
+def test_update_is_the_same_with_and_without_the_compiled_kernel(monkeypatch):
+    stat, target = _data(5)
+    ignore = torch.zeros_like(target)
+    ignore[0, 0, :3] = True
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        acc = RocAccumulator()
+        acc.update(stat, target, ignore)
+        acc.update(stat.double() * 3, target)
+        out.append(acc)
+    assert torch.equal(out[0].target_hits, out[1].target_hits)
+    assert torch.equal(out[0].clutter_hits, out[1].clutter_hits)
+    assert (out[0].targets, out[0].clutter) == (out[1].targets, out[1].clutter)
 
 
 def test_log_grid_recognises_only_its_grid():

@@ -9,7 +9,15 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_probability
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
+from torchsar.cfar.core import (
+    compiled_rules,
+    conclude,
+    finish,
+    out_dtype,
+    prepare,
+    ratio,
+    stack_planes,
+)
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
 from torchsar.detection import Detection
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
@@ -52,8 +60,11 @@ def block_cfar(
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        est = extreme_mean(sums, reduce)
-        stat = ratio(xs.to(est.dtype), est)
+        if compiled_rules(xs):
+            stat = _compiled_extreme_ratio(xs, sums, reduce)
+        else:
+            est = extreme_mean(sums, reduce)
+            stat = ratio(xs.to(est.dtype), est)
         scale = block_scale([s.count for s in sums], interior, factor)
         if scale is not None:
             stat = stat * scale
@@ -61,6 +72,19 @@ def block_cfar(
 
     stat = windowed(x, rects, statistic, valid=vmask, moments=1)
     return conclude(stat, vmask, factor(interior))
+
+
+def _compiled_extreme_ratio(xs: Tensor, sums: list[Sums], reduce: str) -> Tensor:
+    """``xs / extreme_mean(sums, reduce)`` (as :func:`ratio`) by
+    :func:`torchsar.cfar._kernels.block_extreme_ratio`, bit for bit."""
+    from torchsar.cfar import _kernels
+
+    count = stack_planes([s.count for s in sums])
+    s1 = stack_planes([s.s1 for s in sums])
+    shift = sums[0].shift.reshape(xs.shape[:2])
+    out = _kernels.block_extreme_ratio(xs.contiguous().numpy(), count.numpy(), s1.numpy(),
+                                       shift.numpy(), reduce == "max")  # fmt: skip
+    return torch.from_numpy(out)
 
 
 def block_threshold(guard: int, train: int, pfa: float, reduce: str) -> float:

@@ -5,11 +5,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import partial
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import (
+    compiled_rules,
     conclude,
     finish,
     out_dtype,
@@ -88,10 +90,31 @@ def ring_mean_ratio(
             stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
             r0 = int(rows[0, 0]) if rows.numel() else 0
             return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
+        if compiled_rules(xs):
+            return _compiled_masked(xs, s, ring.n, factor).to(dtype)
         stat = ratio(xs, s.mean_())
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)
 
     return windowed(x, [ring.region], statistic, valid=vmask, moments=1, extras=(row,))
+
+
+def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]) -> Tensor:
+    """The masked branch of :func:`ring_mean_ratio` by
+    :func:`torchsar.cfar._kernels.ring_mean_ratio_masked` (same values bit for bit): the
+    border factors are evaluated once per count that occurs, as :func:`rescale_border_`
+    does."""
+    from torchsar.cfar import _kernels
+
+    count = s.count.expand_as(s.s1).contiguous().numpy()
+    seen = _kernels.counts_present(count, n + 1)
+    scale = np.ones(n + 1)
+    for c in np.flatnonzero(seen):
+        if 0 < c != n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
+            scale[c] = (1.0 / factor(int(c))) * factor(n)
+    shift = s.shift.reshape(xs.shape[:2]).numpy()
+    out = _kernels.ring_mean_ratio_masked(xs.contiguous().numpy(), count, s.s1.numpy(), shift,
+                                          n, scale)  # fmt: skip
+    return torch.from_numpy(out)
 
 
 def ca_threshold(*, guard: int, train: int, pfa: float, looks: float) -> float:

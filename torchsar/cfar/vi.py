@@ -10,7 +10,15 @@ from torch import Tensor
 
 from torchsar._checks import check_positive
 from torchsar.cfar.ca import ca_threshold
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
+from torchsar.cfar.core import (
+    compiled_rules,
+    conclude,
+    finish,
+    out_dtype,
+    prepare,
+    ratio,
+    stack_planes,
+)
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
 from torchsar.detection import Detection
 from torchsar.windows import Sums, pinwheel_rects, windowed
@@ -83,6 +91,8 @@ def vi(
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
+        if compiled_rules(xs):
+            return _compiled(xs, sums, ring.n, full, factor, k_vi, k_mr, dtype)
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
         rule = _decide(a, b, mean_a, mean_b, k_vi, k_mr)
@@ -94,6 +104,34 @@ def vi(
     rects = [*pinwheel_rects(ring.guard, ring.train), ring.region]
     stat = windowed(x, rects, statistic, valid=vmask, moments=2)
     return conclude(stat, vmask, full)
+
+
+def _compiled(
+    xs: Tensor,
+    sums: list[Sums],
+    n: int,
+    full: float,
+    factor: Callable[[tuple[int, ...]], float],
+    k_vi: float,
+    k_mr: float,
+    dtype: torch.dtype,
+) -> Tensor:
+    """The statistic of :func:`vi` by :func:`torchsar.cfar._kernels.vi_rule_ratio` (same
+    values bit for bit); the rules' factor planes come from :func:`_rule_scale`'s maps."""
+    from torchsar.cfar import _kernels
+
+    count = stack_planes([s.count for s in sums[:4]])
+    count_a, count_b = count[0] + count[1], count[2] + count[3]
+    scale = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
+    ring = sums[4]
+    ring_count = ring.count if ring.count.dim() == 4 else ring.count.view(1, 1, *ring.count.shape)
+    out = _kernels.vi_rule_ratio(
+        xs.contiguous().numpy(), count.numpy(), stack_planes([s.s1 for s in sums[:4]]).numpy(),
+        stack_planes([s.s2 for s in sums[:4]]).numpy(), ring_count.contiguous().numpy(),
+        ring.s1.contiguous().numpy(), ring.shift.reshape(xs.shape[:2]).numpy(), k_vi, k_mr,
+        scale.contiguous().numpy(),
+    )  # fmt: skip
+    return finish(torch.from_numpy(out), count_a + count_b, dtype)
 
 
 def vi_threshold(*, guard: int, train: int, pfa: float, k_vi: float, k_mr: float) -> float:

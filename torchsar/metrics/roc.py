@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import InputTypeError, InputValueError, check_same_shape, has_nan
 from torchsar.metrics.log_bins import LogGrid
 
@@ -52,6 +53,7 @@ class RocAccumulator:
         self.target_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
         self.clutter_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
         self._log_grid = LogGrid.matching(self.pixel_grid)
+        self._starts: np.ndarray | None = None  # float32 bucket starts of the compiled kernel
 
     def update(self, statistic: Tensor, target: Tensor, ignore: Tensor | None = None) -> None:
         """Add a batch: ``statistic`` float, ``target`` bool, optional ``ignore`` bool, all
@@ -65,12 +67,7 @@ class RocAccumulator:
                 check_same_shape(statistic, t, "statistic", name)
         if has_nan(statistic):
             raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
-        grid = self.pixel_grid.to(device=statistic.device, dtype=statistic.dtype)
-        bins = self._bins(statistic, grid)  # statistic > grid[k]  <=>  bin > k
-        # one histogram over (class, bin): class 0 target, 1 clutter, 2 ignored
-        cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
-        n = grid.numel() + 1
-        hist = torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).cpu().view(3, n)
+        hist = self._histogram(statistic, target, ignore)
         self.target_hits += _exceedances(hist[0])
         self.clutter_hits += _exceedances(hist[1])
         self.targets += int(hist[0].sum())
@@ -96,15 +93,48 @@ class RocAccumulator:
         """
         if has_nan(values):
             raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
-        grid = self.pixel_grid.to(dtype=values.dtype)
-        bins = self._bins(values, grid)
-        cls = (~target).long().masked_fill_(ignore, 2)
-        n = grid.numel() + 1
-        hist = torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).view(3, n)
+        hist = self._histogram(values, target, ignore)
         self.target_hits += _exceedances(hist[0])
         self.clutter_hits += _exceedances(hist[1])
         self.targets += int(targets)
         self.clutter += int(clutter)
+
+    def _histogram(self, values: Tensor, target: Tensor, ignore: Tensor | None) -> Tensor:
+        """``(3, grid + 1)`` int64 counts (CPU) of (class, bucket): class 0 target, 1
+        clutter, 2 ignored; bucket ``b`` holds the values with ``grid[b - 1] < v <=
+        grid[b]``, so ``v > grid[k]`` exactly when its bucket is above ``k``. On the CPU with
+        the default grid one compiled pass (:mod:`torchsar.metrics._kernels`) gives the
+        tensor code's counts without its intermediate tensors."""
+        grid = self.pixel_grid.to(device=values.device, dtype=values.dtype)
+        n = grid.numel() + 1
+        if self._log_grid is not None and values.device.type == "cpu" and _jit.enabled():
+            return self._compiled_histogram(values, target, ignore, grid)
+        bins = self._bins(values, grid)
+        cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
+        return torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).cpu().view(3, n)
+
+    def _compiled_histogram(
+        self, values: Tensor, target: Tensor, ignore: Tensor | None, grid: Tensor
+    ) -> Tensor:
+        from torchsar.metrics import _kernels
+
+        flat = values.detach().contiguous().view(-1).numpy()
+        tgt = target.contiguous().view(-1).numpy()
+        ign = tgt if ignore is None else ignore.contiguous().view(-1).numpy()
+        g = grid.numpy()
+        if flat.dtype == np.float32:
+            if self._starts is None:
+                self._starts = _kernels.float32_starts(g)
+            hist = _kernels.float32_histogram(flat, tgt, ign, ignore is not None, g, self._starts)
+        else:
+            from torchsar.metrics.log_bins import _SURE
+
+            lg = self._log_grid
+            args = (lg.m, float(lg.low), float(lg.ppd), _SURE)
+            hist = _kernels.log_grid_histogram(
+                flat.astype(np.float64, copy=False), tgt, ign, ignore is not None, g, *args
+            )
+        return torch.from_numpy(hist)
 
     def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
         """``torch.bucketize(statistic, grid)``, by arithmetic when the grid is the default
