@@ -201,10 +201,14 @@ def _formed(pool: dict, idx: np.ndarray, replicates: int, seed: int, op_bin: int
     st.images, st.n_gt = len(idx), int(pool["n_gt"][idx].sum())
     st.tp, st.fp = pool["tp"][idx].sum(axis=0), pool["fp"][idx].sum(axis=0)
     if replicates:
-        w = poisson_weights([pool["keys"][i] for i in idx], replicates, seed).astype(np.int64)
+        w = poisson_weights([pool["keys"][i] for i in idx], replicates, seed).astype(np.float64)
         st.replicates = replicates
-        st.boot = {k: w @ pool[k][idx] for k in ("tp", "fp", "tp50", "fp50")}
-        st.boot.update(n_gt=w @ pool["n_gt"][idx], images=w.sum(axis=1))
+
+        def weighted(h: np.ndarray) -> np.ndarray:  # float BLAS product, exact below 2**53
+            return np.rint(w @ h[idx].astype(np.float64)).astype(np.int64)
+
+        st.boot = {k: weighted(pool[k]) for k in ("tp", "fp", "tp50", "fp50")}
+        st.boot.update(n_gt=weighted(pool["n_gt"]), images=w.sum(axis=1).astype(np.int64))
     m = st.metrics()
     m["ap50"] = float(coco_ap_rows(pool["tp50"][idx].sum(0), pool["fp50"][idx].sum(0),
                                    np.array([st.n_gt]))[0])  # fmt: skip
