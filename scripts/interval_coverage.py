@@ -9,16 +9,22 @@ the natural count, the bootstrap replicates' mean / variance / undefined count, 
 resampling units and the plain percentile endpoints, so any interval rule can be judged
 afterwards without scoring again (``--report`` on the records file).
 
+Each plane's own sufficient statistics (resampling key, targets, TP / FP score histograms)
+go to ``OUT/planes.jsonl``, so ``--report --draws N`` can re-form datasets from the pool
+without scoring: the consecutive blocks, topped up to ``N`` per size by sets of planes drawn
+from the whole pool, each bootstrapped as the harness does and recorded with each unit's TP,
+FP and targets (for rules that need per-unit moments); cached in ``OUT/formed-N.jsonl``.
+
 Resumable: records go to ``OUT/records.jsonl`` and the truth states to ``OUT/truth.state``
 after every block of the largest size; a rerun with the same options continues.
 
 Usage::
 
-    python scripts/interval_coverage.py --kind sim-chips --sizes 36 200 --datasets 200 \
+    python scripts/interval_coverage.py --kind sim-chips --sizes 36 200 --datasets 100 \
         --out cov-chips
-    python scripts/interval_coverage.py --kind sim-scenes --sizes 4 36 --datasets 40 \
+    python scripts/interval_coverage.py --kind sim-scenes --sizes 4 36 --datasets 250 \
         --out cov-scenes
-    python scripts/interval_coverage.py --report cov-chips cov-scenes
+    python scripts/interval_coverage.py --report cov-chips cov-scenes --compact --draws 1000
 """
 
 from __future__ import annotations
