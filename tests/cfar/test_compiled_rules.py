@@ -53,3 +53,15 @@ def test_compiled_rules_do_not_depend_on_the_batch(name):
     whole = detector(x).statistic
     for i in range(x.shape[0]):
         assert torch.equal(detector(x[i : i + 1]).statistic, whole[i : i + 1])
+
+
+def test_stacked_planes_are_a_view_when_adjacent_else_a_copy():
+    from torchsar.cfar.core import stack_planes
+
+    base = torch.rand(5, 2, 1, 4, 6, dtype=torch.float64)
+    view = stack_planes([base[i] for i in range(4)])
+    assert view.data_ptr() == base.data_ptr() and torch.equal(view, base[:4])
+    copy = stack_planes([base[0], base[2]])
+    assert copy.data_ptr() != base.data_ptr() and torch.equal(copy, base[[0, 2]])
+    geometric = stack_planes([torch.ones(4, 6), base[1]])  # an (rr, W) count broadcast
+    assert geometric.shape == (2, 2, 1, 4, 6) and torch.equal(geometric[1], base[1])

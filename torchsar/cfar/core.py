@@ -69,7 +69,22 @@ def stack_planes(planes: list[Tensor]) -> Tensor:
     planes = [p if p.dim() == 4 else p.view(1, 1, *p.shape[-2:]) for p in planes]
     if len({tuple(p.shape) for p in planes}) > 1:
         planes = list(torch.broadcast_tensors(*planes))
+    adjacent = _adjacent(planes)
+    if adjacent is not None:
+        return adjacent
     return torch.stack(planes).to(torch.float64).contiguous()
+
+
+def _adjacent(planes: list[Tensor]) -> Tensor | None:
+    """The planes as one ``(K, ...)`` view, without a copy, when they lie one after the other
+    in memory as contiguous float64 tensors of one shape (the window sums of one strip do)."""
+    first = planes[0]
+    step = first.numel() * first.element_size()
+    if not all(p.dtype == torch.float64 and p.is_contiguous() and p.shape == first.shape
+               and p.data_ptr() == first.data_ptr() + i * step
+               for i, p in enumerate(planes)):  # fmt: skip
+        return None
+    return torch.as_strided(first, (len(planes), *first.shape), (first.numel(), *first.stride()))
 
 
 def ratio(num: Tensor, den: Tensor) -> Tensor:
