@@ -208,7 +208,7 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
     assert "worker process died" in counts["failed"][0]["error"]
     assert merged[0].images == 4 and counts["done"] == 2
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [
-        "shard-000000.state", "shard-000001.state"
+        "rows.jsonl", "shard-000000.state", "shard-000001.state"
     ]  # fmt: skip
     with (
         pytest.raises(EvalError, match="shard 2 failed: a worker process died"),
