@@ -19,7 +19,6 @@ from torchsar.metrics import (
     PixelCounts,
     RocAccumulator,
     match_batch,
-    pixel_counts,
 )
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
@@ -182,8 +181,8 @@ class DetectorResult:
         :func:`torchsar_eval.scoring.batch_truth`); returns the batch's objects."""
         mask, ignore = batch["mask"], batch["ignore"]
         if isinstance(out, Detection):
-            self.pixels = self.pixels + pixel_counts(out.mask, mask, ignore=ignore)
-            self.roc.update(out.statistic, mask, ignore)
+            counts = self.roc.update(out.statistic, mask, ignore, detected=out.mask)
+            self.pixels = self.pixels + counts
             self.pixel_level = True
         elif _sparse_pixel_metrics(self, out, batch):
             self.pixel_level = True

@@ -7,7 +7,7 @@ from sklearn.metrics import roc_curve
 
 from torchsar import _jit
 from torchsar._checks import InputTypeError, InputValueError, ShapeError
-from torchsar.metrics import RocAccumulator, default_pixel_grid
+from torchsar.metrics import RocAccumulator, default_pixel_grid, pixel_counts
 from torchsar.metrics.log_bins import LogGrid
 
 
@@ -143,3 +143,37 @@ def test_update_counts_equal_literal_exceedances():
         assert torch.equal(hits, (above & keep).sum(0))
     assert acc.targets == int((target & ~ignore).sum())
     assert acc.clutter == int((~target & ~ignore).sum())
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("with_ignore", [False, True])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_update_with_a_mask_returns_its_pixel_counts(monkeypatch, dtype, with_ignore, compiled):
+    if compiled and not _jit.enabled():
+        pytest.skip("numba kernels not available")
+    monkeypatch.setattr(_jit, "ENABLED", compiled)
+    x, _ = _extreme_values(40, dtype)
+    x = x[torch.isfinite(x) | x.isinf()].reshape(1, 1, 1, -1)
+    g = torch.Generator().manual_seed(11)
+    target = torch.rand(x.shape, generator=g) < 0.3
+    ignore = (torch.rand(x.shape, generator=g) < 0.2) if with_ignore else None
+    detected = x > 1.0
+    one, two = RocAccumulator(), RocAccumulator()
+    got = one.update(x, target, ignore, detected=detected)
+    two.update(x, target, ignore)
+    assert got == pixel_counts(detected, target, ignore=ignore)
+    for k in ("target_hits", "clutter_hits", "targets", "clutter"):
+        a, b = getattr(one, k), getattr(two, k)
+        assert torch.equal(a, b) if isinstance(a, torch.Tensor) else a == b, k
+    assert RocAccumulator().update(x, target, ignore) is None
+
+
+def test_a_nan_is_refused_before_anything_is_added():
+    acc = RocAccumulator()
+    stat = torch.tensor([[[[1.0, float("nan"), 3.0]]]])
+    tgt = torch.zeros(1, 1, 1, 3, dtype=torch.bool)
+    with pytest.raises(InputValueError, match="NaN"):
+        acc.update(stat, tgt, detected=stat > 0)
+    assert acc.targets == acc.clutter == 0 and int(acc.clutter_hits.sum()) == 0
+    with pytest.raises(InputTypeError, match="detected"):
+        acc.update(stat.nan_to_num(), tgt, detected=stat)

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["float32_histogram", "float32_starts", "log_grid_histogram"]
+__all__ = ["float32_histogram", "float32_roc_pass", "float32_starts", "log_grid_histogram"]
 
 _JIT = {"cache": True, "nogil": True}
 
@@ -100,3 +100,34 @@ def log_grid_histogram(values, target, ignore, has_ignore, grid, m, low, ppd, su
             cls = 2
         hist[cls, _log_bucket(values[i], grid, m, low, ppd, sure)] += 1
     return hist
+
+
+@njit(**_JIT)
+def float32_roc_pass(values, target, ignore, has_ignore, detected, grid, starts):
+    """:func:`float32_histogram` and, in the same pass, the pixel counts of the detection
+    mask ``detected`` (``[tp, detected, targets, counted]`` over the pixels not ignored, as
+    :func:`~torchsar.metrics.pixel_counts` counts them) and whether a value is NaN (then the
+    counts are not to be used)."""
+    n = grid.size
+    hist = np.zeros((3, n + 1), np.int64)
+    counts = np.zeros(4, np.int64)
+    bits = values.view(np.uint32)
+    nan = False
+    for i in range(values.size):
+        x = values[i]
+        if x != x:
+            nan = True
+            break
+        b = starts[bits[i] >> 16]
+        while b < n and grid[b] < x:
+            b += 1
+        if has_ignore and ignore[i]:
+            hist[2, b] += 1
+            continue
+        t, d = target[i], detected[i]
+        hist[0 if t else 1, b] += 1
+        counts[0] += t and d
+        counts[1] += d
+        counts[2] += t
+        counts[3] += 1
+    return hist, counts, nan

@@ -18,9 +18,13 @@ from torch import Tensor
 
 from torchsar import _jit
 from torchsar._checks import InputTypeError, InputValueError, check_same_shape, has_nan
+from torchsar.metrics.counts import PixelCounts, pixel_counts
 from torchsar.metrics.log_bins import LogGrid
 
 __all__ = ["RocAccumulator", "default_pixel_grid"]
+
+
+_NAN = "statistic must not contain NaN (it has no place on a ROC)"
 
 
 def default_pixel_grid(points_per_decade: int = 40) -> Tensor:
@@ -55,23 +59,72 @@ class RocAccumulator:
         self._log_grid = LogGrid.matching(self.pixel_grid)
         self._starts: np.ndarray | None = None  # float32 bucket starts of the compiled kernel
 
-    def update(self, statistic: Tensor, target: Tensor, ignore: Tensor | None = None) -> None:
+    def update(
+        self,
+        statistic: Tensor,
+        target: Tensor,
+        ignore: Tensor | None = None,
+        *,
+        detected: Tensor | None = None,
+    ) -> PixelCounts | None:
         """Add a batch: ``statistic`` float, ``target`` bool, optional ``ignore`` bool, all
-        of one shape."""
+        of one shape. With ``detected`` (a bool detection mask of that shape) also returns
+        its :func:`~torchsar.metrics.pixel_counts` against ``target`` and ``ignore``, counted
+        in the same pass over the pixels where it can be (float32 on the CPU).
+
+        Example:
+            >>> acc = RocAccumulator()
+            >>> stat = torch.tensor([0.5, 2.0, 3.0]); tgt = torch.tensor([False, True, False])
+            >>> c = acc.update(stat, tgt, detected=stat > 1.0)
+            >>> (c.tp, c.fp, c.targets, c.clutter), acc.targets
+            ((1, 1, 1, 2), 1)
+        """
         if not isinstance(statistic, Tensor) or not statistic.is_floating_point():
             raise InputTypeError("statistic must be a floating torch.Tensor")
-        for name, t in (("target", target), ("ignore", ignore)):
+        for name, t in (("target", target), ("ignore", ignore), ("detected", detected)):
             if t is not None and (not isinstance(t, Tensor) or t.dtype != torch.bool):
                 raise InputTypeError(f"{name} must be a bool tensor")
             if t is not None:
                 check_same_shape(statistic, t, "statistic", name)
-        if has_nan(statistic):
-            raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
-        hist = self._histogram(statistic, target, ignore)
+        one_pass = self._one_pass(statistic, target, ignore, detected)
+        if one_pass is None:
+            if has_nan(statistic):
+                raise InputValueError(_NAN)
+            hist = self._histogram(statistic, target, ignore)
+            counts = None if detected is None else pixel_counts(detected, target, ignore=ignore)
+        else:
+            hist, counts = one_pass
         self.target_hits += _exceedances(hist[0])
         self.clutter_hits += _exceedances(hist[1])
         self.targets += int(hist[0].sum())
         self.clutter += int(hist[1].sum())
+        return counts
+
+    def _one_pass(
+        self, values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
+    ) -> tuple[Tensor, PixelCounts] | None:
+        """The histogram and the detection mask's pixel counts in one compiled pass
+        (:func:`torchsar.metrics._kernels.float32_roc_pass`), for float32 CPU batches on the
+        default grid with a mask; ``None`` otherwise. Raises on NaN before anything is
+        added."""
+        if (detected is None or values.dtype != torch.float32 or values.device.type != "cpu"
+                or self._log_grid is None or not _jit.enabled()):  # fmt: skip
+            return None
+        from torchsar.metrics import _kernels
+
+        grid = self.pixel_grid.to(torch.float32).numpy()
+        if self._starts is None:
+            self._starts = _kernels.float32_starts(grid)
+        tgt = target.contiguous().view(-1).numpy()
+        ign = tgt if ignore is None else ignore.contiguous().view(-1).numpy()
+        hist, c, nan = _kernels.float32_roc_pass(
+            values.detach().contiguous().view(-1).numpy(), tgt, ign, ignore is not None,
+            detected.contiguous().view(-1).numpy(), grid, self._starts,
+        )  # fmt: skip
+        if nan:
+            raise InputValueError(_NAN)
+        tp, det, targets, counted = (int(v) for v in c)
+        return torch.from_numpy(hist), PixelCounts(tp, det - tp, targets, counted - targets)
 
     def update_sparse(
         self, values: Tensor, target: Tensor, ignore: Tensor, targets: int, clutter: int
@@ -92,7 +145,7 @@ class RocAccumulator:
             [True, True]
         """
         if has_nan(values):
-            raise InputValueError("statistic must not contain NaN (it has no place on a ROC)")
+            raise InputValueError(_NAN)
         hist = self._histogram(values, target, ignore)
         self.target_hits += _exceedances(hist[0])
         self.clutter_hits += _exceedances(hist[1])
