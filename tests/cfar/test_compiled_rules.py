@@ -65,3 +65,35 @@ def test_stacked_planes_are_a_view_when_adjacent_else_a_copy():
     assert copy.data_ptr() != base.data_ptr() and torch.equal(copy, base[[0, 2]])
     geometric = stack_planes([torch.ones(4, 6), base[1]])  # an (rr, W) count broadcast
     assert geometric.shape == (2, 2, 1, 4, 6) and torch.equal(geometric[1], base[1])
+
+
+@pytest.mark.parametrize("name", ["go", "so", "vi"])
+def test_remembered_border_factors_change_nothing(monkeypatch, name):
+    import importlib
+
+    modules = [importlib.import_module(f"torchsar.cfar.{m}") for m in ("blocks", "vi")]
+    detector = getattr(cfar, name)
+    x = _scene(5)
+    first, again = detector(x).statistic, detector(x[:2]).statistic  # the second reuses them
+    for module in modules:
+        monkeypatch.setattr(module, "geometric_cached", lambda key, counts, make: make())
+    assert torch.equal(detector(x).statistic, first)
+    assert torch.equal(detector(x[:2]).statistic, again)
+
+
+def test_only_counts_shared_by_the_batch_are_remembered():
+    from torchsar.cfar.core import geometric_cached
+
+    calls = []
+
+    def make():
+        calls.append(1)
+        return torch.zeros(1)
+
+    shared = torch.ones(4, 6)
+    geometric_cached(("t",), [shared], make), geometric_cached(("t",), [shared.clone()], make)
+    assert len(calls) == 1
+    geometric_cached(("t",), [shared + 1], make)  # other counts: evaluated again
+    per_image = torch.ones(2, 1, 4, 6)
+    geometric_cached(("t",), [per_image], make), geometric_cached(("t",), [per_image], make)
+    assert len(calls) == 4

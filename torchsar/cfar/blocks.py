@@ -13,6 +13,7 @@ from torchsar.cfar.core import (
     compiled_rules,
     conclude,
     finish,
+    geometric_cached,
     out_dtype,
     prepare,
     ratio,
@@ -65,7 +66,9 @@ def block_cfar(
         else:
             est = extreme_mean(sums, reduce)
             stat = ratio(xs.to(est.dtype), est)
-        scale = block_scale([s.count for s in sums], interior, factor)
+        counts = [s.count for s in sums]
+        scale = geometric_cached(("block", interior, pfa, reduce), counts,
+                                 lambda: block_scale(counts, interior, factor))  # fmt: skip
         if scale is not None:
             stat = stat * scale
         return finish(stat, sum(s.count for s in sums), dtype)

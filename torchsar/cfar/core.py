@@ -15,6 +15,7 @@ cells under test and builds the :class:`~torchsar.detection.Detection`.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 
 import torch
@@ -85,6 +86,29 @@ def _adjacent(planes: list[Tensor]) -> Tensor | None:
                for i, p in enumerate(planes)):  # fmt: skip
         return None
     return torch.as_strided(first, (len(planes), *first.shape), (first.numel(), *first.stride()))
+
+
+_GEOMETRIC: OrderedDict = OrderedDict()
+_GEOMETRIC_SIZE = 16
+
+
+def geometric_cached(key: tuple, counts: list[Tensor], make: Callable[[], Tensor | None]):
+    """``make()``, remembered for counts that depend only on the window geometry (no no-data
+    mask: ``(rr, W)`` planes or planes with unit batch and channel dims, the same for every
+    batch of images of one size): the border factors of the rules then cost one evaluation
+    per strip of a image size, not one per batch. ``key`` names everything else ``make``
+    depends on; the counts' values are part of the key. Other counts: ``make()`` as is."""
+    if any(c.dim() > 2 and (c.shape[0] != 1 or c.shape[1] != 1) for c in counts):
+        return make()
+    full = (key, *((tuple(c.shape), c.cpu().numpy().tobytes()) for c in counts))
+    if full in _GEOMETRIC:
+        _GEOMETRIC.move_to_end(full)
+        return _GEOMETRIC[full]
+    value = make()
+    _GEOMETRIC[full] = value
+    if len(_GEOMETRIC) > _GEOMETRIC_SIZE:
+        _GEOMETRIC.popitem(last=False)
+    return value
 
 
 def ratio(num: Tensor, den: Tensor) -> Tensor:

@@ -14,6 +14,7 @@ from torchsar.cfar.core import (
     compiled_rules,
     conclude,
     finish,
+    geometric_cached,
     out_dtype,
     prepare,
     ratio,
@@ -122,7 +123,10 @@ def _compiled(
 
     count = stack_planes([s.count for s in sums[:4]])
     count_a, count_b = count[0] + count[1], count[2] + count[3]
-    scale = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
+    scale = geometric_cached(
+        ("vi", n, full, factor.keywords["pfa"]), [count_a, count_b],
+        lambda: torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)]),
+    )  # fmt: skip
     ring = sums[4]
     ring_count = ring.count if ring.count.dim() == 4 else ring.count.view(1, 1, *ring.count.shape)
     out = _kernels.vi_rule_ratio(
