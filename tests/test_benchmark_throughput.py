@@ -3,21 +3,15 @@ count whose figures agree with each other and with the run's own timing table.""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pandas as pd
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "benchmark.py"
+from tests.scripts import SCRIPTS, load_script
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("benchmark_script", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmark")
 
 
 def test_throughput_topic_reports_consistent_rows(bench, tmp_path, capsys):
@@ -39,7 +33,7 @@ def test_throughput_topic_reports_consistent_rows(bench, tmp_path, capsys):
 
 
 def test_report_topics_are_not_ab_cases(bench):
-    mod = bench.load_topic(SCRIPT.parent / "benchmarks" / "throughput.py")
+    mod = bench.load_topic(SCRIPTS / "benchmarks" / "throughput.py")
     assert hasattr(mod, "report") and not hasattr(mod, "cases")
     assert bench.load_cases(None, "throughput") == []
     assert mod.DETECTORS == ("ca", "two_parameter", "go", "so", "os", "vi", "ac", "region")

@@ -5,22 +5,17 @@ rules judged on re-formed and drawn datasets are judged on what the harness comp
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "interval_coverage.py"
+from tests.scripts import load_script
 
 
 @pytest.fixture(scope="module")
 def cov():
-    spec = importlib.util.spec_from_file_location("interval_coverage_script", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("interval_coverage")
 
 
 @pytest.fixture(scope="module")
