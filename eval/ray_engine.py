@@ -14,7 +14,6 @@ import atexit
 import hashlib
 import importlib
 import os
-import pickle
 import shutil
 import sys
 import tempfile
@@ -77,14 +76,21 @@ def _worker_identity() -> dict:
     }
 
 
-def _detectors_load(detectors: bytes) -> str | None:
-    """In a Ray worker: rebuild a detector from the bytes Ray's own serializer made of it
-    (the driver's in-memory object, never a file); ``None`` or the error as one line."""
-    try:
-        pickle.loads(detectors)
-    except Exception as exc:
-        return f"{type(exc).__name__}: {exc}".splitlines()[0]
-    return None
+def _arrived(detector) -> None:
+    """In a Ray worker: nothing to do; Ray itself rebuilt ``detector`` (its task argument)
+    to call this, or failed to."""
+
+
+def last_line(exc: BaseException) -> str:
+    """The last non-blank line of an error's text (a Ray task error ends with the worker's
+    own error, e.g. ``ModuleNotFoundError: No module named 'mydets'``).
+
+    Example:
+        >>> last_line(RuntimeError("Traceback:\\n  File x\\nKeyError: 'a'\\n"))
+        "KeyError: 'a'"
+    """
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    return lines[-1] if lines else type(exc).__name__
 
 
 def check_workers(ray, detectors: list) -> None:
@@ -111,11 +117,12 @@ def check_workers(ray, detectors: list) -> None:
             "torchsar yourself)"
         )
     for det in detectors:
-        error = ray.get(probe(_detectors_load).remote(ray.cloudpickle.dumps(det)))
-        if error is not None:
-            raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker ({error}): "
-                            "install its package on every node, or give Ray its module "
-                            "through runtime_env")  # fmt: skip
+        try:
+            ray.get(probe(_arrived).remote(det))
+        except Exception as exc:
+            raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker "
+                            f"({last_line(exc)}): install its package on every node, or give "
+                            "Ray its module through runtime_env") from None  # fmt: skip
 
 
 def _scored_one_thread(job, k: int) -> bytes:
