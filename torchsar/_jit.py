@@ -18,7 +18,7 @@ import importlib.util
 import os
 import warnings
 
-__all__ = ["ENABLED", "enabled"]
+__all__ = ["ENABLED", "enabled", "for_tensor"]
 
 
 def _numba_installed() -> bool:
@@ -56,3 +56,17 @@ def enabled() -> bool:
     """Whether the numba kernels are to be used (numba installed, importable and not
     switched off)."""
     return ENABLED and _numba_imports()
+
+
+def for_tensor(t) -> bool:
+    """Whether the numba kernels are to be used on the tensor ``t``: a float32 or float64
+    CPU tensor that needs no gradient (the kernels compute values only), with
+    :func:`enabled`. Other tensors (other devices and dtypes, autograd) take the torch code."""
+    import torch
+
+    return (
+        t.device.type == "cpu"
+        and t.dtype in (torch.float32, torch.float64)
+        and not t.requires_grad
+        and enabled()
+    )

@@ -280,7 +280,7 @@ def _strip_sums(
 ) -> list[Sums]:
     """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
     h, w = x.shape[-2:]
-    if _compiled(x):
+    if _jit.for_tensor(x):
         return _compiled_strip_sums(x, rects, r, rr, pad, shift, vmask, moments)
     buf = _strip_buffer(x, r, rr, pad, shift)
     cnt = None
@@ -305,17 +305,6 @@ def _strip_sums(
             )
         )
     return out
-
-
-def _compiled(x: Tensor) -> bool:
-    """Whether the strip sums of ``x`` come from the compiled kernel (CPU float tensors that
-    need no gradient; same values as the tensor code, bit for bit)."""
-    return (
-        x.device.type == "cpu"
-        and x.dtype in (torch.float32, torch.float64)
-        and not x.requires_grad
-        and _jit.enabled()
-    )
 
 
 def _compiled_strip_sums(

@@ -8,9 +8,9 @@ from functools import partial
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_probability
 from torchsar.cfar.core import (
-    compiled_rules,
     conclude,
     finish,
     geometric_cached,
@@ -61,7 +61,7 @@ def block_cfar(
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if compiled_rules(xs):
+        if _jit.for_tensor(xs):
             stat = _compiled_extreme_ratio(xs, sums, reduce)
         else:
             est = extreme_mean(sums, reduce)
@@ -71,7 +71,7 @@ def block_cfar(
                                  lambda: block_scale(counts, interior, factor))  # fmt: skip
         if scale is not None:
             stat = stat * scale
-        return finish(stat, sum(s.count for s in sums), dtype)
+        return finish(stat, sum(counts), dtype)
 
     stat = windowed(x, rects, statistic, valid=vmask, moments=1)
     return conclude(stat, vmask, factor(interior))

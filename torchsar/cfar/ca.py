@@ -9,9 +9,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import (
-    compiled_rules,
     conclude,
     finish,
     out_dtype,
@@ -90,7 +90,7 @@ def ring_mean_ratio(
             stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
             r0 = int(rows[0, 0]) if rows.numel() else 0
             return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
-        if compiled_rules(xs):
+        if _jit.for_tensor(xs):
             return _compiled_masked(xs, s, ring.n, factor).to(dtype)
         stat = ratio(xs, s.mean_())
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)

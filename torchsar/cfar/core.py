@@ -21,7 +21,6 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar import _jit
 from torchsar._checks import check_image, check_mask, check_probability, float_dtype
 from torchsar.cfar.thresholds import factor_map
 from torchsar.detection import Detection, detection_from
@@ -50,18 +49,6 @@ def prepare(
     pfa = check_probability(pfa, "pfa")
     vmask = None if valid is None else check_mask(valid, x, "valid")
     return ring, pfa, vmask
-
-
-def compiled_rules(xs: Tensor) -> bool:
-    """Whether a window statistic of ``xs`` goes through the compiled per-pixel rules of
-    :mod:`torchsar.cfar._kernels` (CPU float tensors without gradients, numba available;
-    same values as the tensor code)."""
-    return (
-        xs.device.type == "cpu"
-        and xs.dtype in (torch.float32, torch.float64)
-        and not xs.requires_grad
-        and _jit.enabled()
-    )
 
 
 def stack_planes(planes: list[Tensor]) -> Tensor:

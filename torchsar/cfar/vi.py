@@ -8,10 +8,10 @@ from functools import partial
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_positive
 from torchsar.cfar.ca import ca_threshold
 from torchsar.cfar.core import (
-    compiled_rules,
     conclude,
     finish,
     geometric_cached,
@@ -92,7 +92,7 @@ def vi(
     dtype = out_dtype(x)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if compiled_rules(xs):
+        if _jit.for_tensor(xs):
             return _compiled(xs, sums, ring.n, full, factor, k_vi, k_mr, dtype)
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
