@@ -103,7 +103,7 @@ def test_compiled_histogram_equals_bucketize_counts(ppd, dtype, with_ignore):
     n = grid.numel() + 1
     literal = torch.bincount(cls * n + torch.bucketize(x, grid), minlength=3 * n).view(3, n)
     acc = RocAccumulator(default_pixel_grid(ppd))
-    assert torch.equal(acc._compiled_histogram(x, target, ignore, grid), literal)
+    assert torch.equal(acc._compiled_histogram(x, target, ignore), literal)
 
 
 def test_update_is_the_same_with_and_without_the_compiled_kernel(monkeypatch):

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["float32_histogram", "float32_roc_pass", "float32_starts", "log_grid_histogram"]
+__all__ = ["float32_roc_pass", "float32_starts", "log_grid_histogram"]
 
 _JIT = {"cache": True, "nogil": True}
 
@@ -40,25 +40,6 @@ def float32_starts(grid: np.ndarray) -> np.ndarray:
     ends = [keys.view(np.float32), (keys | np.uint32(0xFFFF)).view(np.float32)]
     starts = [np.where(np.isnan(e), grid.size, np.searchsorted(grid, e, side="left")) for e in ends]
     return np.minimum(*starts).astype(np.int32)
-
-
-@njit(**_JIT)
-def float32_histogram(values, target, ignore, has_ignore, grid, starts):
-    """``(3, grid.size + 1)`` int64 counts of (class, bucket) over flat float32 ``values``
-    (``starts``: :func:`float32_starts` of ``grid``)."""
-    n = grid.size
-    hist = np.zeros((3, n + 1), np.int64)
-    bits = values.view(np.uint32)
-    for i in range(values.size):
-        x = values[i]
-        b = starts[bits[i] >> 16]
-        while b < n and grid[b] < x:
-            b += 1
-        cls = 0 if target[i] else 1
-        if has_ignore and ignore[i]:
-            cls = 2
-        hist[cls, b] += 1
-    return hist
 
 
 @njit(**_JIT)
@@ -104,10 +85,11 @@ def log_grid_histogram(values, target, ignore, has_ignore, grid, m, low, ppd, su
 
 @njit(**_JIT)
 def float32_roc_pass(values, target, ignore, has_ignore, detected, grid, starts):
-    """:func:`float32_histogram` and, in the same pass, the pixel counts of the detection
-    mask ``detected`` (``[tp, detected, targets, counted]`` over the pixels not ignored, as
-    :func:`~torchsar.metrics.pixel_counts` counts them) and whether a value is NaN (then the
-    counts are not to be used)."""
+    """``(3, grid.size + 1)`` int64 counts of (class, bucket) over flat float32 ``values``
+    (``starts``: :func:`float32_starts` of ``grid``), in the same pass the pixel counts of
+    the detection mask ``detected`` (``[tp, detected, targets, counted]`` over the pixels not
+    ignored, as :func:`~torchsar.metrics.pixel_counts` counts them), and whether a value is
+    NaN (then nothing is to be used)."""
     n = grid.size
     hist = np.zeros((3, n + 1), np.int64)
     counts = np.zeros(4, np.int64)

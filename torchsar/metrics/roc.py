@@ -33,6 +33,11 @@ def default_pixel_grid(points_per_decade: int = 40) -> Tensor:
     return LogGrid(points_per_decade).grid
 
 
+def _flat(t: Tensor) -> np.ndarray:
+    """A CPU tensor as a flat contiguous array (no copy when it is contiguous)."""
+    return t.contiguous().view(-1).numpy()
+
+
 def _exceedances(hist: Tensor) -> Tensor:
     """``out[k] = #(values > grid[k])`` from the bucket histogram (a suffix sum)."""
     return hist.flip(0).cumsum(0).flip(0)[1:]
@@ -103,28 +108,39 @@ class RocAccumulator:
     def _one_pass(
         self, values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
     ) -> tuple[Tensor, PixelCounts] | None:
-        """The histogram and the detection mask's pixel counts in one compiled pass
-        (:func:`torchsar.metrics._kernels.float32_roc_pass`), for float32 CPU batches on the
-        default grid with a mask; ``None`` otherwise. Raises on NaN before anything is
-        added."""
-        if (detected is None or values.dtype != torch.float32 or values.device.type != "cpu"
-                or self._log_grid is None or not _jit.enabled()):  # fmt: skip
+        """The histogram and the detection mask's pixel counts in one compiled pass, for
+        float32 batches the kernels take, with a mask; ``None`` otherwise. Raises on NaN
+        before anything is added."""
+        if detected is None or values.dtype != torch.float32 or not self._compiled_for(values):
             return None
+        hist, c, nan = self._float32_pass(values, target, ignore, detected)
+        if nan:
+            raise InputValueError(_NAN)
+        tp, det, targets, counted = (int(v) for v in c)
+        return hist, PixelCounts(tp, det - tp, targets, counted - targets)
+
+    def _compiled_for(self, values: Tensor) -> bool:
+        """Whether :mod:`torchsar.metrics._kernels` histogram ``values`` (the default grid,
+        a tensor the kernels take)."""
+        return self._log_grid is not None and _jit.for_tensor(values.detach())
+
+    def _float32_pass(
+        self, values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
+    ) -> tuple[Tensor, np.ndarray, bool]:
+        """:func:`torchsar.metrics._kernels.float32_roc_pass` on a batch: histogram, pixel
+        counts of ``detected`` (meaningless without one) and whether a value is NaN."""
         from torchsar.metrics import _kernels
 
         grid = self.pixel_grid.to(torch.float32).numpy()
         if self._starts is None:
             self._starts = _kernels.float32_starts(grid)
-        tgt = target.contiguous().view(-1).numpy()
-        ign = tgt if ignore is None else ignore.contiguous().view(-1).numpy()
-        hist, c, nan = _kernels.float32_roc_pass(
-            values.detach().contiguous().view(-1).numpy(), tgt, ign, ignore is not None,
-            detected.contiguous().view(-1).numpy(), grid, self._starts,
-        )  # fmt: skip
-        if nan:
-            raise InputValueError(_NAN)
-        tp, det, targets, counted = (int(v) for v in c)
-        return torch.from_numpy(hist), PixelCounts(tp, det - tp, targets, counted - targets)
+        tgt = _flat(target)
+        ign = tgt if ignore is None else _flat(ignore)
+        det = tgt if detected is None else _flat(detected)
+        flat = _flat(values.detach())
+        hist, counts, nan = _kernels.float32_roc_pass(flat, tgt, ign, ignore is not None, det,
+                                                      grid, self._starts)  # fmt: skip
+        return torch.from_numpy(hist), counts, nan
 
     def update_sparse(
         self, values: Tensor, target: Tensor, ignore: Tensor, targets: int, clutter: int
@@ -158,35 +174,26 @@ class RocAccumulator:
         grid[b]``, so ``v > grid[k]`` exactly when its bucket is above ``k``. On the CPU with
         the default grid one compiled pass (:mod:`torchsar.metrics._kernels`) gives the
         tensor code's counts without its intermediate tensors."""
+        if self._compiled_for(values):
+            return self._compiled_histogram(values, target, ignore)
         grid = self.pixel_grid.to(device=values.device, dtype=values.dtype)
         n = grid.numel() + 1
-        if self._log_grid is not None and values.device.type == "cpu" and _jit.enabled():
-            return self._compiled_histogram(values, target, ignore, grid)
         bins = self._bins(values, grid)
         cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
         return torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).cpu().view(3, n)
 
-    def _compiled_histogram(
-        self, values: Tensor, target: Tensor, ignore: Tensor | None, grid: Tensor
-    ) -> Tensor:
+    def _compiled_histogram(self, values: Tensor, target: Tensor, ignore: Tensor | None) -> Tensor:
+        if values.dtype == torch.float32:
+            return self._float32_pass(values, target, ignore, None)[0]
         from torchsar.metrics import _kernels
+        from torchsar.metrics.log_bins import _SURE
 
-        flat = values.detach().contiguous().view(-1).numpy()
-        tgt = target.contiguous().view(-1).numpy()
-        ign = tgt if ignore is None else ignore.contiguous().view(-1).numpy()
-        g = grid.numpy()
-        if flat.dtype == np.float32:
-            if self._starts is None:
-                self._starts = _kernels.float32_starts(g)
-            hist = _kernels.float32_histogram(flat, tgt, ign, ignore is not None, g, self._starts)
-        else:
-            from torchsar.metrics.log_bins import _SURE
-
-            lg = self._log_grid
-            args = (lg.m, float(lg.low), float(lg.ppd), _SURE)
-            hist = _kernels.log_grid_histogram(
-                flat.astype(np.float64, copy=False), tgt, ign, ignore is not None, g, *args
-            )
+        lg = self._log_grid
+        tgt = _flat(target)
+        ign = tgt if ignore is None else _flat(ignore)
+        hist = _kernels.log_grid_histogram(_flat(values.detach()), tgt, ign, ignore is not None,
+                                           self.pixel_grid.numpy(), lg.m, float(lg.low),
+                                           float(lg.ppd), _SURE)  # fmt: skip
         return torch.from_numpy(hist)
 
     def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
