@@ -96,21 +96,17 @@ class Cases:
     def settle(self) -> Cases:
         """Build the pending cases that still make the cut (see :meth:`offer`); returns
         ``self``."""
-        if self._pending:
-            cut = self.ranked_keys()[-1]
-            todo = [(k, make) for k, make in self._pending if k <= cut]
-            self._pending = []
-            self._take(self + self._built([k for k, _ in todo], [make() for _, make in todo]))
+        cut = self.ranked_keys()[-1] if self._pending else None
+        todo = [(k, make) for k, make in self._pending if k <= cut]
+        self._pending = []
+        if todo:
+            info, image, masks = zip(*(make() for _, make in todo), strict=True)
+            new = Cases(self.kind, self.size, [k for k, _ in todo], list(info), np.stack(image),
+                        np.stack(masks))  # fmt: skip
+            merged = self + new
+            self.keys, self.info, self.image, self.masks = (merged.keys, merged.info,
+                                                            merged.image, merged.masks)  # fmt: skip
         return self
-
-    def _built(self, keys: list, built: list[tuple]) -> Cases:
-        """Cases of this kind from ``keys`` and their built ``(info, image, masks)``."""
-        return Cases(self.kind, self.size, keys, [b[0] for b in built],
-                     np.stack([b[1] for b in built]), np.stack([b[2] for b in built]))  # fmt: skip
-
-    def _take(self, other: Cases) -> None:
-        self.keys, self.info, self.image, self.masks = (other.keys, other.info, other.image,
-                                                        other.masks)  # fmt: skip
 
     def __add__(self, other: Cases) -> Cases:
         """The best ``size`` cases of both (disjoint parts of a dataset)."""
@@ -139,12 +135,11 @@ class Cases:
             kept = [j for j in kept if keys[j] < ranked[-1]]
         if not kept:
             return
-        if defer:
-            self._pending += [(keys[j], partial(make, j)) for j in kept]
-            cut = self.ranked_keys()[-1]
-            self._pending = [(k, m) for k, m in self._pending if k <= cut]
-            return
-        self._take(self + self._built([keys[j] for j in kept], [make(j) for j in kept]))
+        self._pending += [(keys[j], partial(make, j)) for j in kept]
+        cut = self.ranked_keys()[-1]
+        self._pending = [(k, m) for k, m in self._pending if k <= cut]
+        if not defer:
+            self.settle()
 
 
 def _facts(a: list, b: list) -> list:
