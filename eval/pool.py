@@ -10,6 +10,7 @@ driver handles it) and get their share of the cores as torch threads."""
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -79,26 +80,27 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
     try:
         while queue or running:
             try:
-                while queue and len(running) < workers:
-                    running[pool.submit(fn, *items[queue[0]])] = queue[0]
-                    queue.pop(0)
+                _top_up(pool, fn, items, queue, running, workers)
             except BrokenProcessPool:  # broke before we noticed: settle what ran
                 done = set(running)
                 if not running:  # no worker even started
                     broken.append(queue.pop(0))
             else:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
+            finished_now = []
             for fut in done:
                 key = running.pop(fut)
                 try:
-                    value = fut.result()
+                    finished_now.append((key, fut.result()))
                 except BrokenProcessPool:
                     broken.append(key)
-                    continue
                 except Exception as exc:
                     if on_error(key, exc):
                         queue.insert(0, key)
-                    continue
+            if not broken:  # keep the workers busy while the driver handles the results
+                with contextlib.suppress(BrokenProcessPool):  # settled on the next pass
+                    _top_up(pool, fn, items, queue, running, workers)
+            for key, value in finished_now:
                 on_result(key, value)
             if broken:
                 broken += running.values()
@@ -114,3 +116,10 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
         on_died(broken[0])
         return []
     return sorted(broken)
+
+
+def _top_up(pool, fn, items, queue, running, workers) -> None:
+    """Submit the next keys of ``queue`` until ``workers`` items are running."""
+    while queue and len(running) < workers:
+        running[pool.submit(fn, *items[queue[0]])] = queue[0]
+        queue.pop(0)

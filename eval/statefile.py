@@ -2,12 +2,16 @@
 any code from them.
 
 A state file is a line naming the format, a JSON header line (format, version and a BLAKE2b
-hash of the body) and the body: a zlib-compressed NPZ archive (``numpy.save`` without pickle)
-of the state's arrays and of its structure as JSON (plain values, references to the arrays,
-and the names of the classes to rebuild). Reading checks the format, the version and the
-hash, loads the arrays with ``allow_pickle=False`` and rebuilds only the classes of an
-allow-list (the harness's result and metric states) by setting their attributes: a file can
-hold wrong numbers at worst, and a changed or truncated file is refused as corrupt.
+hash of the body) and the body: zlib-compressed, the length of a JSON structure (8 bytes,
+little-endian), the structure, and the state's arrays as raw bytes, each at a 64-byte
+aligned offset. The structure holds a table of the arrays (offset, plain numeric type,
+shape) and the state as JSON (plain values, references to the arrays, and the names of the
+classes to rebuild). Reading checks the format, the version and the hash, reads the arrays
+as views of the decompressed bytes (only boolean and numeric types, inside the body) and
+rebuilds only the classes of an allow-list (the harness's result and metric states) by
+setting their attributes: a file can hold wrong numbers at worst, and a changed or
+truncated file is refused as corrupt. Version 1 files (the body an NPZ archive read with
+``allow_pickle=False``) are still read.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import zipfile
 import zlib
 from pathlib import Path
@@ -26,10 +31,12 @@ import torch
 
 from torchsar_eval.errors import EvalError
 
-__all__ = ["FORMAT", "VERSION", "CorruptStateError", "dumps", "loads", "register", "save"]
+__all__ = ["FORMAT", "VERSION", "CorruptStateError", "dumps", "loads", "pack", "register", "save",
+           "unpack"]
 
 FORMAT = "torchsar-state"
-VERSION = 1
+VERSION = 2
+READABLE = (1, 2)  # versions read back (1: the body an NPZ archive)
 
 _TYPES: dict[str, type] = {}
 _TRANSIENT: dict[str, tuple[str, ...]] = {}
@@ -58,7 +65,7 @@ def _own(cls: type, name: str) -> bool:
 
 class _Encoder:
     def __init__(self) -> None:
-        self.arrays: dict[str, np.ndarray] = {}
+        self.arrays: list[np.ndarray] = []
 
     def array(self, a: np.ndarray, kind: str) -> dict:
         """``{kind: key}`` for an array stored under ``key``; a wide integer array whose values
@@ -67,14 +74,17 @@ class _Encoder:
         compress, write and read)."""
         if a.dtype.hasobject:
             raise TypeError("object arrays cannot be saved as data")
-        key = f"a{len(self.arrays)}"
-        out: dict[str, Any] = {kind: key}
+        out: dict[str, Any] = {}
         narrow = _narrow(a)
         if narrow is not None:
             out["__as__"] = np.lib.format.dtype_to_descr(a.dtype)
             a = a.astype(narrow)
-        self.arrays[key] = np.ascontiguousarray(a)
+        out[kind] = self._put(a)
         return out
+
+    def _put(self, a: np.ndarray) -> int:
+        self.arrays.append(np.require(a, requirements="C"))  # keeps 0-d arrays 0-d
+        return len(self.arrays) - 1
 
     def __call__(self, obj: Any) -> Any:
         if obj is None or isinstance(obj, bool | int | float | str):
@@ -119,9 +129,11 @@ def _narrow(a: np.ndarray) -> np.dtype | None:
     return None
 
 
-def _stored(tree: dict, kind: str, arrays: dict[str, np.ndarray]) -> np.ndarray:
+def _stored(tree: dict, kind: str, arrays: list | dict) -> np.ndarray:
     """The array a ``{kind: key}`` node refers to, in its own dtype again when it was stored
     narrower (``__as__``; only a widening to a 64-bit integer type is accepted)."""
+    if not set(tree) <= {kind, "__as__"}:
+        raise ValueError("unexpected array node")
     a = arrays[tree[kind]]
     if "__as__" not in tree:
         return a
@@ -131,17 +143,19 @@ def _stored(tree: dict, kind: str, arrays: dict[str, np.ndarray]) -> np.ndarray:
     return a.astype(dtype)
 
 
-def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
+def _decode(tree: Any, arrays: list | dict) -> Any:
     if tree is None or isinstance(tree, bool | int | float | str):
         return tree
     if isinstance(tree, list):
         return [_decode(v, arrays) for v in tree]
-    if not isinstance(tree, dict) or len(tree) not in (1, 2):
+    if not isinstance(tree, dict):
         raise ValueError("unexpected structure")
     if "__array__" in tree:
         return _stored(tree, "__array__", arrays)
     if "__tensor__" in tree:
         return torch.from_numpy(np.array(_stored(tree, "__tensor__", arrays)))
+    if len(tree) not in (1, 2):
+        raise ValueError("unexpected structure")
     if "__dtype__" in tree:
         return np.lib.format.descr_to_dtype(_decode(tree["__dtype__"], arrays))
     if "__tuple__" in tree:
@@ -166,20 +180,104 @@ def _digest(body: bytes) -> str:
     return hashlib.blake2b(body, digest_size=32).hexdigest()
 
 
+_ALIGN = 64
+_LENGTH = 8  # bytes of the structure's length
+_DESCR = re.compile(r"[<>|][biufc][0-9]{1,2}\Z")  # booleans and plain numbers only
+_PAD = re.compile(r"\|V[0-9]{1,4}\Z")
+
+
+def _aligned(n: int) -> int:
+    return -(-n // _ALIGN) * _ALIGN
+
+
+def pack(structure: Any, arrays: list[np.ndarray]) -> bytes:
+    """The uncompressed body of a version-2 file: ``structure`` (JSON-able) with the
+    table of ``arrays`` (C-contiguous) under ``"arrays"``, then their bytes."""
+    table, offset = [], 0
+    for a in arrays:
+        table.append([offset, np.lib.format.dtype_to_descr(a.dtype), list(a.shape)])
+        offset = _aligned(offset + a.nbytes)
+    head = json.dumps({"arrays": table, "tree": structure}, separators=(",", ":")).encode()
+    start = _aligned(_LENGTH + len(head))
+    raw = bytearray(start + offset)
+    raw[:_LENGTH] = len(head).to_bytes(_LENGTH, "little")
+    raw[_LENGTH : _LENGTH + len(head)] = head
+    data = np.frombuffer(raw, np.uint8)
+    for (at, _, _), a in zip(table, arrays, strict=True):
+        data[start + at : start + at + a.nbytes] = a.reshape(-1).view(np.uint8)
+    return bytes(raw)
+
+
+def unpack(raw: bytes) -> tuple[Any, list[np.ndarray]]:
+    """``(structure, arrays)`` of a version-2 body; the arrays are writable views of one
+    copy of ``raw``. ``ValueError`` for anything but a well-formed table of plain arrays
+    inside the body."""
+    n = int.from_bytes(raw[:_LENGTH], "little")
+    if len(raw) < _LENGTH + n:
+        raise ValueError("truncated structure")
+    head = json.loads(raw[_LENGTH : _LENGTH + n])
+    if not isinstance(head, dict) or set(head) != {"arrays", "tree"}:
+        raise ValueError("unexpected structure")
+    data = bytearray(raw)  # writable, like the arrays numpy reads from a file
+    start = _aligned(_LENGTH + n)
+    return head["tree"], [_view(data, start, entry) for entry in _entries(head["arrays"])]
+
+
+def _entries(table: Any) -> list:
+    if not isinstance(table, list) or not all(isinstance(e, list) and len(e) == 3
+                                              for e in table):  # fmt: skip
+        raise ValueError("unexpected array table")
+    return table
+
+
+def _view(data: bytearray, start: int, entry: list) -> np.ndarray:
+    offset, descr, shape = entry
+    if not _plain(descr):
+        raise ValueError(f"unexpected array type {descr!r}")
+    if not (isinstance(shape, list) and all(type(d) is int and d >= 0 for d in shape)
+            and type(offset) is int and offset >= 0):  # fmt: skip
+        raise ValueError("unexpected array shape or offset")
+    dtype = np.lib.format.descr_to_dtype(_as_descr(descr))
+    count = int(np.prod(shape, dtype=np.int64))
+    if start + offset + count * dtype.itemsize > len(data):
+        raise ValueError("an array reaches past the end of the body")
+    return np.frombuffer(data, dtype, count, start + offset).reshape(shape)
+
+
+def _plain(descr: Any) -> bool:
+    """A boolean or numeric type, or a record of them (``[name, type(, shape)]`` fields;
+    unnamed fields are padding)."""
+    if isinstance(descr, str):
+        return bool(_DESCR.match(descr))
+    return isinstance(descr, list) and all(
+        isinstance(f, list) and len(f) in (2, 3) and isinstance(f[0], str)
+        and (_plain(f[1]) or (f[0] == "" and isinstance(f[1], str) and _PAD.match(f[1])))
+        and (len(f) == 2 or (isinstance(f[2], list) and all(type(d) is int and d >= 0
+                                                            for d in f[2])))
+        for f in descr
+    )  # fmt: skip
+
+
+def _as_descr(descr: Any) -> Any:
+    """JSON's lists back into the tuples of numpy's record descriptions."""
+    if isinstance(descr, str):
+        return descr
+    return [(f[0], _as_descr(f[1])) if len(f) == 2 else (f[0], _as_descr(f[1]), tuple(f[2]))
+            for f in descr]  # fmt: skip
+
+
 def dumps(obj: Any) -> bytes:
     """The bytes of a state file holding ``obj`` (see the module docstring)."""
     enc = _Encoder()
-    structure = json.dumps(enc(obj), separators=(",", ":")).encode()
-    buf = io.BytesIO()
-    np.savez(buf, __structure__=np.frombuffer(structure, np.uint8), **enc.arrays)
-    body = zlib.compress(buf.getvalue(), 1)
+    tree = enc(obj)
+    body = zlib.compress(pack(tree, enc.arrays), 1)
     header = {"format": FORMAT, "version": VERSION, "blake2b": _digest(body)}
     return MAGIC + json.dumps(header).encode() + b"\n" + body
 
 
 def loads(data: bytes, what: str = "state") -> Any:
     """The object a state file holds; :class:`CorruptStateError` (naming ``what``) when it is
-    not a complete, unchanged state of this format and version."""
+    not a complete, unchanged state of this format and a readable version."""
     if not data.startswith(MAGIC) or b"\n" not in data[len(MAGIC) :]:
         raise CorruptStateError(f"{what} is not a readable torchsar state (no {FORMAT} header)")
     line, _, body = data[len(MAGIC) :].partition(b"\n")
@@ -187,19 +285,24 @@ def loads(data: bytes, what: str = "state") -> Any:
         header = json.loads(line)
     except (ValueError, UnicodeDecodeError):
         raise CorruptStateError(f"{what} is not a readable torchsar state (bad header)") from None
-    if not isinstance(header, dict) or (header.get("format"), header.get("version")) != (
-            FORMAT, VERSION):  # fmt: skip
+    version = header.get("version") if isinstance(header, dict) else None
+    if not isinstance(header, dict) or header.get("format") != FORMAT or version not in READABLE:
         raise CorruptStateError(f"{what} is not a {FORMAT} version {VERSION} file")
     if header.get("blake2b") != _digest(body):
         raise CorruptStateError(f"{what} has changed since it was written (content hash mismatch)")
     try:
-        with np.load(io.BytesIO(zlib.decompress(body)), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-        structure = json.loads(arrays.pop("__structure__").tobytes())
-        return _decode(structure, arrays)
-    except (zlib.error, ValueError, KeyError, TypeError, OSError, zipfile.BadZipFile,
-            EOFError) as exc:  # fmt: skip
+        tree, arrays = (unpack if version == 2 else _unpack_npz)(zlib.decompress(body))
+        return _decode(tree, arrays)
+    except (zlib.error, ValueError, KeyError, TypeError, IndexError, OSError,
+            zipfile.BadZipFile, EOFError) as exc:  # fmt: skip
         raise CorruptStateError(f"{what} holds an unexpected structure ({exc})") from None
+
+
+def _unpack_npz(raw: bytes) -> tuple[Any, dict[str, np.ndarray]]:
+    """``(structure, arrays)`` of a version-1 body (an NPZ archive, read without pickle)."""
+    with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    return json.loads(arrays.pop("__structure__").tobytes()), arrays
 
 
 def save(path: Path, data: bytes) -> None:

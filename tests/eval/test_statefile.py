@@ -65,19 +65,17 @@ def test_a_planted_pickle_runs_nothing_and_the_shard_is_scored_again(tmp_path):
     assert counts["done"] == 2 and merged[0].images == 4
 
 
-def _pack(header: dict, members: dict) -> bytes:
-    buf = io.BytesIO()
-    np.savez(buf, **members)
-    body = zlib.compress(buf.getvalue(), 1)
+def _pack(header: dict, tree, arrays: list) -> bytes:
+    body = zlib.compress(statefile.pack(tree, arrays), 1)
     if header.get("blake2b") == "recompute":
         header = {**header, "blake2b": statefile._digest(body)}
     return statefile.MAGIC + json.dumps(header).encode() + b"\n" + body
 
 
-def _unpack(data: bytes) -> tuple[dict, dict]:
+def _unpack(data: bytes) -> tuple[dict, object, list]:
     line, _, body = data[len(statefile.MAGIC) :].partition(b"\n")
-    with np.load(io.BytesIO(zlib.decompress(body)), allow_pickle=False) as npz:
-        return json.loads(line), {k: npz[k] for k in npz.files}
+    tree, arrays = statefile.unpack(zlib.decompress(body))
+    return json.loads(line), tree, [a.copy() for a in arrays]
 
 
 @pytest.mark.parametrize("how", ["array", "structure", "truncated", "version", "magic"])
@@ -85,18 +83,16 @@ def test_changed_states_are_refused(tmp_path, how):
     path = tmp_path / "s.state"
     res = _one_run(tmp_path)
     data = statefile.dumps(ShardState(res.states["sim-chips"]))
-    header, members = _unpack(data)
+    header, tree, arrays = _unpack(data)
     if how == "array":
-        key = next(k for k in members if not k.startswith("__") and members[k].size)
-        members[key] = members[key].copy()
-        members[key].reshape(-1).view(np.uint8)[0] ^= 1
-        data = _pack(header, members)
+        a = next(a for a in arrays if a.size)
+        a.reshape(-1).view(np.uint8)[0] ^= 1
+        data = _pack(header, tree, arrays)
     elif how == "structure":
-        text = members["__structure__"].tobytes().replace(b"PixelCounts", b"PixelCounts ")
-        members["__structure__"] = np.frombuffer(text, np.uint8)
-        data = _pack(header, members)
+        text = json.dumps(tree).replace("PixelCounts", "PixelCounts ")
+        data = _pack(header, json.loads(text), arrays)
     elif how == "version":
-        data = _pack({**header, "version": 99, "blake2b": "recompute"}, members)
+        data = _pack({**header, "version": 99, "blake2b": "recompute"}, tree, arrays)
     elif how == "magic":
         data = data[1:]
     else:
@@ -104,6 +100,65 @@ def test_changed_states_are_refused(tmp_path, how):
     path.write_bytes(data)
     with pytest.raises(statefile.CorruptStateError, match="s.state"):
         _load(path)
+
+
+def _recompute(body: bytes, version: int = statefile.VERSION) -> bytes:
+    header = {"format": statefile.FORMAT, "version": version,
+              "blake2b": statefile._digest(body)}  # fmt: skip
+    return statefile.MAGIC + json.dumps(header).encode() + b"\n" + body
+
+
+@pytest.mark.parametrize("entry", [
+    [0, "|O", [1]],  # an object array: never
+    [0, "<f8", [10**6]],  # past the end of the body
+    [-64, "<f8", [1]],
+    [0, "<f8", [-1]],
+    [0, "<f8", "12"],
+    [0, ["<f8"], [1]],
+    [0, "V8", [1]],
+    [0, [["a", "|O"]], [1]],  # nor inside a record
+    [0, [["a", "<f8", [-1]]], [1]],
+    [0, [["a", "|V8"]], [1]],  # raw bytes only as unnamed padding
+    "a0",
+])  # fmt: skip
+def test_an_array_table_out_of_bounds_or_of_other_types_is_refused(entry):
+    """Even with a valid hash, the table names only plain arrays inside the body."""
+    raw = bytearray(statefile.pack({"__array__": 0}, [np.arange(3.0)]))
+    n = int.from_bytes(raw[:8], "little")
+    head = json.loads(raw[8 : 8 + n])
+    head["arrays"] = [entry]
+    text = json.dumps(head).encode()
+    raw = len(text).to_bytes(8, "little") + text + bytes(64) * 2
+    with pytest.raises(statefile.CorruptStateError, match="unexpected|past the end"):
+        statefile.loads(_recompute(zlib.compress(raw)), "crafted")
+
+
+def test_records_and_odd_layouts_come_back_equal():
+    rec = np.dtype([("score", "<f8"), ("bits", "u1", (3,)), ("sub", [("a", "<f4"), ("b", ">i2")])])
+    a = np.zeros(4, rec)
+    a["score"], a["sub"]["b"] = [1, 2, 3, 4], [5, -6, 7, 8]
+    padded = np.dtype({"names": ["x", "y"], "formats": ["u1", "<f8"], "offsets": [0, 8]})
+    values = [a, np.ones(2, padded), np.arange(12.0).reshape(3, 4)[:, ::2], np.array(5.0),
+              np.zeros((0, 3), np.float32), np.array([True, False])]  # fmt: skip
+    for v, b in zip(values, statefile.loads(statefile.dumps(values), "test"), strict=True):
+        assert b.dtype == v.dtype and b.shape == v.shape and np.array_equal(b, v)
+        assert b.flags.writeable
+
+
+def test_version_1_files_are_still_read():
+    """A run saved before the raw-array body (an NPZ archive body) resumes without
+    rescoring."""
+    value = {"counts": np.arange(5, dtype=np.int64), "grid": torch.linspace(0, 1, 4)}
+    enc = statefile._Encoder()
+    tree = enc(value)
+    buf = io.BytesIO()
+    named = {f"a{i}": a for i, a in enumerate(enc.arrays)}
+    text = json.dumps(tree).replace('__array__": 0', '__array__": "a0"')
+    text = text.replace('__tensor__": 1', '__tensor__": "a1"')
+    np.savez(buf, __structure__=np.frombuffer(text.encode(), np.uint8), **named)
+    back = statefile.loads(_recompute(zlib.compress(buf.getvalue(), 1), version=1), "v1")
+    assert np.array_equal(back["counts"], value["counts"]) and back["counts"].dtype == np.int64
+    assert torch.equal(back["grid"], value["grid"])
 
 
 def test_only_allow_listed_types_are_written():
@@ -115,12 +170,10 @@ def test_only_allow_listed_types_are_written():
 
 def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
     """Even a file whose hash was recomputed cannot name a class off the allow-list."""
-    structure = json.dumps({"__type__": "subprocess.Popen",
-                            "state": {"__dict__": [["args", "id"]]}})  # fmt: skip
+    tree = {"__type__": "subprocess.Popen", "state": {"__dict__": [["args", "id"]]}}
     header = {"format": statefile.FORMAT, "version": statefile.VERSION, "blake2b": "recompute"}
-    data = _pack(header, {"__structure__": np.frombuffer(structure.encode(), np.uint8)})
     with pytest.raises(statefile.CorruptStateError, match="unexpected structure"):
-        statefile.loads(data, "crafted")
+        statefile.loads(_pack(header, tree, []), "crafted")
 
 
 @pytest.mark.parametrize("dtype", [np.int64, np.uint64])
@@ -145,20 +198,10 @@ def test_small_counts_are_stored_narrow():
 
 
 def test_a_stored_type_other_than_a_wide_integer_is_refused():
-    data = statefile.dumps(np.arange(3, dtype=np.int64))
-    body = data[len(statefile.MAGIC) :].partition(b"\n")[2]
-    raw = zlib.decompress(body)
-    with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
-        arrays = {k: npz[k] for k in npz.files}
-    tree = json.loads(arrays.pop("__structure__").tobytes())
+    header, tree, arrays = _unpack(statefile.dumps(np.arange(3, dtype=np.int64)))
     tree["__as__"] = "<f8"
-    buf = io.BytesIO()
-    np.savez(buf, __structure__=np.frombuffer(json.dumps(tree).encode(), np.uint8), **arrays)
-    body = zlib.compress(buf.getvalue(), 1)
-    head = json.dumps({"format": statefile.FORMAT, "version": statefile.VERSION,
-                       "blake2b": statefile._digest(body)}).encode()  # fmt: skip
     with pytest.raises(statefile.CorruptStateError, match="unexpected"):
-        statefile.loads(statefile.MAGIC + head + b"\n" + body, "test")
+        statefile.loads(_pack({**header, "blake2b": "recompute"}, tree, arrays), "test")
 
 
 @pytest.mark.parametrize("rows", [
