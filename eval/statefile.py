@@ -31,8 +31,17 @@ import torch
 
 from torchsar_eval.errors import EvalError
 
-__all__ = ["FORMAT", "VERSION", "CorruptStateError", "dumps", "loads", "pack", "register", "save",
-           "unpack"]
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "CorruptStateError",
+    "dumps",
+    "loads",
+    "pack",
+    "register",
+    "save",
+    "unpack",
+]
 
 FORMAT = "torchsar-state"
 VERSION = 2

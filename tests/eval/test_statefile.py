@@ -16,7 +16,8 @@ import torch
 
 import torchsar_eval as te
 from torchsar_eval import statefile
-from torchsar_eval.shards import ShardState, _load, run_shards
+from torchsar_eval.shard_states import ShardState, load_shard
+from torchsar_eval.shards import run_shards
 from torchsar_eval.tables import summary_table
 
 
@@ -99,7 +100,7 @@ def test_changed_states_are_refused(tmp_path, how):
         data = data[: len(data) // 2]
     path.write_bytes(data)
     with pytest.raises(statefile.CorruptStateError, match="s.state"):
-        _load(path)
+        load_shard(path)
 
 
 def _recompute(body: bytes, version: int = statefile.VERSION) -> bytes:
