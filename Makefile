@@ -19,7 +19,14 @@ $(BIN)/.ray: $(BIN)/.installed
 	$(BIN)/python -m pip install --quiet -e ".[dev,ray]"
 	touch $@
 
-setup: $(BIN)/.installed
+# numba compiles its kernels on first use (about a minute for all of them): pay it here, once
+# per change of a kernel file, instead of in the first evaluation or test run.
+KERNELS := $(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py)
+$(BIN)/.kernels: $(BIN)/.installed $(KERNELS)
+	$(BIN)/python -m torchsar._warm
+	touch $@
+
+setup: $(BIN)/.installed $(BIN)/.kernels
 
 eval: setup
 	$(BIN)/torchsar-eval run

@@ -53,3 +53,35 @@ def test_no_script_shadows_a_module_that_a_dependency_imports():
                 if found:
                     hits.append(f"scripts/{found.group(1)}.py shadows a module {f} imports")
     assert not hits, hits[:5]
+
+
+def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
+    """``python -m torchsar._warm`` (run by ``make setup``) leaves nothing for the default
+    evaluation to compile (no kernel gains a signature while it runs), and does nothing
+    when the kernels are off."""
+    from torchsar import _warm
+
+    monkeypatch.setattr(_jit, "ENABLED", False)
+    assert _warm.warm() == 0.0
+    monkeypatch.undo()
+    if not _jit.enabled():
+        pytest.skip("numba is not available")
+    import importlib
+
+    import torchsar_eval as te
+    from numba.core.registry import CPUDispatcher
+
+    names = ["torchsar._windows_kernels", "torchsar.cfar._kernels", "torchsar.metrics._kernels",
+             "torchsar.objects._kernels", "torchsar.order_statistics._kernels",
+             "torchsar.region._kernels"]  # fmt: skip
+
+    def compiled() -> dict:
+        return {(n, k): list(f.signatures) for n in names
+                for k, f in vars(importlib.import_module(n)).items()
+                if isinstance(f, CPUDispatcher)}  # fmt: skip
+
+    assert _warm.warm() > 0
+    before = compiled()
+    te.evaluate("sim-chips", ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "region"], n=2,
+                progress=False)  # fmt: skip
+    assert compiled() == before
