@@ -68,8 +68,9 @@ def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
         pytest.skip("numba is not available")
     import importlib
 
-    import torchsar_eval as te
     from numba.core.registry import CPUDispatcher
+
+    import torchsar_eval as te
 
     names = ["torchsar._windows_kernels", "torchsar.cfar._kernels", "torchsar.metrics._kernels",
              "torchsar.objects._kernels", "torchsar.order_statistics._kernels",
