@@ -23,6 +23,7 @@ bottom, left.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -202,7 +203,14 @@ def _corner_sum(s: Tensor, region: Region, pad: int, h: int, w: int) -> Tensor:
 
 
 def _region_count(region: Region, n_rows: int, n_cols: int, r: int, rr: int, device) -> Tensor:
-    """In-image cell counts of a region for rows ``[r, r + rr)``: ``(rr, W)`` float64."""
+    """In-image cell counts of a region for rows ``[r, r + rr)``: ``(rr, W)`` float64 (a
+    fresh copy of counts remembered per geometry: every batch of one image size has them)."""
+    return _region_count_cached(region, n_rows, n_cols, r, rr, device).clone()
+
+
+@functools.lru_cache(maxsize=64)
+def _region_count_cached(region: Region, n_rows: int, n_cols: int, r: int, rr: int,
+                         device) -> Tensor:  # fmt: skip
     out = torch.zeros((rr, n_cols), dtype=torch.float64, device=device)
     for sign, rect in region.signed():
         rows = _axis_counts(n_rows, rect.r0, rect.r1, r, r + rr, device)
