@@ -73,3 +73,15 @@ def test_make_wheel_builds_an_installable_wheel(tmp_path):
     tops = {n.split("/")[0] for n in names if "/" in n and ".dist-info" not in n}
     assert tops == {"torchsar", "torchsar_eval"}
     assert "torchsar_eval/ray_engine.py" in names and "torchsar/__init__.py" in names
+
+
+def test_a_worker_loads_without_the_table_and_plot_libraries():
+    """A worker process imports torchsar and the harness's scoring modules only: pandas,
+    kornia and matplotlib (half a second of start-up per process together) are imported
+    where they are used, by the driver's tables and plots or a metric that needs them."""
+    code = ("import sys, torchsar, torchsar_eval.shards, torchsar_eval.registry, "
+            "torchsar_eval.store; print(sorted(m for m in ('pandas', 'kornia', 'matplotlib') "
+            "if m in sys.modules))")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)  # fmt: skip
+    assert done.stdout.strip() == "[]"

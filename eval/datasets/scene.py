@@ -23,14 +23,17 @@ ground truth, ``--match distance --max-distance 3px``.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from torchsar.io import open_scene
 from torchsar_eval.datasets.base import FileDataset, make_item
 from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["SCENE_OPTIONS", "SceneDataset", "scene_chips"]
 
@@ -57,6 +60,8 @@ def scene_chips(shape: tuple[int, int], chip: int) -> list[tuple[int, int, int, 
 
 
 def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path) -> np.ndarray:
+    import pandas as pd  # here, not at import: workers load datasets without pandas
+
     for n in names:
         if n in df.columns:
             values = pd.to_numeric(df[n], errors="coerce").to_numpy(np.float64)
@@ -72,6 +77,8 @@ def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path) -> np.ndarray:
 
 def read_truth(path: Path, scene_id: str, shape: tuple[int, int]) -> pd.DataFrame:
     """The targets of one scene: ``row``, ``col``, ``height``, ``width`` (int64)."""
+    import pandas as pd  # here, not at import: workers load datasets without pandas
+
     try:
         df = pd.read_csv(path, dtype={"scene_id": str})
     except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
@@ -128,6 +135,8 @@ class SceneDataset(FileDataset):
         self.items = scene_chips(self.shape, chip)
         self.truth_path = None if truth is None else Path(truth)
         if self.truth_path is None:
+            import pandas as pd  # here, not at import: workers load datasets without pandas
+
             self.targets = pd.DataFrame({c: pd.Series(dtype="int64")
                                          for c in ("row", "col", "height", "width")})  # fmt: skip
         else:

@@ -30,7 +30,6 @@ range ``max - min = 0``: pass ``data_range``).
 
 from __future__ import annotations
 
-import kornia
 import torch
 from torch import Tensor
 
@@ -298,5 +297,7 @@ def ssim(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
     scale = _data_range(clean, data_range).reciprocal()[..., None, None]
     e = estimate.to(torch.float64) * scale
     c = clean.to(torch.float64) * scale
+    import kornia  # here, not at import: torchsar loads without kornia
+
     smap = kornia.metrics.ssim(e, c, 11, max_val=1.0, eps=0.0, padding="valid")
     return smap.mean(dim=(-2, -1)).to(float_dtype(clean.dtype))

@@ -14,11 +14,14 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from torchsar._checks import OptionError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["SceneFile", "scene_lonlat", "write_scene_file"]
 
@@ -110,6 +113,8 @@ def _place_targets(
         cols.append(c)
     size = rng.integers(1, 4, size=(n, 2))
     amp = rng.integers(2000, 6001, size=n)
+    import pandas as pd  # here, not at import: torchsar loads without pandas
+
     t = pd.DataFrame(
         {"row": rows, "col": cols, "height": size[:, 0], "width": size[:, 1], "amplitude": amp}
     )

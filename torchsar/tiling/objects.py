@@ -20,15 +20,18 @@ peak position in raster order (a total order: peaks are distinct pixels).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from torchsar._checks import OptionError
 from torchsar.tiling.plan import Tile
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["COLUMNS", "SeamMerger", "components_table"]
 
@@ -200,6 +203,8 @@ class SeamMerger:
     def table(self) -> pd.DataFrame:
         """One row per merged object (see the module docstring)."""
         if self._count == 0:
+            import pandas as pd  # here, not at import: torchsar loads without pandas
+
             return pd.DataFrame({c: pd.Series(dtype=_dtype(c)) for c in COLUMNS})
         m, root, parts = self._merge()
         area, sr, sc, rmin, rmax, cmin, cmax, score, peak = parts
@@ -218,6 +223,8 @@ class SeamMerger:
         first = order[np.r_[True, root[order][1:] != root[order][:-1]]]
         out["score"] = score[first]
         out["peak_row"], out["peak_col"] = np.divmod(peak[first], self.shape[1])
+        import pandas as pd  # here, not at import: torchsar loads without pandas
+
         df = pd.DataFrame({c: out[c] for c in COLUMNS})
         return _sorted(df)
 

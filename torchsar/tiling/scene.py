@@ -4,9 +4,9 @@
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 import torch
 from scipy import ndimage
 
@@ -18,6 +18,9 @@ from torchsar.tiling.footprint import operator
 from torchsar.tiling.objects import SeamMerger
 from torchsar.tiling.plan import Tile
 from torchsar.tiling.source import Scene, as_scene, release
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["run_scene", "scene_objects"]
 

@@ -33,11 +33,14 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from torchsar._checks import OptionError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["DETECTION_COLUMNS", "detection_table", "write_csv", "write_geojson"]
 
@@ -121,6 +124,8 @@ def detection_table(
         length = np.full(len(objects), np.nan)
     else:
         length = np.maximum(box_h * spacing[0], box_w * spacing[1])
+    import pandas as pd  # here, not at import: torchsar loads without pandas
+
     out = pd.DataFrame(
         {
             "scene_id": pd.Series([scene_id] * len(objects), dtype=object),
