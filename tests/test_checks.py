@@ -107,3 +107,22 @@ def test_all_finite_and_has_nan_equal_elementwise_tests(values, dtype):
     x = torch.tensor(values, dtype=dtype)
     assert C.all_finite(x) == bool(torch.isfinite(x).all())
     assert C.has_nan(x) == bool(torch.isnan(x).any())
+
+
+def test_broadcasts_agrees_with_torch_on_random_shapes():
+    import random
+
+    import torch
+
+    from torchsar._checks import broadcasts
+
+    rng = random.Random(0)
+    for _ in range(500):
+        a = tuple(rng.choice([0, 1, 2, 3]) for _ in range(rng.randint(0, 4)))
+        b = tuple(rng.choice([0, 1, 2, 3]) for _ in range(rng.randint(0, 4)))
+        try:
+            torch.broadcast_shapes(a, b)
+            want = True
+        except RuntimeError:
+            want = False
+        assert broadcasts(a, b) is want, (a, b)

@@ -201,13 +201,19 @@ def check_mask(mask: object, like: Tensor, name: str = "valid") -> Tensor:
         raise InputTypeError(f"{name} must be a torch.Tensor, got {type(mask).__name__}")
     if mask.dtype != torch.bool:
         raise InputTypeError(f"{name} must be a bool tensor, got dtype {mask.dtype}")
-    try:
-        torch.broadcast_shapes(mask.shape, like.shape)
-    except RuntimeError:
-        raise ShapeError(
-            f"{name} must broadcast to {tuple(like.shape)}, got {tuple(mask.shape)}"
-        ) from None
+    if not broadcasts(mask.shape, like.shape):
+        raise ShapeError(f"{name} must broadcast to {tuple(like.shape)}, got {tuple(mask.shape)}")
     return mask.to(like.device)
+
+
+def broadcasts(a: tuple[int, ...], b: tuple[int, ...]) -> bool:
+    """Whether shapes ``a`` and ``b`` broadcast together (numpy's rule, the same as torch's;
+    ``torch.broadcast_shapes`` imports sympy on its first call, half a second)."""
+    try:
+        np.broadcast_shapes(tuple(a), tuple(b))
+    except ValueError:
+        return False
+    return True
 
 
 def check_same_shape(a: Tensor, b: Tensor, name_a: str, name_b: str) -> None:

@@ -23,6 +23,7 @@ from torchsar._checks import (
     OptionError,
     ShapeError,
     WindowSizeError,
+    broadcasts,
     check_per_plane,
     check_real,
     has_nan,
@@ -120,13 +121,11 @@ def _check(
     if has_nan(statistic):
         raise InputValueError("statistic must not hold NaN values")
     thr = check_real(threshold, "threshold")
-    try:
-        torch.broadcast_shapes(thr.shape, statistic.shape)
-    except RuntimeError:
+    if not broadcasts(thr.shape, statistic.shape):
         raise ShapeError(
             f"threshold must broadcast to statistic {tuple(statistic.shape)}, "
             f"got {tuple(thr.shape)}"
-        ) from None
+        )
     h, w = statistic.shape[-2:]
     if h * w and rules.closing > max(h, w):
         raise WindowSizeError(
