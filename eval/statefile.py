@@ -145,7 +145,7 @@ def _stored(tree: dict, kind: str, arrays: list | dict) -> np.ndarray:
         raise ValueError("unexpected array node")
     a = arrays[tree[kind]]
     if "__as__" not in tree:
-        return a
+        return a.copy()  # its own memory, writable
     dtype = np.lib.format.descr_to_dtype(tree["__as__"])
     if dtype.kind not in "iu" or dtype.itemsize != 8 or a.dtype.kind != "i":
         raise ValueError(f"unexpected stored type {tree['__as__']!r}")
@@ -218,18 +218,17 @@ def pack(structure: Any, arrays: list[np.ndarray]) -> bytes:
 
 
 def unpack(raw: bytes) -> tuple[Any, list[np.ndarray]]:
-    """``(structure, arrays)`` of a version-2 body; the arrays are writable views of one
-    copy of ``raw``. ``ValueError`` for anything but a well-formed table of plain arrays
-    inside the body."""
+    """``(structure, arrays)`` of a version-2 body; the arrays are read-only views of
+    ``raw`` (:func:`loads` copies each out, so no kept array holds the whole body alive).
+    ``ValueError`` for anything but a well-formed table of plain arrays inside the body."""
     n = int.from_bytes(raw[:_LENGTH], "little")
     if len(raw) < _LENGTH + n:
         raise ValueError("truncated structure")
     head = json.loads(raw[_LENGTH : _LENGTH + n])
     if not isinstance(head, dict) or set(head) != {"arrays", "tree"}:
         raise ValueError("unexpected structure")
-    data = bytearray(raw)  # writable, like the arrays numpy reads from a file
     start = _aligned(_LENGTH + n)
-    return head["tree"], [_view(data, start, entry) for entry in _entries(head["arrays"])]
+    return head["tree"], [_view(raw, start, entry) for entry in _entries(head["arrays"])]
 
 
 def _entries(table: Any) -> list:
@@ -239,7 +238,7 @@ def _entries(table: Any) -> list:
     return table
 
 
-def _view(data: bytearray, start: int, entry: list) -> np.ndarray:
+def _view(data: bytes, start: int, entry: list) -> np.ndarray:
     offset, descr, shape = entry
     if not _plain(descr):
         raise ValueError(f"unexpected array type {descr!r}")

@@ -143,7 +143,7 @@ def test_records_and_odd_layouts_come_back_equal():
               np.zeros((0, 3), np.float32), np.array([True, False])]  # fmt: skip
     for v, b in zip(values, statefile.loads(statefile.dumps(values), "test"), strict=True):
         assert b.dtype == v.dtype and b.shape == v.shape and np.array_equal(b, v)
-        assert b.flags.writeable
+        assert b.flags.writeable and b.flags.owndata  # no view keeping a whole file alive
 
 
 def test_version_1_files_are_still_read():
