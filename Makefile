@@ -22,8 +22,8 @@ $(BIN)/.ray: $(BIN)/.installed
 # numba compiles its kernels on first use (about a minute for all of them): pay it here, once
 # per change of a kernel file, instead of in the first evaluation or test run.
 KERNELS := $(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py)
-$(BIN)/.kernels: $(BIN)/.installed $(KERNELS)
-	$(BIN)/python -m torchsar._warm
+$(BIN)/.kernels: $(BIN)/.installed $(KERNELS) torchsar/_warm.py scripts/warm_kernels.py
+	$(BIN)/python scripts/warm_kernels.py
 	touch $@
 
 setup: $(BIN)/.installed $(BIN)/.kernels

@@ -155,7 +155,6 @@ class ShardMerger:
 
     def __init__(self, folder: Path, n_shards: int, pending: Iterable[int]) -> None:
         self.folder = folder
-        self.n_shards = n_shards
         self._ready = set(range(n_shards)) - set(pending)
         self._lost: set[int] = set()
         self._next = 0

@@ -6,8 +6,8 @@ hash of the body) and the body: zlib-compressed, the length of a JSON structure 
 little-endian), the structure, and the state's arrays as raw bytes, each at a 64-byte
 aligned offset. The structure holds a table of the arrays (offset, plain numeric type,
 shape) and the state as JSON (plain values, references to the arrays, and the names of the
-classes to rebuild). Reading checks the format, the version and the hash, reads the arrays
-as views of the decompressed bytes (only boolean and numeric types, inside the body) and
+classes to rebuild). Reading checks the format, the version and the hash, copies each array
+out of the decompressed bytes (only boolean, numeric and record types, inside the body) and
 rebuilds only the classes of an allow-list (the harness's result and metric states) by
 setting their attributes: a file can hold wrong numbers at worst, and a changed or
 truncated file is refused as corrupt. Version 1 files (the body an NPZ archive read with
@@ -162,7 +162,7 @@ def _decode(tree: Any, arrays: list | dict) -> Any:
     if "__array__" in tree:
         return _stored(tree, "__array__", arrays)
     if "__tensor__" in tree:
-        return torch.from_numpy(np.array(_stored(tree, "__tensor__", arrays)))
+        return torch.from_numpy(_stored(tree, "__tensor__", arrays))
     if len(tree) not in (1, 2):
         raise ValueError("unexpected structure")
     if "__dtype__" in tree:
@@ -242,8 +242,7 @@ def _view(data: bytes, start: int, entry: list) -> np.ndarray:
     offset, descr, shape = entry
     if not _plain(descr):
         raise ValueError(f"unexpected array type {descr!r}")
-    if not (isinstance(shape, list) and all(type(d) is int and d >= 0 for d in shape)
-            and type(offset) is int and offset >= 0):  # fmt: skip
+    if not (_dims(shape) and type(offset) is int and offset >= 0):
         raise ValueError("unexpected array shape or offset")
     dtype = np.lib.format.descr_to_dtype(_as_descr(descr))
     count = int(np.prod(shape, dtype=np.int64))
@@ -260,10 +259,14 @@ def _plain(descr: Any) -> bool:
     return isinstance(descr, list) and all(
         isinstance(f, list) and len(f) in (2, 3) and isinstance(f[0], str)
         and (_plain(f[1]) or (f[0] == "" and isinstance(f[1], str) and _PAD.match(f[1])))
-        and (len(f) == 2 or (isinstance(f[2], list) and all(type(d) is int and d >= 0
-                                                            for d in f[2])))
+        and (len(f) == 2 or _dims(f[2]))
         for f in descr
     )  # fmt: skip
+
+
+def _dims(shape: Any) -> bool:
+    """A JSON shape: a list of non-negative integers."""
+    return isinstance(shape, list) and all(type(d) is int and d >= 0 for d in shape)
 
 
 def _as_descr(descr: Any) -> Any:

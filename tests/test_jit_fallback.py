@@ -56,7 +56,7 @@ def test_no_script_shadows_a_module_that_a_dependency_imports():
 
 
 def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
-    """``python -m torchsar._warm`` (run by ``make setup``) leaves nothing for the default
+    """``scripts/warm_kernels.py`` (run by ``make setup``) leaves nothing for the default
     evaluation to compile (no kernel gains a signature while it runs), and does nothing
     when the kernels are off."""
     from torchsar import _warm

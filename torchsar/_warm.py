@@ -2,11 +2,12 @@
 
 numba compiles a kernel the first time it is called with new argument types and keeps the
 machine code in its on-disk cache (``__pycache__`` beside the sources). On a fresh install
-that first call costs up to a minute for all kernels together; ``python -m torchsar._warm``
-(run by ``make setup``) pays it once, so the first evaluation, detector call or test run
-does not. It runs every compiled path (the window CFARs, OS-CFAR, the region CFAR, object
-labelling and closing, the pixel ROC) on tiny float32 and float64 batches (the window
-CFARs with and without a valid mask). Without numba (or with ``TORCHSAR_NUMBA=0``) it does nothing.
+that first call costs up to a minute for all kernels together; :func:`warm` (run by ``make
+setup`` through ``scripts/warm_kernels.py``) pays it once, so the first evaluation, detector
+call or test run does not. It runs every compiled path (the window CFARs, OS-CFAR, the
+region CFAR, object labelling and closing, the pixel ROC) on tiny float32 and float64
+batches (the window CFARs with and without a valid mask). Without numba (or with
+``TORCHSAR_NUMBA=0``) it does nothing.
 """
 
 from __future__ import annotations
@@ -56,7 +57,3 @@ def warm() -> float:
         target[..., 18:23, 18:23] = True
         acc.update(det.statistic, target, detected=det.mask)
     return time.perf_counter() - start
-
-
-if __name__ == "__main__":
-    print(f"torchsar: compiled kernels ready ({warm():.0f} s)")

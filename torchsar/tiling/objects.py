@@ -202,9 +202,9 @@ class SeamMerger:
 
     def table(self) -> pd.DataFrame:
         """One row per merged object (see the module docstring)."""
-        if self._count == 0:
-            import pandas as pd  # here, not at import: torchsar loads without pandas
+        import pandas as pd  # here, not at import: torchsar loads without pandas
 
+        if self._count == 0:
             return pd.DataFrame({c: pd.Series(dtype=_dtype(c)) for c in COLUMNS})
         m, root, parts = self._merge()
         area, sr, sc, rmin, rmax, cmin, cmax, score, peak = parts
@@ -223,8 +223,6 @@ class SeamMerger:
         first = order[np.r_[True, root[order][1:] != root[order][:-1]]]
         out["score"] = score[first]
         out["peak_row"], out["peak_col"] = np.divmod(peak[first], self.shape[1])
-        import pandas as pd  # here, not at import: torchsar loads without pandas
-
         df = pd.DataFrame({c: out[c] for c in COLUMNS})
         return _sorted(df)
 
