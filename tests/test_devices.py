@@ -6,9 +6,13 @@ these are the GPU checks: every window CFAR, every speckle filter, the region CF
 parts on the device, its heap on the CPU), the imaging routines and a default evaluator run.
 
 Tolerances: detection masks are compared exactly up to pixels whose statistic lies within
-``1e-5`` (relative) of the threshold (float64 integral images summed in another order on
-the GPU may flip such a near-tie); statistics agree to ``1e-5`` relative; speckle filters
-to ``1e-4``; imaging to ``1e-3`` of the image peak (float32 FFTs in another order).
+the statistic's tolerance of the threshold (float64 integral images summed in another order
+on the GPU may flip such a near-tie); statistics agree to ``1e-5`` relative, except the K
+and G0 CFARs (``2e-3``): their log-cumulant fit through the inverse trigamma amplifies an
+ulp of the input (CPU and GPU logarithms differ by about that) up to ~10^3 times in
+heavy-tailed rings, which :func:`test_tolerance_covers_one_ulp_of_input` measures on the
+CPU alone; speckle filters to ``1e-4``; imaging to ``1e-3`` of the image peak (float32
+FFTs in another order).
 """
 
 from __future__ import annotations
@@ -31,13 +35,16 @@ def chips() -> torch.Tensor:
     return ts.simulate.chips(2, size=64, length_px=(8, 20), seed=3).image
 
 
-def _same_detection(got, want) -> None:
+RTOL = {"k": 2e-3, "g0": 2e-3}  # statistics' relative tolerance (default 1e-5), see above
+
+
+def _same_detection(got, want, rtol: float = 1e-5) -> None:
     got_s, want_s = got.statistic.cpu().double(), want.statistic.double()
     finite = torch.isfinite(want_s)
     assert torch.equal(torch.isfinite(got_s), finite)
-    assert torch.allclose(got_s[finite], want_s[finite], rtol=1e-5, atol=1e-8)
+    assert torch.allclose(got_s[finite], want_s[finite], rtol=rtol, atol=1e-8)
     thr = want.threshold.double()
-    near = ((want_s - thr).abs() <= 1e-5 * thr.abs().clamp_min(1e-12)) & finite
+    near = ((want_s - thr).abs() <= rtol * thr.abs().clamp_min(1e-12)) & finite
     differ = got.mask.cpu() != want.mask
     assert not (differ & ~near).any(), f"{int((differ & ~near).sum())} mask pixels differ"
 
@@ -49,7 +56,21 @@ def test_window_cfars(name, device, chips):
     want = fn(chips)
     got = fn(chips.to(device))
     assert got.mask.device.type == device and got.statistic.device.type == device
-    _same_detection(got, want)
+    _same_detection(got, want, RTOL.get(name, 1e-5))
+
+
+@pytest.mark.parametrize("name", sorted(RTOL))
+def test_tolerance_covers_one_ulp_of_input(name, chips):
+    """The CPU against itself with every input value moved by about one float32 ulp
+    (relative 1.2e-7, seeded): the K and G0 statistics stay within a tenth of their wider
+    tolerance, so it is not hiding a device error larger than the detectors' own
+    conditioning."""
+    fn = getattr(ts.cfar, name)
+    gen = torch.Generator().manual_seed(0)
+    moved = chips * (1 + 1.2e-7 * torch.randn(chips.shape, generator=gen))
+    a, b = fn(chips).statistic.double(), fn(moved).statistic.double()
+    finite = torch.isfinite(a) & torch.isfinite(b)
+    assert torch.allclose(b[finite], a[finite], rtol=RTOL[name] / 10, atol=1e-9)
 
 
 @pytest.mark.parametrize("device", DEVICES)

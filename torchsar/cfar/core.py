@@ -84,10 +84,12 @@ def geometric_cached(key: tuple, counts: list[Tensor], make: Callable[[], Tensor
     mask: ``(rr, W)`` planes or planes with unit batch and channel dims, the same for every
     batch of images of one size): the border factors of the rules then cost one evaluation
     per strip of a image size, not one per batch. ``key`` names everything else ``make``
-    depends on; the counts' values are part of the key. Other counts: ``make()`` as is."""
+    depends on; the counts' values and device are part of the key (a value made on one device
+    is never handed to another). Other counts: ``make()`` as is."""
     if any(c.dim() > 2 and (c.shape[0] != 1 or c.shape[1] != 1) for c in counts):
         return make()
-    full = (key, *((tuple(c.shape), c.cpu().numpy().tobytes()) for c in counts))
+    full = (key, str(counts[0].device),
+            *((tuple(c.shape), c.cpu().numpy().tobytes()) for c in counts))  # fmt: skip
     if full in _GEOMETRIC:
         _GEOMETRIC.move_to_end(full)
         return _GEOMETRIC[full]
