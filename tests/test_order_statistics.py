@@ -65,9 +65,14 @@ def run(algorithm: str, imgs: np.ndarray, ring: Ring, k: np.ndarray, valid=None)
     return ALGORITHMS[algorithm](torch.from_numpy(imgs), ring, torch.from_numpy(k), vm).numpy()
 
 
-@pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
+@pytest.mark.parametrize(
+    ("algorithm", "groups"), [(a, "cpu") for a in sorted(ALGORITHMS)] + [("bisection", "device")]
+)
 @pytest.mark.parametrize("budget", [None, 700])
-def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorithm, budget):
+def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorithm, budget,
+                                                            groups):  # fmt: skip
+    if groups == "device":  # the GPU's grouping: every piece of every plane in one group
+        monkeypatch.setattr(bisection, "_COMPARE_BUDGET", bisection.DEVICE_COMPARE_BUDGET)
     if budget is not None:  # force many small tiles (planes, rows and columns)
         monkeypatch.setattr(bisection, "CELL_BUDGET", budget)
         if HAVE_NUMBA:

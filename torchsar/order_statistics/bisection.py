@@ -1,27 +1,30 @@
-"""Exact ring order statistic by bit-wise bisection of tile ranks (small rings).
+"""Exact ring order statistic by bit-wise bisection of piece ranks (small rings).
 
 Algorithm (exact, memory bounded, no per-pixel Python loop):
 
-1. The image is cut into tiles (planes x rows x columns, with the ring's halo) of at most
-   65 535 cells (fewer for large rings, so the ``N x tile`` compare buffer stays ~4 MB,
-   within the last-level cache); the **ranks** of the cell values inside a tile then fit in
-   ``B <= 16`` bits. Ranks are ordinal (ties broken arbitrarily but consistently), so the ``k``-th
-   smallest rank points to the ``k``-th smallest value. Missing (outside / invalid) cells
-   get rank ``2^B - 1`` and are never counted.
+1. The planes are cut into pieces (rows x columns of one plane, with the ring's halo) of at
+   most 65 535 cells (on CPU fewer for large rings, so the ``N x positions`` compare buffer
+   stays ~4 MB, within the last-level cache); the **ranks** of the cell values inside a
+   piece then fit in ``B <= 16`` bits. Ranks are ordinal (ties broken arbitrarily but
+   consistently), so the ``k``-th smallest rank points to the ``k``-th smallest value.
+   Missing (outside / invalid) cells get rank ``2^B - 1`` and are never counted.
 2. Every pixel bisects its answer bit by bit: a candidate rank ``t`` is kept or raised by
-   counting the ring cells with rank ``<= t``. The ring cells of every pixel are laid out as
-   a contiguous ``(N, tile)`` uint8 buffer (strided views of the padded tile, one copy), so
-   a step is one uint8 compare against the per-pixel threshold and one uint8 column sum.
-   The top 8 bits are decided on the high bytes; then cells whose high byte differs from the
-   pixel's answer are remapped to "always below" (0) or "never counted" (255), so the last
-   ``B - 8`` steps also run on uint8.
-3. The final rank indexes the tile's sorted values: the result is an input value, bit-exact.
+   counting the ring cells with rank ``<= t``. The ring cells of every pixel of a group of
+   pieces are laid out as a contiguous ``(N, positions)`` uint8 buffer (strided views of the
+   stacked pieces, one copy), so a step is one uint8 compare against the per-pixel
+   threshold and one uint8 column sum. The top 8 bits are decided on the high bytes; then
+   cells whose high byte differs from the pixel's answer are remapped to "always below" (0)
+   or "never counted" (255), so the last ``B - 8`` steps also run on uint8.
+3. The final rank indexes its piece's sorted values: the result is an input value,
+   bit-exact.
 
-The work per pixel is ``B N`` byte compares and sums (``N`` ring cells), vectorised over the
-tile and independent of the data: the fastest choice for small rings, but it grows with the
-ring's area, so large rings go to :mod:`torchsar.order_statistics.histogram`. All per-step
-buffers are allocated once per call: on CPU, fresh large temporaries (page faults) cost more
-than the arithmetic.
+The work per pixel is ``B N`` byte compares and sums (``N`` ring cells), vectorised over a
+group of pieces and independent of the data: the fastest choice for small rings, but it
+grows with the ring's area, so large rings go to :mod:`torchsar.order_statistics.histogram`.
+A group holds as many pieces as the compare buffer's budget allows: ~4 MB on CPU (cache),
+256 MB on other devices (a GPU then bisects a whole batch in a few dozen launches per
+step instead of one per piece). All per-step buffers are allocated once per call: on CPU,
+fresh large temporaries (page faults) cost more than the arithmetic.
 
 References:
     Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350 (OS-CFAR).
@@ -35,10 +38,11 @@ from torch import Tensor
 from torchsar.order_statistics.sorting import argsort_rows
 from torchsar.windows import Ring
 
-__all__ = ["CELL_BUDGET", "bisection_select", "fits"]
+__all__ = ["CELL_BUDGET", "DEVICE_COMPARE_BUDGET", "bisection_select", "fits"]
 
-CELL_BUDGET = 65535  # cells per tile, so ranks fit 16 bits
-_COMPARE_BUDGET = 1 << 22  # bytes of the per-step compare buffer (N x tile): measured best
+CELL_BUDGET = 65535  # cells per piece, so ranks fit 16 bits
+_COMPARE_BUDGET = 1 << 22  # CPU: bytes of the per-step N x positions buffer: measured best
+DEVICE_COMPARE_BUDGET = 1 << 28  # other devices: the same buffer, large groups, few launches
 
 
 def bisection_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) -> Tensor:
@@ -46,48 +50,86 @@ def bisection_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) 
 
     ``kk`` ``(P, H, W)`` holds 1-based ranks, at most the pixel's counted ring cells (``0``
     gives ``0``); ``vm`` an optional bool mask of counted cells, same shape. The ring must
-    fit a 16-bit tile: ``(2(g+t)+1)^2 <= 32767`` (see :func:`fits`).
+    fit a 16-bit piece: ``(2(g+t)+1)^2 <= 32767`` (see :func:`fits`).
     """
-    out = torch.zeros_like(planes)
     p, h, w = planes.shape
     o = ring.outer
-    tiles = _tiles(p, h, w, o, ring.n)
-    longest = max(_tile_length(t, o) for t in tiles)
-    ws = _Workspace(ring.n, longest, planes.device)
-    for tile in tiles:
-        _select_tile(planes, ring, kk, vm, out, tile, ws)
-    return out
+    budget = _COMPARE_BUDGET if planes.device.type == "cpu" else DEVICE_COMPARE_BUDGET
+    th, tw = _piece_shape(h, w, o, ring.n, budget)
+    pieces, keep = _cut(planes, vm, th, tw, o)
+    k = _cut_interior(kk, th, tw)
+    hp, wp = th + 2 * o, tw + 2 * o
+    group = max(1, budget // max(ring.n, 1) // (hp * wp))
+    ws = _Workspace(ring.n, _length(min(group, len(pieces)), hp, wp, o), planes.device)
+    out = torch.empty((len(pieces), th, tw), dtype=planes.dtype, device=planes.device)
+    for g0 in range(0, len(pieces), group):
+        g1 = min(len(pieces), g0 + group)
+        ranks, srt = _piece_ranks(pieces[g0:g1], keep[g0:g1])  # per group: in cache on CPU
+        out[g0:g1] = _select_group(ranks, srt, k[g0:g1], ring, ws)
+    return _uncut(out, p, h, w)
 
 
 def fits(ring: Ring) -> bool:
-    """Whether a tile with the ring's halo fits the 16-bit rank budget."""
+    """Whether a piece with the ring's halo fits the 16-bit rank budget."""
     return ring.extent**2 <= CELL_BUDGET // 2
 
 
-def _tiles(p: int, h: int, w: int, o: int, n: int) -> list[tuple[int, int, int, int, int, int]]:
-    """Output tiles ``(p0, p1, y0, y1, x0, x1)`` whose padded input stays within budget."""
-    budget = max((2 * o + 1) ** 2 * 2, min(CELL_BUDGET, _COMPARE_BUDGET // max(n, 1)))
+def _piece_shape(h: int, w: int, o: int, n: int, budget: int) -> tuple[int, int]:
+    """Output rows and columns ``(th, tw)`` of a piece whose padded cells stay within the
+    cell budget (and, on CPU, the compare budget): full-width strips where a strip of a
+    few rows fits, else narrower pieces."""
+    cells = max((2 * o + 1) ** 2 * 2, min(CELL_BUDGET, budget // max(n, 1)))
     wp = w + 2 * o
-    tw = w if wp * (2 * o + 2) <= budget else max(1, budget // (2 * (2 * o + 2)) - 2 * o)
-    th = max(1, min(h, budget // (tw + 2 * o) - 2 * o))
-    pc = max(1, budget // ((h + 2 * o) * (tw + 2 * o))) if th == h else 1
-    return [
-        (p0, min(p, p0 + pc), y0, min(h, y0 + th), x0, min(w, x0 + tw))
-        for p0 in range(0, p, pc)
-        for y0 in range(0, h, th)
-        for x0 in range(0, w, tw)
-    ]
+    tw = w if wp * (2 * o + 2) <= cells else max(1, cells // (2 * (2 * o + 2)) - 2 * o)
+    th = max(1, min(h, cells // (tw + 2 * o) - 2 * o))
+    return th, tw
 
 
-def _tile_length(tile: tuple[int, ...], o: int) -> int:
-    """Number of flat positions bisected for a tile (pixels plus the junk between rows)."""
-    p0, p1, y0, y1, x0, x1 = tile
-    wp, hp = x1 - x0 + 2 * o, y1 - y0 + 2 * o
-    return (p1 - p0 - 1) * hp * wp + (y1 - y0 - 1) * wp + (x1 - x0)
+def _length(g: int, hp: int, wp: int, o: int) -> int:
+    """Number of flat positions bisected for ``g`` stacked pieces (pixels plus the junk
+    between rows and pieces)."""
+    return (g - 1) * hp * wp + (hp - 2 * o - 1) * wp + (wp - 2 * o)
+
+
+def _cut(planes: Tensor, vm: Tensor | None, th: int, tw: int, o: int) -> tuple[Tensor, Tensor]:
+    """The pieces ``(T, th + 2o, tw + 2o)`` of every plane (plane-major, then rows, then
+    columns; ``T = P ny nx``) with their halos, and which of their cells are counted (in the
+    image and valid)."""
+    p, h, w = planes.shape
+    ny, nx = -(-h // th), -(-w // tw)
+    shape = (p, ny * th + 2 * o, nx * tw + 2 * o)
+    vals = planes.new_zeros(shape)
+    vals[:, o : o + h, o : o + w] = planes
+    keep = torch.zeros(shape, dtype=torch.bool, device=planes.device)
+    keep[:, o : o + h, o : o + w] = True if vm is None else vm
+    hp, wp = th + 2 * o, tw + 2 * o
+
+    def pieces(t: Tensor) -> Tensor:
+        return t.unfold(1, hp, th).unfold(2, wp, tw).reshape(-1, hp, wp)
+
+    return pieces(vals), pieces(keep)
+
+
+def _cut_interior(kk: Tensor, th: int, tw: int) -> Tensor:
+    """``kk`` ``(P, H, W)`` cut like :func:`_cut`'s pieces, without halo: ``(T, th, tw)``
+    (0 beyond the image)."""
+    p, h, w = kk.shape
+    ny, nx = -(-h // th), -(-w // tw)
+    full = kk.new_zeros((p, ny * th, nx * tw))
+    full[:, :h, :w] = kk
+    return full.view(p, ny, th, nx, tw).permute(0, 1, 3, 2, 4).reshape(-1, th, tw)
+
+
+def _uncut(out: Tensor, p: int, h: int, w: int) -> Tensor:
+    """Inverse of :func:`_cut_interior`: ``(T, th, tw)`` back to ``(P, H, W)``."""
+    _, th, tw = out.shape
+    ny, nx = -(-h // th), -(-w // tw)
+    full = out.view(p, ny, nx, th, tw).permute(0, 1, 3, 2, 4).reshape(p, ny * th, nx * tw)
+    return full[:, :h, :w]
 
 
 def _rank_bits(cells: int) -> int:
-    """Bits of the tile ranks: ``cells`` real ranks plus the "missing" rank ``2^B - 1``."""
+    """Bits of the piece ranks: ``cells`` real ranks plus the "missing" rank ``2^B - 1``."""
     return max(9, cells.bit_length())
 
 
@@ -96,29 +138,21 @@ def _missing(cells: int) -> int:
     return (1 << _rank_bits(cells)) - 1
 
 
-def _tile_ranks(
-    planes: Tensor, vm: Tensor | None, tile: tuple[int, ...], o: int
-) -> tuple[Tensor, Tensor]:
-    """Padded int32 rank image ``(P, th + 2o, tw + 2o)`` of a tile (missing cells
-    ``2^B - 1``, see :func:`_missing`) and the tile's sorted counted values."""
-    p0, p1, y0, y1, x0, x1 = tile
-    h, w = planes.shape[-2:]
-    ya, yb, xa, xb = max(0, y0 - o), min(h, y1 + o), max(0, x0 - o), min(w, x1 + o)
-    vals = planes[p0:p1, ya:yb, xa:xb]
-    keep = None if vm is None else vm[p0:p1, ya:yb, xa:xb]
-    flat = vals.reshape(-1) if keep is None else vals[keep]
-    order = argsort_rows(flat)
-    srt = flat[order]
-    rank = torch.empty(flat.numel(), dtype=torch.int32, device=flat.device)
-    rank[order] = torch.arange(flat.numel(), dtype=torch.int32, device=flat.device)
-    shape = (p1 - p0, y1 - y0 + 2 * o, x1 - x0 + 2 * o)
-    pad = torch.full(shape, _missing(flat.numel()), dtype=torch.int32, device=flat.device)
-    region = pad[:, ya - y0 + o : yb - y0 + o, xa - x0 + o : xb - x0 + o]
-    if keep is None:
-        region.copy_(rank.view(vals.shape))
-    else:
-        region[keep] = rank
-    return pad, srt
+def _piece_ranks(pieces: Tensor, keep: Tensor) -> tuple[Tensor, Tensor]:
+    """int32 rank of every cell within its piece ``(T, hp, wp)`` (missing cells
+    ``2^B - 1``, see :func:`_missing`) and each piece's values sorted ``(T, hp wp)``
+    (counted cells first)."""
+    t, hp, wp = pieces.shape
+    cells = hp * wp
+    counted = keep.reshape(t, cells)
+    vals = torch.where(counted, pieces.reshape(t, cells), torch.inf)  # missing sort last
+    order = argsort_rows(vals)
+    srt = vals.gather(1, order)
+    rank = torch.empty((t, cells), dtype=torch.int32, device=pieces.device)
+    pos = torch.arange(cells, dtype=torch.int32, device=pieces.device)
+    rank.scatter_(1, order, pos.expand(t, cells))
+    rank.masked_fill_(~counted, _missing(cells))
+    return rank.view(t, hp, wp), srt
 
 
 def _ring_blocks(ring: Ring) -> list[tuple[int, int, int, int]]:
@@ -142,7 +176,7 @@ def _views(flat: Tensor, base: int, length: int, wp: int, ring: Ring) -> list[Te
 
 
 class _Workspace:
-    """Buffers reused by every tile of one call: fresh large allocations (page faults) cost
+    """Buffers reused by every group of one call: fresh large allocations (page faults) cost
     more than the uint8 arithmetic, so every step writes into these with ``out=``."""
 
     def __init__(self, n: int, length: int, device: torch.device) -> None:
@@ -218,28 +252,19 @@ def _remap_low(bufs: tuple[Tensor, ...], lv: list[Tensor], shift: int) -> None:
     cells.bitwise_or_(above.view(torch.uint8).neg_())
 
 
-def _select_tile(
-    planes: Tensor,
-    ring: Ring,
-    kk: Tensor,
-    vm: Tensor | None,
-    out: Tensor,
-    tile: tuple[int, ...],
-    ws: _Workspace,
-) -> None:
-    """Bisect the ranks of one tile and write the selected values into ``out``."""
-    p0, p1, y0, y1, x0, x1 = tile
+def _select_group(ranks: Tensor, srt: Tensor, k: Tensor, ring: Ring, ws: _Workspace) -> Tensor:
+    """Bisect the ranks of a group of pieces ``(g, hp, wp)`` at their interior pixels (ranks
+    ``k`` ``(g, th, tw)``): the selected values ``(g, th, tw)``."""
+    g, hp, wp = ranks.shape
     o = ring.outer
-    ranks, srt = _tile_ranks(planes, vm, tile, o)
-    pc, hp, wp = ranks.shape
-    th, tw = y1 - y0, x1 - x0
+    th, tw = hp - 2 * o, wp - 2 * o
     base = o * wp + o
-    length = (pc - 1) * hp * wp + (th - 1) * wp + tw
+    length = _length(g, hp, wp, o)
     bufs = ws.take(length)
-    k_flat = torch.ones(pc * hp * wp, dtype=bufs[3].dtype, device=ranks.device)
-    k_flat.view(pc, hp, wp)[:, o : o + th, o : o + tw] = kk[p0:p1, y0:y1, x0:x1].to(k_flat.dtype)
+    k_flat = torch.ones(g * hp * wp, dtype=bufs[3].dtype, device=ranks.device)
+    k_flat.view(g, hp, wp)[:, o : o + th, o : o + tw] = k.to(k_flat.dtype)
     bufs[3].copy_(k_flat[base : base + length])
-    bits = _rank_bits(srt.numel())
+    bits = _rank_bits(hp * wp)
     shift = bits - 8
     high = (ranks >> shift).to(torch.uint8).reshape(-1)
     bufs[6].zero_()
@@ -248,9 +273,8 @@ def _select_tile(
     low = (ranks & ((1 << shift) - 1)).to(torch.uint8).reshape(-1)
     _remap_low(bufs, _views(low, base, length, wp, ring), shift)
     _bisect(bufs, range(shift - 1, -1, -1), shift, True)
-    full = torch.zeros(pc * hp * wp, dtype=torch.int64, device=ranks.device)
-    full[base : base + length] = bufs[6].clamp(max=max(srt.numel() - 1, 0))
-    sel = full.view(pc, hp, wp)[:, o : o + th, o : o + tw]
-    vals = srt[sel] if srt.numel() else torch.zeros(sel.shape, dtype=out.dtype, device=out.device)
-    kt = kk[p0:p1, y0:y1, x0:x1]
-    out[p0:p1, y0:y1, x0:x1] = torch.where(kt > 0, vals, torch.zeros_like(vals))
+    full = torch.zeros(g * hp * wp, dtype=torch.int64, device=ranks.device)
+    full[base : base + length] = bufs[6].clamp(max=hp * wp - 1)
+    sel = full.view(g, hp, wp)[:, o : o + th, o : o + tw].reshape(g, th * tw)
+    vals = srt.gather(1, sel).view(g, th, tw)
+    return torch.where(k > 0, vals, torch.zeros_like(vals))
