@@ -6,7 +6,9 @@ the pool: the items that were running are run again one at a time, each in a fre
 of its own (so the item that kills its worker is told from those that only shared the pool
 with it), and the rest go on in a fresh pool. Leaving early (an error, Ctrl-C, SIGTERM)
 stops the pool at once instead of waiting for running items. Workers ignore Ctrl-C (the
-driver handles it) and get their share of the cores as torch threads."""
+driver handles it) and get their share of the cores as torch threads. A pool whose workers
+all die before they start (a script that runs an evaluation at its top level, re-run by
+every spawned worker) is refused in one line that says so, not blamed on an item."""
 
 from __future__ import annotations
 
@@ -19,13 +21,22 @@ from collections.abc import Callable, Hashable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
-__all__ = ["DIED", "run_in_processes"]
+from torchsar_eval.errors import EvalError
+
+__all__ = ["DIED", "NOT_STARTED", "run_in_processes"]
 
 DIED = "a worker process died (killed or out of memory)"
+NOT_STARTED = (
+    "no worker process could start: each one re-imports the main script, so a script that "
+    'runs an evaluation with workers must do it under `if __name__ == "__main__":` (the '
+    "worker's own error is printed above)"
+)
 
 
-def _init_worker(threads: int) -> None:
+def _init_worker(threads: int, started) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
+    with started.get_lock():  # this worker got past its start (the main script's import)
+        started.value += 1
     import torch
 
     torch.set_num_threads(threads)
@@ -73,8 +84,9 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
     returns the keys that were running when it broke (``solo``: ``on_died`` instead)."""
     on_result, on_error, on_died = hooks
     ctx = multiprocessing.get_context("spawn")
+    started = ctx.Value("i", 0)
     pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(threads,))  # fmt: skip
+                               initargs=(threads, started))  # fmt: skip
     finished, broken = False, []
     running: dict = {}
     try:
@@ -112,6 +124,8 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
             for proc in list(getattr(pool, "_processes", {}).values()):
                 proc.terminate()
         pool.shutdown(wait=finished and not broken, cancel_futures=True)
+    if broken and started.value == 0:  # not the items' fault: none was ever run
+        raise EvalError(NOT_STARTED)
     if solo and broken:
         on_died(broken[0])
         return []
