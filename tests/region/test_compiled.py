@@ -61,8 +61,9 @@ class TestGrow:
         st.sampled_from([0.1, 0.3, 0.5, 0.8]),
         st.integers(1, 30),
         st.integers(1, 30),
+        st.sampled_from([0.0, 0.3, 0.7]),
     )
-    def test_same_pixels_as_the_heap(self, seed, conn, n_init, tau, h, w):
+    def test_same_pixels_as_the_heap(self, seed, conn, n_init, tau, h, w, floor):
         """The first ``n_init`` pixels by rescanning, then the flood fixpoint: the heap's
         region (budget None: no flood in the Python path), the seed first."""
         rng = np.random.default_rng(seed)
@@ -74,7 +75,7 @@ class TestGrow:
         blocked.flat[start] = False
         g = Grid.new(f, connectivity=conn)
         g.free2d()[blocked] = 0
-        want = grow(g, start, 1, tau=tau, n_init=n_init, budget=None)
+        want = grow(g, start, 1, tau=tau, n_init=n_init, budget=None, floor=floor)
         fp, free = _padded(f, blocked)
         offs = np.array(
             [-(w + 2), w + 2, -1, 1, -(w + 3), -(w + 1), w + 1, w + 3][:conn], dtype=np.int32
@@ -82,10 +83,12 @@ class TestGrow:
         region, cand = np.empty(h * w, np.int32), np.empty(h * w, np.int32)
         stamp = np.zeros(fp.size, np.int32)
         seed_p = start + 2 * (start // w) + w + 3
-        n = K._grow(fp, free, stamp, 1, seed_p, tau, n_init, offs, region, cand)
+        low = floor * f.flat[start] if floor > 0 else -np.inf
+        n = K._grow(fp, free, stamp, 1, seed_p, tau, n_init, offs, region, cand, low)
         got = _unpad(region[:n], w)
         assert got[0] == start
         np.testing.assert_array_equal(np.sort(got), np.sort(want))
+        assert (f.flat[want[1:]] >= floor * f.flat[start]).all()  # nothing below the floor
 
 
 class TestSeeds:
@@ -212,6 +215,8 @@ OPTIONS = [
     {"lowpass": 5, "merge": 2, "n_init": 1, "tau": 0.3},
     {"lowpass": None, "merge": None, "min_size": 5, "max_size": 300, "guard": 0},
     {"preset": "paper", "fill_holes": True, "max_fraction": 0.05, "background": 1, "k": 0.0},
+    {"floor": 0.05},
+    {"preset": "paper", "floor": 0.5, "connectivity": 8},
 ]
 
 
@@ -246,11 +251,12 @@ def test_compiled_equals_python_on_odd_shapes(options):
 def test_compiled_equals_python_on_many_chips_and_scenes(model):
     """The broad check (``-m slow``): 64 chips and two 512x512 scenes (buildings, roads,
     clutter edges: floods larger than the pairwise sums' blocks) per clutter model, both
-    presets."""
+    presets, and a floor on scenes."""
     for seed in range(8):
         x = ts.simulate.chips(8, seed=seed, model=model).image
         for options in ({}, {"preset": "paper"}):
             _assert_same(x, **options)
     scenes = ts.simulate.scenes(2, seed=1, model=model).image
-    for options in ({}, {"preset": "paper"}, {"max_size": None, "max_fraction": None}):
+    for options in ({}, {"preset": "paper"}, {"max_size": None, "max_fraction": None},
+                    {"floor": 0.02}):  # fmt: skip
         _assert_same(scenes, **options)

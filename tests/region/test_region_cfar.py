@@ -161,6 +161,9 @@ class TestExceptions:
             ({"k": -0.5}, "k must be finite and >= 0"),
             ({"k": float("inf")}, "k must be finite and >= 0"),
             ({"k": float("nan")}, "k must be finite and >= 0"),
+            ({"floor": 1.0}, r"floor must be in \[0, 1\)"),
+            ({"floor": -0.1}, r"floor must be in \[0, 1\)"),
+            ({"floor": True}, r"floor must be in \[0, 1\)"),
         ],
     )
     def test_options(self, kw, msg):
@@ -181,6 +184,27 @@ def test_max_fraction_rejects_a_flood_covering_most_of_the_image():
     assert not det.mask[..., :, :24].any()
     with pytest.raises(ts._checks.OptionError, match="max_fraction"):
         ts.region.region_cfar(x, max_fraction=1.5)
+
+
+def test_floor_keeps_a_peaked_target_from_flooding_the_image():
+    # A 7x7 target at 20 with a sharp peak (100, 50, 30 along a row; the seed is the 100)
+    # on clutter near 1: its first four pixels (100, 50, 30, 20) average 50, so at
+    # tau = 0.5 the band |F - 50| <= 50 takes every clutter pixel: the region floods the
+    # image, is rejected as too large and owns the target. A floor of 0.05 (F >= 5) keeps
+    # the region on the target, which is then accepted (the torchsar preset's 0.02 too).
+    rng = np.random.default_rng(0)
+    x = torch.from_numpy(rng.gamma(20.0, 1 / 20.0, size=(1, 1, 64, 64)))
+    x[..., 20:27, 30:37] = 20.0
+    x[..., 23, 33:36] = torch.tensor([100.0, 50.0, 30.0], dtype=x.dtype)
+    flooded = region_search(x, despeckle=None, floor=0.0)
+    assert not flooded.detection.mask.any()
+    assert [r.reason for r in flooded.tables[0].rows][0] == "too_large"
+    for floor in ({}, {"floor": 0.05}):  # the torchsar preset's 0.02, and 0.05
+        kept = region_search(x, despeckle=None, **floor)
+        assert kept.detection.mask[0, 0, 20:27, 30:37].all()
+        assert int(kept.detection.mask.sum()) == 49
+        first = kept.tables[0].rows[0]
+        assert first.accepted and first.size == 49
 
 
 class TestOptionsInTheOpen:

@@ -115,13 +115,16 @@ class TestGrow:
         f[5:12, 6:15] += 6.0
         blocked = rng.random(f.shape) < 0.1
         start = int(np.argmax(f))
-        out = []
-        for budget in (None, 1, 5):
-            g = Grid.new(f, connectivity=conn)
-            g.free2d()[blocked] = 0
-            out.append(np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget)))
-        np.testing.assert_array_equal(out[0], out[1])
-        np.testing.assert_array_equal(out[0], out[2])
+        for floor in (0.0, 0.4):  # the floor holds in the heap and in the flood finish
+            out = []
+            for budget in (None, 1, 5):
+                g = Grid.new(f, connectivity=conn)
+                g.free2d()[blocked] = 0
+                out.append(np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget,
+                                        floor=floor)))  # fmt: skip
+            np.testing.assert_array_equal(out[0], out[1])
+            np.testing.assert_array_equal(out[0], out[2])
+            assert (f.flat[out[0]] >= floor * f.flat[start]).all()
 
     @pytest.mark.parametrize("steps", [0, 1, 8])
     @given(st.integers(0, 10_000), st.sampled_from([4, 8]))

@@ -103,7 +103,7 @@ def np_sum(a, n):
 
 
 @njit(**_JIT)
-def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand):
+def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand, low):
     """Grow one region from ``seed`` into ``region``; returns its size (the seed first).
 
     Indices are those of the image padded by one never-free pixel on every side, so a
@@ -114,7 +114,8 @@ def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand):
     candidates with the running mean, ties by flat index); then the flood fixpoint that the
     heap ends with: a breadth-first flood adding every neighbour with
     ``|F - mu_N| <= tau * beta`` (``beta`` the running maximum), the pixels it refused
-    kept in ``cand`` and retried whenever ``beta`` has grown, until none passes."""
+    kept in ``cand`` and retried whenever ``beta`` has grown, until none passes. Pixels with
+    ``F < low`` are never queued (the floor; ``-inf``: none)."""
     region[0] = seed
     n = 1
     total = f[seed]
@@ -123,7 +124,7 @@ def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand):
     nc = 0
     for o in offs:
         q = seed + o
-        if free[q] and stamp[q] != tag:
+        if free[q] and stamp[q] != tag and f[q] >= low:
             stamp[q] = tag
             cand[nc] = q
             nc += 1
@@ -148,7 +149,7 @@ def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand):
             beta = f[bq]
         for o in offs:
             q = bq + o
-            if free[q] and stamp[q] != tag:
+            if free[q] and stamp[q] != tag and f[q] >= low:
                 stamp[q] = tag
                 cand[nc] = q
                 nc += 1
@@ -177,7 +178,7 @@ def _grow(f, free, stamp, tag, seed, tau, n_init, offs, region, cand):
             head += 1
             for o in offs:
                 q = p + o
-                if free[q] and stamp[q] != tag:
+                if free[q] and stamp[q] != tag and f[q] >= low:
                     stamp[q] = tag
                     if abs(f[q] - mu_n) <= limit:
                         region[n] = q
@@ -272,11 +273,11 @@ def _statistic(mu_t, mu_c, sigma_c):
 @njit(**_JIT)
 def detect_loop(
     f, raw, target, low, h, w, seeds, tau, n_init, guard, background, k, min_background,
-    conn, blocking_all, max_size, max_fraction,
+    conn, blocking_all, max_size, max_fraction, floor,
 ):  # fmt: skip
     """Visit the seeds of one image (flat float64 planes ``(h * w,)``), brightest first.
 
-    ``max_size < 0`` and ``max_fraction < 0`` mean no limit. Returns the painted statistic
+    ``max_size < 0`` and ``max_fraction < 0`` mean no limit; ``floor`` 0 means none. Returns the painted statistic
     and region ids ``(h * w,)`` and the per-region columns (seed index, size, ``mu_t``,
     ``mu_c``, ``sigma_c``, background size, statistic, accepted, reason code).
     """
@@ -323,7 +324,8 @@ def detect_loop(
         if covered[sp]:
             continue
         tag = nreg + 1
-        n = _grow(fp, free, stamp, tag, sp, tau, n_init, offs, region, cand)
+        lowest = floor * fp[sp] if floor > 0 else -np.inf
+        n = _grow(fp, free, stamp, tag, sp, tau, n_init, offs, region, cand, lowest)
         for t in range(n):
             covered[region[t]] = True
             if blocking_all:

@@ -101,7 +101,7 @@ def _visit(
 ) -> None:
     """Grow, test and record the region of one seed (steps c–i)."""
     tag = len(st.table) + 1
-    idx = grow(g.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget)
+    idx = grow(g.grid, seed, tag, tau=p.tau, n_init=p.n_init, budget=p.budget, floor=p.floor)
     g.covered[idx] = True
     if p.blocking == "all":
         g.free[idx] = 0
@@ -151,7 +151,7 @@ def _visit_compiled(
         *flat, h, w, np.ascontiguousarray(seeds, dtype=np.int64), float(p.tau), p.n_init,
         p.guard, p.background, float(p.k), p.min_background, p.connectivity,
         p.blocking == "all", -1 if p.max_size is None else p.max_size,
-        -1.0 if p.max_fraction is None else float(p.max_fraction),
+        -1.0 if p.max_fraction is None else float(p.max_fraction), float(p.floor),
     )  # fmt: skip
     st.stat, st.region_id = out[0], out[1]
     seed, size, mu_t, mu_c, sigma_c, n_bg, z, ok, reason = (a.tolist() for a in out[2:])

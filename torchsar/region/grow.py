@@ -31,6 +31,7 @@ component), the crop being labelled afresh only if it is still growing.
 from __future__ import annotations
 
 import heapq
+import math
 from collections.abc import Callable, MutableSequence, Sequence
 from dataclasses import dataclass
 
@@ -113,9 +114,11 @@ class Grid:
 
 
 def _first_n(
-    grid: Grid, seed: int, tag: int, tau: float, n_init: int, nbrs: Callable[[int], list[int]]
-) -> tuple[list[int], list[int], float, float, bool]:
-    """Grow the first ``n_init`` pixels with the running mean as reference.
+    grid: Grid, seed: int, tag: int, tau: float, n_init: int, nbrs: Callable[[int], list[int]],
+    low: float,
+) -> tuple[list[int], list[int], float, float, bool]:  # fmt: skip
+    """Grow the first ``n_init`` pixels with the running mean as reference (pixels with
+    ``F < low`` are never queued).
 
     Returns the region, the queued candidates, the sum of F over the region (added in the
     order of joining), ``beta`` and whether growth may continue.
@@ -124,7 +127,7 @@ def _first_n(
     region, total, beta = [seed], f[seed], f[seed]
     stamp[seed] = tag
     cand: list[int] = []
-    _queue(seed, cand, nbrs, free, stamp, tag)
+    _queue(seed, cand, nbrs, free, stamp, tag, f, low)
     while len(region) < n_init and cand:
         mu = total / len(region)
         j = min(range(len(cand)), key=lambda i: (abs(f[cand[i]] - mu), cand[i]))
@@ -135,7 +138,7 @@ def _first_n(
         region.append(p)
         total += f[p]
         beta = max(beta, f[p])
-        _queue(p, cand, nbrs, free, stamp, tag)
+        _queue(p, cand, nbrs, free, stamp, tag, f, low)
     return region, cand, total, beta, True
 
 
@@ -146,10 +149,13 @@ def _queue(
     free: bytearray,
     stamp: MutableSequence[int],
     tag: int,
+    f: Sequence[float],
+    low: float,
 ) -> None:
-    """Append the growable, not yet queued neighbours of ``p`` to ``out``."""
+    """Append the growable (free, ``F >= low``), not yet queued neighbours of ``p`` to
+    ``out``."""
     for q in nbrs(p):
-        if free[q] and stamp[q] != tag:
+        if free[q] and stamp[q] != tag and f[q] >= low:
             stamp[q] = tag
             out.append(q)
 
@@ -165,6 +171,7 @@ def grow(
     tau: float,
     n_init: int,
     budget: int | None = DEFAULT_BUDGET,
+    floor: float = 0.0,
 ) -> np.ndarray:
     """Grow one region from ``seed`` (seed step c).
 
@@ -177,6 +184,7 @@ def grow(
         n_init: N, the number of first pixels whose mean is the reference ``mu_N``.
         budget: pixels grown by the Python heap before the flood fill finishes the region
             (None: heap only, pixels in order of joining).
+        floor: pixels with ``F < floor * F(seed)`` never join (0: no floor).
 
     Returns:
         int64 flat indices of the region, the seed first.
@@ -188,7 +196,8 @@ def grow(
     """
     f = grid.f
     nbrs = grid.neighbours()
-    region, cand, total, beta, go_on = _first_n(grid, seed, tag, tau, n_init, nbrs)
+    low = floor * f[seed] if floor > 0 else -math.inf
+    region, cand, total, beta, go_on = _first_n(grid, seed, tag, tau, n_init, nbrs, low)
     if not go_on:
         return np.asarray(region, dtype=np.int64)
     mu_n = total / len(region)  # a plain running sum (the compiled kernel's, bit for bit)
@@ -206,9 +215,9 @@ def grow(
             beta = fp
             limit = tau * beta
         if len(region) >= cap:
-            return _flood_rest(grid, np.asarray(region, dtype=np.int64), mu_n, beta, tau)
+            return _flood_rest(grid, np.asarray(region, dtype=np.int64), mu_n, beta, tau, low)
         for q in nbrs(p):
-            if free[q] and stamp[q] != tag:
+            if free[q] and stamp[q] != tag and f[q] >= low:
                 stamp[q] = tag
                 push(heap, (abs(f[q] - mu_n), q))
     return np.asarray(region, dtype=np.int64)
@@ -275,7 +284,7 @@ def _touches_edge(m: np.ndarray, box: tuple[int, int, int, int], shape: tuple[in
 
 def _flood_crop(
     grid: Grid, idx: np.ndarray, box: tuple[int, int, int, int], mu_n: float, beta: float,
-    tau: float,
+    tau: float, low: float,
 ) -> tuple[np.ndarray, float, bool]:  # fmt: skip
     """Iterate flood fills on one crop until ``beta`` is stable or the flood reaches an inner
     crop edge; return the flat indices of the flood, ``beta`` and whether it reached such an
@@ -290,6 +299,7 @@ def _flood_crop(
     f[:, :-1] = grid.f2d[r0:r1, c0:c1]
     dist = np.abs(f - mu_n)  # inf in the extra column
     dist[:, :-1][grid.free2d()[r0:r1, c0:c1] == 0] = np.inf
+    dist[f < low] = np.inf  # below the floor (the extra column is inf already)
     rows, cols = idx // w - r0, idx % w - c0
     dist[rows, cols] = 0.0
     m = None
@@ -308,7 +318,9 @@ def _flood_crop(
     return p + (p // width) * (w - width) + (r0 * w + c0), top if edge else beta, edge
 
 
-def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: float) -> np.ndarray:
+def _flood_rest(
+    grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: float, low: float
+) -> np.ndarray:
     """Finish a region from its partial heap region ``idx`` with flood fills on a crop around
     it; when the flood reaches a crop edge inside the image, the flood so far (contained in
     the final region, its maximum a valid ``beta``) becomes the new partial region and the
@@ -319,7 +331,7 @@ def _flood_rest(grid: Grid, idx: np.ndarray, mu_n: float, beta: float, tau: floa
     margin = _MARGIN if h * w > _LABEL_MAX else max(h, w)
     while True:
         box = index_box(idx, (h, w), margin)
-        flat, beta, edge = _flood_crop(grid, idx, box, mu_n, beta, tau)
+        flat, beta, edge = _flood_crop(grid, idx, box, mu_n, beta, tau, low)
         idx = np.concatenate([idx[:1], flat[flat != seed]])
         if not edge:
             return idx

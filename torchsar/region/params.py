@@ -36,6 +36,7 @@ class RegionParams:
     """All options of the region-growing CFAR (see :func:`region_cfar` for their meaning)."""
 
     tau: float = 0.3
+    floor: float = 0.0
     n_init: int = 4
     guard: int = 3
     background: int = 3
@@ -62,6 +63,7 @@ class RegionOptions(TypedDict, total=False):
     :class:`RegionParams`."""
 
     tau: float
+    floor: float
     n_init: int
     guard: int
     background: int
@@ -86,6 +88,7 @@ PRESETS: dict[str, RegionParams] = {
     "paper": RegionParams(),
     "torchsar": RegionParams(
         tau=0.5,
+        floor=0.02,
         k=2.0,
         max_size=20_000,
         max_fraction=0.25,
@@ -128,6 +131,12 @@ def _check_fraction(value: object) -> float | None:
     return float(value)
 
 
+def _check_floor(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < 1:
+        raise OptionError(f"floor must be in [0, 1) (a fraction of the seed's F), got {value!r}")
+    return float(value)
+
+
 def _check_bool(value: object, name: str) -> bool:
     if not isinstance(value, bool):
         raise OptionError(f"{name} must be True or False, got {value!r}")
@@ -142,6 +151,7 @@ def _validate(p: RegionParams) -> RegionParams:
         raise OptionError(f"connectivity must be 4 or 8, got {conn}")
     return RegionParams(
         tau=check_positive(p.tau, "tau"),
+        floor=_check_floor(p.floor),
         n_init=check_int(p.n_init, "n_init", minimum=1),
         guard=check_int(p.guard, "guard", minimum=0),
         background=check_int(p.background, "background", minimum=1),
