@@ -198,7 +198,7 @@ def test_floor_keeps_a_peaked_target_from_flooding_the_image():
     x[..., 23, 33:36] = torch.tensor([100.0, 50.0, 30.0], dtype=x.dtype)
     flooded = region_search(x, despeckle=None, floor=0.0)
     assert not flooded.detection.mask.any()
-    assert [r.reason for r in flooded.tables[0].rows][0] == "too_large"
+    assert flooded.tables[0].rows[0].reason == "too_large"
     for floor in ({}, {"floor": 0.05}):  # the torchsar preset's 0.02, and 0.05
         kept = region_search(x, despeckle=None, **floor)
         assert kept.detection.mask[0, 0, 20:27, 30:37].all()

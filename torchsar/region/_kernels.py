@@ -277,9 +277,10 @@ def detect_loop(
 ):  # fmt: skip
     """Visit the seeds of one image (flat float64 planes ``(h * w,)``), brightest first.
 
-    ``max_size < 0`` and ``max_fraction < 0`` mean no limit; ``floor`` 0 means none. Returns the painted statistic
-    and region ids ``(h * w,)`` and the per-region columns (seed index, size, ``mu_t``,
-    ``mu_c``, ``sigma_c``, background size, statistic, accepted, reason code).
+    ``max_size < 0`` and ``max_fraction < 0`` mean no limit; ``floor`` 0 means none.
+    Returns the painted statistic and region ids ``(h * w,)`` and the per-region columns
+    (seed index, size, ``mu_t``, ``mu_c``, ``sigma_c``, background size, statistic,
+    accepted, reason code).
     """
     npx = h * w
     w2 = w + 2
