@@ -2,7 +2,9 @@
 
 The paper grows region T from the seed by always adding the boundary pixel most similar to
 the region, accepting it while ``psi = |F(p) - mu_N| / beta <= tau``, where ``mu_N`` is the
-mean of the first ``N`` pixels added and ``beta`` the maximum of F over T.
+mean of the first ``N`` pixels added and ``beta`` the maximum of F over T. An optional floor
+(not in the paper) keeps every pixel with ``F < floor * F(seed)`` out of the region, in each
+phase below: such pixels are treated as not growable for this region.
 
 Implementation: flat (row-major) pixel indices, the image as a flat float64 memoryview (fast
 scalar access to Python floats), a ``bytearray`` of growable pixels shared by every region
