@@ -56,8 +56,7 @@ def bisection_select(planes: Tensor, ring: Ring, kk: Tensor, vm: Tensor | None) 
     o = ring.outer
     budget = _COMPARE_BUDGET if planes.device.type == "cpu" else DEVICE_COMPARE_BUDGET
     th, tw = _piece_shape(h, w, o, ring.n, budget)
-    pieces, keep = _cut(planes, vm, th, tw, o)
-    k = _cut_interior(kk, th, tw)
+    pieces, keep, k = _cut(planes, vm, kk, th, tw, o)
     hp, wp = th + 2 * o, tw + 2 * o
     group = max(1, budget // max(ring.n, 1) // (hp * wp))
     ws = _Workspace(ring.n, _length(min(group, len(pieces)), hp, wp, o), planes.device)
@@ -91,37 +90,31 @@ def _length(g: int, hp: int, wp: int, o: int) -> int:
     return (g - 1) * hp * wp + (hp - 2 * o - 1) * wp + (wp - 2 * o)
 
 
-def _cut(planes: Tensor, vm: Tensor | None, th: int, tw: int, o: int) -> tuple[Tensor, Tensor]:
+def _cut(
+    planes: Tensor, vm: Tensor | None, kk: Tensor, th: int, tw: int, o: int
+) -> tuple[Tensor, Tensor, Tensor]:
     """The pieces ``(T, th + 2o, tw + 2o)`` of every plane (plane-major, then rows, then
-    columns; ``T = P ny nx``) with their halos, and which of their cells are counted (in the
-    image and valid)."""
+    columns; ``T = P ny nx``) with their halos: the values, which cells are counted (in the
+    image and valid) and the ranks ``kk`` (0 outside the image; only a piece's interior is
+    used)."""
     p, h, w = planes.shape
     ny, nx = -(-h // th), -(-w // tw)
     shape = (p, ny * th + 2 * o, nx * tw + 2 * o)
-    vals = planes.new_zeros(shape)
-    vals[:, o : o + h, o : o + w] = planes
-    keep = torch.zeros(shape, dtype=torch.bool, device=planes.device)
-    keep[:, o : o + h, o : o + w] = True if vm is None else vm
     hp, wp = th + 2 * o, tw + 2 * o
 
-    def pieces(t: Tensor) -> Tensor:
-        return t.unfold(1, hp, th).unfold(2, wp, tw).reshape(-1, hp, wp)
+    def pieces(t: Tensor, inside: Tensor | bool) -> Tensor:
+        full = t.new_zeros(shape)
+        full[:, o : o + h, o : o + w] = inside
+        return full.unfold(1, hp, th).unfold(2, wp, tw).reshape(-1, hp, wp)
 
-    return pieces(vals), pieces(keep)
-
-
-def _cut_interior(kk: Tensor, th: int, tw: int) -> Tensor:
-    """``kk`` ``(P, H, W)`` cut like :func:`_cut`'s pieces, without halo: ``(T, th, tw)``
-    (0 beyond the image)."""
-    p, h, w = kk.shape
-    ny, nx = -(-h // th), -(-w // tw)
-    full = kk.new_zeros((p, ny * th, nx * tw))
-    full[:, :h, :w] = kk
-    return full.view(p, ny, th, nx, tw).permute(0, 1, 3, 2, 4).reshape(-1, th, tw)
+    keep = pieces(torch.zeros((), dtype=torch.bool, device=planes.device),
+                  True if vm is None else vm)  # fmt: skip
+    return pieces(planes, planes), keep, pieces(kk, kk)
 
 
 def _uncut(out: Tensor, p: int, h: int, w: int) -> Tensor:
-    """Inverse of :func:`_cut_interior`: ``(T, th, tw)`` back to ``(P, H, W)``."""
+    """The pieces' interiors ``(T, th, tw)`` (as :func:`_cut` orders them) back to
+    ``(P, H, W)``."""
     _, th, tw = out.shape
     ny, nx = -(-h // th), -(-w // tw)
     full = out.view(p, ny, nx, th, tw).permute(0, 1, 3, 2, 4).reshape(p, ny * th, nx * tw)
@@ -254,16 +247,14 @@ def _remap_low(bufs: tuple[Tensor, ...], lv: list[Tensor], shift: int) -> None:
 
 def _select_group(ranks: Tensor, srt: Tensor, k: Tensor, ring: Ring, ws: _Workspace) -> Tensor:
     """Bisect the ranks of a group of pieces ``(g, hp, wp)`` at their interior pixels (ranks
-    ``k`` ``(g, th, tw)``): the selected values ``(g, th, tw)``."""
+    ``k``, cut like the pieces): the selected values ``(g, th, tw)``."""
     g, hp, wp = ranks.shape
     o = ring.outer
     th, tw = hp - 2 * o, wp - 2 * o
     base = o * wp + o
     length = _length(g, hp, wp, o)
     bufs = ws.take(length)
-    k_flat = torch.ones(g * hp * wp, dtype=bufs[3].dtype, device=ranks.device)
-    k_flat.view(g, hp, wp)[:, o : o + th, o : o + tw] = k.to(k_flat.dtype)
-    bufs[3].copy_(k_flat[base : base + length])
+    bufs[3].copy_(k.reshape(-1)[base : base + length])  # junk positions: any rank, unused
     bits = _rank_bits(hp * wp)
     shift = bits - 8
     high = (ranks >> shift).to(torch.uint8).reshape(-1)
@@ -277,4 +268,4 @@ def _select_group(ranks: Tensor, srt: Tensor, k: Tensor, ring: Ring, ws: _Worksp
     full[base : base + length] = bufs[6].clamp(max=hp * wp - 1)
     sel = full.view(g, hp, wp)[:, o : o + th, o : o + tw].reshape(g, th * tw)
     vals = srt.gather(1, sel).view(g, th, tw)
-    return torch.where(k > 0, vals, torch.zeros_like(vals))
+    return torch.where(k[:, o : o + th, o : o + tw] > 0, vals, torch.zeros_like(vals))

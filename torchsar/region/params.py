@@ -123,17 +123,10 @@ def _check_lowpass(value: str | int | None) -> str | int | None:
     raise OptionError(f"lowpass must be 'despeckled', None or an odd box width, got {value!r}")
 
 
-def _check_fraction(value: object) -> float | None:
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= 1:
-        raise OptionError(f"max_fraction must be None or in (0, 1], got {value!r}")
-    return float(value)
-
-
-def _check_floor(value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < 1:
-        raise OptionError(f"floor must be in [0, 1) (a fraction of the seed's F), got {value!r}")
+def _check_fraction(value: object, inside: Callable[[float], bool], message: str) -> float:
+    """``value`` as a float if it is a real number that ``inside`` accepts, else ``message``."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not inside(value):
+        raise OptionError(f"{message}, got {value!r}")
     return float(value)
 
 
@@ -146,12 +139,16 @@ def _check_bool(value: object, name: str) -> bool:
 def _validate(p: RegionParams) -> RegionParams:
     max_size = None if p.max_size is None else check_int(p.max_size, "max_size", minimum=1)
     merge = None if p.merge is None else check_int(p.merge, "merge", minimum=0)
+    max_fraction = None if p.max_fraction is None else _check_fraction(
+        p.max_fraction, lambda v: 0 < v <= 1, "max_fraction must be None or in (0, 1]")  # fmt: skip
     conn = check_int(p.connectivity, "connectivity")
     if conn not in (4, 8):
         raise OptionError(f"connectivity must be 4 or 8, got {conn}")
     return RegionParams(
         tau=check_positive(p.tau, "tau"),
-        floor=_check_floor(p.floor),
+        floor=_check_fraction(
+            p.floor, lambda v: 0 <= v < 1, "floor must be in [0, 1) (a fraction of the seed's F)"
+        ),
         n_init=check_int(p.n_init, "n_init", minimum=1),
         guard=check_int(p.guard, "guard", minimum=0),
         background=check_int(p.background, "background", minimum=1),
@@ -164,7 +161,7 @@ def _validate(p: RegionParams) -> RegionParams:
         lowpass=_check_lowpass(p.lowpass),
         blocking=check_choice(p.blocking, "blocking", ("all", "targets")),
         max_size=max_size,
-        max_fraction=_check_fraction(p.max_fraction),
+        max_fraction=max_fraction,
         min_size=check_int(p.min_size, "min_size", minimum=1),
         merge=merge,
         fill_holes=_check_bool(p.fill_holes, "fill_holes"),
