@@ -102,14 +102,13 @@ def _cut(
     shape = (p, ny * th + 2 * o, nx * tw + 2 * o)
     hp, wp = th + 2 * o, tw + 2 * o
 
-    def pieces(t: Tensor, inside: Tensor | bool) -> Tensor:
-        full = t.new_zeros(shape)
+    def pieces(inside: Tensor | bool, dtype: torch.dtype) -> Tensor:
+        full = torch.zeros(shape, dtype=dtype, device=planes.device)
         full[:, o : o + h, o : o + w] = inside
         return full.unfold(1, hp, th).unfold(2, wp, tw).reshape(-1, hp, wp)
 
-    keep = pieces(torch.zeros((), dtype=torch.bool, device=planes.device),
-                  True if vm is None else vm)  # fmt: skip
-    return pieces(planes, planes), keep, pieces(kk, kk)
+    keep = pieces(True if vm is None else vm, torch.bool)
+    return pieces(planes, planes.dtype), keep, pieces(kk, kk.dtype)
 
 
 def _uncut(out: Tensor, p: int, h: int, w: int) -> Tensor:
