@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from torch.utils.data import Dataset
 
 from torchsar_eval.batches import SkipBad, TruthOnly
-from torchsar_eval.calibrate import choose_bin, parse_target, split_indices
+from torchsar_eval.calibrate import choose_threshold, parse_target, split_indices
 from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import observed_facts
@@ -433,13 +433,13 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
             raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
                             f"split of {cal.fraction:g}")  # fmt: skip
         tuned, calib_counts = shards(calib, state / "calibration")
-        chosen = [choose_bin(r.objects, target) for r in tuned]
+        chosen = [choose_threshold(r.objects, target) for r in tuned]
     results, counts = shards(indices, state / "test", plan.export_coco)
     for r, det in zip(results, detectors, strict=True):
         r.detector = det  # saved shards keep only its name
     exporter = shard_coco(state / "test", name) if plan.export_coco else None
-    for r, b in zip(results, chosen or [], strict=False):
-        r.op_bin = b
+    for r, t in zip(results, chosen or [], strict=False):
+        r.choose(t)
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)

@@ -1,5 +1,5 @@
 """Operating points chosen without peeking: a calibration split picks each detector's score
-threshold, a disjoint test split reports at it.
+threshold (one of its detection scores), a disjoint test split reports at it.
 
 The split is by item index: item ``i`` of a dataset belongs to the calibration split when a
 hash of ``(dataset name, i)`` falls below the fraction, so it is deterministic, disjoint,
@@ -11,14 +11,10 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 
-import numpy as np
-
 from torchsar.metrics import ObjectState
-from torchsar.metrics.curves import SCORE_GRID, suffix
-from torchsar.metrics.object_state import operating_point
 from torchsar_eval.errors import EvalError
 
-__all__ = ["Target", "choose_bin", "parse_target", "split_indices", "threshold_of"]
+__all__ = ["Target", "choose_threshold", "parse_target", "split_indices"]
 
 
 @dataclass(frozen=True)
@@ -58,19 +54,9 @@ def split_indices(n: int, name: str, fraction: float) -> tuple[list[int], list[i
     return cal, test
 
 
-def choose_bin(state: ObjectState, target: Target) -> int:
-    """The score bin where the operating point starts: the lowest score level with at most
-    ``level`` false alarms per image, or the level of best F1 (ties: the higher level)."""
-    n = SCORE_GRID.size + 1
-    cf = suffix(state.fp)
-    if target.kind == "fa":
-        ok = np.flatnonzero(cf / max(state.images, 1) <= target.level)
-        return int(ok[0]) if ok.size else n
-    f1 = [operating_point(state.tp, state.fp, state.n_gt, state.images, j)["f1"] for j in range(n)]
-    f1 = np.nan_to_num(np.array(f1), nan=-1.0)
-    return int(np.flatnonzero(f1 == f1.max())[-1])
-
-
-def threshold_of(bin_: int) -> float:
-    """The score threshold of an operating point starting at ``bin_`` (scores above it)."""
-    return float(SCORE_GRID[bin_ - 1]) if bin_ > 0 else float("-inf")
+def choose_threshold(state: ObjectState, target: Target) -> float | None:
+    """The operating threshold the calibration split picks, at one of its detection scores
+    (detections scoring above it count; ``None``: every detection): the most detections
+    with at most ``level`` false alarms per image, or the best F1 (ties: fewer detections).
+    A strictly increasing map of the scores maps the chosen threshold with them."""
+    return state.choose_threshold(target.kind, target.level)

@@ -23,9 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
-from torchsar.metrics.curves import OP_BIN, score_bins
 from torchsar.metrics.matching import GroundTruth
-from torchsar.metrics.object_state import ImageInfo, normalise
+from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.objects import Objects
 
 __all__ = [
@@ -232,9 +231,7 @@ def observed_facts(results: list) -> dict:
 def at_operating_point(obj: Objects) -> np.ndarray:
     """Which objects count at the design operating point (scores above the objects'
     threshold, or every object when they declare none)."""
-    if obj.threshold is None:
-        return np.ones(len(obj), bool)
-    return score_bins(normalise(obj.score, obj.threshold)) >= OP_BIN
+    return above(obj.score, obj.threshold)
 
 
 def _class(classes, k: int) -> str:

@@ -22,11 +22,8 @@ from torchsar.metrics import (
 )
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
-from torchsar.metrics.curves import score_bins
-from torchsar.metrics.error_types import ErrorCounts, false_alarm_types
-from torchsar.metrics.object_state import normalise
-from torchsar.metrics.scr import ScrCounts
-from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar.metrics.error_types import false_alarm_types
+from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar.objects.discriminate import own_regions
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
@@ -123,12 +120,10 @@ class DetectorName:
 class DetectorResult:
     """Everything measured for one detector on one dataset.
 
-    ``op_bin`` is the operating point's score bin when it was chosen (calibrated), else
-    ``None``: the design point of the objects (:attr:`ObjectState.op_bin`).
+    ``calibrated`` says whether the operating point was chosen on a calibration split, at
+    the score ``chosen`` (detections scoring above it count; ``None``: every detection);
+    otherwise it is the objects' design point (:attr:`ObjectState.design_threshold`).
     ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
-    ``scr`` counts the targets and their detections per signal-to-clutter ratio bin
-    (:class:`~torchsar.metrics.scr.ScrCounts`), ``errors`` the false alarms per type
-    (:class:`~torchsar.metrics.error_types.ErrorCounts`).
     ``gallery`` holds the detector's worst cases (:class:`~torchsar_eval.gallery.Gallery`).
     """
 
@@ -141,14 +136,13 @@ class DetectorResult:
     object_seconds: float = 0.0
     images: int = 0
     rows: list = field(default_factory=list)
-    op_bin: int | None = None
+    calibrated: bool = False
+    chosen: float | None = None
     skipped: list = field(default_factory=list)
     pixel_level: bool = False
     default_class: str = "target"
     coco: CocoState | None = None
     coco_iou_type: str | None = None
-    scr: ScrCounts = field(default_factory=ScrCounts)
-    errors: ErrorCounts = field(default_factory=ErrorCounts)
     gallery: Gallery | None = None
 
     def __post_init__(self) -> None:
@@ -172,9 +166,15 @@ class DetectorResult:
         self.__dict__.update(state)
 
     @property
-    def at(self) -> int:
-        """The score bin of the reported operating point."""
-        return self.objects.op_bin if self.op_bin is None else self.op_bin
+    def threshold(self) -> float | None:
+        """The reported operating point: detections scoring above it count (``None``:
+        every detection)."""
+        return self.chosen if self.calibrated else self.objects.design_threshold
+
+    def choose(self, threshold: float | None) -> None:
+        """Report at ``threshold`` (chosen on a calibration split) instead of the design
+        point."""
+        self.calibrated, self.chosen = True, threshold
 
     def add(self, out: Detection | Objects, batch: dict, truth) -> Objects:
         """Accumulate one batch's detector output (on the CPU; ``truth``:
@@ -190,8 +190,8 @@ class DetectorResult:
         obj = self.objects_of(out, batch)
         gt, info = truth
         m = match_batch(obj, gt, self.scoring.matching)
-        self.objects.update(m, obj, gt, info)
-        self._add_errors(m, obj, gt)
+        types = false_alarm_types(m, obj, gt, self.scoring.matching)
+        self.objects.update(m, obj, gt, info, fa_types=types)
         self.rows += image_rows(m, obj, gt, info)
         if self.gallery is not None:
             self.gallery.add(obj, gt, info, m, batch.get("image"))
@@ -199,18 +199,6 @@ class DetectorResult:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
         return obj
-
-    def _add_errors(self, m, obj: Objects, gt) -> None:
-        """The targets per SCR bin with the score bin of the detection that found them, and
-        the false alarms per type (both read at any operating point)."""
-        bins = score_bins(normalise(obj.score, obj.threshold))
-        found = np.where(m.gt_det >= 0, bins[np.maximum(m.gt_det, 0)] if bins.size else 0, -1)
-        if gt.scr_db is not None:
-            self.scr.update("measured", gt.scr_db, found)
-        if gt.known_scr_db is not None:  # only the targets that declare one
-            declared = ~np.isnan(gt.known_scr_db)
-            self.scr.update("known", gt.known_scr_db[declared], found[declared])
-        self.errors.update(false_alarm_types(m, obj, gt, self.scoring.matching), bins)
 
     def _add_coco(self, obj: Objects, gt, info) -> None:
         """COCO's own evaluation of the batch: segm IoU for objects with masks (unless the
@@ -230,8 +218,8 @@ class DetectorResult:
         if self.detector.name != other.detector.name or self.scoring != other.scoring:
             raise ValueError("cannot add results of different detectors or scoring settings")
         out = DetectorResult(self.detector, self.scoring, self.pixels + other.pixels,
-                             self.roc + other.roc, op_bin=self.op_bin,
-                             default_class=self.default_class)  # fmt: skip
+                             self.roc + other.roc, calibrated=self.calibrated,
+                             chosen=self.chosen, default_class=self.default_class)  # fmt: skip
         if self.coco is not None:
             out.coco = self.coco + other.coco
             out.coco_iou_type = self.coco_iou_type or other.coco_iou_type
@@ -242,8 +230,6 @@ class DetectorResult:
         out.rows = self.rows + other.rows
         out.skipped = self.skipped + other.skipped
         out.pixel_level = self.pixel_level or other.pixel_level
-        out.scr = self.scr + other.scr
-        out.errors = self.errors + other.errors
         if self.gallery is not None and other.gallery is not None:
             out.gallery = self.gallery + other.gallery
         else:  # a state saved without one
@@ -300,7 +286,9 @@ def object_pixels(out: Objects) -> tuple[np.ndarray, np.ndarray, float] | None:
     owner, idx = out.pixel_lists()
     h, w = out.shape
     best = np.full(out.planes * h * w, -np.inf)
-    np.maximum.at(best, idx, normalise(out.score, out.threshold)[owner])
+    score = out.score if out.threshold is None else normalised_score(
+        torch.from_numpy(out.score), out.threshold).numpy()  # fmt: skip
+    np.maximum.at(best, idx, score[owner])
     covered = np.zeros(best.size, bool)
     covered[idx] = True
     idx = np.flatnonzero(covered)

@@ -8,9 +8,8 @@ from dataclasses import replace
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
-from torchsar.metrics.curves import OP_BIN, score_bins
 from torchsar.metrics.matching import GroundTruth, ground_truth
-from torchsar.metrics.object_state import ImageInfo, normalise
+from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import Objects
 
@@ -125,8 +124,7 @@ def image_rows(m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInf
     threshold, or every object when they declare none):
     ``(image, n_gt, tp, fp, fn, objects, max_score)``."""
     n = len(info)
-    at_op = score_bins(normalise(obj.score, obj.threshold)) >= (
-        OP_BIN if obj.threshold is not None else 0)  # fmt: skip
+    at_op = above(obj.score, obj.threshold)
     tp = np.bincount(obj.plane[at_op & (m.op >= 0)], minlength=n)
     fp = np.bincount(obj.plane[at_op & (m.op == -1)], minlength=n)
     n_gt = np.bincount(gt.plane, minlength=n)

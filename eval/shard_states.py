@@ -19,11 +19,8 @@ from typing import IO
 from torchsar.metrics import ObjectState, PixelCounts, RocAccumulator
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.distance import LengthErrors
-from torchsar.metrics.error_types import ErrorCounts
 from torchsar.metrics.matching import Matching
-from torchsar.metrics.object_state import KeyCounts
-from torchsar.metrics.ranked import RankedDetections
-from torchsar.metrics.scr import ScrCounts
+from torchsar.metrics.records import Records
 from torchsar.objects import ObjectRules
 from torchsar_eval import statefile
 from torchsar_eval.coco import CocoExport
@@ -61,18 +58,15 @@ for _cls in (
     Matching,
     PixelCounts,
     ObjectState,
-    KeyCounts,
-    RankedDetections,
+    Records,
     LengthErrors,
     CocoExport,
     Gallery,
     Cases,
 ):
     statefile.register(_cls)  # fmt: skip
-statefile.register(RocAccumulator, transient=("_log_grid", "_starts"))
+statefile.register(RocAccumulator)
 statefile.register(CocoState, transient=("_cache", "_consolidated"))
-statefile.register(ScrCounts)
-statefile.register(ErrorCounts)
 
 
 def load_shard(path: Path) -> ShardState:

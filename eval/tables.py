@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from torchsar.metrics.curves import RECALL_POINTS, suffix
-from torchsar.metrics.object_state import operating_point
+from torchsar.metrics.error_types import FA_TYPES
+from torchsar.metrics.object_state import ratios
 from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals, side
 from torchsar_eval.result import DetectorResult
 
@@ -101,8 +101,8 @@ PAIRED_COLUMNS = ["dataset", "detector", "reference", "metric", "difference", "l
 
 def summary_row(dataset: str, r: DetectorResult) -> dict:
     """One summary row at the detector's operating point (its design or calibrated one)."""
-    m = r.objects.metrics(r.at)
-    ci = r.objects.intervals(r.at) if r.objects.replicates else {}
+    m = r.objects.metrics(r.threshold)
+    ci = r.objects.intervals(r.threshold) if r.objects.replicates else {}
     nan = float("nan")
     if r.scoring.matching.kind == "distance":
         m["mean_iou"] = nan  # no IoU under the distance rule
@@ -117,7 +117,7 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         "false_alarms": m["fp"],
         "false_alarms_per_image": m["fa_per_image"],
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
-        "score_threshold": r.objects.score_at(r.at),
+        "score_threshold": -np.inf if r.threshold is None else r.threshold,
     }
     for k in INTERVALS:
         iv = ci.get(_STATE_NAME.get(k, k))
@@ -169,42 +169,32 @@ def summary_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return _frame(results, lambda ds, r: [summary_row(ds, r)], SUMMARY_COLUMNS)
 
 
-def _levels(tp: np.ndarray, fp: np.ndarray) -> list[tuple[int, int, int]]:
-    """``(bin, TP above it, FP above it)`` at every score level where the detections above
-    change, highest level first (level j: normalised scores > ``[-inf, *SCORE_GRID][j]``)."""
-    ct, cf = suffix(tp), suffix(fp)
-    keep = np.ones(ct.size, bool)
-    keep[1:] = (ct[1:] != ct[:-1]) | (cf[1:] != cf[:-1])
-    return [(int(j), int(ct[j]), int(cf[j])) for j in np.flatnonzero(keep)[::-1]]
-
-
 def _froc_rows(ds: str, r: DetectorResult) -> list[list]:
-    """The threshold is on the detector's own score scale."""
-    o, nan = r.objects, float("nan")
+    """The threshold is on the detector's own score scale: the detections scoring at or
+    above it."""
+    f, nan = r.objects.froc(), float("nan")
     return [
-        [ds, r.detector.name, o.score_at(j), t, f, f / max(o.images, 1),
-         t / o.n_gt if o.n_gt else nan, t / (t + f) if t + f else nan]
-        for j, t, f in _levels(o.tp, o.fp)
+        [ds, r.detector.name, float(thr), int(t), int(n), float(fa), float(pd),
+         t / (t + n) if t + n else nan]
+        for thr, t, n, fa, pd in zip(f["threshold"], f["tp"], f["fp"], f["fa_per_image"], f["pd"],
+                                     strict=True)
     ]  # fmt: skip
 
 
 def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
-    """The dense FROC under the matching rule: one row per score level where the detections
-    change (highest first), monotone in the threshold by construction."""
+    """The dense FROC under the matching rule: one row per detection score where the
+    counted detections change (highest first; each row counts the detections scoring at or
+    above its threshold), monotone in the threshold by construction."""
     return _frame(results, _froc_rows, FROC_COLUMNS)
 
 
 def _pr_rows(ds: str, r: DetectorResult) -> list[list]:
     """COCO's interpolated precision at the 101 recall points reached (the exact curve
     behind AP50), with the score of the detection where each is reached."""
-    o = r.objects
-    if not o.n_gt or o.ap_kind == "none":
-        return []
-    prec, _, score = o.ranked.curves(o.n_gt)
-    keep = np.isfinite(score[0])
+    recall, precision, score = r.objects.pr_curve()
     return [
         [ds, r.detector.name, float(t), float(rc), float(p)]
-        for t, rc, p in zip(score[0][keep], RECALL_POINTS[keep], prec[0][keep], strict=True)
+        for t, rc, p in zip(score, recall, precision, strict=True)
     ]
 
 
@@ -217,18 +207,19 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     """Per key; ground-truth classes carry false alarms (and so precision) only when the
     images have a class of their own, to which the false alarms are attributed."""
     rows = []
-    has_image_class = any(k.startswith("image_class:") for k in r.objects.keys)
+    keys = r.objects.breakdown(r.threshold)
+    has_image_class = any(k.startswith("image_class:") for k in keys)
     nan = float("nan")
-    for key in sorted(r.objects.keys):
+    for key in sorted(keys):
         by, _, name = key.partition(":")
-        k = r.objects.keys[key]
-        op = operating_point(k.tp, k.fp, k.n_gt, k.images, r.at)
+        k = keys[key]
+        op = ratios(k["tp"], k["fp"], k["n_gt"], k["images"])
         if by == "class" and not has_image_class:
-            if k.n_gt == 0:
+            if k["n_gt"] == 0:
                 continue  # the sink of unattributed false alarms
             op.update(fp=nan, precision=nan, f1=nan)
-        rows.append([ds, r.detector.name, by, name, k.images or None, k.n_gt, op["tp"], op["fp"],
-                     op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
+        rows.append([ds, r.detector.name, by, name, k["images"] or None, k["n_gt"], op["tp"],
+                     op["fp"], op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
     return rows
 
 
@@ -240,7 +231,7 @@ def _scr_breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
         [ds, r.detector.name, "scr" if row["source"] == "measured" else f"scr_{row['source']}",
          row["scr_bin"], None, row["targets"], row["detected"], nan,
          row["targets"] - row["detected"], nan, row["pd"], nan]
-        for row in r.scr.rows(r.at)
+        for row in r.objects.scr_rows(r.threshold)
     ]  # fmt: skip
 
 
@@ -252,7 +243,7 @@ def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 
 def _scr_rows(ds: str, r: DetectorResult) -> list[list]:
-    return [[ds, r.detector.name, *row.values()] for row in r.scr.rows(r.at)]
+    return [[ds, r.detector.name, *row.values()] for row in r.objects.scr_rows(r.threshold)]
 
 
 def scr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
@@ -267,13 +258,14 @@ def scr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 def _errors_rows(ds: str, r: DetectorResult) -> list[list]:
     """False alarms per type, misses per size bin and per SCR bin, at the operating
     point (each family sums to the false alarms, resp. the missed targets)."""
-    det, at = r.detector.name, r.at
-    rows = [[ds, det, "false_alarm", t, n] for t, n in r.errors.counts(at).items()]
+    det, thr = r.detector.name, r.threshold
+    counts = r.objects.fa_types(thr)
+    rows = [[ds, det, "false_alarm", t, int(n)] for t, n in zip(FA_TYPES, counts, strict=True)]
+    keys = r.objects.breakdown(thr)
     for name in r.objects.size_names:
-        k = r.objects.keys.get(f"size:{name}")
-        missed = 0 if k is None else k.n_gt - int(k.tp[at:].sum())
-        rows.append([ds, det, "miss", f"size:{name}", missed])
-    for row in r.scr.rows(at):
+        k = keys.get(f"size:{name}")
+        rows.append([ds, det, "miss", f"size:{name}", 0 if k is None else k["n_gt"] - k["tp"]])
+    for row in r.objects.scr_rows(thr):
         prefix = "scr" if row["source"] == "measured" else f"scr_{row['source']}"
         rows.append([ds, det, "miss", f"{prefix}:{row['scr_bin']}",
                      row["targets"] - row["detected"]])  # fmt: skip
@@ -306,7 +298,7 @@ def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) 
     ``significant`` when the interval excludes 0 (NaN intervals without replicates)."""
     rows = []
     for ds, rs in results.items():
-        states = [side(r.objects, r.at, level) for r in rs]
+        states = [side(r.objects, r.threshold, level) for r in rs]
         ref = _reference([m for m, _, _ in states])
         for k, r in enumerate(rs):
             if ref is None or k == ref:
@@ -338,8 +330,9 @@ def per_image_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 
 def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
-    """The fine pixel-level ROC (every grid threshold) per dataset and detector (those with
-    pixel masks)."""
+    """The scale-free pixel-level ROC per dataset and detector (those with pixel masks): one
+    row per key of the statistic present (see :class:`~torchsar.metrics.RocAccumulator`),
+    exact for ``statistic > threshold``, after a first row at ``-inf``."""
     frames = []
     for ds, rs in results.items():
         for r in rs:

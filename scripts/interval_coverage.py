@@ -9,11 +9,13 @@ the natural count, the bootstrap replicates' mean / variance / undefined count, 
 resampling units and the plain percentile endpoints, so any interval rule can be judged
 afterwards without scoring again (``--report`` on the records file).
 
-Each plane's own sufficient statistics (resampling key, targets, TP / FP score histograms)
-go to ``OUT/planes.jsonl``, so ``--report --draws N`` can re-form datasets from the pool
+The truth states keep every plane's records (its image, detections and targets:
+:mod:`torchsar.metrics.records`), so ``--report --draws N`` re-forms datasets from the pool
 without scoring: the consecutive blocks, topped up to ``N`` per size by sets of planes drawn
-from the whole pool, each bootstrapped as the harness does and recorded with each unit's TP,
-FP and targets (for rules that need per-unit moments); cached in ``OUT/formed-N.jsonl``.
+from the whole pool, each the subset of the pool's records, bootstrapped as the harness does
+and recorded with each unit's TP, FP and targets (for rules that need per-unit moments);
+cached in ``OUT/formed-N.jsonl``. Every metric of a re-formed dataset is exact, AP50
+included.
 
 Resumable: records go to ``OUT/records.jsonl`` and the truth states to ``OUT/truth.state``
 after every block of the largest size; a rerun with the same options continues.
@@ -45,15 +47,15 @@ import torch  # noqa: E402
 from torchsar.metrics import ObjectState  # noqa: E402
 from torchsar.metrics.assign import match_batch  # noqa: E402
 from torchsar.metrics.bootstrap import interval as percentile  # noqa: E402
-from torchsar.metrics.bootstrap import poisson_weights  # noqa: E402
-from torchsar.metrics.curves import coco_ap_rows, score_bins  # noqa: E402
+from torchsar.metrics.error_types import false_alarm_types  # noqa: E402
 from torchsar.metrics.intervals import (  # noqa: E402
     PROPORTIONS,
     ReplicateSpread,
     proportion_interval,
     rate_interval,
 )
-from torchsar.metrics.object_state import N_BINS, normalise  # noqa: E402
+from torchsar.metrics.object_state import above  # noqa: E402
+from torchsar.metrics.records import Records  # noqa: E402
 from torchsar_eval import shards, statefile  # noqa: E402, F401  (shards registers the states)
 from torchsar_eval.batches import Indexed, batches  # noqa: E402
 from torchsar_eval.datasets.sim import SimDataset  # noqa: E402
@@ -81,23 +83,6 @@ def _record(state: ObjectState, m: dict | None = None) -> dict:
             "undefined": int((~ok).sum()),
             "pct": [lo, hi],
         }
-    return out
-
-
-def _per_image(m, obj, gt, info: list, first: int) -> list[dict]:
-    """Each plane's own sufficient statistics: its resampling key, targets and the TP / FP
-    histograms (sparse ``{bin: count}``) under the rule and at IoU 0.5, from which any
-    dataset of planes can be re-formed and bootstrapped without scoring again."""
-    bins = score_bins(normalise(obj.score, obj.threshold))
-    n_gt = np.bincount(gt.plane, minlength=len(info)) if len(gt) else np.zeros(len(info), int)
-    sel = {"tp": m.op >= 0, "fp": m.op == -1, "tp50": m.ap[0] >= 0, "fp50": m.ap[0] == -1}
-    out = []
-    for p, i in enumerate(info):
-        rec = {"index": first + p, "key": i.boot_key or i.key, "n_gt": int(n_gt[p])}
-        for name, s in sel.items():
-            b, c = np.unique(bins[s & (obj.plane == p)], return_counts=True)
-            rec[name] = {int(k): int(v) for k, v in zip(b, c, strict=True)}
-        out.append(rec)
     return out
 
 
@@ -133,14 +118,12 @@ def score(args) -> None:
         truth = statefile.loads(truth_path.read_bytes())
     else:
         rec_path.unlink(missing_ok=True)
-        (out / "planes.jsonl").unlink(missing_ok=True)
     scoring = Scoring(replicates=args.replicates, seed=args.seed)
     dets = [load(d) for d in args.detectors]
     shells = {d.name: DetectorResult(d, scoring) for d in dets}
     truth = truth or {d.name: ObjectState(replicates=0) for d in dets}
     ds = SimDataset(args.kind, total, args.seed)
     open_states: dict[tuple[str, int], ObjectState] = {}
-    planes: list[dict] = []  # per-plane records, written with the progress
     t0 = time.perf_counter()
     for i in range(start, total, step):
         sub = Indexed(ds, range(i, i + step))
@@ -149,11 +132,11 @@ def score(args) -> None:
         for d in dets:
             obj = shells[d.name].objects_of(d(batch["image"], batch["meta"]), batch)
             m = match_batch(obj, gt, scoring.matching)
-            truth[d.name].update(m, obj, gt, info)
-            planes.extend({"detector": d.name, **r} for r in _per_image(m, obj, gt, info, i))
+            types = false_alarm_types(m, obj, gt, scoring.matching)
+            truth[d.name].update(m, obj, gt, info, fa_types=types)
             for n in sizes:
                 st = open_states.setdefault((d.name, n), ObjectState(args.replicates, args.seed))
-                st.update(m, obj, gt, info)
+                st.update(m, obj, gt, info, fa_types=types)
         end = i + step
         lines = []
         for (name, n), st in list(open_states.items()):
@@ -164,9 +147,6 @@ def score(args) -> None:
             with rec_path.open("a") as f:
                 f.writelines(json.dumps(r) + "\n" for r in lines)
         if end % big == 0:
-            with (out / "planes.jsonl").open("a") as f:
-                f.writelines(json.dumps(r) + "\n" for r in planes)
-            planes.clear()
             truth_path.write_bytes(statefile.dumps(truth))
             done_path.write_text(json.dumps({"settings": settings, "images": end}))
             rate = (end - start) / (time.perf_counter() - t0)
@@ -174,56 +154,36 @@ def score(args) -> None:
     print(json.dumps({k: _truth(v) for k, v in truth.items()}))
 
 
-def _pool(folder: Path) -> dict[str, dict]:
-    """The per-plane records of a run as dense arrays, per detector: resampling ``keys``,
-    targets ``n_gt`` ``(P,)`` and the histograms ``tp``, ``fp``, ``tp50``, ``fp50``
-    ``(P, bins)``."""
-    raw: dict[str, list[dict]] = {}
-    with (folder / "planes.jsonl").open() as f:
-        for line in f:
-            r = json.loads(line)
-            raw.setdefault(r["detector"], []).append(r)
-    out = {}
-    for det, rs in raw.items():
-        rs.sort(key=lambda r: r["index"])
-        pool = {"keys": [r["key"] for r in rs],
-                "n_gt": np.array([r["n_gt"] for r in rs], np.int64)}  # fmt: skip
-        for name in ("tp", "fp", "tp50", "fp50"):
-            h = np.zeros((len(rs), N_BINS), np.int64)
-            for j, r in enumerate(rs):
-                for b, c in r[name].items():
-                    h[j, int(b)] = c
-            pool[name] = h
-        out[det] = pool
-    return out
+def _subset(pool: ObjectState, idx: np.ndarray, replicates: int, seed: int) -> ObjectState:
+    """The state of the dataset formed by images ``idx`` (positions in order) of a pool:
+    the subset of its records."""
+    rec = pool.records
+    keep = np.zeros(rec.images.size, bool)
+    keep[idx] = True
+    new = np.cumsum(keep) - 1
+    d = rec.detections[keep[rec.detections["image"]]].copy()
+    g = rec.targets[keep[rec.targets["image"]]].copy()
+    d["image"], g["image"] = new[d["image"]], new[g["image"]]
+    part = Records(rec.images[keep].copy(), d, g, list(rec.names))
+    return ObjectState(replicates=replicates, seed=seed, thresholded=pool.thresholded,
+                       threshold=pool.threshold, ap_kind=pool.ap_kind, parts=[part],
+                       scr_sources=pool.scr_sources)  # fmt: skip
 
 
-def _formed(pool: dict, idx: np.ndarray, replicates: int, seed: int, op_bin: int) -> dict:
-    """The record (as :func:`_record`) of the dataset formed by planes ``idx`` of a pool,
+def _formed(pool: ObjectState, idx: np.ndarray, replicates: int, seed: int) -> dict:
+    """The record (as :func:`_record`) of the dataset formed by images ``idx`` of a pool,
     plus each unit's TP, FP and targets at the operating point (``unit_tp``, ``unit_fp``,
-    ``unit_gt``) for rules that need them. AP50 is the histogram's (ties within a score bin
-    ranked together), the same for the truth."""
-    st = ObjectState(replicates=0, thresholded=op_bin > 0, ap_kind="iou")
-    st.images, st.n_gt = len(idx), int(pool["n_gt"][idx].sum())
-    st.tp, st.fp = pool["tp"][idx].sum(axis=0), pool["fp"][idx].sum(axis=0)
-    if replicates:
-        w = poisson_weights([pool["keys"][i] for i in idx], replicates, seed).astype(np.float64)
-        st.replicates = replicates
-
-        def weighted(h: np.ndarray) -> np.ndarray:  # float BLAS product, exact below 2**53
-            return np.rint(w @ h[idx].astype(np.float64)).astype(np.int64)
-
-        st.boot = {k: weighted(pool[k]) for k in ("tp", "fp", "tp50", "fp50")}
-        st.boot.update(n_gt=weighted(pool["n_gt"]), images=w.sum(axis=1).astype(np.int64))
-    m = st.metrics()
-    m["ap50"] = float(coco_ap_rows(pool["tp50"][idx].sum(0), pool["fp50"][idx].sum(0),
-                                   np.array([st.n_gt]))[0])  # fmt: skip
+    ``unit_gt``) for rules that need them."""
+    st = _subset(pool, idx, replicates, seed)
     if not replicates:
-        return m
-    out = _record(st, m)
-    out["unit_tp"] = pool["tp"][idx, op_bin:].sum(axis=1).tolist()
-    out["unit_fp"] = pool["fp"][idx, op_bin:].sum(axis=1).tolist()
-    out["unit_gt"] = pool["n_gt"][idx].tolist()
+        return st.metrics()
+    out = _record(st)
+    rec = st.records
+    d, n = rec.detections, rec.images.size
+    on = above(d["score"], st.design_threshold)
+    out["unit_tp"] = np.bincount(d["image"][on & (d["op"] == 1)], minlength=n).tolist()
+    out["unit_fp"] = np.bincount(d["image"][on & (d["op"] == 0)], minlength=n).tolist()
+    out["unit_gt"] = rec.images["n_gt"].tolist()
     return out
 
 
@@ -234,16 +194,14 @@ def formed(folder: str, draws: int) -> tuple[dict, list[dict]]:
     ``FOLDER/formed-DRAWS.jsonl``."""
     out = Path(folder)
     settings = json.loads((out / "progress.json").read_text())["settings"]
-    states = statefile.loads((out / "truth.state").read_bytes())
-    pools = _pool(out)
+    pools = statefile.loads((out / "truth.state").read_bytes())
     truth = {}
     cache = out / f"formed-{draws}.jsonl"
     recs = [json.loads(x) for x in cache.read_text().splitlines()] if cache.exists() else []
     rng = np.random.default_rng([settings["seed"], draws])
     for det, pool in pools.items():
-        op_bin = states[det].op_bin
-        size = len(pool["keys"])
-        truth[det] = _formed(pool, np.arange(size), 0, 0, op_bin)
+        size = pool.images
+        truth[det] = _formed(pool, np.arange(size), 0, 0)
         if cache.exists():
             continue
         for n in settings["sizes"]:
@@ -251,7 +209,7 @@ def formed(folder: str, draws: int) -> tuple[dict, list[dict]]:
             extra = max(draws - len(blocks), 0)
             drawn = [np.sort(rng.choice(size, n, replace=False)) for _ in range(extra)]
             for j, idx in enumerate(blocks + drawn):
-                r = _formed(pool, idx, settings["replicates"], settings["seed"], op_bin)
+                r = _formed(pool, idx, settings["replicates"], settings["seed"])
                 recs.append({"detector": det, "size": n, "dataset": j,
                              "drawn": j >= len(blocks), **r})  # fmt: skip
     if not cache.exists():
@@ -292,11 +250,10 @@ def _interval(metric: str, r: dict, rule: str) -> tuple[float, float]:
 
 def _cells(folder: str, draws: int) -> tuple[str, dict, dict]:
     """``(kind, truth, {(size, detector): records})`` of a run: the scored blocks'
-    records, or (``draws > 0`` and per-plane records present) the datasets :func:`formed`
-    from its planes."""
+    records, or (``draws > 0``) the datasets :func:`formed` from its pool's records."""
     out = Path(folder)
     kind = json.loads((out / "progress.json").read_text())["settings"]["kind"]
-    if draws and (out / "planes.jsonl").exists():
+    if draws:
         truth, recs = formed(folder, draws)
     else:
         states = statefile.loads((out / "truth.state").read_bytes())  # up to the last block
@@ -385,7 +342,7 @@ def main() -> None:
     p.add_argument("--rules", nargs="+", default=["pct", "default"])
     p.add_argument("--compact", action="store_true", help="with --report: one row per cell")
     p.add_argument("--draws", type=int, default=0,
-                   help="with --report: form datasets from the per-plane records, at least "
+                   help="with --report: form datasets from the pool's records, at least "
                    "this many per size (blocks, then draws from the pool)")  # fmt: skip
     args = p.parse_args()
     if args.report and args.compact:

@@ -59,7 +59,7 @@ def test_objects_detectors_dicts_and_datasets_as_objects(tmp_path):
     assert s.loc["peaks", "tp"] > 0 and pd.isna(s.loc["peaks", "pd_pixel"])
     # no threshold declared: every object of the box detector counts at the operating point
     assert s.loc["peaks", "score_threshold"] == -np.inf
-    assert res.states["chips"][0].objects.op_bin == 0
+    assert res.states["chips"][0].objects.design_threshold is None
 
 
 def test_declared_threshold_sets_the_operating_point():
@@ -165,7 +165,7 @@ def test_region_cfar_is_scored_by_its_regions_unless_discrimination_is_asked():
     x = torch.stack([chips[i]["image"] for i in range(4)])
     d = ts.region.region_cfar(x)
     regions = sum(int(np.unique(d.labels[i].numpy()).size) - 1 for i in range(4))
-    assert len(own.objects.ranked) == regions  # every region, as it is
+    assert own.objects.detections == regions  # every region, as it is
     rules = te.Scoring().rules
     objs = ts.objects.discriminate(d.statistic, d.threshold, rules=rules)
-    assert len(forced.states["c"][0].objects.ranked) == len(objs)
+    assert forced.states["c"][0].objects.detections == len(objs)

@@ -9,8 +9,11 @@ import pandas as pd
 import pytest
 
 from torchsar.metrics import ObjectState
-from torchsar.metrics.curves import OP_BIN, SCORE_GRID
-from torchsar_eval.calibrate import Target, choose_bin, parse_target, split_indices, threshold_of
+from torchsar.metrics.assign import BatchMatch
+from torchsar.metrics.matching import ground_truth
+from torchsar.metrics.object_state import ImageInfo
+from torchsar.objects import Objects
+from torchsar_eval.calibrate import Target, choose_threshold, parse_target, split_indices
 from torchsar_eval.cli import main
 from torchsar_eval.errors import EvalError
 
@@ -25,17 +28,24 @@ def test_split_is_disjoint_deterministic_and_near_the_fraction():
         split_indices(10, "x", 1.5)
 
 
-def test_choose_bin_by_hand():
+def test_choose_threshold_by_hand():
+    """Two images, two targets; ranked TP 0.9, FP 0.7, FP 0.6, TP 0.2: the threshold is a
+    detection score (the highest one left out), never a grid level."""
+    score = np.array([0.9, 0.7, 0.6, 0.2])
+    obj = Objects.from_points(np.zeros((4, 2)), score, shape=(8, 8),
+                              plane=np.array([0, 0, 1, 1]), planes=2)  # fmt: skip
+    inst = np.zeros((2, 8, 8), int)
+    inst[0, 0, 0] = inst[1, 4, 4] = 1
+    op = np.array([0, -1, -1, 1])
+    m = BatchMatch(np.tile(op, (10, 1)), op, np.zeros(4), np.array([0.9, 0.2]),
+                   np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
     st = ObjectState(replicates=0)
-    st.images, st.n_gt = 2, 2
-    st.tp[300] = st.tp[100] = 1  # TP, FP, FP, TP from the top
-    st.fp[200] = st.fp[150] = 1
-    assert choose_bin(st, Target("fa", 0.0)) == 201  # only the top TP
-    assert choose_bin(st, Target("fa", 0.5)) == 151  # one false alarm in 2 images
-    assert choose_bin(st, Target("fa", 5.0)) == 0  # everything
-    # F1: top TP alone 2/3, everything 2*2/(4+2+0) = 2/3: ties go to the highest level
-    assert choose_bin(st, Target("f1")) == 300
-    assert threshold_of(OP_BIN) == 1.0 and threshold_of(201) == SCORE_GRID[200]
+    st.update(m, obj, ground_truth(inst), [ImageInfo("a", order=0), ImageInfo("b", order=1)])
+    assert choose_threshold(st, Target("fa", 0.0)) == 0.7  # only the top TP
+    assert choose_threshold(st, Target("fa", 0.5)) == 0.6  # one false alarm in 2 images
+    assert choose_threshold(st, Target("fa", 5.0)) is None  # everything
+    # F1: top TP alone 2/3, everything 2*2/(4+2+0) = 2/3: ties go to fewer detections
+    assert choose_threshold(st, Target("f1")) == 0.7
 
 
 def test_parse_target():

@@ -11,7 +11,7 @@ import torch
 
 import torchsar_eval as te
 from torchsar.detection import detection_from
-from torchsar.metrics.bootstrap import poisson_weights
+from torchsar.metrics.bootstrap import poisson_weights, unit_hash
 from torchsar.metrics.paired import PAIRED_METRICS, paired_differences
 from torchsar_eval.cli import build_parser
 from torchsar_eval.commands.run.options import scoring_from
@@ -77,7 +77,7 @@ def results():
 
 def test_a_detector_against_itself_is_exactly_zero(results):
     for r in results.states["sq"]:
-        for metric, (d, lo, hi) in paired_differences(r.objects, r.objects, r.at, r.at).items():
+        for metric, (d, lo, hi) in paired_differences(r.objects, r.objects, r.threshold, r.threshold).items():
             assert (d, lo, hi) == (0.0, 0.0, 0.0), metric
 
 
@@ -105,8 +105,9 @@ def test_the_paired_interval_recovers_the_two_intervals_and_their_correlation(re
     """Against a direct reading of the two states: each one's own interval and the
     correlation of their replicates, combined by square-and-add (Zou & Donner)."""
     ref, fa = results.states["sq"][0], results.states["sq"][2]
-    a, b = fa.objects.replicate_metrics(fa.at), ref.objects.replicate_metrics(ref.at)
-    ia, ib = fa.objects.intervals(fa.at)["f1"], ref.objects.intervals(ref.at)["f1"]
+    a = fa.objects.replicate_metrics(fa.threshold)
+    b = ref.objects.replicate_metrics(ref.threshold)
+    ia, ib = fa.objects.intervals(fa.threshold)["f1"], ref.objects.intervals(ref.threshold)["f1"]
     ok = np.isfinite(a["f1"]) & np.isfinite(b["f1"])
     r = np.corrcoef(a["f1"][ok], b["f1"][ok])[0, 1] if b["f1"][ok].std() > 0 else 0.0
     pa, pb = ia.centre, ib.centre
@@ -115,7 +116,8 @@ def test_the_paired_interval_recovers_the_two_intervals_and_their_correlation(re
     hi = (pa - pb) + np.sqrt((ia.hi - pa) ** 2 + (pb - ib.lo) ** 2
                              - 2 * r * (ia.hi - pa) * (pb - ib.lo))  # fmt: skip
     row = results.paired.set_index(["detector", "metric"]).loc[("fa", "f1")]
-    assert (row.lo, row.hi) == pytest.approx((lo, hi))
+    d = row.difference  # the interval is widened to its point when the centres moved past it
+    assert (row.lo, row.hi) == pytest.approx((min(lo, d), max(hi, d)))
 
 
 @pytest.mark.parametrize("unit", ["image", "group"])
@@ -129,12 +131,19 @@ def test_group_unit_resamples_whole_scenes():
     """With ``bootstrap_unit="group"`` every image of a scene gets its scene's weights: the
     replicate target counts are the scenes' counts weighted by the scenes' Poisson weights."""
     res = _run(12, 256, "group", 50)
-    boot = res.states["sq"][0].objects.boot
-    w = poisson_weights([f"group:scene{k}" for k in range(3)], 50, seed=0)
-    np.testing.assert_array_equal(boot["n_gt"], w @ np.full(3, 8))  # 4 images x 2 targets
-    np.testing.assert_array_equal(boot["images"], w @ np.full(3, 4))
-    image_unit = _run(12, 256, "image", 50).states["sq"][0].objects.boot
-    assert not np.array_equal(image_unit["n_gt"], boot["n_gt"])
+    state = res.states["sq"][0].objects
+    assert state.units == 3
+    units = np.array([unit_hash(f"group:scene{k}") for k in range(3)], np.uint64)
+    res_ = state.resampled()
+    np.testing.assert_array_equal(np.sort(units), res_.units)
+    np.testing.assert_array_equal(res_.unit_gt, np.full(3, 8))  # 4 images x 2 targets
+    np.testing.assert_array_equal(res_.unit_images, np.full(3, 4))
+    # the replicates count each scene's 4 images as often as its group's weight draws
+    w = poisson_weights(units[np.argsort(units)], 50, seed=0).astype(float)
+    fa = state.replicate_metrics()["fa_per_image"]  # every_target: no false alarm
+    np.testing.assert_array_equal(fa, np.where(w.sum(axis=1) > 0, 0.0, np.nan))
+    image_unit = _run(12, 256, "image", 50).states["sq"][0].objects
+    assert image_unit.units == 12
 
 
 def test_bootstrap_unit_option_and_flag():

@@ -10,8 +10,8 @@ import torch
 
 import torchsar as ts
 import torchsar_eval as te
-from torchsar.metrics import Matching, ground_truth, match_batch
-from torchsar.metrics.error_types import FA_TYPES, ErrorCounts, false_alarm_types
+from torchsar.metrics import ImageInfo, Matching, ObjectState, ground_truth, match_batch
+from torchsar.metrics.error_types import FA_TYPES, false_alarm_types
 from torchsar.objects import Objects
 
 H = W = 64
@@ -80,11 +80,13 @@ def test_ranked_before_decides_not_the_operating_point():
     not matched before it), and stays one at any threshold: the counts are nested."""
     dets = [("part", (5, 8, 5, 8), 0.9, "localisation"), ("whole", (5, 15, 5, 15), 0.5, None)]
     gt, obj, rule = _truth(), _objects("mask", dets), Matching("mask")
-    types = false_alarm_types(match_batch(obj, gt, rule), obj, gt, rule)
+    m = match_batch(obj, gt, rule)
+    types = false_alarm_types(m, obj, gt, rule)
     assert types.tolist() == [FA_TYPES.index("localisation"), -1]
-    counts = ErrorCounts()
-    counts.update(types, np.array([10, 5]))
-    assert counts.counts(6)["localisation"] == 1 and counts.counts(11)["localisation"] == 0
+    state = ObjectState(replicates=0)
+    state.update(m, obj, gt, [ImageInfo("a")], fa_types=types)
+    loc = FA_TYPES.index("localisation")
+    assert state.fa_types(0.6)[loc] == 1 and state.fa_types(0.95)[loc] == 0
 
 
 def test_priority_merge_before_fragment():

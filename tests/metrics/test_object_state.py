@@ -1,7 +1,13 @@
+"""ObjectState: exact ranked metrics from per-detection records. AP equals pycocotools, the
+metrics and every bootstrap replicate equal slow references written out, states merge in any
+split and order, a strictly increasing map of the scores changes no number, and every
+interval contains its point."""
+
 from __future__ import annotations
 
 import contextlib
 import io
+import math
 
 import numpy as np
 import pytest
@@ -9,28 +15,36 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.reference import ranked as ref
 from torchsar.metrics import Matching, ObjectState, ground_truth, match_batch
+from torchsar.metrics.bootstrap import poisson_weights, unit_hash
 from torchsar.metrics.curves import (
-    OP_BIN,
-    SCORE_GRID,
     coco_ap,
     coco_ap_rows,
-    froc,
+    levels,
     partial_auc,
     pd_at_fa,
 )
 from torchsar.metrics.object_state import ImageInfo
-from torchsar.objects import ObjectRules, discriminate
+from torchsar.objects import ObjectRules, Objects, discriminate
 from torchsar_eval.coco import CocoExport
 
+MAPS = {
+    "sharpen": lambda s: 1.0 - 1e-12 * (2.0 - s),  # scores within 1e-12 of 1
+    "stretch": lambda s: 10.0 ** (8.0 * s),  # past 1e6 and below 1e-6
+    "affine": lambda s: 3.0 * s - 10.0,  # onto negative numbers
+    "logit": lambda s: np.log(s / (2.0 - s)),
+}
+"""Strictly increasing maps of scores in (0, 2) that keep 1/64 steps distinct in float64."""
 
-def _scene(rng, n_img=3, size=48):
+
+def _scene(rng, n_img=3, size=48, ties=False):
     """Random instances, an ignore patch, and non-touching detection rectangles whose peak
-    scores are distinct grid points (so pycocotools' ranking has no ties)."""
+    scores are distinct (or, with ``ties``, drawn from four levels)."""
     inst = np.zeros((n_img, size, size), int)
     ignore = np.zeros((n_img, size, size), bool)
     stat = np.zeros((n_img, size, size))
-    levels = rng.permutation(np.arange(OP_BIN - 40, OP_BIN + 240))
+    levels_ = rng.permutation(np.arange(33, 120)) / 64.0  # in (0.5, 2), 1/64 apart
     k = 0
     for p in range(n_img):
         for i in range(1, rng.integers(0, 5) + 1):
@@ -43,15 +57,19 @@ def _scene(rng, n_img=3, size=48):
             if rng.random() < 0.25:
                 r0, c0 = 8 * (cell // 6), 8 * (cell % 6)
                 h, w = rng.integers(1, 7, 2)
-                stat[p, r0 + 1 : r0 + 1 + h, c0 + 1 : c0 + 1 + w] = SCORE_GRID[levels[k]]
+                level = 0.5 + rng.integers(1, 5) / 4 if ties else levels_[k]
+                stat[p, r0 + 1 : r0 + 1 + h, c0 + 1 : c0 + 1 + w] = level
                 k += 1
     return inst, ignore, stat
 
 
-def _state(inst, ignore, stat, rule, planes=None, replicates=0):
+def _objects(stat):
+    return discriminate(torch.as_tensor(stat)[:, None], 1.0, rules=ObjectRules(floor=0.5))
+
+
+def _state(inst, ignore, stat, rule, planes=None, replicates=0, obj=None):
     sel = slice(None) if planes is None else planes
-    s = torch.as_tensor(stat[sel])[:, None]
-    obj = discriminate(s, 1.0, rules=ObjectRules(floor=0.5))
+    obj = _objects(stat[sel]) if obj is None else obj
     gt = ground_truth(inst[sel], ignore[sel])
     idx = np.arange(len(inst))[sel]
     st_ = ObjectState(replicates=replicates)
@@ -91,32 +109,42 @@ def _pycocotools(inst, ignore, obj, iou_type):
 
 
 @settings(max_examples=12, deadline=None)
-@given(seed=st.integers(0, 100_000), iou_type=st.sampled_from(["segm", "bbox"]))
-def test_ap_equals_pycocotools(seed, iou_type):
-    inst, ignore, stat = _scene(np.random.default_rng(seed))
+@given(seed=st.integers(0, 100_000), iou_type=st.sampled_from(["segm", "bbox"]),
+       ties=st.booleans())  # fmt: skip
+def test_ap_equals_pycocotools(seed, iou_type, ties):
+    inst, ignore, stat = _scene(np.random.default_rng(seed), ties=ties)
     rule = Matching(kind="mask" if iou_type == "segm" else "box")
     state, obj = _state(inst, ignore, stat, rule)
     if state.n_gt == 0 or len(obj) == 0:
         return  # pycocotools has nothing to score
     ap50, ap = _pycocotools(inst, ignore, obj, iou_type)
     m = state.metrics()
-    assert m["ap50"] == pytest.approx(ap50, abs=1e-6)
-    assert m["ap50_95"] == pytest.approx(ap, abs=1e-6)
+    assert m["ap50"] == pytest.approx(ap50, abs=1e-12)
+    assert m["ap50_95"] == pytest.approx(ap, abs=1e-12)
 
 
 @settings(max_examples=15, deadline=None)
 @given(
     seed=st.integers(0, 100_000), cut=st.integers(0, 4), kind=st.sampled_from(["mask", "centroid"])
 )
-def test_merged_shards_equal_one_pass(seed, cut, kind):
-    inst, ignore, stat = _scene(np.random.default_rng(seed), n_img=4)
+def test_merged_shards_equal_one_pass_in_any_order(seed, cut, kind):
+    inst, ignore, stat = _scene(np.random.default_rng(seed), n_img=4, ties=seed % 2 == 0)
     rule = Matching(kind=kind)
     whole, _ = _state(inst, ignore, stat, rule, replicates=20)
     a, _ = _state(inst, ignore, stat, rule, slice(0, cut), replicates=20)
     b, _ = _state(inst, ignore, stat, rule, slice(cut, 4), replicates=20)
-    merged = a + b
-    assert merged == whole
-    assert merged.metrics() == pytest.approx(whole.metrics(), nan_ok=True)
+    for merged in (a + b, b + a):
+        assert merged == whole
+        assert merged.metrics() == pytest.approx(whole.metrics(), nan_ok=True, abs=0)
+        for k, v in whole.replicate_metrics().items():
+            np.testing.assert_array_equal(merged.replicate_metrics()[k], v)
+
+
+def test_adding_an_image_twice_is_refused():
+    inst, ignore, stat = _scene(np.random.default_rng(0), n_img=2)
+    a, _ = _state(inst, ignore, stat, Matching("mask"))
+    with pytest.raises(ValueError, match="added twice"):
+        _ = (a + a).metrics()
 
 
 @settings(max_examples=10, deadline=None)
@@ -124,34 +152,156 @@ def test_merged_shards_equal_one_pass(seed, cut, kind):
 def test_breakdowns_sum_to_totals_and_froc_is_monotone(seed):
     inst, ignore, stat = _scene(np.random.default_rng(seed), n_img=4)
     state, _ = _state(inst, ignore, stat, Matching(kind="centroid"))
-    m = state.metrics(OP_BIN)
+    m = state.metrics()
+    keys = state.breakdown()
     for by in ("class", "size"):
-        keys = [v for k, v in state.keys.items() if k.startswith(by + ":")]
-        assert sum(k.n_gt for k in keys) == state.n_gt
-        assert sum(int(k.tp[OP_BIN:].sum()) for k in keys) == m["tp"]
-        assert sum(int(k.fp[OP_BIN:].sum()) for k in keys) == m["fp"]
-    _, fa, pd = state.froc()
-    assert np.all(np.diff(fa) >= 0) and np.all(np.diff(pd[np.isfinite(pd)]) >= 0)
+        mine = [v for k, v in keys.items() if k.startswith(by + ":")]
+        assert sum(k["n_gt"] for k in mine) == state.n_gt
+        assert sum(k["tp"] for k in mine) == m["tp"]
+        assert sum(k["fp"] for k in mine) == m["fp"]
+    f = state.froc()
+    assert np.all(np.diff(f["fa_per_image"]) >= 0) and np.all(np.diff(f["pd"]) >= 0)
+    assert np.all(np.diff(f["threshold"]) < 0)  # one row per score level, highest first
 
 
-def test_bootstrap_intervals_bracket_the_estimate():
-    inst, ignore, stat = _scene(np.random.default_rng(3), n_img=6)
-    state, _ = _state(inst, ignore, stat, Matching(kind="centroid"), replicates=200)
-    m, ci = state.metrics(), state.intervals()
-    for k in ("precision", "recall", "f1"):
-        lo, hi = ci[k]
-        assert lo <= m[k] <= hi
+def _records(state: ObjectState, m, obj, info) -> list[dict]:
+    """The slow reference's view of a batch: one dict per detection."""
+    code = {0: "fp", 1: "tp", 2: "ig"}
+    op = np.where(m.op >= 0, 1, np.where(m.op == -2, 2, 0))
+    ap = np.where(m.ap[0] >= 0, 1, np.where(m.ap[0] == -2, 2, 0))
+    rank = {}
+    out = []
+    for k in range(len(obj)):
+        p = int(obj.plane[k])
+        rank[p] = rank.get(p, -1) + 1
+        out.append({"score": float(obj.score[k]), "order": info[p].order, "rank": rank[p],
+                    "op": code[int(op[k])], "ap50": code[int(ap[k])]})  # fmt: skip
+    return out
+
+
+def _data(seed, ties, n_img=5):
+    inst, ignore, stat = _scene(np.random.default_rng(seed), n_img=n_img, ties=ties)
+    obj = _objects(stat)
+    obj = obj.with_threshold(1.3)
+    gt = ground_truth(inst, ignore)
+    rule = Matching("centroid")
+    m = match_batch(obj, gt, rule)
+    info = [ImageInfo(f"i{p}", order=10 * p + 3) for p in range(n_img)]
+    return m, obj, gt, info
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 100_000), ties=st.booleans(),
+       threshold=st.sampled_from(["design", None, 1.0, 1.6, 5.0]))  # fmt: skip
+def test_metrics_equal_the_slow_reference(seed, ties, threshold):
+    m, obj, gt, info = _data(seed, ties)
+    state = ObjectState(replicates=0)
+    state.update(m, obj, gt, info)
+    got = state.metrics(threshold)
+    thr = 1.3 if threshold == "design" else threshold
+    want = ref.metrics(_records(state, m, obj, info), len(gt), len(info), thr)
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, abs=1e-12, nan_ok=True), k
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 100_000), ties=st.booleans())
+def test_every_replicate_equals_the_slow_reference_on_the_resampled_images(seed, ties):
+    """Replicate r is the dataset with image i drawn w_r(i) times: each of its detections
+    repeated w_r(i) times in a row, its targets and the image counted w_r(i) times."""
+    m, obj, gt, info = _data(seed, ties)
+    state = ObjectState(replicates=12, seed=seed)
+    state.update(m, obj, gt, info)
+    got = state.replicate_metrics()
+    w = poisson_weights([i.key for i in info], 12, seed)
+    dets = _records(state, m, obj, info)
+    n_gt = np.bincount(gt.plane, minlength=len(info))
+    for r in range(12):
+        weight = {i.order: int(w[r, p]) for p, i in enumerate(info)}
+        want = ref.metrics(ref.expand(dets, weight.__getitem__), float(w[r] @ n_gt),
+                           float(w[r].sum()), 1.3, expanded=True)  # fmt: skip
+        for k, v in want.items():
+            assert got[k][r] == pytest.approx(v, abs=1e-12, nan_ok=True), (k, r)
+
+
+def _mapped(obj: Objects, f) -> Objects:
+    from dataclasses import replace
+
+    return replace(obj, score=f(obj.score), threshold=float(f(np.float64(obj.threshold))))
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 100_000), ties=st.booleans(), name=st.sampled_from(sorted(MAPS)))
+def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, name):
+    f = MAPS[name]
+    m, obj, gt, info = _data(seed, ties)
+    mapped = _mapped(obj, f)
+    assert np.array_equal(np.argsort(-obj.score, kind="stable"),
+                          np.argsort(-mapped.score, kind="stable"))  # fmt: skip
+    a, b = ObjectState(replicates=30), ObjectState(replicates=30)
+    a.update(m, obj, gt, info)
+    b.update(match_batch(mapped, gt, Matching("centroid")), mapped, gt, info)
+    assert a.metrics() == pytest.approx(b.metrics(), nan_ok=True, abs=1e-12)
+    for k, v in a.replicate_metrics().items():
+        np.testing.assert_allclose(b.replicate_metrics()[k], v, rtol=0, atol=1e-12)
+    ia, ib = a.intervals(), b.intervals()
+    for k, v in ia.items():
+        assert (v.lo, v.hi) == pytest.approx((ib[k].lo, ib[k].hi), nan_ok=True, abs=1e-12), k
+    fa, fb = a.froc(), b.froc()
+    np.testing.assert_array_equal(f(fa["threshold"]), fb["threshold"])
+    for k in ("tp", "fp", "fa_per_image", "pd"):
+        np.testing.assert_array_equal(fa[k], fb[k])
+    for kind, level in (("f1", None), ("fa", 0.5), ("fa", 2.0)):
+        ta, tb = a.choose_threshold(kind, level), b.choose_threshold(kind, level)
+        assert (ta is None and tb is None) or f(np.float64(ta)) == tb
+        assert a.metrics(ta) == pytest.approx(b.metrics(tb), nan_ok=True, abs=1e-12)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 100_000), ties=st.booleans(), n_img=st.integers(1, 8),
+       threshold=st.sampled_from(["design", None, 1.0, 1.6]))  # fmt: skip
+def test_every_interval_contains_its_point(seed, ties, n_img, threshold):
+    m, obj, gt, info = _data(seed, ties, n_img)
+    state = ObjectState(replicates=50, seed=seed)
+    state.update(m, obj, gt, info)
+    point = state.metrics(threshold)
+    for k, iv in state.intervals(threshold).items():
+        name = {"fa_per_image": "fa_per_image"}.get(k, k)
+        if math.isfinite(iv.lo) and math.isfinite(iv.hi):
+            assert iv.lo <= point[name] <= iv.hi, (k, iv, point[name])
 
 
 def test_curve_helpers_by_hand():
-    tp = np.zeros(SCORE_GRID.size + 1, int)
-    fp = np.zeros_like(tp)
-    tp[300], fp[200], tp[100] = 1, 1, 1  # ranked TP, FP, TP; 2 images, 2 targets
-    fa, pd = froc(tp, fp, 2, 2)
+    # ranked TP, FP, TP on 2 images with 2 targets: FROC (0, 0), (0, .5), (.5, .5), (.5, 1)
+    fa, pd = np.array([0.0, 0.0, 0.5, 0.5]), np.array([0.0, 0.5, 0.5, 1.0])
     assert pd_at_fa(fa, pd, 0.1) == 0.5 and pd_at_fa(fa, pd, 0.5) == 1.0
     assert partial_auc(fa, pd, 1.0) == pytest.approx(0.5 * 0.5 + 1.0 * 0.5)
-    assert coco_ap(tp, fp, 2) == pytest.approx((51 + 50 * 2 / 3) / 101)
-    assert np.isnan(coco_ap(tp, fp, 0))
+    assert coco_ap(np.array([1, 0, 1]), np.array([0, 1, 0]), 2) == pytest.approx(
+        (51 + 50 * 2 / 3) / 101)  # fmt: skip
+    assert np.isnan(coco_ap(np.array([1]), np.array([0]), 0))
+    assert levels(np.array([3.0, 3.0, 2.0, 1.0, 1.0])).tolist() == [1, 2, 4]
+
+
+def test_choose_threshold_by_hand():
+    """Two images, two targets; ranked TP 0.9, FP 0.8, FP 0.8, TP 0.5."""
+    from torchsar.metrics.assign import BatchMatch
+
+    score = np.array([0.9, 0.8, 0.8, 0.5])
+    obj = Objects.from_points(np.zeros((4, 2)), score, shape=(8, 8),
+                              plane=np.array([0, 0, 1, 1]), planes=2)  # fmt: skip
+    inst = np.zeros((2, 8, 8), int)
+    inst[0, 0, 0] = inst[1, 4, 4] = 1
+    gt = ground_truth(inst)
+    op = np.array([0, -1, -1, 1])
+    m = BatchMatch(np.tile(op, (10, 1)), op, np.zeros(4), np.array([0.9, 0.5]),
+                   np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
+    state = ObjectState(replicates=0)
+    state.update(m, obj, gt, [ImageInfo("a", order=0), ImageInfo("b", order=1)])
+    assert state.choose_threshold("fa", 0.0) == 0.8  # only the top TP
+    assert state.choose_threshold("fa", 0.99) == 0.8  # the tied false alarms come together
+    assert state.choose_threshold("fa", 1.0) is None  # everything
+    assert state.choose_threshold("f1") == 0.8  # F1 2/3 at the top TP, tie with all: fewer
+    assert state.metrics(0.8)["tp"] == 1 and state.metrics(None)["tp"] == 2
 
 
 @pytest.mark.parametrize("kind", ["centroid", "mask"])
@@ -180,37 +330,21 @@ def test_all_true_and_all_false_masks_on_simulated_data(kind):
 @given(seed=st.integers(0, 100_000), rows=st.integers(1, 6), n_gt=st.integers(0, 9))
 def test_ap_of_many_rows_equals_ap_row_by_row(seed, rows, n_gt):
     rng = np.random.default_rng(seed)
-    tp = rng.poisson(0.05, (rows, SCORE_GRID.size + 1)) * (rng.random((rows, 1)) < 0.8)
-    fp = rng.poisson(0.05, tp.shape)
+    status = rng.integers(0, 3, 40)  # 0 fp, 1 tp, 2 ignored
+    w = rng.poisson(1.0, (rows, 40))
+    tp, fp = w * (status == 1), w * (status == 0)
     gts = rng.integers(0, n_gt + 1, rows)
     got = coco_ap_rows(tp, fp, gts)
-    ref = [coco_ap(t, f, g) for t, f, g in zip(tp, fp, gts, strict=True)]
-    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    for r in range(rows):
+        statuses = [s for k in range(40) for s in [("fp", "tp", "ig")[status[k]]] * int(w[r, k])]
+        want = ref.coco_ap(statuses, gts[r])
+        assert got[r] == pytest.approx(want, abs=1e-12, nan_ok=True)
 
 
-def test_replicate_metrics_equal_the_scalar_helpers_replicate_by_replicate():
-    """The vectorised replicate metrics behind the intervals equal each replicate's metrics
-    computed one by one with the scalar helpers."""
-    from torchsar.metrics.object_state import operating_point
-
-    inst, ignore, stat = _scene(np.random.default_rng(11), n_img=6)
-    state, _ = _state(inst, ignore, stat, Matching(kind="centroid"), replicates=50)
-    b, at = state.boot, OP_BIN
-    got = state.replicate_metrics()
-    assert set(got) == {"precision", "recall", "f1", "fom", "fa_per_image", "ap50",
-                        "pd_at_0.1_fa_per_image", "pd_at_1_fa_per_image",
-                        "pd_at_10_fa_per_image", "pauc"}  # fmt: skip
-    for r in range(50):
-        n_gt, images = int(b["n_gt"][r]), int(b["images"][r])
-        op = operating_point(b["tp"][r], b["fp"][r], n_gt, images, at)
-        fa, pd = froc(b["tp"][r], b["fp"][r], n_gt, images)
-        nan = float("nan")
-        ref = {k: op[k] for k in ("precision", "recall", "f1")}
-        ref["fom"] = op["tp"] / (op["fp"] + n_gt) if op["fp"] + n_gt else nan
-        ref["fa_per_image"] = op["fa_per_image"]
-        ref["ap50"] = coco_ap(b["tp50"][r], b["fp50"][r], n_gt)
-        for level in (0.1, 1.0, 10.0):
-            ref[f"pd_at_{level:g}_fa_per_image"] = pd_at_fa(fa, pd, level) if n_gt else nan
-        ref["pauc"] = partial_auc(fa, pd, 1.0) if n_gt else nan
-        for k, v in ref.items():
-            assert got[k][r] == pytest.approx(v, abs=1e-12, nan_ok=True), (k, r)
+def test_weights_depend_on_the_unit_and_seed_only():
+    w = poisson_weights(["a", "b", "c"], 200, seed=4)
+    again = poisson_weights(np.array([unit_hash(k) for k in ("c", "a")], np.uint64), 200, seed=4)
+    np.testing.assert_array_equal(w[:, [2, 0]], again)
+    assert not np.array_equal(w, poisson_weights(["a", "b", "c"], 200, seed=5))
+    big = poisson_weights([str(i) for i in range(5000)], 40, seed=0).astype(float)
+    assert abs(big.mean() - 1) < 0.01 and abs(big.var() - 1) < 0.02  # Poisson(1)

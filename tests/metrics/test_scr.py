@@ -14,7 +14,7 @@ import torch
 import torchsar as ts
 import torchsar_eval as te
 from torchsar.metrics import Matching
-from torchsar.metrics.scr import SCR_NAMES, ScrCounts, scr_bins, target_scr_db, wilson
+from torchsar.metrics.scr import SCR_NAMES, scr_bins, scr_rows, target_scr_db, wilson
 from torchsar.objects import ObjectRules
 
 
@@ -90,24 +90,17 @@ def test_wilson_is_the_set_of_proportions_its_score_test_accepts(k, n):
     assert abs(lo[0] - p[ok].min()) < 1e-6 and abs(hi[0] - p[ok].max()) < 1e-6
 
 
-def test_counts_add_up_in_any_split():
+def test_rows_count_every_target_once():
     rng = np.random.default_rng(0)
     scr = np.concatenate([rng.normal(8, 9, 300), [np.nan, np.inf, -np.inf]])
-    found = np.where(rng.random(scr.size) < 0.6, rng.integers(0, 900, scr.size), -1)
-    whole = ScrCounts()
-    whole.update("measured", scr, found)
-    parts = ScrCounts()
-    for lo, hi in ((0, 7), (7, 150), (150, scr.size)):
-        part = ScrCounts()
-        part.update("measured", scr[lo:hi], found[lo:hi])
-        parts = parts + part
-    assert whole.rows(500) == parts.rows(500)
-    rows = {r["scr_bin"]: r for r in whole.rows(500)}
+    found = rng.random(scr.size) < 0.6
+    rows = {r["scr_bin"]: r for r in scr_rows({"measured": (scr, found)})}
     assert sum(r["targets"] for r in rows.values()) == scr.size
     sel = (scr >= 5) & (scr < 10)
     assert rows["5-10"]["targets"] == sel.sum()
-    assert rows["5-10"]["detected"] == (found[sel] >= 500).sum()
-    assert rows["5-10"]["scr_mean_db"] == pytest.approx(scr[sel].mean(), abs=1e-6)
+    assert rows["5-10"]["detected"] == found[sel].sum()
+    assert rows["5-10"]["scr_mean_db"] == pytest.approx(scr[sel].mean(), abs=1e-9)
+    assert rows["n/a"]["targets"] == 1 and np.isnan(rows["n/a"]["scr_mean_db"])
 
 
 def test_the_simulator_declares_each_targets_known_scr():
@@ -197,7 +190,7 @@ def test_ca_cfar_pd_versus_scr_follows_the_textbook_curve():
     res = te.evaluate({"points": PointTargets(24)}, ["ca"], scoring=scoring, progress=False)
     known = res.scr[res.scr.source == "known"].set_index("scr_bin")
     r = res.states["points"][0]
-    strict = pd.DataFrame(r.scr.rows(r.at, level=0.999))
+    strict = pd.DataFrame(r.objects.scr_rows(r.threshold, level=0.999))
     strict = strict[strict.source == "known"].set_index("scr_bin")
     assert list(known.index) == ["<0", "0-5", "5-10", "10-15", "15-20", ">=20"]
     assert (known.targets == 1024).all()

@@ -12,7 +12,7 @@ from torchsar.metrics.counts import (
     object_counts,
     pixel_counts,
 )
-from torchsar.metrics.curves import SCORE_GRID, coco_ap, froc, partial_auc, pd_at_fa
+from torchsar.metrics.curves import coco_ap, partial_auc, pd_at_fa
 from torchsar.metrics.despeckling import (
     edge_preservation,
     edge_ratio,
@@ -23,10 +23,9 @@ from torchsar.metrics.despeckling import (
 )
 from torchsar.metrics.matching import GroundTruth, Matching, box_iou, greedy_match, ground_truth
 from torchsar.metrics.object_state import ImageInfo, ObjectState
-from torchsar.metrics.roc import RocAccumulator, default_pixel_grid
+from torchsar.metrics.roc import RocAccumulator
 
 __all__ = [
-    "SCORE_GRID",
     "BatchMatch",
     "GroundTruth",
     "ImageInfo",
@@ -37,11 +36,9 @@ __all__ = [
     "RocAccumulator",
     "box_iou",
     "coco_ap",
-    "default_pixel_grid",
     "edge_preservation",
     "edge_ratio",
     "enl",
-    "froc",
     "greedy_match",
     "ground_truth",
     "label_components",

@@ -1,9 +1,25 @@
-"""Threshold-free object metrics from score histograms: COCO AP, FROC, Pd at fixed false
-alarms per image, partial AUC.
+"""Threshold-free object curves from detections in rank order: COCO AP, the FROC, Pd at a
+false-alarm rate and the partial AUC.
 
-Histograms count detections per score bin of a fixed grid (bin ``b`` holds scores in
-``(grid[b-1], grid[b]]``); the curves visit bins from the highest score down, so each point is
-"every detection scoring above this level", exactly what a global threshold on the score gives.
+Everything here takes detections already ranked (descending score, ties in a fixed order),
+as counts per detection, possibly weighted (a bootstrap replicate weights each detection by
+its image's weight). A global score threshold keeps a prefix of the ranking, so the curve
+points are prefixes; detections of equal score enter together (:func:`levels`). Scores
+themselves never enter the arithmetic, so a strictly increasing map of the scores changes no
+number.
+
+Reading rules (stated once, used everywhere):
+
+- FROC point of score level ``s``: the detections scoring ``>= s`` (so a threshold ``t``
+  between two levels keeps those scoring ``> t``); the first point is ``(0, 0)``: nothing
+  detected.
+- Pd at ``k`` false alarms per image (:func:`pd_at_fa`): the FROC read as a step function
+  without interpolation: the Pd of the lowest score level whose false alarms per image do not
+  exceed ``k`` (0 when even the highest level exceeds it).
+- Partial AUC (:func:`partial_auc`): the area under that step function over ``[0, limit]``
+  false alarms per image, divided by ``limit`` (1 for a perfect detector).
+- AP: COCO's 101-point interpolated precision (:func:`interpolated_precision`), one point per
+  detection in rank order, as ``pycocotools`` ranks them.
 """
 
 from __future__ import annotations
@@ -11,43 +27,32 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "OP_BIN",
-    "SCORE_GRID",
+    "RECALL_POINTS",
     "coco_ap",
     "coco_ap_rows",
-    "froc",
     "interpolated_precision",
+    "levels",
     "partial_auc",
     "partial_auc_rows",
     "pd_at_fa",
-    "score_bins",
-    "suffix",
+    "pd_at_fa_rows",
 ]
-
-SCORE_GRID = np.concatenate(
-    [-(10.0 ** (np.arange(150, -301, -1) / 50.0)), [0.0], 10.0 ** (np.arange(-300, 301) / 50.0)]
-)
-"""Score bin edges, 50 per decade on each side of 0: -1e3 .. -1e-6, 0, 1e-6 .. 1e6 (1.0 is
-an edge exactly). Scores normalised by the operating threshold (a CFAR's statistic over
-its design threshold, a probability over a declared threshold) put the operating point at
-1; raw scores of any range (probabilities, logits) still fall on the grid."""
-
-OP_BIN = int(np.searchsorted(SCORE_GRID, 1.0)) + 1
-"""First bin of scores > 1: the design operating point."""
 
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 """COCO's recall points (``pycocotools`` ``recThrs``)."""
 
 
-def score_bins(score: np.ndarray) -> np.ndarray:
-    """Bin index of each score: ``grid[b-1] < score <= grid[b]`` (0 below the grid,
-    ``len(grid)`` above it)."""
-    return np.searchsorted(SCORE_GRID, np.asarray(score, dtype=np.float64), side="left")
+def levels(score: np.ndarray) -> np.ndarray:
+    """Index of the last detection of each score level of ranked ``score`` (descending).
 
-
-def suffix(hist: np.ndarray) -> np.ndarray:
-    """``out[..., j] = hist[..., j:].sum()``: counts scoring above ``grid[j - 1]``."""
-    return np.flip(np.cumsum(np.flip(hist, -1), -1), -1)
+    Example:
+        >>> levels(np.array([0.9, 0.7, 0.7, 0.2])).tolist()
+        [0, 2, 3]
+    """
+    s = np.asarray(score)
+    if s.size == 0:
+        return np.zeros(0, np.int64)
+    return np.flatnonzero(np.append(s[1:] != s[:-1], True))
 
 
 def interpolated_precision(
@@ -81,33 +86,25 @@ def interpolated_precision(
 
 
 def coco_ap(tp: np.ndarray, fp: np.ndarray, n_gt: int) -> float:
-    """Average precision, COCO's 101-point interpolation, from TP / FP score histograms.
-
-    Equals ``pycocotools`` exactly when no score bin mixes true and false positives (e.g.
-    every score on a distinct grid point); within a mixed bin the detections count as tied.
-    NaN when there is no ground truth.
+    """Average precision, COCO's 101-point interpolation, of ranked detections flagged true
+    positive (``tp``) or false positive (``fp``; neither: ignored). NaN without ground truth.
 
     Example:
-        >>> tp = np.zeros(352, int); fp = np.zeros(352, int)
-        >>> tp[300] = 1; fp[200] = 1; tp[100] = 1  # ranked TP, FP, TP
-        >>> round(coco_ap(tp, fp, 2), 4)  # precision 1 up to recall 0.5, then 2/3
+        >>> round(coco_ap(np.array([1, 0, 1]), np.array([0, 1, 0]), 2), 4)  # TP, FP, TP
         0.835
     """
     if n_gt == 0:
         return float("nan")
-    rev = np.flatnonzero((np.asarray(tp) + np.asarray(fp))[::-1] > 0)
-    tps = np.cumsum(np.asarray(tp)[::-1], dtype=np.float64)[rev]
-    fps = np.cumsum(np.asarray(fp)[::-1], dtype=np.float64)[rev]
-    return float(interpolated_precision(tps, fps, n_gt)[0].mean())
+    return float(coco_ap_rows(np.asarray(tp)[None], np.asarray(fp)[None], np.array([n_gt]))[0])
 
 
 def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray:
-    """:func:`coco_ap` of every row of TP / FP histograms ``(R, N)`` at once (e.g. bootstrap
-    replicates, ``n_gt`` ``(R,)``); NaN where a row has no ground truth.
+    """COCO AP of every row of ranked, weighted detections ``(R, N)`` at once (e.g.
+    bootstrap replicates: ``tp[r, i]`` the weight of detection ``i`` in replicate ``r`` when it
+    is a true positive, else 0), ``n_gt`` ``(R,)``; NaN where a row has no ground truth.
 
     Example:
-        >>> tp = np.zeros((2, 352), int); fp = np.zeros_like(tp)
-        >>> tp[:, 300] = 1; fp[:, 200] = 1; tp[:, 100] = 1
+        >>> tp = np.array([[1, 0, 1], [2, 0, 0]]); fp = np.array([[0, 1, 0], [0, 1, 0]])
         >>> np.round(coco_ap_rows(tp, fp, np.array([2, 0])), 4).tolist()
         [0.835, nan]
     """
@@ -116,7 +113,7 @@ def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray
     rows = tp.shape[0]
     if rows == 0:
         return np.zeros(0)
-    cols = np.flatnonzero((tp + fp).any(axis=0))[::-1]  # bins holding detections, best first
+    cols = np.flatnonzero((tp + fp).any(axis=0))  # detections that count somewhere
     if cols.size == 0:
         return np.where(n_gt > 0, 0.0, np.nan)
     tps = np.cumsum(tp[:, cols], axis=1, dtype=np.float64)
@@ -133,28 +130,35 @@ def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray
     return np.where(n_gt > 0, q.mean(axis=1), np.nan)
 
 
-def froc(tp: np.ndarray, fp: np.ndarray, n_gt: int, images: int) -> tuple[np.ndarray, ...]:
-    """FROC points at every grid level, highest score first: false alarms per image and Pd
-    (both monotone non-decreasing), starting at ``(0, 0)`` (nothing detected)."""
-    ct, cf = suffix(np.asarray(tp))[::-1], suffix(np.asarray(fp))[::-1]
-    fa = np.concatenate([[0.0], cf / max(images, 1)])
-    pd = np.concatenate([[0.0], ct / n_gt if n_gt else np.full(ct.shape, np.nan)])
-    return fa, pd
-
-
 def pd_at_fa(fa: np.ndarray, pd: np.ndarray, level: float) -> float:
-    """Best Pd with at most ``level`` false alarms per image (the FROC read at ``level``;
-    beyond the curve's last point the detector's final Pd holds)."""
-    ok = fa <= level
-    return float(pd[ok].max()) if ok.any() else 0.0
+    """Pd at ``level`` false alarms per image from FROC points (``fa`` non-decreasing, the
+    first point ``(0, 0)``): the last point with ``fa <= level`` (see the module docstring).
+
+    Example:
+        >>> pd_at_fa(np.array([0.0, 0.5, 2.0]), np.array([0.0, 0.4, 0.8]), 1.0)
+        0.4
+    """
+    return float(pd_at_fa_rows(np.asarray(fa)[None], np.asarray(pd)[None], level)[0])
+
+
+def pd_at_fa_rows(fa: np.ndarray, pd: np.ndarray, level: float) -> np.ndarray:
+    """:func:`pd_at_fa` of every row of FROC points ``(R, K)`` (each row's ``fa``
+    non-decreasing; Pd non-decreasing too, so the last point within the level is the best)."""
+    fa, pd = np.atleast_2d(fa), np.atleast_2d(pd)
+    if fa.shape[1] == 0:
+        return np.zeros(fa.shape[0])
+    last = (fa <= level).sum(axis=1) - 1
+    return np.where(last >= 0, np.take_along_axis(pd, np.maximum(last, 0)[:, None], 1)[:, 0], 0.0)
 
 
 def partial_auc(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> float:
-    """Mean Pd over false alarms per image in ``[0, limit]`` (area under the step FROC,
-    normalised to 1 for a perfect detector)."""
-    xs = np.concatenate([fa[fa < limit], [limit]])
-    held = np.array([pd_at_fa(fa, pd, x) for x in xs[:-1]])
-    return float(np.sum(held * np.diff(xs)) / limit) if xs.size > 1 else 0.0
+    """Mean Pd over false alarms per image in ``[0, limit]`` (see the module docstring).
+
+    Example:
+        >>> partial_auc(np.array([0.0, 0.5, 2.0]), np.array([0.0, 0.4, 0.8]))
+        0.2
+    """
+    return float(partial_auc_rows(np.asarray(fa)[None], np.asarray(pd)[None], limit)[0])
 
 
 def partial_auc_rows(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> np.ndarray:

@@ -22,15 +22,13 @@ gets the first type that applies, in this order:
 
 "Matched before" only looks at detections ranked above the false alarm, which are present
 whenever it is (a global score threshold keeps a prefix of the ranking), so a type does not
-depend on the operating point: :class:`ErrorCounts` keeps one score histogram per type and
-is read at any operating point. Under the distance rule a point cannot cover or split a
+depend on the operating point: the object state keeps each detection's type and reads the
+counts at any operating point. Under the distance rule a point cannot cover or split a
 target: a false alarm within the tolerance of a target (which was then matched to another
 detection) is a ``duplicate``, the others are ``shadow`` or ``clutter``.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,11 +39,10 @@ from torchsar.metrics.assign import (
     _same_plane_pairs,
     by_plane,
 )
-from torchsar.metrics.curves import SCORE_GRID
 from torchsar.metrics.matching import GroundTruth, Matching, pair_box_iou
 from torchsar.objects import Objects
 
-__all__ = ["FA_TYPES", "WHOLE", "ErrorCounts", "false_alarm_types", "touching_pairs"]
+__all__ = ["FA_TYPES", "WHOLE", "false_alarm_types", "touching_pairs"]
 
 FA_TYPES = ("merge", "duplicate", "fragment", "localisation", "shadow", "clutter")
 """False-alarm types in priority order (see the module docstring)."""
@@ -53,7 +50,6 @@ MERGE, DUPLICATE, FRAGMENT, LOCALISATION, SHADOW, CLUTTER = range(len(FA_TYPES))
 WHOLE = 0.5
 """The share of a target a second detection covers to be a ``duplicate`` (else a
 ``fragment``)."""
-_N_SCORE_BINS = SCORE_GRID.size + 1
 
 
 def touching_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -160,25 +156,3 @@ def false_alarm_types(m: BatchMatch, obj: Objects, gt: GroundTruth, rule: Matchi
         rest = fa[touches[fa] == 0]
     out[rest] = np.where(_on_shadow(obj, gt, rest), SHADOW, CLUTTER)
     return out
-
-
-@dataclass(eq=False)
-class ErrorCounts:
-    """False alarms per type (rows, :data:`FA_TYPES`) and score bin (columns) of the
-    detection (additive; the count at operating point ``at`` is ``fa[:, at:].sum(1)``)."""
-
-    fa: np.ndarray = field(
-        default_factory=lambda: np.zeros((len(FA_TYPES), _N_SCORE_BINS), np.int64)
-    )
-
-    def update(self, types: np.ndarray, bins: np.ndarray) -> None:
-        """Add detections of types ``types`` (-1: not a false alarm) in score bins ``bins``."""
-        sel = types >= 0
-        np.add.at(self.fa, (types[sel], bins[sel]), 1)
-
-    def counts(self, at: int) -> dict[str, int]:
-        """False alarms per type at score bin ``at`` and above."""
-        return {t: int(v) for t, v in zip(FA_TYPES, self.fa[:, at:].sum(axis=1), strict=True)}
-
-    def __add__(self, other: ErrorCounts) -> ErrorCounts:
-        return ErrorCounts(self.fa + other.fa)

@@ -26,6 +26,10 @@ the percentiles collapse to a point when every image agrees (a perfect or an emp
   events; zero false alarms give ``[0, 3.69 / images]``, not ``[0, 0]``.
 - Bias: non-linear metrics (F1, AP, the FROC readings) are centred on ``2 point -
   mean(replicates)``, the point corrected by the bootstrap's estimate of its bias.
+- An interval always contains its point: where the bias correction moves the centre so far
+  that a bound passes the point (a strongly skewed metric on few units), that bound is
+  moved to the point (:func:`_holding`), so a table never prints a point outside its own
+  interval.
 
 Every choice was made by measuring coverage on many small simulated datasets
 (``scripts/interval_coverage.py``; the table is in the README):
@@ -219,7 +223,18 @@ def proportion_interval(
     if not n_df > 0:
         return Interval(nan, nan, undefined=s.undefined, note="one resampling unit")
     lo, hi = _binomial_bounds(p * n_df, n_df, level, kind)
+    lo, hi = _holding(lo, hi, float(point))
     return Interval(lo, hi, "effective-count Jeffreys", s.undefined, centre=p)
+
+
+def _holding(lo: float, hi: float, point: float) -> tuple[float, float]:
+    """``[lo, hi]`` widened to contain ``point`` (see the module docstring).
+
+    Example:
+        >>> _holding(0.5, 0.7, 0.45), _holding(0.5, 0.7, 0.6)
+        ((0.45, 0.7), (0.5, 0.7))
+    """
+    return min(lo, point), max(hi, point)
 
 
 def _poisson_bounds(k: float, level: float, kind: str) -> tuple[float, float]:
@@ -280,7 +295,8 @@ def rate_interval(
     if not n_df > 0:
         return Interval(nan, nan, undefined=s.undefined, note="one resampling unit")
     lo, hi = _poisson_bounds(rate * n_df, level, kind)
-    return Interval(lo / n_df, hi / n_df, "effective-count Poisson", s.undefined, centre=rate)
+    lo, hi = _holding(lo / n_df, hi / n_df, rate)
+    return Interval(lo, hi, "effective-count Poisson", s.undefined, centre=rate)
 
 
 PROPORTIONS = {

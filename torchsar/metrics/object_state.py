@@ -1,24 +1,25 @@
-"""Additive object-level scoring state: fixed-size histograms that merge by addition.
+"""Object-level scoring state of one detector on one dataset: per-detection records, exact.
 
-One :class:`ObjectState` per detector and dataset holds, over a fixed score grid
-(:data:`~torchsar.metrics.curves.SCORE_GRID`):
+An :class:`ObjectState` keeps one record per image, per detection and per ground-truth
+target (:mod:`torchsar.metrics.records`) and computes every metric from them when it is
+read: the operating point (precision, recall, F1, FoM, false alarms per image and per km²,
+mean IoU, fragmentation, length score), COCO AP50 and AP50:95, the FROC at every score
+level, Pd at fixed false alarms per image, the partial AUC (reading rules in
+:mod:`torchsar.metrics.curves`), the breakdowns (class, size bin, image class, group), the
+false-alarm types, Pd per signal-to-clutter ratio bin, and the Poisson-bootstrap replicates
+of the headline metrics (:func:`replicate_metrics`: each replicate weights the records of
+each resampling unit by its weight, :mod:`torchsar.metrics.bootstrap`).
 
-- one record per detection with its status at the ten COCO IoU thresholds, ranked once at
-  the end for exact AP50 and AP50:95 on scores of any range
-  (:class:`~torchsar.metrics.ranked.RankedDetections`, 24 bytes per detection);
-- TP / FP histograms and the summed IoU of matches under the matching rule (operating point,
-  precision / recall / F1, FoM, FROC, Pd at fixed false alarms per image);
-- the same TP / FP histograms per breakdown key: ground-truth class (false alarms go to the
-  image's class when it has one), size bin (instances by their area, false alarms by theirs)
-  and image group (e.g. the clutter model of a simulated image);
-- Poisson-bootstrap replicates of the rule's and the IoU-0.5 histograms (see
-  :mod:`torchsar.metrics.bootstrap`) for intervals over images.
+An operating point is a score threshold on the detector's own scale: the detections scoring
+``> threshold`` count (``None``: every detection counts). No score is binned, so a strictly
+increasing map of a detector's scores (with its threshold) changes no number, however the
+scores are spread (probabilities within 1e-12 of 1, logits, ratios of 1e300).
 
-Histograms bin each detection's score normalised by its detector's operating threshold
-(:func:`normalise`), so the operating point is score bin :data:`OP_BIN` for every detector;
-objects without a declared threshold are binned by their raw score and every one of them
-counts at the operating point. Only the AP records grow with the number of detections, and
-any split of a dataset into batches, shards or workers gives identical states once added up.
+States of disjoint sets of images merge with ``+`` (records concatenated); any split of a
+dataset into batches, shards or workers, merged in any order, gives equal states and
+identical tables. Memory: :data:`~torchsar.metrics.records.BYTES_PER_DETECTION` bytes per
+detection, :data:`~torchsar.metrics.records.BYTES_PER_TARGET` per target and
+:data:`~torchsar.metrics.records.BYTES_PER_IMAGE` per image.
 """
 
 from __future__ import annotations
@@ -28,37 +29,37 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
-from torchsar.metrics.bootstrap import poisson_weights
-from torchsar.metrics.curves import (
-    OP_BIN,
-    SCORE_GRID,
-    coco_ap_rows,
-    froc,
-    partial_auc,
-    partial_auc_rows,
-    pd_at_fa,
-    score_bins,
-    suffix,
-)
+from torchsar.metrics.bootstrap import unit_hash
+from torchsar.metrics.curves import coco_ap_rows, levels
 from torchsar.metrics.distance import LengthErrors
 from torchsar.metrics.intervals import Interval, headline_intervals
 from torchsar.metrics.matching import COCO_IOUS, GroundTruth
-from torchsar.metrics.ranked import RankedDetections, plane_ranks
+from torchsar.metrics.records import (
+    DETECTION,
+    IMAGE,
+    NOT_FA,
+    TARGET,
+    Records,
+    bits,
+    consolidate,
+    plane_ranks,
+)
+from torchsar.metrics.replicates import FA_LEVELS, Resampled, replicate_metrics
 from torchsar.objects import Objects
 
 __all__ = [
     "FA_LEVELS",
+    "NO_CLASS",
     "ImageInfo",
-    "KeyCounts",
     "ObjectState",
-    "normalise",
-    "operating_point",
+    "above",
+    "ratios",
     "size_bin",
 ]
 
-N_BINS = SCORE_GRID.size + 1
-FA_LEVELS = (0.1, 1.0, 10.0)
 NO_CLASS = "(no image class)"
+"""Where a false alarm without a class of its own or of its image is counted."""
+SCORED, TARGET_OP, IGNORED = 0, 1, 2  # ``op`` of a detection record: false alarm, TP, ignored
 
 
 @dataclass(frozen=True)
@@ -71,24 +72,11 @@ class ImageInfo:
     km2: float | None = None
     order: int | None = None
     """Global order of the plane in its dataset (ties in score are ranked by it, as
-    ``pycocotools`` ranks them by image id); default: its position in the batch."""
+    ``pycocotools`` ranks them by image id; unique per image); default: the count of images
+    the state had before the batch, plus the plane's position in it."""
     boot_key: str | None = None
     """The bootstrap's resampling unit of the plane (planes with the same ``boot_key`` get the
     same replicate weights, e.g. the images of one scene); default: ``key``."""
-
-
-def normalise(score: np.ndarray, threshold: float | None) -> np.ndarray:
-    """Scores relative to the operating ``threshold``: ``score / threshold`` (threshold >
-    0), else ``1 + score - threshold``, so the threshold maps to 1; ``None``: unchanged.
-
-    Example:
-        >>> normalise(np.array([0.25, 0.5, 1.0]), 0.5).tolist()
-        [0.5, 1.0, 2.0]
-    """
-    s = np.asarray(score, dtype=np.float64)
-    if threshold is None:
-        return s
-    return s / threshold if threshold > 0 else 1.0 + s - threshold
 
 
 def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
@@ -96,58 +84,40 @@ def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
     return np.searchsorted(np.asarray(edges, dtype=np.float64), area, side="right")
 
 
-IOU_UNIT = 10**9
-"""IoUs are summed as integers in units of 1e-9, so sums are exact whatever the order."""
+def above(score: np.ndarray, threshold: float | None) -> np.ndarray:
+    """Which scores count at an operating point: ``score > threshold`` (all for ``None``).
+
+    Example:
+        >>> above(np.array([0.2, 0.5, 0.9]), 0.5).tolist(), above(np.array([0.2]), None).tolist()
+        ([False, False, True], [True])
+    """
+    s = np.asarray(score)
+    return np.ones(s.shape, bool) if threshold is None else s > threshold
 
 
-def _hist(bins: np.ndarray) -> np.ndarray:
-    return np.bincount(bins, minlength=N_BINS)
+def ratios(tp: int, fp: int, n_gt: int, images: int) -> dict:
+    """TP, FP, FN, precision, recall, F1 and false alarms per image of counts.
+
+    Example:
+        >>> r = ratios(3, 1, 4, 2)
+        >>> r["precision"], r["recall"], r["f1"], r["fa_per_image"]
+        (0.75, 0.75, 0.75, 0.5)
+    """
+    nan = float("nan")
+    return {
+        "tp": tp,
+        "fp": fp,
+        "fn": n_gt - tp,
+        "precision": tp / (tp + fp) if tp + fp else nan,
+        "recall": tp / n_gt if n_gt else nan,
+        "f1": 2 * tp / (2 * tp + fp + (n_gt - tp)) if (tp + fp + n_gt) else nan,
+        "fa_per_image": fp / images if images else nan,
+    }
 
 
-def _iou_units(bins: np.ndarray, iou: np.ndarray) -> np.ndarray:
-    out = np.zeros(N_BINS, np.int64)
-    np.add.at(out, bins, np.rint(iou * IOU_UNIT).astype(np.int64))
-    return out
-
-
-def _add_weighted(out: np.ndarray, w: np.ndarray, plane: np.ndarray, bins: np.ndarray) -> None:
-    """``out[r, bins[i]] += w[r, plane[i]]`` for every object ``i``, as one integer product
-    ``w @ counts`` over the bins present (``counts``: objects per plane and bin; ``w``
-    int64)."""
-    if bins.size == 0:
-        return
-    cols, at = np.unique(bins, return_inverse=True)
-    n = w.shape[1]
-    counts = np.bincount(at * n + plane, minlength=cols.size * n).reshape(cols.size, n)
-    out[:, cols] += w @ counts.T
-
-
-def _planes_by_key(info: list[ImageInfo]) -> dict[str, np.ndarray]:
-    """The planes (a bool mask) of each image-level key, ``group:`` and ``image_class:``,
-    in order of first appearance."""
-    out: dict[str, np.ndarray] = {}
-    for p, i in enumerate(info):
-        for key in (f"group:{i.group}" if i.group else None,
-                    f"image_class:{i.cls}" if i.cls else None):  # fmt: skip
-            if key is not None:
-                out.setdefault(key, np.zeros(len(info), bool))[p] = True
-    return out
-
-
-@dataclass(eq=False)
-class KeyCounts:
-    """Per breakdown key: instances, images and TP / FP score histograms (additive)."""
-
-    n_gt: int = 0
-    images: int = 0
-    tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-    fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-
-    def __add__(self, other: KeyCounts) -> KeyCounts:
-        return KeyCounts(
-            self.n_gt + other.n_gt, self.images + other.images,
-            self.tp + other.tp, self.fp + other.fp,
-        )  # fmt: skip
+def _op_status(op: np.ndarray) -> np.ndarray:
+    """Matching statuses (instance >= 0, -1 unmatched, -2 ignored) as record ``op`` codes."""
+    return np.where(op >= 0, TARGET_OP, np.where(op == -2, IGNORED, SCORED)).astype(np.uint8)
 
 
 @dataclass(eq=False)
@@ -166,283 +136,393 @@ class ObjectState:
     seed: int = 0
     size_edges: tuple[float, ...] = (32.0**2, 96.0**2)
     size_names: tuple[str, ...] = ("small", "medium", "large")
-    images: int = 0
-    area_mm2: int = 0
-    images_km2: int = 0
-    n_gt: int = 0
-    ranked: RankedDetections = field(default_factory=lambda: RankedDetections(len(COCO_IOUS)))
     thresholded: bool | None = None
-    ap_kind: str | None = None
     threshold: float | None = None
-    tp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-    fp: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-    iou_sum: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
-    fragments: int = 0
-    fragmented: int = 0
-    lengths: LengthErrors = field(default_factory=LengthErrors)
-    keys: dict[str, KeyCounts] = field(default_factory=dict)
-    boot: dict[str, np.ndarray] = field(default_factory=dict)
-    grouped: bool = False
-    """Whether some planes were resampled by a group key (:attr:`ImageInfo.boot_key`)."""
+    ap_kind: str | None = None
+    parts: list[Records] = field(default_factory=list)
+    added: int = 0
+    """Images added by :meth:`update` (the default order key of the next ones)."""
+    scr_sources: tuple[str, ...] = ()
+    """The signal-to-clutter ratio sources the ground truth gave (``measured`` on the image,
+    ``known`` from the data): a source never given has no rows."""
 
     def __post_init__(self) -> None:
         if len(self.size_names) != len(self.size_edges) + 1:
             raise ValueError("size_names needs one name more than size_edges")
-        if not self.boot:
-            r = self.replicates
-            self.boot = {k: np.zeros((r, N_BINS), np.int64) for k in ("tp", "fp", "tp50", "fp50")}
-            self.boot["n_gt"] = np.zeros(r, np.int64)
-            self.boot["images"] = np.zeros(r, np.int64)
+        self._cache: dict = {}
 
     # -- accumulation ------------------------------------------------------------------------
 
-    def update(self, m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInfo]) -> None:
-        """Add one matched batch (``info``: one entry per plane)."""
-        bins = score_bins(normalise(obj.score, obj.threshold))
-        hit, false = m.op >= 0, m.op == -1
-        self.images += len(info)
-        spaced = [i.km2 for i in info if i.km2 is not None]
-        self.area_mm2 += sum(round(a * 1e12) for a in spaced)  # integers: exact in any order
-        self.images_km2 += len(spaced)
-        self.n_gt += len(gt)
-        self._update_ranked(m, obj, info)
-        self.tp += _hist(bins[hit])
-        self.fp += _hist(bins[false])
-        self.iou_sum += _iou_units(bins[hit], m.op_iou[hit])
-        gt_bins = np.where(m.gt_det >= 0, bins[np.maximum(m.gt_det, 0)] if bins.size else 0, -1)
-        found = gt_bins >= OP_BIN if obj.threshold is not None else gt_bins >= 0
-        self.fragments += int(m.overlaps[found].sum())
-        self.fragmented += int(found.sum())
-        self._update_lengths(m, obj, gt, bins)
-        self._update_keys(m, obj, gt, info, bins, gt_bins)
-        if self.replicates:
-            self._update_boot(m, obj, gt, info, bins)
+    def update(
+        self,
+        m: BatchMatch,
+        obj: Objects,
+        gt: GroundTruth,
+        info: list[ImageInfo],
+        *,
+        fa_types: np.ndarray | None = None,
+    ) -> None:
+        """Add one matched batch (``info``: one entry per plane; ``fa_types``: each
+        detection's false-alarm type, -1 where none, see
+        :func:`~torchsar.metrics.error_types.false_alarm_types`)."""
+        self._declare(m, obj)
+        names: dict[str, int] = {}
 
-    def _update_lengths(self, m: BatchMatch, obj: Objects, gt: GroundTruth, bins) -> None:
-        """Length errors of the matches at the design operating point where both the
-        detection and its instance declare a length in metres."""
-        if obj.length_m is None or gt.length_m is None:
+        def name(n: str | None) -> int:
+            return -1 if n is None else names.setdefault(str(n), len(names))
+
+        images = self._image_records(gt, info, name)
+        dets = np.zeros(len(obj), DETECTION)
+        dets["score"], dets["image"], dets["rank"] = obj.score, obj.plane, plane_ranks(obj.plane)
+        dets["ap_tp"], dets["ap_ig"] = bits(m.ap >= 0), bits(m.ap == -2)
+        dets["op"], dets["iou"] = _op_status(m.op), m.op_iou
+        types = np.full(len(obj), -1) if fa_types is None else np.asarray(fa_types)
+        dets["fa_type"] = np.where(types >= 0, types, NOT_FA)
+        dets["size"] = size_bin(obj.area, self.size_edges)
+        if obj.classes is not None:
+            dets["label"] = [name(c) for c in obj.classes.tolist()]
+        else:
+            dets["label"] = -1
+        targets = self._target_records(m, obj, gt, name)
+        self.parts.append(Records(images, dets, targets, list(names)))
+        self.added += len(info)
+        self._cache.clear()
+
+    def _declare(self, m: BatchMatch, obj: Objects) -> None:
+        """What the objects say about their operating point and AP (the same in every
+        batch)."""
+        if not len(obj):
             return
-        at = bins >= (OP_BIN if obj.threshold is not None else 0)
-        hit = np.flatnonzero(at & (m.op >= 0))
-        self.lengths = self.lengths.add(obj.length_m[hit], gt.length_m[m.op[hit]])
+        declared = obj.threshold is not None
+        if self.thresholded is not None and (self.thresholded, self.threshold) != (
+                declared, obj.threshold):  # fmt: skip
+            raise ValueError("objects with different operating thresholds in one state")
+        self.thresholded, self.threshold = declared, obj.threshold
+        if self.ap_kind is not None and m.ap_kind != self.ap_kind:
+            raise ValueError(f"AP of kinds {self.ap_kind} and {m.ap_kind} in one state")
+        self.ap_kind = m.ap_kind
 
-    def _update_ranked(self, m: BatchMatch, obj: Objects, info: list[ImageInfo]) -> None:
-        """The AP records, and what the objects say about their operating point and AP."""
-        if len(obj):
-            declared = obj.threshold is not None
-            if self.thresholded is not None and (self.thresholded, self.threshold) != (
-                    declared, obj.threshold):  # fmt: skip
-                raise ValueError("objects with different operating thresholds in one state")
-            self.thresholded, self.threshold = declared, obj.threshold
-            if self.ap_kind is not None and m.ap_kind != self.ap_kind:
-                raise ValueError(f"AP of kinds {self.ap_kind} and {m.ap_kind} in one state")
-            self.ap_kind = m.ap_kind
-        order = np.array([p if i.order is None else i.order for p, i in enumerate(info)],
-                         dtype=np.int64)  # fmt: skip
-        image = order[obj.plane] if len(obj) else np.zeros(0, np.int64)
-        self.ranked.update(obj.score, image, m.ap, plane_ranks(obj.plane))
+    def _image_records(self, gt: GroundTruth, info: list[ImageInfo], name) -> np.ndarray:
+        out = np.zeros(len(info), IMAGE)
+        out["order"] = [self.added + p if i.order is None else i.order for p, i in enumerate(info)]
+        out["unit"] = np.array([unit_hash(i.boot_key or i.key) for i in info], dtype=np.uint64)
+        out["n_gt"] = np.bincount(gt.plane, minlength=len(info))[: len(info)]
+        out["group"] = [name(i.group) if i.group else -1 for i in info]
+        out["cls"] = [name(i.cls) if i.cls else -1 for i in info]
+        out["km2"] = [np.nan if i.km2 is None else float(i.km2) for i in info]
+        return out
 
-    @property
-    def op_bin(self) -> int:
-        """The design operating point: scores above the declared threshold (bin
-        :data:`OP_BIN`), or every object when the objects declared none (bin 0)."""
-        return 0 if self.thresholded is False else OP_BIN
-
-    def _add_key(self, key: str, **parts) -> None:
-        self.keys[key] = self.keys.get(key, KeyCounts()) + KeyCounts(**parts)
-
-    def _update_keys(self, m, obj, gt, info, bins, gt_bins) -> None:
-        false = m.op == -1
-        image_cls = np.array([i.cls or NO_CLASS for i in info], dtype=object)
-        fp_size = self._size_names(obj.area[false])
-        groups = [
-            ("class", gt.classes, image_cls[obj.plane[false]]),
-            ("size", self._size_names(gt.area), fp_size),
-        ]
-        for prefix, gt_keys, fp_keys in groups:
-            for k in set(gt_keys.tolist()) | set(fp_keys.tolist()):
-                mine = gt_keys == k
-                self._add_key(
-                    f"{prefix}:{k}", n_gt=int(mine.sum()),
-                    tp=_hist(gt_bins[mine & (gt_bins >= 0)]),
-                    fp=_hist(bins[false][fp_keys == k]),
-                )  # fmt: skip
-        for key, planes in _planes_by_key(info).items():
-            d, g = planes[obj.plane], planes[gt.plane]
-            self._add_key(
-                key, n_gt=int(g.sum()), images=int(planes.sum()),
-                tp=_hist(bins[d & (m.op >= 0)]), fp=_hist(bins[d & false]),
-            )  # fmt: skip
-
-    def _size_names(self, area: np.ndarray) -> np.ndarray:
-        names = np.array(self.size_names, dtype=object)
-        return names[size_bin(area, self.size_edges)]
-
-    def _update_boot(self, m, obj, gt, info, bins) -> None:
-        self.grouped = self.grouped or any(i.boot_key for i in info)
-        w = poisson_weights([i.boot_key or i.key for i in info], self.replicates, self.seed)
-        w = w.astype(np.int64)  # once for the four histograms (integer sums: exact)
-        for name, sel in (("tp", m.op >= 0), ("fp", m.op == -1),
-                          ("tp50", m.ap[0] >= 0), ("fp50", m.ap[0] == -1)):  # fmt: skip
-            _add_weighted(self.boot[name], w, obj.plane[sel], bins[sel])
-        per_plane = np.bincount(gt.plane, minlength=len(info))
-        self.boot["n_gt"] += w @ per_plane
-        self.boot["images"] += w.sum(axis=1)
+    def _target_records(self, m: BatchMatch, obj: Objects, gt: GroundTruth, name) -> np.ndarray:
+        n, hit = len(gt), m.gt_det >= 0
+        out = np.zeros(n, TARGET)
+        out["image"], out["index"] = gt.plane, plane_ranks(gt.plane)
+        det = np.maximum(m.gt_det, 0)
+        out["found"] = np.where(hit, obj.score[det] if len(obj) else 0.0, np.nan)
+        out["size"] = size_bin(gt.area, self.size_edges)
+        out["label"] = [name(c) for c in gt.classes.tolist()]
+        out["touch"] = m.overlaps
+        nan = np.full(n, np.nan)
+        out["scr"] = nan if gt.scr_db is None else gt.scr_db
+        out["scr_known"] = nan if gt.known_scr_db is None else gt.known_scr_db
+        out["length"] = nan if gt.length_m is None else gt.length_m
+        if obj.length_m is not None and len(obj):
+            out["found_length"] = np.where(hit, obj.length_m[det], np.nan)
+        else:
+            out["found_length"] = np.nan
+        given = {"measured"} if gt.scr_db is not None else set()
+        if gt.known_scr_db is not None and not np.isnan(gt.known_scr_db).all():
+            given.add("known")
+        self.scr_sources = _sources(set(self.scr_sources) | given)
+        return out
 
     # -- merging -----------------------------------------------------------------------------
 
+    def _settings(self) -> tuple:
+        return (self.replicates, self.seed, self.size_edges, self.size_names)
+
     def __add__(self, other: ObjectState) -> ObjectState:
-        same = (self.replicates, self.seed, self.size_edges, self.size_names)
-        if same != (other.replicates, other.seed, other.size_edges, other.size_names):
+        if self._settings() != other._settings():
             raise ValueError("cannot add ObjectStates with different settings")
-        keys = dict(self.keys)
-        for k, v in other.keys.items():
-            keys[k] = keys.get(k, KeyCounts()) + v
-        if None not in (self.thresholded, other.thresholded) and (
-                self.threshold != other.threshold):  # fmt: skip
+        mine, theirs = (self.thresholded, self.threshold), (other.thresholded, other.threshold)
+        if None not in (self.thresholded, other.thresholded) and mine != theirs:
             raise ValueError("cannot add states with different operating thresholds")
-        declared = other.thresholded if self.thresholded is None else self.thresholded
-        threshold = other.threshold if self.thresholded is None else self.threshold
         if None not in (self.ap_kind, other.ap_kind) and self.ap_kind != other.ap_kind:
             raise ValueError("cannot add states of different AP kinds")
-        kind = other.ap_kind if self.ap_kind is None else self.ap_kind
-        summed = {
-            k: getattr(self, k) + getattr(other, k)
-            for k in ("images", "area_mm2", "images_km2", "n_gt", "ranked", "tp", "fp",
-                      "iou_sum", "fragments", "fragmented", "lengths")
-        }  # fmt: skip
-        return ObjectState(
+        first = self if self.thresholded is not None else other
+        out = ObjectState(
             replicates=self.replicates, seed=self.seed, size_edges=self.size_edges,
-            size_names=self.size_names, thresholded=declared, ap_kind=kind,
-            threshold=threshold, keys=keys, grouped=self.grouped or other.grouped,
-            boot={k: self.boot[k] + other.boot[k] for k in self.boot}, **summed,
+            size_names=self.size_names, thresholded=first.thresholded,
+            threshold=first.threshold, ap_kind=self.ap_kind or other.ap_kind,
+            parts=[*self.parts, *other.parts], added=self.added + other.added,
+            scr_sources=_sources(set(self.scr_sources) | set(other.scr_sources)),
         )  # fmt: skip
+        return out
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ObjectState):
             return NotImplemented
-        return _same(self.__dict__, other.__dict__)
+        a, b = self.records, other.records
+        same = self._settings() == other._settings() and (
+            self.thresholded, self.threshold, self.ap_kind, self.scr_sources) == (
+            other.thresholded, other.threshold, other.ap_kind, other.scr_sources)  # fmt: skip
+        return same and a.names == b.names and all(
+            getattr(a, k).tobytes() == getattr(b, k).tobytes()  # NaN equals NaN here
+            for k in ("images", "detections", "targets"))  # fmt: skip
 
-    # -- results -----------------------------------------------------------------------------
+    def __getstate__(self) -> dict:
+        state = {k: v for k, v in self.__dict__.items() if k != "_cache"}
+        state["parts"] = [self.records]
+        return state
 
-    def metrics(self, at: int | None = None) -> dict[str, float]:
-        """Every object metric with the operating point at score bin ``at`` (default: the
-        design point :attr:`op_bin`). AP is exact (from the per-detection records)."""
-        at = self.op_bin if at is None else at
-        ap = self.ap()
-        out = operating_point(self.tp, self.fp, self.n_gt, self.images, at)
-        tp = out["tp"]
-        fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
-        km2 = self.area_mm2 / 1e12
-        full = self.images_km2 == self.images and km2 > 0
-        out.update(
-            fom=tp / (out["fp"] + self.n_gt) if self.n_gt + out["fp"] else float("nan"),
-            fa_per_km2=out["fp"] / km2 if full else float("nan"),
-            mean_iou=float(self.iou_sum[at:].sum() / IOU_UNIT / tp) if tp else float("nan"),
-            fragmentation=self.fragments / self.fragmented if self.fragmented else float("nan"),
-            length_score=self.lengths.score,
-            ap50=float(ap[0]),
-            ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else float("nan"),
-            pauc=partial_auc(fa, pd, 1.0) if self.n_gt else float("nan"),
-        )  # fmt: skip
-        for level in FA_LEVELS:
-            out[f"pd_at_{level:g}_fa_per_image"] = (
-                pd_at_fa(fa, pd, level) if self.n_gt else float("nan")
-            )
-        return out
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._cache = {}
+
+    @property
+    def records(self) -> Records:
+        """Every record in canonical order (one consolidation, cached until the next
+        update)."""
+        if "records" not in self._cache:
+            rec = consolidate(self.parts)
+            self.parts = [rec]
+            self._cache["records"] = rec
+        return self._cache["records"]
+
+    # -- what the records say ----------------------------------------------------------------
+
+    @property
+    def images(self) -> int:
+        return len(self.records)
+
+    @property
+    def n_gt(self) -> int:
+        return int(self.records.targets.size)
+
+    @property
+    def detections(self) -> int:
+        return int(self.records.detections.size)
+
+    @property
+    def design_threshold(self) -> float | None:
+        """The objects' declared operating threshold (``None``: none, every object
+        counts)."""
+        return self.threshold if self.thresholded else None
+
+    @property
+    def units(self) -> int:
+        """Resampling units of the bootstrap: distinct bootstrap keys of the images (the
+        images, or the groups plus the images without one)."""
+        return int(np.unique(self.records.images["unit"]).size)
+
+    @property
+    def km2(self) -> float | None:
+        """The images' total area in km², ``None`` unless every image declares one."""
+        km2 = self.records.images["km2"]
+        total = float(km2.sum()) if km2.size else 0.0
+        return total if km2.size and np.isfinite(km2).all() and total > 0 else None
+
+    def resampled(self) -> Resampled:
+        """The records as the replicate computation needs them (cached)."""
+        if "resampled" not in self._cache:
+            self._cache["resampled"] = Resampled.of(self.records)
+        return self._cache["resampled"]
 
     def ap(self) -> np.ndarray:
         """Exact AP at each COCO IoU threshold (NaN without ground truth, or for points
         under an IoU rule); under the distance rule every entry is the AP at the distance
         tolerance."""
-        if self.ap_kind == "none":
+        if self.ap_kind == "none" or self.n_gt == 0:
             return np.full(len(COCO_IOUS), np.nan)
-        return self.ranked.ap(self.n_gt)
+        d = self.records.detections
+        out = np.empty(len(COCO_IOUS))
+        for t in range(len(COCO_IOUS)):
+            tp, ig = (d["ap_tp"] >> t) & 1, (d["ap_ig"] >> t) & 1
+            out[t] = coco_ap_rows(tp[None], (1 - (tp | ig))[None], np.array([self.n_gt]))[0]
+        return out
 
-    @property
-    def units(self) -> int:
-        """Resampling units of the bootstrap: the images, or (planes resampled by group)
-        the groups plus the images without one."""
-        if not self.grouped:
-            return self.images
-        groups = [k for name, k in self.keys.items() if name.startswith("group:")]
-        return len(groups) + self.images - sum(k.images for k in groups)
+    def metrics(self, threshold: float | str | None = "design") -> dict[str, float]:
+        """Every object metric at an operating point (``"design"``: the objects' declared
+        threshold; a float: detections scoring above it; ``None``: every detection)."""
+        thr = self._threshold(threshold)
+        rec = self.records
+        d, g = rec.detections, rec.targets
+        sel = above(d["score"], thr)
+        tp_ = sel & (d["op"] == TARGET_OP)
+        out = ratios(int(tp_.sum()), int((sel & (d["op"] == SCORED)).sum()), self.n_gt,
+                     self.images)  # fmt: skip
+        found = above(g["found"], thr) & ~np.isnan(g["found"])
+        km2, nan = self.km2, float("nan")
+        ap = self.ap()
+        out.update(
+            fom=out["tp"] / (out["fp"] + self.n_gt) if self.n_gt + out["fp"] else nan,
+            fa_per_km2=out["fp"] / km2 if km2 else nan,
+            mean_iou=float(d["iou"][tp_].astype(np.float64).sum() / out["tp"]) if out["tp"]
+            else nan,
+            fragmentation=float(g["touch"][found].sum() / found.sum()) if found.any() else nan,
+            length_score=LengthErrors().add(g["found_length"][found].astype(np.float64),
+                                            g["length"][found].astype(np.float64)).score,
+            ap50=float(ap[0]),
+            ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else nan,
+        )  # fmt: skip
+        reads = replicate_metrics(self.resampled(), None, thr, self.ap_kind)
+        for k in ("pauc", *(f"pd_at_{level:g}_fa_per_image" for level in FA_LEVELS)):
+            out[k] = float(reads[k][0])
+        return out
 
-    def intervals(self, at: int | None = None, level: float = 0.95) -> dict[str, Interval]:
-        """Intervals of the headline metrics at score bin ``at`` (see
-        :func:`~torchsar.metrics.intervals.headline_intervals`)."""
-        km2 = self.area_mm2 / 1e12
-        per_km2 = self.images / km2 if self.images_km2 == self.images and km2 > 0 else None
-        return headline_intervals(self.metrics(at), self.replicate_metrics(at), self.units,
-                                  self.n_gt, level, per_km2)  # fmt: skip
+    def _threshold(self, threshold: float | str | None) -> float | None:
+        if isinstance(threshold, str):
+            if threshold != "design":
+                raise ValueError(f"threshold must be a number, None or 'design', got {threshold!r}")
+            return self.design_threshold
+        return None if threshold is None else float(threshold)
 
-    def replicate_metrics(self, at: int | None = None) -> dict[str, np.ndarray]:
+    def replicate_metrics(self, threshold: float | str | None = "design") -> dict[str, np.ndarray]:
         """The headline metrics of every bootstrap replicate (``(replicates,)`` each, NaN
-        where undefined): ``precision``, ``recall``, ``f1``, ``fom`` and
-        ``fa_per_image`` at score bin ``at``, ``ap50``, Pd at each of :data:`FA_LEVELS`
-        false alarms per image and ``pauc``."""
-        at = self.op_bin if at is None else at
-        b, nan = self.boot, float("nan")
-        n_gt, images = b["n_gt"].astype(np.float64), b["images"].astype(np.float64)
-        t, f = b["tp"][:, at:].sum(axis=1), b["fp"][:, at:].sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            reps = {
-                "precision": np.where(t + f > 0, t / (t + f), nan),
-                "recall": np.where(n_gt > 0, t / n_gt, nan),
-                "f1": np.where(t + f + n_gt > 0, 2 * t / (2 * t + f + (n_gt - t)), nan),
-                "fom": np.where(f + n_gt > 0, t / (f + n_gt), nan),
-                "fa_per_image": np.where(images > 0, f / images, nan),
-            }
-            zero = np.zeros((n_gt.size, 1))
-            fa = np.hstack([zero, suffix(b["fp"])[:, ::-1]]) / np.maximum(images, 1)[:, None]
-            pd = np.hstack([zero, suffix(b["tp"])[:, ::-1]]) / n_gt[:, None]
-        reps["ap50"] = (coco_ap_rows(b["tp50"], b["fp50"], n_gt) if self.ap_kind != "none"
-                        else np.full(n_gt.size, nan))  # fmt: skip
-        for level in FA_LEVELS:
-            best = np.where(fa <= level, pd, 0.0).max(axis=1, initial=0.0)
-            reps[f"pd_at_{level:g}_fa_per_image"] = np.where(n_gt > 0, best, nan)
-        reps["pauc"] = np.where(n_gt > 0, partial_auc_rows(fa, pd, 1.0), nan)
-        return reps
+        where undefined): ``precision``, ``recall``, ``f1``, ``fom`` and ``fa_per_image`` at
+        the operating point, ``ap50``, Pd at each of :data:`FA_LEVELS` false alarms per image
+        and ``pauc``."""
+        thr = self._threshold(threshold)
+        key = ("replicates", thr)
+        if key not in self._cache:
+            from torchsar.metrics.bootstrap import poisson_weights
 
-    def score_at(self, at: int) -> float:
-        """The threshold, on the objects' own score scale, of an operating point starting at
-        score bin ``at`` (scores above it count)."""
-        level = float(SCORE_GRID[at - 1]) if at > 0 else float("-inf")
-        t = self.threshold
-        if t is None or not np.isfinite(level):
-            return level
-        return level * t if t > 0 else level - 1.0 + t
+            res = self.resampled()
+            w = poisson_weights(res.units, self.replicates, self.seed)
+            self._cache[key] = replicate_metrics(res, w, thr, self.ap_kind)
+        return self._cache[key]
 
-    def froc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(score threshold, false alarms per image, Pd)``, highest threshold first."""
-        fa, pd = froc(self.tp, self.fp, self.n_gt, self.images)
-        thr = np.concatenate([[np.inf], SCORE_GRID[::-1], [-np.inf]])
-        return thr[: fa.size], fa, pd
+    def intervals(self, threshold: float | str | None = "design", level: float = 0.95
+                  ) -> dict[str, Interval]:  # fmt: skip
+        """Intervals of the headline metrics at an operating point (see
+        :func:`~torchsar.metrics.intervals.headline_intervals`)."""
+        km2 = self.km2
+        per_km2 = self.images / km2 if km2 else None
+        return headline_intervals(self.metrics(threshold), self.replicate_metrics(threshold),
+                                  self.units, self.n_gt, level, per_km2)  # fmt: skip
+
+    def froc(self) -> dict[str, np.ndarray]:
+        """The dense FROC: one point per score level where the counted detections change,
+        highest first: ``threshold`` (the level: detections scoring at or above it),
+        ``tp``, ``fp``, ``fa_per_image``, ``pd`` (see :mod:`torchsar.metrics.curves`)."""
+        d = self.records.detections
+        ends = levels(d["score"])
+        ct = np.cumsum(d["op"] == TARGET_OP)[ends] if ends.size else np.zeros(0, np.int64)
+        cf = np.cumsum(d["op"] == SCORED)[ends] if ends.size else np.zeros(0, np.int64)
+        change = np.append(True, (np.diff(ct) != 0) | (np.diff(cf) != 0)) if ends.size else ends
+        keep = change & ((ct > 0) | (cf > 0)) if ends.size else change.astype(bool)
+        ct, cf, thr = ct[keep], cf[keep], d["score"][ends][keep]
+        nan = float("nan")
+        return {
+            "threshold": thr, "tp": ct, "fp": cf,
+            "fa_per_image": cf / max(self.images, 1),
+            "pd": ct / self.n_gt if self.n_gt else np.full(ct.shape, nan),
+        }  # fmt: skip
+
+    def pr_curve(self, iou: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(recall points, precision, score)`` at COCO IoU threshold index ``iou``: COCO's
+        interpolated precision at the recall points reached, and the score of the detection
+        where each is reached (the curve behind AP)."""
+        from torchsar.metrics.curves import RECALL_POINTS, interpolated_precision
+
+        d = self.records.detections
+        if not self.n_gt or self.ap_kind == "none" or d.size == 0:
+            return np.zeros(0), np.zeros(0), np.zeros(0)
+        tp = (d["ap_tp"] >> iou) & 1
+        fp = 1 - (tp | ((d["ap_ig"] >> iou) & 1))
+        tp_cum, fp_cum = np.cumsum(tp), np.cumsum(fp)
+        prec, _ = interpolated_precision(tp_cum, fp_cum, self.n_gt)
+        idx = np.searchsorted(tp_cum / self.n_gt, RECALL_POINTS, side="left")
+        ok = idx < d.size
+        return RECALL_POINTS[ok], prec[ok], d["score"][idx[ok]]
+
+    def breakdown(self, threshold: float | str | None = "design") -> dict[str, dict]:
+        """Counts per breakdown key at an operating point: ``class:NAME`` (targets by class,
+        false alarms by the detection's class, else its image's, else
+        :data:`NO_CLASS`), ``size:NAME`` (targets by their area, false alarms by theirs),
+        ``group:NAME`` and ``image_class:NAME`` (the images of the key); each ``{images,
+        n_gt, tp, fp}`` (``images`` 0 for class and size keys)."""
+        thr = self._threshold(threshold)
+        rec = self.records
+        d, g, im = rec.detections, rec.targets, rec.images
+        names = np.array([*rec.names, NO_CLASS], dtype=object)
+        sel = above(d["score"], thr)
+        fa = d["op"] == SCORED
+        found = above(g["found"], thr) & ~np.isnan(g["found"])
+        img_cls = np.where(im["cls"] >= 0, im["cls"], len(rec.names))
+        fa_cls = np.where(d["label"] >= 0, d["label"], img_cls[d["image"]] if d.size else 0)
+        sizes = np.array(self.size_names, dtype=object)
+        out: dict[str, dict] = {}
+        for prefix, gt_key, fa_key in (
+            ("class", names[g["label"]], names[fa_cls[fa]]),
+            ("size", sizes[g["size"]], sizes[d["size"][fa]]),
+        ):
+            for k in sorted(set(gt_key.tolist()) | set(fa_key.tolist())):
+                mine = gt_key == k
+                out[f"{prefix}:{k}"] = {
+                    "images": 0, "n_gt": int(mine.sum()), "tp": int((mine & found).sum()),
+                    "fp": int((fa_key[sel[fa]] == k).sum()) if fa.any() else 0,
+                }  # fmt: skip
+        tp_det = sel & (d["op"] == TARGET_OP)
+        for prefix, field_ in (("group", "group"), ("image_class", "cls")):
+            for idx in np.unique(im[field_][im[field_] >= 0]):
+                planes = im[field_] == idx
+                on_d, on_g = planes[d["image"]], planes[g["image"]]
+                out[f"{prefix}:{rec.names[idx]}"] = {
+                    "images": int(planes.sum()), "n_gt": int(on_g.sum()),
+                    "tp": int((on_d & tp_det).sum()), "fp": int((on_d & sel & fa).sum()),
+                }  # fmt: skip
+        return out
+
+    def fa_types(self, threshold: float | str | None = "design") -> np.ndarray:
+        """False alarms per type (index: :data:`~torchsar.metrics.error_types.FA_TYPES`) at
+        an operating point."""
+        from torchsar.metrics.error_types import FA_TYPES
+
+        d = self.records.detections
+        sel = above(d["score"], self._threshold(threshold)) & (d["fa_type"] != NOT_FA)
+        return np.bincount(d["fa_type"][sel], minlength=len(FA_TYPES))[: len(FA_TYPES)]
+
+    def scr_rows(self, threshold: float | str | None = "design", level: float = 0.95
+                 ) -> list[dict]:  # fmt: skip
+        """Pd per signal-to-clutter ratio bin at an operating point (see
+        :func:`torchsar.metrics.scr.scr_rows`)."""
+        from torchsar.metrics.scr import scr_rows
+
+        g = self.records.targets
+        found = above(g["found"], self._threshold(threshold)) & ~np.isnan(g["found"])
+        known = g["scr_known"].astype(np.float64)
+        sources = {}
+        for source in self.scr_sources:
+            if source == "measured":
+                sources[source] = (g["scr"].astype(np.float64), found)
+            else:
+                declared = ~np.isnan(known)
+                sources[source] = (known[declared], found[declared])
+        return scr_rows(sources, level)
+
+    def choose_threshold(self, kind: str, level: float | None = None) -> float | None:
+        """The operating threshold a calibration split picks (at a detection score: the
+        highest score left out, ``None`` when every detection is kept): ``kind="fa"``, the
+        most detections with at most ``level`` false alarms per image; ``kind="f1"``, the
+        best F1 (ties: the fewer detections)."""
+        d = self.records.detections
+        ends = levels(d["score"])
+        ct = np.concatenate([[0], np.cumsum(d["op"] == TARGET_OP)[ends]]) if ends.size else [0]
+        cf = np.concatenate([[0], np.cumsum(d["op"] == SCORED)[ends]]) if ends.size else [0]
+        ct, cf = np.asarray(ct, np.float64), np.asarray(cf, np.float64)
+        if kind == "fa":
+            ok = np.flatnonzero(cf / max(self.images, 1) <= level)
+            k = int(ok[-1]) if ok.size else 0
+        else:
+            f1 = np.array([ratios(int(t), int(f), self.n_gt, self.images)["f1"]
+                           for t, f in zip(ct, cf, strict=True)])  # fmt: skip
+            f1 = np.nan_to_num(f1, nan=-1.0)
+            k = int(np.flatnonzero(f1 == f1.max())[0])
+        if k == ends.size:
+            return None
+        return float(d["score"][ends[k]])
 
 
-def _same(a: object, b: object) -> bool:
-    """Deep equality of states (arrays, dicts, dataclasses, scalars)."""
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return np.array_equal(a, b)
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, KeyCounts) and isinstance(b, KeyCounts):
-        return _same(a.__dict__, b.__dict__)
-    return a == b
-
-
-def operating_point(tp: np.ndarray, fp: np.ndarray, n_gt: int, images: int, at: int) -> dict:
-    """TP, FP, FN, precision, recall, F1 and false alarms per image of the detections in
-    score bins ``>= at``."""
-    t, f = int(tp[at:].sum()), int(fp[at:].sum())
-    nan = float("nan")
-    return {
-        "tp": t,
-        "fp": f,
-        "fn": n_gt - t,
-        "precision": t / (t + f) if t + f else nan,
-        "recall": t / n_gt if n_gt else nan,
-        "f1": 2 * t / (2 * t + f + (n_gt - t)) if (t + f + n_gt) else nan,
-        "fa_per_image": f / images if images else nan,
-    }
+def _sources(sources: set[str]) -> tuple[str, ...]:
+    """SCR sources in table order: ``measured`` first."""
+    return tuple(sorted(sources, key=lambda s: (s != "measured", s)))

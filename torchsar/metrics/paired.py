@@ -18,7 +18,9 @@ paired proportions): with centres ``a, b`` and bounds ``[la, ua]``, ``[lb, ub]``
     hi = (a - b) + sqrt((ua - a)^2 + (b - lb)^2 - 2 r (ua - a)(b - lb))
 
 Two detectors whose metric agrees on the sample and on every replicate (a detector against
-itself) differ by exactly 0, interval ``[0, 0]``.
+itself, or against a strictly increasing map of its own scores) differ by exactly 0,
+interval ``[0, 0]``. The interval always contains the difference of the points (a bound the
+bias correction moved past it is moved to it, as for every interval).
 """
 
 from __future__ import annotations
@@ -40,16 +42,19 @@ Side = tuple[dict, dict, dict]
 """One detector's ``(metrics, replicate_metrics, intervals)``."""
 
 
-def side(state: ObjectState, at: int | None = None, level: float = 0.95) -> Side:
-    """What :func:`difference_intervals` needs of one detector at score bin ``at``."""
-    return state.metrics(at), state.replicate_metrics(at), state.intervals(at, level)
+def side(state: ObjectState, threshold: float | str | None = "design", level: float = 0.95
+         ) -> Side:  # fmt: skip
+    """What :func:`difference_intervals` needs of one detector at its operating point
+    (``threshold``: see :meth:`ObjectState.metrics`)."""
+    return (state.metrics(threshold), state.replicate_metrics(threshold),
+            state.intervals(threshold, level))  # fmt: skip
 
 
 def paired_differences(
     a: ObjectState,
     b: ObjectState,
-    at_a: int | None = None,
-    at_b: int | None = None,
+    at_a: float | str | None = "design",
+    at_b: float | str | None = "design",
     level: float = 0.95,
 ) -> dict[str, tuple[float, float, float]]:
     """``metric(a) - metric(b)`` for each of :data:`PAIRED_METRICS`, with its paired
@@ -58,7 +63,8 @@ def paired_differences(
     Args:
         a, b: the states of two detectors on the same images, with the same bootstrap
             replicates and seed.
-        at_a, at_b: each one's operating point (score bin; default: its design point).
+        at_a, at_b: each one's operating threshold (default: its design point; ``None``:
+            every detection).
         level: the interval's level.
 
     Returns:
@@ -107,5 +113,6 @@ def difference_intervals(a: Side, b: Side) -> dict[str, tuple[float, float, floa
         if x is None or y is None or not np.isfinite([x.lo, x.hi, y.lo, y.hi]).all():
             out[k] = (d, nan, nan)
             continue
-        out[k] = (d, *_mover(x, y, _correlation(ra[k], rb[k])))
+        lo, hi = _mover(x, y, _correlation(ra[k], rb[k]))
+        out[k] = (d, min(lo, d), max(hi, d))
     return out

@@ -61,9 +61,7 @@ def _operating(obj: Objects) -> np.ndarray:
     """Which objects are at the operating point."""
     if obj.threshold is None:
         return np.ones(len(obj), bool)
-    from torchsar.metrics.object_state import normalise
-
-    return normalise(obj.score, obj.threshold) > 1.0
+    return obj.score > obj.threshold
 
 
 def _optimal_then_greedy(dist, score, top, tol) -> np.ndarray:

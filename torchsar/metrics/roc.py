@@ -1,9 +1,26 @@
-"""Pixel ROC accumulation over a fixed threshold grid, additive across batches and shards.
+"""Scale-free pixel ROC: exact counts per key of the detector statistic, additive across
+batches and shards.
 
-Histograms of the detector statistic over target and clutter pixels on a fine grid;
-``Pd(t)`` and ``Pfa(t)`` for ``statistic > t`` come from suffix sums, so one pass of a
-detector gives its whole pixel ROC with memory independent of the dataset size. Accumulators
-with the same grid add up with ``+``. (Object-level curves come from
+No threshold grid is fixed in advance and no value is clipped: every pixel's statistic is
+counted under its *key*, an order-preserving integer of its float64 value (float32 and other
+float statistics are converted exactly):
+
+- ``-0.0`` becomes ``+0.0``; the 64 IEEE bits as a signed integer, with every bit but the
+  sign flipped for a negative value, order like the floats themselves; the key keeps their
+  top 17 bits (the sign, the 11 exponent bits and the top 5 mantissa bits,
+  :data:`MANTISSA_BITS`).
+- Every finite float64 and ``±inf`` has a key, and keys are monotone non-decreasing in the
+  value.
+- Resolution: the values of one key span a relative width of at most ``2**-5`` (3.1 %):
+  ``(largest - smallest) / |smallest| < 2**-5`` for every ``|x| >= 2**-1022`` (the normal
+  float64 range, which holds every nonzero float32); below it the keys have the absolute
+  width ``2**-1027`` (``largest - smallest < 2**-1027``; ``0`` shares its key with the
+  positive float64 values under it).
+
+The state holds, for each key present, its target and clutter pixels, and the totals of
+target and clutter pixels; :meth:`RocAccumulator.pixel_curve` gives ``Pd`` and ``Pfa`` for
+``statistic > t`` exactly at each key's largest value ``t``. States of any split of a dataset
+add up with ``+`` to the state of one pass, in any order. (Object-level curves come from
 :class:`~torchsar.metrics.ObjectState`: objects ranked by score, not images re-labelled per
 threshold.)
 """
@@ -19,18 +36,57 @@ from torch import Tensor
 from torchsar import _jit
 from torchsar._checks import InputTypeError, InputValueError, check_same_shape, has_nan
 from torchsar.metrics.counts import PixelCounts, pixel_counts
-from torchsar.metrics.log_bins import LogGrid
 
-__all__ = ["RocAccumulator", "default_pixel_grid"]
+__all__ = ["RocAccumulator", "key_thresholds", "pixel_keys"]
 
 
 _NAN = "statistic must not contain NaN (it has no place on a ROC)"
+MANTISSA_BITS = 5
+"""The mantissa bits a key keeps after the sign and the 11 exponent bits: one key spans a
+relative width of at most ``2**-MANTISSA_BITS``. :mod:`torchsar.metrics._kernels` defines
+the same number (it must not import it from here: numba's cache would keep the old value)."""
+_SHIFT = 64 - 12 - MANTISSA_BITS  # the bits below the key
+_LOW63 = (1 << 63) - 1  # every bit but the sign
+_SIGN = np.int64(-(1 << 63))  # the sign bit alone
+_INF_KEY = 2047 << MANTISSA_BITS  # +inf's key (exponent all ones, mantissa 0); -inf's: ~it
+
+_Sparse = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""Sorted unique int32 keys with their int64 target and clutter counts."""
 
 
-def default_pixel_grid(points_per_decade: int = 40) -> Tensor:
-    """Symmetric log grid ``-1e6 .. -1e-3, 0, 1e-3 .. 1e6`` (float64): covers ratio and
-    z-score statistics alike."""
-    return LogGrid(points_per_decade).grid
+def pixel_keys(x: Tensor) -> Tensor:
+    """The int64 key of each value of ``x`` (any float tensor, free of NaN): the top 17 bits
+    of the order-preserving integer of its float64 value, ``-0.0`` as ``+0.0``.
+
+    Example:
+        >>> pixel_keys(torch.tensor([-1.0, -0.0, 0.0, 1.0, 1.03, 1.04, torch.inf])).tolist()
+        [-32737, 0, 0, 32736, 32736, 32737, 65504]
+    """
+    b = (x.to(torch.float64) + 0.0).view(torch.int64)  # + 0.0: -0.0 becomes +0.0
+    return (b ^ ((b >> 63) & _LOW63)) >> _SHIFT
+
+
+def key_thresholds(keys: np.ndarray) -> np.ndarray:
+    """The largest float64 of each key (``x > t`` exactly when ``x``'s key is above ``t``'s):
+    ``+inf`` for the key of ``+inf``.
+
+    Example:
+        >>> key_thresholds(pixel_keys(torch.tensor([-1.0, 0.0, 1.0])).numpy()).tolist()
+        [-1.0, 6.95335580783495e-310, 1.0312499999999998]
+    """
+    k = np.asarray(keys, dtype=np.int64)
+    up = ((k + 1) << _SHIFT) - 1  # a non-negative key: its top bit pattern
+    down = np.maximum(~k << _SHIFT, 1) | _SIGN  # a negative key: its smallest magnitude
+    t = np.where(k >= 0, up, down).view(np.float64)
+    return np.where(k == _INF_KEY, np.inf, t)
+
+
+def _no_keys() -> np.ndarray:
+    return np.zeros(0, np.int32)
+
+
+def _no_counts() -> np.ndarray:
+    return np.zeros(0, np.int64)
 
 
 def _flat(t: Tensor) -> np.ndarray:
@@ -38,31 +94,62 @@ def _flat(t: Tensor) -> np.ndarray:
     return t.contiguous().view(-1).numpy()
 
 
-def _exceedances(hist: Tensor) -> Tensor:
-    """``out[k] = #(values > grid[k])`` from the bucket histogram (a suffix sum)."""
-    return hist.flip(0).cumsum(0).flip(0)[1:]
+def _sparse(kmin: int, table: np.ndarray) -> _Sparse:
+    """The keys present in a dense ``(n, 2)`` table of (target, clutter) counts of keys
+    ``kmin ..``, with their counts."""
+    rows = np.flatnonzero(table[:, 0] | table[:, 1])
+    return (rows + kmin).astype(np.int32), table[rows, 0].copy(), table[rows, 1].copy()
 
 
-@dataclass
+def _merge(a: _Sparse, b: _Sparse) -> _Sparse:
+    """The union of two sparse counts, the counts of a key in both summed (new arrays)."""
+    (keys, t, c), (kb, tb, cb) = a, b
+    at = np.searchsorted(keys, kb)
+    new = keys[np.minimum(at, keys.size - 1)] != kb if keys.size else np.ones(kb.size, bool)
+    if new.any():  # keys of b not in a: inserted in order
+        keys, t, c = (np.insert(v, at[new], w) for v, w in ((keys, kb[new]), (t, 0), (c, 0)))
+        at = np.searchsorted(keys, kb)
+    else:
+        t, c = t.copy(), c.copy()
+    t[at] += tb
+    c[at] += cb
+    return keys, t, c
+
+
+@dataclass(eq=False)
 class RocAccumulator:
-    """Accumulates the pixel ROC counts of one detector on one dataset.
+    """Accumulates the pixel ROC counts of one detector on one dataset, scale-free.
 
-    Args:
-        pixel_grid: thresholds of the pixel ROC (sorted ascending).
+    Each pixel not ignored counts under the key of its statistic (see the module: the top 17
+    bits of the order-preserving integer of its float64 value; the values of one key span a
+    relative width of at most ``2**-5``, 3.1 %, for every ``|x| >= 2**-1022``, every nonzero
+    float32 included, and an absolute width of ``2**-1027`` below). Nothing is clipped: every
+    finite value and ``+inf`` has its own key; a pixel at ``-inf`` exceeds no threshold of
+    the curve and counts in the totals only. States of any split of a dataset, added with
+    ``+`` in any order, equal the state of one pass.
+
+    Attributes:
+        keys: sorted int32 keys present.
+        target_counts: int64 target pixels of each key.
+        clutter_counts: int64 clutter pixels of each key.
+        targets: target pixels counted.
+        clutter: clutter pixels counted.
+
+    Example:
+        >>> a, b = RocAccumulator(), RocAccumulator()
+        >>> tgt = torch.tensor([True, False, False])
+        >>> _ = a.update(torch.tensor([3.0, 1e300, -2.0]), tgt)
+        >>> _ = b.update(torch.tensor([3.0, 0.5, 0.5]), tgt)
+        >>> c = (a + b).pixel_curve()
+        >>> c["pd_pixel"].tolist(), c["pfa_pixel"].tolist()
+        ([1.0, 1.0, 1.0, 0.0, 0.0], [1.0, 0.75, 0.25, 0.25, 0.0])
     """
 
-    pixel_grid: Tensor = field(default_factory=default_pixel_grid)
-    target_hits: Tensor = field(init=False)
-    clutter_hits: Tensor = field(init=False)
+    keys: np.ndarray = field(init=False, default_factory=_no_keys)
+    target_counts: np.ndarray = field(init=False, default_factory=_no_counts)
+    clutter_counts: np.ndarray = field(init=False, default_factory=_no_counts)
     targets: int = field(init=False, default=0)
     clutter: int = field(init=False, default=0)
-
-    def __post_init__(self) -> None:
-        self.pixel_grid = self.pixel_grid.to(torch.float64).cpu()
-        self.target_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
-        self.clutter_hits = torch.zeros(self.pixel_grid.numel(), dtype=torch.int64)
-        self._log_grid = LogGrid.matching(self.pixel_grid)
-        self._starts: np.ndarray | None = None  # float32 bucket starts of the compiled kernel
 
     def update(
         self,
@@ -75,7 +162,7 @@ class RocAccumulator:
         """Add a batch: ``statistic`` float, ``target`` bool, optional ``ignore`` bool, all
         of one shape. With ``detected`` (a bool detection mask of that shape) also returns
         its :func:`~torchsar.metrics.pixel_counts` against ``target`` and ``ignore``, counted
-        in the same pass over the pixels where it can be (float32 on the CPU).
+        in the same compiled call where the kernels run (float32 or float64 on the CPU).
 
         Example:
             >>> acc = RocAccumulator()
@@ -91,56 +178,9 @@ class RocAccumulator:
                 raise InputTypeError(f"{name} must be a bool tensor")
             if t is not None:
                 check_same_shape(statistic, t, "statistic", name)
-        one_pass = self._one_pass(statistic, target, ignore, detected)
-        if one_pass is None:
-            if has_nan(statistic):
-                raise InputValueError(_NAN)
-            hist = self._histogram(statistic, target, ignore)
-            counts = None if detected is None else pixel_counts(detected, target, ignore=ignore)
-        else:
-            hist, counts = one_pass
-        self.target_hits += _exceedances(hist[0])
-        self.clutter_hits += _exceedances(hist[1])
-        self.targets += int(hist[0].sum())
-        self.clutter += int(hist[1].sum())
-        return counts
-
-    def _one_pass(
-        self, values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
-    ) -> tuple[Tensor, PixelCounts] | None:
-        """The histogram and the detection mask's pixel counts in one compiled pass, for
-        float32 batches the kernels take, with a mask; ``None`` otherwise. Raises on NaN
-        before anything is added."""
-        if detected is None or values.dtype != torch.float32 or not self._compiled_for(values):
-            return None
-        hist, c, nan = self._float32_pass(values, target, ignore, detected)
-        if nan:
-            raise InputValueError(_NAN)
-        tp, det, targets, counted = (int(v) for v in c)
-        return hist, PixelCounts(tp, det - tp, targets, counted - targets)
-
-    def _compiled_for(self, values: Tensor) -> bool:
-        """Whether :mod:`torchsar.metrics._kernels` histogram ``values`` (the default grid,
-        a tensor the kernels take)."""
-        return self._log_grid is not None and _jit.for_tensor(values.detach())
-
-    def _float32_pass(
-        self, values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
-    ) -> tuple[Tensor, np.ndarray, bool]:
-        """:func:`torchsar.metrics._kernels.float32_roc_pass` on a batch: histogram, pixel
-        counts of ``detected`` (meaningless without one) and whether a value is NaN."""
-        from torchsar.metrics import _kernels
-
-        grid = self.pixel_grid.to(torch.float32).numpy()
-        if self._starts is None:
-            self._starts = _kernels.float32_starts(grid)
-        tgt = _flat(target)
-        ign = tgt if ignore is None else _flat(ignore)
-        det = tgt if detected is None else _flat(detected)
-        flat = _flat(values.detach())
-        hist, counts, nan = _kernels.float32_roc_pass(flat, tgt, ign, ignore is not None, det,
-                                                      grid, self._starts)  # fmt: skip
-        return torch.from_numpy(hist), counts, nan
+        batch, counts = _count(statistic, target, ignore, detected)
+        self._add(batch, counts.targets, counts.clutter)
+        return None if detected is None else counts
 
     def update_sparse(
         self, values: Tensor, target: Tensor, ignore: Tensor, targets: int, clutter: int
@@ -148,7 +188,7 @@ class RocAccumulator:
         """Add a batch whose statistic is ``-inf`` except at some pixels: their ``values``
         with their ``target`` / ``ignore`` flags (bool, same length), and the batch's
         counts of target and clutter pixels (``-inf`` exceeds no threshold, so only the
-        listed pixels reach the histograms). Equal to :meth:`update` on the dense batch.
+        listed pixels reach the per-key counts). Equal to :meth:`update` on the dense batch.
 
         Example:
             >>> a, b = RocAccumulator(), RocAccumulator()
@@ -157,66 +197,167 @@ class RocAccumulator:
             >>> a.update(stat, tgt)
             >>> no = torch.zeros(2, dtype=torch.bool)
             >>> b.update_sparse(stat[[1, 4]], tgt[[1, 4]], no, targets=2, clutter=4)
-            >>> [torch.equal(getattr(a, k), getattr(b, k)) for k in ("target_hits", "clutter_hits")]
-            [True, True]
+            >>> a == b
+            True
         """
-        if has_nan(values):
-            raise InputValueError(_NAN)
-        hist = self._histogram(values, target, ignore)
-        self.target_hits += _exceedances(hist[0])
-        self.clutter_hits += _exceedances(hist[1])
-        self.targets += int(targets)
-        self.clutter += int(clutter)
+        batch, _ = _count(values, target, ignore, None)
+        self._add(batch, int(targets), int(clutter))
 
-    def _histogram(self, values: Tensor, target: Tensor, ignore: Tensor | None) -> Tensor:
-        """``(3, grid + 1)`` int64 counts (CPU) of (class, bucket): class 0 target, 1
-        clutter, 2 ignored; bucket ``b`` holds the values with ``grid[b - 1] < v <=
-        grid[b]``, so ``v > grid[k]`` exactly when its bucket is above ``k``. On the CPU with
-        the default grid one compiled pass (:mod:`torchsar.metrics._kernels`) gives the
-        tensor code's counts without its intermediate tensors."""
-        if self._compiled_for(values):
-            return self._compiled_histogram(values, target, ignore)
-        grid = self.pixel_grid.to(device=values.device, dtype=values.dtype)
-        n = grid.numel() + 1
-        bins = self._bins(values, grid)
-        cls = (~target).long() if ignore is None else (~target).long().masked_fill_(ignore, 2)
-        return torch.bincount(cls.mul_(n).add_(bins).view(-1), minlength=3 * n).cpu().view(3, n)
+    def _sparse(self) -> _Sparse:
+        return self.keys, self.target_counts, self.clutter_counts
 
-    def _compiled_histogram(self, values: Tensor, target: Tensor, ignore: Tensor | None) -> Tensor:
-        if values.dtype == torch.float32:
-            return self._float32_pass(values, target, ignore, None)[0]
-        from torchsar.metrics import _kernels
-        from torchsar.metrics.log_bins import _SURE
-
-        lg = self._log_grid
-        tgt = _flat(target)
-        ign = tgt if ignore is None else _flat(ignore)
-        hist = _kernels.log_grid_histogram(_flat(values.detach()), tgt, ign, ignore is not None,
-                                           self.pixel_grid.numpy(), lg.m, float(lg.low),
-                                           float(lg.ppd), _SURE)  # fmt: skip
-        return torch.from_numpy(hist)
-
-    def _bins(self, statistic: Tensor, grid: Tensor) -> Tensor:
-        """``torch.bucketize(statistic, grid)``, by arithmetic when the grid is the default
-        kind."""
-        if self._log_grid is None:
-            return torch.bucketize(statistic, grid)
-        return self._log_grid.bucketize(statistic, grid)
+    def _add(self, batch: _Sparse, targets: int, clutter: int) -> None:
+        self.keys, self.target_counts, self.clutter_counts = _merge(self._sparse(), batch)
+        self.targets += targets
+        self.clutter += clutter
 
     def __add__(self, other: RocAccumulator) -> RocAccumulator:
-        if not torch.equal(self.pixel_grid, other.pixel_grid):
-            raise ValueError("cannot add RocAccumulators with different threshold grids")
-        out = RocAccumulator(self.pixel_grid)
-        out.target_hits = self.target_hits + other.target_hits
-        out.clutter_hits = self.clutter_hits + other.clutter_hits
-        out.targets = self.targets + other.targets
-        out.clutter = self.clutter + other.clutter
+        out = RocAccumulator()
+        for acc in (self, other):
+            out._add(acc._sparse(), acc.targets, acc.clutter)
         return out
 
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, RocAccumulator):
+            return NotImplemented
+        arrays = ("keys", "target_counts", "clutter_counts")
+        return (self.targets, self.clutter) == (other.targets, other.clutter) and all(
+            np.array_equal(getattr(self, k), getattr(other, k)) for k in arrays
+        )
+
+    def __getstate__(self) -> dict:
+        """The state as data: the keys, the counts and the two totals."""
+        return {k: getattr(self, k) for k in ("keys", "target_counts", "clutter_counts",
+                                              "targets", "clutter")}  # fmt: skip
+
+    def __setstate__(self, state: dict) -> None:
+        """Rebuild from saved data (a state file, a pickle), checked: a state of another
+        layout (a threshold grid's, from an older version) raises ``ValueError``."""
+        if set(state) != {"keys", "target_counts", "clutter_counts", "targets", "clutter"}:
+            raise ValueError(f"not a RocAccumulator state (fields {sorted(state)})")
+        if not _well_formed(state["keys"], state["target_counts"], state["clutter_counts"]):
+            raise ValueError("not a RocAccumulator state (keys and counts)")
+        self.__dict__.update(state)
+
+    @property
+    def target_hits(self) -> Tensor:
+        """Target pixels above each threshold of :meth:`pixel_curve` (int64)."""
+        return torch.from_numpy(_exceeding(self.target_counts))
+
+    @property
+    def clutter_hits(self) -> Tensor:
+        """Clutter pixels above each threshold of :meth:`pixel_curve` (int64)."""
+        return torch.from_numpy(_exceeding(self.clutter_counts))
+
     def pixel_curve(self) -> dict[str, np.ndarray]:
-        """``threshold``, ``pd_pixel``, ``pfa_pixel`` arrays over the pixel grid."""
+        """``threshold``, ``pd_pixel``, ``pfa_pixel`` arrays, ascending in ``threshold``:
+        first ``-inf`` (every pixel above ``-inf``), then the largest float64 of each key
+        present, so that ``pd_pixel[i]`` is exactly the fraction of target pixels with
+        ``statistic > threshold[i]`` (``pfa_pixel`` of clutter pixels; a fraction of 0
+        pixels is 0).
+
+        Example:
+            >>> acc = RocAccumulator()
+            >>> _ = acc.update(torch.tensor([0.5, 2.0, 3.0]), torch.tensor([False, True, False]))
+            >>> c = acc.pixel_curve()
+            >>> float(c["threshold"][0]), c["pd_pixel"].tolist(), c["pfa_pixel"].tolist()
+            (-inf, [1.0, 1.0, 0.0, 0.0], [1.0, 0.5, 0.5, 0.0])
+        """
+        threshold = np.concatenate([[-np.inf], key_thresholds(self.keys)])
         return {
-            "threshold": self.pixel_grid.numpy(),
-            "pd_pixel": self.target_hits.numpy() / max(self.targets, 1),
-            "pfa_pixel": self.clutter_hits.numpy() / max(self.clutter, 1),
+            "threshold": threshold,
+            "pd_pixel": _exceeding(self.target_counts) / max(self.targets, 1),
+            "pfa_pixel": _exceeding(self.clutter_counts) / max(self.clutter, 1),
         }
+
+
+def _well_formed(keys: object, t: object, c: object) -> bool:
+    """Whether these are sorted unique int32 keys with int64 counts of each."""
+    if not all(isinstance(a, np.ndarray) and a.ndim == 1 for a in (keys, t, c)):
+        return False
+    types = keys.dtype == np.int32 and t.dtype == c.dtype == np.int64
+    return types and keys.shape == t.shape == c.shape and bool(np.all(np.diff(keys) > 0))
+
+
+def _exceeding(counts: np.ndarray) -> np.ndarray:
+    """Pixels above ``-inf``, then above each key: ``[sum, sum - cumsum]``."""
+    total = int(counts.sum())
+    return np.concatenate([[total], total - np.cumsum(counts)]).astype(np.int64)
+
+
+def _count(
+    values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
+) -> tuple[_Sparse, PixelCounts]:
+    """The per-key counts of a batch and the pixel counts of ``detected`` (``tp``, ``fp``
+    0 without one); raises on NaN before anything is added. One compiled call
+    (:mod:`torchsar.metrics._kernels`) where the kernels take ``values``, else tensor code
+    with the same counts."""
+    if _jit.for_tensor(values.detach()):
+        return _compiled_count(values, target, ignore, detected)
+    if has_nan(values):
+        raise InputValueError(_NAN)
+    if ignore is not None:
+        ignore = ignore.to(values.device)
+    target = target.to(values.device)
+    if detected is None:
+        care = target.numel() if ignore is None else int(torch.count_nonzero(~ignore))
+        tgt = target if ignore is None else target & ~ignore
+        n_target = int(torch.count_nonzero(tgt))
+        counts = PixelCounts(0, 0, n_target, care - n_target)
+    else:
+        counts = pixel_counts(detected, target, ignore=ignore)
+    return _tensor_keys(values.detach(), target, ignore), counts
+
+
+def _tensor_keys(values: Tensor, target: Tensor, ignore: Tensor | None) -> _Sparse:
+    """The per-key counts of a batch in tensor code (any device): a bincount over (key from
+    the first above ``-inf``'s, class), ``-inf`` in row 0 and ignored pixels as a third
+    class, both left out."""
+    hi = values.max() if values.numel() else None
+    if hi is None or bool(hi == -torch.inf):
+        return _no_keys(), _no_counts(), _no_counts()
+    lo = values.masked_fill(values == -torch.inf, torch.inf).min()
+    kmin, kmax = (int(k) for k in pixel_keys(torch.stack([lo, hi])))
+    n = kmax - kmin + 2  # row 0: -inf
+    cls = (~target).long()
+    if ignore is not None:
+        cls.masked_fill_(ignore, 2)
+    index = pixel_keys(values).sub_(kmin - 1).clamp_(min=0).mul_(3).add_(cls)
+    table = torch.bincount(index.view(-1), minlength=3 * n).view(n, 3)[1:, :2]
+    return _sparse(kmin, table.cpu().numpy())
+
+
+def _compiled_count(
+    values: Tensor, target: Tensor, ignore: Tensor | None, detected: Tensor | None
+) -> tuple[_Sparse, PixelCounts]:
+    """:func:`torchsar.metrics._kernels.roc_pass` on a CPU batch: one compiled call."""
+    from torchsar.metrics import _kernels
+
+    flat = _flat(values.detach())
+    lo, hi = _finite_range(flat)
+    tgt = _flat(target)
+    ign = tgt if ignore is None else _flat(ignore)
+    det = tgt if detected is None else _flat(detected)
+    kmin, table, tp, det_n = _kernels.roc_pass(flat, lo, hi, tgt, ign, ignore is not None, det,
+                                               detected is not None)  # fmt: skip
+    n_target, n_clutter = (int(v) for v in table.sum(0))
+    keys, t, c = _sparse(int(kmin), table[:-2])
+    if table[-2].any():  # +inf: the last key
+        keys = np.append(keys, np.int32(_INF_KEY))
+        t, c = np.append(t, table[-2, 0]), np.append(c, table[-2, 1])
+    return (keys, t, c), PixelCounts(int(tp), int(det_n - tp), n_target, n_clutter)
+
+
+def _finite_range(flat: np.ndarray) -> tuple[float, float]:
+    """The smallest and largest finite value of ``flat`` (``inf, -inf`` for none); raises
+    on NaN."""
+    from torchsar.metrics import _kernels
+
+    if flat.size == 0:
+        return np.inf, -np.inf
+    lo, hi = float(flat.min()), float(flat.max())  # NaN when a value is
+    if np.isnan(lo) or np.isnan(hi):
+        raise InputValueError(_NAN)
+    if np.isinf(lo) or np.isinf(hi):
+        lo, hi = (float(v) for v in _kernels.finite_range(flat))
+    return lo, hi

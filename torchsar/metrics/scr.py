@@ -16,28 +16,26 @@ image that was not read, e.g. when scoring saved predictions); ``+inf`` when onl
 clutter mean is 0. Bins (:data:`SCR_EDGES`, half-open ``[lo, hi)`` dB): ``<0``, ``0-5``,
 ``5-10``, ``10-15``, ``15-20``, ``>=20``, then ``n/a``.
 
-:class:`ScrCounts` keeps, per source of the SCR (``measured`` on the image, ``known``
-where the data declare it, e.g. a simulator's target level over its clutter mean) and bin,
-the targets and the score histogram of the detections that matched them, so Pd per bin is
-read at any operating point and the state adds up across batches, shards and workers.
+:func:`scr_rows` counts, per source of the SCR (``measured`` on the image, ``known`` where
+the data declare it, e.g. a simulator's target level over its clutter mean) and bin, the
+targets and those found at an operating point (the object state keeps each target's SCR
+and the score of the detection that found it, so Pd per bin is read at any operating
+point).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
-
-from torchsar.metrics.curves import SCORE_GRID
 
 __all__ = [
     "SCR_EDGES",
     "SCR_GUARD",
     "SCR_NAMES",
     "SCR_WIDTH",
-    "ScrCounts",
     "scr_bins",
+    "scr_rows",
     "target_scr_db",
     "wilson",
 ]
@@ -50,10 +48,6 @@ SCR_EDGES = (0.0, 5.0, 10.0, 15.0, 20.0)
 """SCR bin edges in dB (bins ``[lo, hi)``, open at both ends)."""
 SCR_NAMES = ("<0", "0-5", "5-10", "10-15", "15-20", ">=20", "n/a")
 """One name per SCR bin, then the bin of targets without an SCR."""
-
-_N_SCORE_BINS = SCORE_GRID.size + 1
-DB_UNIT = 10**6
-"""SCRs are summed as integers in units of 1e-6 dB, so sums are exact in any order."""
 
 
 def target_scr_db(
@@ -156,86 +150,41 @@ def wilson(k: np.ndarray, n: np.ndarray, level: float = 0.95) -> tuple[np.ndarra
     return np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan)
 
 
-def _zeros(*shape: int) -> np.ndarray:
-    return np.zeros(shape, np.int64)
+def scr_rows(sources: dict[str, tuple[np.ndarray, np.ndarray]], level: float = 0.95
+             ) -> list[dict]:  # fmt: skip
+    """Pd per SCR bin: for each source (in the order given) ``(scr_db, found)`` of its
+    targets, one row per non-empty bin with the targets, those found, Pd, its Wilson
+    interval and the bin's mean finite SCR.
 
-
-@dataclass(eq=False)
-class ScrCounts:
-    """Targets per SCR source and bin, and the score bins of the detections that found
-    them (additive; see the module docstring).
-
-    Attributes:
-        n: ``{source: (bins,)}`` targets.
-        tp: ``{source: (bins, score bins)}`` targets by the score bin of the detection that
-            matched them under the matching rule (found at operating point ``at``:
-            ``tp[:, at:].sum(1)``).
-        db: ``{source: (bins,)}`` sum of the finite SCRs in units of :data:`DB_UNIT`.
-        finite: ``{source: (bins,)}`` targets with a finite SCR.
+    Example:
+        >>> rows = scr_rows({"measured": (np.array([3.0, 4.0, 12.0]), np.array([1, 0, 1], bool))})
+        >>> [(r["scr_bin"], r["targets"], r["detected"], r["scr_mean_db"]) for r in rows]
+        [('0-5', 2, 1, 3.5), ('10-15', 1, 1, 12.0)]
     """
-
-    n: dict[str, np.ndarray] = field(default_factory=dict)
-    tp: dict[str, np.ndarray] = field(default_factory=dict)
-    db: dict[str, np.ndarray] = field(default_factory=dict)
-    finite: dict[str, np.ndarray] = field(default_factory=dict)
-
-    def update(self, source: str, scr_db: np.ndarray, found_bin: np.ndarray) -> None:
-        """Add targets of SCR ``scr_db`` whose detection has score bin ``found_bin`` (-1:
-        missed)."""
-        nb = len(SCR_NAMES)
-        if source not in self.n:
-            for part in (self.n, self.db, self.finite):
-                part[source] = _zeros(nb)
-            self.tp[source] = _zeros(nb, _N_SCORE_BINS)
+    out = []
+    edges = (-math.inf, *SCR_EDGES, math.inf)
+    nb = len(SCR_NAMES)
+    for source, (scr_db, found) in sources.items():
         v = np.asarray(scr_db, dtype=np.float64)
         bins = scr_bins(v)
-        self.n[source] += np.bincount(bins, minlength=nb)
-        hit = found_bin >= 0
-        np.add.at(self.tp[source], (bins[hit], found_bin[hit]), 1)
+        n = np.bincount(bins, minlength=nb)
+        hit = np.bincount(bins[np.asarray(found, bool)], minlength=nb)
         ok = np.isfinite(v)
-        units = np.rint(v[ok] * DB_UNIT).astype(np.int64)
-        self.db[source] += _sum_by(bins[ok], units, nb)
-        self.finite[source] += np.bincount(bins[ok], minlength=nb)
-
-    def __add__(self, other: ScrCounts) -> ScrCounts:
-        out = ScrCounts()
-        for name in ("n", "tp", "db", "finite"):
-            mine, theirs = getattr(self, name), getattr(other, name)
-            merged = {k: v.copy() for k, v in mine.items()}
-            for k, v in theirs.items():
-                merged[k] = merged[k] + v if k in merged else v.copy()
-            setattr(out, name, merged)
-        return out
-
-    def rows(self, at: int, level: float = 0.95) -> list[dict]:
-        """Per source and non-empty bin: targets, found at score bin ``at`` and above, Pd,
-        its Wilson interval and the bin's mean finite SCR."""
-        out = []
-        edges = (-math.inf, *SCR_EDGES, math.inf)
-        for source in sorted(self.n, key=lambda s: (s != "measured", s)):
-            n = self.n[source]
-            found = self.tp[source][:, at:].sum(axis=1)
-            lo, hi = wilson(found, n, level)
-            for b in np.flatnonzero(n):
-                known = b < len(SCR_NAMES) - 1
-                fin = self.finite[source][b]
-                out.append({
-                    "source": source,
-                    "scr_bin": SCR_NAMES[b],
-                    "scr_lo_db": edges[b] if known else math.nan,
-                    "scr_hi_db": edges[b + 1] if known else math.nan,
-                    "scr_mean_db": self.db[source][b] / DB_UNIT / fin if fin else math.nan,
-                    "targets": int(n[b]),
-                    "detected": int(found[b]),
-                    "pd": float(found[b] / n[b]),
-                    "pd_lo": float(lo[b]),
-                    "pd_hi": float(hi[b]),
-                })  # fmt: skip
-        return out
-
-
-def _sum_by(bins: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """Exact integer sums of ``values`` per bin."""
-    out = np.zeros(n, np.int64)
-    np.add.at(out, bins, values)
+        fin = np.bincount(bins[ok], minlength=nb)
+        total = np.bincount(bins[ok], weights=v[ok], minlength=nb)
+        lo, hi = wilson(hit, n, level)
+        for b in np.flatnonzero(n):
+            known = b < nb - 1
+            out.append({
+                "source": source,
+                "scr_bin": SCR_NAMES[b],
+                "scr_lo_db": edges[b] if known else math.nan,
+                "scr_hi_db": edges[b + 1] if known else math.nan,
+                "scr_mean_db": float(total[b] / fin[b]) if fin[b] else math.nan,
+                "targets": int(n[b]),
+                "detected": int(hit[b]),
+                "pd": float(hit[b] / n[b]),
+                "pd_lo": float(lo[b]),
+                "pd_hi": float(hi[b]),
+            })  # fmt: skip
     return out
