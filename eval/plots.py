@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from torchsar_eval.colours import detector_colour, detector_dash
+from torchsar_eval.tables import pooled_pr
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -272,7 +273,7 @@ def roc_figure(
             axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post",
                          label=name, **st, **marks)  # fmt: skip
             axes[1].plot(op["false_alarms_per_image"], op["pd_object"], **point)
-        p = pr[pr["detector"] == name]
+        p = pooled_pr(pr[pr["detector"] == name])
         ap = _ap50(summary, name)
         if p.empty or not ap > 0:
             left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"

@@ -32,6 +32,7 @@ __all__ = [
     "paired_table",
     "per_image_table",
     "pixel_roc_table",
+    "pooled_pr",
     "pr_table",
     "scr_table",
     "summary_table",
@@ -65,6 +66,10 @@ SUMMARY_COLUMNS = [
     "f1",
     "ap50",
     "ap50_95",
+    "ap_small",
+    "ap_medium",
+    "ap_large",
+    "classes",
     "pd_at_0.1_fa_per_image",
     "pd_at_1_fa_per_image",
     "pd_at_10_fa_per_image",
@@ -83,7 +88,7 @@ TIMING_COLUMNS = ["dataset", "detector", "images", "ms_per_image", "object_ms_pe
                   "images_per_s"]  # fmt: skip
 FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_per_image",
                 "pd_object", "precision"]  # fmt: skip
-PR_COLUMNS = ["dataset", "detector", "threshold", "recall", "precision"]
+PR_COLUMNS = ["dataset", "detector", "class", "threshold", "recall", "precision"]
 BREAKDOWN_COLUMNS = ["dataset", "detector", "by", "key", "images", "targets", "tp", "fp",
                      "fn", "precision", "recall", "f1"]  # fmt: skip
 COCO_STATS = ["AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large", "AR1", "AR10",
@@ -118,6 +123,7 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         "false_alarms_per_image": m["fa_per_image"],
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
         "score_threshold": -np.inf if r.threshold is None else r.threshold,
+        "classes": "per-class" if r.objects.by_class else "agnostic",
     }
     for k in INTERVALS:
         iv = ci.get(_STATE_NAME.get(k, k))
@@ -190,12 +196,22 @@ def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 def _pr_rows(ds: str, r: DetectorResult) -> list[list]:
     """COCO's interpolated precision at the 101 recall points reached (the exact curve
-    behind AP50), with the score of the detection where each is reached."""
-    recall, precision, score = r.objects.pr_curve()
+    behind AP50), with the score of the detection where each is reached: class ``all``
+    class-agnostic; per class, then ``mean`` (their mean precision: the curve behind the
+    mean AP50; no score)."""
     return [
-        [ds, r.detector.name, float(t), float(rc), float(p)]
+        [ds, r.detector.name, cls, float(t), float(rc), float(p)]
+        for cls, recall, precision, score in r.objects.pr_curves()
         for t, rc, p in zip(score, recall, precision, strict=True)
     ]
+
+
+def pooled_pr(df: pd.DataFrame) -> pd.DataFrame:
+    """The curve behind each AP50 of ``pr.csv``: class ``all`` (class-agnostic) or ``mean``
+    (the mean over classes); every row of a table without classes."""
+    if "class" not in df.columns:
+        return df
+    return df[df["class"].isin(["all", "mean"])]
 
 
 def pr_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:

@@ -18,6 +18,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FuncFormatter
 
+from torchsar_eval.tables import pooled_pr
+
 __all__ = ["Series", "figure_svg", "first_column"]
 
 _DASHES = ["-", "--", ":", "-."]
@@ -115,6 +117,7 @@ def _froc(ax, df: pd.DataFrame, series: list[Series]) -> bool:
 def _pr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     if not {"recall", "precision"} <= set(df.columns):
         return False
+    df = pooled_pr(df)
     drawn = False
     for s in series:
         d = _rows(df, s)

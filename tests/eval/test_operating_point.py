@@ -37,7 +37,7 @@ def test_choose_threshold_by_hand():
     inst = np.zeros((2, 8, 8), int)
     inst[0, 0, 0] = inst[1, 4, 4] = 1
     op = np.array([0, -1, -1, 1])
-    m = BatchMatch(np.tile(op, (10, 1)), op, np.zeros(4), np.array([0.9, 0.2]),
+    m = BatchMatch(np.tile(op, (4, 10, 1)), op, np.zeros(4), np.array([0.9, 0.2]),
                    np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
     st = ObjectState(replicates=0)
     st.update(m, obj, ground_truth(inst), [ImageInfo("a", order=0), ImageInfo("b", order=1)])

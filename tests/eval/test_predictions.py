@@ -86,15 +86,16 @@ def write_coco_set(root, seed: int = 0, n_img: int = 5, crowd: bool = False):
     return root / "gt.json", root / "dets.json"
 
 
-def _cocoeval(gt_path, results, iou_type, use_cats=True):
+def _cocoeval(gt_path, results, iou_type, use_cats=True, sar=False):
+    """pycocotools' evaluation; ``sar``: no detection cap (torchsar's SAR mode)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
     with contextlib.redirect_stdout(io.StringIO()):
         gt = COCO(str(gt_path))
         ev = COCOeval(gt, gt.loadRes(results), iou_type)
-        if not use_cats:
-            ev.params.useCats = 0
+        ev.params.useCats = int(use_cats)
+        if sar:
             ev.params.maxDets = [1, 10, 100_000]
         ev.evaluate()
         ev.accumulate()
@@ -103,12 +104,14 @@ def _cocoeval(gt_path, results, iou_type, use_cats=True):
 
 
 def _sar_ap(ev) -> tuple[float, float]:
-    prec = ev.eval["precision"][:, :, 0, 0, -1]
+    """AP50 and AP50:95 at area ``all`` and the last cap: the mean over categories (and
+    thresholds) of the entries pycocotools defines."""
+    prec = ev.eval["precision"][:, :, :, 0, -1]  # (T, R, K)
 
     def ap(p):
         return float(p[p > -1].mean()) if (p > -1).any() else float("nan")
 
-    return ap(prec[0]), float(np.mean([ap(p) for p in prec]))
+    return ap(prec[0]), ap(prec)
 
 
 @pytest.mark.parametrize("iou_type", ["bbox", "segm"])
@@ -125,8 +128,9 @@ def test_scored_file_equals_pycocotools_sar_and_coco_modes(tmp_path, iou_type, s
     res = te.evaluate(f"coco:{gt_path}?type=display", [te.predictions(dets, name="cnn")],
                       scoring=scoring, progress=False)  # fmt: skip
     row = res.row(f"coco:{gt_path}?type=display", "cnn")
-    sar = _sar_ap(_cocoeval(gt_path, results, iou_type, use_cats=False))
-    assert (row.ap50, row.ap50_95) == pytest.approx(sar, abs=1e-6)
+    sar = _sar_ap(_cocoeval(gt_path, results, iou_type, sar=True))  # per category
+    assert (row.ap50, row.ap50_95) == pytest.approx(sar, abs=1e-9)
+    assert row.classes == "per-class"
     coco = _cocoeval(gt_path, results, iou_type)
     assert res.coco.iou_type.tolist() == [iou_type]
     assert res.coco[te.tables.COCO_STATS].to_numpy()[0] == pytest.approx(coco.stats, abs=1e-12)

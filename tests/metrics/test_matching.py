@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from tests.reference.coco import coco_match
 from torchsar._checks import OptionError
 from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
-from torchsar.metrics.matching import COCO_IOUS, greedy_match_planes
+from torchsar.metrics.greedy import assign_pairs
+from torchsar.metrics.matching import COCO_IOUS
 from torchsar.objects import ObjectRules, discriminate
 
 
@@ -26,24 +27,33 @@ def test_greedy_equals_the_pycocotools_loop(seed, d, g):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10_000), planes=st.integers(1, 5))
-def test_planes_at_once_equal_the_pycocotools_loop_per_plane(seed, planes):
-    """Many planes matched rank by rank (padded, with ties and crowd) equal the literal
-    loop on each plane."""
+@given(seed=st.integers(0, 10_000), problems=st.integers(1, 6))
+def test_problems_at_once_equal_the_pycocotools_loop_per_problem(seed, problems):
+    """Many problems matched from their candidate pairs (padded in blocks, with ties and
+    crowd columns) equal the literal loop on each problem."""
     rng = np.random.default_rng(seed)
-    sizes = rng.integers(0, 8, (planes, 2))
-    n_d, n_g = int(sizes[:, 0].max()), int(sizes[:, 1].max())
-    quality = np.full((planes, n_d, n_g), -1.0)
-    crowd = np.full((planes, n_d), -1.0)
-    for p, (d, g) in enumerate(sizes):
-        quality[p, :d, :g] = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
-        crowd[p, :d] = rng.choice([0.0, 0.5, 0.8], size=d)
-    got = greedy_match_planes(quality, crowd, COCO_IOUS)
-    for p, (d, g) in enumerate(sizes):
-        q, c = quality[p, :d, :g], crowd[p, :d]
-        ref = coco_match(np.concatenate([q, c[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
-                         COCO_IOUS)  # fmt: skip
-        assert np.array_equal(got[:, p, :d], np.where(ref == g, -2, ref))
+    sizes = rng.integers(0, 8, (problems, 2))
+    d_problem = np.repeat(np.arange(problems), sizes[:, 0])
+    g_problem = np.repeat(np.arange(problems), sizes[:, 1] + 1)  # + one crowd column each
+    crowd = np.concatenate([np.r_[np.zeros(g), 1] > 0 for g in sizes[:, 1]])
+    blocks, pairs = [], ([], [], [])
+    d0 = g0 = 0
+    for d, g in sizes:
+        q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g + 1))
+        blocks.append(q)
+        i, j = np.nonzero(q > 0)
+        for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
+            a.append(v)
+        d0, g0 = d0 + d, g0 + g + 1
+    flat = tuple(np.concatenate(a) for a in pairs)
+    col = assign_pairs(d_problem, g_problem, crowd[:, None], crowd, flat, COCO_IOUS)[:, 0, :]
+    d0 = g0 = 0
+    for (d, g), q in zip(sizes, blocks, strict=True):
+        ref = coco_match(q, np.r_[np.zeros(g), 1] > 0, COCO_IOUS)
+        got = col[d0 : d0 + d].T - g0
+        got = np.where(col[d0 : d0 + d].T < 0, -1, np.where(got == g, -2, got))
+        assert np.array_equal(got, ref)
+        d0, g0 = d0 + d, g0 + g + 1
 
 
 @settings(max_examples=60, deadline=None)
@@ -166,12 +176,13 @@ def _reference_plane(obj, gt, p, rule):
             a, b = lab == di + 1, ids == gj + 1
             iou[i, j] = (a & b).sum() / (a | b).sum()
     crowd = np.array([(ign & (lab == di + 1)).sum() / max(obj.area[di], 1) for di in d])
-    if rule.iou_kind == "box":
+    if rule.iou_kind == "box":  # the boxes' area on the ignore pixels (unit squares)
         iou, crowd = box_iou(obj.box[d], gt.box[g]), np.zeros(d.size)
-        if ign.any():
-            r, c = np.nonzero(ign)
-            crowd = box_iou(obj.box[d], np.array([[r.min(), c.min(), r.max() + 1, c.max() + 1.0]]),
-                            crowd=True)[:, 0]  # fmt: skip
+        for i, di in enumerate(d):
+            r0, c0, r1, c1 = obj.box[di]
+            for r, c in zip(*np.nonzero(ign), strict=True):
+                ov = max(0.0, min(r + 1, r1) - max(r, r0)) * max(0.0, min(c + 1, c1) - max(c, c0))
+                crowd[i] += ov / ((r1 - r0) * (c1 - c0))
     ap = coco_match(np.c_[iou, crowd], np.r_[np.zeros(g.size), 1] > 0, COCO_IOUS)
     if rule.kind == "centroid":
         q = np.zeros((d.size, g.size))
@@ -217,4 +228,4 @@ def test_match_batch_equals_brute_force_per_plane(seed, kind, iou):
     m, obj, gt = _score(stat, inst, rule, ignore=ignore)
     for p in range(n):
         d, ap, op = _reference_plane(obj, gt, p, rule)
-        assert np.array_equal(m.ap[:, d], ap) and np.array_equal(m.op[d], op)
+        assert np.array_equal(m.ap[0][:, d], ap) and np.array_equal(m.op[d], op)

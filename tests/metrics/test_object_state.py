@@ -168,7 +168,7 @@ def _records(state: ObjectState, m, obj, info) -> list[dict]:
     """The slow reference's view of a batch: one dict per detection."""
     code = {0: "fp", 1: "tp", 2: "ig"}
     op = np.where(m.op >= 0, 1, np.where(m.op == -2, 2, 0))
-    ap = np.where(m.ap[0] >= 0, 1, np.where(m.ap[0] == -2, 2, 0))
+    ap = np.where(m.ap[0, 0] >= 0, 1, np.where(m.ap[0, 0] == -2, 2, 0))
     rank = {}
     out = []
     for k in range(len(obj)):
@@ -293,7 +293,7 @@ def test_choose_threshold_by_hand():
     inst[0, 0, 0] = inst[1, 4, 4] = 1
     gt = ground_truth(inst)
     op = np.array([0, -1, -1, 1])
-    m = BatchMatch(np.tile(op, (10, 1)), op, np.zeros(4), np.array([0.9, 0.5]),
+    m = BatchMatch(np.tile(op, (4, 10, 1)), op, np.zeros(4), np.array([0.9, 0.5]),
                    np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
     state = ObjectState(replicates=0)
     state.update(m, obj, gt, [ImageInfo("a", order=0), ImageInfo("b", order=1)])

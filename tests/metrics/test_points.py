@@ -48,7 +48,7 @@ def test_distance_rule_equals_brute_force_and_greedy_loop(seed, units):
         # AP / FROC: the greedy visit by score
         ref = greedy_loop(dist, obj.score[d], 5.0)
         expect = np.where(ref >= 0, g[np.maximum(ref, 0)], -1) if g.size else ref
-        assert np.array_equal(m.ap[0, d], expect)
+        assert np.array_equal(m.ap[0, 0, d], expect)
         # operating point (score > 1): optimal among those; the others greedy on what is left
         top = obj.score[d] > 1.0
         pairs, total = brute_force_optimal(dist[top], 5.0)

@@ -518,9 +518,25 @@ class CocoState:
             )
         return self._cache
 
-    def precision(self) -> np.ndarray:
+    def _slots(self, array: np.ndarray, axis: int, categories) -> np.ndarray:
+        """``array`` with its category axis in the order of ``categories`` (``None``: as
+        :attr:`categories`), -1 for a category never seen (as pycocotools fills it)."""
+        if categories is None:
+            return array.copy()
+        seen = {c: k for k, c in enumerate(self.categories)}
+        shape = list(array.shape)
+        shape[axis] = len(categories)
+        out = -np.ones(shape)
+        for k, c in enumerate(categories):
+            if c in seen:
+                np.moveaxis(out, axis, 0)[k] = np.moveaxis(array, axis, 0)[seen[c]]
+        return out
+
+    def precision(self, categories=None) -> np.ndarray:
         """``COCOeval.eval["precision"]``: ``(T, R, K, A, M)``, -1 where a category has no
-        non-ignored ground truth in an area range; ``K`` is :attr:`categories`.
+        non-ignored ground truth in an area range; ``K`` is :attr:`categories`, or the
+        category ids given (a dataset's whole list, as pycocotools lays them out: -1 for a
+        category never seen).
 
         Example:
             >>> s = CocoState()
@@ -528,10 +544,11 @@ class CocoState:
             >>> s.precision()[[0, 7], 50, 0, 0, 2].round(6).tolist()  # IoU 0.8: at 0.5, not 0.85
             [1.0, 0.0]
         """
-        return self._accumulate()[0].copy()
+        return self._slots(self._accumulate()[0], 2, categories)
 
-    def recall(self) -> np.ndarray:
-        """``COCOeval.eval["recall"]``: ``(T, K, A, M)``, -1 as :meth:`precision`.
+    def recall(self, categories=None) -> np.ndarray:
+        """``COCOeval.eval["recall"]``: ``(T, K, A, M)``, -1 as :meth:`precision` (and the
+        same ``categories``).
 
         Example:
             >>> s = CocoState()
@@ -539,7 +556,7 @@ class CocoState:
             >>> s.recall()[[0, 7], 0, 2, 2].tolist()  # no medium instance
             [-1.0, -1.0]
         """
-        return self._accumulate()[1].copy()
+        return self._slots(self._accumulate()[1], 1, categories)
 
     def stats(self) -> np.ndarray:
         """``COCOeval.stats``: the 12 summary numbers (see :func:`summarize`).

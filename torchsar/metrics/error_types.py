@@ -32,17 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from torchsar.metrics.assign import (
-    BatchMatch,
-    Overlaps,
-    _point_pixels,
-    _same_plane_pairs,
-    by_plane,
-)
+from torchsar.metrics.assign import BatchMatch, by_plane, point_pixels, touching_pairs
 from torchsar.metrics.matching import GroundTruth, Matching, pair_box_iou
 from torchsar.objects import Objects
 
-__all__ = ["FA_TYPES", "WHOLE", "false_alarm_types", "touching_pairs"]
+__all__ = ["FA_TYPES", "WHOLE", "false_alarm_types"]
 
 FA_TYPES = ("merge", "duplicate", "fragment", "localisation", "shadow", "clutter")
 """False-alarm types in priority order (see the module docstring)."""
@@ -52,29 +46,15 @@ WHOLE = 0.5
 ``fragment``)."""
 
 
-def touching_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every ``(detection, target)`` pair that touches, with their shared pixels (0 for
-    boxes and points): ``(d, g, pixels)``."""
-    if obj.has_masks:
-        ov = Overlaps(obj, gt)
-        return ov.d.astype(np.int64), ov.g.astype(np.int64), ov.inter.astype(np.int64)
-    if obj.geometry == "point":
-        gid = gt.ids.reshape(-1)[_point_pixels(obj)]
-        d = np.flatnonzero(gid > 0)
-        return d, gid[d].astype(np.int64) - 1, np.zeros(d.size, np.int64)
-    d, g = _same_plane_pairs(obj.plane, gt.plane)
-    a, b = obj.box[d], gt.box[g]
-    meet = (np.minimum(a[:, 2], b[:, 2]) > np.maximum(a[:, 0], b[:, 0])) & (
-        np.minimum(a[:, 3], b[:, 3]) > np.maximum(a[:, 1], b[:, 1]))  # fmt: skip
-    return d[meet], g[meet], np.zeros(int(meet.sum()), np.int64)
-
-
 def _coverage(obj: Objects, gt: GroundTruth, d, g, inter) -> np.ndarray:
     """The share of target ``g[i]`` that detection ``d[i]`` covers: of its pixels (objects
-    with masks), else of its box (boxes; points cover nothing)."""
-    if obj.has_masks:
-        return inter / np.maximum(gt.area[g], 1)
-    return pair_box_iou(gt.box[g], obj.box[d], crowd=True)  # intersection / target box
+    with masks on targets with pixels), else of its box (boxes, box targets given without
+    pixels; points cover nothing)."""
+    by_box = pair_box_iou(gt.box[g], obj.box[d], crowd=True)  # intersection / target box
+    if not obj.has_masks:
+        return by_box
+    pixelled = np.diff(gt.masks.offsets)[g] > 0
+    return np.where(pixelled, inter / np.maximum(gt.area[g], 1), by_box)
 
 
 def _near_pairs(obj: Objects, gt: GroundTruth, rule: Matching) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +89,7 @@ def _on_shadow(obj: Objects, gt: GroundTruth, cand: np.ndarray) -> np.ndarray:
         hit[owner[shadow.reshape(-1)[idx]]] = True
         return hit[cand]
     if obj.geometry == "point":
-        return shadow.reshape(-1)[_point_pixels(obj)[cand]]
+        return shadow.reshape(-1)[point_pixels(obj)[cand]]
     h, w = obj.shape
     for i, k in enumerate(cand):
         p = int(obj.plane[k])

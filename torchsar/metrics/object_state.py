@@ -40,6 +40,7 @@ from torchsar.metrics.records import (
     NOT_FA,
     TARGET,
     Records,
+    bit,
     bits,
     consolidate,
     plane_ranks,
@@ -139,6 +140,10 @@ class ObjectState:
     thresholded: bool | None = None
     threshold: float | None = None
     ap_kind: str | None = None
+    ap_areas: int | None = None
+    """Area ranges the AP statuses cover (``all``, small, medium, large; 1 for points)."""
+    by_class: bool | None = None
+    """Whether the detections were matched within their class (AP: the mean over classes)."""
     parts: list[Records] = field(default_factory=list)
     added: int = 0
     """Images added by :meth:`update` (the default order key of the next ones)."""
@@ -174,7 +179,8 @@ class ObjectState:
         images = self._image_records(gt, info, name)
         dets = np.zeros(len(obj), DETECTION)
         dets["score"], dets["image"], dets["rank"] = obj.score, obj.plane, plane_ranks(obj.plane)
-        dets["ap_tp"], dets["ap_ig"] = bits(m.ap >= 0), bits(m.ap == -2)
+        flat = m.ap.reshape(m.ap.shape[0] * m.ap.shape[1], len(obj))
+        dets["ap_tp"], dets["ap_ig"] = bits(flat >= 0), bits(flat == -2)
         dets["op"], dets["iou"] = _op_status(m.op), m.op_iou
         types = np.full(len(obj), -1) if fa_types is None else np.asarray(fa_types)
         dets["fa_type"] = np.where(types >= 0, types, NOT_FA)
@@ -191,8 +197,15 @@ class ObjectState:
     def _declare(self, m: BatchMatch, obj: Objects) -> None:
         """What the objects say about their operating point and AP (the same in every
         batch)."""
+        if self.ap_areas is not None and m.ap.shape[0] != self.ap_areas:
+            raise ValueError("AP statuses of different area ranges in one state")
+        self.ap_areas = int(m.ap.shape[0])
         if not len(obj):
             return
+        if self.by_class is not None and m.by_class != self.by_class:
+            raise ValueError("detections with and without classes in one state: give every "
+                             "detection a class, or match class-agnostic")  # fmt: skip
+        self.by_class = bool(m.by_class)
         declared = obj.threshold is not None
         if self.thresholded is not None and (self.thresholded, self.threshold) != (
                 declared, obj.threshold):  # fmt: skip
@@ -220,6 +233,7 @@ class ObjectState:
         out["found"] = np.where(hit, obj.score[det] if len(obj) else 0.0, np.nan)
         out["size"] = size_bin(gt.area, self.size_edges)
         out["label"] = [name(c) for c in gt.classes.tolist()]
+        out["coco_area"] = gt.coco_area
         out["touch"] = m.overlaps
         nan = np.full(n, np.nan)
         out["scr"] = nan if gt.scr_db is None else gt.scr_db
@@ -240,19 +254,26 @@ class ObjectState:
     def _settings(self) -> tuple:
         return (self.replicates, self.seed, self.size_edges, self.size_names)
 
+    def _declared(self) -> tuple:
+        return (self.thresholded, self.threshold, self.ap_kind, self.ap_areas, self.by_class)
+
     def __add__(self, other: ObjectState) -> ObjectState:
         if self._settings() != other._settings():
             raise ValueError("cannot add ObjectStates with different settings")
         mine, theirs = (self.thresholded, self.threshold), (other.thresholded, other.threshold)
         if None not in (self.thresholded, other.thresholded) and mine != theirs:
             raise ValueError("cannot add states with different operating thresholds")
-        if None not in (self.ap_kind, other.ap_kind) and self.ap_kind != other.ap_kind:
-            raise ValueError("cannot add states of different AP kinds")
+        for k in ("ap_kind", "ap_areas", "by_class"):
+            a, b = getattr(self, k), getattr(other, k)
+            if None not in (a, b) and a != b:
+                raise ValueError(f"cannot add states of different {k}")
         first = self if self.thresholded is not None else other
+        pick = {k: getattr(self, k) if getattr(self, k) is not None else getattr(other, k)
+                for k in ("ap_kind", "ap_areas", "by_class")}  # fmt: skip
         out = ObjectState(
             replicates=self.replicates, seed=self.seed, size_edges=self.size_edges,
             size_names=self.size_names, thresholded=first.thresholded,
-            threshold=first.threshold, ap_kind=self.ap_kind or other.ap_kind,
+            threshold=first.threshold, **pick,
             parts=[*self.parts, *other.parts], added=self.added + other.added,
             scr_sources=_sources(set(self.scr_sources) | set(other.scr_sources)),
         )  # fmt: skip
@@ -262,9 +283,8 @@ class ObjectState:
         if not isinstance(other, ObjectState):
             return NotImplemented
         a, b = self.records, other.records
-        same = self._settings() == other._settings() and (
-            self.thresholded, self.threshold, self.ap_kind, self.scr_sources) == (
-            other.thresholded, other.threshold, other.ap_kind, other.scr_sources)  # fmt: skip
+        same = (self._settings(), self._declared(), self.scr_sources) == (
+            other._settings(), other._declared(), other.scr_sources)
         return same and a.names == b.names and all(
             getattr(a, k).tobytes() == getattr(b, k).tobytes()  # NaN equals NaN here
             for k in ("images", "detections", "targets"))  # fmt: skip
@@ -324,20 +344,44 @@ class ObjectState:
     def resampled(self) -> Resampled:
         """The records as the replicate computation needs them (cached)."""
         if "resampled" not in self._cache:
-            self._cache["resampled"] = Resampled.of(self.records)
+            self._cache["resampled"] = Resampled.of(self.records, bool(self.by_class))
         return self._cache["resampled"]
 
     def ap(self) -> np.ndarray:
-        """Exact AP at each COCO IoU threshold (NaN without ground truth, or for points
-        under an IoU rule); under the distance rule every entry is the AP at the distance
-        tolerance."""
-        if self.ap_kind == "none" or self.n_gt == 0:
-            return np.full(len(COCO_IOUS), np.nan)
-        d = self.records.detections
-        out = np.empty(len(COCO_IOUS))
-        for t in range(len(COCO_IOUS)):
-            tp, ig = (d["ap_tp"] >> t) & 1, (d["ap_ig"] >> t) & 1
-            out[t] = coco_ap_rows(tp[None], (1 - (tp | ig))[None], np.array([self.n_gt]))[0]
+        """Exact AP at each COCO IoU threshold over every area (NaN without ground truth, or
+        for points under an IoU rule); under the distance rule every entry is the AP at the
+        distance tolerance. With classes: the mean over the classes with targets."""
+        return self.ap_table()[0]
+
+    def ap_table(self) -> np.ndarray:
+        """Exact AP ``(A, T)`` per COCO area range (``all``, small, medium, large) and IoU
+        threshold, as ``pycocotools`` computes it with no detection cap: per class (the
+        mean over the classes with targets in the range) or class-agnostic; NaN where no
+        target counts."""
+        if "ap_table" in self._cache:
+            return self._cache["ap_table"]
+        T, A = len(COCO_IOUS), self.ap_areas or 1
+        out = np.full((4, T), np.nan)
+        if self.ap_kind == "none":
+            return out
+        rec = self.records
+        d, g = rec.detections, rec.targets
+        groups = _class_groups(d, g, bool(self.by_class))
+        for a in range(A):
+            lo, hi = AREA_RANGES[a]
+            inside = (g["coco_area"] >= lo) & (g["coco_area"] <= hi)
+            aps = []
+            for det_sel, gt_sel in groups:
+                npig = int((inside & gt_sel).sum())
+                if npig == 0:
+                    continue
+                k = np.arange(T) + a * T
+                tp = np.stack([bit(d["ap_tp"][det_sel], int(b)) for b in k]).astype(np.float64)
+                ig = np.stack([bit(d["ap_ig"][det_sel], int(b)) for b in k])
+                aps.append(coco_ap_rows(tp, (1.0 - tp) * ~ig, np.full(T, npig)))
+            if aps:
+                out[a] = np.mean(aps, axis=0)
+        self._cache["ap_table"] = out
         return out
 
     def metrics(self, threshold: float | str | None = "design") -> dict[str, float]:
@@ -364,6 +408,9 @@ class ObjectState:
             ap50=float(ap[0]),
             ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else nan,
         )  # fmt: skip
+        table = self.ap_table()
+        for a, size in enumerate(("small", "medium", "large"), start=1):
+            out[f"ap_{size}"] = float(np.mean(table[a])) if self.ap_kind == "iou" else nan
         reads = replicate_metrics(self.resampled(), None, thr, self.ap_kind)
         for k in ("pauc", *(f"pd_at_{level:g}_fa_per_image" for level in FA_LEVELS)):
             out[k] = float(reads[k][0])
@@ -418,22 +465,35 @@ class ObjectState:
             "pd": ct / self.n_gt if self.n_gt else np.full(ct.shape, nan),
         }  # fmt: skip
 
-    def pr_curve(self, iou: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(recall points, precision, score)`` at COCO IoU threshold index ``iou``: COCO's
-        interpolated precision at the recall points reached, and the score of the detection
-        where each is reached (the curve behind AP)."""
+    def pr_curves(self, iou: int = 0) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+        """``[(class, recall points, precision, score)]`` at COCO IoU threshold index ``iou``
+        (area ``all``): COCO's interpolated precision at the recall points reached and the
+        score of the detection where each is reached (the curve behind AP). One curve
+        ``"all"`` class-agnostic; per class one curve each, then ``"mean"``: their mean
+        precision at every recall point (the curve behind the mean AP; no score)."""
         from torchsar.metrics.curves import RECALL_POINTS, interpolated_precision
 
-        d = self.records.detections
-        if not self.n_gt or self.ap_kind == "none" or d.size == 0:
-            return np.zeros(0), np.zeros(0), np.zeros(0)
-        tp = (d["ap_tp"] >> iou) & 1
-        fp = 1 - (tp | ((d["ap_ig"] >> iou) & 1))
-        tp_cum, fp_cum = np.cumsum(tp), np.cumsum(fp)
-        prec, _ = interpolated_precision(tp_cum, fp_cum, self.n_gt)
-        idx = np.searchsorted(tp_cum / self.n_gt, RECALL_POINTS, side="left")
-        ok = idx < d.size
-        return RECALL_POINTS[ok], prec[ok], d["score"][idx[ok]]
+        rec = self.records
+        d, g = rec.detections, rec.targets
+        if not self.n_gt or self.ap_kind == "none":
+            return []
+        out = []
+        names = [*rec.names, ""]
+        for det_sel, gt_sel in _class_groups(d, g, bool(self.by_class)):
+            n_gt = int(gt_sel.sum())
+            mine = d[det_sel]
+            tp = bit(mine["ap_tp"], iou).astype(np.int64)
+            fp = 1 - (tp | bit(mine["ap_ig"], iou))
+            tp_cum, fp_cum = np.cumsum(tp), np.cumsum(fp)
+            prec, _ = interpolated_precision(tp_cum, fp_cum, n_gt)
+            idx = np.searchsorted(tp_cum / n_gt, RECALL_POINTS, side="left")
+            ok = idx < mine.size
+            label = names[int(g["label"][gt_sel][0])] if self.by_class else "all"
+            out.append((label, RECALL_POINTS[ok], prec[ok], mine["score"][idx[ok]], prec))
+        if self.by_class and out:
+            mean = np.mean([c[4] for c in out], axis=0)
+            out.append(("mean", RECALL_POINTS, mean, np.full(RECALL_POINTS.size, np.nan), mean))
+        return [c[:4] for c in out]
 
     def breakdown(self, threshold: float | str | None = "design") -> dict[str, dict]:
         """Counts per breakdown key at an operating point: ``class:NAME`` (targets by class,
@@ -521,6 +581,17 @@ class ObjectState:
         if k == ends.size:
             return None
         return float(d["score"][ends[k]])
+
+
+AREA_RANGES = ((0.0, 1e10), (0.0, 32.0**2), (32.0**2, 96.0**2), (96.0**2, 1e10))
+"""COCO's area ranges of AP (``all``, small, medium, large; bounds inclusive)."""
+
+
+def _class_groups(d: np.ndarray, g: np.ndarray, by_class: bool) -> list:
+    """``(detections, targets)`` selections of each class (one group, class-agnostic)."""
+    if not by_class:
+        return [(np.ones(d.size, bool), np.ones(g.size, bool))]
+    return [(d["label"] == c, g["label"] == c) for c in np.unique(g["label"])]
 
 
 def _sources(sources: set[str]) -> tuple[str, ...]:

@@ -79,9 +79,10 @@ def _optimal_then_greedy(dist, score, top, tol) -> np.ndarray:
 
 def match_points(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     """Match every plane's objects to its instances by centroid distance (see the module
-    docstring). ``BatchMatch.ap`` holds the greedy statuses (the same at every row)."""
+    docstring). ``BatchMatch.ap`` holds the greedy statuses (the same at every IoU row; one
+    area range: a point has no area)."""
     n_d, n_g = len(obj), len(gt)
-    ap = np.full((len(COCO_IOUS), n_d), -1, dtype=np.int64)
+    ap = np.full((1, len(COCO_IOUS), n_d), -1, dtype=np.int64)
     op = np.full(n_d, -1, dtype=np.int64)
     touch = np.zeros(n_g, np.int64)
     tol = float(rule.max_distance)

@@ -31,6 +31,7 @@ __all__ = [
     "NOT_FA",
     "TARGET",
     "Records",
+    "bit",
     "bits",
     "consolidate",
     "plane_ranks",
@@ -45,25 +46,28 @@ ranks them by image id), the hash of its bootstrap unit, its ground-truth target
 and image class (indices into the names, -1: none) and its area in km² (NaN: unknown)."""
 
 DETECTION = np.dtype(
-    [("score", "<f8"), ("image", "<i4"), ("rank", "<u4"), ("ap_tp", "<u2"), ("ap_ig", "<u2"),
+    [("score", "<f8"), ("image", "<i4"), ("rank", "<u4"), ("ap_tp", "<u8"), ("ap_ig", "<u8"),
      ("op", "u1"), ("fa_type", "u1"), ("size", "u1"), ("label", "<i4"), ("iou", "<f8")]
 )  # fmt: skip
 """One detection: its score (any finite or infinite float), its image (an index into the
-image records), its rank among its image's detections, bit ``t`` of ``ap_tp`` / ``ap_ig``
-set when it is a true positive / ignored at COCO IoU threshold ``t``, its status under the
+image records), its rank among its image's detections, bit ``a * T + t`` of ``ap_tp`` /
+``ap_ig`` set when it is a true positive / ignored in COCO area range ``a`` (``all``, then
+small, medium, large) at COCO IoU threshold ``t`` (of ``T``), its status under the
 matching rule (``op``: 0 false alarm, 1 true positive, 2 ignored), its false-alarm type
 (:data:`NOT_FA` when it is none), its size bin, its class (an index into the names, -1:
 class-agnostic) and the IoU with the instance it matched under the rule (0: none)."""
 
 TARGET = np.dtype(
     [("image", "<i4"), ("index", "<u4"), ("found", "<f8"), ("size", "u1"), ("label", "<i4"),
+     ("coco_area", "<f8"),
      ("touch", "<u4"), ("scr", "<f8"), ("scr_known", "<f8"), ("length", "<f8"),
      ("found_length", "<f8")]
 )  # fmt: skip
 """One ground-truth target: its image, its position among the image's targets, the score of
 the detection that matched it under the rule (NaN: missed), its size bin, its class, the
-detections touching it, its measured and known signal-to-clutter ratio in dB, its length and
-the matched detection's length in metres (NaN: unknown)."""
+area COCO's area ranges read (the declared one, else its own), the detections touching it,
+its measured and known signal-to-clutter ratio in dB, its length and the matched
+detection's length in metres (NaN: unknown)."""
 
 NOT_FA = 255
 """``fa_type`` of a detection that is not a false alarm."""
@@ -90,15 +94,25 @@ def plane_ranks(plane: np.ndarray) -> np.ndarray:
 
 
 def bits(flags: np.ndarray) -> np.ndarray:
-    """``(T, M)`` bools as ``(M,)`` uint16 with bit ``t`` set where ``flags[t]`` (T <= 16).
+    """``(K, M)`` bools as ``(M,)`` uint64 with bit ``k`` set where ``flags[k]`` (K <= 64).
 
     Example:
         >>> bits(np.array([[True, False], [True, True]])).tolist()
         [3, 2]
     """
     flags = np.asarray(flags, bool)
-    weights = (1 << np.arange(flags.shape[0], dtype=np.uint32))[:, None]
-    return (flags.astype(np.uint32) * weights).sum(axis=0).astype(np.uint16)
+    weights = np.left_shift(np.uint64(1), np.arange(flags.shape[0], dtype=np.uint64))[:, None]
+    return (flags.astype(np.uint64) * weights).sum(axis=0, dtype=np.uint64)
+
+
+def bit(values: np.ndarray, k: int) -> np.ndarray:
+    """Bit ``k`` of uint64 ``values``, as bool.
+
+    Example:
+        >>> bit(np.array([3, 2], np.uint64), 0).tolist()
+        [True, False]
+    """
+    return ((values >> np.uint64(k)) & np.uint64(1)).astype(bool)
 
 
 @dataclass(eq=False)

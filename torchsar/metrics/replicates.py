@@ -41,6 +41,9 @@ class Resampled:
         tp50, fa50: ``(D,)`` bool: the same at COCO IoU 0.5 (AP50).
         ends: index of the last detection of each score level.
         unit_gt, unit_images: ``(U,)`` targets and images of each unit.
+        label: ``(D,)`` each detection's AP class (an index into the classes with targets;
+            -1: none of them; all 0 class-agnostic).
+        unit_gt_class: ``(U, C)`` targets of each unit and AP class.
     """
 
     units: np.ndarray
@@ -53,19 +56,35 @@ class Resampled:
     ends: np.ndarray
     unit_gt: np.ndarray
     unit_images: np.ndarray
+    label: np.ndarray
+    unit_gt_class: np.ndarray
 
     @classmethod
-    def of(cls, rec: Records) -> Resampled:
-        """From consolidated records (detections in rank order)."""
+    def of(cls, rec: Records, by_class: bool = False) -> Resampled:
+        """From consolidated records (detections in rank order); ``by_class``: AP per class
+        (the mean over the classes with targets)."""
         units, image_unit = np.unique(rec.images["unit"], return_inverse=True)
-        d = rec.detections
-        tp50 = (d["ap_tp"] & 1).astype(bool)
+        d, g = rec.detections, rec.targets
+        tp50 = (d["ap_tp"] & np.uint64(1)).astype(bool)
+        if by_class:
+            classes, g_label = np.unique(g["label"], return_inverse=True)
+            pos = np.searchsorted(classes, d["label"])
+            pos = np.minimum(pos, max(classes.size - 1, 0))
+            found = classes.size > 0
+            label = np.where(found & (classes[pos] == d["label"]) if found else False, pos, -1)
+        else:
+            classes, g_label = np.zeros(1), np.zeros(g.size, np.int64)
+            label = np.zeros(d.size, np.int64)
+        g_unit = image_unit[g["image"]] if g.size else np.zeros(0, np.int64)
+        per = np.zeros((units.size, max(classes.size, 1)))
+        np.add.at(per, (g_unit, g_label), 1.0)
         return cls(
             units=units, det_unit=image_unit[d["image"]] if d.size else np.zeros(0, np.int64),
             score=d["score"], tp=d["op"] == 1, fa=d["op"] == 0, tp50=tp50,
-            fa50=~tp50 & ~(d["ap_ig"] & 1).astype(bool), ends=levels(d["score"]),
+            fa50=~tp50 & ~(d["ap_ig"] & np.uint64(1)).astype(bool), ends=levels(d["score"]),
             unit_gt=np.bincount(image_unit, weights=rec.images["n_gt"], minlength=units.size),
             unit_images=np.bincount(image_unit, minlength=units.size).astype(np.float64),
+            label=np.asarray(label, np.int64), unit_gt_class=per,
         )  # fmt: skip
 
 
@@ -89,7 +108,21 @@ def _froc_rows(wd: np.ndarray, res: Resampled, n_gt: np.ndarray, images: np.ndar
     return fa, pd
 
 
-def _block(wd: np.ndarray, res: Resampled, top: int, n_gt, images, ap: bool) -> dict:
+def _ap50(wd: np.ndarray, res: Resampled, n_gt_class: np.ndarray) -> np.ndarray:
+    """AP50 of each row: the mean over the classes with targets in the row of each class's
+    COCO AP (one class when class-agnostic); NaN where no class has one."""
+    total, count = np.zeros(wd.shape[0]), np.zeros(wd.shape[0])
+    for c in range(n_gt_class.shape[1]):
+        sel = res.label == c
+        has = n_gt_class[:, c] > 0
+        ap = coco_ap_rows(wd[:, sel] * res.tp50[sel], wd[:, sel] * res.fa50[sel], n_gt_class[:, c])
+        total += np.where(has, ap, 0.0)
+        count += has
+    with np.errstate(invalid="ignore"):
+        return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+
+def _block(wd: np.ndarray, res: Resampled, top: int, n_gt, images, ap, n_gt_class) -> dict:
     """The metrics of a block of rows of detection weights ``wd (B, D)``."""
     nan = float("nan")
     t = wd[:, :top] @ res.tp[:top].astype(np.float64)
@@ -107,7 +140,7 @@ def _block(wd: np.ndarray, res: Resampled, top: int, n_gt, images, ap: bool) -> 
         out[f"pd_at_{level:g}_fa_per_image"] = np.where(n_gt > 0, pd_at_fa_rows(fa, pd, level), nan)
     out["pauc"] = np.where(n_gt > 0, partial_auc_rows(fa, pd, 1.0), nan)
     if ap:
-        out["ap50"] = coco_ap_rows(wd * res.tp50, wd * res.fa50, n_gt)
+        out["ap50"] = _ap50(wd, res, n_gt_class)
     else:
         out["ap50"] = np.full(wd.shape[0], nan)
     return out
@@ -125,14 +158,15 @@ def replicate_metrics(
     rows, d = w.shape[0], res.score.size
     n_gt_all = w @ res.unit_gt
     images_all = w @ res.unit_images
+    n_gt_class = w @ res.unit_gt_class
     top = _prefix(res.score, threshold)
     step = max(1, BLOCK_ELEMENTS // max(d, 1))
     parts = []
     for r0 in range(0, rows, step):
         blk = w[r0 : r0 + step]
         wd = blk[:, res.det_unit].astype(np.float64) if d else np.zeros((blk.shape[0], 0))
-        parts.append(_block(wd, res, top, n_gt_all[r0 : r0 + step],
-                            images_all[r0 : r0 + step], ap_kind != "none"))  # fmt: skip
+        parts.append(_block(wd, res, top, n_gt_all[r0 : r0 + step], images_all[r0 : r0 + step],
+                            ap_kind != "none", n_gt_class[r0 : r0 + step]))  # fmt: skip
     if not parts:
         return {k: np.zeros(0) for k in METRICS}
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

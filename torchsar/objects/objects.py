@@ -83,6 +83,9 @@ class Objects:
         classes: object array ``(M,)`` of class names, or ``None`` (class-agnostic).
         length_m: float64 ``(M,)`` lengths in metres declared by the detector (NaN where
             unknown), or ``None``.
+        declared_area: float64 ``(M,)`` areas the source declares (NaN where none), or
+            ``None``: what COCO's area ranges read instead of :attr:`area` (``pycocotools``
+            reads a results entry's ``bbox`` ``w * h`` when it has one, even for masks).
     """
 
     labels: np.ndarray | None
@@ -100,6 +103,7 @@ class Objects:
     threshold: float | None = 1.0
     classes: np.ndarray | None = None
     length_m: np.ndarray | None = None
+    declared_area: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.score.shape[0])
@@ -153,6 +157,23 @@ class Objects:
     def with_threshold(self, threshold: float | None) -> Objects:
         """The same objects with another operating threshold."""
         return replace(self, threshold=_threshold(threshold))
+
+    def with_declared_area(self, area: np.ndarray | None) -> Objects:
+        """The same objects with the areas their source declares (see
+        :attr:`declared_area`; NaN where none).
+
+        Example:
+            >>> o = Objects.from_points(np.zeros((1, 2)), np.array([1.0]), shape=(4, 4))
+            >>> o.with_declared_area(np.array([6.0])).declared_area.tolist()
+            [6.0]
+        """
+        if area is None:
+            return replace(self, declared_area=None)
+        a = np.asarray(area, dtype=np.float64).reshape(-1)
+        if a.shape != (len(self),):
+            raise ShapeError(f"declared_area must have one entry per object ({len(self)}), "
+                             f"got {a.shape}")  # fmt: skip
+        return replace(self, declared_area=a)
 
     # -- constructors ------------------------------------------------------------------------
 
