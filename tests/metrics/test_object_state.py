@@ -348,3 +348,14 @@ def test_weights_depend_on_the_unit_and_seed_only():
     assert not np.array_equal(w, poisson_weights(["a", "b", "c"], 200, seed=5))
     big = poisson_weights([str(i) for i in range(5000)], 40, seed=0).astype(float)
     assert abs(big.mean() - 1) < 0.01 and abs(big.var() - 1) < 0.02  # Poisson(1)
+
+
+def test_ap_rows_read_the_recall_points_exactly():
+    """7 of 20 targets is a recall of 0.35, short of COCO's recall point 0.35000000000000003
+    (``np.linspace(0, 1, 101)[35]``): no precision there, in one row or in many."""
+    tp = np.zeros((2, 12))
+    tp[:, :7] = 1  # 7 true positives then 5 false ones, twice
+    fp = 1 - tp
+    rows = coco_ap_rows(tp * np.array([[1], [2]]), fp * np.array([[1], [2]]), np.array([20, 40]))
+    assert rows.tolist() == pytest.approx([35 / 101, 35 / 101], abs=1e-15)
+    assert coco_ap(tp[0], fp[0], 20) == pytest.approx(35 / 101, abs=1e-15)

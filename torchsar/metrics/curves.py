@@ -121,10 +121,9 @@ def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray
     recall = tps / np.where(n_gt > 0, n_gt, 1.0)[:, None]
     precision = tps / (tps + fps + np.spacing(1))
     precision = np.maximum.accumulate(precision[:, ::-1], axis=1)[:, ::-1]
-    # first column reaching each recall point, per row: one search over rows laid end to end
-    offset = (float(recall.max()) + 2.0) * np.arange(rows)[:, None]
-    idx = np.searchsorted((recall + offset).reshape(-1), (RECALL_POINTS + offset).reshape(-1))
-    idx = idx.reshape(rows, -1) - cols.size * np.arange(rows)[:, None]
+    # first column reaching each recall point, row by row: exact comparisons of the recall
+    # with the points, as pycocotools makes them (0.35 does not reach 0.35000000000000003)
+    idx = np.stack([np.searchsorted(r, RECALL_POINTS, side="left") for r in recall])
     q = np.take_along_axis(precision, np.minimum(idx, cols.size - 1), axis=1)
     q = np.where(idx < cols.size, q, 0.0)
     return np.where(n_gt > 0, q.mean(axis=1), np.nan)
