@@ -170,9 +170,10 @@ def torchsar_inputs(gt: dict, dets: list, iou_type: str):
                 classes=cls,
             )
             # pycocotools reads a results entry's bbox w * h as its area when it has one
-            obj = obj.with_declared_area(np.array([d["bbox"][2] * d["bbox"][3] if "bbox" in d
-                                                   else np.nan for d in mine]))  # fmt: skip
-        else:
+            obj = obj.with_declared_area(
+                np.array([d["bbox"][2] * d["bbox"][3] if "bbox" in d else np.nan for d in mine])
+            )
+        else:  # (the boxes' declared areas, w * h, are their own)
             obj = Objects.from_boxes(np.array([d["bbox"] for d in mine]).reshape(-1, 4), score,
                                      shape=(h, w), plane=pl, planes=len(ims), box_format="xywh",
                                      classes=cls)  # fmt: skip

@@ -241,16 +241,13 @@ def _problems(obj: Objects, gt: GroundTruth, by_class: bool) -> _Problems:
 
 
 def _det_area(obj: Objects, boxes: bool = False) -> np.ndarray:
-    """Each detection's area as ``pycocotools`` reads it for the area ranges: the area its
-    source declares (:attr:`~torchsar.objects.Objects.declared_area`), else its pixels
-    (masks), ``w * h`` (boxes, or every object with ``boxes``), 0 (points)."""
+    """Each detection's own area for COCO's area ranges: its pixels (masks), ``w * h``
+    (boxes, or every object with ``boxes``), 0 (points). (``pycocotools`` reads a results
+    entry's ``bbox`` ``w * h`` even for a mask: only the COCO-compatible state follows it,
+    :attr:`~torchsar.objects.Objects.declared_area`.)"""
     if obj.geometry == "box" or (boxes and obj.geometry == "mask"):
-        own = (obj.box[:, 2] - obj.box[:, 0]) * (obj.box[:, 3] - obj.box[:, 1])
-    else:
-        own = obj.area.astype(np.float64)
-    if obj.declared_area is None:
-        return own
-    return np.where(np.isfinite(obj.declared_area), obj.declared_area, own)
+        return (obj.box[:, 2] - obj.box[:, 0]) * (obj.box[:, 3] - obj.box[:, 1])
+    return obj.area.astype(np.float64)
 
 
 @dataclass(frozen=True)

@@ -176,6 +176,11 @@ class ObjectState:
         def name(n: str | None) -> int:
             return -1 if n is None else names.setdefault(str(n), len(names))
 
+        def codes(values: np.ndarray) -> np.ndarray:
+            """:func:`name` of many class names at once."""
+            uniq, inv = np.unique(np.asarray(values, dtype=str), return_inverse=True)
+            return np.array([name(u) for u in uniq.tolist()], np.int64)[inv].reshape(-1)
+
         images = self._image_records(gt, info, name)
         dets = np.zeros(len(obj), DETECTION)
         dets["score"], dets["image"], dets["rank"] = obj.score, obj.plane, plane_ranks(obj.plane)
@@ -186,10 +191,10 @@ class ObjectState:
         dets["fa_type"] = np.where(types >= 0, types, NOT_FA)
         dets["size"] = size_bin(obj.area, self.size_edges)
         if obj.classes is not None:
-            dets["label"] = [name(c) for c in obj.classes.tolist()]
+            dets["label"] = codes(obj.classes) if len(obj) else []
         else:
             dets["label"] = -1
-        targets = self._target_records(m, obj, gt, name)
+        targets = self._target_records(m, obj, gt, codes)
         self.parts.append(Records(images, dets, targets, list(names)))
         self.added += len(info)
         self._cache.clear()
@@ -225,14 +230,14 @@ class ObjectState:
         out["km2"] = [np.nan if i.km2 is None else float(i.km2) for i in info]
         return out
 
-    def _target_records(self, m: BatchMatch, obj: Objects, gt: GroundTruth, name) -> np.ndarray:
+    def _target_records(self, m: BatchMatch, obj: Objects, gt: GroundTruth, codes) -> np.ndarray:
         n, hit = len(gt), m.gt_det >= 0
         out = np.zeros(n, TARGET)
         out["image"], out["index"] = gt.plane, plane_ranks(gt.plane)
         det = np.maximum(m.gt_det, 0)
         out["found"] = np.where(hit, obj.score[det] if len(obj) else 0.0, np.nan)
         out["size"] = size_bin(gt.area, self.size_edges)
-        out["label"] = [name(c) for c in gt.classes.tolist()]
+        out["label"] = codes(gt.classes) if len(gt) else []
         out["coco_area"] = gt.coco_area
         out["touch"] = m.overlaps
         nan = np.full(n, np.nan)
@@ -388,6 +393,12 @@ class ObjectState:
         """Every object metric at an operating point (``"design"``: the objects' declared
         threshold; a float: detections scoring above it; ``None``: every detection)."""
         thr = self._threshold(threshold)
+        key = ("metrics", thr)
+        if key not in self._cache:
+            self._cache[key] = self._metrics(thr)
+        return dict(self._cache[key])
+
+    def _metrics(self, thr: float | None) -> dict[str, float]:
         rec = self.records
         d, g = rec.detections, rec.targets
         sel = above(d["score"], thr)
