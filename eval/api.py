@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from torch.utils.data import Dataset
 
-from torchsar_eval.batches import SkipBad, TruthOnly
+from torchsar_eval.batches import SkipBad, TruthOnly, as_dict
 from torchsar_eval.calibrate import choose_threshold, parse_target, split_indices
 from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
@@ -355,7 +355,7 @@ def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path,
 def windows_in_pixels(name: str, ds, detectors: list[Detector]) -> list[Detector]:
     """Detectors with ``guard`` / ``train`` given in metres converted to pixels with the
     dataset's pixel spacing (the mean of its row and column spacing, read from item 0)."""
-    spacing = ds[0]["meta"].get("pixel_spacing") if len(ds) else None
+    spacing = as_dict(ds[0])["meta"].get("pixel_spacing") if len(ds) else None
     if spacing is None:
         raise EvalError(f"{{opt:window_units}}'m' needs the pixel spacing of {name}: declare "
                         "it with ?spacing=METRES")  # fmt: skip
@@ -379,7 +379,7 @@ def _default_class(ds) -> str:
     if known is not None:
         return str(known)
     for i in range(min(len(ds), 16)):
-        classes = ds[i]["meta"].get("classes") or []
+        classes = as_dict(ds[i])["meta"].get("classes") or []
         if classes:
             return str(classes[0])
     return "target"

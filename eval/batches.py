@@ -10,7 +10,15 @@ from torch.utils.data import DataLoader, Dataset
 
 from torchsar_eval.datasets.base import BadItemError
 
-__all__ = ["Indexed", "SkipBad", "TruthOnly", "batches"]
+__all__ = ["Indexed", "SkipBad", "TruthOnly", "as_dict", "batches"]
+
+
+def as_dict(item):
+    """A dataset item as the harness's dict (a typed :class:`~torchsar_eval.items.Item` is
+    converted; a dict is itself)."""
+    from torchsar_eval.items import Item
+
+    return item.as_dict() if isinstance(item, Item) else item
 
 
 def _stack(items: list[dict]) -> dict:
@@ -18,6 +26,10 @@ def _stack(items: list[dict]) -> dict:
         k: torch.stack([it[k] for it in items]) for k in ("image", "mask", "instances", "ignore")
     }
     out["meta"] = [it["meta"] for it in items]
+    if all("targets" in it for it in items):  # ground truth as given (annotation files)
+        out["targets"] = [it["targets"] for it in items]
+    if all(it.get("truth_only") for it in items):  # images not read: nothing to measure on
+        out["truth_only"] = True
     return out
 
 
@@ -33,7 +45,10 @@ class TruthOnly(Dataset):
         return len(self.dataset)
 
     def __getitem__(self, i: int) -> dict:
-        return self._get(i)
+        item = as_dict(self._get(i))
+        if isinstance(item, dict) and "bad" not in item:
+            item["truth_only"] = True
+        return item
 
 
 class SkipBad(Dataset):
@@ -48,7 +63,7 @@ class SkipBad(Dataset):
 
     def __getitem__(self, i: int) -> dict:
         try:
-            return self.dataset[i]
+            return as_dict(self.dataset[i])
         except BadItemError as exc:
             return {"bad": str(exc.path), "error": str(exc)}
 
@@ -64,7 +79,7 @@ class Indexed(Dataset):
         return len(self.indices)
 
     def __getitem__(self, i: int) -> dict:
-        item = self.dataset[self.indices[i]]
+        item = as_dict(self.dataset[self.indices[i]])
         if "meta" in item:
             item["meta"] = {**item["meta"], "index": self.indices[i]}
         return item
@@ -79,7 +94,7 @@ def batches(dataset: Dataset, batch_size: int, skipped: list | None = None) -> I
     position = 0
     for items in loader:
         group: list[dict] = []
-        for it in items:
+        for it in map(as_dict, items):
             position += 1
             if "bad" in it:
                 if skipped is not None:

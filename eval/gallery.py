@@ -171,7 +171,7 @@ class Gallery:
         """Offer one batch's false alarms and misses at the design operating point
         (``image``: the batch's ``(B, C, H, W)`` images)."""
         n = len(info)
-        h, w = gt.ids.shape[-2:]
+        h, w = gt.shape
         self.shapes = _facts(self.shapes, [(h, w)] * bool(n))
         sp = gt.spacing if gt.spacing is not None else np.full((n, 2), np.nan)
         self.spacings = _facts(self.spacings, [tuple(map(float, s)) for s in sp
@@ -266,7 +266,7 @@ class _Planes:
 
     def __init__(self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info) -> None:
         self.image, self.gt, self.obj, self.at_op, self.info = image, gt, obj, at_op, info
-        self.channels = gt.ids.shape[0] // max(1, int(image.shape[0])) if image is not None else 1
+        self.channels = gt.planes // max(1, int(image.shape[0])) if image is not None else 1
 
     def _plane_image(self, p: int) -> np.ndarray | None:
         img = self.image

@@ -135,8 +135,10 @@ def _one_by_one(results, batch: dict, preprocess, device, skipped: list):
     """A failed batch image by image: the images that fail alone are skipped (named in
     ``skipped`` with the error), the others scored as in any batch."""
     for i, meta in enumerate(batch["meta"]):
-        one = {k: v[i : i + 1] for k, v in batch.items() if k != "meta"}
+        one = {k: v[i : i + 1] for k, v in batch.items() if k not in ("meta", "truth_only")}
         one["meta"] = [meta]
+        if batch.get("truth_only"):
+            one["truth_only"] = True
         try:
             yield one, _outputs(results, one, preprocess, device)
         except Exception as exc:

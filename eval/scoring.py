@@ -13,8 +13,8 @@ from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import Objects
 
-__all__ = ["BOOTSTRAP_UNITS", "batch_truth", "declared_boxes", "image_rows", "known_scr",
-           "pixel_areas"]  # fmt: skip
+__all__ = ["BOOTSTRAP_UNITS", "batch_truth", "declared_boxes", "image_infos", "image_rows",
+           "known_scr", "pixel_areas", "truth_from_targets"]  # fmt: skip
 
 BOOTSTRAP_UNITS = ("image", "group")
 """What the bootstrap resamples: images, or groups of images (``meta["group"]``, e.g. the
@@ -74,10 +74,16 @@ def batch_truth(
     b, c = _planes(batch)
     h, w = batch["instances"].shape[-2:]
     metas = [m for m in batch["meta"] for _ in range(c)]
-    inst = batch["instances"].reshape(b * c, h, w).cpu().numpy()
-    ignore = batch["ignore"].reshape(b * c, h, w).cpu().numpy()
     box_only = np.array([m.get("gt") == "box" for m in metas])
     spacing = [_spacing(m) or (np.nan, np.nan) for m in metas]
+    if "targets" in batch:
+        given = [t for t in batch["targets"] for _ in range(c)]
+        shadow = np.array([m.get("shadow") == "ignore" for m in metas])
+        sp = np.array(spacing, np.float64).reshape(len(metas), 2)
+        gt = truth_from_targets(given, (h, w), box_only=box_only, spacing=sp, shadow=shadow)
+        return _with_scr(gt, batch, b * c, h, w), image_infos(metas, dataset, c, (h, w), unit)
+    inst = batch["instances"].reshape(b * c, h, w).cpu().numpy()
+    ignore = batch["ignore"].reshape(b * c, h, w).cpu().numpy()
     known = [known_scr(m) for m in metas]
     gt = ground_truth(
         inst,
@@ -91,9 +97,24 @@ def batch_truth(
         known_scr_db=[k or [] for k in known] if any(known) else None,
         shadow=np.array([m.get("shadow") == "ignore" for m in metas]),
     )  # fmt: skip
-    if "image" in batch and len(gt):
-        image = batch["image"].reshape(b * c, h, w).cpu().numpy()
-        gt = replace(gt, scr_db=target_scr_db(image, gt.ids, gt.ignore, gt.box, gt.plane))
+    return _with_scr(gt, batch, b * c, h, w), image_infos(metas, dataset, c, (h, w), unit)
+
+
+def _with_scr(gt: GroundTruth, batch: dict, n: int, h: int, w: int) -> GroundTruth:
+    """The ground truth with each target's SCR measured on the batch's images (when it has
+    images: items read for their ground truth only have none to measure)."""
+    if batch.get("image") is None or not len(gt) or batch.get("truth_only"):
+        return gt
+    image = batch["image"].reshape(n, h, w).cpu().numpy()
+    return replace(gt, scr_db=target_scr_db(image, gt.ids, gt.ignore, gt.box, gt.plane))
+
+
+def image_infos(metas: list[dict], dataset: str, c: int, shape: tuple[int, int],
+                unit: str = "image") -> list[ImageInfo]:  # fmt: skip
+    """Each plane's facts (:class:`~torchsar.metrics.object_state.ImageInfo`): its key (the
+    image name, ``#channel`` with several channels), image class, group, area in km², order
+    in the dataset and bootstrap unit."""
+    h, w = shape
     info = []
     for k, m in enumerate(metas):
         sp = _spacing(m)
@@ -104,7 +125,34 @@ def batch_truth(
         group = _group(m)
         boot = f"group:{group}" if unit == "group" and group else None
         info.append(ImageInfo(name, m.get("class"), group, km2, order, boot))
-    return gt, info
+    return info
+
+
+def truth_from_targets(targets: list, shape: tuple[int, int], *, box_only=None, spacing=None,
+                       shadow=None) -> GroundTruth:  # fmt: skip
+    """:class:`~torchsar.metrics.GroundTruth` of a stack of planes of ``shape`` from each
+    plane's :class:`~torchsar_eval.items.Targets` (as given: nothing painted)."""
+    from torchsar.metrics.truth import Regions
+
+    h, w = shape
+    n = [len(t) for t in targets]
+    k = [len(t.crowd_classes) for t in targets]
+    plane = np.repeat(np.arange(len(targets)), n)
+    cplane = np.repeat(np.arange(len(targets)), k)
+    cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0))  # noqa: E731
+    return GroundTruth.build(
+        plane, cat([t.boxes for t in targets]).reshape(-1, 4), planes=len(targets),
+        shape=(h, w), classes=[c for t in targets for c in t.classes],
+        pixels=[p for t in targets for p in t.pixels],
+        crowd=Regions.build(cplane, cat([t.crowd_boxes for t in targets]).reshape(-1, 4),
+                            shape=(h, w), classes=[c for t in targets for c in t.crowd_classes],
+                            pixels=[p for t in targets for p in t.crowd_pixels]),
+        box_only=box_only, spacing=spacing, length_m=cat([t.lengths_m for t in targets]),
+        declared_area=cat([t.areas for t in targets]),
+        known_scr_db=(cat([t.scr_db for t in targets])
+                      if any(np.isfinite(t.scr_db).any() for t in targets) else None),
+        shadow=shadow,
+    )  # fmt: skip
 
 
 def pixel_areas(batch: dict) -> np.ndarray | None:

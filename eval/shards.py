@@ -28,6 +28,7 @@ from torchsar_eval.detector import check_portable
 from torchsar_eval.errors import EvalError
 from torchsar_eval.labels import short_label
 from torchsar_eval.memory import release_memory, tune_allocator
+from torchsar_eval.objects_only import objects_only, score_objects
 from torchsar_eval.pool import DIED, run_in_processes
 from torchsar_eval.result import DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
@@ -84,6 +85,8 @@ def shard_ranges(n: int, size: int) -> list[range]:
 def _score_shard(job: ShardJob, k: int) -> ShardState:
     tune_allocator()
     rng = shard_ranges(len(job.indices), job.shard_size)[k]
+    if objects_only(job) and not job.export_coco:  # saved boxes from annotations: no pixel
+        return ShardState(score_objects(job, [job.indices[i] for i in rng], job.name))
     part = Indexed(job.dataset, [job.indices[i] for i in rng])
     coco = CocoExport(job.name) if job.export_coco else None
     results = run_detectors(

@@ -1,7 +1,14 @@
 """Datasets whose ground truth is an annotation file: ``coco:FILE.json`` and ``voc:DIR``.
 
-Instances are painted in annotation order (a later object wins where two overlap); boxes
-come from the annotations. COCO crowd regions and VOC ``difficult`` objects are don't-care.
+Every item carries its ground truth as given (:class:`~torchsar_eval.items.Targets`): each
+annotation its own target (its segmentation decoded to pixels, else its box), overlapping
+ones as they are; COCO crowd regions and VOC ``difficult`` objects are don't-care regions
+of their own class. The pixel planes of the item (``mask``, ``instances``, ``ignore``) are
+the targets painted in annotation order, for pixel-level metrics and pictures only.
+
+The images need not exist when nothing reads their pixels: saved predictions are scored
+from the annotation file alone (sizes from the file), and an item whose image is missing
+fails only when its pixels are read.
 
 An image named by an annotation file must lie inside the image folder (``images=DIR``;
 by default the COCO file's folder, or VOC's ``JPEGImages`` / the XML's folder): a name
@@ -12,6 +19,7 @@ machine. ``outside=allow`` reads such images anyway.
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 from pathlib import Path
 
@@ -28,6 +36,7 @@ from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, wal
 from torchsar_eval.datasets.images import read_samples
 from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
+from torchsar_eval.items import Targets
 
 __all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
 
@@ -38,8 +47,14 @@ OUTSIDE = ("refuse", "allow")
 class AnnotatedDataset(FileDataset):
     """Images with their objects: entries ``(image path, (H, W), objects, name)``, objects
     ``(class, box, painter, ignore)``; built by :func:`coco_dataset` / :func:`voc_dataset`.
-    Every image must exist and be annotated once (a second annotation would count it twice).
+    Every image is annotated once (a second annotation would count it twice); an image file
+    need exist only when its pixels are read.
     """
+
+    def _sample(self) -> list[dict]:
+        """No items: every annotation is its own target, so there is no instance plane to
+        check for split or merged objects (and reading images for it would cost reads)."""
+        return []
 
     def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, *,
                  image_ids: list[int] | None = None, **kw):  # fmt: skip
@@ -47,18 +62,16 @@ class AnnotatedDataset(FileDataset):
         super().__init__(root, **kw)
         self.items = entries
         self.image_ids = image_ids
-        missing = [str(e[0]) for e in entries if not _is_file(e[0])]
-        if missing:
-            raise EvalError(
-                f"{scheme} annotations refer to missing image {missing[0]} ({len(missing)} missing)"
-            )
+        self.missing = {str(e[0]) for e in entries if not _is_file(e[0])}
+        self.options["missing_images"] = len(self.missing)
         twice = [path for path, k in Counter(e[0] for e in entries).items() if k > 1]
         if twice:
             raise EvalError(f"{scheme} annotations describe image {twice[0]} more than once")
         self.shared_files = list(annotation_files)
 
     def item_files(self, i: int) -> list[Path]:
-        return [self.items[i][0]]
+        path = self.items[i][0]
+        return [] if str(path) in self.missing else [path]
 
     def item_key(self, i: int) -> dict:
         key = {"name": self.items[i][3], "path": str(self.items[i][0])}
@@ -75,8 +88,45 @@ class AnnotatedDataset(FileDataset):
         """The item without reading its image (zeros of the annotated shape)."""
         return self.load(i, images=False)
 
+    def truth_targets(self, i: int) -> tuple[Targets, tuple[int, int], dict]:
+        """Item ``i``'s ground truth as given, its image size and meta, from the annotations
+        alone: no image read, no pixel plane (only segmentations are decoded).
+
+        Raises:
+            BadItemError: the annotations give no size and the image cannot be read, or a
+                segmentation cannot be decoded.
+        """
+        return self._checked(self._truth_targets, i)
+
+    def _truth_targets(self, i: int) -> tuple[Targets, tuple[int, int], dict]:
+        path, size, objects, name = self.items[i]
+        if size is None:
+            if str(path) in self.missing:
+                raise FileFormatError(path, "does not exist and no annotation gives its size")
+            size = raster_shape(path)[:2]
+        shape = (int(size[0]), int(size[1]))
+        segmented = [k for k, (_, _, o, _) in enumerate(objects) if o.segmented]
+        try:
+            decoded = annotation_pixels([objects[k][2].ann for k in segmented], *shape) if (
+                segmented) else []  # fmt: skip
+        except FileFormatError as exc:
+            raise FileFormatError(path, exc.problem) from None
+        pixels: list = [None] * len(objects)
+        for k, pix in zip(segmented, decoded, strict=True):
+            pixels[k] = pix
+        targets = _targets(objects, pixels, shape)
+        boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
+        meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
+        meta["classes"] = list(targets.classes)
+        if self.image_ids is not None:
+            meta["image_id"] = self.image_ids[i]
+        return targets, shape, meta
+
     def load(self, i: int, images: bool = True) -> dict:
         path, size, objects, name = self.items[i]
+        if str(path) in self.missing and (images or size is None):
+            raise FileFormatError(path, "does not exist (scoring saved predictions reads no "
+                                  "image; detectors that read pixels need it)")  # fmt: skip
         shape = tuple(size) if size is not None and not images else raster_shape(path)[:2]
         if size is not None and tuple(shape) != tuple(size):
             raise FileFormatError(
@@ -89,29 +139,49 @@ class AnnotatedDataset(FileDataset):
             samples = np.zeros(shape, np.float32)
         inst = np.zeros(shape[0] * shape[1], np.int32)
         ignore = np.zeros(inst.size, bool)
-        classes, boxes, areas, has_masks = [], [], [], True
         try:
             pixels = annotation_pixels([_painted(o, box) for _, box, o, _ in objects], *shape)
         except FileFormatError as exc:
             raise FileFormatError(path, exc.problem) from None
-        for (cls, box, mask, is_ignore), pix in zip(objects, pixels, strict=True):
+        targets = _targets(objects, pixels, shape)
+        k = 0
+        for (_, _, _, is_ignore), pix in zip(objects, pixels, strict=True):
             if is_ignore:
                 ignore[pix] = True
-                continue
-            has_masks &= mask.segmented
-            classes.append(cls)
-            boxes.append(box)
-            areas.append(mask.area)
-            inst[pix] = len(classes)  # a later object wins where two overlap
+            else:
+                k += 1
+                inst[pix] = k  # painted in order (pictures and pixel metrics only)
         inst, ignore = inst.reshape(shape), ignore.reshape(shape)
-        meta = self.base_meta(name, path, None, gt="mask" if has_masks else "box")
-        meta["classes"] = classes
+        boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
+        meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
+        meta["classes"] = list(targets.classes)
         meta["box_source"] = "annotation"  # box IoU uses these boxes, as pycocotools
-        if any(a is not None for a in areas):
-            meta["areas"] = areas
+        if np.isfinite(targets.areas).any():
+            meta["areas"] = [None if a != a else float(a) for a in targets.areas.tolist()]
         if self.image_ids is not None:
             meta["image_id"] = self.image_ids[i]
-        return make_item(samples, inst, ignore, meta, boxes=boxes)
+        item = make_item(samples, inst, ignore, meta, boxes=[tuple(b) for b in targets.boxes])
+        item["targets"] = targets
+        return item
+
+
+def _targets(objects: list, pixels: list, shape: tuple[int, int]) -> Targets:
+    """The item's ground truth as given: each annotation its own target (its segmentation's
+    pixels, or its box), don't-care ones (crowd, difficult) regions of their class."""
+    real = [(o, p) for o, p in zip(objects, pixels, strict=True) if not o[3]]
+    crowd = [(o, p) for o, p in zip(objects, pixels, strict=True) if o[3]]
+    n = len(real)
+    # checked when the annotation file was read: built as they are
+    return Targets(
+        np.array([o[1] for o, _ in real], np.float64).reshape(n, 4),
+        tuple(o[0] for o, _ in real),
+        tuple(p if o[2].segmented else None for o, p in real),  # (boxes: None)
+        np.array([np.nan if o[2].area is None else o[2].area for o, _ in real], np.float64),
+        np.full(n, np.nan), np.full(n, np.nan),
+        np.array([o[1] for o, _ in crowd], np.float64).reshape(len(crowd), 4),
+        tuple(o[0] for o, _ in crowd),
+        tuple(p if o[2].segmented else None for o, p in crowd),
+    )  # fmt: skip
 
 
 def _is_file(path: Path) -> bool:
@@ -140,6 +210,8 @@ class _Painter:
     """What paints one object: its COCO annotation (decoded with the image's others), or
     a filled box."""
 
+    __slots__ = ("ann", "area", "box", "segmented")
+
     def __init__(self, box, coco_annotation=None) -> None:
         self.box, self.ann = box, coco_annotation
         self.segmented = coco_annotation is not None and coco_annotation.segmentation is not None
@@ -162,6 +234,25 @@ def _inside(folder: Path, name: str, what: str) -> Path:
     )
 
 
+def _all_inside(folder: Path, names: list[str], what: list[str]) -> None:
+    """:func:`_inside` for many names at once: names that stay inside lexically and whose
+    folders resolve inside (each distinct folder resolved once) need no resolution of
+    their own unless the file is a symbolic link."""
+    base = folder.resolve()
+    parents: dict[str, bool] = {}
+    for name, w in zip(names, what, strict=True):
+        norm = os.path.normpath(name)
+        if os.path.isabs(norm) or norm == ".." or norm.startswith(".." + os.sep):
+            _inside(folder, name, w)  # refused, with the resolved path in the message
+            continue
+        parent = os.path.dirname(norm)
+        if parent not in parents:
+            real = (folder / parent).resolve() if parent else base
+            parents[parent] = real == base or base in real.parents
+        if not parents[parent] or os.path.islink(folder / norm):
+            _inside(folder, name, w)
+
+
 def coco_dataset(
     path: Path, images: Path | None, limit: int | None, *, outside: bool = False, **kw
 ) -> AnnotatedDataset:
@@ -173,8 +264,9 @@ def coco_dataset(
         raise EvalError(str(exc)) from exc
     folder = images or path.parent
     if not outside:
-        for k, im in enumerate(coco.images):
-            _inside(folder, im.file_name, f"{path}: images[{k}] (id {im.id}) file_name")
+        _all_inside(folder, [im.file_name for im in coco.images],
+                    [f"{path}: images[{k}] (id {im.id}) file_name"
+                     for k, im in enumerate(coco.images)])  # fmt: skip
     ordered = sorted(coco.images, key=lambda im: im.id)  # pycocotools' image order
     entries = [
         (

@@ -121,8 +121,8 @@ def same_files(paths: Iterable[str | Path]) -> list[tuple[Path, Path]]:
 def _dataset_files(ds: object) -> list[Path]:
     """The files whose items a dataset scores: each item's image (file datasets) or the
     store header (stores)."""
-    if hasattr(ds, "item_files"):
-        return list(dict.fromkeys(ds.item_files(i)[0] for i in range(len(ds))))
+    if hasattr(ds, "item_files"):  # (an annotated image that does not exist reads no file)
+        return list(dict.fromkeys(f[0] for i in range(len(ds)) if (f := ds.item_files(i))))
     root = getattr(ds, "root", None)
     if root is not None and (Path(root) / "store.json").exists():
         return [Path(root) / "store.json"]

@@ -100,16 +100,28 @@ def segmentation_pixels(
     return rle_pixels(counts, owner, len(segs), (h, w))
 
 
-def _class_names(classes: np.ndarray | None, dataset: Dataset) -> np.ndarray | None:
+def _class_names(classes: np.ndarray | None, dataset: Dataset, what: str,
+                 rows: np.ndarray) -> np.ndarray | None:  # fmt: skip
     """Class names of the rows: COCO category ids named by the dataset's categories (a
-    ``coco:`` dataset); on other datasets, ids that are all 1 (what ``--export-coco`` writes
-    for class-agnostic detectors) mean class-agnostic."""
+    ``coco:`` dataset; an id it does not list is refused); on other datasets, ids that are
+    all 1 (what ``--export-coco`` writes for class-agnostic detectors) mean class-agnostic.
+
+    Raises:
+        EvalError: a row's category id is not one of the dataset's (naming the entry).
+    """
     if classes is None:
         return None
     known = getattr(dataset, "categories", None)
     if known:
-        return np.array([known.get(int(c), c) if str(c).lstrip("-").isdigit() else c
-                         for c in classes.tolist()], dtype=object)  # fmt: skip
+        ids = {str(k): v for k, v in known.items()}
+        bad = [k for k, c in enumerate(classes.tolist()) if c not in ids]
+        if bad:
+            k = int(rows[bad[0]]) if rows.size else bad[0]
+            listed = ", ".join(f"{i} ({n})" for i, n in sorted(known.items()))
+            raise EvalError(f"{what}: entry {k} has category_id {classes[bad[0]]}, which the "
+                            f"dataset does not list (its categories: {listed}); "
+                            f"{len(bad)} entries have unknown ids")  # fmt: skip
+        return np.array([ids[c] for c in classes.tolist()], dtype=object)
     return None if set(classes.tolist()) <= {"1"} else classes
 
 
@@ -151,7 +163,8 @@ class SavedPredictions:
             items = locate(self.table.refs, dataset_keys(dataset), what)
         order = np.argsort(items, kind="stable")
         bound._item_rows = (items[order], order)
-        bound._classes = _class_names(getattr(self.table, "classes", None), dataset)
+        bound._classes = _class_names(getattr(self.table, "classes", None), dataset, what,
+                                      np.arange(len(items)))  # fmt: skip
         return bound
 
     def __getstate__(self) -> dict:
@@ -182,12 +195,15 @@ class SavedPredictions:
         names = getattr(self, "_classes", None)
         classes = None if names is None else names[r]
         common = {"plane": plane, "planes": b * c, "classes": classes}
+        area = None if t.declared_area is None else t.declared_area[r]
         if t.geometry == "mask":
             owner, pixels = segmentation_pixels([t.segmentation[i] for i in r], h, w,
                                                 r.tolist(), self.path)  # fmt: skip
-            return Objects.from_pixels(owner, pixels, t.score[r], shape=(h, w), **common)
+            obj = Objects.from_pixels(owner, pixels, t.score[r], shape=(h, w), **common)
+            return obj.with_declared_area(area)
         if t.geometry == "box":
-            return Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)
+            obj = Objects.from_boxes(t.box[r], t.score[r], shape=(h, w), **common)
+            return obj.with_declared_area(area)
         length = None if t.length_m is None else t.length_m[r]
         offset = getattr(self, "_point_offset", None)
         point = t.point[r] if offset is None else t.point[r] - offset[r]

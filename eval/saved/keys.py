@@ -15,6 +15,7 @@ from pathlib import PurePath
 import numpy as np
 from torch.utils.data import Dataset
 
+from torchsar_eval.batches import as_dict
 from torchsar_eval.errors import EvalError
 
 __all__ = ["dataset_keys", "locate"]
@@ -28,7 +29,7 @@ def dataset_keys(dataset: Dataset) -> list[dict]:
         return [key(i) for i in range(len(dataset))]
     out = []
     for i in range(len(dataset)):
-        meta = dataset[i]["meta"]
+        meta = as_dict(dataset[i])["meta"]
         out.append({k: meta[k] for k in ("name", "path", "image_id") if meta.get(k) is not None})
     return out
 

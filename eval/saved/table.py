@@ -43,6 +43,9 @@ class PredictionTable:
         point: float64 ``(N, 2)`` (row, col) for points, else ``None``.
         classes: ``(N,)`` object array of class names, or ``None``.
         length_m: float64 ``(N,)`` lengths in metres (NaN unknown), or ``None``.
+        declared_area: float64 ``(N,)`` the areas pycocotools reads for COCO's area ranges
+            (a results file whose first entry has a ``bbox``: ``w * h`` of every entry's,
+            even for masks; NaN: the object's own area), or ``None``.
     """
 
     path: Path
@@ -54,6 +57,7 @@ class PredictionTable:
     point: np.ndarray | None = None
     classes: np.ndarray | None = None
     length_m: np.ndarray | None = None
+    declared_area: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.score.size)
@@ -90,6 +94,39 @@ def _coco_row(row: object, k: int, path: Path) -> tuple:
     return ref, score, box, seg, row.get("category_id")
 
 
+def _plain_box_rows(data: list, path: Path) -> PredictionTable | None:
+    """The table of a results list whose every entry is ``{"image_id": int, "bbox": [4
+    finite numbers, w, h >= 0], "score": number, "category_id"?: int}`` without
+    segmentation (the checks of :func:`_coco_row`, made at once), else ``None``: the
+    entry-by-entry path then names the first problem."""
+    if not all(type(r) is dict for r in data) or any("segmentation" in r for r in data):
+        return None
+    try:
+        refs = [r["image_id"] for r in data]
+        score = np.array([r["score"] for r in data], dtype=np.float64)
+        box = np.array([r["bbox"] for r in data], dtype=np.float64).reshape(len(data), 4)
+    except (KeyError, TypeError, ValueError):
+        return None
+    cats = [r.get("category_id") for r in data]
+    if not all(type(v) is int for v in refs) or not all(type(r["score"]) in (int, float)
+                                                          for r in data):  # fmt: skip
+        return None
+    if not all(type(r["bbox"]) is list and len(r["bbox"]) == 4 for r in data):
+        return None
+    if not np.isfinite(box).all() or (box[:, 2:] < 0).any() or np.isnan(score).any():
+        return None
+    n = len(data)
+    x, y, w, h = box.T
+    rc = np.stack([y, x, y + h, x + w], axis=1).reshape(n, 4)
+    return PredictionTable(
+        path=path, refs=np.array(refs, dtype=object).reshape(n), score=score.reshape(n),
+        geometry="box", box=rc,
+        classes=None if all(c is None for c in cats) else np.array(
+            [str(c) for c in cats], dtype=object),
+        declared_area=w * h if n else None,
+    )  # fmt: skip
+
+
 def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTable:
     """Read a COCO results file (see the module docstring).
 
@@ -109,6 +146,9 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
                     "detections as a results list [{image_id, bbox, score}, ...]")  # fmt: skip
     if not isinstance(data, list):
         raise _fail(path, "is not a COCO results list [{image_id, bbox|segmentation, score}]")
+    fast = _plain_box_rows(data, path) if iou_type != "segm" else None
+    if fast is not None:  # every entry a plain valid box: checked all at once
+        return fast
     rows = [_coco_row(r, k, path) for k, r in enumerate(data)]
     has_seg = all(r[3] is not None for r in rows) and bool(rows)
     has_box = all(r[2] is not None for r in rows)
@@ -121,6 +161,9 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
     box = np.array([r[2] if r[2] is not None else (np.nan,) * 4 for r in rows],
                    dtype=np.float64).reshape(n, 4)  # fmt: skip
     cats = [r[4] for r in rows]
+    area = None
+    if rows and rows[0][2] is not None:  # pycocotools' loadRes: the bbox branch, w * h
+        area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
     return PredictionTable(
         path=path, refs=np.array([r[0] for r in rows], dtype=object).reshape(n),
         score=np.array([r[1] for r in rows], dtype=np.float64).reshape(n),
@@ -128,6 +171,7 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
         segmentation=[r[3] for r in rows] if iou_type == "segm" else None,
         classes=None if all(c is None for c in cats) else np.array(
             [str(c) for c in cats], dtype=object),
+        declared_area=area,
     )  # fmt: skip
 
 

@@ -65,10 +65,18 @@ def test_coco_fully_segmented_image_is_mask_gt(tmp_path):
 
 
 def test_coco_images_option_and_missing_image(tmp_path):
+    """An annotation file scores without its images (saved predictions read none); an item
+    whose pixels are read fails naming the missing file."""
+    from torchsar_eval.datasets.base import BadItemError
+
     (tmp_path / "imgs").mkdir()
     path = write_coco(tmp_path)
-    with pytest.raises(EvalError, match=r"coco annotations refer to missing image .*a.png"):
-        make_dataset(f"coco:{path}")
+    ds = _quiet(f"coco:{path}")
+    assert ds.options["missing_images"] == 1 and ds.manifest()["files"] == 1  # the JSON
+    with pytest.raises(BadItemError, match=r"a.png: does not exist"):
+        ds[0]
+    t = ds.truth(0)
+    assert t["image"].shape[-2:] == (H, W) and len(t["targets"]) == 4
     write_png(tmp_path / "imgs" / "a.png", np.zeros((H, W), np.uint8))
     assert len(_quiet(f"coco:{path}?images={tmp_path / 'imgs'}")) == 1
 
@@ -120,9 +128,13 @@ def test_image_annotated_twice(tmp_path):
 
 
 def test_voc_missing_image_and_no_xml(tmp_path):
+    from torchsar_eval.datasets.base import BadItemError
+
     (tmp_path / "x.xml").write_text(voc_xml("gone.jpg", (20, 30), []))
-    with pytest.raises(EvalError, match=r"voc annotations refer to missing image .*gone.jpg"):
-        make_dataset(f"voc:{tmp_path}")
+    ds = make_dataset(f"voc:{tmp_path}")  # the annotations alone: saved predictions score
+    assert ds.truth(0)["image"].shape[-2:] == (20, 30)
+    with pytest.raises(BadItemError, match=r"gone.jpg: does not exist"):
+        ds[0]
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(EvalError, match="no VOC"):

@@ -212,6 +212,13 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--iou", type=float, default=0.5, help="IoU threshold of --match mask|box")
     g.add_argument(
+        "--class-agnostic",
+        action="store_true",
+        help="match every detection to every target whatever their classes (default: "
+        "detections that carry classes match targets of their class, AP the mean over "
+        "classes, as COCO)",
+    )
+    g.add_argument(
         "--max-distance",
         default=None,
         metavar="D",

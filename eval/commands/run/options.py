@@ -106,14 +106,18 @@ def _matching(args: argparse.Namespace) -> Matching:
     if args.match != "distance":
         if args.max_distance is not None:
             raise EvalError("--max-distance applies to --match distance only")
-        return Matching(kind=args.match, iou=args.iou)
+        return Matching(kind=args.match, iou=args.iou, classes=_classes(args))
     if args.max_distance is None:
         raise EvalError("--match distance needs --max-distance (e.g. 200m or 20px)")
     from torchsar.metrics.distance import parse_distance
 
     value, units = parse_distance(args.max_distance)
     return Matching(kind="distance", max_distance=value, distance_units=units,
-                    assign=args.assign)  # fmt: skip
+                    assign=args.assign, classes=_classes(args))  # fmt: skip
+
+
+def _classes(args: argparse.Namespace) -> str:
+    return "agnostic" if getattr(args, "class_agnostic", False) else "auto"
 
 
 def scoring_from(args: argparse.Namespace) -> Scoring:
