@@ -5,6 +5,9 @@ The public API (imported lazily, so the command line starts fast):
 
 - :func:`evaluate`: datasets x detectors -> :class:`Results` (tables as DataFrames; a run
   folder with ``out=``).
+- :class:`Evaluator`: the same scoring batch by batch from a training loop
+  (``update(predictions, targets)``, ``compute()``, ``+``, ``state_dict()``); typed
+  dataset items :class:`Item`, :class:`Targets`, :class:`ImageMeta`.
 - :class:`Detector`, :func:`load` (built-in names, entry points, ``module:name`` import
   paths), :func:`predictions` (saved COCO results, point CSV, mask folders).
 - :class:`Scoring`, :class:`Execution`, :class:`Calibration`; :class:`EvalError`.
@@ -21,12 +24,16 @@ __all__ = [
     "Calibration",
     "Detector",
     "EvalError",
+    "Evaluator",
     "Execution",
+    "ImageMeta",
+    "Item",
     "Matching",
     "ObjectRules",
     "Objects",
     "Results",
     "Scoring",
+    "Targets",
     "evaluate",
     "load",
     "predictions",
@@ -37,12 +44,16 @@ _HOMES = {
     "Calibration": "torchsar_eval.settings",
     "Detector": "torchsar_eval.detector",
     "EvalError": "torchsar_eval.errors",
+    "Evaluator": "torchsar_eval.result",
     "Execution": "torchsar_eval.settings",
+    "ImageMeta": "torchsar_eval.items",
+    "Item": "torchsar_eval.items",
     "Matching": "torchsar.metrics",
     "ObjectRules": "torchsar.objects",
     "Objects": "torchsar.objects",
     "Results": "torchsar_eval.api",
     "Scoring": "torchsar_eval.result",
+    "Targets": "torchsar_eval.items",
     "evaluate": "torchsar_eval.api",
     "load": "torchsar_eval.registry",
     "predictions": "torchsar_eval.saved",

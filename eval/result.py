@@ -6,7 +6,8 @@ own instances), is matched one-to-one and added to the states."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -23,6 +24,7 @@ from torchsar.metrics import (
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
 from torchsar.metrics.error_types import false_alarm_types
+from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
 from torchsar.objects.discriminate import own_regions
 from torchsar_eval.detector import Detector
@@ -33,8 +35,10 @@ from torchsar_eval.scoring import BOOTSTRAP_UNITS, image_rows, pixel_areas
 __all__ = [
     "DEFAULT_MATCH",
     "DEFAULT_RULES",
+    "STATE_FORMAT",
     "DetectorName",
     "DetectorResult",
+    "Evaluator",
     "Scoring",
     "object_pixels",
     "pixel_view",
@@ -46,6 +50,8 @@ DEFAULT_RULES = ObjectRules(closing=2, min_area=5)
 fragments, and no object smaller than 5 px."""
 DEFAULT_MATCH = Matching(kind="centroid")
 """The harness's matching default: the prescreening rule (see the README)."""
+STATE_FORMAT = "torchsar-evaluator"
+"""The ``format`` of :meth:`Evaluator.state_dict`."""
 
 
 @dataclass(frozen=True)
@@ -117,17 +123,37 @@ class DetectorName:
 
 
 @dataclass
-class DetectorResult:
-    """Everything measured for one detector on one dataset.
+class Evaluator:
+    """Everything measured for one detector on one dataset, and the incremental evaluator a
+    training loop calls: :meth:`update` with each batch's predictions and targets,
+    :meth:`compute` for the tables (those of :func:`~torchsar_eval.evaluate`), ``+`` (or
+    :meth:`merge`) for states of disjoint images (other processes, other splits, in any
+    order), :meth:`state_dict` / :meth:`load_state_dict` to save and restore it as data.
+    :func:`~torchsar_eval.evaluate` drives one per dataset and detector.
 
     ``calibrated`` says whether the operating point was chosen on a calibration split, at
     the score ``chosen`` (detections scoring above it count; ``None``: every detection);
     otherwise it is the objects' design point (:attr:`ObjectState.design_threshold`).
     ``pixel_level`` says whether pixel metrics were measured (not for boxes or points).
     ``gallery`` holds the detector's worst cases (:class:`~torchsar_eval.gallery.Gallery`).
+
+    Args:
+        detector: the row's name (or the harness's :class:`~torchsar_eval.Detector`).
+        scoring: matching, discrimination and bootstrap (default :class:`Scoring`).
+
+    Example:
+        >>> import torch
+        >>> ev = Evaluator("cnn", Scoring(replicates=0))
+        >>> targets = [{"boxes": torch.tensor([[2.0, 2, 10, 10]]), "image_id": 0}]
+        >>> preds = [{"boxes": torch.tensor([[2.0, 2, 10, 10], [20, 20, 30, 30]]),
+        ...           "scores": torch.tensor([0.9, 0.3])}]
+        >>> ev.update(preds, targets)
+        >>> s = ev.compute().summary.iloc[0]
+        >>> int(s.tp), int(s.fp), round(float(s.ap50), 6)
+        (1, 1, 1.0)
     """
 
-    detector: Detector | DetectorName
+    detector: Detector | DetectorName | str = "detector"
     scoring: Scoring = field(default_factory=Scoring)
     pixels: PixelCounts = field(default_factory=PixelCounts)
     roc: RocAccumulator = field(default_factory=RocAccumulator)
@@ -144,8 +170,15 @@ class DetectorResult:
     coco: CocoState | None = None
     coco_iou_type: str | None = None
     gallery: Gallery | None = None
+    row_order: list = field(default_factory=list)
+    """The order key of each per-image row added by :meth:`update` (rows are reported in
+    image order, whatever order the batches came in)."""
 
     def __post_init__(self) -> None:
+        if isinstance(self.detector, str):
+            self.detector = DetectorName(self.detector)
+        if not isinstance(self.scoring, Scoring):
+            raise EvalError(f"{{opt:scoring}}{self.scoring!r}: expected a torchsar_eval.Scoring")
         self.objects = ObjectState(replicates=self.scoring.replicates, seed=self.scoring.seed)
         if self.gallery is None:
             self.gallery = Gallery()
@@ -176,6 +209,126 @@ class DetectorResult:
         point."""
         self.calibrated, self.chosen = True, threshold
 
+    # -- the incremental evaluator ---------------------------------------------------------
+
+    def update(
+        self,
+        predictions,
+        targets,
+        *,
+        images=None,
+        box_format: str = "xyxy",
+        categories: Mapping | None = None,
+        threshold: float | None = None,
+        mask_threshold: float = 0.5,
+    ) -> None:
+        """Add a batch: one prediction and one target per image (see
+        :mod:`torchsar_eval.inputs` for what they may be: torchvision-style dicts of tensors
+        or arrays, typed :class:`~torchsar_eval.items.Item` / ``Targets``).
+
+        Args:
+            predictions: per image ``{"boxes", "scores", "labels"?, "masks"?}`` (or
+                ``"points"``); without labels, class-agnostic.
+            targets: per image ``{"boxes", "labels"?, "masks"?, "iscrowd"?, "area"?,
+                "image_id"?}``, or an ``Item`` / ``Targets``. ``image_id`` orders the images
+                (ties in score, as pycocotools ranks them): give it when batches may come in
+                any order or from several processes; by default the order they are added.
+            images: the batch's intensity images ``(B, C, H, W)`` or ``(B, H, W)``
+                (optional): the targets' signal-to-clutter ratios are measured on them.
+            box_format: ``"xyxy"`` (torchvision), ``"xywh"`` (COCO) or ``"rc"``.
+            categories: ``{label: name}`` for integer labels (default: the numbers).
+            threshold: the operating threshold of the scores (``None``: every prediction
+                counts at the operating point).
+            mask_threshold: where probability masks are cut.
+
+        Raises:
+            EvalError: not one prediction per target, a malformed box, mask or label.
+        """
+        from torchsar_eval.inputs import objects_from, truth_from
+
+        predictions, targets = list(predictions), list(targets)
+        if len(predictions) != len(targets):
+            raise EvalError(f"{len(predictions)} predictions for {len(targets)} targets: give "
+                            "one per image")  # fmt: skip
+        first = self.images
+        opts = {"box_format": box_format, "categories": categories,
+                "mask_threshold": mask_threshold}
+        truths = [truth_from(t, first + k, **opts) for k, t in enumerate(targets)]
+        groups: dict[tuple[int, int], list[int]] = {}
+        for k, (_, meta) in enumerate(truths):
+            groups.setdefault(tuple(meta.shape), []).append(k)
+        for shape, ks in groups.items():
+            obj = objects_from([predictions[k] for k in ks], shape, threshold=threshold, **opts)
+            self._update_group([truths[k] for k in ks], obj, shape, _planes(images, ks))
+        self.images += len(targets)
+
+    def _update_group(self, truths: list, obj: Objects, shape, image) -> None:
+        """Add the images of one size (``image``: their ``(N, H, W)`` pixels, or ``None``)."""
+        from torchsar_eval.scoring import image_infos, truth_from_targets
+
+        metas = [m.as_meta() for _, m in truths]
+        spacing = np.array([m["pixel_spacing"] or (np.nan, np.nan) for m in metas], np.float64)
+        gt = truth_from_targets([t for t, _ in truths], shape, spacing=spacing.reshape(-1, 2))
+        if image is not None and len(gt):
+            gt = replace(gt, scr_db=target_scr_db(image, gt.ids, gt.ignore, gt.box, gt.plane))
+        info = image_infos(metas, self.detector.name, 1, shape, self.scoring.bootstrap_unit)
+        self.add_objects(obj, gt, info)
+        self.row_order += [int(m.index) for _, m in truths]
+
+    def compute(self, dataset: str = "dataset"):
+        """Every table of :func:`~torchsar_eval.evaluate` for what was added, as
+        :class:`~torchsar_eval.Results` (no run folder; per-image rows in image order)."""
+        import pandas as pd
+
+        from torchsar_eval.api import Results
+        from torchsar_eval.report import result_tables
+        from torchsar_eval.tables import PER_IMAGE_COLUMNS
+
+        tables = result_tables({dataset: [self]})
+        rows = self.rows
+        if len(self.row_order) == len(rows):
+            rows = [rows[k] for k in np.argsort(np.array(self.row_order), kind="stable")]
+        per_image = pd.DataFrame([[dataset, self.detector.name, *r] for r in rows],
+                                 columns=PER_IMAGE_COLUMNS)  # fmt: skip
+        stats = {dataset: {"images": self.images, "scored": self.images}}
+        return Results(**tables, per_image=per_image, states={dataset: [self]}, stats=stats)
+
+    def merge(self, other: Evaluator) -> Evaluator:
+        """``self + other``: the state of both sets of images (disjoint)."""
+        return self + other
+
+    def reset(self) -> None:
+        """Forget every image added."""
+        fresh = Evaluator(DetectorName(self.detector.name, self.detector.instances),
+                          self.scoring, default_class=self.default_class)  # fmt: skip
+        self.__dict__.update(fresh.__dict__)
+
+    def state_dict(self) -> dict:
+        """The state as data only (plain values and numpy arrays, no pickled object):
+        ``{"format", "version", "tree", "arrays"}``; :meth:`load_state_dict` reads it
+        back (only the harness's own state classes are rebuilt)."""
+        from torchsar_eval import shard_states, statefile  # noqa: F401  (registers the states)
+
+        tree, arrays = statefile.encode(self)
+        return {"format": STATE_FORMAT, "version": 1, "tree": tree, "arrays": arrays}
+
+    def load_state_dict(self, state: Mapping) -> None:
+        """Restore a :meth:`state_dict` (replacing this evaluator's state).
+
+        Raises:
+            EvalError: not a state dict of an evaluator.
+        """
+        from torchsar_eval import shard_states, statefile  # noqa: F401  (registers the states)
+
+        if not isinstance(state, Mapping) or state.get("format") != STATE_FORMAT:
+            raise EvalError("{opt:state} is not an Evaluator.state_dict()")
+        other = statefile.decode(state["tree"], list(state["arrays"]), "evaluator state")
+        if not isinstance(other, Evaluator):
+            raise EvalError("{opt:state} does not hold an evaluator")
+        self.__dict__.update(other.__dict__)
+
+    # -- the harness's batches --------------------------------------------------------------
+
     def add(self, out: Detection | Objects, batch: dict, truth) -> Objects:
         """Accumulate one batch's detector output (on the CPU; ``truth``:
         :func:`torchsar_eval.scoring.batch_truth`); returns the batch's objects."""
@@ -188,17 +341,24 @@ class DetectorResult:
             self.pixel_level = True
         t0 = time.perf_counter()
         obj = self.objects_of(out, batch)
-        gt, info = truth
+        self.object_seconds += time.perf_counter() - t0
+        self.add_objects(obj, *truth, image=batch.get("image"))
+        return obj
+
+    def add_objects(self, obj: Objects, gt, info, *, image=None) -> None:
+        """Accumulate scored objects against their ground truth (one entry of ``info`` per
+        plane): the object-level states, the per-image rows, the worst cases (with the
+        planes' ``image``, when there is one to crop) and the COCO state."""
+        t0 = time.perf_counter()
         m = match_batch(obj, gt, self.scoring.matching)
         types = false_alarm_types(m, obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info, fa_types=types)
         self.rows += image_rows(m, obj, gt, info)
-        if self.gallery is not None:
-            self.gallery.add(obj, gt, info, m, batch.get("image"))
+        if self.gallery is not None and image is not None:
+            self.gallery.add(obj, gt, info, m, image)
         if self.coco is not None:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0
-        return obj
 
     def _add_coco(self, obj: Objects, gt, info) -> None:
         """COCO's own evaluation of the batch: segm IoU for objects with masks (unless the
@@ -213,11 +373,11 @@ class DetectorResult:
         orders = [p if i.order is None else i.order for p, i in enumerate(info)]
         self.coco.update(coco_images(obj, gt, orders, iou_type, self.default_class))
 
-    def __add__(self, other: DetectorResult) -> DetectorResult:
+    def __add__(self, other: Evaluator) -> Evaluator:
         """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
         if self.detector.name != other.detector.name or self.scoring != other.scoring:
             raise ValueError("cannot add results of different detectors or scoring settings")
-        out = DetectorResult(self.detector, self.scoring, self.pixels + other.pixels,
+        out = Evaluator(self.detector, self.scoring, self.pixels + other.pixels,
                              self.roc + other.roc, calibrated=self.calibrated,
                              chosen=self.chosen, default_class=self.default_class)  # fmt: skip
         if self.coco is not None:
@@ -228,6 +388,8 @@ class DetectorResult:
         out.object_seconds = self.object_seconds + other.object_seconds
         out.images = self.images + other.images
         out.rows = self.rows + other.rows
+        aligned = all(len(r.row_order) == len(r.rows) for r in (self, other))
+        out.row_order = self.row_order + other.row_order if aligned else []
         out.skipped = self.skipped + other.skipped
         out.pixel_level = self.pixel_level or other.pixel_level
         if self.gallery is not None and other.gallery is not None:
@@ -334,3 +496,18 @@ def _column_rows(rows: dict | list) -> list:
     counts = rows["counts"].tolist()
     return [(k, *c, s) for k, c, s in zip(rows["image"], counts, rows["max_score"].tolist(),
                                           strict=True)]  # fmt: skip
+
+
+DetectorResult = Evaluator
+"""The harness's name of :class:`Evaluator` (one detector on one dataset)."""
+
+
+def _planes(images, ks: list[int]):
+    """Images ``ks`` of a batch as ``(N, H, W)`` float64 planes (first channel), or ``None``."""
+    if images is None:
+        return None
+    x = images.detach().cpu().numpy() if hasattr(images, "detach") else np.asarray(images)
+    x = x[:, 0] if x.ndim == 4 else x
+    if x.ndim != 3:
+        raise EvalError(f"{{opt:images}} must be (B, C, H, W) or (B, H, W), got shape {x.shape}")
+    return x[ks].astype(np.float64)

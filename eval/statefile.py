@@ -35,7 +35,9 @@ __all__ = [
     "FORMAT",
     "VERSION",
     "CorruptStateError",
+    "decode",
     "dumps",
+    "encode",
     "loads",
     "pack",
     "register",
@@ -275,6 +277,25 @@ def _as_descr(descr: Any) -> Any:
         return descr
     return [(f[0], _as_descr(f[1])) if len(f) == 2 else (f[0], _as_descr(f[1]), tuple(f[2]))
             for f in descr]  # fmt: skip
+
+
+def encode(obj: Any) -> tuple[Any, list[np.ndarray]]:
+    """``(structure, arrays)`` of ``obj``: plain JSON values and numpy arrays, what a state
+    file holds before it is packed (an in-memory state, e.g. a ``state_dict``)."""
+    enc = _Encoder()
+    return enc(obj), enc.arrays
+
+
+def decode(tree: Any, arrays: list[np.ndarray], what: str = "state") -> Any:
+    """The object of :func:`encode`'s ``(structure, arrays)``, rebuilt from the allow-list
+    only; :class:`CorruptStateError` (naming ``what``) for anything else."""
+    try:
+        checked = [np.asarray(a) for a in arrays]
+        if any(a.dtype.hasobject for a in checked):
+            raise ValueError("object arrays are not data")
+        return _decode(tree, checked)
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise CorruptStateError(f"{what} holds an unexpected structure ({exc})") from None
 
 
 def dumps(obj: Any) -> bytes:
