@@ -29,18 +29,25 @@ _TERMS = [
     ("false_alarms_per_image, fa_per_km2", "fp per image; fp per km² of scored image area "
      "(only when every image has a pixel spacing)"),
     ("ap50, ap50_95", "COCO average precision (101-point) at mask IoU 0.5 (box IoU for "
-     "box-only ground truth or --match box), and averaged over IoU 0.50:0.05:0.95; "
-     "class-agnostic (pycocotools useCats=0), no per-image detection cap"),
-    ("pd_at_F_fa_per_image", "FROC read at F false alarms per image: best recall with at "
-     "most F false alarms per image, objects ranked by score"),
-    ("pauc", "mean recall over 0-1 false alarms per image (area under the FROC, normalised)"),
+     "box targets, boxes or --match box), and averaged over IoU 0.50:0.05:0.95; exact "
+     "(pycocotools' ranking, no per-image detection cap)"),
+    ("ap_small, ap_medium, ap_large", "ap50_95 in COCO's area ranges (targets outside the "
+     "range ignored, as pycocotools)"),
+    ("classes", "per-class: detections matched within their class, AP the mean over the "
+     "classes with targets (COCO); agnostic: every class pooled"),
+    ("pd_at_F_fa_per_image", "FROC read at F false alarms per image as a step function (no "
+     "interpolation): the recall of the lowest score level with at most F false alarms per "
+     "image, objects ranked by score"),
+    ("pauc", "mean recall over 0-1 false alarms per image (area under that step function, "
+     "normalised)"),
     ("X_lo, X_hi", "95 % interval over images, from a Poisson bootstrap that resamples whole "
      "images (the targets of one image stay together): for precision, recall, f1, fom, "
      "ap50, pd_at_F_fa_per_image and pauc, Jeffreys' interval on the effective count (the "
      "count divided by the design effect the bootstrap's variance shows, times Korn & "
      "Graubard's (t_{n-1}/t_{images-1})², n the count, for few images; Clopper-Pearson's "
      "bound at 0 and at 1, so never zero width), f1, ap50, pd_at_F and pauc centred on the "
-     "bootstrap's bias-corrected point; for false_alarms_per_image, Jeffreys' Poisson "
+     "bootstrap's bias-corrected point (an interval always holds its point); for "
+     "false_alarms_per_image, Jeffreys' Poisson "
      "interval on the effective number of images (Garwood's exact upper bound at zero false "
      "alarms; fa_per_km2: the same per km²). No interval: ap50_95 (not resampled), pixel "
      "pd/pfa, mean_iou, fragmentation, length_score (descriptive). Coverage measured on "

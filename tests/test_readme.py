@@ -1,4 +1,5 @@
-"""The README's examples of "Evaluate your own detector" and "Score saved predictions" run
+"""The README's examples of "Evaluate your own detector", "Score saved predictions" and "Use
+it in a training loop" run
 as written (in a temporary folder): files it shows are written, Python blocks executed,
 ``torchsar-eval`` lines run; a block marked ``<!-- example: ... -->`` is only shown."""
 
@@ -14,7 +15,8 @@ from pathlib import Path
 import pytest
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-SECTIONS = ("## Evaluate your own detector", "## Score saved predictions")
+SECTIONS = ("## Evaluate your own detector", "## Score saved predictions",
+            "## Use it in a training loop")
 BLOCK = re.compile(r"(<!-- example:[^>]*-->\n)?```(\w+)\n(.*?)```", re.DOTALL)
 
 
