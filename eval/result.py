@@ -342,7 +342,8 @@ class Evaluator:
         t0 = time.perf_counter()
         obj = self.objects_of(out, batch)
         self.object_seconds += time.perf_counter() - t0
-        self.add_objects(obj, *truth, image=batch.get("image"))
+        # images not read (saved predictions): no picture to crop
+        self.add_objects(obj, *truth, image=None if batch.get("truth_only") else batch.get("image"))
         return obj
 
     def add_objects(self, obj: Objects, gt, info, *, image=None) -> None:

@@ -107,8 +107,8 @@ class AnnotatedDataset(FileDataset):
         shape = (int(size[0]), int(size[1]))
         segmented = [k for k, (_, _, o, _) in enumerate(objects) if o.segmented]
         try:
-            decoded = annotation_pixels([objects[k][2].ann for k in segmented], *shape) if (
-                segmented) else []  # fmt: skip
+            decoded = annotation_pixels([objects[k][2].ann for k in segmented], *shape,
+                                        checked=True) if segmented else []  # fmt: skip
         except FileFormatError as exc:
             raise FileFormatError(path, exc.problem) from None
         pixels: list = [None] * len(objects)
@@ -140,7 +140,8 @@ class AnnotatedDataset(FileDataset):
         inst = np.zeros(shape[0] * shape[1], np.int32)
         ignore = np.zeros(inst.size, bool)
         try:
-            pixels = annotation_pixels([_painted(o, box) for _, box, o, _ in objects], *shape)
+            pixels = annotation_pixels([_painted(o, box) for _, box, o, _ in objects], *shape,
+                                       checked=True)  # (read_coco checked every segmentation)
         except FileFormatError as exc:
             raise FileFormatError(path, exc.problem) from None
         targets = _targets(objects, pixels, shape)

@@ -423,8 +423,8 @@ def _plain_boxes(entries: list, categories: dict, images: dict) -> list | None:
         if not (type(x) in number and type(y) in number and type(w) in number
                 and type(h) in number):  # fmt: skip
             return None
-        if not (0 <= x and 0 <= y and 0 <= w and 0 <= h and x + w <= rec["width"] + 1e-6
-                and y + h <= rec["height"] + 1e-6 and math.isfinite(x + y + w + h)):  # fmt: skip
+        inside = x + w <= rec["width"] + 1e-6 and y + h <= rec["height"] + 1e-6
+        if not (min(x, y, w, h) >= 0 and inside and math.isfinite(x + y + w + h)):
             return None
         if area is not None and (type(area) not in number or not 0 <= area < math.inf):
             return None
@@ -528,9 +528,11 @@ def _counts(seg: object, height: int, width: int) -> bytes:
     return seg["counts"].encode()
 
 
-def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int) -> list[np.ndarray]:
+def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int, *,
+                      checked: bool = False) -> list[np.ndarray]:  # fmt: skip
     """The flat pixel indices (``row * width + col``) of each annotation's mask (its
-    filled box when unsegmented), the run lengths of all decoded at once.
+    filled box when unsegmented), the run lengths of all decoded at once (``checked``: the
+    segmentations were checked already, by :func:`read_coco`).
 
     Raises:
         FileFormatError: a segmentation :func:`segmentation_problem` refuses (path ``""``).
@@ -544,7 +546,8 @@ def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int) -> li
 
     out: list[np.ndarray] = []
     segmented = [k for k, a in enumerate(anns) if a.segmentation is not None]
-    _refuse(segmentation_problems([anns[k].segmentation for k in segmented], height, width))
+    if not checked:
+        _refuse(segmentation_problems([anns[k].segmentation for k in segmented], height, width))
     strings = [_counts(anns[k].segmentation, height, width) for k in segmented]
     counts, owner = counts_from_strings(strings)
     mask_of, flat = rle_pixels(counts, owner, len(strings), (height, width))

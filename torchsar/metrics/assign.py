@@ -109,12 +109,29 @@ def point_pixels(obj: Objects) -> np.ndarray:
     return obj.plane * (h * w) + r * w + c
 
 
+DENSE_LOOKUP = 1 << 22
+"""Pixel index range always joined through a dense lookup table; beyond it only when the
+range is at most 16 times the pixels joined (else by sorting: memory follows the pixels)."""
+
+
 def join_pixels(a_owner: np.ndarray, a_pix: np.ndarray, b_owner: np.ndarray, b_pix: np.ndarray):
     """Pixel intersections of two sets of pixel lists: ``(a, b, shared pixels)`` for every
-    pair sharing a pixel (the ``b`` lists may overlap each other)."""
+    pair sharing a pixel (the ``b`` lists may overlap each other: then by sorting, else by a
+    dense lookup of the ``b`` owners over the pixel range)."""
     if a_pix.size == 0 or b_pix.size == 0:
         z = np.zeros(0, np.int64)
         return z, z, z
+    top = int(max(a_pix.max(), b_pix.max())) + 1
+    if top <= max(DENSE_LOOKUP, 16 * (a_pix.size + b_pix.size)) and b_owner.max() < 2**31 - 2:
+        lut = np.zeros(top, np.int32)
+        lut[b_pix] = b_owner + 1
+        if np.count_nonzero(lut) == b_pix.size:  # no pixel in two b lists
+            hit = lut[a_pix]
+            n_b = int(b_owner.max()) + 1
+            sel = hit > 0
+            key = a_owner[sel].astype(np.int64) * (n_b + 1) + (hit[sel] - 1)
+            pairs, inter = np.unique(key, return_counts=True)
+            return pairs // (n_b + 1), pairs % (n_b + 1), inter.astype(np.int64)
     order = np.argsort(b_pix, kind="stable")
     bp, bo = b_pix[order], b_owner[order]
     lo = np.searchsorted(bp, a_pix, side="left")
@@ -136,8 +153,13 @@ def pixel_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray, 
     """Every ``(detection, target)`` pair sharing pixels, with the shared pixel count: objects
     with masks against targets with pixels (box targets given without pixels never share
     one)."""
-    owner, idx = obj.pixel_lists()
-    return join_pixels(owner, idx, gt.masks.owner(), gt.masks.pixels)
+    cache = gt.__dict__.setdefault("_pixel_pairs", {})
+    key = id(obj)
+    if key not in cache or cache[key][0] is not obj:  # the same objects: joined once
+        owner, idx = obj.pixel_lists()
+        cache.clear()
+        cache[key] = (obj, join_pixels(owner, idx, gt.masks.owner(), gt.masks.pixels))
+    return cache[key][1]
 
 
 def _box_cover(pixels: np.ndarray, shape: tuple[int, int], boxes: np.ndarray) -> np.ndarray:
