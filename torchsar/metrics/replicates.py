@@ -25,8 +25,10 @@ FA_LEVELS = (0.1, 1.0, 10.0)
 METRICS = ("precision", "recall", "f1", "fom", "fa_per_image",
            *(f"pd_at_{level:g}_fa_per_image" for level in FA_LEVELS), "pauc", "ap50")  # fmt: skip
 """The metrics :func:`replicate_metrics` returns."""
-BLOCK_ELEMENTS = 1 << 22
-"""Elements (replicates x detections) of one block of the replicate computation."""
+BLOCK_ELEMENTS = 1 << 18
+"""Elements (replicates x detections) of one block of the replicate computation: blocks that
+stay in the cache (2 MB per array) are measured 3.5x faster than 32 MB ones on 20,000
+detections x 200 replicates, whose arrays are touched for the first time."""
 
 
 @dataclass(frozen=True)
