@@ -21,6 +21,9 @@ from __future__ import annotations
 
 import os
 from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +31,7 @@ import numpy as np
 from torchsar.io import (
     FileFormatError,
     raster_shape,
-    read_coco,
+    read_coco_table,
     read_voc,
 )
 from torchsar.io.coco import CocoAnnotation, annotation_pixels
@@ -44,11 +47,71 @@ ANNOTATED_OPTIONS = ("images", "type", "spacing", "max_pixels", "outside")
 OUTSIDE = ("refuse", "allow")
 
 
+@dataclass(frozen=True, eq=False)
+class ObjectColumns:
+    """Every object of an annotated dataset, one row each, grouped by image: image ``i``'s
+    objects are rows ``start[i]:start[i + 1]`` (in annotation order).
+
+    Attributes:
+        start: int64 ``(N + 1,)`` row offsets per image.
+        box: float64 ``(M, 4)`` ``(r0, c0, r1, c1)``.
+        cls: object ``(M,)`` class names.
+        ignore: bool ``(M,)`` don't-care (COCO crowd, VOC difficult).
+        area: float64 ``(M,)`` declared areas (NaN: none).
+        segmentation: per row its COCO segmentation, or ``None`` (the object is its box).
+    """
+
+    start: np.ndarray
+    box: np.ndarray
+    cls: np.ndarray
+    ignore: np.ndarray
+    area: np.ndarray
+    segmentation: tuple
+
+    @cached_property
+    def names(self) -> list[str]:
+        """``cls`` as a list."""
+        return self.cls.tolist()
+
+    @cached_property
+    def any_ignore(self) -> _AnyIgnore:
+        """``any_ignore[a:b]``: whether rows ``a:b`` hold a don't-care one."""
+        return _AnyIgnore(np.concatenate([[0], np.cumsum(self.ignore, dtype=np.int64)]))
+
+    def rows(self, i: int) -> range:
+        return range(int(self.start[i]), int(self.start[i + 1]))
+
+    def annotation(self, k: int) -> CocoAnnotation:
+        """Row ``k`` as the annotation that paints it (its segmentation, else its box)."""
+        return CocoAnnotation(-1, self.cls[k], tuple(self.box[k].tolist()),
+                              self.segmentation[k], bool(self.ignore[k]))  # fmt: skip
+
+
+class _AnyIgnore:
+    """Slices of a cumulative count: ``[a:b]`` is whether the count grows in ``a:b``."""
+
+    def __init__(self, cumulative: np.ndarray) -> None:
+        self.cumulative = cumulative.tolist()
+
+    def __getitem__(self, rows: slice) -> bool:
+        return self.cumulative[rows.stop] > self.cumulative[rows.start]
+
+
+def _grouped(image: np.ndarray, n_images: int, **columns) -> ObjectColumns:
+    """:class:`ObjectColumns` from per-row image positions (rows of an image kept in order)."""
+    order = np.argsort(image, kind="stable")
+    start = np.zeros(n_images + 1, np.int64)
+    np.cumsum(np.bincount(image, minlength=n_images), out=start[1:])
+    seg = columns.pop("segmentation")
+    return ObjectColumns(start, segmentation=tuple(seg[k] for k in order.tolist()),
+                         **{k: v[order] for k, v in columns.items()})  # fmt: skip
+
+
 class AnnotatedDataset(FileDataset):
-    """Images with their objects: entries ``(image path, (H, W), objects, name)``, objects
-    ``(class, box, painter, ignore)``; built by :func:`coco_dataset` / :func:`voc_dataset`.
-    Every image is annotated once (a second annotation would count it twice); an image file
-    need exist only when its pixels are read.
+    """Images with their objects: entries ``(image path, (H, W) or None, name)`` and the
+    objects of all of them as :class:`ObjectColumns`; built by :func:`coco_dataset` /
+    :func:`voc_dataset`. Every image is annotated once (a second annotation would count it
+    twice); an image file need exist only when its pixels are read.
     """
 
     def _sample(self) -> list[dict]:
@@ -56,13 +119,15 @@ class AnnotatedDataset(FileDataset):
         check for split or merged objects (and reading images for it would cost reads)."""
         return []
 
-    def __init__(self, scheme: str, root: Path, entries: list, annotation_files: list, *,
-                 image_ids: list[int] | None = None, **kw):  # fmt: skip
+    def __init__(self, scheme: str, root: Path, entries: list, objects: ObjectColumns,
+                 annotation_files: list, *, image_ids: list[int] | None = None,
+                 **kw):  # fmt: skip
         self.scheme = scheme
         super().__init__(root, **kw)
         self.items = entries
+        self.objects = objects
         self.image_ids = image_ids
-        self.missing = {str(e[0]) for e in entries if not _is_file(e[0])}
+        self.missing = {e[0] for e in entries if not os.path.isfile(e[0])}
         self.options["missing_images"] = len(self.missing)
         twice = [path for path, k in Counter(e[0] for e in entries).items() if k > 1]
         if twice:
@@ -71,10 +136,10 @@ class AnnotatedDataset(FileDataset):
 
     def item_files(self, i: int) -> list[Path]:
         path = self.items[i][0]
-        return [] if str(path) in self.missing else [path]
+        return [] if path in self.missing else [Path(path)]
 
     def item_key(self, i: int) -> dict:
-        key = {"name": self.items[i][3], "path": str(self.items[i][0])}
+        key = {"name": self.items[i][2], "path": self.items[i][0]}
         if self.image_ids is not None:
             key["image_id"] = self.image_ids[i]
         return key
@@ -98,23 +163,29 @@ class AnnotatedDataset(FileDataset):
         """
         return self._checked(self._truth_targets, i)
 
-    def _truth_targets(self, i: int) -> tuple[Targets, tuple[int, int], dict]:
-        path, size, objects, name = self.items[i]
+    def _size(self, i: int) -> tuple[int, int]:
+        path, size, _ = self.items[i]
         if size is None:
-            if str(path) in self.missing:
+            if path in self.missing:
                 raise FileFormatError(path, "does not exist and no annotation gives its size")
             size = raster_shape(path)[:2]
-        shape = (int(size[0]), int(size[1]))
-        segmented = [k for k, (_, _, o, _) in enumerate(objects) if o.segmented]
-        try:
-            decoded = annotation_pixels([objects[k][2].ann for k in segmented], *shape,
-                                        checked=True) if segmented else []  # fmt: skip
-        except FileFormatError as exc:
-            raise FileFormatError(path, exc.problem) from None
-        pixels: list = [None] * len(objects)
-        for k, pix in zip(segmented, decoded, strict=True):
-            pixels[k] = pix
-        targets = _targets(objects, pixels, shape)
+        return int(size[0]), int(size[1])
+
+    def _truth_targets(self, i: int) -> tuple[Targets, tuple[int, int], dict]:
+        path, _, name = self.items[i]
+        shape = self._size(i)
+        rows = self.objects.rows(i)
+        segmented = [k for k in rows if self.objects.segmentation[k] is not None]
+        pixels: list = [None] * len(rows)
+        if segmented:
+            try:
+                decoded = annotation_pixels([self.objects.annotation(k) for k in segmented],
+                                            *shape, checked=True)  # fmt: skip
+            except FileFormatError as exc:
+                raise FileFormatError(path, exc.problem) from None
+            for k, pix in zip(segmented, decoded, strict=True):
+                pixels[k - rows.start] = pix
+        targets = _targets(self.objects, rows, pixels)
         boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
         meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
         meta["classes"] = list(targets.classes)
@@ -123,8 +194,8 @@ class AnnotatedDataset(FileDataset):
         return targets, shape, meta
 
     def load(self, i: int, images: bool = True) -> dict:
-        path, size, objects, name = self.items[i]
-        if str(path) in self.missing and (images or size is None):
+        path, size, name = self.items[i]
+        if path in self.missing and (images or size is None):
             raise FileFormatError(path, "does not exist (scoring saved predictions reads no "
                                   "image; detectors that read pixels need it)")  # fmt: skip
         shape = tuple(size) if size is not None and not images else raster_shape(path)[:2]
@@ -133,20 +204,22 @@ class AnnotatedDataset(FileDataset):
                 path, f"is {shape[1]}x{shape[0]} but its annotation says {size[1]}x{size[0]}"
             )
         if images:
-            samples = self.intensity(read_samples(path, self.sample_type,
-                                                  max_pixels=self.max_pixels), path)  # fmt: skip
+            raw = read_samples(Path(path), self.sample_type, max_pixels=self.max_pixels)
+            samples = self.intensity(raw, Path(path))
         else:
             samples = np.zeros(shape, np.float32)
         inst = np.zeros(shape[0] * shape[1], np.int32)
         ignore = np.zeros(inst.size, bool)
+        rows = self.objects.rows(i)
         try:
-            pixels = annotation_pixels([_painted(o, box) for _, box, o, _ in objects], *shape,
+            pixels = annotation_pixels([self.objects.annotation(k) for k in rows], *shape,
                                        checked=True)  # (read_coco checked every segmentation)
         except FileFormatError as exc:
             raise FileFormatError(path, exc.problem) from None
-        targets = _targets(objects, pixels, shape)
+        targets = _targets(self.objects, rows, pixels)
         k = 0
-        for (_, _, _, is_ignore), pix in zip(objects, pixels, strict=True):
+        for is_ignore, pix in zip(self.objects.ignore[rows.start : rows.stop].tolist(), pixels,
+                                  strict=True):  # fmt: skip
             if is_ignore:
                 ignore[pix] = True
             else:
@@ -154,7 +227,7 @@ class AnnotatedDataset(FileDataset):
                 inst[pix] = k  # painted in order (pictures and pixel metrics only)
         inst, ignore = inst.reshape(shape), ignore.reshape(shape)
         boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
-        meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
+        meta = self.base_meta(name, Path(path), None, gt="box" if boxes_only else "mask")
         meta["classes"] = list(targets.classes)
         meta["box_source"] = "annotation"  # box IoU uses these boxes, as pycocotools
         if np.isfinite(targets.areas).any():
@@ -166,31 +239,30 @@ class AnnotatedDataset(FileDataset):
         return item
 
 
-def _targets(objects: list, pixels: list, shape: tuple[int, int]) -> Targets:
-    """The item's ground truth as given: each annotation its own target (its segmentation's
-    pixels, or its box), don't-care ones (crowd, difficult) regions of their class."""
-    real = [(o, p) for o, p in zip(objects, pixels, strict=True) if not o[3]]
-    crowd = [(o, p) for o, p in zip(objects, pixels, strict=True) if o[3]]
-    n = len(real)
+def _targets(objects: ObjectColumns, rows: range, pixels: list) -> Targets:
+    """An item's ground truth as given: each annotation its own target (its segmentation's
+    pixels, or its box), don't-care ones (crowd, difficult) regions of their class.
+    ``pixels``: per row its decoded pixels (used for segmented rows only)."""
+    a, b = rows.start, rows.stop
+    seg, cls = objects.segmentation[a:b], objects.names[a:b]
+    if not objects.any_ignore[a:b]:  # (the common case, without an index per row)
+        n = b - a
+        return Targets(
+            objects.box[a:b], tuple(cls),
+            tuple(p if s is not None else None for p, s in zip(pixels, seg, strict=True)),
+            objects.area[a:b], np.full(n, np.nan), np.full(n, np.nan),
+        )  # fmt: skip
+    ignore = objects.ignore[a:b]
+    real, crowd = np.flatnonzero(~ignore).tolist(), np.flatnonzero(ignore).tolist()
+    box, n = objects.box[a:b], len(real)
     # checked when the annotation file was read: built as they are
     return Targets(
-        np.array([o[1] for o, _ in real], np.float64).reshape(n, 4),
-        tuple(o[0] for o, _ in real),
-        tuple(p if o[2].segmented else None for o, p in real),  # (boxes: None)
-        np.array([np.nan if o[2].area is None else o[2].area for o, _ in real], np.float64),
-        np.full(n, np.nan), np.full(n, np.nan),
-        np.array([o[1] for o, _ in crowd], np.float64).reshape(len(crowd), 4),
-        tuple(o[0] for o, _ in crowd),
-        tuple(p if o[2].segmented else None for o, p in crowd),
+        box[real], tuple(cls[k] for k in real),
+        tuple(pixels[k] if seg[k] is not None else None for k in real),
+        objects.area[a:b][real], np.full(n, np.nan), np.full(n, np.nan),
+        box[crowd], tuple(cls[k] for k in crowd),
+        tuple(pixels[k] if seg[k] is not None else None for k in crowd),
     )  # fmt: skip
-
-
-def _is_file(path: Path) -> bool:
-    """``path.is_file()``, false for a name the system refuses (too long, say)."""
-    try:
-        return path.is_file()
-    except (OSError, ValueError):
-        return False
 
 
 def _exists(path: Path) -> bool:
@@ -198,25 +270,6 @@ def _exists(path: Path) -> bool:
         return path.exists()
     except (OSError, ValueError):
         return False
-
-
-def _painted(painter: _Painter, box) -> CocoAnnotation:
-    """The annotation a painter paints (a bare box for VOC objects)."""
-    if painter.ann is not None:
-        return painter.ann
-    return CocoAnnotation(-1, "", tuple(box), None, False)
-
-
-class _Painter:
-    """What paints one object: its COCO annotation (decoded with the image's others), or
-    a filled box."""
-
-    __slots__ = ("ann", "area", "box", "segmented")
-
-    def __init__(self, box, coco_annotation=None) -> None:
-        self.box, self.ann = box, coco_annotation
-        self.segmented = coco_annotation is not None and coco_annotation.segmentation is not None
-        self.area = None if coco_annotation is None else coco_annotation.area
 
 
 def _inside(folder: Path, name: str, what: str) -> Path:
@@ -235,23 +288,30 @@ def _inside(folder: Path, name: str, what: str) -> Path:
     )
 
 
-def _all_inside(folder: Path, names: list[str], what: list[str]) -> None:
-    """:func:`_inside` for many names at once: names that stay inside lexically and whose
-    folders resolve inside (each distinct folder resolved once) need no resolution of
-    their own unless the file is a symbolic link."""
-    base = folder.resolve()
+def _all_inside(folder: Path, names: list[str], what: Callable[[int], str]) -> None:
+    """:func:`_inside` for many names at once (``what(k)`` names name ``k``'s file and
+    field): names that stay inside lexically and whose folders resolve inside (each
+    distinct folder resolved once) need no resolution of their own unless the file is a
+    symbolic link."""
+    base, top = folder.resolve(), os.fspath(folder)
     parents: dict[str, bool] = {}
-    for name, w in zip(names, what, strict=True):
+    for k, name in enumerate(names):
         norm = os.path.normpath(name)
         if os.path.isabs(norm) or norm == ".." or norm.startswith(".." + os.sep):
-            _inside(folder, name, w)  # refused, with the resolved path in the message
+            _inside(folder, name, what(k))  # refused, with the resolved path in the message
             continue
         parent = os.path.dirname(norm)
         if parent not in parents:
             real = (folder / parent).resolve() if parent else base
             parents[parent] = real == base or base in real.parents
-        if not parents[parent] or os.path.islink(folder / norm):
-            _inside(folder, name, w)
+        if not parents[parent] or os.path.islink(os.path.join(top, norm)):
+            _inside(folder, name, what(k))
+
+
+def _joined(folder: str, name: str) -> str:
+    """``str(Path(folder) / name)`` (without building a path for a plain name)."""
+    return os.path.join(folder, name) if os.path.normpath(name) == name else str(
+        Path(folder) / name)  # fmt: skip
 
 
 def coco_dataset(
@@ -260,26 +320,33 @@ def coco_dataset(
     """``coco:FILE.json``: images under ``images`` (default: the JSON's folder); with
     ``outside``, also images whose ``file_name`` resolves outside that folder."""
     try:
-        coco = read_coco(path, max_pixels=kw.get("max_pixels", DEFAULT_MAX_PIXELS))
+        coco = read_coco_table(path, max_pixels=kw.get("max_pixels", DEFAULT_MAX_PIXELS))
     except FileFormatError as exc:
         raise EvalError(str(exc)) from exc
     folder = images or path.parent
+    names = [im["file_name"] for im in coco.images]
     if not outside:
-        _all_inside(folder, [im.file_name for im in coco.images],
-                    [f"{path}: images[{k}] (id {im.id}) file_name"
-                     for k, im in enumerate(coco.images)])  # fmt: skip
-    ordered = sorted(coco.images, key=lambda im: im.id)  # pycocotools' image order
+        _all_inside(folder, names, lambda k: f"{path}: images[{k}] (id "
+                    f"{coco.images[k]['id']}) file_name")  # fmt: skip
+    ids = np.array([im["id"] for im in coco.images], np.int64)
+    order = np.argsort(ids, kind="stable")  # pycocotools' image order
+    position = np.empty_like(order)
+    position[order] = np.arange(order.size)
+    cats = np.array(list(coco.categories.values()), dtype=object)
+    codes = {c: k for k, c in enumerate(coco.categories)}
+    category = np.array([codes[c] for c in coco.category.tolist()], np.int64)
+    objects = _grouped(
+        position[coco.image], order.size, box=coco.box, cls=cats[category].reshape(-1),
+        ignore=coco.iscrowd, area=coco.area, segmentation=coco.segmentation,
+    )  # fmt: skip
+    base = os.fspath(folder)
     entries = [
-        (
-            folder / im.file_name,
-            (im.height, im.width),
-            [(a.category, a.box, _Painter(a.box, a), a.iscrowd) for a in im.annotations],
-            im.file_name,
-        )
-        for im in ordered
-    ]
-    ids = [im.id for im in ordered]
-    ds = AnnotatedDataset("coco", path, entries, [path], image_ids=ids, **kw)
+        (_joined(base, names[k]), (coco.images[k]["height"], coco.images[k]["width"]),
+         names[k])
+        for k in order.tolist()
+    ]  # fmt: skip
+    ds = AnnotatedDataset("coco", path, entries, objects, [path],
+                          image_ids=ids[order].tolist(), **kw)  # fmt: skip
     ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())),
                       outside=OUTSIDE[outside])  # fmt: skip
     ds.categories = dict(coco.categories)  # id -> name: saved predictions give ids
@@ -309,16 +376,24 @@ def voc_dataset(
     xmls = [f for f in walk_files(root) if f.suffix.lower() == ".xml"]
     if not xmls:
         raise EvalError(f"no VOC *.xml annotation files found in {root}")
-    entries = []
+    entries, objs = [], []
     for xml in xmls:
         try:
             ann = read_voc(xml, max_pixels=kw.get("max_pixels", DEFAULT_MAX_PIXELS))
         except FileFormatError as exc:
             raise EvalError(str(exc)) from exc
-        objs = [(o.name, o.box, _Painter(o.box), o.difficult) for o in ann.objects]
+        objs.extend((len(entries), o) for o in ann.objects)
         img = _voc_image(xml, ann.filename, images, outside)
-        entries.append((img, (ann.height, ann.width), objs, str(xml.relative_to(root))))
-    ds = AnnotatedDataset("voc", root, entries, xmls, **kw)
+        entries.append((str(img), (ann.height, ann.width), str(xml.relative_to(root))))
+    m = len(objs)
+    objects = _grouped(
+        np.array([k for k, _ in objs], np.int64).reshape(m), len(entries),
+        box=np.array([o.box for _, o in objs], np.float64).reshape(m, 4),
+        cls=np.array([o.name for _, o in objs], dtype=object).reshape(m),
+        ignore=np.array([o.difficult for _, o in objs], bool).reshape(m),
+        area=np.full(m, np.nan), segmentation=(None,) * m,
+    )  # fmt: skip
+    ds = AnnotatedDataset("voc", root, entries, objects, xmls, **kw)
     ds.options["labels"] = "VOC boxes (gt=box); difficult = ignore"
     ds.options["outside"] = OUTSIDE[outside]
     ds.finish("annotation", limit)

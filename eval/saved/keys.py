@@ -60,13 +60,12 @@ def locate(refs: np.ndarray, keys: list[dict], what: str) -> np.ndarray:
     """
     ids = [k.get("image_id") for k in keys]
     by_id = _unique_index(ids) if any(i is not None for i in ids) else None
-    tables = _by_name(keys)
-    out = np.full(len(refs), -1, dtype=np.int64)
-    memo: dict[object, int] = {}
-    for r, ref in enumerate(refs.tolist()):
-        if ref not in memo:
-            memo[ref] = _find(ref, by_id, tables, len(keys))
-        out[r] = memo[ref]
+    values = refs.tolist()
+    memo: dict[object, int] = dict.fromkeys(values, -1)
+    tables = _by_name(keys) if any(type(ref) is str for ref in memo) else []  # names: by need
+    for ref in memo:
+        memo[ref] = _find(ref, by_id, tables, len(keys))
+    out = np.array([memo[ref] for ref in values], dtype=np.int64).reshape(len(values))
     missing = [ref for ref, i in memo.items() if i < 0]
     if missing:
         raise EvalError(f"{what}: {len(missing)} image(s) not in the dataset, e.g. "

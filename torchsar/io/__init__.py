@@ -2,7 +2,15 @@
 windowed readers of whole scenes (:func:`open_scene`)."""
 
 from torchsar.io.channels import single_channel
-from torchsar.io.coco import CocoAnnotation, CocoImage, CocoSet, annotation_mask, read_coco
+from torchsar.io.coco import (
+    CocoAnnotation,
+    CocoImage,
+    CocoSet,
+    CocoTable,
+    annotation_mask,
+    read_coco,
+    read_coco_table,
+)
 from torchsar.io.errors import AnnotationWarning, FileFormatError
 from torchsar.io.georef import AffineGeoref, GeorefError, TiePointGrid
 from torchsar.io.geotiff import geotiff_pixel_spacing
@@ -36,6 +44,7 @@ __all__ = [
     "CocoAnnotation",
     "CocoImage",
     "CocoSet",
+    "CocoTable",
     "FileFormatError",
     "GeorefError",
     "GotchaPass",
@@ -57,6 +66,7 @@ __all__ = [
     "open_scene",
     "raster_shape",
     "read_coco",
+    "read_coco_table",
     "read_gotcha",
     "read_phoenix",
     "read_phoenix_header",

@@ -26,7 +26,6 @@ decoder allocates in proportion to the coordinates it is given, so one polygon v
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from torchsar.io import jsontext
 from torchsar.io.errors import AnnotationWarning, FileFormatError
 from torchsar.io.raster import DEFAULT_MAX_PIXELS, check_regular_file
 from torchsar.io.rle import check_strings
@@ -43,9 +43,11 @@ __all__ = [
     "CocoAnnotation",
     "CocoImage",
     "CocoSet",
+    "CocoTable",
     "annotation_mask",
     "annotation_pixels",
     "read_coco",
+    "read_coco_table",
     "segmentation_counts",
     "segmentation_problem",
     "segmentation_problems",
@@ -87,6 +89,49 @@ class CocoSet:
     categories: dict[int, str]
 
 
+@dataclass(frozen=True, eq=False)
+class CocoTable:
+    """A parsed annotation file as columns (:func:`read_coco_table`): the image records in
+    file order, and one row per annotation, in file order.
+
+    Attributes:
+        images: ``{"id", "file_name", "height", "width"}`` per image.
+        categories: category names by id.
+        image: int64 ``(M,)``, each annotation's row in ``images``.
+        id: int64 ``(M,)`` annotation ids (-1: none given).
+        category: int64 ``(M,)`` category ids.
+        box: float64 ``(M, 4)`` ``(r0, c0, r1, c1)``, end-exclusive.
+        iscrowd: bool ``(M,)``.
+        area: float64 ``(M,)`` the declared ``area`` (NaN: none).
+        segmentation: per annotation its segmentation as stored, or ``None``.
+    """
+
+    images: tuple[dict, ...]
+    categories: dict[int, str]
+    image: np.ndarray
+    id: np.ndarray
+    category: np.ndarray
+    box: np.ndarray
+    iscrowd: np.ndarray
+    area: np.ndarray
+    segmentation: tuple
+
+    def to_set(self) -> CocoSet:
+        """The same annotations as objects (:class:`CocoSet`)."""
+        anns: list[list[CocoAnnotation]] = [[] for _ in self.images]
+        for k, (row, box) in enumerate(zip(self.image.tolist(), self.box.tolist(), strict=True)):
+            area = float(self.area[k])
+            name = self.categories[int(self.category[k])]
+            anns[row].append(CocoAnnotation(int(self.id[k]), name, tuple(box),
+                                            self.segmentation[k], bool(self.iscrowd[k]),
+                                            None if area != area else area))  # fmt: skip
+        return CocoSet(
+            tuple(CocoImage(**rec, annotations=tuple(a)) for rec, a in zip(self.images, anns,
+                                                                             strict=True)),
+            self.categories,
+        )  # fmt: skip
+
+
 def _is_int(v: object) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
@@ -122,7 +167,7 @@ def _load_json(path: str | Path) -> dict:
     """The top-level object of a COCO file, or an error naming it."""
     check_regular_file(path)
     try:
-        data = json.loads(Path(path).read_text())
+        data = jsontext.loads(Path(path).read_text())
     except RecursionError:
         raise FileFormatError(path, "is not a readable JSON file (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits
@@ -397,44 +442,63 @@ def _annotation(k: int, a: object, categories: dict[int, str], images: dict, pat
     return image_id, ann, where, string
 
 
-def _plain_boxes(entries: list, categories: dict, images: dict) -> list | None:
-    """``[(image id, CocoAnnotation)]`` when every entry is a plain valid box annotation (the
-    checks of :func:`_annotation` in one pass over the entries: no segmentation, distinct
-    ids), else ``None``: the entry-by-entry path then names the first problem."""
-    if not isinstance(entries, list):
+_NUMBER = (int, float)
+
+
+def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict | None:
+    """The annotation columns (see :class:`CocoTable`) when every entry is a plain valid box
+    annotation (the checks of :func:`_annotation`, made column by column: no segmentation,
+    distinct ids), else ``None``: the entry-by-entry path then names the first problem."""
+    if type(entries) is not list or not all(type(a) is dict for a in entries):
         return None
-    out, seen, number = [], set(), (int, float)
-    for a in entries:
-        if type(a) is not dict:
-            return None
-        img, cat, box = a.get("image_id"), a.get("category_id"), a.get("bbox")
-        aid, crowd, area = a.get("id"), a.get("iscrowd", 0), a.get("area")
-        rec = images.get(img) if type(img) is int else None
-        if rec is None or type(cat) is not int or cat not in categories:
-            return None
-        if aid is not None and (type(aid) is not int or aid in seen):
-            return None
-        if crowd not in (0, 1) or type(crowd) is not int or a.get("segmentation") not in (
-                None, [], {}):  # fmt: skip
-            return None
-        if type(box) is not list or len(box) != 4:
-            return None
-        x, y, w, h = box
-        if not (type(x) in number and type(y) in number and type(w) in number
-                and type(h) in number):  # fmt: skip
-            return None
-        inside = x + w <= rec["width"] + 1e-6 and y + h <= rec["height"] + 1e-6
-        if not (min(x, y, w, h) >= 0 and inside and math.isfinite(x + y + w + h)):
-            return None
-        if area is not None and (type(area) not in number or not 0 <= area < math.inf):
-            return None
-        if aid is not None:
-            seen.add(aid)
-        x, y, w, h = float(x), float(y), float(w), float(h)
-        ann = CocoAnnotation(-1 if aid is None else aid, categories[cat], (y, x, y + h, x + w),
-                             None, bool(crowd), None if area is None else float(area))  # fmt: skip
-        out.append((img, ann))
-    return out
+    rows = {rec["id"]: k for k, rec in enumerate(records)}
+    image = [rows.get(v) if type(v) is int else None for v in (a.get("image_id") for a in entries)]
+    category = [a.get("category_id") for a in entries]
+    ids = [a.get("id") for a in entries]
+    given = [v for v in ids if v is not None]
+    crowd = [a.get("iscrowd", 0) for a in entries]
+    boxes = [a.get("bbox") for a in entries]
+    areas = [a.get("area") for a in entries]
+    num = _NUMBER
+    if (
+        None in image
+        or not all(type(c) is int and c in categories for c in category)
+        or not all(type(v) is int for v in given)
+        or len(set(given)) != len(given)
+        or not all(type(c) is int and (c == 0 or c == 1) for c in crowd)
+        or not all(a.get("segmentation") in (None, [], {}) for a in entries)
+        or not all(type(b) is list and len(b) == 4 and type(b[0]) in num and type(b[1]) in num
+                   and type(b[2]) in num and type(b[3]) in num for b in boxes)
+        or not all(v is None or type(v) in num for v in areas)
+    ):  # fmt: skip
+        return None
+    n = len(entries)
+    try:
+        xywh = np.array(boxes, np.float64).reshape(n, 4)
+        area = np.array([np.nan if v is None else v for v in areas], np.float64).reshape(n)
+    except OverflowError:  # an integer past float range
+        return None
+    row = np.array(image, np.int64).reshape(n)
+    height = np.array([r["height"] for r in records], np.float64)[row]
+    width = np.array([r["width"] for r in records], np.float64)[row]
+    x, y, w, h = xywh.T
+    with np.errstate(over="ignore", invalid="ignore"):
+        good = (
+            np.isfinite(xywh).all(axis=1) & (xywh.min(axis=1, initial=0.0) >= 0)
+            & (x + w <= width + 1e-6) & (y + h <= height + 1e-6)
+            & (np.isnan(area) | ((area >= 0) & (area < np.inf)))
+        )  # fmt: skip
+    if not good.all():
+        return None
+    return {
+        "image": row,
+        "id": np.array([-1 if v is None else v for v in ids], np.int64).reshape(n),
+        "category": np.array(category, np.int64).reshape(n),
+        "box": np.stack([y, x, y + h, x + w], axis=1).reshape(n, 4),
+        "iscrowd": np.array(crowd, bool).reshape(n),
+        "area": area,
+        "segmentation": (None,) * n,
+    }
 
 
 def _check_strings(pending: list[tuple[str, str, tuple[int, int]]], path) -> None:
@@ -448,7 +512,19 @@ def _check_strings(pending: list[tuple[str, str, tuple[int, int]]], path) -> Non
 
 def read_coco(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> CocoSet:
     """Parse a COCO instances file, validating every field (see the module docstring)
-    before any mask is decoded.
+    before any mask is decoded: :func:`read_coco_table` as objects.
+
+    Raises:
+        FileFormatError: as :func:`read_coco_table`.
+    """
+    return read_coco_table(path, max_pixels=max_pixels).to_set()
+
+
+@jsontext.without_gc  # the parsed document is dropped on return
+def read_coco_table(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> CocoTable:
+    """Parse a COCO instances file into columns (:class:`CocoTable`), validating every field
+    (see the module docstring) before any mask is decoded. A file of plain boxes is checked
+    column by column, without an object per annotation.
 
     Args:
         path: the JSON file.
@@ -464,25 +540,27 @@ def read_coco(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> Coco
     data = _load_json(path)
     categories = _categories(data.get("categories", []), path)
     records = _images(data["images"], path, max_pixels)
+    entries = data.get("annotations", [])
+    columns = _box_columns(entries, categories, records)
+    if columns is None:  # segmentations, or a problem to name: entry by entry
+        columns = _entry_columns(entries, categories, records, path)
+    return CocoTable(tuple(records), categories, **columns)
+
+
+def _entry_columns(entries: list, categories: dict, records: list[dict], path) -> dict:
+    """The annotation columns, every entry checked on its own (the first problem named)."""
     images = {rec["id"]: rec for rec in records}
-    anns: dict[int, list[CocoAnnotation]] = {rec["id"]: [] for rec in records}
-    fast = _plain_boxes(data.get("annotations", []), categories, images)
-    if fast is not None:  # every annotation a valid box without segmentation: checked at once
-        for image_id, ann in fast:
-            anns[image_id].append(ann)
-        return CocoSet(
-            tuple(CocoImage(**rec, annotations=tuple(anns[rec["id"]])) for rec in records),
-            categories,
-        )
+    rows = {rec["id"]: k for k, rec in enumerate(records)}
     seen: dict[int, int] = {}
     pending: list[tuple[str, str, tuple[int, int]]] = []  # compressed RLE, checked together
-    for k, a in enumerate(data.get("annotations", [])):
+    out: list[tuple[int, int, CocoAnnotation]] = []
+    for k, a in enumerate(entries):
         try:
             image_id, ann, where, string = _annotation(k, a, categories, images, path)
         except FileFormatError:
             _check_strings(pending, path)  # an earlier bad string is reported first
             raise
-        anns[image_id].append(ann)
+        out.append((rows[image_id], a["category_id"], ann))
         if string is not None:
             pending.append((where, string, (images[image_id]["height"], images[image_id]["width"])))
         if ann.id != -1 and seen.setdefault(ann.id, k) != k:
@@ -490,13 +568,20 @@ def read_coco(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> Coco
                 f"{path}: annotations[{seen[ann.id]}] and annotations[{k}] both have id "
                 f"{ann.id}; both are kept",
                 AnnotationWarning,
-                stacklevel=2,
+                stacklevel=4,
             )
     _check_strings(pending, path)
-    return CocoSet(
-        tuple(CocoImage(**rec, annotations=tuple(anns[rec["id"]])) for rec in records),
-        categories,
-    )
+    n = len(out)
+    return {
+        "image": np.array([r for r, _, _ in out], np.int64).reshape(n),
+        "id": np.array([a.id for _, _, a in out], np.int64).reshape(n),
+        "category": np.array([c for _, c, _ in out], np.int64).reshape(n),
+        "box": np.array([a.box for _, _, a in out], np.float64).reshape(n, 4),
+        "iscrowd": np.array([a.iscrowd for _, _, a in out], bool).reshape(n),
+        "area": np.array([np.nan if a.area is None else a.area for _, _, a in out],
+                         np.float64).reshape(n),
+        "segmentation": tuple(a.segmentation for _, _, a in out),
+    }
 
 
 def segmentation_counts(seg: object, height: int, width: int) -> bytes:
