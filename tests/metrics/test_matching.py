@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from tests.reference.coco import coco_match
 from torchsar._checks import OptionError
 from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
-from torchsar.metrics.greedy import assign_pairs
+from torchsar.metrics.greedy import assign_pairs, greedy_assign
 from torchsar.metrics.matching import COCO_IOUS
 from torchsar.objects import ObjectRules, discriminate
 
@@ -29,8 +29,7 @@ def test_greedy_equals_the_pycocotools_loop(seed, d, g):
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), problems=st.integers(1, 6))
 def test_problems_at_once_equal_the_pycocotools_loop_per_problem(seed, problems):
-    """Many problems matched from their candidate pairs (padded in blocks, with ties and
-    crowd columns) equal the literal loop on each problem."""
+    """Many problems matched from their candidate pairs (with ties and crowd columns) equal the literal loop on each problem."""
     rng = np.random.default_rng(seed)
     sizes = rng.integers(0, 8, (problems, 2))
     d_problem = np.repeat(np.arange(problems), sizes[:, 0])
@@ -54,6 +53,38 @@ def test_problems_at_once_equal_the_pycocotools_loop_per_problem(seed, problems)
         got = np.where(col[d0 : d0 + d].T < 0, -1, np.where(got == g, -2, got))
         assert np.array_equal(got, ref)
         d0, g0 = d0 + d, g0 + g + 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), problems=st.integers(1, 6))
+def test_problems_with_ignored_instances_per_area_range_equal_the_dense_matcher(seed, problems):
+    """Instances ignored in some area ranges and not others, crowd ones, tied qualities:
+    the pair-by-pair matcher equals the padded one, problem by problem."""
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(0, 9, (problems, 2))
+    d_problem = np.repeat(np.arange(problems), sizes[:, 0])
+    g_problem = np.repeat(np.arange(problems), sizes[:, 1])
+    ignore = rng.random((g_problem.size, 3)) < 0.3
+    crowd = rng.random(g_problem.size) < 0.2
+    ignore[crowd] = True
+    pairs, dense, d0, g0 = ([], [], []), [], 0, 0
+    for d, g in sizes:
+        q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
+        dense.append(q)
+        i, j = np.nonzero(q > 0)
+        for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
+            a.append(v)
+        d0, g0 = d0 + d, g0 + g
+    col = assign_pairs(d_problem, g_problem, ignore, crowd,
+                       tuple(np.concatenate(a) for a in pairs), COCO_IOUS)  # fmt: skip
+    d0 = g0 = 0
+    for (d, g), q in zip(sizes, dense, strict=True):
+        quality = np.where(q > 0, q, -np.inf)[None]
+        ref = greedy_assign(quality, ignore[g0 : g0 + g].T[None], crowd[g0 : g0 + g][None],
+                            np.array([d]), COCO_IOUS)[0]  # fmt: skip
+        got = col[d0 : d0 + d]
+        assert np.array_equal(np.where(got >= 0, got - g0, -1), ref)
+        d0, g0 = d0 + d, g0 + g
 
 
 @settings(max_examples=60, deadline=None)

@@ -11,18 +11,17 @@ ignored. Everything is vectorised over problems, area ranges and thresholds, one
 rank at a time.
 
 :func:`assign_pairs` is the entry point: it takes the candidate pairs of every problem as flat
-arrays (detections and instances numbered by problem), pads problems of similar size into
-blocks and returns, per detection, area range and threshold, the instance it took.
+arrays (detections and instances numbered by problem) and returns, per detection, area
+range and threshold, the instance it took; it visits only the candidate pairs (no padded
+problem arrays). :func:`greedy_assign` is the same matching on padded dense arrays (one
+problem of a few detections, or a reference).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["WORK", "assign_pairs", "greedy_assign"]
-
-WORK = 1 << 22
-"""Elements of the matcher's arrays per block of problems."""
+__all__ = ["assign_pairs", "greedy_assign"]
 
 
 def _row_ranks(q: np.ndarray) -> np.ndarray:
@@ -85,30 +84,6 @@ def greedy_assign(
     return out
 
 
-def _within(sizes: np.ndarray) -> np.ndarray:
-    """Position of each element within its run, runs of ``sizes`` laid end to end.
-
-    Example:
-        >>> _within(np.array([2, 3])).tolist()
-        [0, 1, 0, 1, 2]
-    """
-    sizes = np.asarray(sizes, np.int64)
-    return np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-
-
-def _blocks(dn: np.ndarray, gn: np.ndarray, width: int):
-    """Problems (indices) grouped by instance count (power-of-two padding), most detections
-    first, in blocks whose matcher arrays stay under :data:`WORK` elements."""
-    pad = 1 << np.ceil(np.log2(np.maximum(gn, 1))).astype(np.int64)
-    for g in np.unique(pad):
-        idx = np.flatnonzero(pad == g)
-        idx = idx[np.argsort(-dn[idx], kind="stable")]
-        d = int(dn[idx[0]])
-        step = max(1, WORK // max(d * int(g) + max(d, int(g)) * width, 1))
-        for i in range(0, idx.size, step):
-            yield idx[i : i + step]
-
-
 def assign_pairs(
     d_problem: np.ndarray,
     g_problem: np.ndarray,
@@ -117,7 +92,9 @@ def assign_pairs(
     pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
     thresholds,
 ) -> np.ndarray:
-    """The greedy matching of every problem from its candidate pairs.
+    """The greedy matching of every problem from its candidate pairs, without padding: one
+    step per detection rank (the rank-``k`` detections of all problems at once), each
+    visiting only the candidate pairs of those detections.
 
     Args:
         d_problem: ``(D,)`` problem of each detection, sorted; within a problem the
@@ -140,42 +117,40 @@ def assign_pairs(
         ...              pairs, [0.5])[:, 0, 0].tolist()
         [0, -1, -1]
     """
-    thr = np.asarray(thresholds, np.float64).reshape(-1)
-    A = g_ignore.shape[1]
-    out = np.full((d_problem.size, A, thr.size), -1, np.int64)
+    thr = np.minimum(np.asarray(thresholds, np.float64).reshape(-1), 1 - 1e-10)
+    d_problem = np.asarray(d_problem, np.int64)
+    A, D = g_ignore.shape[1], d_problem.size
+    out = np.full((D, A, thr.size), -1, np.int64)
     pd_, pg, pq = (np.asarray(a) for a in pairs)
     if pd_.size == 0:
         return out
-    n_prob = int(max(d_problem.max(initial=-1), g_problem.max(initial=-1))) + 1
-    dn = np.bincount(d_problem, minlength=n_prob)
-    gn = np.bincount(g_problem, minlength=n_prob)
-    ds, gs = np.cumsum(dn) - dn, np.cumsum(gn) - gn  # first detection / instance of each
-    active = np.flatnonzero((dn > 0) & (gn > 0))
-    for blk in _blocks(dn[active], gn[active], A * thr.size):
-        probs = active[blk]
-        _solve(probs, dn, gn, ds, gs, d_problem, (pd_, pg, pq), g_ignore, g_crowd, thr, out)
+    # pairs by detection, then quality, then instance: a pair's rank among its detection's
+    # pairs orders pycocotools' choice (highest quality; ties: the later instance)
+    order = np.lexsort((pg, pq, pd_))
+    pd_, pg, pq = pd_[order].astype(np.int64), pg[order].astype(np.int64), pq[order]
+    per_det = np.bincount(pd_, minlength=D)
+    rank = np.arange(pd_.size) - (np.cumsum(per_det) - per_det)[pd_]
+    # the key (0: not a candidate) is largest for the choice: counted instances first
+    top = int(per_det.max()) + 1
+    key = np.where(g_ignore[pg], 1, top + 1) + rank[:, None]  # (pairs, A), unique per det
+    reach = pq[:, None] >= thr  # (pairs, T)
+    dn = np.bincount(d_problem)
+    step = (np.arange(D) - (np.cumsum(dn) - dn)[d_problem])[pd_]  # the detection's rank
+    by_step = np.argsort(step, kind="stable")  # (detections stay in order within a step)
+    bounds = np.searchsorted(step[by_step], np.arange(int(step.max()) + 2))
+    free = np.ones((g_ignore.shape[0], A, thr.size), bool)
+    real = ~np.asarray(g_crowd, bool)  # a crowd instance may be taken again and again
+    for k in range(bounds.size - 1):
+        idx = by_step[bounds[k] : bounds[k + 1]]
+        if idx.size == 0:
+            continue
+        g, det = pg[idx], pd_[idx]
+        kk = key[idx][:, :, None] * (free[g] & reach[idx][:, None, :])  # (pairs, A, T)
+        starts = np.flatnonzero(np.append(True, det[1:] != det[:-1]))
+        best = np.maximum.reduceat(kk, starts, axis=0)
+        seg = np.repeat(np.arange(starts.size), np.diff(np.append(starts, idx.size)))
+        p, a, t = np.nonzero((kk == best[seg]) & (kk > 0))
+        out[det[p], a, t] = g[p]
+        taken = real[g[p]]
+        free[g[p][taken], a[taken], t[taken]] = False
     return out
-
-
-def _solve(probs, dn, gn, ds, gs, d_problem, pairs, g_ignore, g_crowd, thr, out) -> None:
-    """Pad one block of problems, match them and write each detection's instance."""
-    P, D, G = probs.size, int(dn[probs].max()), int(gn[probs].max())
-    slot = np.full(dn.size, -1)
-    slot[probs] = np.arange(P)
-    pd_, pg, pq = pairs
-    sel = slot[d_problem[pd_]] >= 0
-    p = slot[d_problem[pd_[sel]]]
-    quality = np.full((P, D, G), -np.inf)
-    quality[p, pd_[sel] - ds[probs][p], pg[sel] - gs[probs][p]] = pq[sel]
-    ignore = np.ones((P, g_ignore.shape[1], G), bool)
-    crowd = np.zeros((P, G), bool)
-    gp = np.repeat(np.arange(P), gn[probs])
-    gi = np.repeat(gs[probs], gn[probs]) + _within(gn[probs])
-    ignore[gp, :, _within(gn[probs])] = g_ignore[gi]
-    crowd[gp, _within(gn[probs])] = g_crowd[gi]
-    col = greedy_assign(quality, ignore, crowd, dn[probs], thr)
-    dp = np.repeat(np.arange(P), dn[probs])
-    dr = _within(dn[probs])
-    di = np.repeat(ds[probs], dn[probs]) + dr
-    c = col[dp, dr]  # (n, A, T)
-    out[di] = np.where(c >= 0, gs[probs][dp][:, None, None] + c, -1)
