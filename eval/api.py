@@ -297,7 +297,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
             dets = windows_in_pixels(name, ds, dets)
         windows[name] = {d.name: d.describe() for d in dets}
         results[name], stats[name] = evaluate_dataset(
-            name, ds, dets, plan, tmp / "shards" / labels[name]
+            name, ds, dets, plan, tmp / "shards" / labels[name], persist=out is not None
         )
         exporter = stats[name].pop("export")
         if exporter is not None:
@@ -401,8 +401,10 @@ def _check_failures(name: str, total: int, bad: list, counts: dict, ex: Executio
                         f"first {first[0]}: {first[1]}")  # fmt: skip
 
 
-def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path):
-    """Score one dataset shard by shard; with a calibration each detector's operating point
+def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path,
+                     persist: bool = True):  # fmt: skip
+    """Score one dataset shard by shard (their states saved in ``state`` when ``persist``,
+    for a resume); with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
     Returns the merged results and the dataset's run statistics: images (of the reported
     split), scored (images scored in this run, calibration split included) and reused
@@ -422,8 +424,8 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
                        ex.shard_size, export_coco=export, device=ex.device,
                        default_class=default_class, skip_bad=ex.skip_bad)  # fmt: skip
         return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
-                          address=ex.address, skip_bad=ex.skip_bad,
-                          progress=ex.progress)  # fmt: skip
+                          address=ex.address, skip_bad=ex.skip_bad, progress=ex.progress,
+                          persist=persist or export)  # fmt: skip
 
     chosen, calib_counts = None, {"scored_images": 0, "reused_images": 0}
     if cal is not None:

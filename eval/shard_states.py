@@ -153,6 +153,7 @@ class ShardMerger:
         self._lost: set[int] = set()
         self._next = 0
         self._merged: list[Path] = []
+        self._held: dict[int, ShardState] = {}
         self._out: list[DetectorResult] | None = None
         (folder / ROWS_FILE).unlink(missing_ok=True)
         self._tmp = folder / f".{ROWS_FILE}.{os.getpid()}.tmp"
@@ -165,9 +166,12 @@ class ShardMerger:
         self._rows.close()
         self._tmp.unlink(missing_ok=True)
 
-    def saved(self, k: int) -> None:
-        """Shard ``k`` is saved: merge every shard now in order."""
+    def saved(self, k: int, state: ShardState | None = None) -> None:
+        """Shard ``k`` is saved (or, ``state``, scored and kept in memory, not saved): merge
+        every shard now in order."""
         self._ready.add(k)
+        if state is not None:
+            self._held[k] = state
         self._drain()
 
     def lost(self, k: int) -> None:
@@ -177,7 +181,9 @@ class ShardMerger:
 
     def _drain(self) -> None:
         while self._next in self._ready or self._next in self._lost:
-            if self._next in self._ready:
+            if self._next in self._held:
+                self._out = _add(self._out, self._held.pop(self._next).results, self._rows)
+            elif self._next in self._ready:
                 path = shard_path(self.folder, self._next)
                 self._out = _add(self._out, load_shard(path).results, self._rows)
                 self._merged.append(path)

@@ -163,14 +163,19 @@ class _Failures:
 
 class _Track:
     """A run's finished shards: each saved one goes to the merger, and every settled one
-    (saved or failed) moves the progress bar."""
+    (saved or failed) moves the progress bar. Without ``persist`` (a run that cannot be
+    resumed: its folder is temporary) a state scored in this process is merged as it is,
+    neither encoded nor written."""
 
-    def __init__(self, bar, sizes: list[int], merger: ShardMerger) -> None:
-        self.bar, self.sizes, self.merger = bar, sizes, merger
+    def __init__(self, bar, sizes: list[int], merger: ShardMerger, persist: bool) -> None:
+        self.bar, self.sizes, self.merger, self.persist = bar, sizes, merger, persist
 
-    def saved(self, k: int, path: Path, data: bytes) -> None:
-        statefile.save(path, data)
-        self.merger.saved(k)
+    def saved(self, k: int, path: Path, data: bytes | ShardState) -> None:
+        if isinstance(data, ShardState):  # scored here, not to be saved
+            self.merger.saved(k, data)
+        else:
+            statefile.save(path, data)
+            self.merger.saved(k)
         self.settled(k)
 
     def settled(self, k: int) -> None:
@@ -181,7 +186,7 @@ def _local(job, todo, track: _Track, fail: _Failures) -> None:
     for k, path in todo:
         while True:
             try:
-                data = _scored(job, k)
+                data = _scored(job, k) if track.persist else _score_shard(job, k)
             except KeyboardInterrupt:
                 raise
             except Exception as exc:
@@ -236,6 +241,7 @@ def run_shards(
     address: str | None = None,
     skip_bad: bool = False,
     progress: bool = True,
+    persist: bool = True,
 ) -> tuple[list[DetectorResult], dict]:
     """Score every shard not yet saved in ``folder`` and merge all saved shards (in shard
     order, each as soon as the shards before it are saved).
@@ -248,6 +254,8 @@ def run_shards(
         address: Ray cluster address (default: a local Ray instance).
         skip_bad: record failed shards and merge the rest instead of stopping.
         progress: one progress bar over images.
+        persist: save every shard's state in ``folder`` (``False``: shards scored in this
+            process are merged from memory; for a temporary folder, never resumed).
 
     Returns:
         The merged results and counts ``{"shards", "done", "skipped", "retried", "failed",
@@ -262,7 +270,7 @@ def run_shards(
                unit="img")  # fmt: skip
     bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
     with ShardMerger(folder, len(sizes), (k for k, _ in todo)) as merger:
-        track, fail = _Track(bar, sizes, merger), _Failures(skip_bad, merger.lost)
+        track, fail = _Track(bar, sizes, merger, persist), _Failures(skip_bad, merger.lost)
         try:
             if engine == "ray":
                 _ray(job, todo, track, fail, address)

@@ -175,23 +175,28 @@ def summary_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return _frame(results, lambda ds, r: [summary_row(ds, r)], SUMMARY_COLUMNS)
 
 
-def _froc_rows(ds: str, r: DetectorResult) -> list[list]:
-    """The threshold is on the detector's own score scale: the detections scoring at or
-    above it."""
-    f, nan = r.objects.froc(), float("nan")
-    return [
-        [ds, r.detector.name, float(thr), int(t), int(n), float(fa), float(pd),
-         t / (t + n) if t + n else nan]
-        for thr, t, n, fa, pd in zip(f["threshold"], f["tp"], f["fp"], f["fa_per_image"], f["pd"],
-                                     strict=True)
-    ]  # fmt: skip
-
-
 def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """The dense FROC under the matching rule: one row per detection score where the
     counted detections change (highest first; each row counts the detections scoring at or
-    above its threshold), monotone in the threshold by construction."""
-    return _frame(results, _froc_rows, FROC_COLUMNS)
+    above its threshold), monotone in the threshold by construction. The threshold is on
+    the detector's own score scale: the detections scoring at or above it."""
+    parts = []
+    for ds, rs in results.items():
+        for r in rs:
+            f = r.objects.froc()
+            t, n = f["tp"].astype(np.int64), f["fp"].astype(np.int64)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                precision = np.where(t + n > 0, t / np.maximum(t + n, 1), np.nan)
+            parts.append(pd.DataFrame({
+                "dataset": ds, "detector": r.detector.name,
+                "threshold": f["threshold"].astype(np.float64), "tp": t, "fp": n,
+                "false_alarms_per_image": f["fa_per_image"].astype(np.float64),
+                "pd_object": f["pd"].astype(np.float64), "precision": precision,
+            }, columns=FROC_COLUMNS))  # fmt: skip
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return pd.DataFrame(columns=FROC_COLUMNS)
+    return pd.concat(parts, ignore_index=True)
 
 
 def _pr_rows(ds: str, r: DetectorResult) -> list[list]:

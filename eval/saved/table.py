@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from torchsar.io import jsontext
 from torchsar_eval.errors import EvalError
 
 __all__ = ["IOU_TYPES", "PredictionTable", "read_coco_results", "read_points"]
@@ -127,6 +128,7 @@ def _plain_box_rows(data: list, path: Path) -> PredictionTable | None:
     )  # fmt: skip
 
 
+@jsontext.without_gc  # the parsed document is dropped on return
 def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTable:
     """Read a COCO results file (see the module docstring).
 
@@ -138,7 +140,7 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
     if iou_type not in IOU_TYPES:
         raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
     try:
-        data = json.loads(path.read_text())
+        data = jsontext.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _fail(path, f"is not a readable JSON file ({exc})") from None
     if isinstance(data, dict) and "annotations" in data and "images" in data:
