@@ -74,31 +74,16 @@ def score_objects(job, indices: list[int], name: str) -> list[DetectorResult]:
     ]
     for r in results:
         r.gallery = None
-    by_shape: dict[tuple[int, int], list] = {}
-    skipped = []
-    for i in indices:
-        try:
-            targets, shape, meta = ds.truth_targets(i)
-        except BadItemError as exc:
-            if not job.skip_bad:
-                raise
-            skipped.append((str(exc.path), str(exc)))
-            continue
-        by_shape.setdefault(shape, []).append((i, targets, {**meta, "index": i}))
+    stacked = getattr(ds, "truth_batch", None)
+    groups = stacked(indices) if stacked is not None else None
+    skipped: list = []
+    if groups is None:  # item by item (segmentations to decode, bad items to skip)
+        groups, skipped = _truth_by_item(ds, indices, job.skip_bad)
     for r in results:
         r.skipped = list(skipped)
     done: list[int] = []
-    for shape, group in by_shape.items():
-        items = [i for i, _, _ in group]
+    for shape, items, gt, metas in groups:
         done += items
-        metas = [m for _, _, m in group]
-        spacing = np.array([_spacing(m) for m in metas], np.float64).reshape(len(group), 2)
-        gt = truth_from_targets(
-            [t for _, t, _ in group],
-            shape,
-            spacing=spacing,
-            box_only=np.array([m.get("gt") == "box" for m in metas]),
-        )
         info = image_infos(metas, name, 1, shape, job.scoring.bootstrap_unit)
         for res in results:
             t0 = time.perf_counter()
@@ -110,6 +95,34 @@ def score_objects(job, indices: list[int], name: str) -> list[DetectorResult]:
     for res in results:  # per-image rows in dataset order, as the item path writes them
         res.rows = [res.rows[k] for k in order]
     return results
+
+
+def _truth_by_item(ds, indices: list[int], skip_bad: bool) -> tuple[list[tuple], list]:
+    """``([(shape, items, GroundTruth, metas)], skipped)`` from each item's targets (a bad
+    item raises, or with ``skip_bad`` is listed as ``(path, message)``)."""
+    by_shape: dict[tuple[int, int], list] = {}
+    skipped = []
+    for i in indices:
+        try:
+            targets, shape, meta = ds.truth_targets(i)
+        except BadItemError as exc:
+            if not skip_bad:
+                raise
+            skipped.append((str(exc.path), str(exc)))
+            continue
+        by_shape.setdefault(shape, []).append((i, targets, {**meta, "index": i}))
+    groups = []
+    for shape, group in by_shape.items():
+        metas = [m for _, _, m in group]
+        spacing = np.array([_spacing(m) for m in metas], np.float64).reshape(len(group), 2)
+        gt = truth_from_targets(
+            [t for _, t, _ in group],
+            shape,
+            spacing=spacing,
+            box_only=np.array([m.get("gt") == "box" for m in metas]),
+        )
+        groups.append((shape, [i for i, _, _ in group], gt, metas))
+    return groups, skipped
 
 
 def _spacing(meta: dict) -> tuple[float, float]:

@@ -35,6 +35,7 @@ from torchsar.io import (
     read_voc,
 )
 from torchsar.io.coco import CocoAnnotation, annotation_pixels
+from torchsar.metrics.truth import GroundTruth, Regions
 from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, walk_files
 from torchsar_eval.datasets.images import read_samples
 from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
@@ -74,6 +75,11 @@ class ObjectColumns:
         return self.cls.tolist()
 
     @cached_property
+    def segmented(self) -> np.ndarray:
+        """bool ``(M,)``: rows with a segmentation (to decode)."""
+        return np.array([g is not None for g in self.segmentation], bool).reshape(-1)
+
+    @cached_property
     def any_ignore(self) -> _AnyIgnore:
         """``any_ignore[a:b]``: whether rows ``a:b`` hold a don't-care one."""
         return _AnyIgnore(np.concatenate([[0], np.cumsum(self.ignore, dtype=np.int64)]))
@@ -95,6 +101,18 @@ class _AnyIgnore:
 
     def __getitem__(self, rows: slice) -> bool:
         return self.cumulative[rows.stop] > self.cumulative[rows.start]
+
+
+def _rows_of(start: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """The object rows of images ``idx`` (image by image, in order)."""
+    count = start[idx + 1] - start[idx]
+    offset = np.repeat(start[idx] - (np.cumsum(count) - count), count)
+    return np.arange(int(count.sum())) + offset
+
+
+def _spacing(meta: dict) -> tuple[float, float]:
+    sp = meta.get("pixel_spacing")
+    return (np.nan, np.nan) if sp is None else (float(sp[0]), float(sp[1]))
 
 
 def _grouped(image: np.ndarray, n_images: int, **columns) -> ObjectColumns:
@@ -162,6 +180,55 @@ class AnnotatedDataset(FileDataset):
                 segmentation cannot be decoded.
         """
         return self._checked(self._truth_targets, i)
+
+    def truth_batch(self, indices: list[int]) -> list[tuple] | None:
+        """The ground truth of items ``indices`` stacked per image size, straight from the
+        annotation columns: ``[(shape, items, GroundTruth, metas)]`` (images of one size
+        in the order given), the same as :meth:`truth_targets` item by item; ``None`` when
+        an item needs more than its columns (a segmentation to decode, a size to read from
+        its image), or an index is out of range."""
+        n = len(self)
+        if any(not 0 <= i < n or self.items[i][1] is None for i in indices):
+            return None
+        obj, idx = self.objects, np.asarray(indices, np.int64).reshape(-1)
+        if obj.segmented[_rows_of(obj.start, idx)].any():
+            return None
+        out = []
+        shapes = [tuple(self.items[i][1]) for i in indices]
+        for shape in dict.fromkeys(shapes):
+            items = [i for i, s in zip(indices, shapes, strict=True) if s == shape]
+            out.append(self._stacked(items, (int(shape[0]), int(shape[1]))))
+        return out
+
+    def _stacked(self, items: list[int], shape: tuple[int, int]) -> tuple:
+        """:meth:`truth_batch` of items of one size."""
+        obj, idx = self.objects, np.asarray(items, np.int64).reshape(-1)
+        rows = _rows_of(obj.start, idx)
+        plane = np.repeat(np.arange(idx.size), obj.start[idx + 1] - obj.start[idx])
+        crowd = obj.ignore[rows]
+        real, regions = rows[~crowd], rows[crowd]
+        n_real = np.bincount(plane[~crowd], minlength=idx.size)
+        metas = []
+        for k, i in enumerate(items):
+            path, _, name = self.items[i]
+            meta = self.base_meta(name, path, None, gt="box" if n_real[k] else "mask")
+            a, b = int(obj.start[i]), int(obj.start[i + 1])
+            meta["classes"] = [c for c, g in zip(obj.names[a:b], obj.ignore[a:b].tolist(),
+                                                 strict=True) if not g]  # fmt: skip
+            if self.image_ids is not None:
+                meta["image_id"] = self.image_ids[i]
+            meta["index"] = i
+            metas.append(meta)
+        spacing = np.array([_spacing(m) for m in metas], np.float64).reshape(idx.size, 2)
+        gt = GroundTruth.build(
+            plane[~crowd], obj.box[real], planes=idx.size, shape=shape,
+            classes=obj.cls[real].tolist(),
+            crowd=Regions.build(plane[crowd], obj.box[regions], shape=shape,
+                                classes=obj.cls[regions].tolist()),
+            box_only=n_real > 0, spacing=spacing, length_m=np.full(real.size, np.nan),
+            declared_area=obj.area[real],
+        )  # fmt: skip
+        return shape, items, gt, metas
 
     def _size(self, i: int) -> tuple[int, int]:
         path, size, _ = self.items[i]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -100,19 +101,28 @@ def _plain_box_rows(data: list, path: Path) -> PredictionTable | None:
     finite numbers, w, h >= 0], "score": number, "category_id"?: int}`` without
     segmentation (the checks of :func:`_coco_row`, made at once), else ``None``: the
     entry-by-entry path then names the first problem."""
-    if not all(type(r) is dict for r in data) or any("segmentation" in r for r in data):
+    if not set(map(type, data)) <= {dict} or any("segmentation" in r for r in data):
         return None
     try:
         refs = [r["image_id"] for r in data]
-        score = np.array([r["score"] for r in data], dtype=np.float64)
-        box = np.array([r["bbox"] for r in data], dtype=np.float64).reshape(len(data), 4)
-    except (KeyError, TypeError, ValueError):
+        scores = [r["score"] for r in data]
+        boxes = [r["bbox"] for r in data]
+    except KeyError:
         return None
     cats = [r.get("category_id") for r in data]
-    if not all(type(v) is int for v in refs) or not all(type(r["score"]) in (int, float)
-                                                          for r in data):  # fmt: skip
+    numbers = {int, float}  # (bool is neither; checked type by type, at C speed)
+    if (
+        not set(map(type, refs)) <= {int}
+        or not set(map(type, scores)) <= numbers
+        or not set(map(type, boxes)) <= {list}
+        or not set(map(len, boxes)) <= {4}
+        or not set(map(type, chain.from_iterable(boxes))) <= numbers
+    ):
         return None
-    if not all(type(r["bbox"]) is list and len(r["bbox"]) == 4 for r in data):
+    try:
+        score = np.array(scores, dtype=np.float64)
+        box = np.array(boxes, dtype=np.float64).reshape(len(data), 4)
+    except OverflowError:  # an integer past float range
         return None
     if not np.isfinite(box).all() or (box[:, 2:] < 0).any() or np.isnan(score).any():
         return None

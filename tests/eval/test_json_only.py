@@ -129,3 +129,29 @@ def test_the_pixel_free_path_equals_the_item_path(tmp_path, monkeypatch):
     slow = _evaluate(tmp_path)
     for name in TABLES:
         pd.testing.assert_frame_equal(getattr(fast, name), getattr(slow, name), obj=name)
+
+
+@pytest.mark.parametrize("seed", [3, 8, 21])
+def test_stacked_truth_equals_the_item_by_item_truth(tmp_path, seed):
+    """The ground truth of box annotations stacked from their columns (crowd boxes, empty
+    images, two image sizes) equals the one built from each item's targets."""
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.objects_only import _truth_by_item
+
+    _write(tmp_path, seed=seed, n_images=9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = make_dataset(f"coco:{tmp_path / 'gt.json'}")
+    order = [5, 0, 3, 8, 1, 2, 7, 4, 6]
+    fast = ds.truth_batch(order)
+    slow, skipped = _truth_by_item(ds, order, skip_bad=False)
+    assert fast is not None and not skipped and len(fast) == len(slow) >= 1
+    for (shape, items, gt, metas), (shape2, items2, gt2, metas2) in zip(fast, slow, strict=True):
+        assert (shape, items, metas) == (shape2, items2, metas2)
+        for field in ("plane", "area", "box", "classes", "has_mask", "box_only", "centroid",
+                      "spacing", "length_m", "declared_area"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(gt, field), getattr(gt2, field), err_msg=field)
+        for field in ("plane", "classes", "box", "has_mask"):
+            np.testing.assert_array_equal(getattr(gt.crowd, field), getattr(gt2.crowd, field))
+        np.testing.assert_array_equal(gt.masks.offsets, gt2.masks.offsets)
+        assert gt.known_scr_db is None and gt2.known_scr_db is None

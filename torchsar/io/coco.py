@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -442,35 +443,38 @@ def _annotation(k: int, a: object, categories: dict[int, str], images: dict, pat
     return image_id, ann, where, string
 
 
-_NUMBER = (int, float)
-
-
 def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict | None:
     """The annotation columns (see :class:`CocoTable`) when every entry is a plain valid box
     annotation (the checks of :func:`_annotation`, made column by column: no segmentation,
     distinct ids), else ``None``: the entry-by-entry path then names the first problem."""
-    if type(entries) is not list or not all(type(a) is dict for a in entries):
+    if type(entries) is not list or not set(map(type, entries)) <= {dict}:
         return None
     rows = {rec["id"]: k for k, rec in enumerate(records)}
-    image = [rows.get(v) if type(v) is int else None for v in (a.get("image_id") for a in entries)]
+    image_ids = [a.get("image_id") for a in entries]
     category = [a.get("category_id") for a in entries]
     ids = [a.get("id") for a in entries]
     given = [v for v in ids if v is not None]
     crowd = [a.get("iscrowd", 0) for a in entries]
     boxes = [a.get("bbox") for a in entries]
     areas = [a.get("area") for a in entries]
-    num = _NUMBER
+    numbers = {int, float}  # (bool is neither; checked type by type, at C speed)
     if (
-        None in image
-        or not all(type(c) is int and c in categories for c in category)
-        or not all(type(v) is int for v in given)
+        not set(map(type, image_ids)) <= {int}
+        or not set(map(type, category)) <= {int}
+        or not set(category) <= categories.keys()
+        or not set(map(type, given)) <= {int}
         or len(set(given)) != len(given)
-        or not all(type(c) is int and (c == 0 or c == 1) for c in crowd)
-        or not all(a.get("segmentation") in (None, [], {}) for a in entries)
-        or not all(type(b) is list and len(b) == 4 and type(b[0]) in num and type(b[1]) in num
-                   and type(b[2]) in num and type(b[3]) in num for b in boxes)
-        or not all(v is None or type(v) in num for v in areas)
+        or not set(map(type, crowd)) <= {int}
+        or not set(crowd) <= {0, 1}
+        or any(a.get("segmentation") not in (None, [], {}) for a in entries)
+        or not set(map(type, boxes)) <= {list}
+        or not set(map(len, boxes)) <= {4}
+        or not set(map(type, chain.from_iterable(boxes))) <= numbers
+        or not set(map(type, areas)) <= {int, float, type(None)}
     ):  # fmt: skip
+        return None
+    image = [rows.get(v) for v in image_ids]
+    if None in image:
         return None
     n = len(entries)
     try:

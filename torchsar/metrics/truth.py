@@ -43,6 +43,11 @@ def _csr(pixels: Sequence[np.ndarray | None], n: int) -> ObjectMasks:
     return ObjectMasks(offsets, flat)
 
 
+def _no_pixels(n: int) -> ObjectMasks:
+    """:class:`ObjectMasks` of ``n`` objects without pixels."""
+    return ObjectMasks(np.zeros(n + 1, np.int64), np.zeros(0, np.int64))
+
+
 def box_pixels(box: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Flat in-plane indices of the pixels whose centres lie in a box ``(r0, c0, r1, c1)``
     (end-exclusive), clipped to the plane.
@@ -130,11 +135,13 @@ class Regions:
         k = plane.size
         box = np.asarray(box, np.float64).reshape(k, 4)
         h, w = shape
-        pix = [None] * k if pixels is None else list(pixels)
-        stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
-                 for i, p in enumerate(pix)]  # fmt: skip
         cls_ = np.full(k, None, object) if classes is None else np.array(
             [None if c is None else str(c) for c in classes], dtype=object)  # fmt: skip
+        if pixels is None:  # box regions only
+            return cls(plane, cls_.reshape(k), box, _no_pixels(k), np.zeros(k, bool))
+        pix = list(pixels)
+        stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
+                 for i, p in enumerate(pix)]  # fmt: skip
         return cls(plane, cls_.reshape(k), box, _csr(stack, k),
                    np.array([p is not None for p in pix], bool).reshape(k))  # fmt: skip
 
@@ -263,13 +270,16 @@ class GroundTruth:
         g = plane.size
         box = np.asarray(box, np.float64).reshape(g, 4)
         h, w = shape
-        pix = [None] * g if pixels is None else list(pixels)
-        if len(pix) != g:
-            raise ShapeError(f"pixels must hold one entry per target ({g}), got {len(pix)}")
-        has = np.array([p is not None for p in pix], bool).reshape(g)
-        stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
-                 for i, p in enumerate(pix)]  # fmt: skip
-        masks = _csr(stack, g)
+        if pixels is None:  # box targets only: no list per target
+            has, masks = np.zeros(g, bool), _no_pixels(g)
+        else:
+            pix = list(pixels)
+            if len(pix) != g:
+                raise ShapeError(f"pixels must hold one entry per target ({g}), got {len(pix)}")
+            has = np.array([p is not None for p in pix], bool).reshape(g)
+            stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
+                     for i, p in enumerate(pix)]  # fmt: skip
+            masks = _csr(stack, g)
         counts = np.diff(masks.offsets).astype(np.float64)
         box_area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
         area = np.where(has, counts, box_area)
