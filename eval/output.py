@@ -27,6 +27,7 @@ import re
 import secrets
 import shutil
 import socket
+import stat
 import sys
 import time
 import warnings
@@ -51,13 +52,19 @@ __all__ = [
     "file_slugs",
     "has_saved_work",
     "hidden_folders",
+    "not_ours",
     "recover",
     "result_dir",
     "write_config",
+    "write_marker",
 ]
 
-RUN_MARKER = "config.json"
-"""Every published run folder holds this file; only such folders are ever replaced."""
+RUN_MARKER = ".torchsar-run.json"
+"""Every published run folder holds this file, written last, listing every file the run
+wrote; only a folder whose every file it lists is ever replaced (``--overwrite``) or
+treated as a run."""
+MARKER_TOOL = "torchsar-eval"
+_MARKER_BYTES = 64 << 20  # a marker larger than this is not ours
 RESUMABLE = "resume.json"
 """The record of a resumable run's options, in its staging folder."""
 
@@ -253,13 +260,51 @@ def _check_writable(out: Path) -> None:
         raise EvalError(f"{{opt:out}}{out}: cannot write in {anc} ({exc.strerror})") from None
 
 
+def write_marker(folder: Path) -> None:
+    """Write :data:`RUN_MARKER` into a finished run folder: every file in it, by path."""
+    files = sorted(
+        os.path.relpath(os.path.join(d, f), folder)
+        for d, _, names in os.walk(folder, followlinks=False) for f in names
+    )  # fmt: skip
+    record = {"tool": MARKER_TOOL, "files": [f for f in files if f != RUN_MARKER]}
+    (folder / RUN_MARKER).write_text(json.dumps(record, indent=0) + "\n")
+
+
+def not_ours(folder: Path) -> str | None:
+    """Why ``folder`` is not a run folder of ours (``None``: it is): no
+    :data:`RUN_MARKER`, an unreadable one, or a file or link the marker does not list
+    (something a run did not write, and ``--overwrite`` must not delete)."""
+    marker = folder / RUN_MARKER
+    try:
+        st = os.lstat(marker)
+    except OSError:
+        return f"it has no {RUN_MARKER} (the record every run folder of torchsar-eval holds)"
+    if not stat.S_ISREG(st.st_mode) or st.st_size > _MARKER_BYTES:
+        return f"its {RUN_MARKER} is not a file a run wrote"
+    try:
+        record = json.loads(marker.read_text())
+        listed = set(record["files"]) if record.get("tool") == MARKER_TOOL else None
+    except (OSError, ValueError, TypeError, KeyError, AttributeError, RecursionError):
+        listed = None
+    if listed is None:
+        return f"its {RUN_MARKER} is not a record of torchsar-eval"
+    for d, dirs, names in os.walk(folder, followlinks=False):
+        for f in sorted(names) + sorted(x for x in dirs if os.path.islink(os.path.join(d, x))):
+            rel = os.path.relpath(os.path.join(d, f), folder)
+            if rel != RUN_MARKER and rel not in listed:
+                return f"it holds {rel}, which no run wrote"
+    return None
+
+
 def _check_out(out: Path, overwrite: bool) -> None:
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise EvalError(f"{{opt:out}}{out} exists and is not a folder")
     if out.is_dir() and not _is_empty_dir(out):
-        if not (out / RUN_MARKER).is_file():
+        why = not_ours(out)
+        if why is not None:
             raise EvalError(
-                f"{{opt:out}}{out} is a non-empty folder that is not a run: choose another"
+                f"{{opt:out}}{out} is a non-empty folder that is not a run of torchsar-eval "
+                f"({why}): nothing in it is touched; choose another folder"
             )
         if not overwrite:
             raise EvalError(
@@ -361,6 +406,7 @@ def result_dir(out: Path, *, resume: bool = False, keep: bool = False) -> Iterat
             tmp.mkdir()
         try:
             yield tmp
+            write_marker(tmp)
             _publish(tmp, out)
         except BaseException as exc:
             saved = keep and has_saved_work(tmp)
@@ -434,4 +480,4 @@ def write_config(folder: Path, command: str, options: dict[str, Any]) -> None:
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "options": options,
     }
-    (folder / RUN_MARKER).write_text(json.dumps(cfg, indent=2, default=str) + "\n")
+    (folder / "config.json").write_text(json.dumps(cfg, indent=2, default=str) + "\n")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from torchsar_eval.output import clean, hidden_folders
+from torchsar_eval.output import RUN_MARKER, clean, hidden_folders
 
 __all__ = ["WRITES_OUT", "add_parser", "run"]
 
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         for h in clean(target, dry_run=args.dry_run):
             what = "an old run moved aside" if h.kind == "replaced" else "saved work"
             print(f"{verb} {what}: {h.describe() if args.dry_run else h.path}")
-        parent = target if target.is_dir() and not (target / "config.json").exists() else None
+        parent = target if target.is_dir() and not (target / RUN_MARKER).exists() else None
         for h in hidden_folders(parent or target.parent):
             if h.alive and (parent is not None or h.name == target.name):
                 print(f"left {h.path}: its run (process {h.pid} on {h.host}) is still working")

@@ -14,7 +14,7 @@ from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import _RULES, _TERMS
 from torchsar_eval.html_report.figures import FIGURES, Series, figure_svg, first_column
-from torchsar_eval.html_report.runfiles import RunFiles
+from torchsar_eval.html_report.runfiles import RunFiles, read_png
 from torchsar_eval.leaderboard import (
     DEFAULT_RANK,
     LOWER_IS_BETTER,
@@ -127,10 +127,11 @@ def _fmt(metric: str, v: object) -> str:
     return f"{x:.3g}" if abs(x) < 1000 else f"{x:,.0f}"
 
 
-def _png_uri(path: Path) -> str | None:
-    try:
-        data = path.read_bytes()
-    except OSError:
+def _png_uri(folder: Path, name: str) -> str | None:
+    """PNG ``name`` of run folder ``folder`` as a data URI (``None``: not a figure of the
+    run, see :func:`~torchsar_eval.html_report.runfiles.read_png`)."""
+    data = read_png(folder, name)
+    if data is None:
         return None
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
@@ -524,7 +525,7 @@ def _gallery(board: Board) -> str:
                 k = d[d["kind"] == kind]
                 figs = []
                 for rank, (_, r) in enumerate(k.iterrows(), 1):
-                    uri = _png_uri(run.folder / str(r["file"]))
+                    uri = _png_uri(run.folder, str(r["file"]))
                     if uri is None:
                         continue
                     alt = f"{kind.replace('_', ' ')} {rank} of {det}"
@@ -572,7 +573,7 @@ def _others(runs: list[RunFiles]) -> str:
     out = []
     for run in runs:
         for path in run.figures:
-            uri = _png_uri(path)
+            uri = _png_uri(run.folder, path.name)
             if uri:
                 name = path.name if len(runs) == 1 else f"{run.name}/{path.name}"
                 out.append(f'<figure><img class="other" src="{uri}" alt="{_e(name)}">'

@@ -5,6 +5,8 @@ column is skipped by whoever needs it."""
 from __future__ import annotations
 
 import json
+import os
+import stat
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,7 +15,12 @@ import pandas as pd
 
 from torchsar_eval.errors import EvalError
 
-__all__ = ["RUN_TABLES", "RunFiles", "read_run"]
+__all__ = ["MAX_PNG_BYTES", "RUN_TABLES", "RunFiles", "read_png", "read_run"]
+
+MAX_PNG_BYTES = 32 << 20
+"""The largest figure a report embeds."""
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+_PNG = b"\x89PNG\r\n\x1a\n"
 
 RUN_TABLES = {
     "summary": "summary.csv",
@@ -68,6 +75,35 @@ class RunFiles:
         return list(dict.fromkeys(self.tables["summary"]["dataset"].astype(str)))
 
 
+def read_png(folder: Path, name: str) -> bytes | None:
+    """The bytes of PNG ``name`` of run folder ``folder``, or ``None`` when it is not a
+    figure of the run: an absolute path, a ``..`` part, a symbolic link anywhere on the
+    way, not a regular file (a FIFO, a device), larger than :data:`MAX_PNG_BYTES`, or no
+    PNG signature. A run's tables name files, so a report reads only what lies inside the
+    run folder (nothing else of the machine can end up in ``report.html``)."""
+    parts = Path(name).parts
+    if not parts or Path(name).is_absolute() or any(p in ("..", "") for p in parts):
+        return None
+    path = folder
+    for part in parts:
+        path = path / part
+        try:
+            st = os.lstat(path)
+        except (OSError, ValueError):
+            return None
+        if stat.S_ISLNK(st.st_mode):
+            return None
+    if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_PNG_BYTES:
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY | _NOFOLLOW)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        data = f.read(MAX_PNG_BYTES + 1)
+    return data if data.startswith(_PNG) and len(data) <= MAX_PNG_BYTES else None
+
+
 def _read_csv(path: Path) -> pd.DataFrame:
     if not path.is_file():
         return pd.DataFrame()
@@ -106,5 +142,6 @@ def read_run(folder: str | Path) -> RunFiles:
     options = config.get("options")
     out = options.get("out") if isinstance(options, dict) else None
     name = Path(str(out)).name if out else folder.resolve().name
-    figures = sorted(p for p in folder.glob("*.png") if not p.name.startswith(REDRAWN))
+    figures = sorted(p for p in folder.glob("*.png")
+                     if not p.name.startswith(REDRAWN) and not p.is_symlink())  # fmt: skip
     return RunFiles(folder, name, config, tables, figures)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -12,6 +13,7 @@ import pytest
 from torchsar_eval.errors import EvalError
 from torchsar_eval.output import (
     HOST,
+    RUN_MARKER,
     StaleRunWarning,
     check_out,
     claim,
@@ -20,6 +22,7 @@ from torchsar_eval.output import (
     hidden_folders,
     recover,
     result_dir,
+    write_marker,
 )
 
 
@@ -27,10 +30,11 @@ def _write_run(folder, files):
     for name, text in files.items():
         (folder / name).write_text(text)
     (folder / "config.json").write_text("{}\n")
+    write_marker(folder)  # (result_dir writes it again when it publishes)
 
 
 def _contents(folder):
-    return {p.name: p.read_text() for p in folder.iterdir()}
+    return {p.name: p.read_text() for p in folder.iterdir() if p.name != RUN_MARKER}
 
 
 def _dead_pid():
@@ -184,7 +188,7 @@ def test_resume_adopts_the_staging_folder_of_an_ended_run(tmp_path):
         (tmp / "summary.csv").write_text("x")
     assert not left.exists()
     assert sorted(os.listdir(out)) == [
-        "config.json", "resume.json", "shard-000000.state", "summary.csv"
+        RUN_MARKER, "config.json", "resume.json", "shard-000000.state", "summary.csv"
     ]  # fmt: skip
     assert list(tmp_path.iterdir()) == [out]
 
@@ -311,6 +315,7 @@ def test_a_kill_at_any_step_leaves_the_old_or_the_new_run(tmp_path):
         out.mkdir()
         for name in ("a.csv", "stale.csv", "config.json"):
             (out / name).write_text("old")
+        write_marker(out)
         finished = _killed_at(out, k)
         recover(tmp_path)
         contents = _contents(out)
@@ -334,3 +339,44 @@ def test_file_slugs_are_unique_per_run():
         "folder:b/x": "folder_b_x",
         "folder_a_x": "folder_a_x-2",
     }
+
+
+def _tree(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+@pytest.mark.parametrize(
+    "prepare",
+    [
+        # a model or project folder that happens to hold a config.json
+        lambda p: ((p / "config.json").write_text("{}"), (p / "weights").mkdir(),
+                   (p / "weights" / "model.pt").write_text("w")),
+        # a run of ours to which the user added a file
+        lambda p: (_write_run(p, {"a.csv": "1"}), (p / "notes.txt").write_text("mine")),
+        # a run of ours with a link added (never followed, never deleted)
+        lambda p: (_write_run(p, {"a.csv": "1"}), (p / "data").symlink_to(p.parent)),
+        # a marker that is not ours
+        lambda p: ((p / RUN_MARKER).write_text('{"tool": "other", "files": []}'),),
+    ],
+)
+def test_overwrite_touches_only_what_a_run_wrote(tmp_path, prepare):
+    out = tmp_path / "out"
+    out.mkdir()
+    prepare(out)
+    before = _tree(out)
+    with pytest.raises(EvalError, match="not a run of torchsar-eval"), \
+            claim(out, overwrite=True):  # fmt: skip
+        raise AssertionError("the body must not run")
+    assert _tree(out) == before
+
+
+def test_a_published_run_lists_every_file_and_is_replaced(tmp_path):
+    out = tmp_path / "out"
+    with result_dir(out) as tmp:
+        (tmp / "sub").mkdir()
+        _write_run(tmp, {"a.csv": "1", "sub/b.csv": "2"})
+    record = json.loads((out / RUN_MARKER).read_text())
+    assert record["files"] == ["a.csv", "config.json", "sub/b.csv"]
+    with claim(out, overwrite=True), result_dir(out) as tmp:
+        _write_run(tmp, {"c.csv": "3"})
+    assert _contents(out) == {"c.csv": "3", "config.json": "{}\n"}

@@ -272,3 +272,31 @@ def test_detector_colours_are_stable_and_distinct():
         assert detector_colour(name) not in colours  # never a built-in's colour
         assert detector_dash(name) in ("--", "-.", ":")
     assert all(re.fullmatch(r"#[0-9a-f]{6}", c) for c in PALETTE)
+
+
+def test_the_report_embeds_only_figures_inside_the_run_folder(run, tmp_path):
+    """Paths a run's ``gallery/cases.csv`` names, and figures that are links, FIFOs or not
+    PNGs, are never read into the page: nothing of the machine outside the run folder."""
+    import os
+
+    copy = _copy(run, tmp_path)
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(b"\x89PNG\r\n\x1a\n" + b"SECRET-OUTSIDE-THE-RUN" * 8)
+    inside = copy / "gallery" / "inside.png"
+    inside.write_bytes(b"\x89PNG\r\n\x1a\n" + b"A-FIGURE-OF-THE-RUN" * 8)
+    (copy / "gallery" / "link.png").symlink_to(secret)
+    (copy / "linked.png").symlink_to(secret)
+    os.mkfifo(copy / "gallery" / "fifo.png")
+    (copy / "gallery" / "text.png").write_text("not a png")
+    cases = pd.read_csv(copy / "gallery" / "cases.csv")
+    row = cases.iloc[0]
+    names = [str(secret), "../" * 12 + str(secret)[1:], "gallery/link.png",
+             "gallery/fifo.png", "gallery/text.png", "/dev/zero", "gallery/inside.png"]  # fmt: skip
+    pd.concat([pd.DataFrame([{**row.to_dict(), "file": n} for n in names]), cases]).to_csv(
+        copy / "gallery" / "cases.csv", index=False)  # fmt: skip
+    assert main(["report", str(copy)]) == 0
+    text = (copy / "report.html").read_text()
+    embedded = b"".join(base64.b64decode(src.split(",", 1)[1]) for src in Page(text).images
+                        if src.startswith("data:"))  # fmt: skip
+    assert b"SECRET-OUTSIDE-THE-RUN" not in embedded
+    assert b"A-FIGURE-OF-THE-RUN" in embedded
