@@ -18,6 +18,7 @@ travels to worker processes by that reference, rebuilt there.
 
 from __future__ import annotations
 
+import copy
 import inspect
 import math
 import pickle
@@ -175,13 +176,18 @@ class Detector:
 
     def __call__(self, images: Tensor, meta: list[dict] | None = None) -> Detection | Objects:
         """Run the detector on a batch (``meta``: per-image metadata, for detectors that
-        take it)."""
+        take it). The detector gets its own copy of the images and metadata: one that
+        writes into its input (``images.mul_(0)``) changes nothing for the detectors after
+        it or for the scoring (callables marked ``reads_only`` get the batch itself)."""
         kwargs = dict(self.params)
         if meta is not None and self.wants_meta():
-            kwargs["meta"] = meta
+            kwargs["meta"] = copy.deepcopy(meta)  # its own: a detector cannot change another's
+        given = images
+        if not getattr(self.fn, "reads_only", False):  # its own copy to write into, if it will
+            images = images.clone()
         with torch.no_grad():
             out = self.fn(images, **kwargs)
-        return self.check_output(out, images)
+        return self.check_output(out, given)
 
     def check_output(self, out: object, images: Tensor) -> Detection | Objects:
         """Refuse an output that is neither a Detection nor Objects of this batch."""

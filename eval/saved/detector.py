@@ -138,6 +138,8 @@ class SavedPredictions:
         threshold: operating threshold of the scores (needed by score-map masks).
     """
 
+    reads_only = True  # (the detector harness passes it the batch itself)
+
     def __init__(self, path: str | Path, *, format: str = "auto", iou_type: str = "auto",
                  threshold: float | None = None) -> None:  # fmt: skip
         self.path = Path(path)

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import pandas as pd
 import pytest
 import torch
 
@@ -66,3 +67,24 @@ def test_preprocess_runs_before_detectors():
     (res,) = run_detectors(ListDataset([img]), [BUILTIN["ca"]], preprocess=stage, progress=False)
     assert seen == [(1, 1, 32, 32)]
     assert res.pixels.fp == 0
+
+
+def test_a_detector_that_writes_into_its_input_corrupts_nothing_after_it():
+    """A detector zeroing its images (and emptying the metadata) in place: ``ca`` after it,
+    and the scoring, see the batch as it was (on the code before, ``ca`` lost every
+    detection)."""
+    import torchsar_eval as te
+    from torchsar.cfar import ca
+
+    def vandal(images, meta):
+        images.mul_(0)
+        for m in meta:
+            m.clear()
+        return ca(images + 1.0)
+
+    alone = te.evaluate("sim-chips", ["ca"], n=6, progress=False).summary
+    both = te.evaluate("sim-chips", [te.Detector("vandal", vandal), "ca"], n=6,
+                       progress=False).summary  # fmt: skip
+    ca = both[both.detector == "ca"].drop(columns=["detector"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(ca, alone.drop(columns=["detector"]).reset_index(drop=True))
+    assert int(alone.tp.iloc[0]) > 0
