@@ -22,6 +22,8 @@ def fingerprint(plan, datasets: dict) -> dict:
         "calibration": None if cal is None else [cal.target, cal.fraction],
         "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
         "manifests": {n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")},
+        "predictions": {d.name: [str(d.fn.path), d.fn.digest] for d in plan.detectors
+                        if getattr(d.fn, "digest", None) is not None},
     }, default=str))  # fmt: skip
 
 
@@ -36,6 +38,12 @@ def check_resumable(path: Path, expected: dict) -> None:
                 raise EvalError(f"{{opt:resume}}: dataset {name} changed since the interrupted "
                                 f"run ({_manifest_change(before, now)}); start over with "
                                 "{opt:discard}")  # fmt: skip
+        for name, (path, now) in expected.get("predictions", {}).items():
+            before = saved.get("predictions", {}).get(name)
+            if before is None or before[1] != now:
+                raise EvalError(f"{{opt:resume}}: the predictions of {name} ({path}) are not "
+                                "those of the interrupted run (the file was replaced or "
+                                "changed); start over with {opt:discard}")  # fmt: skip
         if saved != expected:
             raise EvalError(f"{{opt:resume}}: the options differ from those of the interrupted "
                             f"run (see {path.name} in its folder)")  # fmt: skip

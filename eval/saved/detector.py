@@ -7,6 +7,7 @@ Worker processes receive the file's path and the row -> item map, and read the f
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -15,8 +16,11 @@ from torch.utils.data import Dataset
 
 from torchsar.detection import Detection
 from torchsar.io.coco import segmentation_problems
+from torchsar.io.errors import FileFormatError
+from torchsar.io.raster import check_regular_file
 from torchsar.io.rle import counts_from_strings, rle_pixels
 from torchsar.objects import Objects
+from torchsar_eval.datasets.manifest import file_manifest
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.saved.keys import dataset_keys, locate
@@ -54,14 +58,27 @@ def _format(path: Path, fmt: str) -> str:
                     "format='coco' (JSON), 'points' (CSV) or 'masks' (a folder)")  # fmt: skip
 
 
-def _read(path: Path, fmt: str, iou_type: str) -> PredictionTable | MaskFolder:
+def _read(path: Path, fmt: str, iou_type: str, digest: str) -> PredictionTable | MaskFolder:
+    """The file's table (cached by its content's ``digest``: never a stale copy)."""
     if fmt == "masks":
         return MaskFolder(path)
-    st = path.stat()
-    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, fmt, iou_type)
+    key = (str(path.resolve()), digest, fmt, iou_type)
     if key not in _TABLES:
         _TABLES[key] = read_coco_results(path, iou_type) if fmt == "coco" else read_points(path)
     return _TABLES[key]
+
+
+def _digest(path: Path, fmt: str) -> str:
+    """The sha256 of a predictions file's bytes; of a mask folder, of its files' names,
+    sizes and modification times."""
+    if fmt == "masks":
+        files = sorted(p for p in path.rglob("*") if p.is_file())
+        return file_manifest(path, files)["sha256_mtime"]
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def compressed_counts(seg: object, h: int, w: int) -> bytes:
@@ -148,7 +165,13 @@ class SavedPredictions:
             raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
         self.iou_type, self.threshold = iou_type, threshold
         self.needs_images = False
-        self.table = _read(self.path, self.format, iou_type)  # read now: errors before any work
+        if self.format != "masks":  # a FIFO or a device would block: refused unopened
+            try:
+                check_regular_file(self.path)
+            except FileFormatError as exc:
+                raise EvalError(f"predictions {exc}") from None
+        self.digest = _digest(self.path, self.format)  # what a resumed run must find again
+        self.table = _read(self.path, self.format, iou_type, self.digest)  # errors before work
         self._item_rows: tuple[np.ndarray, np.ndarray] | None = None
 
     def bind(self, dataset: Dataset, name: str) -> SavedPredictions:
@@ -176,7 +199,10 @@ class SavedPredictions:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self.table = _read(self.path, self.format, self.iou_type)
+        if _digest(self.path, self.format) != self.digest:
+            raise EvalError(f"predictions {self.path} changed during the run (a worker read "
+                            "other contents than the run did); run again")  # fmt: skip
+        self.table = _read(self.path, self.format, self.iou_type, self.digest)
 
     def rows_of(self, item: int) -> np.ndarray:
         """The rows of dataset item ``item``, in file order."""

@@ -104,3 +104,45 @@ def test_resume_refuses_a_dataset_that_changed(tmp_path):
     os.utime(data / "a.png", ns=(1, 1))
     with pytest.raises(EvalError, match="dataset d changed .*files modified"):
         check()
+
+
+def test_resume_refuses_predictions_that_changed(tmp_path):
+    """A predictions file replaced between the interrupted run and --resume (same name, even
+    the same size and time): refused, naming it (before, the run mixed old and new shards)."""
+    import json
+
+    from torchsar_eval.api import _Plan
+    from torchsar_eval.errors import EvalError
+    from torchsar_eval.result import Scoring
+    from torchsar_eval.resume import check_resumable, fingerprint
+    from torchsar_eval.saved import predictions
+    from torchsar_eval.settings import Execution
+
+    path = tmp_path / "results.json"
+    rows = [{"image_id": 1, "bbox": [1, 2, 3, 4], "score": 0.5}]
+    path.write_text(json.dumps(rows))
+    record = tmp_path / "resume.json"
+
+    def check():
+        plan = _Plan([predictions(path, name="cnn")], Scoring(), Execution(), None, None, None,
+                     "px", False, 0)  # fmt: skip
+        check_resumable(record, fingerprint(plan, {}))
+
+    check()
+    check()
+    stat = path.stat()
+    path.write_text(json.dumps([{**rows[0], "score": 0.7}]))  # same size
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns))  # and the same time
+    with pytest.raises(EvalError, match=r"predictions of cnn .*results.json.* not those"):
+        check()
+
+
+@pytest.mark.parametrize("suffix", [".json", ".csv"])
+def test_a_fifo_as_predictions_is_refused_at_once(tmp_path, suffix):
+    from torchsar_eval.errors import EvalError
+    from torchsar_eval.saved import predictions
+
+    fifo = tmp_path / f"results{suffix}"
+    os.mkfifo(fifo)
+    with pytest.raises(EvalError, match="not a regular file"):
+        predictions(fifo)
