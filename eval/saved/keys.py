@@ -1,10 +1,13 @@
 """Which dataset item a saved prediction refers to.
 
-A prediction names its image by a COCO image id (an integer) or by a name. An integer is the
-item's COCO id when the dataset has COCO ids (``coco:`` datasets), else its 1-based position
-in the dataset (the ids ``torchsar-eval run --export-coco`` writes). A name is matched to an
-item's name (as in ``per_image.csv``), else its file name, else its file name without
-extension; a name that is all digits may also be an integer id.
+The one rule, for every format: a prediction names its image either by an **id** (COCO
+results' ``image_id``, a points CSV's ``image_id`` column: an integer) or by a **name**
+(COCO results' ``file_name``; a points CSV's ``image``, ``file_name`` or ``scene_id``
+column: text). An id is the item's COCO id when the dataset has COCO ids (``coco:``
+datasets), else its 1-based position in the dataset (the ids ``torchsar-eval run
+--export-coco`` writes). A name is matched to an item's name (as in ``per_image.csv``),
+else its file name, else its file name without extension, and never taken for an id: a
+name ``"1"`` that no image has is an error, not the first image.
 """
 
 from __future__ import annotations
@@ -68,21 +71,21 @@ def locate(refs: np.ndarray, keys: list[dict], what: str) -> np.ndarray:
     out = np.array([memo[ref] for ref in values], dtype=np.int64).reshape(len(values))
     missing = [ref for ref, i in memo.items() if i < 0]
     if missing:
+        hint = (" (it is given as a name; an integer id goes in the image_id field or column)"
+                if isinstance(missing[0], str) and missing[0].isdigit() else "")  # fmt: skip
         raise EvalError(f"{what}: {len(missing)} image(s) not in the dataset, e.g. "
-                        f"{missing[0]!r} (images are matched by COCO id, or by name, file "
-                        "name or file stem; ids of other datasets count from 1 in dataset "
-                        "order)")  # fmt: skip
+                        f"{missing[0]!r}{hint} (images are matched by COCO id, or by name, "
+                        "file name or file stem; ids of other datasets count from 1 in "
+                        "dataset order)")  # fmt: skip
     return out
 
 
 def _find(ref: object, by_id: dict | None, tables: list[dict[str, int]], n: int) -> int:
-    if isinstance(ref, str):
+    if isinstance(ref, str):  # a name: never an id
         for table in tables:
             if ref in table:
                 return table[ref]
-        if not ref.isdigit():
-            return -1
-        ref = int(ref)
+        return -1
     if by_id is not None:
         return by_id.get(ref, -1)
     return ref - 1 if isinstance(ref, int) and 1 <= ref <= n else -1

@@ -79,6 +79,9 @@ def _coco_row(row: object, k: int, path: Path) -> tuple:
     if not isinstance(row, dict):
         raise _fail(path, f"entry {k} is not an object: {row!r:.60}")
     ref = row.get("image_id", row.get("file_name"))
+    if "image_id" in row and (isinstance(ref, bool) or not isinstance(ref, int)):
+        raise _fail(path, f"entry {k} image_id {ref!r:.40} is not an integer id (an image's "
+                    "name goes in file_name)")  # fmt: skip
     if isinstance(ref, bool) or not isinstance(ref, int | str):
         raise _fail(path, f"entry {k} has no image_id (an integer) or file_name")
     score = _number(row.get("score"), path, f"entry {k} score")
@@ -213,6 +216,21 @@ def _floats(col: pd.Series, path: Path, what: str, *, finite: bool = True) -> np
     return values
 
 
+def _refs(df: pd.DataFrame, path: Path) -> np.ndarray:
+    """Each row's image: an integer id from an ``image_id`` column, else a name (text)."""
+    col = next((n for n in _IMAGE if n in df.columns), None)
+    values = _column(df, _IMAGE, path)
+    if col != "image_id":
+        return values.astype(str).to_numpy(dtype=object)
+    text = values.astype(str).str.strip()
+    bad = ~text.str.fullmatch(r"[0-9]{1,18}")
+    if bad.any():
+        k = int(np.flatnonzero(bad.to_numpy())[0])
+        raise _fail(path, f"row {k + 1}: image_id {text.iloc[k][:40]!r} is not an integer id "
+                    "(an image's name goes in an image or file_name column)")  # fmt: skip
+    return np.array([int(v) for v in text], dtype=object).reshape(len(text))
+
+
 def read_points(path: str | Path) -> PredictionTable:
     """Read a point CSV (see the module docstring).
 
@@ -226,7 +244,7 @@ def read_points(path: str | Path) -> PredictionTable:
         raise _fail(path, f"is not a readable CSV file ({exc})") from None
     except pd.errors.EmptyDataError:
         raise _fail(path, "is empty (expected a header image,row,col,score)") from None
-    refs = _column(df, _IMAGE, path).astype(str).to_numpy(dtype=object)
+    refs = _refs(df, path)
     point = np.stack([_floats(_column(df, _ROW, path), path, "row"),
                       _floats(_column(df, _COL, path), path, "col")], axis=1)  # fmt: skip
     score_col = _column(df, ("score",), path, required=False)

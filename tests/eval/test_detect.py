@@ -65,7 +65,7 @@ def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
     assert cfg["scenes"][0]["manifest"]["bytes"] == os.path.getsize(scene.path)
     assert cfg["scenes"][0]["objects"] == len(got) and cfg["tiles_total"] == 30
     assert sorted(p.name for p in (tmp_path / "r").iterdir()) == [
-        "config.json", "detections.csv", "detections.geojson"]  # fmt: skip
+        ".torchsar-run.json", "config.json", "detections.csv", "detections.geojson"]  # fmt: skip
 
 
 def test_ac_scene_clutter_mean_computed_once_and_shared(scene, tmp_path, monkeypatch):

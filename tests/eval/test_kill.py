@@ -14,7 +14,7 @@ from contextlib import nullcontext
 import pytest
 
 from torchsar_eval.cli import main
-from torchsar_eval.output import StaleRunWarning, has_saved_work
+from torchsar_eval.output import RUN_MARKER, StaleRunWarning, has_saved_work, write_marker
 
 RUN_FILES = {"summary.csv", "roc.csv", "roc_pixel.csv", "summary.md", "config.json"}
 OLD_RUN = {"config.json": "old", "stale.csv": "old"}
@@ -25,6 +25,7 @@ def _start(out, old: bool) -> subprocess.Popen:
         out.mkdir()
         for name, text in OLD_RUN.items():
             (out / name).write_text(text)
+        write_marker(out)
     argv = ["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca", "--no-progress"]
     argv += ["--out", str(out)] + (["--overwrite"] if old else [])
     cmd = [sys.executable, "-m", "torchsar_eval.cli", *argv]
@@ -47,7 +48,7 @@ def _kill_when_writing(proc: subprocess.Popen, parent, sig: int, delay: float) -
 def _state(out) -> str:
     if not out.exists():
         return "none"
-    names = {p.name for p in out.iterdir()}
+    names = {p.name for p in out.iterdir()} - {RUN_MARKER}
     if names == set(OLD_RUN):
         return "old"
     assert names >= RUN_FILES and any(n.startswith("roc_") and n.endswith(".png") for n in names)

@@ -253,3 +253,40 @@ def test_predictions_need_one_dataset_and_known_options(tmp_path, capsys):
     assert "saved predictions take only" in capsys.readouterr().err
     with pytest.raises(EvalError, match="do not exist"):
         te.predictions(tmp_path / "missing.json")
+
+
+def test_one_id_rule_for_every_format(tmp_path):
+    """An integer id (COCO ``image_id``, a CSV ``image_id`` column) is the image's COCO id
+    or 1-based position in every format; a name is a name and never taken for a position
+    (on the code before, CSV ``image_id=1`` scored against the second sim-chips image)."""
+    import json
+
+    import torchsar_eval as te
+    from torchsar_eval.errors import EvalError
+
+    ds = "sim-chips"
+    te.evaluate(ds, ["ca"], n=4, export_coco=True, out=tmp_path / "ref", progress=False)
+    saved = tmp_path / "ref" / "coco" / "sim-chips__ca.json"
+    dets = json.loads(saved.read_text())
+    (tmp_path / "p.csv").write_text("image_id,row,col,score\n" + "".join(
+        f"{d['image_id']},{d['bbox'][1] + d['bbox'][3] / 2 - 0.5},"
+        f"{d['bbox'][0] + d['bbox'][2] / 2 - 0.5},{d['score']}\n" for d in dets))  # fmt: skip
+    scoring = te.Scoring(matching=te.Matching(kind="distance", max_distance=3))
+    json_res = te.evaluate(ds, [te.predictions(saved, name="p", iou_type="bbox")], n=4,
+                           scoring=scoring, progress=False)  # fmt: skip
+    csv_res = te.evaluate(ds, [te.predictions(tmp_path / "p.csv", name="p")], n=4,
+                          scoring=scoring, progress=False)  # fmt: skip
+    per_image = {d["image_id"] for d in dets}
+    assert len(per_image) >= 2  # several images: a shifted id would show
+    assert json_res.per_image.objects.tolist() == csv_res.per_image.objects.tolist()
+    assert json_res.per_image.tp.tolist() == csv_res.per_image.tp.tolist()
+    # a digit string in a name column is a name: refused when no image has it
+    (tmp_path / "n.csv").write_text("image,row,col\n99,5,5\n")
+    with pytest.raises(EvalError, match="given as a name"):
+        te.evaluate(ds, [te.predictions(tmp_path / "n.csv", name="p")], n=4, progress=False)
+    (tmp_path / "bad.csv").write_text("image_id,row,col\nchip.png,5,5\n")
+    with pytest.raises(EvalError, match="not an integer id"):
+        te.predictions(tmp_path / "bad.csv")
+    (tmp_path / "big.csv").write_text("image_id,row,col\n" + "4" * 400 + ",5,5\n")
+    with pytest.raises(EvalError, match="not an integer id"):
+        te.predictions(tmp_path / "big.csv")
