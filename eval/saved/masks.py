@@ -40,14 +40,27 @@ class MaskFolder:
         self.files = files
         self.refs = np.array([str(f.relative_to(self.root).with_suffix("")) if f.parent != (
             self.root) else _stem(f) for f in files], dtype=object)  # fmt: skip
+        seen: dict[str, Path] = {}
+        for f, ref in zip(files, self.refs.tolist(), strict=True):
+            if ref in seen:
+                raise EvalError(f"predictions {root}: {seen[ref].name} and {f.name} are both "
+                                f"the mask of image {ref}; keep one")  # fmt: skip
+            seen[ref] = f
         self.score = np.ones(len(files))
 
     def __len__(self) -> int:
         return len(self.files)
 
     def _read(self, path: Path, shape: tuple[int, int]) -> np.ndarray:
-        if path.suffix.lower() == ".npy":
-            arr = np.load(path, allow_pickle=False)
+        if path.suffix.lower() == ".npy":  # its header's shape checked before it is read
+            try:
+                arr = np.load(path, allow_pickle=False, mmap_mode="r")
+            except (ValueError, OSError) as exc:  # a header the bytes do not back
+                raise EvalError(f"predictions {path}: not a readable .npy mask ({exc})") from None
+            if int(np.prod(arr.shape)) != shape[0] * shape[1]:
+                raise EvalError(f"predictions {path}: a {arr.shape} mask for an image of "
+                                f"{shape}")  # fmt: skip
+            arr = np.array(arr)
         else:
             from torchsar.io import read_raster
 
@@ -93,11 +106,11 @@ class MaskFolder:
                 continue
             if (m < 0).any():
                 raise EvalError(f"predictions {self.files[rows[k][0]]}: negative instance ids")
-            labels[k * c] = m
-            table = self._scores(self.files[rows[k][0]], np.unique(m))
-            ids = np.unique(m[m > 0])
-            lut = np.ones(int(m.max(initial=0)) + 1)
-            for i in ids.tolist():
-                lut[i] = table.get(i, 1.0)
-            score[k * c] = lut[m]
+            # ids relabelled 1..K in order: an id of 2**31 costs no table of 2**31 entries
+            ids = np.union1d([0], np.unique(m))
+            dense = np.searchsorted(ids, m)
+            labels[k * c] = dense
+            table = self._scores(self.files[rows[k][0]], ids)
+            lut = np.array([1.0] + [table.get(int(i), 1.0) for i in ids[1:].tolist()])
+            score[k * c] = lut[dense]
         return Objects.from_labels(labels, score, threshold=None)

@@ -221,6 +221,38 @@ def test_mask_folder_ids_with_scores_and_score_maps(tmp_path):
     assert (s.loc["maps", ["tp", "fp", "fn"]] == [2, 0, 0]).all()
 
 
+def test_mask_folder_huge_ids_two_files_and_lying_headers(tmp_path):
+    """An instance id of 2**31 - 1 is relabelled (on the code before: a 16 GiB table); two
+    files for one image are refused (before: one won silently); a .npy whose header
+    declares a huge array is refused before it is read."""
+    from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.errors import EvalError
+
+    sim = make_dataset("sim-chips", n=2)
+    folder = tmp_path / "ids"
+    folder.mkdir()
+    for i in range(2):
+        inst = sim[i]["instances"][0].numpy().astype(np.int64)
+        np.save(folder / f"{i}.npy", np.where(inst > 0, 2**31 - 1 - inst, 0))
+        (folder / f"{i}.scores.json").write_text(json.dumps({str(2**31 - 2): 0.7}))
+    res = te.evaluate("sim-chips", [te.predictions(folder, name="ids", threshold=0.5)], n=2,
+                      progress=False)  # fmt: skip
+    assert res.summary[["tp", "fp", "fn"]].iloc[0].tolist() == [2, 0, 0]
+    np.save(folder / "0b.npy", np.zeros((4, 4)))
+    (folder / "0b.npy").rename(folder / "0.png")
+    with pytest.raises(EvalError, match="both the mask of image 0"):
+        te.predictions(folder)
+    (folder / "0.png").unlink()
+    header = np.lib.format.header_data_from_array_1_0(np.zeros((2, 2), np.int32))
+    header["shape"] = (100_000, 100_000)
+    with open(folder / "1.npy", "wb") as f:
+        np.lib.format.write_array_header_1_0(f, header)
+        f.write(np.zeros(4, np.int32).tobytes())
+    with pytest.raises(EvalError):
+        te.evaluate("sim-chips", [te.predictions(folder, name="ids", threshold=0.5)], n=2,
+                    progress=False)  # fmt: skip
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [
