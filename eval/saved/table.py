@@ -131,13 +131,15 @@ def _plain_box_rows(data: list, path: Path) -> PredictionTable | None:
         return None
     n = len(data)
     x, y, w, h = box.T
-    rc = np.stack([y, x, y + h, x + w], axis=1).reshape(n, 4)
+    with np.errstate(over="ignore"):  # a finite box past float range: inf, as pycocotools
+        rc = np.stack([y, x, y + h, x + w], axis=1).reshape(n, 4)
+        area = w * h
     return PredictionTable(
         path=path, refs=np.array(refs, dtype=object).reshape(n), score=score.reshape(n),
         geometry="box", box=rc,
         classes=None if all(c is None for c in cats) else np.array(
             [str(c) for c in cats], dtype=object),
-        declared_area=w * h if n else None,
+        declared_area=area if n else None,
     )  # fmt: skip
 
 
@@ -178,7 +180,8 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
     cats = [r[4] for r in rows]
     area = None
     if rows and rows[0][2] is not None:  # pycocotools' loadRes: the bbox branch, w * h
-        area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
+        with np.errstate(over="ignore", invalid="ignore"):
+            area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
     return PredictionTable(
         path=path, refs=np.array([r[0] for r in rows], dtype=object).reshape(n),
         score=np.array([r[1] for r in rows], dtype=np.float64).reshape(n),

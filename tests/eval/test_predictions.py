@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -322,3 +323,26 @@ def test_one_id_rule_for_every_format(tmp_path):
     (tmp_path / "big.csv").write_text("image_id,row,col\n" + "4" * 400 + ",5,5\n")
     with pytest.raises(EvalError, match="not an integer id"):
         te.predictions(tmp_path / "big.csv")
+
+
+def test_a_huge_finite_box_is_one_false_alarm(tmp_path):
+    """``[0, 0, 1e300, 1e300]`` (finite, far past the image): one false alarm of no size bin
+    a target has, no overflow (before: area -2**63 in the small bin)."""
+    gt = {"images": [{"id": 1, "file_name": "a.png", "height": 64, "width": 64}],
+          "categories": [{"id": 1, "name": "ship"}],
+          "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [10, 10, 20, 8],
+                           "area": 160, "iscrowd": 0}]}  # fmt: skip
+    (tmp_path / "gt.json").write_text(json.dumps(gt))
+    (tmp_path / "r.json").write_text(json.dumps([
+        {"image_id": 1, "category_id": 1, "bbox": [0, 0, 1e300, 1e300], "score": 0.9},
+        {"image_id": 1, "category_id": 1, "bbox": [10, 10, 20, 8], "score": 0.5}]))  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        warnings.simplefilter("error", RuntimeWarning)  # no overflow anywhere
+        res = te.evaluate(f"coco:{tmp_path / 'gt.json'}",
+                          [te.predictions(tmp_path / "r.json", name="cnn")],
+                          scoring=te.Scoring(matching=te.Matching(kind="box")), progress=False)
+    row = res.summary.iloc[0]
+    assert (row.tp, row.fp) == (1, 1)
+    sizes = res.breakdown[res.breakdown.by == "size"]
+    assert set(sizes.key) <= {"small", "medium", "large"} and (sizes.fp >= 0).all()

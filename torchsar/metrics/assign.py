@@ -437,7 +437,13 @@ def _outside(area: np.ndarray, ranges: np.ndarray) -> np.ndarray:
 def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     """Match every plane's objects to its targets (objects and targets of the same stack of
     planes; see the module docstring); the distance rule by
-    :func:`torchsar.metrics.points.match_points`."""
+    :func:`torchsar.metrics.points.match_points`. A finite box whose area overflows float
+    range (1e300 px a side) has area ``inf``, as in pycocotools: it matches nothing."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _match_batch(obj, gt, rule)
+
+
+def _match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     if rule.kind == "distance":
         from torchsar.metrics.points import match_points
 
@@ -463,7 +469,8 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     col = assign_pairs(pr.d_problem, pr.i_problem, i_ignore, i_crowd,
                        (dv[keep], iv[keep], quality[keep]), COCO_IOUS)  # fmt: skip
     d_area = _det_area(obj, boxes=rule.iou_kind == "box")[pr.d_order]
-    ap = _statuses(col, pr, i_ignore, _outside(d_area, _RANGES))
+    d_out = _outside(d_area, _RANGES)
+    ap = _statuses(col, pr, i_ignore, d_out)
     if rule.kind == "centroid":
         q = np.zeros(dv.size)
         q[is_t] = _centroid_pairs(obj.centroid[od[is_t]], obj.box[od[is_t]], gt.box[tg[is_t]],
@@ -473,8 +480,9 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
         opc = assign_pairs(pr.d_problem, pr.i_problem, i_ignore[:, :1], i_crowd,
                            (dv[keep], iv[keep], q[keep]), [1e-12])  # fmt: skip
         op_v = _statuses(opc, pr, i_ignore[:, :1], np.zeros((len(obj), 1), bool))
-    elif rule.iou == COCO_IOUS[0]:
-        op_v = ap[:1, :1]
+    elif rule.iou == COCO_IOUS[0] and not d_out[:, 0].any():
+        op_v = ap[:1, :1]  # (the operating point ignores no detection for its size: a box
+        # past COCO's area range "all", 1e10 px, is a false alarm there, not ignored)
     else:
         opc = assign_pairs(pr.d_problem, pr.i_problem, i_ignore[:, :1], i_crowd,
                            (dv[keep], iv[keep], quality[keep]), [rule.iou])  # fmt: skip

@@ -122,7 +122,13 @@ def box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
 
 
 def pair_box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
-    """:func:`box_iou` of boxes ``a[..., :]`` and ``b[..., :]`` paired by broadcasting."""
+    """:func:`box_iou` of boxes ``a[..., :]`` and ``b[..., :]`` paired by broadcasting
+    (a finite box whose area overflows has area ``inf``: IoU 0 with any finite box)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _pair_box_iou(a, b, crowd)
+
+
+def _pair_box_iou(a: np.ndarray, b: np.ndarray, crowd: bool) -> np.ndarray:
     ih = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
     iw = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
     inter = ih * iw

@@ -39,6 +39,11 @@ GEOMETRIES = ("mask", "box", "point")
 BOX_FORMATS = ("rc", "xyxy", "xywh")
 
 
+_MAX_AREA = 1 << 62
+"""The largest area (pixels) a box object records: larger ones saturate (an int64 cannot
+hold the area of a finite box of 1e300 pixels a side)."""
+
+
 @dataclass(frozen=True)
 class ObjectMasks:
     """The pixels of possibly overlapping objects, compressed row by row (CSR).
@@ -401,8 +406,10 @@ class Objects:
             raise InputValueError("boxes must be finite with r1 >= r0 and c1 >= c0 "
                                   f"({box_format})")  # fmt: skip
         hh, ww = box[:, 2] - box[:, 0], box[:, 3] - box[:, 1]
+        with np.errstate(over="ignore"):  # a finite box of 1e300 px: its area saturates
+            area = np.minimum(np.rint(hh * ww), float(_MAX_AREA)).astype(np.int64)
         props = {
-            "plane": plane, "score": scores, "area": np.rint(hh * ww).astype(np.int64),
+            "plane": plane, "score": scores, "area": area,
             "box": box, "centroid": 0.5 * (box[:, :2] + box[:, 2:]) - 0.5,
             "length": np.maximum(hh, ww), "width": np.minimum(hh, ww),
         }  # fmt: skip
