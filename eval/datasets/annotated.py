@@ -20,7 +20,7 @@ machine. ``outside=allow`` reads such images anyway.
 from __future__ import annotations
 
 import os
-from collections import Counter
+import stat
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -145,11 +145,17 @@ class AnnotatedDataset(FileDataset):
         self.items = entries
         self.objects = objects
         self.image_ids = image_ids
-        self.missing = {e[0] for e in entries if not os.path.isfile(e[0])}
+        self.missing, seen = set(), {}
+        for e in entries:  # one image under two names (sub/../a.png, a link) is refused
+            key = _identity(e[0])
+            if key is None:
+                self.missing.add(e[0])
+                key = os.path.normpath(e[0])
+            if key in seen:
+                raise EvalError(f"{scheme} annotations describe image {e[0]} more than once"
+                                + ("" if seen[key] == e[0] else f" (also as {seen[key]})"))
+            seen[key] = e[0]
         self.options["missing_images"] = len(self.missing)
-        twice = [path for path, k in Counter(e[0] for e in entries).items() if k > 1]
-        if twice:
-            raise EvalError(f"{scheme} annotations describe image {twice[0]} more than once")
         self.shared_files = list(annotation_files)
 
     def item_files(self, i: int) -> list[Path]:
@@ -330,6 +336,16 @@ def _targets(objects: ObjectColumns, rows: range, pixels: list) -> Targets:
         box[crowd], tuple(cls[k] for k in crowd),
         tuple(pixels[k] if seg[k] is not None else None for k in crowd),
     )  # fmt: skip
+
+
+def _identity(path: str) -> tuple[int, int] | None:
+    """``(device, inode)`` of a regular file, ``None`` when there is none (missing, a
+    name the system refuses, a folder, a FIFO)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) else None
 
 
 def _exists(path: Path) -> bool:

@@ -127,6 +127,24 @@ def test_image_annotated_twice(tmp_path):
         make_dataset(f"voc:{tmp_path}")
 
 
+@pytest.mark.parametrize("alias", ["./sub/../s1.png", "link.png", "./missing.png"])
+def test_coco_image_under_two_names(tmp_path, alias):
+    """One image named twice in a COCO file (a path alias, a symbolic link, a missing
+    image as ``./x`` and ``x``) would be scored twice: refused, naming both."""
+    import json
+
+    write_png(tmp_path / "s1.png", np.zeros((20, 30), np.uint8))
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.png").symlink_to(tmp_path / "s1.png")
+    first = "missing.png" if alias == "./missing.png" else "s1.png"
+    images = [{"id": k + 1, "file_name": n, "height": 20, "width": 30}
+              for k, n in enumerate([first, alias])]  # fmt: skip
+    (tmp_path / "gt.json").write_text(json.dumps(
+        {"images": images, "annotations": [], "categories": [{"id": 1, "name": "ship"}]}))
+    with pytest.raises(EvalError, match=r"coco annotations describe image .* more than once"):
+        make_dataset(f"coco:{tmp_path / 'gt.json'}")
+
+
 def test_voc_missing_image_and_no_xml(tmp_path):
     from torchsar_eval.datasets.base import BadItemError
 
