@@ -185,8 +185,12 @@ class Detector:
         given = images
         if not getattr(self.fn, "reads_only", False):  # its own copy to write into, if it will
             images = images.clone()
-        with torch.no_grad():
-            out = self.fn(images, **kwargs)
+        try:
+            with torch.no_grad():
+                out = self.fn(images, **kwargs)
+        except SystemExit as exc:  # not the run's to end: an error naming the detector
+            raise EvalError(f"detector {self.name} called sys.exit({exc.code!r}); a detector "
+                            "returns its detections or raises an error") from None  # fmt: skip
         return self.check_output(out, given)
 
     def check_output(self, out: object, images: Tensor) -> Detection | Objects:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-__all__ = ["short_label", "short_labels"]
+__all__ = ["plain", "short_label", "short_labels"]
 
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9_+-]*$")
 
@@ -66,3 +66,14 @@ def short_labels(names: Iterable[str]) -> dict[str, str]:
         for n in grow:
             depth[n] += 1
     return {n: labels[n] if n not in shared else n for n in names}
+
+
+def plain(text: object) -> str:
+    """``text`` to draw as it is in a figure: matplotlib reads ``$...$`` as mathtext (a
+    detector named ``a$\\x$b`` would stop the figure), so every ``$`` is escaped.
+
+    Example:
+        >>> print(plain("a$x$b"))
+        a\\$x\\$b
+    """
+    return str(text).replace("$", r"\$")

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from torchsar_eval.colours import detector_colour, detector_dash
+from torchsar_eval.labels import plain
 from torchsar_eval.tables import pooled_pr
 
 if TYPE_CHECKING:
@@ -92,7 +93,7 @@ def legend_handles(names: Iterable[str]) -> list:
     """One legend entry per detector in its style (whether or not a panel shows it)."""
     from matplotlib.lines import Line2D
 
-    return [Line2D([], [], label=n, **detector_style(n)) for n in names]
+    return [Line2D([], [], label=plain(n), **detector_style(n)) for n in names]
 
 
 def not_shown(left_out: Mapping[str, str]) -> str:
@@ -115,7 +116,7 @@ def titled(ax: Axes, title: str, left_out: Mapping[str, str], width: int = 64) -
     import textwrap
 
     note = textwrap.fill(not_shown(left_out), width, break_long_words=False)
-    ax.set_title(title if not note else f"{title}\n{note}", fontsize=10 if not note else 9)
+    ax.set_title(plain(title if not note else f"{title}\n{note}"), fontsize=10 if not note else 9)
 
 
 # -- log axes ---------------------------------------------------------------------------
@@ -263,7 +264,7 @@ def roc_figure(
         if px.empty:
             left[0][name] = "no pixel mask" if px_all.empty else "Pfa = 0 at every threshold"
         else:
-            axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=name, **st, **marks)
+            axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=plain(name), **st, **marks)
             shown_op = op[op["pfa_pixel"] > 0]
             axes[0].plot(shown_op["pfa_pixel"], shown_op["pd_pixel"], **point)
         fr = froc[froc["detector"] == name]
@@ -271,14 +272,14 @@ def roc_figure(
             left[1][name] = "no object scored"
         else:
             axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post",
-                         label=name, **st, **marks)  # fmt: skip
+                         label=plain(name), **st, **marks)  # fmt: skip
             axes[1].plot(op["false_alarms_per_image"], op["pd_object"], **point)
         p = pooled_pr(pr[pr["detector"] == name])
         ap = _ap50(summary, name)
         if p.empty or not ap > 0:
             left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"
         else:
-            axes[2].plot(p["recall"], p["precision"], label=name, **st, **marks)
+            axes[2].plot(p["recall"], p["precision"], label=plain(name), **st, **marks)
     log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
     log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
     axes[0].set(xlabel="Pfa (pixel)", ylabel="Pd (pixel)")
@@ -295,7 +296,7 @@ def roc_figure(
     handles.append(Line2D([], [], color="grey", marker="o", markeredgecolor="black",
                           linestyle="none", label="design operating point"))  # fmt: skip
     fig.legend(handles=handles, loc="lower center", ncol=LEGEND_COLUMNS, fontsize=8)
-    fig.suptitle(short_label(title))
+    fig.suptitle(plain(short_label(title)))
     return fig
 
 

@@ -84,7 +84,7 @@ def _import(path: str) -> object:
         sys.path.insert(0, os.getcwd())
     try:
         obj: object = importlib.import_module(module)
-    except Exception as exc:  # ImportError, or an error raised while importing
+    except (Exception, SystemExit) as exc:  # ImportError, or raised while importing
         raise EvalError(f"cannot import detector {path!r}: {type(exc).__name__}: {exc}") from None
     for part in attr.split("."):
         try:
@@ -154,6 +154,9 @@ def load(
             built = obj(**passed)  # type: ignore[operator]
         except TypeError as exc:
             raise EvalError(f"detector {ref!r} rejects its options {passed}: {exc}") from None
+        except (Exception, SystemExit) as exc:  # its own __init__ failed: one line naming it
+            raise EvalError(f"detector {ref!r} could not be built: "
+                            f"{type(exc).__name__}: {exc}") from None  # fmt: skip
         base = replace(as_detector(built), options=passed, call_options={}, **harness)
     else:
         base = as_detector(obj).with_options(options)

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FuncFormatter
 
+from torchsar_eval.labels import plain
 from torchsar_eval.tables import pooled_pr
 
 __all__ = ["Series", "figure_svg", "first_column"]
@@ -84,7 +85,7 @@ _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
 def _axes(title: str, xlabel: str, ylabel: str) -> tuple[plt.Figure, plt.Axes]:
     fig, ax = plt.subplots(figsize=(4.6, 3.4))
     fig.subplots_adjust(left=0.14, right=0.97, bottom=0.15, top=0.91)
-    ax.set(title=title, xlabel=xlabel, ylabel=ylabel)
+    ax.set(title=plain(title), xlabel=xlabel, ylabel=ylabel)
     ax.grid(True, which="major", alpha=0.3)
     return fig, ax
 
@@ -102,7 +103,7 @@ def _froc(ax, df: pd.DataFrame, series: list[Series]) -> bool:
         if d.empty:
             continue
         ax.step(d["false_alarms_per_image"], d["pd_object"], where="post", color=s.colour,
-                linestyle=s.dash, lw=1.4, label=s.label)  # fmt: skip
+                linestyle=s.dash, lw=1.4, label=plain(s.label))  # fmt: skip
         op = s.summary
         if op is not None and "false_alarms_per_image" in op and "pd_object" in op:
             ax.plot([op["false_alarms_per_image"]], [op["pd_object"]], "o", color=s.colour,

@@ -83,3 +83,61 @@ def test_more_workers_than_cores_are_capped_with_a_warning(tmp_path, monkeypatch
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
     with pytest.warns(UserWarning, match=r"64 workers are more than this machine's 1 cores"):
         assert main([*BASE, "--n", "2", "--workers", "64", "--out", str(tmp_path / "out")]) == 0
+
+
+DETECTORS = '''
+import sys
+from torchsar.cfar import ca
+
+
+def quits(images):
+    sys.exit(0)
+
+
+class Broken:
+    def __init__(self):
+        raise RuntimeError("no weights")
+
+    def __call__(self, images):
+        return ca(images)
+
+
+def fine(images):
+    return ca(images)
+'''
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)"),
+        ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights"),
+    ],
+)
+def test_a_detector_that_exits_or_fails_to_build_is_one_line(spec, message, tmp_path, capsys,
+                                                             monkeypatch):  # fmt: skip
+    """A detector calling ``sys.exit(0)`` (before: exit 0, no output) or a class whose
+    ``__init__`` raises (before: a traceback) ends the run with exit 2 and one line."""
+    mod = f"dets_{abs(hash(str(tmp_path))) % 10**8}"
+    (tmp_path / f"{mod}.py").write_text(DETECTORS)
+    monkeypatch.chdir(tmp_path)
+    code = main([*BASE[:3], "--n", "2", "--detectors", spec.format(mod=mod), "--no-progress",
+                 "--out", str(tmp_path / "out")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert len(err.splitlines()) == 1 and re.search(message, err), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_names_are_drawn_as_plain_text(tmp_path, monkeypatch):
+    """A detector named with matplotlib mathtext (``a$\\x$b``) runs to the end, figures
+    and report included (before: a traceback after all the scoring)."""
+    mod = f"dets_{abs(hash(str(tmp_path))) % 10**8}"
+    (tmp_path / f"{mod}.py").write_text(DETECTORS)
+    monkeypatch.chdir(tmp_path)
+    name = "a$\\x$b"
+    code = main([*BASE[:3], "--n", "2", "--detectors", f"{name}={mod}:fine", "--no-progress",
+                 "--out", str(tmp_path / "out")])  # fmt: skip
+    assert code == 0
+    assert name in (tmp_path / "out" / "summary.csv").read_text()
+    assert (tmp_path / "out" / "report.html").is_file()
