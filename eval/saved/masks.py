@@ -16,6 +16,8 @@ import numpy as np
 import torch
 
 from torchsar.detection import detection_from
+from torchsar.io.errors import FileFormatError
+from torchsar.io.raster import check_regular_file
 from torchsar.objects import Objects
 from torchsar_eval.errors import EvalError
 
@@ -77,10 +79,13 @@ class MaskFolder:
         if not side.is_file():
             return {}
         try:
+            check_regular_file(side)
             raw = json.loads(side.read_text())
             return {int(k): float(v) for k, v in raw.items()}
-        except (ValueError, TypeError, AttributeError) as exc:
-            raise EvalError(f'predictions {side}: expected {{"id": score}} ({exc})') from None
+        except (ValueError, TypeError, AttributeError, RecursionError, OSError,
+                FileFormatError) as exc:  # fmt: skip
+            raise EvalError(f'predictions {side}: expected {{"id": score}} '
+                            f"({str(exc)[:200]})") from None  # fmt: skip
 
     def batch(self, rows: list[np.ndarray], shape: tuple[int, int, int, int], threshold):
         """The objects (integer maps) or the detection (score maps) of a batch; ``rows``:

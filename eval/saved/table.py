@@ -14,7 +14,6 @@ or by name, and the readers of the COCO results and point CSV formats.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from itertools import chain
@@ -156,8 +155,10 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
         raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
     try:
         data = jsontext.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise _fail(path, f"is not a readable JSON file ({exc})") from None
+    except RecursionError:
+        raise _fail(path, "is not a readable JSON file (nested too deeply)") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits
+        raise _fail(path, f"is not a readable JSON file ({str(exc)[:200]})") from None
     if isinstance(data, dict) and "annotations" in data and "images" in data:
         raise _fail(path, "is a COCO ground-truth file: give it as --dataset coco:FILE and the "
                     "detections as a results list [{image_id, bbox, score}, ...]")  # fmt: skip
@@ -209,14 +210,24 @@ def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path, required: bool
 
 
 def _floats(col: pd.Series, path: Path, what: str, *, finite: bool = True) -> np.ndarray:
-    values = pd.to_numeric(col, errors="coerce").to_numpy(np.float64)
+    try:
+        values = pd.to_numeric(col, errors="coerce").to_numpy(np.float64)
+    except OverflowError:  # an integer of hundreds of digits: not a coordinate or score
+        values = np.array([_float_or_nan(v) for v in col], np.float64).reshape(len(col))
     bad = np.isnan(values) if finite else np.zeros(values.size, bool)
     bad |= np.isinf(values) if finite else False
     bad |= ~pd.isna(col).to_numpy() & np.isnan(values)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise _fail(path, f"row {k + 2}: {what} {col.iloc[k]!r} is not a finite number")
+        raise _fail(path, f"row {k + 2}: {what} {str(col.iloc[k])[:40]!r} is not a finite number")
     return values
+
+
+def _float_or_nan(value: object) -> float:
+    try:
+        return float(value)
+    except (OverflowError, ValueError, TypeError):
+        return float("nan")
 
 
 def _refs(df: pd.DataFrame, path: Path) -> np.ndarray:

@@ -264,6 +264,10 @@ def test_mask_folder_huge_ids_two_files_and_lying_headers(tmp_path):
         ('[{"bbox": [0, 0, 2, 2], "score": 1}]', "entry 0 has no image_id"),
         ('[{"image_id": 99, "bbox": [0, 0, 2, 2], "score": 1}]', "1 image(s) not in the dataset"),
         ("[{", "is not a readable JSON file"),
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+        ('[{"image_id": 1, "bbox": [0, 0, 2, 2], "score": ' + "9" * 5000 + "}]",
+         "is not a readable JSON file"),
+        ('[{"image_id": "1", "bbox": [0, 0, 2, 2], "score": 1}]', "is not an integer id"),
     ],
 )
 def test_bad_results_files_are_one_line(tmp_path, capsys, content, message):
@@ -323,6 +327,13 @@ def test_one_id_rule_for_every_format(tmp_path):
     (tmp_path / "big.csv").write_text("image_id,row,col\n" + "4" * 400 + ",5,5\n")
     with pytest.raises(EvalError, match="not an integer id"):
         te.predictions(tmp_path / "big.csv")
+    for column in ("row", "score"):  # (before: OverflowError tracebacks)
+        values = {"row": "5", "col": "5", "score": "1"}
+        values[column] = "4" * 400
+        (tmp_path / "big.csv").write_text("image,row,col,score\n0,{row},{col},{score}\n".format(
+            **values))  # fmt: skip
+        with pytest.raises(EvalError, match=f"{column} '4444.*' is not a finite number"):
+            te.predictions(tmp_path / "big.csv")
 
 
 def test_a_huge_finite_box_is_one_false_alarm(tmp_path):
