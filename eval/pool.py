@@ -16,6 +16,8 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import threading
+import time
 import warnings
 from collections.abc import Callable, Hashable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -33,7 +35,26 @@ NOT_STARTED = (
 )
 
 
-def _init_worker(threads: int, started) -> None:
+ORPHAN_CHECK_S = 0.5
+"""How often a worker checks that its driver is alive (it exits within this of a kill)."""
+
+
+def _watch_driver(driver: int) -> None:
+    """End this worker when its driver is gone (killed with SIGKILL, nothing could tell
+    the pool): a daemon thread watching the parent process id."""
+
+    def watch() -> None:
+        while os.getppid() == driver:
+            time.sleep(ORPHAN_CHECK_S)
+        os._exit(1)
+
+    if os.getppid() != driver:
+        os._exit(1)
+    threading.Thread(target=watch, name="torchsar-driver-watch", daemon=True).start()
+
+
+def _init_worker(threads: int, started, driver: int) -> None:
+    _watch_driver(driver)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
     with started.get_lock():  # this worker got past its start (the main script's import)
         started.value += 1
@@ -86,7 +107,7 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
     ctx = multiprocessing.get_context("spawn")
     started = ctx.Value("i", 0)
     pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(threads, started))  # fmt: skip
+                               initargs=(threads, started, os.getpid()))  # fmt: skip
     finished, broken = False, []
     running: dict = {}
     try:

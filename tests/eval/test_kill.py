@@ -4,12 +4,14 @@ a killed run left behind."""
 
 from __future__ import annotations
 
+import os
 import random
 import signal
 import subprocess
 import sys
 import time
 from contextlib import nullcontext
+from pathlib import Path
 
 import pytest
 
@@ -106,3 +108,48 @@ def test_a_finished_two_worker_run_is_quiet(tmp_path):
     done = subprocess.run([sys.executable, "-m", "torchsar_eval.cli", *argv],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert done.returncode == 0 and done.stderr == "", done.stderr
+
+
+def _stat(pid: int | str) -> list[str] | None:
+    """``/proc/PID/stat`` after the command name (state, parent, ...), ``None`` if gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+
+
+def _children(pid: int) -> list[int]:
+    """Live processes whose parent is ``pid``."""
+    stats = {int(e): _stat(e) for e in os.listdir("/proc") if e.isdigit()}
+    return [p for p, f in stats.items() if f and int(f[1]) == pid and f[0] != "Z"]
+
+
+def _alive(pid: int) -> bool:
+    fields = _stat(pid)
+    return fields is not None and fields[0] != "Z"
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+def test_workers_die_with_their_driver(tmp_path):
+    """SIGKILL to the driver of a two-worker run: no worker is alive 5 s later (before,
+    they stayed blocked on a pipe for minutes)."""
+    argv = ["run", "--dataset", "sim-chips", "--n", "400", "--detectors", "os,region",
+            "--shard-size", "4", "--workers", "2", "--no-progress", "--out", str(tmp_path / "o")]
+    proc = subprocess.Popen([sys.executable, "-m", "torchsar_eval.cli", *argv],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 120
+    workers: list[int] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        kids = _children(proc.pid)
+        if len(kids) >= 2:  # (the resource tracker and the workers)
+            time.sleep(1.0)  # the workers past their start
+            workers = _children(proc.pid)
+            break
+        time.sleep(0.05)
+    assert workers, "no worker started"
+    proc.kill()
+    proc.wait(timeout=30)
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.1)
+    assert not [p for p in workers if _alive(p)]
