@@ -325,6 +325,8 @@ def check_device(device: object, name: str = "device") -> torch.device | None:
             f"{name} must be a torch device (a torch.device or a name such as 'cpu'), "
             f"got {device!r}"
         ) from None
+    if dev.type == "meta":
+        raise OptionError(f"{name} = {device!r} holds no data (shapes only): use cpu or cuda")
     available = {
         "cuda": torch.cuda.is_available,
         "mps": lambda: torch.backends.mps.is_available(),

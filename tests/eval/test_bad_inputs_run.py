@@ -48,6 +48,7 @@ CASES = {
     "resume and discard": (["--resume", "--discard"], None, r"--resume and --discard exclude"),
     "max-bad beyond 1": (["--skip-bad", "--max-bad", "2"], None,
                          r"--max-bad 2\.0: must be a share from 0 to 1"),
+    "a device without data": (["--device", "meta"], None, r"--device 'meta' holds no data"),
     "rank-by not a metric": (["--rank-by", "speed"], None,
                              r"--rank-by 'speed': not a metric; choose one of f1, precision"),
     "saved work, no --resume": ([], _saved_work,

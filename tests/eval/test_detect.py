@@ -214,6 +214,8 @@ def test_bad_inputs_one_line_exit_2(scene, tmp_path, capsys):
         (["--scene", f"{scene.path},{scene.path}", *CA], "same scene id"),
         (["--scene", str(scene.path), "--detector", "region", "--param", "max_halo=1"],
          "max_halo"),
+        (["--scene", str(scene.path), *CA, "--device", "meta"], "holds no data"),
+        (["--scene", "/proc/self/mem", *CA], "cannot be read"),
     ]  # fmt: skip
     for argv, message in cases:
         assert main([*base, *argv]) == 2, argv

@@ -55,8 +55,11 @@ def open_scene(
         ((300, 200), dtype('float32'), 9.0)
     """
     check_regular_file(path)
-    with open(path, "rb") as f:
-        head = f.read(4)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:  # /proc/self/mem and the like: a "regular" file that reads no bytes
+        raise FileFormatError(path, f"cannot be read ({exc.strerror or exc})") from None
     if len(head) < 4:
         raise FileFormatError(path, f"is {len(head)} bytes long: not a scene file")
     if head in _TIFF_MAGIC:

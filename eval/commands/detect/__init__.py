@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     options = plan.parse_options(args.param)
     scenes = plan.open_scenes(args.scene, args.sample_type)
-    check_device(args.device)
+    check_device(args.device, "--device")
     for sc in scenes:
         tile, batch = plan.check_detector(args.detector, options, args.tile, sc)
     jobs = [
