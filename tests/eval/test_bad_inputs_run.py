@@ -49,6 +49,7 @@ CASES = {
     "max-bad beyond 1": (["--skip-bad", "--max-bad", "2"], None,
                          r"--max-bad 2\.0: must be a share from 0 to 1"),
     "a device without data": (["--device", "meta"], None, r"--device 'meta' holds no data"),
+    "a closing of 300 px": (["--closing", "300"], None, r"closing must be at most 64 px"),
     "rank-by not a metric": (["--rank-by", "speed"], None,
                              r"--rank-by 'speed': not a metric; choose one of f1, precision"),
     "saved work, no --resume": ([], _saved_work,

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass
 
 from torchsar._checks import OptionError, check_choice, check_int
 
-__all__ = ["ObjectRules"]
+__all__ = ["MAX_CLOSING", "ObjectRules"]
 
 
 def _area(value: object, name: str, *, allow_none: bool) -> float | None:
@@ -20,15 +20,20 @@ def _area(value: object, name: str, *, allow_none: bool) -> float | None:
     return float(value)
 
 
+MAX_CLOSING = 64
+"""The largest closing radius (pixels) :class:`ObjectRules` accepts."""
+
+
 @dataclass(frozen=True)
 class ObjectRules:
     """How a detection mask becomes objects (the same rules for every detector of a run).
 
     Attributes:
         closing: radius in pixels of the morphological closing (disk) applied to the mask
-            before labelling; 0 = none, at most the image's larger side. Joins fragments of
+            before labelling; 0 = none, at most :data:`MAX_CLOSING`. Joins fragments of
             one target (window CFARs often detect a vehicle's bright scatterers as separate
-            blobs).
+            blobs); its cost grows with the radius squared, so a radius that would join
+            objects hundreds of pixels apart is refused rather than run for minutes.
         min_area: smallest object kept, in ``units``.
         max_area: largest object kept, in ``units`` (``None``: no limit). A flood of the
             whole image is then dropped rather than scored.
@@ -53,6 +58,11 @@ class ObjectRules:
 
     def __post_init__(self) -> None:
         check_int(self.closing, "closing", minimum=0)
+        if self.closing > MAX_CLOSING:
+            raise OptionError(
+                f"closing must be at most {MAX_CLOSING} px, got {self.closing} (a disk of "
+                f"radius r costs about r^2 operations per pixel and joins objects 2r apart)"
+            )
         lo = _area(self.min_area, "min_area", allow_none=False)
         hi = _area(self.max_area, "max_area", allow_none=True)
         if hi is not None and lo is not None and hi < lo:
