@@ -266,3 +266,21 @@ def test_tile_cache_is_bounded_and_changes_nothing(tmp_path):
         np.testing.assert_array_equal(small[r0:r1, c0:c1], expected)
         assert 0 < small._cache_bytes <= 5.5 * tile_bytes
     assert not plain._cache
+
+
+def test_a_compressed_tile_that_would_inflate_to_gigabytes_is_refused(tmp_path):
+    """A small file whose header declares 32768 x 32768 float32 tiles (4 GiB each once
+    inflated): refused from the header, before any tile is decoded (before: detect ran to
+    4.6 GB and exited 0)."""
+    import tifffile
+
+    from torchsar.io.tiff_scene import MAX_SEGMENT_BYTES
+
+    path = tmp_path / "bomb.tif"
+    tifffile.imwrite(path, np.zeros((256, 256), np.float32), tile=(256, 256),
+                     compression="zlib", bigtiff=True)  # fmt: skip
+    with tifffile.TiffFile(path, mode="r+b") as tif:
+        for code in (322, 323):  # TileWidth, TileLength
+            tif.pages[0].tags[code].overwrite(32768)
+    with pytest.raises(FileFormatError, match=f"over the limit of {MAX_SEGMENT_BYTES:,}"):
+        open_scene(path, sample_type="intensity")

@@ -58,6 +58,12 @@ def _said(messages: list[str]) -> str:
     return f"; tifffile: {'; '.join(distinct)}" if distinct else ""
 
 
+
+MAX_SEGMENT_BYTES = 256 << 20
+"""The largest decoded compressed tile or strip a scene may declare (bytes): each is
+inflated whole, so the bound holds the memory a compressed segment can ask for before it
+is read (an uncompressed segment is as large on disk as in memory)."""
+
 class TiffScene(SceneReader):
     """A TIFF scene read window by window.
 
@@ -193,6 +199,15 @@ class TiffScene(SceneReader):
             self._th, self._tw = min(int(p.rowsperstrip or h), h), w
         if self._th <= 0 or self._tw <= 0:
             raise FileFormatError(self.path, f"declares segments of {self._th}x{self._tw}")
+        samples = int(p.samplesperpixel) if p.planarconfig != 2 else 1
+        decoded = self._th * self._tw * samples * self.raw_dtype.itemsize
+        if decoded > MAX_SEGMENT_BYTES and p.compression != 1:  # from the header, unread
+            raise FileFormatError(
+                self.path,
+                f"declares {self._th}x{self._tw} segments of {decoded:,} bytes each, over the "
+                f"limit of {MAX_SEGMENT_BYTES:,} (a tile or strip is decoded whole; a "
+                "compressed one that inflates to gigabytes would exhaust memory)",
+            )
         self._nty, self._ntx = math.ceil(h / self._th), math.ceil(w / self._tw)
         per_plane = self._nty * self._ntx
         planes = int(p.samplesperpixel) if p.planarconfig == 2 else 1
