@@ -72,7 +72,14 @@ class MaskFolder:
             raise EvalError(f"predictions {path}: a {arr.shape} mask for an image of {shape}")
         if arr.dtype == bool:
             arr = arr.astype(np.int32)
-        return arr
+        if arr.dtype.kind not in "iuf":
+            raise EvalError(f"predictions {path}: a mask of {arr.dtype} values; expected "
+                            "integer instance ids or float scores")  # fmt: skip
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise EvalError(f"predictions {path}: a score map holding NaN or inf")
+        if arr.dtype.kind == "u" and arr.size and int(arr.max()) > np.iinfo(np.int64).max:
+            raise EvalError(f"predictions {path}: an instance id past 2**63")
+        return arr.astype(np.int64) if arr.dtype.kind in "iu" else arr
 
     def _scores(self, path: Path, ids: np.ndarray) -> dict[int, float]:
         side = path.with_name(_stem(path) + ".scores.json")

@@ -205,7 +205,8 @@ def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path, required: bool
         if n in df.columns:
             return df[n]
     if required:
-        raise _fail(path, f"has no column {' or '.join(names)} (columns: {', '.join(df.columns)})")
+        cols = ", ".join(str(c)[:40] for c in list(df.columns)[:20])
+        raise _fail(path, f"has no column {' or '.join(names)} (columns: {cols})")
     return None
 
 
@@ -236,11 +237,11 @@ def _refs(df: pd.DataFrame, path: Path) -> np.ndarray:
     values = _column(df, _IMAGE, path)
     if col != "image_id":
         return values.astype(str).to_numpy(dtype=object)
-    text = values.astype(str).str.strip()
-    bad = ~text.str.fullmatch(r"[0-9]{1,18}")
-    if bad.any():
-        k = int(np.flatnonzero(bad.to_numpy())[0])
-        raise _fail(path, f"row {k + 1}: image_id {text.iloc[k][:40]!r} is not an integer id "
+    text = [str(v).strip() for v in values.tolist()]
+    bad = [k for k, v in enumerate(text) if not (v.isascii() and v.isdigit() and len(v) <= 18)]
+    if bad:
+        k = bad[0]
+        raise _fail(path, f"row {k + 2}: image_id {text[k][:40]!r} is not an integer id "
                     "(an image's name goes in an image or file_name column)")  # fmt: skip
     return np.array([int(v) for v in text], dtype=object).reshape(len(text))
 
