@@ -321,11 +321,19 @@ def write_store(
     with hold(lock_path(out), wait=LOCK_WAIT_S, message=busy):
         if out.exists() or out.is_symlink():  # the other writer finished meanwhile
             raise EvalError(exists)
-        remove_dead_partials(out.parent)  # ours included: we hold its lock, so it is dead
+        remove_dead_partials(out.parent)  # the other dead writers' partial stores
         tmp = partial_path(out)
+        if tmp.is_dir() and not tmp.is_symlink():  # ours, from a killed writer: we hold its
+            shutil.rmtree(tmp)  # lock now, so nobody writes it (our own lock is not free to
+        elif tmp.exists() or tmp.is_symlink():  # remove_dead_partials)
+            tmp.unlink()
         tmp.mkdir()
         try:
-            _write_folder(tmp, items, n, shard_size, info or {})
+            try:
+                _write_folder(tmp, items, n, shard_size, info or {})
+            except OSError as exc:  # a full disk, a quota: one line, nothing kept
+                raise EvalError(f"--out {out}: cannot write the store "
+                                f"({exc.strerror or exc}); nothing was kept") from None  # fmt: skip
             try:
                 os.rename(tmp, out)
             except OSError as exc:

@@ -151,3 +151,34 @@ def test_a_store_changed_after_opening_is_named_at_read(tmp_path):
         ds[1]
     with pytest.raises(EvalError, match=r"n=-1: must be a whole number >= 0"):
         StoreDataset(out, limit=-1)
+
+
+def test_a_retry_after_a_killed_writer_replaces_its_partial_store(tmp_path):
+    """What a SIGKILLed make-dataset leaves (its partial store, its free lock file): the
+    next write into the same --out removes it and succeeds (before: a FileExistsError
+    traceback on every retry, the partial left)."""
+
+    out = tmp_path / "s"
+    left = partial_path(out)
+    (left / "shards").mkdir(parents=True)
+    (left / "shards" / "shard-000000.tar").write_bytes(b"x" * 1000)
+    lock_path(out).write_text("")
+    assert write_store(sim_items("sim-chips", 2, 0), 2, out) == out
+    assert StoreDataset(out).version >= 1 and len(StoreDataset(out)) == 2
+    assert not left.exists()
+
+
+def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsys):
+    import errno
+
+    import torchsar_eval.store as store
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(store, "_write_folder", full)
+    code = main(["make-dataset", "--kind", "sim-chips", "--n", "2", "--no-progress",
+                 "--out", str(tmp_path / "s")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "No space left on device" in err, err
+    assert not [p for p in tmp_path.iterdir() if not p.name.endswith(".store-lock")]
