@@ -266,6 +266,10 @@ def read_points(path: str | Path) -> PredictionTable:
     score = np.ones(len(df)) if score_col is None else _floats(score_col, path, "score")
     length_col = _column(df, _LENGTH, path, required=False)
     length = None if length_col is None else _floats(length_col, path, "length", finite=False)
+    if length is not None and ((length < 0) | np.isinf(length)).any():
+        k = int(np.flatnonzero((length < 0) | np.isinf(length))[0])
+        raise _fail(path, f"row {k + 2}: length {length[k]:g} is not a length in metres "
+                    "(a non-negative number, or empty when unknown)")  # fmt: skip
     cls = _column(df, ("class",), path, required=False)
     return PredictionTable(
         path=path, refs=refs, score=score, geometry="point",

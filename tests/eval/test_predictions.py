@@ -357,3 +357,13 @@ def test_a_huge_finite_box_is_one_false_alarm(tmp_path):
     assert (row.tp, row.fp) == (1, 1)
     sizes = res.breakdown[res.breakdown.by == "size"]
     assert set(sizes.key) <= {"small", "medium", "large"} and (sizes.fp >= 0).all()
+
+
+@pytest.mark.parametrize("length", ["-5", "inf"])
+def test_a_points_length_that_is_not_a_length_is_refused(tmp_path, length):
+    """(found by the fuzzer: a negative length reached the length metric and crashed)"""
+    from torchsar_eval.errors import EvalError
+
+    (tmp_path / "p.csv").write_text(f"image_id,row,col,length_m\n1,5,5,{length}\n")
+    with pytest.raises(EvalError, match="is not a length in metres"):
+        te.predictions(tmp_path / "p.csv")
