@@ -104,8 +104,23 @@ def read_png(folder: Path, name: str) -> bytes | None:
     return data if data.startswith(_PNG) and len(data) <= MAX_PNG_BYTES else None
 
 
+def _inside(folder: Path, name: str) -> bool:
+    """Whether ``folder/name`` is a regular file inside the run folder (no link on the
+    way, no FIFO or device)."""
+    path = folder
+    try:
+        for part in Path(name).parts:
+            path = path / part
+            st = os.lstat(path)
+            if stat.S_ISLNK(st.st_mode):
+                return False
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISREG(st.st_mode)
+
+
 def _read_csv(path: Path) -> pd.DataFrame:
-    if not path.is_file():
+    if not _inside(path.parent, path.name):
         return pd.DataFrame()
     try:  # only empty cells are missing: "n/a" is a bin name (SCR not measurable)
         return pd.read_csv(path, keep_default_na=False, na_values=[""])
@@ -122,7 +137,8 @@ def read_run(folder: str | Path) -> RunFiles:
     folder = Path(folder)
     if not folder.is_dir():
         raise EvalError(f"{folder} is not a folder: give a run folder (torchsar-eval run --out)")
-    tables = {k: _read_csv(folder / f) for k, f in RUN_TABLES.items()}
+    tables = {k: _read_csv(folder / f) if _inside(folder, f) else pd.DataFrame()
+              for k, f in RUN_TABLES.items()}  # (only the run's own files: no link out)
     summary = tables["summary"]
     if summary.empty or not {"dataset", "detector"} <= set(summary.columns):
         raise EvalError(f"{folder} is not a run folder of torchsar-eval run: it has no "
@@ -132,7 +148,7 @@ def read_run(folder: str | Path) -> RunFiles:
             if col in df.columns:
                 df[col] = df[col].astype(str)
     config: dict = {}
-    if (folder / "config.json").is_file():
+    if _inside(folder, "config.json"):
         try:
             config = json.loads((folder / "config.json").read_text())
         except (ValueError, OSError):

@@ -300,3 +300,10 @@ def test_the_report_embeds_only_figures_inside_the_run_folder(run, tmp_path):
                         if src.startswith("data:"))  # fmt: skip
     assert b"SECRET-OUTSIDE-THE-RUN" not in embedded
     assert b"A-FIGURE-OF-THE-RUN" in embedded
+    # a table that is a link out of the run is not read either
+    outside = tmp_path / "errors.csv"
+    outside.write_text("dataset,detector,kind,key,count\nSECRET-TABLE,x,fa,y,1\n")
+    (copy / "errors.csv").unlink(missing_ok=True)
+    (copy / "errors.csv").symlink_to(outside)
+    assert main(["report", str(copy)]) == 0
+    assert "SECRET-TABLE" not in (copy / "report.html").read_text()
