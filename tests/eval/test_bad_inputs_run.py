@@ -110,21 +110,24 @@ def fine(images):
 
 
 @pytest.mark.parametrize(
-    ("spec", "message"),
+    ("spec", "message", "extra"),
     [
-        ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)"),
-        ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights"),
+        ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)", []),
+        ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)",
+         ["--workers", "2", "--shard-size", "1"]),  # in worker processes
+        ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights",
+         []),
     ],
 )
-def test_a_detector_that_exits_or_fails_to_build_is_one_line(spec, message, tmp_path, capsys,
-                                                             monkeypatch):  # fmt: skip
+def test_a_detector_that_exits_or_fails_to_build_is_one_line(spec, message, extra, tmp_path,
+                                                             capsys, monkeypatch):  # fmt: skip
     """A detector calling ``sys.exit(0)`` (before: exit 0, no output) or a class whose
     ``__init__`` raises (before: a traceback) ends the run with exit 2 and one line."""
     mod = f"dets_{abs(hash(str(tmp_path))) % 10**8}"
     (tmp_path / f"{mod}.py").write_text(DETECTORS)
     monkeypatch.chdir(tmp_path)
     code = main([*BASE[:3], "--n", "2", "--detectors", spec.format(mod=mod), "--no-progress",
-                 "--out", str(tmp_path / "out")])  # fmt: skip
+                 "--out", str(tmp_path / "out"), *extra])  # fmt: skip
     err = capsys.readouterr().err.strip()
     assert code == 2, err
     assert len(err.splitlines()) == 1 and re.search(message, err), err
