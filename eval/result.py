@@ -251,8 +251,11 @@ class Evaluator:
             raise EvalError(f"{len(predictions)} predictions for {len(targets)} targets: give "
                             "one per image")  # fmt: skip
         first = self.images
-        opts = {"box_format": box_format, "categories": categories,
-                "mask_threshold": mask_threshold}
+        opts = {
+            "box_format": box_format,
+            "categories": categories,
+            "mask_threshold": mask_threshold,
+        }
         truths = [truth_from(t, first + k, **opts) for k, t in enumerate(targets)]
         groups: dict[tuple[int, int], list[int]] = {}
         for k, (_, meta) in enumerate(truths):

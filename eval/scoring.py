@@ -139,7 +139,7 @@ def truth_from_targets(targets: list, shape: tuple[int, int], *, box_only=None, 
     k = [len(t.crowd_classes) for t in targets]
     plane = np.repeat(np.arange(len(targets)), n)
     cplane = np.repeat(np.arange(len(targets)), k)
-    cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0))  # noqa: E731
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)  # noqa: E731
     return GroundTruth.build(
         plane, cat([t.boxes for t in targets]).reshape(-1, 4), planes=len(targets),
         shape=(h, w), classes=[c for t in targets for c in t.classes],

@@ -15,8 +15,11 @@ from pathlib import Path
 import pytest
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-SECTIONS = ("## Evaluate your own detector", "## Score saved predictions",
-            "## Use it in a training loop")
+SECTIONS = (
+    "## Evaluate your own detector",
+    "## Score saved predictions",
+    "## Use it in a training loop",
+)
 BLOCK = re.compile(r"(<!-- example:[^>]*-->\n)?```(\w+)\n(.*?)```", re.DOTALL)
 
 

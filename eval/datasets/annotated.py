@@ -152,8 +152,10 @@ class AnnotatedDataset(FileDataset):
                 self.missing.add(e[0])
                 key = os.path.normpath(e[0])
             if key in seen:
-                raise EvalError(f"{scheme} annotations describe image {e[0]} more than once"
-                                + ("" if seen[key] == e[0] else f" (also as {seen[key]})"))
+                raise EvalError(
+                    f"{scheme} annotations describe image {e[0]} more than once"
+                    + ("" if seen[key] == e[0] else f" (also as {seen[key]})")
+                )
             seen[key] = e[0]
         self.options["missing_images"] = len(self.missing)
         self.shared_files = list(annotation_files)
@@ -285,8 +287,9 @@ class AnnotatedDataset(FileDataset):
         ignore = np.zeros(inst.size, bool)
         rows = self.objects.rows(i)
         try:
-            pixels = annotation_pixels([self.objects.annotation(k) for k in rows], *shape,
-                                       checked=True)  # (read_coco checked every segmentation)
+            pixels = annotation_pixels(
+                [self.objects.annotation(k) for k in rows], *shape, checked=True
+            )  # (read_coco checked every segmentation)
         except FileFormatError as exc:
             raise FileFormatError(path, exc.problem) from None
         targets = _targets(self.objects, rows, pixels)

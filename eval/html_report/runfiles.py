@@ -137,8 +137,10 @@ def read_run(folder: str | Path) -> RunFiles:
     folder = Path(folder)
     if not folder.is_dir():
         raise EvalError(f"{folder} is not a folder: give a run folder (torchsar-eval run --out)")
-    tables = {k: _read_csv(folder / f) if _inside(folder, f) else pd.DataFrame()
-              for k, f in RUN_TABLES.items()}  # (only the run's own files: no link out)
+    tables = {
+        k: _read_csv(folder / f) if _inside(folder, f) else pd.DataFrame()
+        for k, f in RUN_TABLES.items()
+    }  # (only the run's own files: no link out)
     summary = tables["summary"]
     if summary.empty or not {"dataset", "detector"} <= set(summary.columns):
         raise EvalError(f"{folder} is not a run folder of torchsar-eval run: it has no "

@@ -87,7 +87,7 @@ def test_more_workers_than_cores_are_capped_with_a_warning(tmp_path, monkeypatch
         assert main([*BASE, "--n", "2", "--workers", "64", "--out", str(tmp_path / "out")]) == 0
 
 
-DETECTORS = '''
+DETECTORS = """
 import sys
 from torchsar.cfar import ca
 
@@ -106,17 +106,19 @@ class Broken:
 
 def fine(images):
     return ca(images)
-'''
+"""
 
 
 @pytest.mark.parametrize(
     ("spec", "message", "extra"),
     [
         ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)", []),
-        ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)",
-         ["--workers", "2", "--shard-size", "1"]),  # in worker processes
-        ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights",
-         []),
+        (
+            "{mod}:quits",
+            r"detector \S*quits called sys.exit\(0\)",
+            ["--workers", "2", "--shard-size", "1"],
+        ),  # in worker processes
+        ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights", []),
     ],
 )
 def test_a_detector_that_exits_or_fails_to_build_is_one_line(spec, message, extra, tmp_path,

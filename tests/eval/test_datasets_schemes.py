@@ -139,8 +139,9 @@ def test_coco_image_under_two_names(tmp_path, alias):
     first = "missing.png" if alias == "./missing.png" else "s1.png"
     images = [{"id": k + 1, "file_name": n, "height": 20, "width": 30}
               for k, n in enumerate([first, alias])]  # fmt: skip
-    (tmp_path / "gt.json").write_text(json.dumps(
-        {"images": images, "annotations": [], "categories": [{"id": 1, "name": "ship"}]}))
+    (tmp_path / "gt.json").write_text(
+        json.dumps({"images": images, "annotations": [], "categories": [{"id": 1, "name": "ship"}]})
+    )
     with pytest.raises(EvalError, match=r"coco annotations describe image .* more than once"):
         make_dataset(f"coco:{tmp_path / 'gt.json'}")
 

@@ -133,8 +133,22 @@ def _alive(pid: int) -> bool:
 def test_workers_die_with_their_driver(tmp_path):
     """SIGKILL to the driver of a two-worker run: no worker is alive 5 s later (before,
     they stayed blocked on a pipe for minutes)."""
-    argv = ["run", "--dataset", "sim-chips", "--n", "400", "--detectors", "os,region",
-            "--shard-size", "4", "--workers", "2", "--no-progress", "--out", str(tmp_path / "o")]
+    argv = [
+        "run",
+        "--dataset",
+        "sim-chips",
+        "--n",
+        "400",
+        "--detectors",
+        "os,region",
+        "--shard-size",
+        "4",
+        "--workers",
+        "2",
+        "--no-progress",
+        "--out",
+        str(tmp_path / "o"),
+    ]
     proc = subprocess.Popen([sys.executable, "-m", "torchsar_eval.cli", *argv],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
     deadline = time.monotonic() + 120

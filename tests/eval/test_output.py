@@ -349,8 +349,11 @@ def _tree(folder):
     "prepare",
     [
         # a model or project folder that happens to hold a config.json
-        lambda p: ((p / "config.json").write_text("{}"), (p / "weights").mkdir(),
-                   (p / "weights" / "model.pt").write_text("w")),
+        lambda p: (
+            (p / "config.json").write_text("{}"),
+            (p / "weights").mkdir(),
+            (p / "weights" / "model.pt").write_text("w"),
+        ),
         # a run of ours to which the user added a file
         lambda p: (_write_run(p, {"a.csv": "1"}), (p / "notes.txt").write_text("mine")),
         # a run of ours with a link added (never followed, never deleted)

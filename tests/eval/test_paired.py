@@ -77,7 +77,9 @@ def results():
 
 def test_a_detector_against_itself_is_exactly_zero(results):
     for r in results.states["sq"]:
-        for metric, (d, lo, hi) in paired_differences(r.objects, r.objects, r.threshold, r.threshold).items():
+        for metric, (d, lo, hi) in paired_differences(
+            r.objects, r.objects, r.threshold, r.threshold
+        ).items():
             assert (d, lo, hi) == (0.0, 0.0, 0.0), metric
 
 

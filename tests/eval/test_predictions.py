@@ -265,8 +265,10 @@ def test_mask_folder_huge_ids_two_files_and_lying_headers(tmp_path):
         ('[{"image_id": 99, "bbox": [0, 0, 2, 2], "score": 1}]', "1 image(s) not in the dataset"),
         ("[{", "is not a readable JSON file"),
         ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
-        ('[{"image_id": 1, "bbox": [0, 0, 2, 2], "score": ' + "9" * 5000 + "}]",
-         "is not a readable JSON file"),
+        (
+            '[{"image_id": 1, "bbox": [0, 0, 2, 2], "score": ' + "9" * 5000 + "}]",
+            "is not a readable JSON file",
+        ),
         ('[{"image_id": "1", "bbox": [0, 0, 2, 2], "score": 1}]', "is not an integer id"),
     ],
 )
@@ -350,9 +352,12 @@ def test_a_huge_finite_box_is_one_false_alarm(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         warnings.simplefilter("error", RuntimeWarning)  # no overflow anywhere
-        res = te.evaluate(f"coco:{tmp_path / 'gt.json'}",
-                          [te.predictions(tmp_path / "r.json", name="cnn")],
-                          scoring=te.Scoring(matching=te.Matching(kind="box")), progress=False)
+        res = te.evaluate(
+            f"coco:{tmp_path / 'gt.json'}",
+            [te.predictions(tmp_path / "r.json", name="cnn")],
+            scoring=te.Scoring(matching=te.Matching(kind="box")),
+            progress=False,
+        )
     row = res.summary.iloc[0]
     assert (row.tp, row.fp) == (1, 1)
     sizes = res.breakdown[res.breakdown.by == "size"]

@@ -582,8 +582,9 @@ def _entry_columns(entries: list, categories: dict, records: list[dict], path) -
         "category": np.array([c for _, c, _ in out], np.int64).reshape(n),
         "box": np.array([a.box for _, _, a in out], np.float64).reshape(n, 4),
         "iscrowd": np.array([a.iscrowd for _, _, a in out], bool).reshape(n),
-        "area": np.array([np.nan if a.area is None else a.area for _, _, a in out],
-                         np.float64).reshape(n),
+        "area": np.array(
+            [np.nan if a.area is None else a.area for _, _, a in out], np.float64
+        ).reshape(n),
         "segmentation": tuple(a.segmentation for _, _, a in out),
     }
 

@@ -58,11 +58,11 @@ def _said(messages: list[str]) -> str:
     return f"; tifffile: {'; '.join(distinct)}" if distinct else ""
 
 
-
 MAX_SEGMENT_BYTES = 256 << 20
 """The largest decoded compressed tile or strip a scene may declare (bytes): each is
 inflated whole, so the bound holds the memory a compressed segment can ask for before it
 is read (an uncompressed segment is as large on disk as in memory)."""
+
 
 class TiffScene(SceneReader):
     """A TIFF scene read window by window.

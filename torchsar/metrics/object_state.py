@@ -289,7 +289,10 @@ class ObjectState:
             return NotImplemented
         a, b = self.records, other.records
         same = (self._settings(), self._declared(), self.scr_sources) == (
-            other._settings(), other._declared(), other.scr_sources)
+            other._settings(),
+            other._declared(),
+            other.scr_sources,
+        )
         return same and a.names == b.names and all(
             getattr(a, k).tobytes() == getattr(b, k).tobytes()  # NaN equals NaN here
             for k in ("images", "detections", "targets"))  # fmt: skip
