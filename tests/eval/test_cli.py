@@ -14,6 +14,7 @@ import pytest
 from skimage import io
 
 from torchsar_eval.cli import main
+from torchsar_eval.output import write_marker
 from torchsar_eval.tables import FROC_COLUMNS, SUMMARY_COLUMNS
 
 
@@ -324,7 +325,8 @@ def test_bad_out_is_refused_at_once(tiny_folder, tmp_path, capsys, monkeypatch, 
 def test_previous_run_needs_overwrite_which_leaves_no_stale_file(tiny_folder, tmp_path, capsys):
     out = tmp_path / "out"
     assert _tiny_run(tiny_folder, out) == 0
-    (out / "stale.csv").write_text("from an older run")
+    (out / "stale.csv").write_text("from an older run")  # a file only an older run wrote
+    write_marker(out)  # (so the marker lists it: a file no run wrote is never deleted)
     before = _snapshot(out)
     capsys.readouterr()
     assert _tiny_run(tiny_folder, out) == 2
