@@ -150,13 +150,13 @@ def check_masks(dtype, value, shape, scores, both) -> str:
 RESULT_CASES = st.lists(MUTATION, min_size=1, max_size=3)
 
 
-@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
 @given(RESULT_CASES)
 def test_results_reader_is_scored_or_one_named_error(case):
     check_results(case)
 
 
-@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
 @given(RESULT_CASES)
 def test_points_reader_is_scored_or_one_named_error(case):
     check_points(case)
