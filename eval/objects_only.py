@@ -50,9 +50,8 @@ def objects_only(job) -> bool:
 def _objects(det, items: list[int], shape: tuple[int, int]) -> Objects:
     """The saved predictions of dataset items ``items`` (planes in that order)."""
     fn, table = det.fn, _table(det)
-    rows = [fn.rows_of(int(i)) for i in items]
-    plane = np.repeat(np.arange(len(items)), [r.size for r in rows])
-    r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    r, counts = fn.rows_for(items)
+    plane = np.repeat(np.arange(len(items)), counts)
     names = getattr(fn, "_classes", None)
     common = {"plane": plane, "planes": len(items), "classes": None if names is None else names[r]}
     if table.geometry == "box":

@@ -212,6 +212,19 @@ class SavedPredictions:
         lo, hi = np.searchsorted(items, [item, item + 1])
         return order[lo:hi]
 
+    def rows_for(self, items) -> tuple[np.ndarray, np.ndarray]:
+        """``(rows, counts)``: the rows of dataset items ``items`` item after item (each
+        item's in file order), and how many each has."""
+        if self._item_rows is None:
+            raise EvalError(f"predictions {self.path} are not bound to a dataset")
+        sorted_items, order = self._item_rows
+        want = np.asarray(items, np.int64).reshape(-1)
+        lo = np.searchsorted(sorted_items, want)
+        hi = np.searchsorted(sorted_items, want + 1)
+        counts = hi - lo
+        pos = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        return order[np.repeat(lo, counts) + pos], counts
+
     def __call__(self, images: Tensor, meta: list[dict]) -> Objects | Detection:
         b, c, h, w = images.shape
         rows = [self.rows_of(int(m["index"])) for m in meta]

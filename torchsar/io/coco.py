@@ -450,13 +450,11 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
     if type(entries) is not list or not set(map(type, entries)) <= {dict}:
         return None
     rows = {rec["id"]: k for k, rec in enumerate(records)}
-    image_ids = [a.get("image_id") for a in entries]
-    category = [a.get("category_id") for a in entries]
-    ids = [a.get("id") for a in entries]
+    fields = [(a.get("image_id"), a.get("category_id"), a.get("id"), a.get("iscrowd", 0),
+               a.get("bbox"), a.get("area"), a.get("segmentation")) for a in entries]  # fmt: skip
+    image_ids, category, ids, crowd, boxes, areas, segs = (
+        list(c) for c in zip(*fields, strict=True)) if fields else ([],) * 7  # fmt: skip
     given = [v for v in ids if v is not None]
-    crowd = [a.get("iscrowd", 0) for a in entries]
-    boxes = [a.get("bbox") for a in entries]
-    areas = [a.get("area") for a in entries]
     numbers = {int, float}  # (bool is neither; checked type by type, at C speed)
     if (
         not set(map(type, image_ids)) <= {int}
@@ -466,7 +464,7 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
         or len(set(given)) != len(given)
         or not set(map(type, crowd)) <= {int}
         or not set(crowd) <= {0, 1}
-        or any(a.get("segmentation") not in (None, [], {}) for a in entries)
+        or any(s is not None and s != [] and s != {} for s in segs)
         or not set(map(type, boxes)) <= {list}
         or not set(map(len, boxes)) <= {4}
         or not set(map(type, chain.from_iterable(boxes))) <= numbers
