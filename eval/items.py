@@ -19,7 +19,7 @@ import numpy as np
 
 from torchsar_eval.errors import EvalError
 
-__all__ = ["ImageMeta", "Item", "Targets", "extent"]
+__all__ = ["ImageMeta", "Item", "Targets", "extent", "spacings"]
 
 
 def _column(values, n: int, name: str, dtype=np.float64) -> np.ndarray:
@@ -251,3 +251,16 @@ def extent(targets: Targets) -> tuple[int, int]:
     if boxes.size == 0:
         return (1, 1)
     return (max(int(np.ceil(boxes[:, 2].max())), 1), max(int(np.ceil(boxes[:, 3].max())), 1))
+
+
+def spacings(metas: Sequence[dict]) -> np.ndarray:
+    """float64 ``(N, 2)``: each image's ``pixel_spacing`` (row, col) in metres from its meta
+    dict, NaN where it has none.
+
+    Example:
+        >>> spacings([{"pixel_spacing": (0.3, 0.3)}, {}]).tolist()
+        [[0.3, 0.3], [nan, nan]]
+    """
+    nan = (np.nan, np.nan)
+    rows = [nan if m.get("pixel_spacing") is None else m["pixel_spacing"][:2] for m in metas]
+    return np.array(rows, np.float64).reshape(len(rows), 2)

@@ -15,6 +15,7 @@ import numpy as np
 
 from torchsar.objects import Objects
 from torchsar_eval.datasets.base import BadItemError
+from torchsar_eval.items import spacings
 from torchsar_eval.result import DetectorResult
 from torchsar_eval.scoring import image_infos, truth_from_targets
 
@@ -113,7 +114,7 @@ def _truth_by_item(ds, indices: list[int], skip_bad: bool) -> tuple[list[tuple],
     groups = []
     for shape, group in by_shape.items():
         metas = [m for _, _, m in group]
-        spacing = np.array([_spacing(m) for m in metas], np.float64).reshape(len(group), 2)
+        spacing = spacings(metas)
         gt = truth_from_targets(
             [t for _, t, _ in group],
             shape,
@@ -122,8 +123,3 @@ def _truth_by_item(ds, indices: list[int], skip_bad: bool) -> tuple[list[tuple],
         )
         groups.append((shape, [i for i, _, _ in group], gt, metas))
     return groups, skipped
-
-
-def _spacing(meta: dict) -> tuple[float, float]:
-    sp = meta.get("pixel_spacing")
-    return (np.nan, np.nan) if sp is None else (float(sp[0]), float(sp[1]))

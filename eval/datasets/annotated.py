@@ -40,7 +40,7 @@ from torchsar_eval.datasets.base import FileDataset, make_item, require_dir, wal
 from torchsar_eval.datasets.images import read_samples
 from torchsar_eval.datasets.spec import DEFAULT_MAX_PIXELS, DatasetSpec
 from torchsar_eval.errors import EvalError
-from torchsar_eval.items import Targets
+from torchsar_eval.items import Targets, spacings
 
 __all__ = ["ANNOTATED_OPTIONS", "AnnotatedDataset", "coco_from_spec", "voc_from_spec"]
 
@@ -108,11 +108,6 @@ def _rows_of(start: np.ndarray, idx: np.ndarray) -> np.ndarray:
     count = start[idx + 1] - start[idx]
     offset = np.repeat(start[idx] - (np.cumsum(count) - count), count)
     return np.arange(int(count.sum())) + offset
-
-
-def _spacing(meta: dict) -> tuple[float, float]:
-    sp = meta.get("pixel_spacing")
-    return (np.nan, np.nan) if sp is None else (float(sp[0]), float(sp[1]))
 
 
 def _grouped(image: np.ndarray, n_images: int, **columns) -> ObjectColumns:
@@ -218,16 +213,13 @@ class AnnotatedDataset(FileDataset):
         n_real = np.bincount(plane[~crowd], minlength=idx.size)
         metas = []
         for k, i in enumerate(items):
-            path, _, name = self.items[i]
-            meta = self.base_meta(name, path, None, gt="box" if n_real[k] else "mask")
             a, b = int(obj.start[i]), int(obj.start[i + 1])
-            meta["classes"] = [c for c, g in zip(obj.names[a:b], obj.ignore[a:b].tolist(),
-                                                 strict=True) if not g]  # fmt: skip
-            if self.image_ids is not None:
-                meta["image_id"] = self.image_ids[i]
+            classes = [c for c, g in zip(obj.names[a:b], obj.ignore[a:b].tolist(), strict=True)
+                       if not g]  # fmt: skip
+            meta = self._meta(i, bool(n_real[k]), classes)
             meta["index"] = i
             metas.append(meta)
-        spacing = np.array([_spacing(m) for m in metas], np.float64).reshape(idx.size, 2)
+        spacing = spacings(metas)
         gt = GroundTruth.build(
             plane[~crowd], obj.box[real], planes=idx.size, shape=shape,
             classes=obj.cls[real].tolist(),
@@ -238,6 +230,16 @@ class AnnotatedDataset(FileDataset):
         )  # fmt: skip
         return shape, items, gt, metas
 
+    def _meta(self, i: int, boxes_only: bool, classes: list[str]) -> dict:
+        """Item ``i``'s meta: ``gt`` ``"box"`` when a target is a box (box IoU), its
+        targets' classes and its COCO id."""
+        path, _, name = self.items[i]
+        meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
+        meta["classes"] = classes
+        if self.image_ids is not None:
+            meta["image_id"] = self.image_ids[i]
+        return meta
+
     def _size(self, i: int) -> tuple[int, int]:
         path, size, _ = self.items[i]
         if size is None:
@@ -247,7 +249,7 @@ class AnnotatedDataset(FileDataset):
         return int(size[0]), int(size[1])
 
     def _truth_targets(self, i: int) -> tuple[Targets, tuple[int, int], dict]:
-        path, _, name = self.items[i]
+        path = self.items[i][0]
         shape = self._size(i)
         rows = self.objects.rows(i)
         segmented = [k for k in rows if self.objects.segmentation[k] is not None]
@@ -262,14 +264,10 @@ class AnnotatedDataset(FileDataset):
                 pixels[k - rows.start] = pix
         targets = _targets(self.objects, rows, pixels)
         boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
-        meta = self.base_meta(name, path, None, gt="box" if boxes_only else "mask")
-        meta["classes"] = list(targets.classes)
-        if self.image_ids is not None:
-            meta["image_id"] = self.image_ids[i]
-        return targets, shape, meta
+        return targets, shape, self._meta(i, boxes_only, list(targets.classes))
 
     def load(self, i: int, images: bool = True) -> dict:
-        path, size, name = self.items[i]
+        path, size, _ = self.items[i]
         if path in self.missing and (images or size is None):
             raise FileFormatError(path, "does not exist (scoring saved predictions reads no "
                                   "image; detectors that read pixels need it)")  # fmt: skip
@@ -303,13 +301,10 @@ class AnnotatedDataset(FileDataset):
                 inst[pix] = k  # painted in order (pictures and pixel metrics only)
         inst, ignore = inst.reshape(shape), ignore.reshape(shape)
         boxes_only = any(p is None for p in targets.pixels)  # a box target: box IoU
-        meta = self.base_meta(name, Path(path), None, gt="box" if boxes_only else "mask")
-        meta["classes"] = list(targets.classes)
+        meta = self._meta(i, boxes_only, list(targets.classes))
         meta["box_source"] = "annotation"  # box IoU uses these boxes, as pycocotools
         if np.isfinite(targets.areas).any():
             meta["areas"] = [None if a != a else float(a) for a in targets.areas.tolist()]
-        if self.image_ids is not None:
-            meta["image_id"] = self.image_ids[i]
         item = make_item(samples, inst, ignore, meta, boxes=[tuple(b) for b in targets.boxes])
         item["targets"] = targets
         return item

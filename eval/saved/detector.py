@@ -206,11 +206,7 @@ class SavedPredictions:
 
     def rows_of(self, item: int) -> np.ndarray:
         """The rows of dataset item ``item``, in file order."""
-        if self._item_rows is None:
-            raise EvalError(f"predictions {self.path} are not bound to a dataset")
-        items, order = self._item_rows
-        lo, hi = np.searchsorted(items, [item, item + 1])
-        return order[lo:hi]
+        return self.rows_for([item])[0]
 
     def rows_for(self, items) -> tuple[np.ndarray, np.ndarray]:
         """``(rows, counts)``: the rows of dataset items ``items`` item after item (each

@@ -26,10 +26,10 @@ decoder allocates in proportion to the coordinates it is given, so one polygon v
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from dataclasses import dataclass
-from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -168,7 +168,7 @@ def _load_json(path: str | Path) -> dict:
     """The top-level object of a COCO file, or an error naming it."""
     check_regular_file(path)
     try:
-        data = jsontext.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_text())  # (its reader pauses the collector)
     except RecursionError:
         raise FileFormatError(path, "is not a readable JSON file (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits
@@ -455,7 +455,6 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
     image_ids, category, ids, crowd, boxes, areas, segs = (
         list(c) for c in zip(*fields, strict=True)) if fields else ([],) * 7  # fmt: skip
     given = [v for v in ids if v is not None]
-    numbers = {int, float}  # (bool is neither; checked type by type, at C speed)
     if (
         not set(map(type, image_ids)) <= {int}
         or not set(map(type, category)) <= {int}
@@ -465,9 +464,7 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
         or not set(map(type, crowd)) <= {int}
         or not set(crowd) <= {0, 1}
         or any(s is not None and s != [] and s != {} for s in segs)
-        or not set(map(type, boxes)) <= {list}
-        or not set(map(len, boxes)) <= {4}
-        or not set(map(type, chain.from_iterable(boxes))) <= numbers
+        or not jsontext.plain_boxes(boxes)
         or not set(map(type, areas)) <= {int, float, type(None)}
     ):  # fmt: skip
         return None
