@@ -42,10 +42,14 @@ if TYPE_CHECKING:
 __all__ = ["Results", "evaluate"]
 
 
-@dataclass
+def _table(name: str, doc: str) -> property:
+    return property(lambda self: self._tables[name], doc=doc)
+
+
 class Results:
     """What :func:`evaluate` returns: the tables (pandas, the CSV files of a run folder),
-    the merged states and the run statistics.
+    the merged states and the run statistics. A table is built when it is first read (a
+    run that wants only ``summary`` pays for no other); a run folder holds them all.
 
     Attributes:
         summary: one row per dataset x detector (``summary.csv``).
@@ -63,21 +67,30 @@ class Results:
         files: the files written into ``out``.
     """
 
-    summary: pd.DataFrame
-    froc: pd.DataFrame
-    pr: pd.DataFrame
-    pixel_roc: pd.DataFrame
-    breakdown: pd.DataFrame
-    timing: pd.DataFrame
-    coco: pd.DataFrame
-    per_image: pd.DataFrame
-    scr: pd.DataFrame
-    errors: pd.DataFrame
-    paired: pd.DataFrame
-    states: dict[str, list] = field(repr=False)
-    stats: dict[str, dict] = field(repr=False)
-    out: Path | None = None
-    files: list[str] = field(default_factory=list)
+    summary = _table("summary", "One row per dataset x detector (``summary.csv``).")
+    froc = _table("froc", "Pd against false alarms per image (``froc.csv``).")
+    pr = _table("pr", "Precision and recall at every detection score (``pr.csv``).")
+    pixel_roc = _table("pixel_roc", "The pixel ROC (``pixel_roc.csv``).")
+    breakdown = _table("breakdown", "Pd by size, SCR and class (``breakdown.csv``).")
+    timing = _table("timing", "Run time per detector (``timing.csv``).")
+    coco = _table("coco", "pycocotools' 12 stats (``coco.csv``).")
+    scr = _table("scr", "Pd versus SCR bin (``scr.csv``).")
+    errors = _table("errors", "False alarms per type, misses (``errors.csv``).")
+    paired = _table("paired", "Paired differences against the best (``paired.csv``).")
+
+    def __init__(self, tables: Mapping[str, pd.DataFrame], *, per_image: pd.DataFrame,
+                 states: dict[str, list], stats: dict[str, dict], out: Path | None = None,
+                 files: Iterable[str] = ()) -> None:  # fmt: skip
+        self._tables = tables
+        self.per_image = per_image
+        self.states = states
+        self.stats = stats
+        self.out = out
+        self.files = list(files)
+
+    def __repr__(self) -> str:
+        rows = [f"{d} / {r.detector.name}" for d, rs in self.states.items() for r in rs]
+        return f"Results({', '.join(rows)}; out={self.out})"
 
     def row(self, dataset: str, detector: str) -> pd.Series:
         """The summary row of one dataset and detector."""
@@ -285,7 +298,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
     import pandas as pd
 
-    from torchsar_eval.report import per_image_rows, result_tables, write_run
+    from torchsar_eval.report import LazyTables, per_image_rows, result_tables, write_run
     from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
     check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
@@ -302,7 +315,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         exporter = stats[name].pop("export")
         if exporter is not None:
             exporter.write(tmp / "coco", labels[name])
-    tables = result_tables(results)
+    tables = result_tables(results) if out is not None else LazyTables(results)
     folders = {n: tmp / "shards" / labels[n] / "test" for n in results}
     files: list[str] = []
     if out is not None:
@@ -315,7 +328,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     else:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
         per_image = pd.DataFrame(list(rows), columns=PER_IMAGE_COLUMNS)
-    return Results(**tables, per_image=per_image, states=results, stats=stats, out=out,
+    return Results(tables, per_image=per_image, states=results, stats=stats, out=out,
                    files=[*files, "config.json"] if out is not None else [])  # fmt: skip
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import ExitStack
 from pathlib import Path
 from typing import IO
@@ -37,7 +37,9 @@ from torchsar_eval.tables import (
 )
 
 __all__ = [
+    "BUILDERS",
     "TABLE_FILES",
+    "LazyTables",
     "per_image_rows",
     "ranked_summary",
     "result_tables",
@@ -49,21 +51,58 @@ TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k != "cases"}
 """Each table of :func:`result_tables` and its file in a run folder."""
 
 
+BUILDERS = {
+    "summary": summary_table,
+    "froc": froc_table,
+    "pr": pr_table,
+    "pixel_roc": pixel_roc_table,
+    "breakdown": breakdown_table,
+    "timing": timing_table,
+    "coco": coco_table,
+    "scr": scr_table,
+    "errors": errors_table,
+    "paired": paired_table,
+}
+"""How each table of :data:`TABLE_FILES` is built from ``{dataset: [DetectorResult]}``."""
+
+
 def result_tables(results: dict) -> dict[str, pd.DataFrame]:
     """Every merged table of a run (``{dataset: [DetectorResult]}``), by the keys of
     :data:`TABLE_FILES`."""
-    return {
-        "summary": summary_table(results),
-        "froc": froc_table(results),
-        "pr": pr_table(results),
-        "pixel_roc": pixel_roc_table(results),
-        "breakdown": breakdown_table(results),
-        "timing": timing_table(results),
-        "coco": coco_table(results),
-        "scr": scr_table(results),
-        "errors": errors_table(results),
-        "paired": paired_table(results),
-    }
+    return {key: build(results) for key, build in BUILDERS.items()}
+
+
+class LazyTables(Mapping):
+    """:func:`result_tables` with each table built when it is first read (of final states:
+    the run is over when it is made).
+
+    Example:
+        >>> tables = LazyTables({})
+        >>> sorted(tables) == sorted(TABLE_FILES), tables.built
+        (True, [])
+        >>> len(tables["summary"]), tables.built
+        (0, ['summary'])
+    """
+
+    def __init__(self, results: dict) -> None:
+        self._results = results
+        self._built: dict[str, pd.DataFrame] = {}
+
+    @property
+    def built(self) -> list[str]:
+        """The tables built so far."""
+        return list(self._built)
+
+    def __getitem__(self, key: str) -> pd.DataFrame:
+        if key not in self._built:
+            self._built[key] = BUILDERS[key](self._results)
+        return self._built[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(BUILDERS)
+
+    def __len__(self) -> int:
+        return len(BUILDERS)
 
 
 def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[list]:

@@ -294,7 +294,7 @@ class Evaluator:
         per_image = pd.DataFrame([[dataset, self.detector.name, *r] for r in rows],
                                  columns=PER_IMAGE_COLUMNS)  # fmt: skip
         stats = {dataset: {"images": self.images, "scored": self.images}}
-        return Results(**tables, per_image=per_image, states={dataset: [self]}, stats=stats)
+        return Results(tables, per_image=per_image, states={dataset: [self]}, stats=stats)
 
     def merge(self, other: Evaluator) -> Evaluator:
         """``self + other``: the state of both sets of images (disjoint)."""
