@@ -14,7 +14,6 @@ or by name, and the readers of the COCO results and point CSV formats.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,7 +151,7 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
     if iou_type not in IOU_TYPES:
         raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
     try:
-        data = json.loads(path.read_text())  # (collector paused for the whole read)
+        data = jsontext.read_json(path)  # (collector paused for the whole read)
     except RecursionError:
         raise _fail(path, "is not a readable JSON file (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits

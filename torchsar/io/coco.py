@@ -26,7 +26,6 @@ decoder allocates in proportion to the coordinates it is given, so one polygon v
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from dataclasses import dataclass
@@ -168,7 +167,7 @@ def _load_json(path: str | Path) -> dict:
     """The top-level object of a COCO file, or an error naming it."""
     check_regular_file(path)
     try:
-        data = json.loads(Path(path).read_text())  # (its reader pauses the collector)
+        data = jsontext.read_json(path)  # (its reader pauses the collector)
     except RecursionError:
         raise FileFormatError(path, "is not a readable JSON file (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits

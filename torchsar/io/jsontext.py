@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import functools
 import gc
+import json
 from collections.abc import Callable
 from itertools import chain
-from typing import TypeVar
+from pathlib import Path
+from typing import Any, TypeVar
 
-__all__ = ["plain_boxes", "without_gc"]
+try:  # a C parser about 2.5x the speed of the standard library's
+    import orjson
+except ImportError:  # pragma: no cover - a dependency; the standard reader is the fallback
+    orjson = None
+
+__all__ = ["loads", "plain_boxes", "read_json", "without_gc"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -41,6 +48,42 @@ def without_gc(fn: F) -> F:
                 gc.enable()
 
     return paused  # type: ignore[return-value]
+
+
+def loads(raw: bytes) -> Any:
+    """The JSON document in ``raw`` (UTF-8) as :func:`json.loads` reads it, parsed by orjson
+    when it is installed (about 2.5x faster); a document orjson refuses (NaN or Infinity
+    literals, a number past float range, a lone surrogate, a byte-order mark) is left to
+    :func:`json.loads`, which reads it or words the error. One difference: orjson keeps
+    integers within 64 bits exact and reads larger ones as floats; every reader here
+    refuses such a number as an id or a size either way, and a coordinate or a score is a
+    float in both.
+
+    Example:
+        >>> loads(b'{"id": 7, "score": 0.5, "box": [1, 2.5]}')
+        {'id': 7, 'score': 0.5, 'box': [1, 2.5]}
+        >>> loads(b"[NaN]")
+        [nan]
+    """
+    if orjson is not None:
+        try:
+            return orjson.loads(raw)
+        except orjson.JSONDecodeError:
+            pass  # the standard reader decides, and words the error
+    return json.loads(raw.decode("utf-8"))
+
+
+def read_json(path: str | Path) -> Any:
+    """The JSON document in the file ``path`` (:func:`loads` of its bytes).
+
+    Raises:
+        OSError: the file cannot be read.
+        UnicodeDecodeError: it is not UTF-8.
+        ValueError: it is not JSON (:class:`json.JSONDecodeError`), or holds an integer of
+            more digits than Python converts.
+        RecursionError: it is nested too deeply.
+    """
+    return loads(Path(path).read_bytes())
 
 
 def plain_boxes(values: list) -> bool:
