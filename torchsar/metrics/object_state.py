@@ -374,21 +374,21 @@ class ObjectState:
             return out
         rec = self.records
         d, g = rec.detections, rec.targets
-        groups = _class_groups(d, g, bool(self.by_class))
-        for a in range(A):
-            lo, hi = AREA_RANGES[a]
-            inside = (g["coco_area"] >= lo) & (g["coco_area"] <= hi)
-            aps = []
-            for det_sel, gt_sel in groups:
-                npig = int((inside & gt_sel).sum())
-                if npig == 0:
-                    continue
-                k = np.arange(T) + a * T
-                tp = np.stack([bit(d["ap_tp"][det_sel], int(b)) for b in k]).astype(np.float64)
-                ig = np.stack([bit(d["ap_ig"][det_sel], int(b)) for b in k])
-                aps.append(coco_ap_rows(tp, (1.0 - tp) * ~ig, np.full(T, npig)))
-            if aps:
-                out[a] = np.mean(aps, axis=0)
+        shift = np.arange(A * T, dtype=np.uint64)[:, None]  # bit a * T + t: range a, IoU t
+        lo = np.array([AREA_RANGES[a][0] for a in range(A)])[:, None]
+        hi = np.array([AREA_RANGES[a][1] for a in range(A)])[:, None]
+        inside = (g["coco_area"][None] >= lo) & (g["coco_area"][None] <= hi)  # (A, targets)
+        aps, counted = [], []
+        for det_sel, gt_sel in _class_groups(d, g, bool(self.by_class)):
+            npig = (inside & gt_sel).sum(axis=1)  # (A,)
+            tp = ((d["ap_tp"][det_sel][None] >> shift) & np.uint64(1)).astype(np.float64)
+            ig = ((d["ap_ig"][det_sel][None] >> shift) & np.uint64(1)).astype(bool)
+            aps.append(coco_ap_rows(tp, (1.0 - tp) * ~ig, np.repeat(npig, T)).reshape(A, T))
+            counted.append(npig > 0)
+        if aps:  # per range, the mean over the classes with targets in it
+            n = np.sum(counted, axis=0)
+            total = np.where(np.array(counted)[:, :, None], aps, 0.0).sum(axis=0)
+            out[:A] = np.where(n[:, None] > 0, total / np.maximum(n, 1)[:, None], np.nan)
         self._cache["ap_table"] = out
         return out
 
