@@ -21,12 +21,9 @@ from matplotlib.ticker import FuncFormatter
 from torchsar_eval.labels import plain
 from torchsar_eval.tables import pooled_pr
 
-__all__ = ["Series", "figure_svg", "first_column"]
+__all__ = ["Series", "figure_svg", "first_column", "scr_points"]
 
 _DASHES = ["-", "--", ":", "-."]
-SCR_X = ["scr_db", "scr_centre", "scr_center", "scr_mid", "centre", "center", "scr_bin", "bin",
-         "scr"]  # fmt: skip
-"""Columns that may hold the SCR of a ``scr.csv`` row (the first present is used)."""
 
 
 @dataclass(frozen=True)
@@ -43,17 +40,6 @@ class Series:
 def first_column(df: pd.DataFrame, names: list[str]) -> str | None:
     """The first of ``names`` that ``df`` has."""
     return next((c for c in names if c in df.columns), None)
-
-
-def _numeric(values: pd.Series) -> np.ndarray:
-    """Numbers of a column; interval labels such as ``[0, 5)`` become their midpoints."""
-    out = np.array(pd.to_numeric(values, errors="coerce"), dtype=float)
-    for i, v in enumerate(values):
-        if np.isnan(out[i]) and isinstance(v, str):
-            nums = re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", v)
-            if nums:
-                out[i] = float(np.mean([float(n) for n in nums[:2]]))
-    return out
 
 
 def _svg(fig: plt.Figure, salt: str, label: str) -> str:
@@ -150,27 +136,48 @@ def _pixel(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     return drawn
 
 
+def scr_points(d: pd.DataFrame) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """One detector's rows of ``scr.csv`` as points to draw, per SCR source (``measured``
+    first): ``(source, x, pd, (lo, hi))`` with ``x`` each bin's mean SCR of its targets
+    (``scr_mean_db``; the bin's middle where that is not finite), in increasing ``x``; bins
+    without a Pd (no targets) are left out.
+
+    Example:
+        >>> d = pd.DataFrame({"source": ["measured"] * 2, "scr_lo_db": [5.0, 10.0],
+        ...                   "scr_hi_db": [10.0, 15.0], "scr_mean_db": [7.2, float("nan")],
+        ...                   "pd": [0.5, 1.0], "pd_lo": [0.2, 0.6], "pd_hi": [0.8, 1.0]})
+        >>> [(s, x.tolist(), y.tolist()) for s, x, y, _ in scr_points(d)]
+        [('measured', [7.2, 12.5], [0.5, 1.0])]
+    """
+    out = []
+    sources = sorted(set(d["source"]), key=lambda v: (v != "measured", str(v)))
+    for source in sources:
+        part = d[d["source"] == source]
+        x = part["scr_mean_db"].to_numpy(np.float64)
+        lo_db, hi_db = (part[c].to_numpy(np.float64) for c in ("scr_lo_db", "scr_hi_db"))
+        x = np.where(np.isfinite(x), x, (lo_db + hi_db) / 2)
+        y = part["pd"].to_numpy(np.float64)
+        lo, hi = part["pd_lo"].to_numpy(np.float64), part["pd_hi"].to_numpy(np.float64)
+        ok = np.isfinite(x) & np.isfinite(y)
+        order = np.argsort(x[ok], kind="stable")
+        out.append((source, x[ok][order], y[ok][order], (lo[ok][order], hi[ok][order])))
+    return [p for p in out if p[1].size]
+
+
 def _scr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
-    x_col = first_column(df, SCR_X)
-    y_col = first_column(df, ["pd", "pd_object", "recall"])
-    if x_col is None or y_col is None:
-        return False
+    """Pd at each SCR bin's mean SCR, per detector and SCR source (``measured`` dots,
+    other sources squares), with the Wilson intervals."""
     drawn = False
     for s in series:
         d = _rows(df, s)
-        if d.empty:
-            continue
-        x, y = _numeric(d[x_col]), _numeric(d[y_col])
-        order = np.argsort(x, kind="stable")
-        x, y = x[order], y[order]
-        ax.plot(x, y, "o", color=s.colour, linestyle=s.dash, lw=1.4, ms=3)
-        if {"pd_lo", "pd_hi"} <= set(d.columns):
-            lo, hi = _numeric(d["pd_lo"])[order], _numeric(d["pd_hi"])[order]
-            ok = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(y)
+        for source, x, y, (lo, hi) in scr_points(d) if not d.empty else []:
+            marker = "o" if source == "measured" else "s"
+            ax.plot(x, y, marker=marker, color=s.colour, linestyle=s.dash, lw=1.4, ms=3)
+            ok = np.isfinite(lo) & np.isfinite(hi)
             err = [np.maximum(y[ok] - lo[ok], 0.0), np.maximum(hi[ok] - y[ok], 0.0)]
             ax.errorbar(x[ok], y[ok], yerr=err, fmt="none",
                         ecolor=s.colour, elinewidth=0.8, capsize=2, alpha=0.7)  # fmt: skip
-        drawn = True
+            drawn = True
     ax.set_ylim(0, 1.02)
     return drawn
 
@@ -179,7 +186,7 @@ FIGURES = {
     "froc": ("FROC (matching rule)", "false alarms per image", "Pd (object)", "froc", _froc),
     "pr": ("precision-recall, IoU 0.5", "recall", "precision", "pr", _pr),
     "pixel_roc": ("pixel ROC", "Pfa (pixel)", "Pd (pixel)", "pixel_roc", _pixel),
-    "scr": ("Pd vs SCR", "SCR (dB)", "Pd (object)", "scr", _scr),
+    "scr": ("Pd vs SCR (at each bin's mean SCR)", "SCR (dB)", "Pd (object)", "scr", _scr),
 }
 """Each figure: title, axis labels, the table it draws and how."""
 

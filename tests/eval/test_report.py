@@ -307,3 +307,41 @@ def test_the_report_embeds_only_figures_inside_the_run_folder(run, tmp_path):
     (copy / "errors.csv").symlink_to(outside)
     assert main(["report", str(copy)]) == 0
     assert "SECRET-TABLE" not in (copy / "report.html").read_text()
+
+
+def test_pd_vs_scr_points_sit_at_their_bins_mean_scr(run):
+    """The drawn points of the Pd-vs-SCR figure (read back from the figure's lines) are at
+    each bin's ``scr_mean_db``, never at a number parsed from the bin's label."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from torchsar_eval.html_report.figures import FIGURES, Series
+
+    scr = run[1].scr
+    series = [Series(d, d, detector_colour(d), "-", None) for d in scr.detector.unique()]
+    fig, ax = plt.subplots()
+    assert FIGURES["scr"][4](ax, scr, series)
+    dots = [line for line in ax.lines if line.get_marker() == "o"]  # measured SCR
+    assert len(dots) == len(series)
+    for s, line in zip(series, dots, strict=True):
+        assert line.get_color() == s.colour
+        rows = scr[(scr.detector == s.detector) & (scr.source == "measured") & scr.pd.notna()]
+        want = sorted(zip(rows.scr_mean_db, rows.pd, strict=True))
+        assert list(zip(line.get_xdata(), line.get_ydata(), strict=True)) == want
+        lo, hi = rows.scr_lo_db.to_numpy(), rows.scr_hi_db.to_numpy()
+        assert ((rows.scr_mean_db >= lo) & (rows.scr_mean_db < hi)).all()
+    plt.close(fig)
+    assert np.isfinite(scr.scr_mean_db[scr.targets > 0]).all()
+
+
+def test_pd_vs_scr_labels_with_negative_looking_bins_are_not_parsed():
+    """'5-10' is the bin [5, 10): its point sits at the targets' mean SCR (7.5 here)."""
+    from torchsar_eval.html_report.figures import scr_points
+
+    d = pd.DataFrame({"source": ["measured"] * 3, "scr_bin": ["5-10", "10-15", "15-20"],
+                      "scr_lo_db": [5.0, 10.0, 15.0], "scr_hi_db": [10.0, 15.0, 20.0],
+                      "scr_mean_db": [7.5, 12.0, 16.0], "pd": [0.2, 0.6, 0.9],
+                      "pd_lo": [0.1, 0.4, 0.7], "pd_hi": [0.4, 0.8, 1.0]})  # fmt: skip
+    ((source, x, y, _),) = scr_points(d)
+    assert source == "measured"
+    assert x.tolist() == [7.5, 12.0, 16.0] and y.tolist() == [0.2, 0.6, 0.9]
