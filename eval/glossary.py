@@ -28,9 +28,16 @@ _TERMS = [
     ("fom", "figure of merit tp/(fp+targets)"),
     ("false_alarms_per_image, fa_per_km2", "fp per image; fp per km² of scored image area "
      "(only when every image has a pixel spacing)"),
-    ("ap50, ap50_95", "COCO average precision (101-point) at mask IoU 0.5 (box IoU for "
-     "box targets, boxes or --match box), and averaged over IoU 0.50:0.05:0.95; exact "
-     "(pycocotools' ranking, no per-image detection cap)"),
+    ("ap50, ap50_95", "COCO average precision (101-point) at IoU 0.5, and averaged over IoU "
+     "0.50:0.05:0.95; exact (pycocotools' ranking, no per-image detection cap). The IoU "
+     "of each row is in iou_type: mask IoU where the detector gives masks and the "
+     "targets are masks; box IoU under --match box, for box detectors and box "
+     "predictions (against each mask target's bounding box) and on box targets; "
+     "mask+box where only some targets are masks"),
+    ("iou_type, matching", "what a row's AP measured (mask, box, mask+box, point, "
+     "distance) and its operating point's matching rule in words"),
+    ("ap_distance", "under --match distance: AP with pairs closer than the tolerance (no "
+     "IoU: ap50 and ap50_95 are empty)"),
     ("ap_small, ap_medium, ap_large", "ap50_95 in COCO's area ranges (targets outside the "
      "range ignored, as pycocotools)"),
     ("classes", "per-class: detections matched within their class, AP the mean over the "

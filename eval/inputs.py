@@ -84,13 +84,22 @@ def _mask_pixels(masks, n: int, threshold: float, what: str) -> tuple[list, tupl
 
 
 def truth_from(
-    target, k: int, *, box_format: str = "xyxy", categories=None, mask_threshold: float = 0.5
+    target,
+    k: int,
+    *,
+    box_format: str = "xyxy",
+    categories=None,
+    mask_threshold: float = 0.5,
+    seen: tuple[int, int] | None = None,
 ) -> tuple[Targets, ImageMeta]:
-    """One image's ground truth (see the module docstring); ``k``: its default order."""
+    """One image's ground truth (see the module docstring); ``k``: its default order;
+    ``seen``: the image's ``(H, W)`` as its pixels or predicted masks show it, for targets
+    that give none (no masks, no ``size``; else the boxes' extent)."""
     if isinstance(target, Item):
-        return target.targets, replace(target.meta, shape=target.shape)
+        shape = target.meta.shape or (target.image is None and seen) or target.shape
+        return target.targets, replace(target.meta, shape=tuple(shape))
     if isinstance(target, Targets):
-        return target, ImageMeta(str(k), index=k, shape=extent(target))
+        return target, ImageMeta(str(k), index=k, shape=seen or extent(target))
     if not isinstance(target, Mapping) or "boxes" not in target:
         raise EvalError(
             f"target {k} must be a dict with 'boxes' (and 'labels', 'masks', "
@@ -125,7 +134,18 @@ def truth_from(
     image_id = target.get("image_id")
     index = k if image_id is None else int(_array(image_id).reshape(-1)[0])
     name = str(target.get("name", index))
-    return t, ImageMeta(name, index=index, shape=shape or extent(t))
+    return t, ImageMeta(name, index=index, shape=shape or seen or extent(t))
+
+
+def seen_shape(prediction, image) -> tuple[int, int] | None:
+    """An image's ``(H, W)`` from its pixels (``image``, ``(C, H, W)`` or ``(H, W)``), else
+    from its predicted masks (``(N, H, W)``); ``None`` when neither is given."""
+    if image is not None:
+        return (int(image.shape[-2]), int(image.shape[-1]))
+    masks = prediction.get("masks") if isinstance(prediction, Mapping) else None
+    if masks is not None and len(getattr(masks, "shape", ())) >= 2:
+        return (int(masks.shape[-2]), int(masks.shape[-1]))
+    return None
 
 
 def objects_from(

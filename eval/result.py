@@ -21,6 +21,7 @@ from torchsar.metrics import (
     RocAccumulator,
     match_batch,
 )
+from torchsar.metrics.assign import measured_as
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
 from torchsar.metrics.error_types import false_alarm_types
@@ -173,6 +174,9 @@ class Evaluator:
     row_order: list = field(default_factory=list)
     """The order key of each per-image row added by :meth:`update` (rows are reported in
     image order, whatever order the batches came in)."""
+    measured: list = field(default_factory=list)
+    """How the pairs were measured, sorted (``"mask"``, ``"box"``, ``"point"``,
+    ``"distance"``, ``"centroid"``: :func:`~torchsar.metrics.assign.measured_as`)."""
 
     def __post_init__(self) -> None:
         if isinstance(self.detector, str):
@@ -196,6 +200,7 @@ class Evaluator:
     def __setstate__(self, state: dict) -> None:
         state = dict(state)
         state["rows"] = _column_rows(state.get("rows", []))
+        state.setdefault("measured", [])  # a state saved before rows said what they measured
         self.__dict__.update(state)
 
     @property
@@ -244,7 +249,7 @@ class Evaluator:
         Raises:
             EvalError: not one prediction per target, a malformed box, mask or label.
         """
-        from torchsar_eval.inputs import objects_from, truth_from
+        from torchsar_eval.inputs import objects_from, seen_shape, truth_from
 
         predictions, targets = list(predictions), list(targets)
         if len(predictions) != len(targets):
@@ -256,7 +261,12 @@ class Evaluator:
             "categories": categories,
             "mask_threshold": mask_threshold,
         }
-        truths = [truth_from(t, first + k, **opts) for k, t in enumerate(targets)]
+        if images is not None and len(images) != len(targets):
+            raise EvalError(f"{{opt:images}} holds {len(images)} images for {len(targets)} "
+                            "targets: give one per image")  # fmt: skip
+        seen = [seen_shape(p, None if images is None else images[k])
+                for k, p in enumerate(predictions)]  # fmt: skip
+        truths = [truth_from(t, first + k, seen=seen[k], **opts) for k, t in enumerate(targets)]
         groups: dict[tuple[int, int], list[int]] = {}
         for k, (_, meta) in enumerate(truths):
             groups.setdefault(tuple(meta.shape), []).append(k)
@@ -295,6 +305,18 @@ class Evaluator:
                                  columns=PER_IMAGE_COLUMNS)  # fmt: skip
         stats = {dataset: {"images": self.images, "scored": self.images}}
         return Results(tables, per_image=per_image, states={dataset: [self]}, stats=stats)
+
+    @property
+    def iou_type(self) -> str:
+        """What the row's matching measured: ``"mask"``, ``"box"``, ``"mask+box"``,
+        ``"point"``, ``"distance"``, ``"centroid"`` (``""`` before any target was seen)."""
+        order = ("mask", "box", "point", "distance", "centroid")
+        return "+".join(
+            sorted(
+                self.measured,
+                key=lambda k: (k not in order, order.index(k) if k in order else 0, k),
+            )
+        )
 
     def merge(self, other: Evaluator) -> Evaluator:
         """``self + other``: the state of both sets of images (disjoint)."""
@@ -355,6 +377,7 @@ class Evaluator:
         planes' ``image``, when there is one to crop) and the COCO state."""
         t0 = time.perf_counter()
         m = match_batch(obj, gt, self.scoring.matching)
+        self.measured = sorted({*self.measured, *measured_as(obj, gt, self.scoring.matching)})
         types = false_alarm_types(m, obj, gt, self.scoring.matching)
         self.objects.update(m, obj, gt, info, fa_types=types)
         self.rows += image_rows(m, obj, gt, info)
@@ -396,6 +419,7 @@ class Evaluator:
         out.row_order = self.row_order + other.row_order if aligned else []
         out.skipped = self.skipped + other.skipped
         out.pixel_level = self.pixel_level or other.pixel_level
+        out.measured = sorted({*self.measured, *other.measured})
         if self.gallery is not None and other.gallery is not None:
             out.gallery = self.gallery + other.gallery
         else:  # a state saved without one

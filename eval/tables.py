@@ -41,7 +41,8 @@ __all__ = [
 
 HEADLINE = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image"]
 INTERVALS = [*HEADLINE, "false_alarms_per_image", "fa_per_km2", "fom", "ap50_95",
-             "pd_at_0.1_fa_per_image", "pd_at_10_fa_per_image", "pauc"]  # fmt: skip
+             "pd_at_0.1_fa_per_image", "pd_at_10_fa_per_image", "pauc",
+             "ap_distance"]  # fmt: skip
 """The summary columns with ``_lo`` / ``_hi`` bounds (NaN with the reason in
 ``interval_note`` where there is none)."""
 _STATE_NAME = {"false_alarms_per_image": "fa_per_image"}
@@ -69,7 +70,10 @@ SUMMARY_COLUMNS = [
     "ap_small",
     "ap_medium",
     "ap_large",
+    "ap_distance",
     "classes",
+    "iou_type",
+    "matching",
     "pd_at_0.1_fa_per_image",
     "pd_at_1_fa_per_image",
     "pd_at_10_fa_per_image",
@@ -124,10 +128,17 @@ def summary_row(dataset: str, r: DetectorResult) -> dict:
         **{k: m[k] for k in SUMMARY_COLUMNS if k in m},
         "score_threshold": -np.inf if r.threshold is None else r.threshold,
         "classes": "per-class" if r.objects.by_class else "agnostic",
+        "iou_type": r.iou_type,
+        "matching": r.scoring.matching.describe(r.iou_type),
     }
     for k in INTERVALS:
         iv = ci.get(_STATE_NAME.get(k, k))
         row[f"{k}_lo"], row[f"{k}_hi"] = (nan, nan) if iv is None else (iv.lo, iv.hi)
+    if r.scoring.matching.kind == "distance":  # AP at the distance tolerance: not at IoU 0.5
+        for end in ("", "_lo", "_hi"):
+            row[f"ap_distance{end}"], row[f"ap50{end}"] = row[f"ap50{end}"], nan
+    else:
+        row["ap_distance"] = row["ap_distance_lo"] = row["ap_distance_hi"] = nan
     row["interval_note"] = interval_note(ci, r.objects.replicates)
     return row
 
@@ -325,9 +336,11 @@ def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) 
             if ref is None or k == ref:
                 continue
             diffs = difference_intervals(states[k], states[ref])
+            distance = r.scoring.matching.kind == "distance"
             for metric in PAIRED_METRICS:
                 d, lo, hi = diffs[metric]
-                rows.append([ds, r.detector.name, rs[ref].detector.name, metric, d, lo, hi,
+                name = "ap_distance" if distance and metric == "ap50" else metric
+                rows.append([ds, r.detector.name, rs[ref].detector.name, name, d, lo, hi,
                              bool(lo > 0 or hi < 0)])  # fmt: skip
     return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
 
@@ -372,13 +385,19 @@ HEADLINE_SHOWN = ["dataset", "detector", "images", "targets", "tp", "fp", "fn", 
 
 
 def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """The compact table of ``summary.md``: counts, then the headline metrics and false
-    alarms per image with their intervals as ``value [lo, hi]``, and the intervals' note."""
+    """The compact table of ``summary.md``: counts, what each row's matching measured, then
+    the headline metrics and false alarms per image with their intervals as
+    ``value [lo, hi]``, and the intervals' note. AP columns no row has (``ap50`` under the
+    distance rule, ``ap_distance`` under an IoU rule) are left out."""
     out = summary[HEADLINE_SHOWN].copy()
-    for m in [*HEADLINE, "false_alarms_per_image"]:
+    out.insert(2, "matching", summary["matching"])
+    for m in [*HEADLINE, "ap_distance", "false_alarms_per_image"]:
+        if m.startswith("ap") and summary[m].isna().all():
+            continue
         out[m] = [_with_interval(v, lo, hi) for v, lo, hi in
                   zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)]  # fmt: skip
-    out["ap50_95"] = summary["ap50_95"]
+    if summary["ap50_95"].notna().any():
+        out["ap50_95"] = summary["ap50_95"]
     out["interval_note"] = summary["interval_note"]
     return out
 

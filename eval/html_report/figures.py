@@ -149,15 +149,19 @@ def scr_points(d: pd.DataFrame) -> list[tuple[str, np.ndarray, np.ndarray, np.nd
         >>> [(s, x.tolist(), y.tolist()) for s, x, y, _ in scr_points(d)]
         [('measured', [7.2, 12.5], [0.5, 1.0])]
     """
+    if not {"scr_mean_db", "scr_lo_db", "scr_hi_db", "pd"} <= set(d.columns):
+        return []  # not a scr.csv of this harness: nothing to place
+    d = d.assign(**{c: np.nan for c in ("pd_lo", "pd_hi") if c not in d.columns})
+    d = d if "source" in d.columns else d.assign(source="measured")
     out = []
     sources = sorted(set(d["source"]), key=lambda v: (v != "measured", str(v)))
     for source in sources:
         part = d[d["source"] == source]
-        x = part["scr_mean_db"].to_numpy(np.float64)
-        lo_db, hi_db = (part[c].to_numpy(np.float64) for c in ("scr_lo_db", "scr_hi_db"))
+        x, lo_db, hi_db, y, lo, hi = (
+            pd.to_numeric(part[c], errors="coerce").to_numpy(np.float64)
+            for c in ("scr_mean_db", "scr_lo_db", "scr_hi_db", "pd", "pd_lo", "pd_hi")
+        )
         x = np.where(np.isfinite(x), x, (lo_db + hi_db) / 2)
-        y = part["pd"].to_numpy(np.float64)
-        lo, hi = part["pd_lo"].to_numpy(np.float64), part["pd_hi"].to_numpy(np.float64)
         ok = np.isfinite(x) & np.isfinite(y)
         order = np.argsort(x[ok], kind="stable")
         out.append((source, x[ok][order], y[ok][order], (lo[ok][order], hi[ok][order])))

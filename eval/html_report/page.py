@@ -28,12 +28,13 @@ from torchsar_eval.leaderboard import number as _num
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
 
-_UNIT = {"f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
+_UNIT = {"f1", "precision", "recall", "ap50", "ap50_95", "ap_distance", "pd_at_0.1_fa_per_image",
          "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou",
          "pd_object", "pd_pixel"}  # fmt: skip
 LABELS = {
     "f1": "F1", "precision": "precision", "recall": "recall", "ap50": "AP50",
-    "ap50_95": "AP50:95", "pd_at_0.1_fa_per_image": "Pd @ 0.1 FA/img",
+    "ap50_95": "AP50:95", "ap_distance": "AP (distance)",
+    "pd_at_0.1_fa_per_image": "Pd @ 0.1 FA/img",
     "pd_at_1_fa_per_image": "Pd @ 1 FA/img", "pd_at_10_fa_per_image": "Pd @ 10 FA/img",
     "pauc": "pAUC", "fom": "FoM", "mean_iou": "mean IoU", "pd_object": "Pd (object)",
     "pd_pixel": "Pd pixel", "pfa_pixel": "Pfa pixel", "false_alarms_per_image": "FA/img",
@@ -41,9 +42,10 @@ LABELS = {
     "fn": "FN", "fragmentation": "fragments", "length_score": "length score",
     "ms_per_image": "ms/img", "images_per_s": "images/s",
 }  # fmt: skip
-SHOWN = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image", "false_alarms_per_image",
-         "tp", "fp", "fn", "pd_pixel", "pfa_pixel", "ms_per_image"]  # fmt: skip
-"""Leaderboard columns after the ranking metric (those a run has)."""
+SHOWN = ["precision", "recall", "f1", "ap50", "ap_distance", "pd_at_1_fa_per_image",
+         "false_alarms_per_image", "tp", "fp", "fn", "pd_pixel", "pfa_pixel",
+         "ms_per_image"]  # fmt: skip
+"""Leaderboard columns after the ranking metric (those a run has a value in)."""
 _SAMPLE_TYPES = {
     "intensity": "intensity (power), used as is",
     "amplitude": "amplitude, squared to intensity",
@@ -77,6 +79,7 @@ th{background:var(--band);font-weight:600;position:sticky;top:0}
 td.l,th.l{text-align:left}.why{white-space:normal;color:var(--muted);font-size:11px;
 font-weight:400;max-width:230px;line-height:1.25}
 td.best{background:var(--best);font-weight:700}
+td.rule{white-space:normal;min-width:120px;max-width:220px;font-size:12px}
 .sw{display:inline-block;width:22px;height:0;border-top:3px solid;vertical-align:middle;
 margin-right:6px}
 .ci{display:inline-flex;align-items:center;gap:6px}
@@ -187,7 +190,8 @@ def _leaderboard(board: Board) -> str:
     rows, m = board.rows, board.rank_by
     if rows.empty:
         return '<p class="muted">No rows.</p>'
-    shown = [c for c in SHOWN if c in rows.columns and c != m]
+    shown = [c for c in SHOWN if c in rows.columns and c != m
+             and pd.to_numeric(rows[c], errors="coerce").notna().any()]  # fmt: skip
     many = len(board.runs) > 1
     val = {c: [_num(v) for v in rows[c]] for c in [m, *shown] if c in rows.columns}
     silent = [n == NO_DETECTION for n in board.notes]  # fewest false alarms, trivially
@@ -209,6 +213,9 @@ def _leaderboard(board: Board) -> str:
     head.append(f'<th class="l" title="{_e(arrow)}">{_e(LABELS.get(m, m))} '
                 f'<span class="lohi">95 % interval</span></th>')  # fmt: skip
     head += [f'<th title="{_e(c)}">{_e(LABELS.get(c, c))}</th>' for c in shown]
+    head.append(
+        '<th class="l" title="the matching rule and the IoU each row measured">measured by</th>'
+    )
     body = []
     for i, r in rows.iterrows():
         rank = board.rank[i]
@@ -229,9 +236,17 @@ def _leaderboard(board: Board) -> str:
             x = val[c][i]
             mark = ' class="best"' if best[c] is not None and x == best[c] else ""
             cells.append(f"<td{mark}>{_fmt(c, x)}</td>")
+        cells.append(f'<td class="l rule">{_e(_measured_by(r))}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return ('<div class="wrap"><table class="leaderboard"><thead><tr>' + "".join(head)
             + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+
+
+def _measured_by(row: pd.Series) -> str:
+    """A leaderboard row's matching rule and IoU type (``summary.csv``'s ``matching``;
+    ``–`` for a run written before rows said so)."""
+    text = row.get("matching")
+    return text if isinstance(text, str) and text else "–"
 
 
 def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:

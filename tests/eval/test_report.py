@@ -20,6 +20,7 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.html_report import build_report
 from torchsar_eval.html_report.page import NO_DETECTION
 from torchsar_eval.registry import BUILTIN
+from torchsar_eval.tables import SCR_COLUMNS
 
 
 class Page(HTMLParser):
@@ -194,12 +195,12 @@ def test_notes_name_detectors_without_detections_and_identical_ones(run, tmp_pat
 def test_optional_tables_are_shown_when_present(run, tmp_path):
     copy = _copy(run, tmp_path)
     rows = [
-        ["sim-chips", d, c, n, k, k / n, max(0, k / n - 0.2), min(1, k / n + 0.1)]
+        ["sim-chips", d, "measured", f"{c - 2.5:g}-{c + 2.5:g}", c - 2.5, c + 2.5, c, n, k,
+         k / n, max(0, k / n - 0.2), min(1, k / n + 0.1)]
         for d in ("ca", "so")
         for c, n, k in ((2.5, 5, 2), (7.5, 4, 3), (12.5, 6, 6))
-    ]
-    pd.DataFrame(rows, columns=["dataset", "detector", "scr_db", "targets", "detected", "pd",
-                                "pd_lo", "pd_hi"]).to_csv(copy / "scr.csv", index=False)  # fmt: skip
+    ]  # fmt: skip
+    pd.DataFrame(rows, columns=SCR_COLUMNS).to_csv(copy / "scr.csv", index=False)
     pd.DataFrame([["sim-chips", "ca", "fragment", 7], ["sim-chips", "ca", "clutter", 3],
                   ["sim-chips", "so", "clutter", 11]],
                  columns=["dataset", "detector", "type", "count"]).to_csv(
@@ -212,9 +213,8 @@ def test_optional_tables_are_shown_when_present(run, tmp_path):
     assert page.figures == 4 and "Pd vs SCR" in text
     assert "Error types" in text and "fragment" in text and ">11<" in text
     assert "Paired differences" in text and "-0.25" in text and "<b>yes</b>" in text
-    # other column names than expected: still read, what is missing is skipped
-    scr = pd.read_csv(copy / "scr.csv").rename(columns={"scr_db": "scr_bin", "pd": "pd_object"})
-    scr["scr_bin"] = [f"[{c - 2.5:g}, {c + 2.5:g})" for c in pd.read_csv(copy / "scr.csv").scr_db]
+    # tables of another shape: no crash, what cannot be read is skipped
+    scr = pd.read_csv(copy / "scr.csv").rename(columns={"scr_mean_db": "scr_db"})
     scr.drop(columns=["pd_lo", "pd_hi"]).to_csv(copy / "scr.csv", index=False)
     pd.DataFrame({"dataset": ["sim-chips"], "detector": ["so"], "delta": [0.1]}).to_csv(
         copy / "paired.csv", index=False
@@ -222,7 +222,7 @@ def test_optional_tables_are_shown_when_present(run, tmp_path):
     pd.DataFrame({"dataset": ["sim-chips"], "what": ["x"]}).to_csv(copy / "errors.csv",
                                                                     index=False)  # fmt: skip
     page = Page(build_report([copy]))
-    assert page.figures == 4
+    assert page.figures == 3  # no Pd-vs-SCR figure without its columns
 
 
 def test_an_old_run_without_gallery_or_config_is_reported(run, tmp_path):
@@ -345,3 +345,13 @@ def test_pd_vs_scr_labels_with_negative_looking_bins_are_not_parsed():
     ((source, x, y, _),) = scr_points(d)
     assert source == "measured"
     assert x.tolist() == [7.5, 12.0, 16.0] and y.tolist() == [0.2, 0.6, 0.9]
+
+
+def test_every_leaderboard_row_says_what_it_measured(run):
+    out, res = run
+    page = Page((out / "report.html").read_text())
+    summary = res.summary.set_index("detector")
+    for cells in page.boards[0]:
+        row = summary.loc[cells[1].split(" ")[0]]
+        assert row.iou_type == "mask" and cells[-1] == row.matching
+        assert "AP: mask IoU" in row.matching

@@ -34,6 +34,7 @@ __all__ = [
     "by_plane",
     "join_pixels",
     "match_batch",
+    "measured_as",
     "pixel_pairs",
     "point_pixels",
     "region_lists",
@@ -296,6 +297,24 @@ def _target_iou(obj: Objects, gt: GroundTruth, rule: Matching, od: np.ndarray, g
     union = obj.area[od[use]] + gt.area[g[use]] - shared
     out[use] = np.where(union > 0, shared / np.where(union > 0, union, 1), 0.0)
     return out
+
+
+def measured_as(obj: Objects, gt: GroundTruth, rule: Matching) -> set[str]:
+    """The IoU that AP (and an IoU rule's operating point) measures on the pairs of ``obj``
+    and ``gt``, as :func:`_target_iou` computes it: ``{"mask"}`` (masks on both sides, any
+    rule but the box rule: the centroid rule's AP too), ``{"box"}`` (the box rule, box
+    objects, or box targets), both (some targets masks, some boxes), ``{"point"}`` (points:
+    no AP at an IoU), or ``{"distance"}`` under the distance rule. Nothing without targets
+    (there is nothing to measure against)."""
+    if rule.kind == "distance":
+        return {"distance"}
+    if len(gt) == 0:
+        return set()
+    if obj.geometry == "point":
+        return {"point"}
+    if rule.iou_kind == "mask" and obj.has_masks and gt.has_mask.any():
+        return {"mask"} if gt.has_mask.all() else {"mask", "box"}
+    return {"box"}
 
 
 def region_lists(gt: GroundTruth, boxes: bool = True) -> tuple[np.ndarray, np.ndarray]:

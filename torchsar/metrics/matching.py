@@ -106,6 +106,24 @@ class Matching:
         """The IoU used for AP: box IoU under the box rule, mask IoU otherwise."""
         return "box" if self.kind == "box" else "mask"
 
+    def describe(self, measured: str = "") -> str:
+        """The rule in a few words, naming the IoU a row ``measured`` (``"mask"``,
+        ``"box"``, ``"mask+box"``; default: the rule's own); under the centroid rule, AP's
+        IoU too.
+
+        Example:
+            >>> Matching().describe("box"), Matching(kind="distance", max_distance=10).describe()
+            ('box IoU >= 0.5', 'distance < 10 px (optimal)')
+            >>> Matching(kind="centroid").describe("mask")
+            'centroid in target box +0.25, box <= 4x area (AP: mask IoU)'
+        """
+        if self.kind == "distance":
+            return f"distance < {self.max_distance:g} {self.distance_units} ({self.assign})"
+        if self.kind == "centroid":
+            return (f"centroid in target box +{self.margin:g}, box <= {self.max_size_ratio:g}x "
+                    f"area (AP: {measured or self.iou_kind} IoU)")  # fmt: skip
+        return f"{measured or self.iou_kind} IoU >= {self.iou:g}"
+
     def as_dict(self) -> dict:
         return asdict(self)
 
