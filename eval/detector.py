@@ -147,6 +147,15 @@ class Detector:
         """The options passed to each call."""
         return self.options if self.call_options is None else self.call_options
 
+    def has_option(self, key: str) -> bool:
+        """Whether ``key`` is an option of this detector: a harness setting, one of its
+        recorded options, or a keyword of its callable (one taking ``**kwargs`` has only
+        the first two)."""
+        if key in HARNESS_OPTIONS or key in self.options:
+            return True
+        keywords = _keywords(self.fn)
+        return keywords is not None and key in keywords
+
     def with_options(self, overrides: Mapping[str, Any]) -> Detector:
         """The detector with options overridden (checked against the callable's keywords);
         ``threshold`` and ``instances`` set the harness's settings and are passed on only

@@ -144,13 +144,19 @@ MAX_PARAM = 1000
 """Longest ``DETECTOR.NAME=VALUE`` accepted (no option needs more; refused before parsing)."""
 
 
+EVERY = "*"
+"""The detector name of an option for every detector that has it (``*.pfa=1e-6`` or
+``pfa=1e-6``)."""
+
+
 def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[str, Any]]:
     """Parse ``["ca.guard=3", "region.k=0.5"]`` into ``{"ca": {"guard": 3}, ...}`` (values
-    as Python literals where they parse, else strings).
+    as Python literals where they parse, else strings); ``NAME=VALUE`` or ``*.NAME=VALUE``
+    go under :data:`EVERY` (every detector that has the option).
 
     Example:
-        >>> parse_params(["ca.guard=3", "mine.mode=fast"])
-        {'ca': {'guard': 3}, 'mine': {'mode': 'fast'}}
+        >>> parse_params(["ca.guard=3", "mine.mode=fast", "pfa=1e-6", "*.train=8"])
+        {'ca': {'guard': 3}, 'mine': {'mode': 'fast'}, '*': {'pfa': 1e-06, 'train': 8}}
     """
     out: dict[str, dict[str, Any]] = {}
     for item in items:
@@ -158,9 +164,10 @@ def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[st
             raise EvalError(f"{option} {item[:40]}...: {len(item)} characters, more than the "
                             f"{MAX_PARAM} an option value may have")  # fmt: skip
         key, eq, raw = item.partition("=")
-        name, dot, param = key.partition(".")
-        if not (eq and dot and name and param):
-            raise EvalError(f"{option} must look like DETECTOR.NAME=VALUE, got {item!r}")
+        name, dot, param = key.partition(".") if "." in key else (EVERY, ".", key)
+        if not (eq and dot and name and param) or "." in param:
+            raise EvalError(f"{option} must look like DETECTOR.NAME=VALUE (or NAME=VALUE for "
+                            f"every detector that has the option), got {item!r}")  # fmt: skip
         try:
             value = ast.literal_eval(raw)
         except (ValueError, SyntaxError, RecursionError, MemoryError):

@@ -91,8 +91,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--param",
         action="append",
         default=[],
-        metavar="DET.KEY=VALUE",
-        help="detector parameter override, e.g. ca.guard=3 (repeatable)",
+        metavar="[DET.]KEY=VALUE",
+        help="detector parameter override, e.g. ca.guard=3; KEY=VALUE (or *.KEY=VALUE) sets "
+        "it on every detector that has it, e.g. pfa=1e-6; a detector's own wins (repeatable)",
     )
     p.add_argument(
         "--despeckle",

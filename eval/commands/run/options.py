@@ -15,7 +15,7 @@ from torchsar.metrics import Matching
 from torchsar.objects import ObjectRules
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
-from torchsar_eval.options import at_least, despeckler, dry_run, parse_params
+from torchsar_eval.options import EVERY, at_least, despeckler, dry_run, parse_params
 from torchsar_eval.registry import BUILTIN, load
 from torchsar_eval.result import Scoring
 
@@ -60,10 +60,17 @@ def _predictions(items: list[str]) -> list[tuple[str, str]]:
     return out
 
 
-def _resolve(args: argparse.Namespace, overrides: dict) -> list[Detector]:
-    """Every detector of the run, options applied, names unique."""
+SAVED_OPTIONS = ("threshold", "instances", "format", "iou_type")
+"""The options of saved predictions."""
+
+
+def _resolve(args: argparse.Namespace, overrides: dict) -> tuple[list[Detector], dict]:
+    """Every detector of the run, options applied (a detector's own ``--param`` over one for
+    every detector that has it), names unique; and each detector's options as applied."""
     from torchsar_eval.saved import predictions
 
+    overrides = dict(overrides)
+    every = overrides.pop(EVERY, {})
     refs = [] if args.detectors is None and args.predictions else (
         [(None, n) for n in BUILTIN] if args.detectors is None else detector_refs(args.detectors)
     )  # fmt: skip
@@ -76,24 +83,38 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> list[Detector]:
     stray = sorted(set(overrides) - set(names))
     if stray:
         raise EvalError(f"--param given for detector(s) not being run: {stray}")
-    dets = [load(ref, name=name, options=overrides.get(row, {}))
-            for (name, ref), row in zip(refs, names, strict=False)]  # fmt: skip
+    used: set[str] = set()
+    dets = []
+    for (name, ref), row in zip(refs, names, strict=False):
+        own = overrides.get(row, {})
+        det = load(ref, name=name, options=own)
+        shared = {k: v for k, v in every.items() if k not in own and det.has_option(k)}
+        if shared:
+            det = load(ref, name=name, options={**shared, **own})
+            overrides[row] = {**shared, **own}  # (dry-run below)
+            used |= shared.keys()
+        dets.append(det)
     for name, path in _predictions(args.predictions):
-        opts = dict(overrides.get(name, {}))
-        unknown = sorted(set(opts) - {"threshold", "instances", "format", "iou_type"})
+        opts = {**{k: v for k, v in every.items() if k in SAVED_OPTIONS},
+                **overrides.get(name, {})}  # fmt: skip
+        used |= {k for k in every if k in SAVED_OPTIONS}
+        unknown = sorted(set(opts) - set(SAVED_OPTIONS))
         if unknown:
             raise EvalError(f"--param {name}.{unknown[0]}: saved predictions take only "
                             "threshold, instances, format and iou_type")  # fmt: skip
         dets.append(predictions(path, name=name, **opts))
-    return dets
+    unused = sorted(set(every) - used)
+    if unused:
+        raise EvalError(f"--param {unused[0]}=...: no detector of this run has the option "
+                        f"{unused[0]!r}")  # fmt: skip
+    return dets, overrides
 
 
 def check_run_args(args: argparse.Namespace) -> RunChoices:
     """Validate every option of ``torchsar-eval run`` before any dataset is built."""
     at_least(args.n, "--n", 1)
     at_least(args.batch_size, "--batch-size", 1)
-    overrides = parse_params(args.param)
-    detectors = _resolve(args, overrides)
+    detectors, overrides = _resolve(args, parse_params(args.param))
     in_metres = getattr(args, "window_units", "px") == "m"  # checked once converted
     for det in detectors:
         if det.ref in BUILTIN and det.name in overrides and not in_metres:
