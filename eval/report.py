@@ -17,6 +17,7 @@ from torchsar_eval.gallery import write_gallery
 from torchsar_eval.glossary import glossary
 from torchsar_eval.html_report import DEFAULT_RANK, REPORT_FILE, write_report
 from torchsar_eval.html_report.runfiles import RUN_TABLES, read_run
+from torchsar_eval.latex import summary_tex
 from torchsar_eval.leaderboard import LOWER_IS_BETTER, Board, caveats
 from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
@@ -47,6 +48,8 @@ __all__ = [
     "write_run",
 ]
 
+SUMMARY_TEX = "summary.tex"
+"""The run's headline tables in LaTeX (:func:`~torchsar_eval.latex.summary_tex`)."""
 TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k != "cases"}
 """Each table of :func:`result_tables` and its file in a run folder."""
 
@@ -229,7 +232,12 @@ def write_run(
         )
     text += "\n## Timing\n\n" + markdown(tables["timing"]) + _stats_lines(stats)
     (tmp / "summary.md").write_text(text)
-    files = [*written, "per_image.csv", "summary.md"]
+    run = read_run(tmp)
+    order = {
+        d: Board([run], d, rank_by).rows["detector"].astype(str).tolist() for d in run.datasets
+    }
+    (tmp / SUMMARY_TEX).write_text(summary_tex(summary, order))
+    files = [*written, "per_image.csv", "summary.md", SUMMARY_TEX]
     for name, label in labels.items():
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(
