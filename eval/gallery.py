@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from torchsar.metrics.assign import BatchMatch
-from torchsar.metrics.matching import GroundTruth
+from torchsar.metrics.matching import GroundTruth, Matching
 from torchsar.metrics.object_state import ImageInfo, above
+from torchsar.metrics.reasons import false_alarm_reasons, miss_reasons
 from torchsar.objects import Objects
 
 __all__ = [
@@ -41,13 +42,14 @@ __all__ = [
 
 GALLERY_CASES = 8
 """Cases kept per kind (false alarms, misses) and detector."""
-CROP = 64
-"""Side of a case's crop in samples (a larger object is shown whole, resampled)."""
+CROP = 96
+"""Side of a case's crop in samples, and the least image extent it shows in pixels (a larger
+object is shown whole, resampled)."""
 TRUTH, FOUND, FOCUS, IGNORE, OUTSIDE = 1, 2, 4, 8, 16
 """Bits of a crop's mask: ground truth, detections at the operating point, the case's own
 object, don't-care pixels, outside the image."""
 CASE_COLUMNS = ["dataset", "detector", "kind", "rank", "image", "row", "col", "score", "area",
-                "class", "file"]  # fmt: skip
+                "class", "why", "file"]  # fmt: skip
 """Columns of ``gallery/cases.csv``."""
 _MAX_FACTS = 6
 
@@ -167,9 +169,11 @@ class Gallery:
         return self
 
     def add(self, obj: Objects, gt: GroundTruth, info: list[ImageInfo], m: BatchMatch,
-            image) -> None:  # fmt: skip
+            image, rule: Matching | None = None,
+            types: np.ndarray | None = None) -> None:  # fmt: skip
         """Offer one batch's false alarms and misses at the design operating point
-        (``image``: the batch's ``(B, C, H, W)`` images)."""
+        (``image``: the batch's ``(B, C, H, W)`` images; ``rule`` and ``types``, the matching
+        rule and each detection's false-alarm type, say why each case is one)."""
         n = len(info)
         h, w = gt.shape
         self.shapes = _facts(self.shapes, [(h, w)] * bool(n))
@@ -181,7 +185,7 @@ class Gallery:
         found = np.zeros(len(gt), bool)
         found[m.op[at_op & (m.op >= 0)]] = True
         missed = np.flatnonzero(~found)
-        planes = _Planes(image, gt, obj, at_op, info)
+        planes = _Planes(image, gt, obj, at_op, info, _Why(m, obj, gt, rule, at_op, types))
         defer = _deferrable(image)
         score = np.nan_to_num(obj.score.astype(np.float64), nan=-np.inf)
         keys, idx = _keys(-score[fa], obj.plane[fa], obj.box[fa], info, self.false_alarms)
@@ -198,6 +202,28 @@ DEFER_BYTES = 8 << 20
 """Cases of a batch whose images take at most this many bytes (on the CPU) are built only if
 they are still among the best when the gallery is saved or merged (:meth:`Cases.offer`): the
 gallery then holds on to at most a few such batches."""
+
+
+@dataclass(frozen=True)
+class _Why:
+    """What a batch's cases need to say why each is one (:mod:`torchsar.metrics.reasons`)."""
+
+    m: BatchMatch
+    obj: Objects
+    gt: GroundTruth
+    rule: Matching | None
+    at_op: np.ndarray
+    types: np.ndarray | None
+
+    def __call__(self, k: int, own: str) -> str:
+        if self.rule is None:
+            return ""
+        if own == "det":
+            if self.types is None:
+                return ""
+            return false_alarm_reasons(self.types, self.m, self.obj, self.gt, self.rule,
+                                       np.array([k]))[0]  # fmt: skip
+        return miss_reasons(self.m, self.obj, self.gt, self.rule, self.at_op, np.array([k]))[0]
 
 
 def _deferrable(image) -> bool:
@@ -264,9 +290,24 @@ def _keys(value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[Imag
 class _Planes:
     """Crops of one batch's planes."""
 
-    def __init__(self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info) -> None:
+    def __init__(self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info,
+                 why: _Why) -> None:  # fmt: skip
         self.image, self.gt, self.obj, self.at_op, self.info = image, gt, obj, at_op, info
+        self.why = why
         self.channels = gt.planes // max(1, int(image.shape[0])) if image is not None else 1
+        self._stretch: dict[int, tuple[float, float]] = {}
+
+    def stretch(self, p: int, x: np.ndarray) -> tuple[float, float]:
+        """Plane ``p``'s display range in dB: its 2nd and 99.5th percentiles (on at most
+        about 2**18 samples), so that every crop of an image is drawn on one grey scale."""
+        if p not in self._stretch:
+            step = max(1, int(np.sqrt(x.size / (1 << 18))))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                db = 10 * np.log10(np.maximum(x[::step, ::step], 1e-30))
+            db = db[np.isfinite(db)]
+            lo, hi = np.percentile(db, [2, 99.5]) if db.size else (np.nan, np.nan)
+            self._stretch[p] = (float(lo), float(hi))
+        return self._stretch[p]
 
     def _plane_image(self, p: int) -> np.ndarray | None:
         img = self.image
@@ -314,15 +355,17 @@ class _Planes:
         masks |= np.where(focus, FOCUS, 0).astype(np.uint8)
         masks[~inside] &= OUTSIDE
         x = self._plane_image(p)
+        lo, hi = math.nan, math.nan
         if x is None:
             crop = np.full((CROP, CROP), np.nan)
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
                 crop = 10 * np.log10(np.maximum(x[np.ix_(ri, ci)], 1e-30))
             crop[~inside] = np.nan
+            lo, hi = self.stretch(p, x)
         info = {"image": self.info[p].key, "row": round(cr, 1), "col": round(cc, 1),
                 "score": score if math.isfinite(score) else None, "area": area,
-                "class": cls}  # fmt: skip
+                "class": cls, "why": self.why(k, own), "lo_db": lo, "hi_db": hi}  # fmt: skip
         return info, crop.astype(np.float16), masks
 
     def _object(self, d: int, rr, cs, ri, ci, step: float) -> np.ndarray:
@@ -375,28 +418,31 @@ def _ring(mask: np.ndarray, width: int) -> np.ndarray:
     return grown & ~mask
 
 
-def render_case(image: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """Palette indices ``(SCALE * CROP, SCALE * CROP)`` of one case: the crop in grey
-    (2nd to 99.5th percentile of its dB values), outlines of the don't-care pixels
-    (yellow), the ground truth (green) and the detections at the operating point
-    (magenta), the case's own object outlined twice as thick."""
+def render_case(image: np.ndarray, masks: np.ndarray, kind: str = "false_alarm",
+                stretch: tuple[float, float] | None = None) -> np.ndarray:  # fmt: skip
+    """Palette indices ``(SCALE * side, SCALE * side)`` of one case: the crop in grey
+    (``stretch``: the image's dB range, else the 2nd to 99.5th percentile of the crop's),
+    outlines of the don't-care pixels (yellow), the ground truth (green) and the detections
+    at the operating point (magenta), the case's own object outlined twice as thick in its
+    own colour, drawn last (a missed target under a detection stays green)."""
     img = np.asarray(image, np.float64)
     finite = np.isfinite(img)
     grey = np.full(img.shape, _GREYS // 2, np.uint8)
     if finite.any():
         lo, hi = np.percentile(img[finite], [2, 99.5])
+        if stretch is not None and np.isfinite(stretch).all() and stretch[1] > stretch[0]:
+            lo, hi = stretch
         if hi > lo:
             grey = np.clip((img - lo) / (hi - lo), 0, 1)
             grey = np.round(np.nan_to_num(grey) * (_GREYS - 1)).astype(np.uint8)
     big = np.kron(grey, np.ones((SCALE, SCALE), np.uint8))
     bits = np.kron(masks, np.ones((SCALE, SCALE), np.uint8))
     big[(bits & OUTSIDE) > 0] = _OUTSIDE
-    focus = (bits & FOCUS) > 0
     for bit, colour in ((IGNORE, _IGNORE), (TRUTH, _TRUTH), (FOUND, _FOUND)):
-        m = (bits & bit) > 0
-        big[_ring(m, 1)] = colour
-        if bit != IGNORE and (focus & m).any():
-            big[_ring(focus, 2)] = colour
+        big[_ring((bits & bit) > 0, 1)] = colour
+    focus = (bits & FOCUS) > 0
+    if focus.any():
+        big[_ring(focus, 2)] = _FOUND if kind == "false_alarm" else _TRUTH
     return big
 
 
@@ -428,10 +474,12 @@ def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[s
                 for rank, info in enumerate(cases.info, 1):
                     rel = sub / f"{short}-{rank:02d}.png"
                     (folder / sub).mkdir(parents=True, exist_ok=True)
-                    _png(render_case(cases.image[rank - 1], cases.masks[rank - 1]), folder / rel)
+                    stretch = (info.get("lo_db", math.nan), info.get("hi_db", math.nan))
+                    _png(render_case(cases.image[rank - 1], cases.masks[rank - 1], cases.kind,
+                                     stretch), folder / rel)  # fmt: skip
                     rows.append([name, r.detector.name, cases.kind, rank, info["image"],
                                  info["row"], info["col"], info["score"], info["area"],
-                                 info["class"], rel.as_posix()])  # fmt: skip
+                                 info["class"], info.get("why", ""), rel.as_posix()])  # fmt: skip
     if not rows and not any(getattr(r, "gallery", None) for rs in results.values() for r in rs):
         return []
     (folder / "gallery").mkdir(exist_ok=True)

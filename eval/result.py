@@ -382,7 +382,7 @@ class Evaluator:
         self.objects.update(m, obj, gt, info, fa_types=types)
         self.rows += image_rows(m, obj, gt, info)
         if self.gallery is not None and image is not None:
-            self.gallery.add(obj, gt, info, m, image)
+            self.gallery.add(obj, gt, info, m, image, self.scoring.matching, types)
         if self.coco is not None:
             self._add_coco(obj, gt, info)
         self.object_seconds += time.perf_counter() - t0

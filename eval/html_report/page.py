@@ -94,9 +94,9 @@ svg.fig{width:100%;height:auto;display:block}
 figure{margin:0}
 .legend{display:flex;flex-wrap:wrap;gap:4px 14px;font-size:12px;margin:4px 0 8px}
 .cases{display:flex;flex-wrap:wrap;gap:8px}
-.case{width:136px;font-size:11px;line-height:1.3}
-.case img{width:128px;height:128px;image-rendering:pixelated;border:1px solid var(--line);
-display:block}
+.case{width:168px;font-size:11px;line-height:1.3;overflow-wrap:anywhere;min-width:0}
+.case img{width:160px;height:160px;image-rendering:pixelated;border:1px solid var(--line);
+display:block}.case figcaption{max-width:160px}
 .kind{font-weight:600;font-size:12px;margin:6px 0 2px}
 img.other{max-width:100%;height:auto;border:1px solid var(--line)}
 .heat{font-variant-numeric:tabular-nums}
@@ -517,11 +517,17 @@ def _caption(kind: str, rank: int, r: pd.Series) -> str:
     area = _num(r.get("area"))
     cls = r.get("class")
     cls = "" if cls is None or (isinstance(cls, float) and math.isnan(cls)) else f" {_e(cls)}"
+    why = r.get("why")
+    why = why if isinstance(why, str) and why else ""
     if kind == "false_alarm":
         what = f"score {score:.3g}" + ("" if math.isnan(area) else f" · {area:.0f} px")
     else:
-        found = "no match" if math.isnan(score) else f"matched below threshold ({score:.3g})"
-        what = ("" if math.isnan(area) else f"{area:.0f} px{cls} · ") + found
+        found = why or "no match"
+        if not math.isnan(score):
+            found = f"matched below threshold ({score:.3g})"
+        what = ("" if math.isnan(area) else f"{area:.0f} px{cls} · ") + _e(found)
+    if kind == "false_alarm" and why:
+        what += f"<br>{_e(why)}"
     return f"<b>#{rank}</b> {where}<br>{what}"
 
 
@@ -544,8 +550,8 @@ def _gallery(board: Board) -> str:
                     if uri is None:
                         continue
                     alt = f"{kind.replace('_', ' ')} {rank} of {det}"
-                    figs.append(f'<figure class="case"><img src="{uri}" width="128" '
-                                f'height="128" alt="{_e(alt)}"><figcaption>'
+                    figs.append(f'<figure class="case"><img src="{uri}" width="160" '
+                                f'height="160" alt="{_e(alt)}"><figcaption>'
                                 f"{_caption(kind, rank, r)}</figcaption></figure>")  # fmt: skip
                 count = f"{len(figs)} shown" if figs else "none"
                 parts.append(f'<div class="kind">{_e(title)}: {count}</div>')

@@ -21,6 +21,7 @@ from torchsar_eval.gallery import (
     TRUTH,
     Cases,
     Gallery,
+    render_case,
     write_gallery,
 )
 from torchsar_eval.registry import BUILTIN
@@ -209,3 +210,32 @@ def test_pending_cases_are_built_when_saved_or_merged():
     back = statefile.loads(statefile.dumps(a), "test")
     assert built == [1, 0] and back.keys == [(0.5,), (1.0,)]
     assert [i["j"] for i in back.info] == [0, 1]
+
+
+def test_a_missed_target_under_a_detection_keeps_the_miss_colour():
+    """The case's own ring is drawn last in its kind's colour: a missed target lying under a
+    rejected detection is ringed green, a false alarm on a target magenta."""
+    from torchsar_eval.gallery import _FOUND, _TRUTH, SCALE, _ring
+
+    masks = np.zeros((CROP, CROP), np.uint8)
+    masks[40:56, 40:56] |= TRUTH | FOCUS  # the missed target
+    masks[36:60, 36:60] |= FOUND  # a larger detection over it that failed the rule
+    image = np.zeros((CROP, CROP), np.float16)
+    focus = np.kron((masks & FOCUS) > 0, np.ones((SCALE, SCALE), bool))
+    ring = _ring(focus, 2)
+    assert (render_case(image, masks, "miss")[ring] == _TRUTH).all()
+    swapped = masks.copy()
+    swapped[40:56, 40:56] = FOUND | FOCUS | TRUTH
+    assert (render_case(image, swapped, "false_alarm")[ring] == _FOUND).all()
+
+
+def test_crops_share_the_image_grey_scale():
+    """With the image's stretch, one dB value is one grey in every crop of it."""
+    a = np.full((CROP, CROP), 10.0)
+    a[:8] = 0.0
+    b = np.full((CROP, CROP), 10.0)
+    b[:8] = 30.0
+    masks = np.zeros((CROP, CROP), np.uint8)
+    ga, gb = (render_case(x, masks, "miss", (0.0, 30.0)) for x in (a, b))
+    assert ga[-1, -1] == gb[-1, -1]  # 10 dB in both
+    assert render_case(a, masks, "miss")[-1, -1] != ga[-1, -1]  # the crop's own stretch differs

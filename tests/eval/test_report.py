@@ -355,3 +355,16 @@ def test_every_leaderboard_row_says_what_it_measured(run):
         row = summary.loc[cells[1].split(" ")[0]]
         assert row.iou_type == "mask" and cells[-1] == row.matching
         assert "AP: mask IoU" in row.matching
+
+
+def test_every_case_says_why_it_is_one(run):
+    from torchsar.metrics.reasons import FA_WORDS
+
+    out, _ = run
+    cases = pd.read_csv(out / "gallery" / "cases.csv")
+    assert len(cases) and cases.why.notna().all()
+    fa = cases[cases.kind == "false_alarm"]
+    assert all(any(w.startswith(v) for v in FA_WORDS.values()) for w in fa.why)
+    text = (out / "report.html").read_text()
+    for why in cases.why:
+        assert why.replace("'", "&#x27;").replace(">", "&gt;").replace("<", "&lt;") in text
