@@ -279,12 +279,15 @@ def roc_figure(
         if p.empty or not ap > 0:
             left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"
         else:
-            axes[2].plot(p["recall"], p["precision"], label=plain(name), **st, **marks)
+            axes[2].plot(p["recall"], p["precision"], label=f"{plain(name)} (AP50 {ap:.3f})",
+                         **st, **marks)  # fmt: skip
     log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
     log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
     axes[0].set(xlabel="Pfa (pixel)", ylabel="Pd (pixel)")
     axes[1].set(xlabel="false alarms per image", ylabel="Pd (object)")
     axes[2].set(xlabel="recall", ylabel="precision", xlim=(0, 1.02))
+    if axes[2].lines:  # the AP of each drawn curve beside it
+        axes[2].legend(loc="lower left", fontsize=7, framealpha=0.8)
     panel_titles = ["pixel ROC", "FROC (matching rule)", "precision-recall, IoU 0.5"]
     for ax, panel, out in zip(axes, panel_titles, left, strict=True):
         ax.set_ylim(0, 1.02)

@@ -21,7 +21,7 @@ from matplotlib.ticker import FuncFormatter
 from torchsar_eval.labels import plain
 from torchsar_eval.tables import pooled_pr
 
-__all__ = ["Series", "figure_svg", "first_column", "scr_points"]
+__all__ = ["Series", "figure_svg", "first_column", "pr_label", "scr_points"]
 
 _DASHES = ["-", "--", ":", "-."]
 
@@ -101,6 +101,21 @@ def _froc(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     return drawn
 
 
+def pr_label(s: Series) -> str:
+    """A PR curve's legend entry: its label and AP (AP50, or the distance rule's AP).
+
+    Example:
+        >>> pr_label(Series("ca", "ca", "#000", "-", pd.Series({"ap50": 0.41234})))
+        'ca (AP50 0.412)'
+    """
+    row = s.summary
+    for key, name in (("ap50", "AP50"), ("ap_distance", "AP")):
+        v = row.get(key) if row is not None else None
+        if v is not None and pd.notna(v):
+            return f"{plain(s.label)} ({name} {float(v):.3f})"
+    return plain(s.label)
+
+
 def _pr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     if not {"recall", "precision"} <= set(df.columns):
         return False
@@ -109,8 +124,11 @@ def _pr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     for s in series:
         d = _rows(df, s)
         if not d.empty:
-            ax.plot(d["recall"], d["precision"], color=s.colour, linestyle=s.dash, lw=1.4)
+            ax.plot(d["recall"], d["precision"], color=s.colour, linestyle=s.dash, lw=1.4,
+                    label=pr_label(s))  # fmt: skip
             drawn = True
+    if drawn:
+        ax.legend(loc="lower left", fontsize=7, framealpha=0.8)
     ax.set_xlim(0, 1.02)
     ax.set_ylim(0, 1.02)
     return drawn

@@ -151,8 +151,10 @@ def test_the_pr_panel_names_the_detectors_it_leaves_out():
     names = ["ca", "lognormal", "g0", "region"]
     fig = roc_figure(*_tables(names, ap50={"lognormal": 0.0, "g0": 0.0}), "chips")
     pr = fig.axes[2]
-    shown = {line.get_label() for line in pr.get_lines()}
+    shown = {line.get_label().split(" (")[0] for line in pr.get_lines()}
     assert {"ca", "region"} <= shown and not {"lognormal", "g0"} & shown
+    ap = {t.get_text() for t in pr.get_legend().get_texts()}  # each curve with its AP50
+    assert ap == {"ca (AP50 0.600)", "region (AP50 0.600)"}
     assert "not shown: lognormal, g0 (AP50 = 0)" in " ".join(pr.get_title().split())
     assert "not shown" not in fig.axes[0].get_title()  # nothing left out there
     legend = {t.get_text() for t in fig.legends[0].get_texts()}

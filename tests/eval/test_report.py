@@ -368,3 +368,19 @@ def test_every_case_says_why_it_is_one(run):
     text = (out / "report.html").read_text()
     for why in cases.why:
         assert why.replace("'", "&#x27;").replace(">", "&gt;").replace("<", "&lt;") in text
+
+
+def test_the_pr_legend_gives_each_curve_its_ap(run):
+    import matplotlib.pyplot as plt
+
+    from torchsar_eval.html_report.figures import FIGURES, Series
+
+    _, res = run
+    rows = {r.detector: r for _, r in res.summary.iterrows()}
+    series = [Series(d, d, detector_colour(d), "-", rows[d]) for d in rows]
+    fig, ax = plt.subplots()
+    assert FIGURES["pr"][4](ax, res.pr, series)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    drawn = [d for d in rows if not res.pr[res.pr.detector == d].empty]
+    assert texts == [f"{d} (AP50 {rows[d].ap50:.3f})" for d in drawn]
+    plt.close(fig)
