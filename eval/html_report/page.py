@@ -438,24 +438,40 @@ def _breakdown(board: Board) -> str:
     )
 
 
+_ERROR_FAMILIES = [
+    ("false_alarm", "False alarms by type",
+     "each false alarm counted once, under the first type that applies"),
+    ("miss", "Missed targets by size and SCR",
+     "each missed target counted once per family: size bins, then SCR bins"),
+]  # fmt: skip
+
+
 def _errors(board: Board) -> str:
+    """``errors.csv`` as two tables: the false alarms by type, the misses by size and SCR
+    bin (detectors in leaderboard order)."""
     out = []
     for run in board.runs:
         df = run.table("errors", board.dataset)
         if df.empty:
             continue
-        count = first_column(df, ["count", "n", "errors", "value"])
-        kind = first_column(df, ["type", "error", "kind"])
-        if count is None or kind is None or "detector" not in df.columns:
-            table = _table(df.drop(columns=[c for c in ("dataset",) if c in df.columns]))
-        else:
-            piv = df.pivot_table(index="detector", columns=kind, values=count, aggfunc="sum",
-                                 sort=False)  # fmt: skip
-            order = [d for d in _order(board, run) if d in piv.index]
-            piv = piv.reindex(order + [d for d in piv.index if d not in order])
-            table = _table(piv.reset_index())
-        out.append((f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else "") + table)
-    return "<h3>Error types</h3>" + "".join(out) if out else ""
+        head = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
+        if not {"detector", "error", "type", "count"} <= set(df.columns):
+            out.append(head + _table(df.drop(columns=[c for c in ("dataset",) if c in df.columns])))
+            continue
+        order = _order(board, run)
+        parts = []
+        for family, title, note in _ERROR_FAMILIES:
+            part = df[df["error"] == family]
+            if part.empty:
+                continue
+            piv = part.pivot_table(index="detector", columns="type", values="count",
+                                   aggfunc="sum", sort=False)  # fmt: skip
+            piv = piv.reindex([d for d in order if d in piv.index]
+                              + [d for d in piv.index if d not in order])  # fmt: skip
+            parts.append(f'<h4>{_e(title)}</h4><p class="note">{_e(note)}</p>'
+                         + _table(piv.reset_index()))  # fmt: skip
+        out.append(head + "".join(parts))
+    return "<h3>Errors</h3>" + "".join(out) if out else ""
 
 
 def _paired(board: Board) -> str:

@@ -201,9 +201,11 @@ def test_optional_tables_are_shown_when_present(run, tmp_path):
         for c, n, k in ((2.5, 5, 2), (7.5, 4, 3), (12.5, 6, 6))
     ]  # fmt: skip
     pd.DataFrame(rows, columns=SCR_COLUMNS).to_csv(copy / "scr.csv", index=False)
-    pd.DataFrame([["sim-chips", "ca", "fragment", 7], ["sim-chips", "ca", "clutter", 3],
-                  ["sim-chips", "so", "clutter", 11]],
-                 columns=["dataset", "detector", "type", "count"]).to_csv(
+    pd.DataFrame([["sim-chips", "ca", "false_alarm", "fragment", 7],
+                  ["sim-chips", "ca", "false_alarm", "clutter", 3],
+                  ["sim-chips", "so", "false_alarm", "clutter", 11],
+                  ["sim-chips", "so", "miss", "size:small", 2]],
+                 columns=["dataset", "detector", "error", "type", "count"]).to_csv(
         copy / "errors.csv", index=False)  # fmt: skip
     pd.DataFrame([["sim-chips", "so", "ca", "f1", -0.25, -0.4, -0.1, True]],
                  columns=["dataset", "detector", "reference", "metric", "difference", "lo",
@@ -211,7 +213,10 @@ def test_optional_tables_are_shown_when_present(run, tmp_path):
     text = build_report([copy])
     page = Page(text)
     assert page.figures == 4 and "Pd vs SCR" in text
-    assert "Error types" in text and "fragment" in text and ">11<" in text
+    assert "False alarms by type" in text and "fragment" in text and ">11<" in text
+    assert "Missed targets by size and SCR" in text and "size:small" in text
+    fa_part = text.split("False alarms by type")[1].split("Missed targets")[0]
+    assert "size:small" not in fa_part  # the families are apart
     assert "Paired differences" in text and "-0.25" in text and "<b>yes</b>" in text
     # tables of another shape: no crash, what cannot be read is skipped
     scr = pd.read_csv(copy / "scr.csv").rename(columns={"scr_mean_db": "scr_db"})
