@@ -293,6 +293,17 @@ def _cap_workers(ex: Execution) -> Execution:
     return ex
 
 
+def _note_idle_workers(name: str, images: int, ex: Execution) -> None:
+    """One line when a dataset has fewer shards than local workers: the others stay idle
+    (a shard is one worker's unit of work)."""
+    shards = -(-images // ex.shard_size)
+    if ex.engine == "local" and ex.workers > 1 and shards < ex.workers:
+        warnings.warn(f"dataset {name}: {images} images make {shards} shard(s) of at most "
+                      f"{ex.shard_size}, so only {shards} of the {ex.workers} workers have "
+                      "work; a smaller --shard-size spreads it", UserWarning,
+                      stacklevel=4)  # fmt: skip
+
+
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
     """Score every dataset into the folder ``tmp`` (a run's staging folder, or a temporary
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
@@ -426,6 +437,7 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     t0 = time.perf_counter()
     ex, cal = plan.execution, plan.calibration
     indices = list(range(len(ds)))
+    _note_idle_workers(name, len(indices), ex)
     default_class = _default_class(ds) if plan.scoring.coco_compatible else "target"
     if plan.preprocess is None and not any(d.needs_images for d in detectors):
         ds = TruthOnly(ds)  # saved predictions only: no image is decoded

@@ -121,6 +121,16 @@ class DetectorName:
 
     name: str
     instances: str = "auto"
+    saved: bool = False
+    """Saved predictions (read from a file: no detection time to report)."""
+
+
+def detector_name(detector) -> DetectorName:
+    """What a saved state keeps of a detector (a :class:`DetectorName` is kept as is)."""
+    if isinstance(detector, DetectorName):
+        return detector
+    return DetectorName(detector.name, detector.instances,
+                        bool(getattr(detector.fn, "saved_predictions", False)))  # fmt: skip
 
 
 @dataclass
@@ -193,7 +203,7 @@ class Evaluator:
         """Saved shard states hold the detector's name, not the detector (which may be a
         lambda, a network, a file reader): data only."""
         state = dict(self.__dict__)
-        state["detector"] = DetectorName(self.detector.name, self.detector.instances)
+        state["detector"] = detector_name(self.detector)
         state["rows"] = _row_columns(self.rows)
         return state
 
@@ -324,7 +334,7 @@ class Evaluator:
 
     def reset(self) -> None:
         """Forget every image added."""
-        fresh = Evaluator(DetectorName(self.detector.name, self.detector.instances),
+        fresh = Evaluator(detector_name(self.detector),
                           self.scoring, default_class=self.default_class)  # fmt: skip
         self.__dict__.update(fresh.__dict__)
 

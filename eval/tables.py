@@ -8,7 +8,7 @@ import pandas as pd
 from torchsar.metrics.error_types import FA_TYPES
 from torchsar.metrics.object_state import ratios
 from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals, side
-from torchsar_eval.result import DetectorResult
+from torchsar_eval.result import DetectorResult, detector_name
 
 __all__ = [
     "BREAKDOWN_COLUMNS",
@@ -164,10 +164,14 @@ def interval_note(ci: dict, replicates: int) -> str:
 
 
 def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
+    """Saved predictions have no detection time (their ``ms_per_image`` is empty: the time of
+    reading a file is not a detector's speed); their images per second are the scoring's."""
     nan = float("nan")
-    ms = 1e3 * r.seconds / r.images if r.images else nan
+    saved = detector_name(r.detector).saved
+    ms = 1e3 * r.seconds / r.images if r.images and not saved else nan
     obj = 1e3 * r.object_seconds / r.images if r.images else nan
-    return [[ds, r.detector.name, r.images, ms, obj, 1e3 / (ms + obj) if r.images else nan]]
+    total = obj if saved else ms + obj
+    return [[ds, r.detector.name, r.images, ms, obj, 1e3 / total if r.images else nan]]
 
 
 def timing_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:

@@ -15,6 +15,7 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import _RULES, _TERMS
 from torchsar_eval.html_report.figures import FIGURES, Series, figure_svg, first_column
 from torchsar_eval.html_report.runfiles import RunFiles, read_png
+from torchsar_eval.labels import short_labels
 from torchsar_eval.leaderboard import (
     DEFAULT_RANK,
     LOWER_IS_BETTER,
@@ -634,14 +635,17 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
     check_rank_by(rank_by, columns)
     title, header = _header(runs, rank_by)
     names = _datasets(runs)
-    nav = "".join(f'<li><a href="#ds-{i}">{_e(n)}</a></li>' for i, n in enumerate(names, 1))
+    short = short_labels(names)  # the full spec is in the card's source and config.json
+    nav = "".join(f'<li><a href="#ds-{i}" title="{_e(n)}">{_e(short[n])}</a></li>'
+                  for i, n in enumerate(names, 1))  # fmt: skip
     sections = []
     for i, name in enumerate(names, 1):
         board = Board(runs, name, rank_by)
         cards = "".join(_card(run, name, board, run.name if len(runs) > 1 else None)
                         for run in runs if name in run.datasets)  # fmt: skip
         sections.append(
-            f'<section class="dataset" id="ds-{i}"><h2>{_e(name)}</h2>{cards}'
+            f'<section class="dataset" id="ds-{i}"><h2 title="{_e(name)}">{_e(short[name])}</h2>'
+            f"{cards}"
             f"<h3>Leaderboard</h3>{_leaderboard(board)}"
             f"<h3>Curves</h3>{_figures(board, f'ds{i}-{_slug(name)}')}"
             f"{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"

@@ -165,6 +165,7 @@ class SavedPredictions:
             raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
         self.iou_type, self.threshold = iou_type, threshold
         self.needs_images = False
+        self.saved_predictions = True  # no detection time: the timing table says so
         if self.format != "masks":  # a FIFO or a device would block: refused unopened
             try:
                 check_regular_file(self.path)

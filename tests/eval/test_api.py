@@ -169,3 +169,18 @@ def test_region_cfar_is_scored_by_its_regions_unless_discrimination_is_asked():
     rules = te.Scoring().rules
     objs = ts.objects.discriminate(d.statistic, d.threshold, rules=rules)
     assert forced.states["c"][0].objects.detections == len(objs)
+
+
+def test_idle_workers_are_named_in_one_line():
+    import warnings
+
+    from torchsar_eval.api import _note_idle_workers
+    from torchsar_eval.settings import Execution
+
+    with pytest.warns(UserWarning, match=r"100 images make 1 shard\(s\) of at most 256, so only "
+                      r"1 of the 2 workers have work"):  # fmt: skip
+        _note_idle_workers("d", 100, Execution(workers=2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _note_idle_workers("d", 600, Execution(workers=2))  # 3 shards: both busy
+        _note_idle_workers("d", 100, Execution(workers=1))

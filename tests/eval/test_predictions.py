@@ -372,3 +372,21 @@ def test_a_points_length_that_is_not_a_length_is_refused(tmp_path, length):
     (tmp_path / "p.csv").write_text(f"image_id,row,col,length_m\n1,5,5,{length}\n")
     with pytest.raises(EvalError, match="is not a length in metres"):
         te.predictions(tmp_path / "p.csv")
+
+
+def test_saved_predictions_report_no_detection_time(tmp_path):
+    """Reading a file is not a detector's speed: saved predictions have no ms_per_image (so
+    they are never the fastest row), a detector beside them has its own."""
+
+    import torchsar_eval as te
+
+    res0 = te.evaluate("sim-chips", ["ca"], n=3, progress=False, scoring=te.Scoring(replicates=0))
+    assert res0.timing.ms_per_image.notna().all()
+    path = tmp_path / "p.csv"
+    rows = res0.per_image  # one point per image: the chip's centre
+    path.write_text("image,row,col,score\n" + "".join(f"{im},16,16,0.5\n" for im in rows.image))
+    res = te.evaluate("sim-chips", ["ca", te.predictions(path, name="saved")], n=3,
+                      progress=False, scoring=te.Scoring(replicates=0))  # fmt: skip
+    t = res.timing.set_index("detector")
+    assert np.isnan(t.loc["saved", "ms_per_image"]) and t.loc["ca", "ms_per_image"] > 0
+    assert t.loc["saved", "images_per_s"] > 0

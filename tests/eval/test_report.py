@@ -389,3 +389,19 @@ def test_the_pr_legend_gives_each_curve_its_ap(run):
     drawn = [d for d in rows if not res.pr[res.pr.detector == d].empty]
     assert texts == [f"{d} (AP50 {rows[d].ap50:.3f})" for d in drawn]
     plt.close(fig)
+
+
+def test_datasets_are_headed_by_short_names(run, tmp_path):
+    """A dataset named by its full path is headed by its last path part (the full name in the
+    heading's title and the card)."""
+    copy = _copy(run, tmp_path)
+    long = "folder:/very/long/absolute/path/to/the/data/chips"
+    for name in ("summary", "timing", "froc", "pr", "breakdown", "scr", "errors", "paired"):
+        f = copy / f"{name}.csv"
+        if f.exists():
+            df = pd.read_csv(f)
+            if "dataset" in df.columns:
+                df.assign(dataset=long).to_csv(f, index=False)
+    text = build_report([copy])
+    assert f'<h2 title="{long}">folder:chips</h2>' in text
+    assert f">{long}<" not in text.split("<main>")[0]  # not in the header or the nav
