@@ -65,6 +65,8 @@ class Results:
         stats: per dataset: images, wall time, shards done / resumed / retried / failed.
         out: the run folder (``None`` when nothing was written).
         files: the files written into ``out``.
+        sweep: every setting a sweep tried on the calibration split, with its numbers
+            there and the one chosen (``sweep.csv``; empty without a sweep).
     """
 
     summary = _table("summary", "One row per dataset x detector (``summary.csv``).")
@@ -80,8 +82,9 @@ class Results:
 
     def __init__(self, tables: Mapping[str, pd.DataFrame], *, per_image: pd.DataFrame,
                  states: dict[str, list], stats: dict[str, dict], out: Path | None = None,
-                 files: Iterable[str] = ()) -> None:  # fmt: skip
+                 files: Iterable[str] = (), sweep: pd.DataFrame | None = None) -> None:  # fmt: skip
         self._tables = tables
+        self.sweep = sweep_frame({}) if sweep is None else sweep
         self.per_image = per_image
         self.states = states
         self.stats = stats
@@ -293,6 +296,17 @@ def _cap_workers(ex: Execution) -> Execution:
     return ex
 
 
+SWEEP_FILE = "sweep.csv"
+"""The settings a sweep tried (:attr:`Results.sweep`)."""
+
+
+def sweep_frame(stats: dict) -> pd.DataFrame:
+    """Every dataset's sweep rows (``sweep.csv``)."""
+    from torchsar_eval.sweep import as_frame
+
+    return as_frame([row for st in stats.values() for row in st.get("sweep", {}).get("rows", [])])
+
+
 def _note_idle_workers(name: str, images: int, ex: Execution) -> None:
     """One line when a dataset has fewer shards than local workers: the others stay idle
     (a shard is one worker's unit of work)."""
@@ -327,6 +341,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         if exporter is not None:
             exporter.write(tmp / "coco", labels[name])
     tables = result_tables(results) if out is not None else LazyTables(results)
+    swept = sweep_frame(stats)
     folders = {n: tmp / "shards" / labels[n] / "test" for n in results}
     files: list[str] = []
     if out is not None:
@@ -335,12 +350,16 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         write_config(tmp, "run", config(plan, datasets, windows, stats, out, observed))
         files = write_run(tmp, tables, rows, plan.scoring, stats, labels, results=results,
                           rank_by=plan.rank_by)  # fmt: skip
+        if not swept.empty:
+            swept.to_csv(tmp / SWEEP_FILE, index=False)
+            files.append(SWEEP_FILE)
         per_image = pd.read_csv(tmp / "per_image.csv")
     else:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
         per_image = pd.DataFrame(list(rows), columns=PER_IMAGE_COLUMNS)
     return Results(tables, per_image=per_image, states=results, stats=stats, out=out,
-                   files=[*files, "config.json"] if out is not None else [])  # fmt: skip
+                   files=[*files, "config.json"] if out is not None else [],
+                   sweep=swept)  # fmt: skip
 
 
 def _bound(det: Detector, ds: Dataset, name: str) -> Detector:
@@ -366,8 +385,9 @@ def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path,
         "engine": ex.engine,
         "device": ex.device,
         "shard_size": ex.shard_size,
-        "throughput": stats,
-        "calibration": None if cal is None else {"target": cal.target, "fraction": cal.fraction},
+        "throughput": {n: {k: v for k, v in st.items() if k != "sweep"} for n, st in stats.items()},
+        "calibration": None if cal is None else cal.as_dict(),
+        "sweep": {n: st["sweep"]["chosen"] for n, st in stats.items() if "sweep" in st},
         "batch_size": ex.batch_size,
         "seed": plan.seed,
         "out": str(out),
@@ -444,29 +464,34 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     if ex.skip_bad:
         ds = SkipBad(ds)
 
-    def shards(idx: list[int], folder: Path, export: bool = False):
-        job = ShardJob(name, ds, idx, detectors, plan.scoring, ex.batch_size, plan.preprocess,
-                       ex.shard_size, export_coco=export, device=ex.device,
+    def shards(idx: list[int], folder: Path, export: bool = False, dets=None):
+        job = ShardJob(name, ds, idx, dets or detectors, plan.scoring, ex.batch_size,
+                       plan.preprocess, ex.shard_size, export_coco=export, device=ex.device,
                        default_class=default_class, skip_bad=ex.skip_bad)  # fmt: skip
         return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
                           address=ex.address, skip_bad=ex.skip_bad, progress=ex.progress,
                           persist=persist or export)  # fmt: skip
 
-    chosen, calib_counts = None, {"scored_images": 0, "reused_images": 0}
+    chosen, calib_counts, swept = None, {"scored_images": 0, "reused_images": 0}, None
     if cal is not None:
         target = parse_target(cal.target)
         calib, indices = split_indices(len(ds), name, cal.fraction)
         if not calib or not indices:
             raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
                             f"split of {cal.fraction:g}")  # fmt: skip
-        tuned, calib_counts = shards(calib, state / "calibration")
-        chosen = [choose_threshold(r.objects, target) for r in tuned]
+        if cal.sweep is not None:  # settings chosen on the calibration split only
+            detectors, chosen, swept = _swept(name, detectors, cal, target, calib, shards, state)
+            calib_counts = swept.pop("counts")
+        else:
+            tuned, calib_counts = shards(calib, state / "calibration")
+            chosen = [choose_threshold(r.objects, target) for r in tuned]
     results, counts = shards(indices, state / "test", plan.export_coco)
     for r, det in zip(results, detectors, strict=True):
         r.detector = det  # saved shards keep only its name
     exporter = shard_coco(state / "test", name) if plan.export_coco else None
     for r, t in zip(results, chosen or [], strict=False):
-        r.choose(t)
+        if t is not DESIGN:  # a swept detector reports at its chosen setting's design point
+            r.choose(t)
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)
@@ -476,4 +501,41 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
              "wall_s": wall, **counts, "export": exporter,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": scored / wall if scored and wall > 0 else float("nan")}  # fmt: skip
+    if swept is not None:
+        stats["sweep"] = swept
     return results, stats
+
+
+DESIGN = object()
+"""A swept detector's operating point: its chosen setting's design threshold."""
+
+
+def _swept(name: str, detectors: list[Detector], cal: Calibration, target, calib: list[int],
+           shards, state: Path) -> tuple[list[Detector], list, dict]:  # fmt: skip
+    """Every detector's variants over the sweep scored on the calibration split (one pass),
+    each detector's best variant, the calibrated thresholds of the detectors without a
+    swept option, and the sweep's record: ``{"rows": sweep.csv rows, "chosen": {detector:
+    options}, "counts"}``."""
+    from torchsar_eval.sweep import choose, sweep_table, variants
+
+    tried = [variants(d, cal.sweep) for d in detectors]
+    if not any(tried):
+        raise EvalError(f"{{opt:sweep}} names no option of any detector of this run: "
+                        f"{', '.join(cal.sweep)}")  # fmt: skip
+    flat = [v for vs, d in zip(tried, detectors, strict=True) for v in (vs or [d])]
+    tuned, counts = shards(calib, state / "calibration", dets=flat)
+    final, thresholds, rows, picked, k = [], [], [], {}, 0
+    for det, vs in zip(detectors, tried, strict=True):
+        if not vs:
+            final.append(det)
+            thresholds.append(choose_threshold(tuned[k].objects, target))
+            k += 1
+            continue
+        keys = [o for o in cal.sweep if det.has_option(o)]
+        index, settings = choose(vs, tuned[k : k + len(vs)], target, keys)
+        k += len(vs)
+        rows += sweep_table(name, settings, index, target)
+        picked[det.name] = settings[index].options
+        final.append(replace(vs[index], name=det.name))
+        thresholds.append(DESIGN)
+    return final, thresholds, {"rows": rows, "chosen": picked, "counts": counts}

@@ -19,7 +19,7 @@ def fingerprint(plan, datasets: dict) -> dict:
         "detectors": {d.name: d.describe() for d in plan.detectors},
         "despeckle": plan.despeckle,
         "scoring": plan.scoring.as_dict(), "shard_size": plan.execution.shard_size,
-        "calibration": None if cal is None else [cal.target, cal.fraction],
+        "calibration": None if cal is None else cal.as_dict(),
         "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
         "manifests": {n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")},
         "predictions": {d.name: [str(d.fn.path), d.fn.digest] for d in plan.detectors

@@ -3,12 +3,14 @@ workers, engine, device) and how its operating points are calibrated."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import torch
 
 from torchsar_eval.calibrate import parse_target
 from torchsar_eval.errors import EvalError
+from torchsar_eval.sweep import check_sweep
 
 __all__ = ["ENGINES", "Calibration", "Execution"]
 
@@ -87,8 +89,20 @@ class Calibration:
 
     target: str
     fraction: float = 0.3
+    sweep: Mapping[str, Sequence] | None = None
+    """Options to search on the calibration split (``{"pfa": [1e-3, 1e-4], "train": [4, 8]}``):
+    each detector that has some of them keeps the setting that best meets ``target`` there,
+    at its design operating point (see :mod:`torchsar_eval.sweep`); the others have their
+    operating threshold chosen as without a sweep."""
 
     def __post_init__(self) -> None:
         parse_target(self.target)
         if not 0 < self.fraction < 1:
             raise EvalError(f"{{opt:calibration_fraction}}{self.fraction}: must be in (0, 1)")
+        if self.sweep is not None:
+            object.__setattr__(self, "sweep", check_sweep(self.sweep))
+
+    def as_dict(self) -> dict:
+        """The record of ``config.json``."""
+        out = {"target": self.target, "fraction": self.fraction}
+        return {**out, "sweep": self.sweep} if self.sweep is not None else out

@@ -271,6 +271,17 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--calibration-fraction", type=float, default=0.3,
                    help="share of each dataset's images in the calibration split")  # fmt: skip
+    g.add_argument(
+        "--sweep",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2,...",
+        help="with --calibrate-on: try every detector that has option KEY at each value (all "
+        "combinations of the swept options) on the calibration split, keep the setting that "
+        "best meets TARGET at its design operating point and report it on the test split; "
+        "sweep.csv lists every setting tried (repeatable, e.g. --sweep pfa=1e-3,1e-4,1e-5 "
+        "--sweep train=4,8,16)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -303,8 +314,13 @@ def run(args: argparse.Namespace) -> int:
         device=args.device,
     )
     calibration = None
+    sweep = options.parse_sweep(args.sweep)
+    if sweep and args.calibrate_on is None:
+        raise EvalError("--sweep needs --calibrate-on TARGET (f1 or fa=LEVEL): the settings are "
+                        "chosen on the calibration split")  # fmt: skip
     if args.calibrate_on is not None:
-        calibration = Calibration(args.calibrate_on, args.calibration_fraction)
+        calibration = Calibration(args.calibrate_on, args.calibration_fraction,
+                                  sweep=sweep or None)  # fmt: skip
     datasets = args.dataset or DEFAULT_DATASETS
     if args.predictions and len(datasets) != 1:
         raise EvalError("--predictions scores one dataset: name it with --dataset")

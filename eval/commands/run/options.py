@@ -110,6 +110,34 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> tuple[list[Detector],
     return dets, overrides
 
 
+def parse_sweep(items: list[str]) -> dict[str, list]:
+    """``--sweep KEY=V1,V2`` items as ``{KEY: [V1, V2]}`` (values as Python literals where
+    they parse, else strings).
+
+    Example:
+        >>> parse_sweep(["pfa=1e-3,1e-4", "train=4,8"])
+        {'pfa': [0.001, 0.0001], 'train': [4, 8]}
+    """
+    import ast
+
+    out: dict[str, list] = {}
+    for item in items:
+        key, eq, raw = item.partition("=")
+        values = [v.strip() for v in raw.split(",")]
+        if not (eq and key.strip() and all(values)):
+            raise EvalError(f"--sweep must look like KEY=V1,V2,..., got {item!r}")
+        if key.strip() in out:
+            raise EvalError(f"--sweep gives {key.strip()} twice: list its values once")
+        parsed = []
+        for v in values:
+            try:
+                parsed.append(ast.literal_eval(v))
+            except (ValueError, SyntaxError):
+                parsed.append(v)
+        out[key.strip()] = parsed
+    return out
+
+
 def check_run_args(args: argparse.Namespace) -> RunChoices:
     """Validate every option of ``torchsar-eval run`` before any dataset is built."""
     at_least(args.n, "--n", 1)
