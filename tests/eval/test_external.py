@@ -101,8 +101,8 @@ def test_a_main_only_detector_with_two_workers_gets_one_line(tmp_path):
             return ts.cfar.ca(x)
 
         sys.exit(main(["run", "--dataset", "sim-chips", "--n", "4", "--detectors",
-                       "__main__:mine", "--workers", "2", "--no-progress",
-                       "--out", {str(tmp_path / "out")!r}]))
+                       "__main__:mine", "--workers", "2", "--shard-size", "2",
+                       "--no-progress", "--out", {str(tmp_path / "out")!r}]))
     """)
     )
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
