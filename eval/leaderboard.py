@@ -5,6 +5,7 @@ targets, left-out files)."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
@@ -73,6 +74,7 @@ class Board:
         self.rows["label"] = [f"{d} ({r})" if many else d for d, r in pairs]
         self._rank()
         self.notes = self._notes()
+        self.settings = self._settings()
 
     def _rank(self) -> None:
         m = self.rank_by
@@ -84,6 +86,30 @@ class Board:
         self.rows = self.rows.iloc[order].reset_index(drop=True)
         k = key.to_numpy()[order]
         self.rank = [1 + int(np.sum(k < v)) if np.isfinite(v) else None for v in k]
+
+    def options(self, run: int, detector: str) -> dict:
+        """A row's detector options as its run applied them: the options ``config.json``
+        records, the settings a sweep chose over them, the operating threshold."""
+        opts = self.runs[run].options
+        out = dict((opts.get("detectors") or {}).get(detector) or {})
+        out.update(((opts.get("sweep") or {}).get(self.dataset) or {}).get(detector) or {})
+        return out
+
+    def _settings(self) -> list[str]:
+        """Per row, the options in which its detector differs from the same detector in
+        the other runs (``pfa=1e-06, train=16``; ``""`` with one run or none differing)."""
+        if len(self.runs) < 2 or self.rows.empty:
+            return [""] * len(self.rows)
+        rows = list(zip(self.rows["_run"].astype(int), self.rows["detector"], strict=True))
+        opts = [self.options(k, d) for k, d in rows]
+        out = []
+        for (_, d), mine in zip(rows, opts, strict=True):
+            others = [o for (_, d2), o in zip(rows, opts, strict=True) if d2 == d]
+            keys = sorted({k for o in others for k in o}, key=str)
+            differ = [k for k in keys if len({json.dumps(o.get(k), default=str, sort_keys=True)
+                                             for o in others}) > 1]  # fmt: skip
+            out.append(", ".join(f"{k}={_short(mine.get(k))}" for k in differ))
+        return out
 
     def _curve(self, run: int, detector: str) -> tuple:
         froc = self.runs[run].table("froc", self.dataset)
@@ -117,6 +143,21 @@ class Board:
                 seen[key] = r["label"]
                 notes.append("")
         return notes
+
+
+def _short(v: object) -> str:
+    """An option value as a row shows it (``1e-06``, ``16``, a path's last part).
+
+    Example:
+        >>> _short(1e-6), _short(16), _short("/data/runs/preds.json"), _short(None)
+        ('1e-06', '16', 'preds.json', '–')
+    """
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:g}"
+    text = str(v)
+    return text.rsplit("/", 1)[-1] if "/" in text else text
 
 
 def caveats(run: RunFiles, dataset: str, board: Board) -> list[str]:

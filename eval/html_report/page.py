@@ -80,7 +80,8 @@ th{background:var(--band);font-weight:600;position:sticky;top:0}
 td.l,th.l{text-align:left}.why{white-space:normal;color:var(--muted);font-size:11px;
 font-weight:400;max-width:230px;line-height:1.25}
 td.best{background:var(--best);font-weight:700}
-td.rule{white-space:normal;min-width:120px;max-width:220px;font-size:12px}
+td.rule{font-size:12px}table.leaderboard th{white-space:normal;vertical-align:bottom}
+td.runcell{white-space:normal;max-width:120px}
 .sw{display:inline-block;width:22px;height:0;border-top:3px solid;vertical-align:middle;
 margin-right:6px}
 .ci{display:inline-flex;align-items:center;gap:6px}
@@ -106,6 +107,8 @@ footer{margin-top:36px;padding:12px 20px 28px;border-top:1px solid var(--line);f
  body{font-size:11px}header,main,footer{max-width:none;padding:0}nav{display:none}
  section.dataset{break-before:page}h2{break-after:avoid}h3,h4{break-after:avoid}
  figure,.case,tr,.card{break-inside:avoid}.wrap{overflow:visible}th{position:static}
+ table.leaderboard{font-size:9px}table.leaderboard th,table.leaderboard td{padding:2px 4px}
+ .bar{width:60px}
  *{-webkit-print-color-adjust:exact;print-color-adjust:exact}
  .figs{grid-template-columns:repeat(2,1fr)}
 }
@@ -215,7 +218,8 @@ def _leaderboard(board: Board) -> str:
                 f'<span class="lohi">95 % interval</span></th>')  # fmt: skip
     head += [f'<th title="{_e(c)}">{_e(LABELS.get(c, c))}</th>' for c in shown]
     head.append(
-        '<th class="l" title="the matching rule and the IoU each row measured">measured by</th>'
+        '<th class="l" title="the IoU of each row\'s AP (a cell\'s title: its matching rule)">'
+        "IoU</th>"
     )
     body = []
     for i, r in rows.iterrows():
@@ -230,17 +234,29 @@ def _leaderboard(board: Board) -> str:
             f'<td class="l det">{_swatch(r["detector"])}{_e(r["detector"])}{why}</td>',
         ]
         if many:
-            cells.append(f'<td class="l">{_e(r["run"])}</td>')
+            differs = board.settings[i]
+            note = f'<div class="why">{_e(differs)}</div>' if differs else ""
+            cells.append(f'<td class="l runcell">{_e(r["run"])}{note}</td>')
         cells.append(f'<td{cls}><span class="ci"><b>{_fmt(m, v)}</b>'
                      f'{_bar(v, lo[i], hi[i], top)}{interval}</span></td>')  # fmt: skip
         for c in shown:
             x = val[c][i]
             mark = ' class="best"' if best[c] is not None and x == best[c] else ""
             cells.append(f"<td{mark}>{_fmt(c, x)}</td>")
-        cells.append(f'<td class="l rule">{_e(_measured_by(r))}</td>')
+        cells.append(f'<td class="l rule" title="{_e(_measured_by(r))}">{_e(_iou(r))}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return ('<div class="wrap"><table class="leaderboard"><thead><tr>' + "".join(head)
             + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+
+
+def _iou(row: pd.Series) -> str:
+    """A leaderboard row's IoU type in a word (``summary.csv``'s ``iou_type``)."""
+    kind = row.get("iou_type")
+    if not isinstance(kind, str) or not kind:
+        return "–"
+    if kind == "point":
+        return "point: no AP"  # points have no IoU: matched by the rule, no AP
+    return kind if kind in ("distance", "centroid") else f"{kind} IoU"
 
 
 def _measured_by(row: pd.Series) -> str:

@@ -358,8 +358,10 @@ def test_every_leaderboard_row_says_what_it_measured(run):
     summary = res.summary.set_index("detector")
     for cells in page.boards[0]:
         row = summary.loc[cells[1].split(" ")[0]]
-        assert row.iou_type == "mask" and cells[-1] == row.matching
+        assert row.iou_type == "mask" and cells[-1] == "mask IoU"
         assert "AP: mask IoU" in row.matching
+    assert all(f'title="{m}"' in (out / "report.html").read_text().replace("&lt;", "<")
+               for m in summary.matching)  # fmt: skip
 
 
 def test_every_case_says_why_it_is_one(run):

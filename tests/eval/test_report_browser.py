@@ -106,3 +106,82 @@ def test_a_screenshot_shows_the_page(report, tmp_path):
     for name in ("ca", "so"):  # the detectors' own colours are drawn (swatches, curves)
         want = np.array([int(detector_colour(name)[i : i + 2], 16) for i in (1, 3, 5)])
         assert (np.abs(rgb - want).max(axis=-1) <= 8).sum() > 50, name
+
+
+COMPARE_PROBE = """<script>
+window.addEventListener("load", () => {
+  const rect = el => { const b = el.getBoundingClientRect();
+                       return [b.left, b.top, b.right, b.bottom]; };
+  const wraps = [...document.querySelectorAll("table.leaderboard")].map(t => {
+    const w = t.closest(".wrap");
+    return [w.scrollWidth, w.clientWidth, t.getBoundingClientRect().right]; });
+  const cells = [...document.querySelectorAll("table.leaderboard td.rule")].map(
+    td => td.textContent.trim());
+  const cases = [...document.querySelectorAll("figure.case")].map(f => [
+    rect(f), rect(f.querySelector("figcaption")), rect(f.querySelector("img"))]);
+  const pre = document.createElement("pre");
+  pre.id = "probe";
+  pre.textContent = JSON.stringify({wraps, cells, cases, width: window.innerWidth});
+  document.body.appendChild(pre);
+});
+</script>"""
+
+
+def _boxes(images):
+    """A box detector: one box around each chip's brightest pixel (score: its dB)."""
+    import torch
+
+    from torchsar.objects import Objects
+
+    b, _, h, w = images.shape
+    flat = images[:, 0].reshape(b, -1)
+    peak = flat.argmax(dim=1)
+    r, c = (peak // w).double(), (peak % w).double()
+    boxes = torch.stack([r - 4, c - 4, r + 5, c + 5], 1).clamp(min=0).numpy()
+    boxes[:, 2:] = np.minimum(boxes[:, 2:], [h, w])
+    return Objects.from_boxes(boxes, torch.log10(flat.max(dim=1).values).numpy(), shape=(h, w),
+                              plane=np.arange(b), planes=b)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory):
+    """Two runs of a CFAR, a box detector and a predictions file, the CFAR with other
+    options in the second, compared in one page."""
+    _browser()
+    root = tmp_path_factory.mktemp("compare")
+    base = te.evaluate("sim-chips", ["ca"], n=6, progress=False, scoring=te.Scoring(replicates=0))
+    pts = root / "points.csv"
+    pts.write_text("image,row,col,score\n" + "".join(f"{im},64,64,0.7\n{im},10,100,0.2\n"
+                                                      for im in base.per_image.image))  # fmt: skip
+    runs = []
+    for name, pfa in (("a", 1e-3), ("b", 1e-6)):
+        dets = {"ca": te.load("ca", options={"pfa": pfa}), "boxes": te.Detector("boxes", _boxes),
+                "points": te.predictions(pts, name="points")}  # fmt: skip
+        te.evaluate("sim-chips", dets, n=6, out=root / name, progress=False,
+                    scoring=te.Scoring(replicates=50))  # fmt: skip
+        runs.append(root / name)
+    page = root / "compare.html"
+    from torchsar_eval.html_report import write_report
+
+    write_report(runs, page)
+    return page
+
+
+def test_the_compare_page_fits_and_says_what_each_row_measured(compared, tmp_path):
+    probe = tmp_path / "probe.html"
+    probe.write_text(compared.read_text().replace("<head>", "<head>" + COMPARE_PROBE, 1))
+    done = _chromium(tmp_path, "--window-size=1366,2600", "--dump-dom", probe.as_uri())
+    found = re.search(r'<pre id="probe">(.*?)</pre>', done.stdout, re.S)
+    assert found, done.stderr[-2000:]
+    r = json.loads(found.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    for scroll, client, right in r["wraps"]:  # no horizontal scroll, nothing past the window
+        assert scroll <= client + 1 and right <= r["width"], (scroll, client, right)
+    assert len(r["cells"]) == 6
+    assert set(r["cells"]) == {"mask IoU", "box IoU", "point: no AP"}  # CFAR, boxes, points
+    boxes = [c[0] for c in r["cases"]]
+    for i, a in enumerate(boxes):  # no caption (no tile) overlaps another
+        for b in boxes[i + 1 :]:
+            assert a[2] <= b[0] + 0.5 or b[2] <= a[0] + 0.5 or a[3] <= b[1] + 0.5 or \
+                b[3] <= a[1] + 0.5, (a, b)  # fmt: skip
+    for tile, caption, _ in r["cases"]:  # each caption inside its tile
+        assert tile[0] - 0.5 <= caption[0] and caption[2] <= tile[2] + 0.5
