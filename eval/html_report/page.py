@@ -516,8 +516,11 @@ def _paired(board: Board) -> str:
             a, b = (_num(r[lo]) if lo else math.nan), (_num(r[hi]) if hi else math.nan)
             cells = "".join(f'<td class="l">{_e(r[c])}</td>' for c in names)
             interval = "" if math.isnan(a) else f'<span class="lohi">{a:+.3g} … {b:+.3g}</span>'
-            cells += (f'<td class="l"><span class="ci"><b>{d:+.3g}</b>'
-                      f"{_bar(d, a, b, top, zero=0.0)}{interval}</span></td>")  # fmt: skip
+            if math.isnan(d):  # not defined for this pair (e.g. AP of points): no bar
+                cells += '<td class="l">–</td>'
+            else:
+                cells += (f'<td class="l"><span class="ci"><b>{d:+.3g}</b>'
+                          f"{_bar(d, a, b, top, zero=0.0)}{interval}</span></td>")  # fmt: skip
             if sig:
                 yes = str(r[sig]).strip().lower() in ("true", "1", "yes", "1.0")
                 cells += f'<td class="l">{"<b>yes</b>" if yes else "no"}</td>'
