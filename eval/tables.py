@@ -94,7 +94,7 @@ FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_pe
                 "pd_object", "precision"]  # fmt: skip
 PR_COLUMNS = ["dataset", "detector", "class", "threshold", "recall", "precision"]
 BREAKDOWN_COLUMNS = ["dataset", "detector", "by", "key", "images", "targets", "tp", "fp",
-                     "fn", "precision", "recall", "f1"]  # fmt: skip
+                     "fn", "precision", "recall", "f1", "ap50", "ap50_95"]  # fmt: skip
 COCO_STATS = ["AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large", "AR1", "AR10",
               "AR100", "AR_small", "AR_medium", "AR_large"]  # fmt: skip
 """``COCOeval.stats`` in order (-1 where pycocotools gives -1: nothing to average)."""
@@ -246,6 +246,7 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     keys = r.objects.breakdown(r.threshold)
     has_image_class = any(k.startswith("image_class:") for k in keys)
     nan = float("nan")
+    class_ap = r.objects.class_ap()
     for key in sorted(keys):
         by, _, name = key.partition(":")
         k = keys[key]
@@ -254,8 +255,9 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
             if k["n_gt"] == 0:
                 continue  # the sink of unattributed false alarms
             op.update(fp=nan, precision=nan, f1=nan)
+        ap = class_ap.get(name, (nan, nan)) if by == "class" else (nan, nan)
         rows.append([ds, r.detector.name, by, name, k["images"] or None, k["n_gt"], op["tp"],
-                     op["fp"], op["fn"], op["precision"], op["recall"], op["f1"]])  # fmt: skip
+                     op["fp"], op["fn"], op["precision"], op["recall"], op["f1"], *ap])  # fmt: skip
     return rows
 
 
@@ -266,7 +268,7 @@ def _scr_breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     return [
         [ds, r.detector.name, "scr" if row["source"] == "measured" else f"scr_{row['source']}",
          row["scr_bin"], None, row["targets"], row["detected"], nan,
-         row["targets"] - row["detected"], nan, row["pd"], nan]
+         row["targets"] - row["detected"], nan, row["pd"], nan, nan, nan]
         for row in r.objects.scr_rows(r.threshold)
     ]  # fmt: skip
 

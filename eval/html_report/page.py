@@ -414,6 +414,59 @@ def _order(board: Board, run: RunFiles) -> list[str]:
     return list(dict.fromkeys(r["detector"]))
 
 
+_AP_SIZES = [("ap50", "AP50"), ("ap50_95", "AP50:95"), ("ap_small", "small"),
+             ("ap_medium", "medium"), ("ap_large", "large")]  # fmt: skip
+
+
+def ap_frame(summary: pd.DataFrame, breakdown: pd.DataFrame, order: list[str]) -> pd.DataFrame:
+    """A dataset's AP per detector (``order``): AP50 and AP50:95, AP50:95 by COCO size, and
+    AP50:95 per ground-truth class (``breakdown.csv``'s class rows, when matching is per
+    class); empty when no detector has an AP at an IoU.
+
+    Example:
+        >>> s = pd.DataFrame({"detector": ["a"], "ap50": [0.9], "ap50_95": [0.5],
+        ...                   "ap_small": [0.2], "ap_medium": [0.6], "ap_large": [float("nan")]})
+        >>> b = pd.DataFrame({"detector": ["a", "a"], "by": ["class", "class"],
+        ...                   "key": ["ship", "boat"], "ap50_95": [0.55, 0.45]})
+        >>> ap_frame(s, b, ["a"]).columns.tolist()
+        ['detector', 'AP50', 'AP50:95', 'small', 'medium', 'large', 'boat', 'ship']
+    """
+    have = [(c, h) for c, h in _AP_SIZES if c in summary.columns]
+    if not have or not any(summary[c].notna().any() for c, _ in have):
+        return pd.DataFrame()
+    rows = summary.drop_duplicates("detector").set_index("detector")
+    out = pd.DataFrame({"detector": [d for d in order if d in rows.index]})
+    for c, h in have:
+        out[h] = [float(rows.loc[d, c]) for d in out["detector"]]
+    if {"by", "key", "ap50_95"} <= set(breakdown.columns):
+        cls = breakdown[(breakdown["by"] == "class") & breakdown["ap50_95"].notna()]
+        for name in sorted(set(cls["key"].astype(str))):
+            per = cls[cls["key"].astype(str) == name].drop_duplicates("detector")
+            values = dict(zip(per["detector"], per["ap50_95"], strict=True))
+            out[name] = [float(values.get(d, float("nan"))) for d in out["detector"]]
+    return out
+
+
+def _ap(board: Board) -> str:
+    """AP by size and per class, one table per run."""
+    out = []
+    for run in board.runs:
+        df = ap_frame(run.table("summary", board.dataset), run.table("breakdown", board.dataset),
+                      _order(board, run))  # fmt: skip
+        if df.empty:
+            continue
+        title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
+        out.append(title + _table(df))
+    if not out:
+        return ""
+    return (
+        '<h3>AP by size and class</h3><p class="note">COCO average precision (101-point, '
+        "every detection ranked); small / medium / large: AP50:95 of the targets in "
+        "COCO's area ranges (&lt; 32², to 96², above); a class: AP50:95 of its targets "
+        "(per-class matching).</p>" + "".join(out)
+    )
+
+
 def _breakdown(board: Board) -> str:
     out = []
     for run in board.runs:
@@ -667,7 +720,7 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
             f"{cards}"
             f"<h3>Leaderboard</h3>{_leaderboard(board)}"
             f"<h3>Curves</h3>{_figures(board, f'ds{i}-{_slug(name)}')}"
-            f"{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"
+            f"{_ap(board)}{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"
             f"{_gallery(board)}</section>"
         )
     return (

@@ -407,3 +407,12 @@ def test_datasets_are_headed_by_short_names(run, tmp_path):
     text = build_report([copy])
     assert f'<h2 title="{long}">folder:chips</h2>' in text
     assert f">{long}<" not in text.split("<main>")[0]  # not in the header or the nav
+
+
+def test_ap_by_size_is_in_the_report(run):
+    out, res = run
+    text = (out / "report.html").read_text()
+    assert "AP by size and class" in text
+    section = text.split("AP by size and class")[1].split("</table>")[0]
+    for _, row in res.summary.iterrows():
+        assert f"{row.ap50_95:.3g}" in section or row.ap50_95 == 0

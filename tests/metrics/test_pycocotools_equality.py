@@ -120,3 +120,25 @@ def test_coco_compatible_arrays_equal_cocoeval(seed, iou_type, many, ties):
     np.testing.assert_allclose(state.precision(cats), ev.eval["precision"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(state.recall(cats), ev.eval["recall"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(state.stats(), ev.stats, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10**6), iou_type=st.sampled_from(["bbox", "segm"]))
+def test_per_class_ap_equals_pycocotools_per_category(seed, iou_type):
+    from tests.reference.coco_sets import CATEGORIES
+
+    gt, dets = make_set(seed, segm=iou_type == "segm")
+    if iou_type == "segm":
+        dets = [{k: v for k, v in d.items() if k != "bbox"} for d in dets]
+    ev = pycocotools_eval(gt, dets, iou_type, max_dets=BIG)
+    per_class = _state(gt, dets, iou_type).class_ap()
+    p = ev.eval["precision"][:, :, :, 0, -1]  # (T, R, K): categories in id order
+    for k, cat in enumerate(sorted(CATEGORIES, key=lambda c: c["id"])):
+        x = p[:, :, k]
+        if not (x > -1).any():
+            assert cat["name"] not in per_class  # no target of the class
+            continue
+        ap50, ap = per_class[cat["name"]]
+        assert ap50 == pytest.approx(float(x[0][x[0] > -1].mean()), abs=1e-9)
+        assert ap == pytest.approx(float(x[x > -1].mean()), abs=1e-9)
+    assert _state(gt, dets, iou_type, "agnostic").class_ap() == {}

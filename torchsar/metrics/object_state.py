@@ -373,23 +373,47 @@ class ObjectState:
         if self.ap_kind == "none":
             return out
         rec = self.records
-        d, g = rec.detections, rec.targets
-        shift = np.arange(A * T, dtype=np.uint64)[:, None]  # bit a * T + t: range a, IoU t
-        lo = np.array([AREA_RANGES[a][0] for a in range(A)])[:, None]
-        hi = np.array([AREA_RANGES[a][1] for a in range(A)])[:, None]
-        inside = (g["coco_area"][None] >= lo) & (g["coco_area"][None] <= hi)  # (A, targets)
         aps, counted = [], []
-        for det_sel, gt_sel in _class_groups(d, g, bool(self.by_class)):
-            npig = (inside & gt_sel).sum(axis=1)  # (A,)
-            tp = ((d["ap_tp"][det_sel][None] >> shift) & np.uint64(1)).astype(np.float64)
-            ig = ((d["ap_ig"][det_sel][None] >> shift) & np.uint64(1)).astype(bool)
-            aps.append(coco_ap_rows(tp, (1.0 - tp) * ~ig, np.repeat(npig, T)).reshape(A, T))
+        for det_sel, gt_sel in _class_groups(rec.detections, rec.targets, bool(self.by_class)):
+            ap, npig = self._group_ap(det_sel, gt_sel, A)
+            aps.append(ap)
             counted.append(npig > 0)
         if aps:  # per range, the mean over the classes with targets in it
             n = np.sum(counted, axis=0)
             total = np.where(np.array(counted)[:, :, None], aps, 0.0).sum(axis=0)
             out[:A] = np.where(n[:, None] > 0, total / np.maximum(n, 1)[:, None], np.nan)
         self._cache["ap_table"] = out
+        return out
+
+    def _group_ap(self, det_sel: np.ndarray, gt_sel: np.ndarray, areas: int
+                  ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """AP ``(areas, T)`` of the detections and targets selected, per area range and IoU
+        threshold, and the targets counted in each range ``(areas,)``."""
+        T = len(COCO_IOUS)
+        d, g = self.records.detections, self.records.targets
+        shift = np.arange(areas * T, dtype=np.uint64)[:, None]  # bit a * T + t: range a, IoU t
+        lo = np.array([AREA_RANGES[a][0] for a in range(areas)])[:, None]
+        hi = np.array([AREA_RANGES[a][1] for a in range(areas)])[:, None]
+        inside = (g["coco_area"][None] >= lo) & (g["coco_area"][None] <= hi)  # (A, targets)
+        npig = (inside & gt_sel).sum(axis=1)
+        tp = ((d["ap_tp"][det_sel][None] >> shift) & np.uint64(1)).astype(np.float64)
+        ig = ((d["ap_ig"][det_sel][None] >> shift) & np.uint64(1)).astype(bool)
+        ap = coco_ap_rows(tp, (1.0 - tp) * ~ig, np.repeat(npig, T)).reshape(areas, T)
+        return ap, npig
+
+    def class_ap(self) -> dict[str, tuple[float, float]]:
+        """Per ground-truth class, ``(AP50, AP50:95)`` over every area, as pycocotools
+        computes a category's AP; empty unless detections were matched within their class
+        and AP is at an IoU."""
+        if not self.by_class or self.ap_kind != "iou":
+            return {}
+        rec = self.records
+        d, g = rec.detections, rec.targets
+        out = {}
+        for c in np.unique(g["label"]):
+            ap, npig = self._group_ap(d["label"] == c, g["label"] == c, 1)
+            if npig[0] > 0:
+                out[str(rec.names[int(c)])] = (float(ap[0, 0]), float(ap[0].mean()))
         return out
 
     def metrics(self, threshold: float | str | None = "design") -> dict[str, float]:
