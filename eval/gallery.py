@@ -1,6 +1,7 @@
 """A detector's worst cases, chosen while scoring: its highest-scoring false alarms and its
 largest missed targets, each kept as a small crop of the image with the ground truth and the
-detections around it.
+detections around it; beside them, typical hits (true positives drawn at random: each hit's
+rank is a hash of its image and position, so the sample does not depend on the order).
 
 :class:`Gallery` is a mergeable state of bounded size: each kind keeps at most
 :data:`GALLERY_CASES` cases, ranked by a total order (false alarms: score, highest first;
@@ -14,6 +15,7 @@ point, like ``per_image.csv``. :func:`write_gallery` renders the cases as PNGs i
 from __future__ import annotations
 
 import csv
+import hashlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,7 +43,7 @@ __all__ = [
 ]
 
 GALLERY_CASES = 8
-"""Cases kept per kind (false alarms, misses) and detector."""
+"""Cases kept per kind (false alarms, misses, hits) and detector."""
 CROP = 96
 """Side of a case's crop in samples, and the least image extent it shows in pixels (a larger
 object is shown whole, resampled)."""
@@ -59,7 +61,7 @@ class Cases:
     """Up to ``size`` cases of one kind, best first.
 
     Attributes:
-        kind: ``"false_alarm"`` or ``"miss"``.
+        kind: ``"false_alarm"``, ``"miss"`` or ``"hit"``.
         size: the most cases kept.
         keys: each case's rank key (smaller first; a total order).
         info: each case's facts: image name, centre row and column, score, area, class.
@@ -157,15 +159,28 @@ class Gallery:
     misses: Cases = field(default_factory=lambda: Cases("miss"))
     shapes: list = field(default_factory=list)
     spacings: list = field(default_factory=list)
+    hits: Cases = field(default_factory=lambda: Cases("hit"))
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if "hits" not in state:  # a gallery saved before hits were kept
+            self.hits = Cases("hit")
 
     def __add__(self, other: Gallery) -> Gallery:
         return Gallery(self.false_alarms + other.false_alarms, self.misses + other.misses,
                        _facts(self.shapes, other.shapes),
-                       _facts(self.spacings, other.spacings))  # fmt: skip
+                       _facts(self.spacings, other.spacings),
+                       self.hits + other.hits)  # fmt: skip
+
+    @property
+    def kinds(self) -> list[tuple[Cases, str]]:
+        """Each kind of case with its file prefix."""
+        return [(self.false_alarms, "fa"), (self.misses, "miss"), (self.hits, "hit")]
 
     def settle(self) -> Gallery:
-        """Build the pending cases of both kinds (:meth:`Cases.settle`); returns ``self``."""
-        self.false_alarms.settle(), self.misses.settle()
+        """Build the pending cases of every kind (:meth:`Cases.settle`); returns ``self``."""
+        for cases, _ in self.kinds:
+            cases.settle()
         return self
 
     def add(self, obj: Objects, gt: GroundTruth, info: list[ImageInfo], m: BatchMatch,
@@ -196,6 +211,11 @@ class Gallery:
         keys, idx = _keys(-area, gt.plane[missed], gt.box[missed], info, self.misses)
         self.misses.offer(keys, _maker(planes, missed[idx], gt.box, gt_score, gt.area,
                                        gt.classes, gt.plane, "gt"), defer)  # fmt: skip
+        hit = np.flatnonzero(at_op & (m.op >= 0))
+        draw = _draws(obj.box[hit], obj.plane[hit], info)
+        keys, idx = _keys(draw, obj.plane[hit], obj.box[hit], info, self.hits)
+        self.hits.offer(keys, _maker(planes, hit[idx], obj.box, score, obj.area, obj.classes,
+                                     obj.plane, "hit"), defer)  # fmt: skip
 
 
 DEFER_BYTES = 8 << 20
@@ -216,6 +236,9 @@ class _Why:
     types: np.ndarray | None
 
     def __call__(self, k: int, own: str) -> str:
+        if own == "hit":
+            iou = float(self.m.op_iou[k])
+            return f"matched (IoU {iou:.2f})" if iou > 0 else "matched"
         if self.rule is None:
             return ""
         if own == "det":
@@ -224,6 +247,17 @@ class _Why:
             return false_alarm_reasons(self.types, self.m, self.obj, self.gt, self.rule,
                                        np.array([k]))[0]  # fmt: skip
         return miss_reasons(self.m, self.obj, self.gt, self.rule, self.at_op, np.array([k]))[0]
+
+
+def _draws(box: np.ndarray, plane: np.ndarray, info: list[ImageInfo]) -> np.ndarray:
+    """A uniform draw in [0, 1) per object from its image and box (a hash: the same object
+    draws the same number in any shard, batch or order)."""
+    out = np.empty(len(box))
+    for j in range(len(box)):
+        text = f"{info[int(plane[j])].key}|{','.join(f'{v:.3f}' for v in box[j])}"
+        digest = hashlib.blake2b(text.encode(), digest_size=8).digest()
+        out[j] = int.from_bytes(digest, "little") / 2**64
+    return out
 
 
 def _deferrable(image) -> bool:
@@ -346,7 +380,7 @@ class _Planes:
             if _overlaps(self.obj.box[d], rr, cs):
                 found |= self._object(d, rr, cs, ri, ci, step)
         masks |= np.where(found, FOUND, 0).astype(np.uint8)
-        if own == "det":
+        if own in ("det", "hit"):
             focus = self._object(k, rr, cs, ri, ci, step)
         elif self.gt.box_only[p]:
             focus = _in_box(box, rr, cs)
@@ -442,7 +476,7 @@ def render_case(image: np.ndarray, masks: np.ndarray, kind: str = "false_alarm",
         big[_ring((bits & bit) > 0, 1)] = colour
     focus = (bits & FOCUS) > 0
     if focus.any():
-        big[_ring(focus, 2)] = _FOUND if kind == "false_alarm" else _TRUTH
+        big[_ring(focus, 2)] = _TRUTH if kind == "miss" else _FOUND
     return big
 
 
@@ -468,7 +502,7 @@ def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[s
             gallery = getattr(r, "gallery", None)
             if gallery is None:
                 continue
-            for cases, short in ((gallery.false_alarms, "fa"), (gallery.misses, "miss")):
+            for cases, short in gallery.kinds:
                 cases.settle()
                 sub = Path("gallery") / labels[name] / dets[r.detector.name]
                 for rank, info in enumerate(cases.info, 1):

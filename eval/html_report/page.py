@@ -597,7 +597,8 @@ def _coco(board: Board) -> str:
     return "<h3>COCO-compatible statistics</h3>" + "".join(out) if out else ""
 
 
-_KINDS = [("false_alarm", "highest-scoring false alarms"), ("miss", "largest missed targets")]
+_KINDS = [("false_alarm", "highest-scoring false alarms"), ("miss", "largest missed targets"),
+          ("hit", "typical hits (true positives drawn at random)")]  # fmt: skip
 
 
 def _caption(kind: str, rank: int, r: pd.Series) -> str:
@@ -608,14 +609,14 @@ def _caption(kind: str, rank: int, r: pd.Series) -> str:
     cls = "" if cls is None or (isinstance(cls, float) and math.isnan(cls)) else f" {_e(cls)}"
     why = r.get("why")
     why = why if isinstance(why, str) and why else ""
-    if kind == "false_alarm":
+    if kind in ("false_alarm", "hit"):
         what = f"score {score:.3g}" + ("" if math.isnan(area) else f" · {area:.0f} px")
     else:
         found = why or "no match"
         if not math.isnan(score):
             found = f"matched below threshold ({score:.3g})"
         what = ("" if math.isnan(area) else f"{area:.0f} px{cls} · ") + _e(found)
-    if kind == "false_alarm" and why:
+    if kind in ("false_alarm", "hit") and why:
         what += f"<br>{_e(why)}"
     return f"<b>#{rank}</b> {where}<br>{what}"
 
@@ -650,9 +651,9 @@ def _gallery(board: Board) -> str:
     if not out:
         return ""
     return (
-        '<h3>Worst cases</h3><p class="note">At the design operating point, chosen over '
-        "the whole dataset. Green: ground truth; magenta: detections; yellow: don't-care "
-        "pixels; the case's own object is outlined twice as thick.</p>" + "".join(out)
+        '<h3>Worst cases and typical hits</h3><p class="note">At the design operating point, '
+        "chosen over the whole dataset. Green: ground truth; magenta: detections; yellow: "
+        "don't-care pixels; the case's own object is outlined twice as thick.</p>" + "".join(out)
     )
 
 

@@ -115,6 +115,7 @@ def test_any_shard_or_batch_size_gives_the_same_gallery(tmp_path, reference, sha
     for d in DETECTORS:
         _same(whole[d].false_alarms, parts[d].false_alarms)
         _same(whole[d].misses, parts[d].misses)
+        _same(whole[d].hits, parts[d].hits)
         assert whole[d].shapes == parts[d].shapes == [(64, 64)]
 
 
@@ -169,6 +170,8 @@ def test_written_gallery_matches_its_index(tmp_path, reference):
         g = galleries[d]
         assert (rows.kind == "false_alarm").sum() == len(g.false_alarms)
         assert (rows.kind == "miss").sum() == len(g.misses)
+        assert (rows.kind == "hit").sum() == len(g.hits)
+        assert rows[rows.kind == "hit"].why.str.startswith("matched").all()
     for f in index.file:
         with Image.open(tmp_path / f) as im:
             assert im.format == "PNG" and im.size == (2 * CROP, 2 * CROP)
@@ -194,6 +197,7 @@ def test_deferred_cases_are_the_cases_built_at_once(tmp_path, reference, monkeyp
         whole = reference[1][r.detector.name]
         _same(whole.false_alarms, r.gallery.false_alarms)
         _same(whole.misses, r.gallery.misses)
+        _same(whole.hits, r.gallery.hits)
 
 
 def test_pending_cases_are_built_when_saved_or_merged():
@@ -239,3 +243,16 @@ def test_crops_share_the_image_grey_scale():
     ga, gb = (render_case(x, masks, "miss", (0.0, 30.0)) for x in (a, b))
     assert ga[-1, -1] == gb[-1, -1]  # 10 dB in both
     assert render_case(a, masks, "miss")[-1, -1] != ga[-1, -1]  # the crop's own stretch differs
+
+
+def test_hits_are_true_positives_drawn_at_random(reference):
+    """Every hit is a detection matched at the operating point, ranked by a hash draw in
+    [0, 1) (not by score), as many as there are up to the gallery's size."""
+    _, galleries = reference
+    assert any(len(g.hits) for g in galleries.values())
+    for g in galleries.values():
+        g.settle()
+        assert len(g.hits) <= GALLERY_CASES
+        assert all(i["why"].startswith("matched") for i in g.hits.info)
+        draws = [k[0] for k in g.hits.keys]
+        assert draws == sorted(draws) and all(0 <= v < 1 for v in draws)
