@@ -40,6 +40,10 @@ _TABLES: dict[tuple, PredictionTable] = {}
 """Tables read in this process, by (path, size, mtime, format, iou_type)."""
 
 
+IDS = ("name", "position")
+"""How integer image ids are read on a dataset without ids (:class:`SavedPredictions`)."""
+
+
 def _format(path: Path, fmt: str) -> str:
     if fmt not in FORMATS:
         raise EvalError(f"predictions format must be one of {', '.join(FORMATS)}, got {fmt!r}")
@@ -153,13 +157,19 @@ class SavedPredictions:
         iou_type: COCO results: ``"auto"`` (``segm`` when every entry has a
             segmentation), ``"bbox"`` or ``"segm"``.
         threshold: operating threshold of the scores (needed by score-map masks).
+        ids: how integer image ids are read on a dataset without ids of its own: refused
+            (``"name"``: give names), or 1-based positions in dataset order
+            (``"position"``). On a ``coco:`` dataset ids are its COCO ids either way.
     """
 
     reads_only = True  # (the detector harness passes it the batch itself)
 
     def __init__(self, path: str | Path, *, format: str = "auto", iou_type: str = "auto",
-                 threshold: float | None = None) -> None:  # fmt: skip
+                 threshold: float | None = None, ids: str = "name") -> None:  # fmt: skip
         self.path = Path(path)
+        if ids not in IDS:
+            raise EvalError(f"ids must be one of {', '.join(IDS)}, got {ids!r}")
+        self.ids = ids
         self.format = _format(self.path, format)
         if iou_type not in IOU_TYPES:
             raise EvalError(f"iou_type must be one of {', '.join(IOU_TYPES)}, got {iou_type!r}")
@@ -186,7 +196,8 @@ class SavedPredictions:
             # whole-scene points (scene: datasets): each goes to the chip holding it
             items, bound._point_offset = place(self.table.refs, self.table.point, what)
         else:
-            items = locate(self.table.refs, dataset_keys(dataset), what)
+            items = locate(self.table.refs, dataset_keys(dataset), what,
+                           positions=getattr(self, "ids", "name") == "position")  # fmt: skip
         order = np.argsort(items, kind="stable")
         bound._item_rows = (items[order], order)
         bound._classes = _class_names(getattr(self.table, "classes", None), dataset, what,
@@ -257,6 +268,7 @@ def predictions(
     iou_type: str = "auto",
     threshold: float | None = None,
     instances: str = "auto",
+    ids: str = "name",
 ) -> Detector:
     """Saved predictions as a detector for :func:`torchsar_eval.evaluate`.
 
@@ -271,6 +283,8 @@ def predictions(
             counts at the operating point; choose one with a calibration instead).
         instances: ``"discriminate"`` sends mask predictions through the discrimination
             stage instead of scoring them as they are.
+        ids: ``"position"``: integer image ids are 1-based positions in the dataset's order
+            (on a dataset without ids; see :class:`SavedPredictions`).
 
     Example:
         >>> import json, tempfile, pathlib
@@ -280,8 +294,11 @@ def predictions(
         >>> d.name, d.threshold
         ('dets', 0.5)
     """
-    saved = SavedPredictions(path, format=format, iou_type=iou_type, threshold=threshold)
+    saved = SavedPredictions(path, format=format, iou_type=iou_type, threshold=threshold,
+                             ids=ids)  # fmt: skip
     opts = {"path": str(path), "format": saved.format}
+    if ids != "name":
+        opts["ids"] = ids
     if saved.format == "coco":
         opts["iou_type"] = (saved.table.geometry == "mask" and "segm") or "bbox"
     return Detector(name or Path(path).stem, saved, opts, threshold=threshold,

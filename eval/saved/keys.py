@@ -4,10 +4,12 @@ The one rule, for every format: a prediction names its image either by an **id**
 results' ``image_id``, a points CSV's ``image_id`` column: an integer) or by a **name**
 (COCO results' ``file_name``; a points CSV's ``image``, ``file_name`` or ``scene_id``
 column: text). An id is the item's COCO id when the dataset has COCO ids (``coco:``
-datasets), else its 1-based position in the dataset (the ids ``torchsar-eval run
---export-coco`` writes). A name is matched to an item's name (as in ``per_image.csv``),
-else its file name, else its file name without extension, and never taken for an id: a
-name ``"1"`` that no image has is an error, not the first image.
+datasets); on a dataset without ids, integer ids are refused unless they are declared
+1-based positions in dataset order (``positions``: ``ids="position"``, the ids
+``torchsar-eval run --export-coco`` writes), since a file indexed another way would be
+matched to the wrong images without a word. A name is matched to an item's name (as in
+``per_image.csv``), else its file name, else its file name without extension, and never
+taken for an id: a name ``"1"`` that no image has is an error, not the first image.
 """
 
 from __future__ import annotations
@@ -54,8 +56,9 @@ def _by_name(keys: list[dict]) -> list[dict[str, int]]:
             _unique_index(files), _unique_index(stems)]  # fmt: skip
 
 
-def locate(refs: np.ndarray, keys: list[dict], what: str) -> np.ndarray:
-    """The item index of each reference (see the module docstring).
+def locate(refs: np.ndarray, keys: list[dict], what: str, positions: bool = False) -> np.ndarray:
+    """The item index of each reference (see the module docstring; ``positions``: integer
+    ids are 1-based positions on a dataset without ids).
 
     Raises:
         EvalError: a reference no item has (naming the first and the count), or a name
@@ -64,6 +67,11 @@ def locate(refs: np.ndarray, keys: list[dict], what: str) -> np.ndarray:
     ids = [k.get("image_id") for k in keys]
     by_id = _unique_index(ids) if any(i is not None for i in ids) else None
     values = refs.tolist()
+    if by_id is None and not positions and any(type(v) is not str for v in values):
+        raise EvalError(f"{what}: the predictions name images by integer id, but the dataset "
+                        "has no image ids: give each prediction its image's file_name (COCO) "
+                        "or name (CSV), or declare the ids 1-based positions in dataset order "
+                        "with ids='position' (--param NAME.ids=position)")  # fmt: skip
     memo: dict[object, int] = dict.fromkeys(values, -1)
     tables = _by_name(keys) if any(type(ref) is str for ref in memo) else []  # names: by need
     for ref in memo:

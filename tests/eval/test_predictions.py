@@ -149,7 +149,8 @@ def test_round_trip_through_export_coco(tmp_path):
     assert main([*argv, "--floor", "0.5", "--out", str(again),
                  "--predictions", f"ca={first / 'coco' / 'sim-chips__ca.json'}",
                  "--predictions", f"region={first / 'coco' / 'sim-chips__region.json'}",
-                 "--param", "ca.threshold=1", "--param", "region.threshold=1"]) == 0  # fmt: skip
+                 "--param", "ca.threshold=1", "--param", "region.threshold=1",
+                 "--param", "ids=position"]) == 0  # fmt: skip
     a = pd.read_csv(first / "summary.csv").set_index("detector")
     b = pd.read_csv(again / "summary.csv").set_index("detector")
     objects = [c for c in a.columns if c not in ("pd_pixel", "pfa_pixel")]
@@ -262,7 +263,11 @@ def test_mask_folder_huge_ids_two_files_and_lying_headers(tmp_path):
         ('[{"image_id": 1, "bbox": [0, 0, 2, 2]}]', "entry 0 score must be a number"),
         ('[{"image_id": 1, "bbox": [0, 0, -2, 2], "score": 1}]', "negative or infinite side"),
         ('[{"bbox": [0, 0, 2, 2], "score": 1}]', "entry 0 has no image_id"),
-        ('[{"image_id": 99, "bbox": [0, 0, 2, 2], "score": 1}]', "1 image(s) not in the dataset"),
+        ('[{"image_id": 99, "bbox": [0, 0, 2, 2], "score": 1}]', "the dataset has no image ids"),
+        (
+            '[{"file_name": "nope.png", "bbox": [0, 0, 2, 2], "score": 1}]',
+            "1 image(s) not in the dataset",
+        ),
         ("[{", "is not a readable JSON file"),
         ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
         (
@@ -296,8 +301,9 @@ def test_predictions_need_one_dataset_and_known_options(tmp_path, capsys):
 
 def test_one_id_rule_for_every_format(tmp_path):
     """An integer id (COCO ``image_id``, a CSV ``image_id`` column) is the image's COCO id
-    or 1-based position in every format; a name is a name and never taken for a position
-    (on the code before, CSV ``image_id=1`` scored against the second sim-chips image)."""
+    or, declared with ids='position', its 1-based position in every format (undeclared on a
+    dataset without ids: refused); a name is a name and never taken for a position (on the
+    code before, CSV ``image_id=1`` scored against the second sim-chips image)."""
     import json
 
     import torchsar_eval as te
@@ -311,10 +317,12 @@ def test_one_id_rule_for_every_format(tmp_path):
         f"{d['image_id']},{d['bbox'][1] + d['bbox'][3] / 2 - 0.5},"
         f"{d['bbox'][0] + d['bbox'][2] / 2 - 0.5},{d['score']}\n" for d in dets))  # fmt: skip
     scoring = te.Scoring(matching=te.Matching(kind="distance", max_distance=3))
-    json_res = te.evaluate(ds, [te.predictions(saved, name="p", iou_type="bbox")], n=4,
-                           scoring=scoring, progress=False)  # fmt: skip
-    csv_res = te.evaluate(ds, [te.predictions(tmp_path / "p.csv", name="p")], n=4,
-                          scoring=scoring, progress=False)  # fmt: skip
+    with pytest.raises(EvalError, match="has no image ids.*ids='position'"):
+        te.evaluate(ds, [te.predictions(saved, name="p")], n=4, progress=False)
+    json_res = te.evaluate(ds, [te.predictions(saved, name="p", iou_type="bbox", ids="position")],
+                           n=4, scoring=scoring, progress=False)  # fmt: skip
+    csv_res = te.evaluate(ds, [te.predictions(tmp_path / "p.csv", name="p", ids="position")],
+                          n=4, scoring=scoring, progress=False)  # fmt: skip
     per_image = {d["image_id"] for d in dets}
     assert len(per_image) >= 2  # several images: a shifted id would show
     assert json_res.per_image.objects.tolist() == csv_res.per_image.objects.tolist()

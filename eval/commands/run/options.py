@@ -60,7 +60,7 @@ def _predictions(items: list[str]) -> list[tuple[str, str]]:
     return out
 
 
-SAVED_OPTIONS = ("threshold", "instances", "format", "iou_type")
+SAVED_OPTIONS = ("threshold", "instances", "format", "iou_type", "ids")
 """The options of saved predictions."""
 
 
@@ -101,7 +101,7 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> tuple[list[Detector],
         unknown = sorted(set(opts) - set(SAVED_OPTIONS))
         if unknown:
             raise EvalError(f"--param {name}.{unknown[0]}: saved predictions take only "
-                            "threshold, instances, format and iou_type")  # fmt: skip
+                            "threshold, instances, format, iou_type and ids")  # fmt: skip
         dets.append(predictions(path, name=name, **opts))
     unused = sorted(set(every) - used)
     if unused:
