@@ -348,11 +348,11 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
         observed = {n: observed_facts(rs) for n, rs in results.items()}
         write_config(tmp, "run", config(plan, datasets, windows, stats, out, observed))
+        if not swept.empty:  # before the report, which shows the chosen settings
+            swept.to_csv(tmp / SWEEP_FILE, index=False)
         files = write_run(tmp, tables, rows, plan.scoring, stats, labels, results=results,
                           rank_by=plan.rank_by)  # fmt: skip
-        if not swept.empty:
-            swept.to_csv(tmp / SWEEP_FILE, index=False)
-            files.append(SWEEP_FILE)
+        files += [SWEEP_FILE] if not swept.empty else []
         per_image = pd.read_csv(tmp / "per_image.csv")
     else:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})

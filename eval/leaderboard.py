@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from torchsar_eval.html_report.runfiles import RunFiles
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "NO_DETECTION", "RANK_METRICS", "Board",
-           "caveats", "check_rank_by", "number"]  # fmt: skip
+           "caveats", "check_rank_by", "number", "short_value"]  # fmt: skip
 
 LOWER_IS_BETTER = {
     "false_alarms_per_image", "false_alarms", "fp", "fn", "pfa_pixel", "fa_per_km2",
@@ -108,7 +108,7 @@ class Board:
             keys = sorted({k for o in others for k in o}, key=str)
             differ = [k for k in keys if len({json.dumps(o.get(k), default=str, sort_keys=True)
                                              for o in others}) > 1]  # fmt: skip
-            out.append(", ".join(f"{k}={_short(mine.get(k))}" for k in differ))
+            out.append(", ".join(f"{k}={short_value(mine.get(k))}" for k in differ))
         return out
 
     def _curve(self, run: int, detector: str) -> tuple:
@@ -145,12 +145,12 @@ class Board:
         return notes
 
 
-def _short(v: object) -> str:
+def short_value(v: object) -> str:
     """An option value as a row shows it (``1e-06``, ``16``, a path's last part).
 
     Example:
-        >>> _short(1e-6), _short(16), _short("/data/runs/preds.json"), _short(None)
-        ('1e-06', '16', 'preds.json', '–')
+        >>> [short_value(v) for v in (1e-6, 16, "/data/runs/preds.json", None)]
+        ['1e-06', '16', 'preds.json', '–']
     """
     if v is None:
         return "–"

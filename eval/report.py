@@ -50,7 +50,7 @@ __all__ = [
 
 SUMMARY_TEX = "summary.tex"
 """The run's headline tables in LaTeX (:func:`~torchsar_eval.latex.summary_tex`)."""
-TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k != "cases"}
+TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k not in ("cases", "sweep")}
 """Each table of :func:`result_tables` and its file in a run folder."""
 
 

@@ -24,6 +24,9 @@ from torchsar_eval.tables import pooled_pr
 __all__ = ["Series", "figure_svg", "first_column", "pr_label", "scr_points"]
 
 _DASHES = ["-", "--", ":", "-."]
+LEGEND_MAX = 6
+"""Most curves whose APs the PR figure lists in its own legend (the page's legend lists
+every detector's AP50 too)."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +130,7 @@ def _pr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
             ax.plot(d["recall"], d["precision"], color=s.colour, linestyle=s.dash, lw=1.4,
                     label=pr_label(s))  # fmt: skip
             drawn = True
-    if drawn:
+    if drawn and len(ax.lines) <= LEGEND_MAX:  # more: the page's shared legend has the APs
         ax.legend(loc="lower left", fontsize=7, framealpha=0.8)
     ax.set_xlim(0, 1.02)
     ax.set_ylim(0, 1.02)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import html
+import json
 import math
 from pathlib import Path
 
@@ -13,7 +14,13 @@ import pandas as pd
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import _RULES, _TERMS
-from torchsar_eval.html_report.figures import FIGURES, Series, figure_svg, first_column
+from torchsar_eval.html_report.figures import (
+    FIGURES,
+    Series,
+    figure_svg,
+    first_column,
+    pr_label,
+)
 from torchsar_eval.html_report.runfiles import RunFiles, read_png
 from torchsar_eval.labels import short_labels
 from torchsar_eval.leaderboard import (
@@ -24,6 +31,7 @@ from torchsar_eval.leaderboard import (
     Board,
     caveats,
     check_rank_by,
+    short_value,
 )
 from torchsar_eval.leaderboard import number as _num
 
@@ -339,9 +347,17 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
                       if boot.get("replicates")
                       else "none (bootstrap off)"))  # fmt: skip
     cal = opts.get("calibration")
-    facts.append(("operating point", f"calibrated on {cal.get('fraction')} of the images for "
-                  f"{cal.get('target')}, reported on the rest" if isinstance(cal, dict)
-                  else "each detector's design threshold"))  # fmt: skip
+    if isinstance(cal, dict) and cal.get("sweep"):
+        swept = ", ".join(f"{k} in {{{', '.join(map(str, v))}}}" for k, v in cal["sweep"].items())
+        point = (f"settings chosen on {cal.get('fraction')} of the images for "
+                 f"{cal.get('target')} ({swept}), each at its design threshold; reported on "
+                 "the rest (see Tuned settings)")  # fmt: skip
+    elif isinstance(cal, dict):
+        point = (f"calibrated on {cal.get('fraction')} of the images for {cal.get('target')}, "
+                 "reported on the rest")  # fmt: skip
+    else:
+        point = "each detector's design threshold"
+    facts.append(("operating point", point))
     if opts.get("despeckle"):
         facts.append(("despeckling", ", ".join(f"{k}={v}" for k, v in opts["despeckle"].items())))
     thr = (opts.get("throughput") or {}).get(dataset) or {}
@@ -359,8 +375,40 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
 
 
 def _legend(series: list[Series]) -> str:
-    items = [f"<span>{_swatch(s.detector, s.dash)}{_e(s.label)}</span>" for s in series]
+    """The figures' shared legend: each line's style and label, with its AP50."""
+    items = [f"<span>{_swatch(s.detector, s.dash)}{_e(pr_label(s))}</span>" for s in series]
     return '<div class="legend">' + "".join(items) + "</div>"
+
+
+def _tuned(board: Board) -> str:
+    """The settings a sweep chose for each detector on the calibration split, with its
+    numbers there and how many settings it tried (``sweep.csv``)."""
+    out = []
+    for run in board.runs:
+        sweep = run.table("sweep", board.dataset)
+        if sweep.empty or "chosen" not in sweep.columns:
+            continue
+        chosen = sweep[sweep["chosen"].astype(str).str.lower().isin(["true", "1"])]
+        tried = sweep.groupby("detector").size()
+        order = [d for d in _order(board, run) if d in set(chosen["detector"])]
+        rows = chosen.set_index("detector").loc[order].reset_index()
+        df = pd.DataFrame({
+            "detector": rows["detector"],
+            "chosen settings": [", ".join(f"{k}={short_value(v)}" for k, v in json.loads(o).items())
+                                for o in rows["options"]],
+            "F1 (calibration)": rows["f1"].astype(float),
+            "FA/img (calibration)": rows["false_alarms_per_image"].astype(float),
+            "settings tried": [int(tried[d]) for d in rows["detector"]],
+        })  # fmt: skip
+        title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
+        out.append(title + _table(df))
+    if not out:
+        return ""
+    return (
+        '<h3>Tuned settings</h3><p class="note">Each detector\'s setting chosen on the '
+        "calibration split (every setting tried is in sweep.csv); the leaderboard reports "
+        "it on the disjoint test split.</p>" + "".join(out)
+    )
 
 
 def _figures(board: Board, salt: str) -> str:
@@ -719,7 +767,7 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
         sections.append(
             f'<section class="dataset" id="ds-{i}"><h2 title="{_e(name)}">{_e(short[name])}</h2>'
             f"{cards}"
-            f"<h3>Leaderboard</h3>{_leaderboard(board)}"
+            f"<h3>Leaderboard</h3>{_leaderboard(board)}{_tuned(board)}"
             f"<h3>Curves</h3>{_figures(board, f'ds{i}-{_slug(name)}')}"
             f"{_ap(board)}{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"
             f"{_gallery(board)}</section>"

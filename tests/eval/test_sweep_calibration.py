@@ -111,6 +111,10 @@ def test_the_cli_writes_the_sweep_and_the_chosen_settings(tmp_path):
     chosen = json.loads(sweep[sweep.chosen].options.iloc[0])
     assert cfg["sweep"]["sim-chips"]["ca"] == chosen
     assert cfg["calibration"]["sweep"] == {"pfa": [1e-2, 1e-4], "train": [4, 8]}
+    page = (out / "report.html").read_text()
+    tuned = page.split("<h3>Tuned settings</h3>")[1].split("</table>")[0]
+    assert ", ".join(f"{k}={v:g}" for k, v in chosen.items()) in tuned
+    assert "settings chosen on 0.5 of the images for f1" in page
     assert main(["run", "--dataset", "sim-chips", "--n", "4", "--sweep", "pfa=1e-3"]) == 2
 
 
