@@ -126,9 +126,11 @@ class DetectorName:
 
 
 def detector_name(detector) -> DetectorName:
-    """What a saved state keeps of a detector (a :class:`DetectorName` is kept as is)."""
-    if isinstance(detector, DetectorName):
-        return detector
+    """What a saved state keeps of a detector (a :class:`DetectorName`, or anything without
+    a callable, is kept by its fields)."""
+    if not hasattr(detector, "fn"):
+        return DetectorName(detector.name, detector.instances, bool(getattr(detector, "saved",
+                                                                          False)))  # fmt: skip
     return DetectorName(detector.name, detector.instances,
                         bool(getattr(detector.fn, "saved_predictions", False)))  # fmt: skip
 
