@@ -43,7 +43,9 @@ __all__ = [
 ]
 
 GALLERY_CASES = 8
-"""Cases kept per kind (false alarms, misses, hits) and detector."""
+"""Worst cases kept per kind (false alarms, misses) and detector."""
+HITS = 4
+"""Typical hits kept per detector."""
 CROP = 96
 """Side of a case's crop in samples, and the least image extent it shows in pixels (a larger
 object is shown whole, resampled)."""
@@ -159,12 +161,12 @@ class Gallery:
     misses: Cases = field(default_factory=lambda: Cases("miss"))
     shapes: list = field(default_factory=list)
     spacings: list = field(default_factory=list)
-    hits: Cases = field(default_factory=lambda: Cases("hit"))
+    hits: Cases = field(default_factory=lambda: Cases("hit", HITS))
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if "hits" not in state:  # a gallery saved before hits were kept
-            self.hits = Cases("hit")
+            self.hits = Cases("hit", HITS)
 
     def __add__(self, other: Gallery) -> Gallery:
         return Gallery(self.false_alarms + other.false_alarms, self.misses + other.misses,
@@ -332,10 +334,11 @@ class _Planes:
         self._stretch: dict[int, tuple[float, float]] = {}
 
     def stretch(self, p: int, x: np.ndarray) -> tuple[float, float]:
-        """Plane ``p``'s display range in dB: its 2nd and 99.5th percentiles (on at most
-        about 2**18 samples), so that every crop of an image is drawn on one grey scale."""
+        """Plane ``p``'s display range in dB: its 2nd and 99.5th percentiles (on a regular
+        grid of about 2**14 samples), so that every crop of an image is drawn on one grey
+        scale."""
         if p not in self._stretch:
-            step = max(1, int(np.sqrt(x.size / (1 << 18))))
+            step = max(1, int(np.sqrt(x.size / (1 << 14))))
             with np.errstate(divide="ignore", invalid="ignore"):
                 db = 10 * np.log10(np.maximum(x[::step, ::step], 1e-30))
             db = db[np.isfinite(db)]

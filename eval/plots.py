@@ -29,6 +29,10 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
+LEGEND_MAX = 6
+"""Most PR curves listed with their AP in the PR panel's own legend (the figure's legend
+gives every detector's AP50 as well)."""
+
 __all__ = [
     "STYLES",
     "detector_style",
@@ -89,11 +93,14 @@ def pyplot():
     return plt
 
 
-def legend_handles(names: Iterable[str]) -> list:
-    """One legend entry per detector in its style (whether or not a panel shows it)."""
+def legend_handles(names: Iterable[str], notes: dict[str, str] | None = None) -> list:
+    """One legend entry per detector in its style (whether or not a panel shows it), with its
+    ``notes`` entry in brackets (e.g. its AP50)."""
     from matplotlib.lines import Line2D
 
-    return [Line2D([], [], label=plain(n), **detector_style(n)) for n in names]
+    notes = notes or {}
+    return [Line2D([], [], label=plain(n) + (f" ({notes[n]})" if n in notes else ""),
+                   **detector_style(n)) for n in names]  # fmt: skip
 
 
 def not_shown(left_out: Mapping[str, str]) -> str:
@@ -253,6 +260,7 @@ def roc_figure(
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
     names = list(dict.fromkeys(summary["detector"]))
     left: list[dict[str, str]] = [{}, {}, {}]
+    aps: dict[str, str] = {}
     marks = {"markevery": 0.1, "markersize": 5}
     for name in names:
         st = detector_style(name)
@@ -281,12 +289,13 @@ def roc_figure(
         else:
             axes[2].plot(p["recall"], p["precision"], label=f"{plain(name)} (AP50 {ap:.3f})",
                          **st, **marks)  # fmt: skip
+            aps[name] = f"AP50 {ap:.3f}"
     log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
     log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
     axes[0].set(xlabel="Pfa (pixel)", ylabel="Pd (pixel)")
     axes[1].set(xlabel="false alarms per image", ylabel="Pd (object)")
     axes[2].set(xlabel="recall", ylabel="precision", xlim=(0, 1.02))
-    if axes[2].lines:  # the AP of each drawn curve beside it
+    if 0 < len(axes[2].lines) <= LEGEND_MAX:  # a few curves: each one's AP beside it
         axes[2].legend(loc="lower left", fontsize=7, framealpha=0.8)
     panel_titles = ["pixel ROC", "FROC (matching rule)", "precision-recall, IoU 0.5"]
     for ax, panel, out in zip(axes, panel_titles, left, strict=True):
@@ -295,7 +304,7 @@ def roc_figure(
         titled(ax, panel, out)
     from matplotlib.lines import Line2D
 
-    handles = legend_handles(names)
+    handles = legend_handles(names, aps)  # every curve's AP50 in the figure's legend
     handles.append(Line2D([], [], color="grey", marker="o", markeredgecolor="black",
                           linestyle="none", label="design operating point"))  # fmt: skip
     fig.legend(handles=handles, loc="lower center", ncol=LEGEND_COLUMNS, fontsize=8)

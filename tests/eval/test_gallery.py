@@ -18,6 +18,7 @@ from torchsar_eval.gallery import (
     FOCUS,
     FOUND,
     GALLERY_CASES,
+    HITS,
     TRUTH,
     Cases,
     Gallery,
@@ -252,7 +253,7 @@ def test_hits_are_true_positives_drawn_at_random(reference):
     assert any(len(g.hits) for g in galleries.values())
     for g in galleries.values():
         g.settle()
-        assert len(g.hits) <= GALLERY_CASES
+        assert len(g.hits) <= HITS
         assert all(i["why"].startswith("matched") for i in g.hits.info)
         draws = [k[0] for k in g.hits.keys]
         assert draws == sorted(draws) and all(0 <= v < 1 for v in draws)

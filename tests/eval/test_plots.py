@@ -157,8 +157,10 @@ def test_the_pr_panel_names_the_detectors_it_leaves_out():
     assert ap == {"ca (AP50 0.600)", "region (AP50 0.600)"}
     assert "not shown: lognormal, g0 (AP50 = 0)" in " ".join(pr.get_title().split())
     assert "not shown" not in fig.axes[0].get_title()  # nothing left out there
-    legend = {t.get_text() for t in fig.legends[0].get_texts()}
+    legend = {t.get_text().split(" (")[0] for t in fig.legends[0].get_texts()}
     assert set(names) <= legend  # the legend still names every detector
+    with_ap = {t.get_text() for t in fig.legends[0].get_texts()}
+    assert {"ca (AP50 0.600)", "region (AP50 0.600)"} <= with_ap  # and each drawn curve's AP
     plt.close(fig)
 
 
