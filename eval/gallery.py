@@ -472,8 +472,8 @@ def render_case(image: np.ndarray, masks: np.ndarray, kind: str = "false_alarm",
         if hi > lo:
             grey = np.clip((img - lo) / (hi - lo), 0, 1)
             grey = np.round(np.nan_to_num(grey) * (_GREYS - 1)).astype(np.uint8)
-    big = np.kron(grey, np.ones((SCALE, SCALE), np.uint8))
-    bits = np.kron(masks, np.ones((SCALE, SCALE), np.uint8))
+    big = grey.repeat(SCALE, axis=0).repeat(SCALE, axis=1)
+    bits = np.asarray(masks).repeat(SCALE, axis=0).repeat(SCALE, axis=1)
     big[(bits & OUTSIDE) > 0] = _OUTSIDE
     for bit, colour in ((IGNORE, _IGNORE), (TRUTH, _TRUTH), (FOUND, _FOUND)):
         big[_ring((bits & bit) > 0, 1)] = colour
@@ -488,7 +488,7 @@ def _png(indices: np.ndarray, path: Path) -> None:
 
     im = Image.fromarray(indices, "P")
     im.putpalette(_PALETTE)
-    im.save(path, optimize=True)
+    im.save(path, compress_level=6)  # (optimize's extra passes cost more than they save)
 
 
 def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[str]:

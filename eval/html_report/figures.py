@@ -190,12 +190,13 @@ def scr_points(d: pd.DataFrame) -> list[tuple[str, np.ndarray, np.ndarray, np.nd
 
 
 def _scr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
-    """Pd at each SCR bin's mean SCR, per detector and SCR source (``measured`` dots,
-    other sources squares), with the Wilson intervals."""
+    """Pd at each SCR bin's mean SCR, per detector, with the Wilson intervals: the SCR
+    measured on the images (another source, e.g. the simulator's known SCR, only where none
+    was measured; every source is in ``scr.csv``)."""
     drawn = False
     for s in series:
         d = _rows(df, s)
-        for source, x, y, (lo, hi) in scr_points(d) if not d.empty else []:
+        for source, x, y, (lo, hi) in (scr_points(d) if not d.empty else [])[:1]:
             marker = "o" if source == "measured" else "s"
             ax.plot(x, y, marker=marker, color=s.colour, linestyle=s.dash, lw=1.4, ms=3)
             ok = np.isfinite(lo) & np.isfinite(hi)
