@@ -9,9 +9,14 @@ instance of a class with ``__call__``. A callable that also takes ``meta`` recei
 batch's per-image metadata (name, pixel spacing, dataset index) as ``meta=[dict, ...]``.
 
 :class:`Detector` wraps it with a row name, the options, the operating threshold of the
-scores it returns (``threshold``; ``None`` declares none) and whether its own instances
+scores it returns (``threshold``; ``None`` declares none), whether its own instances
 are scored (``instances="auto"``) or its statistic always goes through the discrimination
-stage (``"discriminate"``, for like-for-like comparisons). A detector resolved from a
+stage (``"discriminate"``, for like-for-like comparisons), and the scale its objects'
+scores are written on (``scale``): ``"auto"`` keeps a Detection's own statistic (a
+probability stays a probability; the operating threshold is its single design threshold)
+and falls back to ``statistic / threshold`` (operating threshold 1) only where the
+threshold varies over a batch; ``"ratio"`` always uses the latter (for a detector whose
+single threshold changes from batch to batch). A detector resolved from a
 name or an import path (:func:`torchsar_eval.registry.load`) remembers it (``ref``) and
 travels to worker processes by that reference, rebuilt there.
 """
@@ -37,6 +42,7 @@ from torchsar_eval.errors import EvalError
 __all__ = [
     "HARNESS_OPTIONS",
     "INSTANCES",
+    "SCALES",
     "Detector",
     "as_detector",
     "check_options",
@@ -45,9 +51,10 @@ __all__ = [
 ]
 
 INSTANCES = ("auto", "discriminate")
-HARNESS_OPTIONS = ("threshold", "instances")
+SCALES = ("auto", "ratio")
+HARNESS_OPTIONS = ("threshold", "instances", "scale")
 """Options the evaluator reads itself (unless the callable takes them too): the operating
-threshold of the returned scores and the instance policy."""
+threshold of the returned scores, the instance policy and the score scale."""
 
 
 def _named(fn: Callable) -> list[str] | None:
@@ -90,7 +97,8 @@ def check_options(fn: Callable, options: Mapping[str, Any], what: str) -> None:
 
 def split_options(fn: Callable, options: Mapping[str, Any]) -> tuple[dict, dict]:
     """``(passed, harness)``: the options for the callable, and the harness settings among
-    them (``threshold``, ``instances``; passed on too when the callable takes them)."""
+    them (``threshold``, ``instances``, ``scale``; passed on too when the callable takes
+    them)."""
     harness = {k: options[k] for k in HARNESS_OPTIONS if k in options}
     named = _keywords(fn) or []
     passed = {k: v for k, v in options.items() if k not in HARNESS_OPTIONS or k in named}
@@ -130,6 +138,7 @@ class Detector:
     instances: str = "auto"
     ref: str | None = None
     call_options: Mapping[str, Any] | None = None
+    scale: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or "," in self.name:
@@ -140,6 +149,9 @@ class Detector:
         if self.instances not in INSTANCES:
             raise EvalError(f"detector {self.name}: instances must be one of "
                             f"{', '.join(INSTANCES)}, got {self.instances!r}")  # fmt: skip
+        if self.scale not in SCALES:
+            raise EvalError(f"detector {self.name}: scale must be one of "
+                            f"{', '.join(SCALES)}, got {self.scale!r}")  # fmt: skip
         object.__setattr__(self, "threshold", _check_threshold(self.threshold, self.name))
 
     @property
@@ -169,7 +181,7 @@ class Detector:
 
             return load(self.ref, name=self.name, options={**self.options, **passed},
                         **{"threshold": self.threshold, "instances": self.instances,
-                           **harness})  # fmt: skip
+                           "scale": self.scale, **harness})  # fmt: skip
         check_options(self.fn, passed, f"detector {self.name}")
         call = None if self.call_options is None else dict(self.call_options)
         return replace(self, options={**self.options, **passed}, call_options=call, **harness)
@@ -229,6 +241,8 @@ class Detector:
             out["_threshold"] = self.threshold
         if self.instances != "auto":
             out["_instances"] = self.instances
+        if self.scale != "auto":
+            out["_scale"] = self.scale
         return out
 
     def __reduce__(self):
@@ -237,7 +251,7 @@ class Detector:
         from torchsar_eval.registry import load
 
         args = {"name": self.name, "options": dict(self.options), "threshold": self.threshold,
-                "instances": self.instances}  # fmt: skip
+                "instances": self.instances, "scale": self.scale}  # fmt: skip
         return (_load_kw, (load, self.ref, args))
 
 
@@ -266,8 +280,8 @@ def _default_name(obj: object) -> str:
 
 def as_detector(obj: object, name: str | None = None) -> Detector:
     """A :class:`Detector` from a detector object: a :class:`Detector` (kept, renamed if
-    ``name``) or any callable, whose ``name``, ``threshold`` and ``instances`` attributes
-    are used when present.
+    ``name``) or any callable, whose ``name``, ``threshold``, ``instances`` and ``scale``
+    attributes are used when present.
 
     Example:
         >>> as_detector(lambda x: None, name="mine").name
@@ -280,10 +294,12 @@ def as_detector(obj: object, name: str | None = None) -> Detector:
                         f"got {type(obj).__name__}")  # fmt: skip
     thr = getattr(obj, "threshold", None)
     inst = getattr(obj, "instances", "auto")
+    scale = getattr(obj, "scale", "auto")
     return Detector(
         name or _default_name(obj), obj,
         threshold=thr if isinstance(thr, int | float) and not isinstance(thr, bool) else None,
         instances=inst if inst in INSTANCES else "auto",
+        scale=scale if scale in SCALES else "auto",
     )  # fmt: skip
 
 

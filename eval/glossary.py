@@ -112,8 +112,10 @@ def glossary(summary: pd.DataFrame, scoring) -> str:
         "# Run summary",
         "",
         "Every detector goes through the same discrimination stage: " + stage + ". An "
-        "object's score is the peak of statistic / threshold over its pixels (1 = the "
-        "detector's design threshold). Operating point = every object (score > 1); "
+        "object's score is the peak of the detector's own statistic over its pixels (its "
+        "design threshold as the operating threshold, `score_threshold`; statistic / "
+        "threshold where the threshold varies over a batch). Operating point = every "
+        "object above its detector's threshold; "
         f"matching rule: {rule}.",
         "",
     ]

@@ -130,9 +130,11 @@ def load(
     options: Mapping[str, Any] | None = None,
     threshold: float | None = None,
     instances: str = "auto",
+    scale: str = "auto",
 ) -> Detector:
     """The detector a reference names (see the module docstring), with ``options``
-    overriding its defaults and the harness settings ``threshold`` / ``instances``.
+    overriding its defaults and the harness settings ``threshold`` / ``instances`` /
+    ``scale``.
 
     Example:
         >>> d = load("ca", options={"guard": 3})
@@ -142,7 +144,7 @@ def load(
     options = dict(options or {})
     if ref in BUILTIN:
         det = BUILTIN[ref].with_options(options)
-        kept = _settings(det, threshold, instances)
+        kept = _settings(det, threshold, instances, scale)
         return replace(det, name=name or ref, **kept)
     obj, default = _target(ref)
     if isinstance(obj, Detector):
@@ -160,10 +162,14 @@ def load(
         base = replace(as_detector(built), options=passed, call_options={}, **harness)
     else:
         base = as_detector(obj).with_options(options)
-    return replace(base, name=name or default, ref=ref, **_settings(base, threshold, instances))
+    kept = _settings(base, threshold, instances, scale)
+    return replace(base, name=name or default, ref=ref, **kept)
 
 
-def _settings(det: Detector, threshold: float | None, instances: str) -> dict[str, Any]:
+def _settings(
+    det: Detector, threshold: float | None, instances: str, scale: str = "auto"
+) -> dict[str, Any]:
     """The harness settings: explicit arguments over the detector's own."""
     return {"threshold": det.threshold if threshold is None else threshold,
-            "instances": det.instances if instances == "auto" else instances}  # fmt: skip
+            "instances": det.instances if instances == "auto" else instances,
+            "scale": det.scale if scale == "auto" else scale}  # fmt: skip

@@ -26,8 +26,8 @@ from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
 from torchsar.metrics.error_types import false_alarm_types
 from torchsar.metrics.scr import target_scr_db
-from torchsar.objects import ObjectRules, Objects, discriminate, normalised_score
-from torchsar.objects.discriminate import own_regions
+from torchsar.objects import ObjectRules, Objects, discriminate
+from torchsar.objects.discriminate import own_regions, single_threshold
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import Gallery
@@ -388,6 +388,7 @@ class Evaluator:
         plane): the object-level states, the per-image rows, the worst cases (with the
         planes' ``image``, when there is one to crop) and the COCO state."""
         t0 = time.perf_counter()
+        self._check_scale(obj.threshold if len(obj) else None, self.objects)
         m = match_batch(obj, gt, self.scoring.matching)
         self.measured = sorted({*self.measured, *measured_as(obj, gt, self.scoring.matching)})
         types = false_alarm_types(m, obj, gt, self.scoring.matching)
@@ -422,6 +423,8 @@ class Evaluator:
         if self.coco is not None:
             out.coco = self.coco + other.coco
             out.coco_iou_type = self.coco_iou_type or other.coco_iou_type
+        if other.objects.thresholded:
+            self._check_scale(other.objects.threshold, self.objects)
         out.objects = self.objects + other.objects
         out.seconds = self.seconds + other.seconds
         out.object_seconds = self.object_seconds + other.object_seconds
@@ -438,6 +441,20 @@ class Evaluator:
             out.gallery = self.gallery or other.gallery
         return out
 
+    def _check_scale(self, threshold: float | None, state) -> None:
+        """Refuse objects whose operating threshold differs from the one already scored
+        (a detector whose single design threshold changes between batches), naming the
+        way out."""
+        seen = state.threshold if state.thresholded else None
+        if threshold is None or seen is None or threshold == seen:
+            return
+        raise EvalError(f"detector {self.detector.name}: its operating threshold changed from "
+                        f"{seen:.6g} to {threshold:.6g} between batches, so its scores would "
+                        "change scale: declare one for its objects (--param "
+                        f"{self.detector.name}.threshold=T) or score its statistic on "
+                        f"statistic / threshold (--param {self.detector.name}.scale=ratio; "
+                        "Python: Detector(..., scale='ratio'))")  # fmt: skip
+
     def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:
         """The scored objects of one batch: the detector's own instances (``Objects``, or a
         Detection's ``labels``), else (or when the run or the detector asks for it) the
@@ -451,21 +468,32 @@ class Evaluator:
                 raise EvalError(f"detector {self.detector.name} returns {out.geometry}es, "
                                 "which the discrimination stage cannot use: score its own "
                                 "instances ({opt:instances}'auto')")  # fmt: skip
-            statistic, threshold = view[0], 1.0 if out.threshold is not None else -np.inf
+            statistic = view[0]
+            threshold = -np.inf if out.threshold is None else out.threshold
         else:
             if own and out.labels is not None:
-                return own_regions(out.statistic, out.threshold, out.labels)
+                scale = self.score_scale(out.threshold)
+                return own_regions(out.statistic, out.threshold, out.labels, scale=scale)
             statistic, threshold = out.statistic, out.threshold
         rules = self.scoring.rules
         area = pixel_areas(batch) if rules.units == "m2" else None
-        return discriminate(statistic, threshold, rules=rules, pixel_area=area)
+        return discriminate(statistic, threshold, rules=rules, pixel_area=area,
+                            scale=self.score_scale(threshold))  # fmt: skip
+
+    def score_scale(self, threshold) -> str:
+        """The scale of the objects the discrimination stage makes of a statistic with this
+        threshold: the detector's own statistic when the threshold is one finite value
+        (unless the detector asks for ``scale="ratio"``), else statistic / threshold."""
+        if self.detector.scale == "ratio" or single_threshold(threshold) is None:
+            return "ratio"
+        return "statistic"
 
 
 def pixel_view(out: Detection | Objects) -> tuple[Tensor, Tensor] | None:
     """``(statistic, mask)`` of a detector output for the pixel metrics: a Detection's own,
-    or for objects with masks each pixel's best normalised object score (``-inf`` outside
-    every object; the mask: pixels of objects above the operating threshold, or of every
-    object when none is declared); ``None`` for boxes and points."""
+    or for objects with masks each pixel's best object score (on the objects' own scale;
+    ``-inf`` outside every object; the mask: pixels of objects above the operating
+    threshold, or of every object when none is declared); ``None`` for boxes and points."""
     if isinstance(out, Detection):
         return out.statistic, out.mask
     sparse = object_pixels(out)
@@ -480,21 +508,19 @@ def pixel_view(out: Detection | Objects) -> tuple[Tensor, Tensor] | None:
 
 
 def object_pixels(out: Objects) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """The pixels the objects cover: ``(flat index, best normalised score, level)`` with
-    ``level`` the operating point (1, or ``-inf`` when no threshold is declared); ``None``
-    for objects without masks."""
+    """The pixels the objects cover: ``(flat index, best score, level)`` with ``level`` the
+    operating threshold (``-inf`` when none is declared); ``None`` for objects without
+    masks."""
     if not out.has_masks:
         return None
     owner, idx = out.pixel_lists()
     h, w = out.shape
     best = np.full(out.planes * h * w, -np.inf)
-    score = out.score if out.threshold is None else normalised_score(
-        torch.from_numpy(out.score), out.threshold).numpy()  # fmt: skip
-    np.maximum.at(best, idx, score[owner])
+    np.maximum.at(best, idx, out.score[owner])
     covered = np.zeros(best.size, bool)
     covered[idx] = True
     idx = np.flatnonzero(covered)
-    return idx, best[idx], 1.0 if out.threshold is not None else -np.inf
+    return idx, best[idx], -np.inf if out.threshold is None else out.threshold
 
 
 def _sparse_pixel_metrics(res: DetectorResult, out: Objects, batch: dict) -> bool:

@@ -28,7 +28,7 @@ from typing import Any
 import pandas as pd
 
 from torchsar_eval.calibrate import Target
-from torchsar_eval.detector import Detector
+from torchsar_eval.detector import HARNESS_OPTIONS, Detector
 from torchsar_eval.errors import EvalError
 
 __all__ = ["SWEEP_COLUMNS", "Setting", "as_frame", "check_sweep", "choose", "sweep_table",
@@ -88,7 +88,7 @@ def variants(det: Detector, sweep: Mapping[str, list]) -> list[Detector]:
     out = []
     for k, values in enumerate(grid):
         point = dict(zip(keys, values, strict=True))
-        harness = {o: point.pop(o) for o in ("threshold", "instances") if o in point}
+        harness = {o: point.pop(o) for o in HARNESS_OPTIONS if o in point}
         tried = det.with_options(point) if point else det
         out.append(replace(tried, name=f"{det.name}@{k}", **harness))
     return out
@@ -96,7 +96,12 @@ def variants(det: Detector, sweep: Mapping[str, list]) -> list[Detector]:
 
 def _point(det: Detector, keys: list[str]) -> dict[str, Any]:
     """The swept options of variant ``det``."""
-    got = {**det.options, "threshold": det.threshold, "instances": det.instances}
+    got = {
+        **det.options,
+        "threshold": det.threshold,
+        "instances": det.instances,
+        "scale": det.scale,
+    }
     return {k: got.get(k) for k in keys}
 
 

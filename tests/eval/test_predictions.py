@@ -16,6 +16,7 @@ import torch
 from skimage import io as skio
 
 import torchsar_eval as te
+from torchsar.cfar.design import threshold
 from torchsar_eval.cli import main
 from torchsar_eval.errors import EvalError
 
@@ -138,20 +139,25 @@ def test_scored_file_equals_pycocotools_sar_and_coco_modes(tmp_path, iou_type, s
 
 
 def test_round_trip_through_export_coco(tmp_path):
-    """A built-in detector's exported detections, scored as a file, give its summary row
-    (object level; a CFAR's pixel metrics come from its statistic, the file's from its
-    objects' masks, the same for the region CFAR whose masks are its regions)."""
+    """A built-in detector's exported detections, scored as a file with the operating
+    threshold its summary row states, give its summary row (object level; a CFAR's pixel
+    metrics come from its statistic, the file's from its objects' masks, the same for the
+    region CFAR whose masks are its regions). The scores are written on the detectors' own
+    statistic, with their design thresholds beside them."""
     first = tmp_path / "direct"
     argv = ["run", "--dataset", "sim-chips", "--n", "12", "--no-progress", "--bootstrap", "30"]
     assert main([*argv, "--detectors", "ca,region", "--floor", "0.5", "--export-coco",
                  "--out", str(first)]) == 0  # fmt: skip
+    a = pd.read_csv(first / "summary.csv").set_index("detector")
+    thr = {d: float(a.loc[d, "score_threshold"]) for d in ("ca", "region")}
+    assert thr["ca"] == pytest.approx(threshold("ca", guard=2, train=4, pfa=1e-3), rel=1e-6)
     again = tmp_path / "again"
     assert main([*argv, "--floor", "0.5", "--out", str(again),
                  "--predictions", f"ca={first / 'coco' / 'sim-chips__ca.json'}",
                  "--predictions", f"region={first / 'coco' / 'sim-chips__region.json'}",
-                 "--param", "ca.threshold=1", "--param", "region.threshold=1",
+                 "--param", f"ca.threshold={thr['ca']!r}",
+                 "--param", f"region.threshold={thr['region']!r}",
                  "--param", "ids=position"]) == 0  # fmt: skip
-    a = pd.read_csv(first / "summary.csv").set_index("detector")
     b = pd.read_csv(again / "summary.csv").set_index("detector")
     objects = [c for c in a.columns if c not in ("pd_pixel", "pfa_pixel")]
     pd.testing.assert_frame_equal(a[objects], b[objects])

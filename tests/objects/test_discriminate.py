@@ -112,3 +112,43 @@ def test_batch_invariance_empty_batch_and_errors():
                 {"units": "acres"}):  # fmt: skip
         with pytest.raises(OptionError):
             ObjectRules(**bad)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    thr=st.sampled_from([0.5, 3.0, 1e-9, 0.0, -2.0]),
+    closing=st.sampled_from([0, 1]),
+)
+def test_statistic_scale_keeps_the_objects_and_scores_their_peak(seed, thr, closing):
+    """``scale="statistic"``: the same objects as the ratio scale, each scored by the peak
+    of the statistic over its own pixels (a slow reference per object), operating
+    threshold the design threshold; the two scales rank the objects alike."""
+    rng = np.random.default_rng(seed)
+    stat = torch.as_tensor(rng.normal(size=(2, 1, 14, 13)) * 3 + thr)
+    rules = ObjectRules(closing=closing, min_area=1, floor=0.5)
+    ratio = discriminate(stat, thr, rules=rules)
+    own = discriminate(stat, thr, rules=rules, scale="statistic")
+    assert own.threshold == thr and ratio.threshold == 1.0
+    assert np.array_equal(own.labels, ratio.labels) and np.array_equal(own.area, ratio.area)
+    for k in range(len(own)):
+        pixels = own.labels[own.plane[k]] == k + 1
+        inside = stat[own.plane[k], 0].numpy()[pixels]
+        ratio_px = normalised_score(torch.as_tensor(inside), thr).numpy()
+        # closing-added pixels below the floor carry no score in either scale
+        scored = ratio_px > rules.floor
+        assert own.score[k] == inside[scored].max()
+    # a strictly increasing map of each other: the same order, ties included
+    assert np.array_equal(np.argsort(-own.score, kind="stable"),
+                          np.argsort(-ratio.score, kind="stable"))  # fmt: skip
+
+
+def test_statistic_scale_needs_one_threshold():
+    stat = torch.rand(2, 1, 8, 8)
+    per_image = torch.tensor([0.5, 0.6]).reshape(2, 1, 1, 1)
+    with pytest.raises(OptionError, match="one finite threshold"):
+        discriminate(stat, per_image, scale="statistic")
+    with pytest.raises(OptionError, match="scale"):
+        discriminate(stat, 0.5, scale="probability")
+    same = torch.full((2, 1, 1, 1), 0.5)  # every entry equal: one threshold
+    assert discriminate(stat, same, scale="statistic").threshold == 0.5
