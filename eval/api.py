@@ -15,7 +15,7 @@ import os
 import tempfile
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,6 +30,7 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import observed_facts
 from torchsar_eval.html_report import DEFAULT_RANK, check_rank_by
 from torchsar_eval.output import claim, file_slugs, result_dir, write_config
+from torchsar_eval.overlays import collect_overlays, overlay_indices, parse_overlay
 from torchsar_eval.plots import slug
 from torchsar_eval.result import Scoring
 from torchsar_eval.resume import check_resumable, fingerprint
@@ -116,6 +117,7 @@ class _Plan:
     window_units: str
     export_coco: bool
     seed: int
+    overlay: int | tuple[str, ...] | None = None
     rank_by: str = DEFAULT_RANK
 
 
@@ -189,6 +191,7 @@ def evaluate(
     despeckle: Mapping[str, Any] | None = None,
     window_units: str = "px",
     export_coco: bool = False,
+    overlay: int | Sequence[str] | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
     resume: bool = False,
@@ -220,6 +223,9 @@ def evaluate(
         window_units: ``"px"`` or ``"m"``: the detectors' ``guard`` / ``train`` options in
             metres, converted per dataset with its pixel spacing.
         export_coco: write the ground truth and detections as COCO JSON (needs ``out``).
+        overlay: draw whole images with every detector's detections and the ground truth
+            (``overlays/``, and in the report; needs ``out``): the first ``N`` images of
+            the reported split, or the images named (name, file name or stem).
         out: the run folder to write (tables, plots, ``config.json``); ``None`` writes
             nothing. The folder is published whole or not at all.
         overwrite: replace a previous run in ``out``.
@@ -252,14 +258,16 @@ def evaluate(
     execution = _cap_workers(execution)
     if window_units not in ("px", "m"):
         raise EvalError(f"{{opt:window_units}}{window_units!r}: expected 'px' or 'm'")
-    if (resume or overwrite or discard or export_coco) and out is None:
+    overlay = parse_overlay(overlay)
+    if (resume or overwrite or discard or export_coco or overlay) and out is None:
         wanted = next(
             k
             for k, v in [
                 ("resume", resume),
                 ("overwrite", overwrite),
                 ("discard", discard),
-                ("export_coco", True),
+                ("export_coco", export_coco),
+                ("overlay", True),
             ]
             if v
         )
@@ -269,7 +277,7 @@ def evaluate(
         scoring=scoring or Scoring(), execution=execution, calibration=calibration,
         preprocess=preprocess, despeckle=None if despeckle is None else dict(despeckle),
         window_units=window_units, export_coco=export_coco, seed=seed,
-        rank_by=check_rank_by(rank_by),
+        rank_by=check_rank_by(rank_by), overlay=overlay,
     )  # fmt: skip
     named = _datasets(datasets, n, seed)
     with ExitStack() as stack:
@@ -327,7 +335,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
     check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
-    results, stats, windows = {}, {}, {}
+    results, stats, windows, overlays = {}, {}, {}, {}
     labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
     for name, ds in datasets.items():
         dets = [_bound(d, ds, name) for d in plan.detectors]
@@ -337,6 +345,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         results[name], stats[name] = evaluate_dataset(
             name, ds, dets, plan, tmp / "shards" / labels[name], persist=out is not None
         )
+        overlays[name] = stats[name].pop("overlays")
         exporter = stats[name].pop("export")
         if exporter is not None:
             exporter.write(tmp / "coco", labels[name])
@@ -351,7 +360,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         if not swept.empty:  # before the report, which shows the chosen settings
             swept.to_csv(tmp / SWEEP_FILE, index=False)
         files = write_run(tmp, tables, rows, plan.scoring, stats, labels, results=results,
-                          rank_by=plan.rank_by)  # fmt: skip
+                          rank_by=plan.rank_by, overlays=overlays)  # fmt: skip
         files += [SWEEP_FILE] if not swept.empty else []
         per_image = pd.read_csv(tmp / "per_image.csv")
     else:
@@ -459,6 +468,7 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     indices = list(range(len(ds)))
     _note_idle_workers(name, len(indices), ex)
     default_class = _default_class(ds) if plan.scoring.coco_compatible else "target"
+    source = ds  # the images themselves, for overlays
     if plan.preprocess is None and not any(d.needs_images for d in detectors):
         ds = TruthOnly(ds)  # saved predictions only: no image is decoded
     if ex.skip_bad:
@@ -485,6 +495,9 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
         else:
             tuned, calib_counts = shards(calib, state / "calibration")
             chosen = [choose_threshold(r.objects, target) for r in tuned]
+    to_draw = []  # checked before the run: a name that is not there stops it now
+    if plan.overlay and persist:
+        to_draw = overlay_indices(source, plan.overlay, indices, name)
     results, counts = shards(indices, state / "test", plan.export_coco)
     for r, det in zip(results, detectors, strict=True):
         r.detector = det  # saved shards keep only its name
@@ -492,13 +505,16 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     for r, t in zip(results, chosen or [], strict=False):
         if t is not DESIGN:  # a swept detector reports at its chosen setting's design point
             r.choose(t)
+    drawn = collect_overlays(name, source, results, to_draw, plan.scoring,
+                             preprocess=plan.preprocess, device=ex.device,
+                             default_class=default_class)  # fmt: skip
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)
     scored = counts.pop("scored_images") + calib_counts["scored_images"]
     reused = counts.pop("reused_images") + calib_counts["reused_images"]
     stats = {"images": len(indices), "scored": scored, "reused": reused,
-             "wall_s": wall, **counts, "export": exporter,
+             "wall_s": wall, **counts, "export": exporter, "overlays": drawn,
              "skipped_items": [{"file": f, "error": e} for f, e in bad],
              "images_per_s": scored / wall if scored and wall > 0 else float("nan")}  # fmt: skip
     if swept is not None:

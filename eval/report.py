@@ -19,6 +19,7 @@ from torchsar_eval.html_report import DEFAULT_RANK, REPORT_FILE, write_report
 from torchsar_eval.html_report.runfiles import RUN_TABLES, read_run
 from torchsar_eval.latex import summary_tex
 from torchsar_eval.leaderboard import LOWER_IS_BETTER, Board, caveats
+from torchsar_eval.overlays import write_overlays
 from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
@@ -50,7 +51,7 @@ __all__ = [
 
 SUMMARY_TEX = "summary.tex"
 """The run's headline tables in LaTeX (:func:`~torchsar_eval.latex.summary_tex`)."""
-TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k not in ("cases", "sweep")}
+TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k not in ("cases", "sweep", "overlays")}
 """Each table of :func:`result_tables` and its file in a run folder."""
 
 
@@ -208,11 +209,13 @@ def write_run(
     *,
     results: dict | None = None,
     rank_by: str = DEFAULT_RANK,
+    overlays: dict | None = None,
 ) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names. ``per_image``
     is streamed to ``per_image.csv`` (memory independent of the dataset size). With the
     merged ``results`` (``{dataset: [DetectorResult]}``), each detector's worst cases go to
-    ``gallery/``; last, ``report.html`` is built from the folder's files (and its
+    ``gallery/``; the ``overlays`` (``{dataset: [Overlay]}``) to ``overlays/``; last,
+    ``report.html`` is built from the folder's files (and its
     ``config.json``, when written first), its leaderboards ranked by ``rank_by``."""
     written = [f for k, f in TABLE_FILES.items() if k != "coco" or not tables[k].empty]
     for key, fname in TABLE_FILES.items():
@@ -246,5 +249,7 @@ def write_run(
         )  # fmt: skip
     if results is not None:
         files += write_gallery(tmp, results, labels)
+    if overlays:
+        files += write_overlays(tmp, overlays, labels)
     write_report(tmp, tmp / REPORT_FILE, rank_by=rank_by)
     return [*files, REPORT_FILE]

@@ -67,6 +67,11 @@ def _svg(fig: plt.Figure, salt: str, label: str) -> str:
     return re.sub(r"url\(#([^)]+)\)", lambda m: f"url(#{pre}{m.group(1)})", text)
 
 
+def _id(text: str) -> str:
+    """``text`` as a part of an element id."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "-", text)
+
+
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
 """Tick labels as plain text (``1e-05``, ``0.1``): no math typesetting, quick to draw."""
 
@@ -198,7 +203,8 @@ def _scr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
         d = _rows(df, s)
         for source, x, y, (lo, hi) in (scr_points(d) if not d.empty else [])[:1]:
             marker = "o" if source == "measured" else "s"
-            ax.plot(x, y, marker=marker, color=s.colour, linestyle=s.dash, lw=1.4, ms=3)
+            (line,) = ax.plot(x, y, marker=marker, color=s.colour, linestyle=s.dash, lw=1.4, ms=3)
+            line.set_gid(f"scr-line-{_id(s.label)}")  # the page's tests find the points by it
             ok = np.isfinite(lo) & np.isfinite(hi)
             err = [np.maximum(y[ok] - lo[ok], 0.0), np.maximum(hi[ok] - y[ok], 0.0)]
             ax.errorbar(x[ok], y[ok], yerr=err, fmt="none",

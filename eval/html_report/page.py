@@ -108,6 +108,8 @@ figure{margin:0}
 .case img{width:160px;height:160px;image-rendering:pixelated;border:1px solid var(--line);
 display:block}.case figcaption{max-width:160px}
 .kind{font-weight:600;font-size:12px;margin:6px 0 2px}
+.overlay{width:316px;font-size:11px;line-height:1.3;overflow-wrap:anywhere;min-width:0}
+.overlay img{width:308px;height:auto;border:1px solid var(--line);display:block}
 img.other{max-width:100%;height:auto;border:1px solid var(--line)}
 .heat{font-variant-numeric:tabular-nums}
 footer{margin-top:36px;padding:12px 20px 28px;border-top:1px solid var(--line);font-size:12px}
@@ -705,6 +707,44 @@ def _gallery(board: Board) -> str:
     )
 
 
+def _overlays(board: Board) -> str:
+    """Each drawn image in a row of its detectors' overlays (leaderboard order)."""
+    out = []
+    for run in board.runs:
+        df = run.table("overlays", board.dataset)
+        if df.empty or not {"detector", "image", "file"} <= set(df.columns):
+            continue
+        order = {d: k for k, d in enumerate(_order(board, run))}
+        for image, rows in df.groupby("image", sort=False):
+            rows = rows.sort_values("detector", key=lambda c: c.map(order).fillna(len(order)))
+            figs = []
+            for _, r in rows.iterrows():
+                uri = _png_uri(run.folder, str(r["file"]))
+                if uri is None:
+                    continue
+                det = str(r["detector"])
+                label = det if len(board.runs) == 1 else f"{det} ({run.name})"
+                n, found = int(_num(r.get("targets"))), int(_num(r.get("found")))
+                fa = int(_num(r.get("false_alarms")))
+                thr = _num(r.get("threshold"))
+                at = "" if math.isnan(thr) else f" · threshold {thr:.4g}"
+                figs.append(
+                    f'<figure class="overlay"><img src="{uri}" alt="{_e(det)} on {_e(image)}">'
+                    f"<figcaption>{_swatch(det)}<b>{_e(label)}</b>: {found} of {n} targets "
+                    f"found, {fa} false alarm{'s' * (fa != 1)}{at}</figcaption></figure>"
+                )
+            if figs:
+                out.append(f'<div class="kind">{_e(str(image))}</div>'
+                           f'<div class="cases">{"".join(figs)}</div>')  # fmt: skip
+    if not out:
+        return ""
+    return (
+        '<h3>Whole images</h3><p class="note">Each detector at its reported operating '
+        "point. Green: targets found; orange (thick): targets missed; cyan: detections "
+        "matching a target; magenta: false alarms; yellow: don't-care regions.</p>" + "".join(out)
+    )
+
+
 def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:
     if len(runs) == 1:
         run = runs[0]
@@ -770,7 +810,7 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
             f"<h3>Leaderboard</h3>{_leaderboard(board)}{_tuned(board)}"
             f"<h3>Curves</h3>{_figures(board, f'ds{i}-{_slug(name)}')}"
             f"{_ap(board)}{_paired(board)}{_errors(board)}{_breakdown(board)}{_coco(board)}"
-            f"{_gallery(board)}</section>"
+            f"{_gallery(board)}{_overlays(board)}</section>"
         )
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'

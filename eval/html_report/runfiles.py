@@ -34,6 +34,7 @@ RUN_TABLES = {
     "errors": "errors.csv",
     "paired": "paired.csv",
     "cases": "gallery/cases.csv",
+    "overlays": "overlays/overlays.csv",
     "sweep": "sweep.csv",
 }
 """The files a report reads (all optional but ``summary.csv``)."""

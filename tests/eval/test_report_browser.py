@@ -185,3 +185,49 @@ def test_the_compare_page_fits_and_says_what_each_row_measured(compared, tmp_pat
                 b[3] <= a[1] + 0.5, (a, b)  # fmt: skip
     for tile, caption, _ in r["cases"]:  # each caption inside its tile
         assert tile[0] - 0.5 <= caption[0] and caption[2] <= tile[2] + 0.5
+
+
+SCR_PROBE = """<script>
+window.addEventListener("load", () => {
+  const mid = el => { const b = el.getBoundingClientRect(); return (b.left + b.right) / 2; };
+  const svg = [...document.querySelectorAll("svg.fig")].find(
+    s => (s.getAttribute("aria-label") || "").startsWith("Pd vs SCR"));
+  const ticks = [...svg.querySelectorAll('g[id*="xtick_"]')].map(
+    g => [mid(g.querySelector("use")), g.querySelector("text").textContent]);
+  const lines = {};
+  for (const g of svg.querySelectorAll('g[id*="scr-line-"]'))
+    lines[g.id.split("scr-line-")[1]] = [...g.querySelectorAll("use")].map(mid);
+  const pre = document.createElement("pre");
+  pre.id = "probe";
+  pre.textContent = JSON.stringify({ticks, lines});
+  document.body.appendChild(pre);
+});
+</script>"""
+
+
+def test_scr_points_sit_at_their_bins_mean_scr(compared, tmp_path):
+    """The Pd-vs-SCR markers as the browser lays them out, read back in dB through the
+    axis' own tick marks, are each detector's bins' mean SCR from ``scr.csv``."""
+    import pandas as pd
+
+    run = compared.parent / "a"
+    probe = tmp_path / "probe.html"
+    probe.write_text((run / "report.html").read_text().replace("<head>", "<head>" + SCR_PROBE, 1))
+    done = _chromium(tmp_path, "--window-size=1366,2600", "--dump-dom", probe.as_uri())
+    found = re.search(r'<pre id="probe">(.*?)</pre>', done.stdout, re.S)
+    assert found, done.stderr[-2000:]
+    r = json.loads(found.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    px = np.array([t[0] for t in r["ticks"]])
+    db = np.array([float(t[1].replace("\u2212", "-")) for t in r["ticks"]])
+    slope, offset = np.polyfit(db, px, 1)  # screen x of a dB value on this axis
+    assert np.abs(slope * db + offset - px).max() < 0.5  # a linear axis
+    scr = pd.read_csv(run / "scr.csv")
+    measured = scr[scr["source"] == "measured"]
+    drawn = measured.dropna(subset=["pd"])
+    assert set(r["lines"]) == set(drawn["detector"]) == {"ca", "boxes", "points"}
+    for det, xs in r["lines"].items():
+        want = np.sort(drawn[drawn["detector"] == det]["scr_mean_db"].to_numpy())
+        got = np.sort((np.array(xs) - offset) / slope)
+        assert got.size == want.size > 0, det
+        # within a tenth of a dB (a fraction of a screen pixel at this axis' scale)
+        np.testing.assert_allclose(got, want, atol=max(0.1, 1 / abs(slope)))

@@ -116,6 +116,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "ground truth and results with scores) for re-scoring with pycocotools",
     )
     p.add_argument(
+        "--overlay",
+        metavar="N|NAMES",
+        default=None,
+        help="draw whole images with every detector's detections over the ground truth "
+        "(overlays/<dataset>/<detector>/<image>.png, and in the report): the first N images "
+        "of the reported split, or the images named (comma-separated names, file names or "
+        "stems)",
+    )
+    p.add_argument(
         "--workers",
         type=int,
         default=1,
@@ -334,6 +343,7 @@ def run(args: argparse.Namespace) -> int:
         despeckle=None if args.despeckle is None else {"filter": args.despeckle, **despeckle_opts},
         window_units=args.window_units,
         export_coco=args.export_coco,
+        overlay=args.overlay,
         out=args.out,
         overwrite=args.overwrite,
         resume=args.resume,
