@@ -64,6 +64,9 @@ _TERMS = [
      "bootstrap replicates where a metric was undefined (left out of the variance)"),
     ("mean_iou, fragmentation", "mean IoU of the matched pairs; objects touching each "
      "found target"),
+    ("score_threshold", "the operating threshold on the detector's own score scale (a "
+     "statistic's design threshold, a declared or a calibrated one): objects scoring above "
+     "it count at the operating point; -inf: every object counts"),
     ("ms_per_image, object_ms_per_image", "detector time (incl. despeckling); object "
      "stage + matching time"),
 ]  # fmt: skip
