@@ -81,9 +81,17 @@ class Results:
     errors = _table("errors", "False alarms per type, misses (``errors.csv``).")
     paired = _table("paired", "Paired differences against the best (``paired.csv``).")
 
-    def __init__(self, tables: Mapping[str, pd.DataFrame], *, per_image: pd.DataFrame,
-                 states: dict[str, list], stats: dict[str, dict], out: Path | None = None,
-                 files: Iterable[str] = (), sweep: pd.DataFrame | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        tables: Mapping[str, pd.DataFrame],
+        *,
+        per_image: pd.DataFrame,
+        states: dict[str, list],
+        stats: dict[str, dict],
+        out: Path | None = None,
+        files: Iterable[str] = (),
+        sweep: pd.DataFrame | None = None,
+    ) -> None:
         self._tables = tables
         self.sweep = sweep_frame({}) if sweep is None else sweep
         self.per_image = per_image
@@ -134,8 +142,10 @@ def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     elif isinstance(datasets, Iterable):
         items = [(d if isinstance(d, str) else getattr(d, "name", None), d) for d in datasets]
     else:
-        raise EvalError(f"{{opt:datasets}}{datasets!r}: expected a dataset name, a dataset or "
-                        "a list or dict of them")  # fmt: skip
+        raise EvalError(
+            f"{{opt:datasets}}{datasets!r}: expected a dataset name, a dataset or "
+            "a list or dict of them"
+        )
     if n is not None and (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_N):
         raise EvalError(f"{{opt:n}}{n!r}: must be an integer from 1 to {MAX_N:,}")
     out: dict[str, Dataset] = {}
@@ -161,14 +171,16 @@ def _detectors(detectors: object) -> list[Detector]:
     elif isinstance(detectors, Iterable):
         items = [(None, d) for d in detectors]
     else:
-        raise EvalError(f"{{opt:detectors}}{detectors!r}: expected a detector, a name or a "
-                        "list or dict of them")  # fmt: skip
+        raise EvalError(
+            f"{{opt:detectors}}{detectors!r}: expected a detector, a name or a list or dict of them"
+        )
     out = [load(d, name=name) if isinstance(d, str) else as_detector(d, name) for name, d in items]
     names = [d.name for d in out]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise EvalError(f"{{opt:detectors}} names {', '.join(twice)} more than once: give each "
-                        "its own name")  # fmt: skip
+        raise EvalError(
+            f"{{opt:detectors}} names {', '.join(twice)} more than once: give each its own name"
+        )
     if not out:
         raise EvalError("{opt:detectors} is empty: give at least one detector")
     return out
@@ -176,8 +188,9 @@ def _detectors(detectors: object) -> list[Detector]:
 
 def _check_type(value: object, kind: type, name: str) -> None:
     if value is not None and not isinstance(value, kind):
-        raise EvalError(f"{{opt:{name}}}{value!r}: expected a torchsar_eval.{kind.__name__} "
-                        "or None")  # fmt: skip
+        raise EvalError(
+            f"{{opt:{name}}}{value!r}: expected a torchsar_eval.{kind.__name__} or None"
+        )
 
 
 def evaluate(
@@ -274,11 +287,17 @@ def evaluate(
         raise EvalError(f"{{opt:{wanted}}} needs {{opt:out}}FOLDER")
     plan = _Plan(
         detectors=_detectors(list(BUILTIN.values()) if detectors is None else detectors),
-        scoring=scoring or Scoring(), execution=execution, calibration=calibration,
-        preprocess=preprocess, despeckle=None if despeckle is None else dict(despeckle),
-        window_units=window_units, export_coco=export_coco, seed=seed,
-        rank_by=check_rank_by(rank_by), overlay=overlay,
-    )  # fmt: skip
+        scoring=scoring or Scoring(),
+        execution=execution,
+        calibration=calibration,
+        preprocess=preprocess,
+        despeckle=None if despeckle is None else dict(despeckle),
+        window_units=window_units,
+        export_coco=export_coco,
+        seed=seed,
+        rank_by=check_rank_by(rank_by),
+        overlay=overlay,
+    )
     named = _datasets(datasets, n, seed)
     with ExitStack() as stack:
         if out is None:
@@ -298,8 +317,11 @@ def _cap_workers(ex: Execution) -> Execution:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     cores = cores or 1
     if ex.engine == "local" and ex.workers > cores:
-        warnings.warn(f"{ex.workers} workers are more than this machine's {cores} cores: "
-                      f"using {cores}", UserWarning, stacklevel=3)  # fmt: skip
+        warnings.warn(
+            f"{ex.workers} workers are more than this machine's {cores} cores: using {cores}",
+            UserWarning,
+            stacklevel=3,
+        )
         return replace(ex, workers=cores)
     return ex
 
@@ -320,10 +342,13 @@ def _note_idle_workers(name: str, images: int, ex: Execution) -> None:
     (a shard is one worker's unit of work)."""
     shards = -(-images // ex.shard_size)
     if ex.engine == "local" and ex.workers > 1 and shards < ex.workers:
-        warnings.warn(f"dataset {name}: {images} images make {shards} shard(s) of at most "
-                      f"{ex.shard_size}, so only {shards} of the {ex.workers} workers have "
-                      "work; a smaller --shard-size spreads it", UserWarning,
-                      stacklevel=4)  # fmt: skip
+        warnings.warn(
+            f"dataset {name}: {images} images make {shards} shard(s) of at most "
+            f"{ex.shard_size}, so only {shards} of the {ex.workers} workers have "
+            "work; a smaller --shard-size spreads it",
+            UserWarning,
+            stacklevel=4,
+        )
 
 
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
@@ -359,16 +384,31 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
         write_config(tmp, "run", config(plan, datasets, windows, stats, out, observed))
         if not swept.empty:  # before the report, which shows the chosen settings
             swept.to_csv(tmp / SWEEP_FILE, index=False)
-        files = write_run(tmp, tables, rows, plan.scoring, stats, labels, results=results,
-                          rank_by=plan.rank_by, overlays=overlays)  # fmt: skip
+        files = write_run(
+            tmp,
+            tables,
+            rows,
+            plan.scoring,
+            stats,
+            labels,
+            results=results,
+            rank_by=plan.rank_by,
+            overlays=overlays,
+        )
         files += [SWEEP_FILE] if not swept.empty else []
         per_image = pd.read_csv(tmp / "per_image.csv")
     else:
         rows = per_image_rows({n: shard_rows(f) for n, f in folders.items()})
         per_image = pd.DataFrame(list(rows), columns=PER_IMAGE_COLUMNS)
-    return Results(tables, per_image=per_image, states=results, stats=stats, out=out,
-                   files=[*files, "config.json"] if out is not None else [],
-                   sweep=swept)  # fmt: skip
+    return Results(
+        tables,
+        per_image=per_image,
+        states=results,
+        stats=stats,
+        out=out,
+        files=[*files, "config.json"] if out is not None else [],
+        sweep=swept,
+    )
 
 
 def _bound(det: Detector, ds: Dataset, name: str) -> Detector:
@@ -377,8 +417,9 @@ def _bound(det: Detector, ds: Dataset, name: str) -> Detector:
     return det if bind is None else replace(det, fn=bind(ds, name))
 
 
-def config(plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path,
-           observed: dict | None = None) -> dict:  # fmt: skip
+def config(
+    plan: _Plan, datasets: dict, windows: dict, stats: dict, out: Path, observed: dict | None = None
+) -> dict:
     """The ``config.json`` record of a run (``observed``: per dataset, the image sizes and
     pixel spacings the images had)."""
     ex, cal = plan.execution, plan.calibration
@@ -410,16 +451,21 @@ def windows_in_pixels(name: str, ds, detectors: list[Detector]) -> list[Detector
     dataset's pixel spacing (the mean of its row and column spacing, read from item 0)."""
     spacing = as_dict(ds[0])["meta"].get("pixel_spacing") if len(ds) else None
     if spacing is None:
-        raise EvalError(f"{{opt:window_units}}'m' needs the pixel spacing of {name}: declare "
-                        "it with ?spacing=METRES")  # fmt: skip
+        raise EvalError(
+            f"{{opt:window_units}}'m' needs the pixel spacing of {name}: declare "
+            "it with ?spacing=METRES"
+        )
     step = (float(spacing[0]) + float(spacing[1])) / 2
     out = []
     for det in detectors:
-        conv = {k: round(float(det.options[k]) / step) for k in ("guard", "train")
-                if k in det.options}  # fmt: skip
+        conv = {
+            k: round(float(det.options[k]) / step) for k in ("guard", "train") if k in det.options
+        }
         if conv.get("train", 1) < 1:
-            raise EvalError(f"{det.name}: train {det.options['train']} m is less than one "
-                            f"pixel of {name} ({step:g} m)")  # fmt: skip
+            raise EvalError(
+                f"{det.name}: train {det.options['train']} m is less than one "
+                f"pixel of {name} ({step:g} m)"
+            )
         out.append(det.with_options(conv) if conv else det)
     return out
 
@@ -448,14 +494,20 @@ def _check_failures(name: str, total: int, bad: list, counts: dict, ex: Executio
         return
     limit = "" if max_bad is None else f" (more than {{opt:max_bad}}{max_bad:g})"
     if failed >= total or (max_bad is not None and failed > max_bad * total):
-        first = bad[0] if bad else (f"shard {counts['failed'][0]['shard']}",
-                                    counts["failed"][0]["error"])  # fmt: skip
-        raise EvalError(f"dataset {name}: {failed} of {total} images failed{limit}, the "
-                        f"first {first[0]}: {first[1]}")  # fmt: skip
+        first = (
+            bad[0]
+            if bad
+            else (f"shard {counts['failed'][0]['shard']}", counts["failed"][0]["error"])
+        )
+        raise EvalError(
+            f"dataset {name}: {failed} of {total} images failed{limit}, the "
+            f"first {first[0]}: {first[1]}"
+        )
 
 
-def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, state: Path,
-                     persist: bool = True):  # fmt: skip
+def evaluate_dataset(
+    name: str, ds, detectors: list[Detector], plan: _Plan, state: Path, persist: bool = True
+):
     """Score one dataset shard by shard (their states saved in ``state`` when ``persist``,
     for a resume); with a calibration each detector's operating point
     is chosen on the calibration split and the results are the disjoint test split's.
@@ -475,20 +527,40 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
         ds = SkipBad(ds)
 
     def shards(idx: list[int], folder: Path, export: bool = False, dets=None):
-        job = ShardJob(name, ds, idx, dets or detectors, plan.scoring, ex.batch_size,
-                       plan.preprocess, ex.shard_size, export_coco=export, device=ex.device,
-                       default_class=default_class, skip_bad=ex.skip_bad)  # fmt: skip
-        return run_shards(job, folder, workers=ex.workers, engine=ex.engine,
-                          address=ex.address, skip_bad=ex.skip_bad, progress=ex.progress,
-                          persist=persist or export)  # fmt: skip
+        job = ShardJob(
+            name,
+            ds,
+            idx,
+            dets or detectors,
+            plan.scoring,
+            ex.batch_size,
+            plan.preprocess,
+            ex.shard_size,
+            export_coco=export,
+            device=ex.device,
+            default_class=default_class,
+            skip_bad=ex.skip_bad,
+        )
+        return run_shards(
+            job,
+            folder,
+            workers=ex.workers,
+            engine=ex.engine,
+            address=ex.address,
+            skip_bad=ex.skip_bad,
+            progress=ex.progress,
+            persist=persist or export,
+        )
 
     chosen, calib_counts, swept = None, {"scored_images": 0, "reused_images": 0}, None
     if cal is not None:
         target = parse_target(cal.target)
         calib, indices = split_indices(len(ds), name, cal.fraction)
         if not calib or not indices:
-            raise EvalError(f"dataset {name} has {len(ds)} images: too few for a calibration "
-                            f"split of {cal.fraction:g}")  # fmt: skip
+            raise EvalError(
+                f"dataset {name} has {len(ds)} images: too few for a calibration "
+                f"split of {cal.fraction:g}"
+            )
         if cal.sweep is not None:  # settings chosen on the calibration split only
             detectors, chosen, swept = _swept(name, detectors, cal, target, calib, shards, state)
             calib_counts = swept.pop("counts")
@@ -505,18 +577,32 @@ def evaluate_dataset(name: str, ds, detectors: list[Detector], plan: _Plan, stat
     for r, t in zip(results, chosen or [], strict=False):
         if t is not DESIGN:  # a swept detector reports at its chosen setting's design point
             r.choose(t)
-    drawn = collect_overlays(name, source, results, to_draw, plan.scoring,
-                             preprocess=plan.preprocess, device=ex.device,
-                             default_class=default_class)  # fmt: skip
+    drawn = collect_overlays(
+        name,
+        source,
+        results,
+        to_draw,
+        plan.scoring,
+        preprocess=plan.preprocess,
+        device=ex.device,
+        default_class=default_class,
+    )
     wall = time.perf_counter() - t0
     bad = results[0].skipped if results else []
     _check_failures(name, len(indices), bad, counts, ex)
     scored = counts.pop("scored_images") + calib_counts["scored_images"]
     reused = counts.pop("reused_images") + calib_counts["reused_images"]
-    stats = {"images": len(indices), "scored": scored, "reused": reused,
-             "wall_s": wall, **counts, "export": exporter, "overlays": drawn,
-             "skipped_items": [{"file": f, "error": e} for f, e in bad],
-             "images_per_s": scored / wall if scored and wall > 0 else float("nan")}  # fmt: skip
+    stats = {
+        "images": len(indices),
+        "scored": scored,
+        "reused": reused,
+        "wall_s": wall,
+        **counts,
+        "export": exporter,
+        "overlays": drawn,
+        "skipped_items": [{"file": f, "error": e} for f, e in bad],
+        "images_per_s": scored / wall if scored and wall > 0 else float("nan"),
+    }
     if swept is not None:
         stats["sweep"] = swept
     return results, stats
@@ -526,8 +612,15 @@ DESIGN = object()
 """A swept detector's operating point: its chosen setting's design threshold."""
 
 
-def _swept(name: str, detectors: list[Detector], cal: Calibration, target, calib: list[int],
-           shards, state: Path) -> tuple[list[Detector], list, dict]:  # fmt: skip
+def _swept(
+    name: str,
+    detectors: list[Detector],
+    cal: Calibration,
+    target,
+    calib: list[int],
+    shards,
+    state: Path,
+) -> tuple[list[Detector], list, dict]:
     """Every detector's variants over the sweep scored on the calibration split (one pass),
     each detector's best variant, the calibrated thresholds of the detectors without a
     swept option, and the sweep's record: ``{"rows": sweep.csv rows, "chosen": {detector:
@@ -536,8 +629,9 @@ def _swept(name: str, detectors: list[Detector], cal: Calibration, target, calib
 
     tried = [variants(d, cal.sweep) for d in detectors]
     if not any(tried):
-        raise EvalError(f"{{opt:sweep}} names no option of any detector of this run: "
-                        f"{', '.join(cal.sweep)}")  # fmt: skip
+        raise EvalError(
+            f"{{opt:sweep}} names no option of any detector of this run: {', '.join(cal.sweep)}"
+        )
     flat = [v for vs, d in zip(tried, detectors, strict=True) for v in (vs or [d])]
     tuned, counts = shards(calib, state / "calibration", dets=flat)
     final, thresholds, rows, picked, k = [], [], [], {}, 0

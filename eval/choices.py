@@ -27,15 +27,34 @@ __all__ = [
 ]
 
 BUILTIN_DETECTORS = (
-    "ca", "two_parameter", "go", "so", "os", "vi", "ac", "lognormal", "weibull", "gamma", "k",
-    "g0", "region",
-)  # fmt: skip
+    "ca",
+    "two_parameter",
+    "go",
+    "so",
+    "os",
+    "vi",
+    "ac",
+    "lognormal",
+    "weibull",
+    "gamma",
+    "k",
+    "g0",
+    "region",
+)
 """The built-in detectors, in the registry's order (``torchsar_eval.registry.BUILTIN``)."""
 
 DATASET_SCHEMES = (
-    "sim-chips", "sim-scenes", "folder:PATH", "coco:FILE.json", "voc:DIR", "hrsid:DIR",
-    "phoenix:DIR", "sicd:FILE", "scene:FILE", "store:DIR",
-)  # fmt: skip
+    "sim-chips",
+    "sim-scenes",
+    "folder:PATH",
+    "coco:FILE.json",
+    "voc:DIR",
+    "hrsid:DIR",
+    "phoenix:DIR",
+    "sicd:FILE",
+    "scene:FILE",
+    "store:DIR",
+)
 """The dataset names and schemes ``make_dataset`` reads (``torchsar_eval.datasets.DATASETS``)."""
 
 SPECKLE_FILTERS = ("lee", "kuan", "enhanced_lee", "frost", "enhanced_frost", "gamma_map")
@@ -51,13 +70,24 @@ DEFAULT_MATCH_KIND = "centroid"
 AUTOFOCUS_ERRORS = ("1d-uniform-pi", "1d-quadratic-2pi", "2d-separable-3pi/4", "2d-3pi/4", "2d-pi")
 """The phase-error types of the autofocus experiment (its ``ERROR_CASES``)."""
 AUTOFOCUS_METHODS = (
-    "conventional", "lp", "pga", "min-entropy", "sparse-autofocus", "sparse-keep-restarts",
+    "conventional",
+    "lp",
+    "pga",
+    "min-entropy",
+    "sparse-autofocus",
+    "sparse-keep-restarts",
     "sparse-true-phase",
-)  # fmt: skip
+)
 """The imaging methods of the autofocus experiment (its ``METHODS``)."""
 DEFAULT_AUTOFOCUS_METHODS = tuple(m for m in AUTOFOCUS_METHODS if m != "sparse-keep-restarts")
-AUTOFOCUS_DEFAULTS = {"scenes": 10, "size": 64, "density": 0.02, "snr_db": 30.0, "seed": 0,
-                      "pfa": 1e-3}  # fmt: skip
+AUTOFOCUS_DEFAULTS = {
+    "scenes": 10,
+    "size": 64,
+    "density": 0.02,
+    "snr_db": 30.0,
+    "seed": 0,
+    "pfa": 1e-3,
+}
 """The command-line defaults of the autofocus experiment (its ``Config``)."""
 
 
@@ -73,11 +103,31 @@ def detector_names() -> list[str]:
 DEFAULT_RANK = "f1"
 """The metric that ranks the leaderboards of ``report.html`` unless told otherwise."""
 RANK_METRICS = (
-    "f1", "precision", "recall", "ap50", "ap50_95", "pd_at_0.1_fa_per_image",
-    "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou", "pd_object",
-    "pd_pixel", "pfa_pixel", "false_alarms_per_image", "fa_per_km2", "false_alarms", "tp",
-    "fp", "fn", "fragmentation", "length_score", "ms_per_image", "images_per_s",
-)  # fmt: skip
+    "f1",
+    "precision",
+    "recall",
+    "ap50",
+    "ap50_95",
+    "pd_at_0.1_fa_per_image",
+    "pd_at_1_fa_per_image",
+    "pd_at_10_fa_per_image",
+    "pauc",
+    "fom",
+    "mean_iou",
+    "pd_object",
+    "pd_pixel",
+    "pfa_pixel",
+    "false_alarms_per_image",
+    "fa_per_km2",
+    "false_alarms",
+    "tp",
+    "fp",
+    "fn",
+    "fragmentation",
+    "length_score",
+    "ms_per_image",
+    "images_per_s",
+)
 """Metrics a leaderboard can be ranked by (``summary.csv`` and ``timing.csv`` columns)."""
 REPORT_FILE = "report.html"
 """The report's file name in a run folder."""

@@ -73,13 +73,19 @@ class HelpFormatter(argparse.HelpFormatter):
         return self._whitespace_matcher.sub(" ", plain(text)).strip()
 
     def _split_lines(self, text: str, width: int) -> list[str]:
-        return textwrap.wrap(self._wrap(text), width, break_long_words=False,
-                             break_on_hyphens=False)  # fmt: skip
+        return textwrap.wrap(
+            self._wrap(text), width, break_long_words=False, break_on_hyphens=False
+        )
 
     def _fill_text(self, text: str, width: int, indent: str) -> str:
-        return textwrap.fill(self._wrap(text), width, initial_indent=indent,
-                             subsequent_indent=indent, break_long_words=False,
-                             break_on_hyphens=False)  # fmt: skip
+        return textwrap.fill(
+            self._wrap(text),
+            width,
+            initial_indent=indent,
+            subsequent_indent=indent,
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""

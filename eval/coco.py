@@ -60,8 +60,14 @@ class CocoExport:
             index = meta.get("index")
             image_id = len(self.images) + 1 if index is None else int(index) * c + p % c + 1
             ids.append(image_id)
-            self.images.append({"id": image_id, "file_name": str(meta.get("name", image_id)),
-                                "height": h, "width": w})  # fmt: skip
+            self.images.append(
+                {
+                    "id": image_id,
+                    "file_name": str(meta.get("name", image_id)),
+                    "height": h,
+                    "width": w,
+                }
+            )
             classes = list(meta.get("classes") or [])
             boxes = list(meta.get("boxes") or []) if declared_boxes(meta) else []
             areas = list(meta.get("areas") or [])
@@ -69,8 +75,11 @@ class CocoExport:
             for k in np.unique(inst[p][inst[p] > 0]).tolist():
                 m = inst[p] == k
                 rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
-                box = boxes[k - 1] if k - 1 < len(boxes) else (rows[0], cols[0], rows[-1] + 1,
-                                                              cols[-1] + 1)  # fmt: skip
+                box = (
+                    boxes[k - 1]
+                    if k - 1 < len(boxes)
+                    else (rows[0], cols[0], rows[-1] + 1, cols[-1] + 1)
+                )
                 cls = str(classes[k - 1]) if k - 1 < len(classes) else "target"
                 area = areas[k - 1] if k - 1 < len(areas) and areas[k - 1] is not None else None
                 seen.append(self._category(cls))
@@ -90,13 +99,20 @@ class CocoExport:
         for cat in sorted({first, *seen}):
             self._annotation(image_id, cat, m, box, crowd=1)
 
-    def _annotation(self, image_id: int, cat: int, m: np.ndarray, box, *, crowd: int,
-                    area: float | None = None) -> None:  # fmt: skip
-        self.annotations.append({
-            "id": len(self.annotations) + 1, "image_id": image_id, "category_id": cat,
-            "segmentation": encode(m), "area": float(m.sum() if area is None else area),
-            "bbox": _xywh(box), "iscrowd": crowd,
-        })  # fmt: skip
+    def _annotation(
+        self, image_id: int, cat: int, m: np.ndarray, box, *, crowd: int, area: float | None = None
+    ) -> None:
+        self.annotations.append(
+            {
+                "id": len(self.annotations) + 1,
+                "image_id": image_id,
+                "category_id": cat,
+                "segmentation": encode(m),
+                "area": float(m.sum() if area is None else area),
+                "bbox": _xywh(box),
+                "iscrowd": crowd,
+            }
+        )
 
     def add(self, batch: dict, found: dict[str, Objects]) -> None:
         """Add a batch's ground truth and each detector's objects."""
@@ -108,8 +124,12 @@ class CocoExport:
 
     def _result(self, obj: Objects, k: int, image_id: int) -> dict:
         cls = obj.classes[k] if obj.classes is not None else None
-        rec = {"image_id": image_id, "category_id": None if cls is None else self._category(cls),
-               "bbox": _xywh(obj.box[k]), "score": float(obj.score[k])}  # fmt: skip
+        rec = {
+            "image_id": image_id,
+            "category_id": None if cls is None else self._category(cls),
+            "bbox": _xywh(obj.box[k]),
+            "score": float(obj.score[k]),
+        }
         if obj.has_masks:
             rec["segmentation"] = encode(obj.mask_of(k))
             rec["area"] = float(obj.area[k])
@@ -130,7 +150,7 @@ class CocoExport:
             out.annotations += [
                 {**a, "id": a["id"] + anns, "category_id": cats[a["category_id"]]}
                 for a in part.annotations
-            ]  # fmt: skip
+            ]
             for det, res in part.results.items():
                 out.results.setdefault(det, []).extend(
                     {**r, "category_id": cats[r["category_id"]]} for r in res

@@ -10,17 +10,45 @@ import hashlib
 __all__ = ["PALETTE", "detector_colour", "detector_dash"]
 
 PALETTE = [
-    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
-    "#bcbd22", "#17becf", "#393b79", "#637939", "#222222", "#843c39", "#7b4173", "#e7ba52",
-    "#3a9e8f", "#a55194", "#6b6ecf", "#b35806",
-]  # fmt: skip
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+    "#393b79",
+    "#637939",
+    "#222222",
+    "#843c39",
+    "#7b4173",
+    "#e7ba52",
+    "#3a9e8f",
+    "#a55194",
+    "#6b6ecf",
+    "#b35806",
+]
 """Twenty colours readable on white (hex): the first 13 are the built-ins', the rest
 (with ``"region-paper"``'s, the region CFAR's colour dashed) go to other names."""
 
 _BUILTIN = {
-    "ca": 0, "two_parameter": 1, "go": 2, "so": 3, "os": 4, "vi": 5, "ac": 6,
-    "lognormal": 7, "weibull": 8, "gamma": 9, "k": 10, "g0": 11, "region": 12,
-}  # fmt: skip
+    "ca": 0,
+    "two_parameter": 1,
+    "go": 2,
+    "so": 3,
+    "os": 4,
+    "vi": 5,
+    "ac": 6,
+    "lognormal": 7,
+    "weibull": 8,
+    "gamma": 9,
+    "k": 10,
+    "g0": 11,
+    "region": 12,
+}
 _SAME_AS = {"region-paper": "region"}  # the published preset of compare-region
 _OTHERS = PALETTE[len(_BUILTIN) :]
 _DASHES = ["--", "-.", ":"]

@@ -142,16 +142,21 @@ class Detector:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or "," in self.name:
-            raise EvalError(f"a detector name must be a non-empty string without commas, "
-                            f"got {self.name!r}")  # fmt: skip
+            raise EvalError(
+                f"a detector name must be a non-empty string without commas, got {self.name!r}"
+            )
         if not callable(self.fn):
             raise EvalError(f"detector {self.name}: {self.fn!r} is not callable")
         if self.instances not in INSTANCES:
-            raise EvalError(f"detector {self.name}: instances must be one of "
-                            f"{', '.join(INSTANCES)}, got {self.instances!r}")  # fmt: skip
+            raise EvalError(
+                f"detector {self.name}: instances must be one of "
+                f"{', '.join(INSTANCES)}, got {self.instances!r}"
+            )
         if self.scale not in SCALES:
-            raise EvalError(f"detector {self.name}: scale must be one of "
-                            f"{', '.join(SCALES)}, got {self.scale!r}")  # fmt: skip
+            raise EvalError(
+                f"detector {self.name}: scale must be one of "
+                f"{', '.join(SCALES)}, got {self.scale!r}"
+            )
         object.__setattr__(self, "threshold", _check_threshold(self.threshold, self.name))
 
     @property
@@ -175,13 +180,23 @@ class Detector:
         passed, harness = split_options(self.fn, overrides)
         if self.call_options is not None and passed:  # built from its options: rebuild
             if self.ref is None:
-                raise EvalError(f"detector {self.name} was built from its options: build it "
-                                "again with the new ones")  # fmt: skip
+                raise EvalError(
+                    f"detector {self.name} was built from its options: build it "
+                    "again with the new ones"
+                )
             from torchsar_eval.registry import load
 
-            return load(self.ref, name=self.name, options={**self.options, **passed},
-                        **{"threshold": self.threshold, "instances": self.instances,
-                           "scale": self.scale, **harness})  # fmt: skip
+            return load(
+                self.ref,
+                name=self.name,
+                options={**self.options, **passed},
+                **{
+                    "threshold": self.threshold,
+                    "instances": self.instances,
+                    "scale": self.scale,
+                    **harness,
+                },
+            )
         check_options(self.fn, passed, f"detector {self.name}")
         call = None if self.call_options is None else dict(self.call_options)
         return replace(self, options={**self.options, **passed}, call_options=call, **harness)
@@ -210,8 +225,10 @@ class Detector:
             with torch.no_grad():
                 out = self.fn(images, **kwargs)
         except SystemExit as exc:  # not the run's to end: an error naming the detector
-            raise EvalError(f"detector {self.name} called sys.exit({exc.code!r}); a detector "
-                            "returns its detections or raises an error") from None  # fmt: skip
+            raise EvalError(
+                f"detector {self.name} called sys.exit({exc.code!r}); a detector "
+                "returns its detections or raises an error"
+            ) from None
         return self.check_output(out, given)
 
     def check_output(self, out: object, images: Tensor) -> Detection | Objects:
@@ -220,17 +237,23 @@ class Detector:
         if isinstance(out, Detection):
             if tuple(out.statistic.shape) != (b, c, h, w):
                 got = tuple(out.statistic.shape)
-                raise EvalError(f"detector {self.name} returned a statistic of shape {got} "
-                                f"for images {(b, c, h, w)}")  # fmt: skip
+                raise EvalError(
+                    f"detector {self.name} returned a statistic of shape {got} "
+                    f"for images {(b, c, h, w)}"
+                )
             return out
         if isinstance(out, Objects):
             if out.planes != b * c or tuple(out.shape) != (h, w):
-                raise EvalError(f"detector {self.name} returned Objects of {out.planes} planes "
-                                f"of {tuple(out.shape)} for images {(b, c, h, w)}: pass "
-                                f"planes={b * c} and shape=({h}, {w})")  # fmt: skip
+                raise EvalError(
+                    f"detector {self.name} returned Objects of {out.planes} planes "
+                    f"of {tuple(out.shape)} for images {(b, c, h, w)}: pass "
+                    f"planes={b * c} and shape=({h}, {w})"
+                )
             return out if self.threshold is None else out.with_threshold(self.threshold)
-        raise EvalError(f"detector {self.name} returned {type(out).__name__}: a detector must "
-                        "return a torchsar Detection or torchsar.objects.Objects")  # fmt: skip
+        raise EvalError(
+            f"detector {self.name} returned {type(out).__name__}: a detector must "
+            "return a torchsar Detection or torchsar.objects.Objects"
+        )
 
     def describe(self) -> dict[str, Any]:
         """What ``config.json`` records of this detector."""
@@ -250,8 +273,13 @@ class Detector:
             return (_rebuild, (self.__dict__,))
         from torchsar_eval.registry import load
 
-        args = {"name": self.name, "options": dict(self.options), "threshold": self.threshold,
-                "instances": self.instances, "scale": self.scale}  # fmt: skip
+        args = {
+            "name": self.name,
+            "options": dict(self.options),
+            "threshold": self.threshold,
+            "instances": self.instances,
+            "scale": self.scale,
+        }
         return (_load_kw, (load, self.ref, args))
 
 
@@ -290,17 +318,19 @@ def as_detector(obj: object, name: str | None = None) -> Detector:
     if isinstance(obj, Detector):
         return obj if name is None else replace(obj, name=name)
     if not callable(obj):
-        raise EvalError(f"a detector must be callable (images -> Detection | Objects), "
-                        f"got {type(obj).__name__}")  # fmt: skip
+        raise EvalError(
+            f"a detector must be callable (images -> Detection | Objects), got {type(obj).__name__}"
+        )
     thr = getattr(obj, "threshold", None)
     inst = getattr(obj, "instances", "auto")
     scale = getattr(obj, "scale", "auto")
     return Detector(
-        name or _default_name(obj), obj,
+        name or _default_name(obj),
+        obj,
         threshold=thr if isinstance(thr, int | float) and not isinstance(thr, bool) else None,
         instances=inst if inst in INSTANCES else "auto",
         scale=scale if scale in SCALES else "auto",
-    )  # fmt: skip
+    )
 
 
 class _MainFinder(pickle.Pickler):
@@ -314,7 +344,9 @@ class _MainFinder(pickle.Pickler):
 
     def reducer_override(self, obj: object):
         if isinstance(obj, types.FunctionType | type) and getattr(obj, "__module__", "") in (
-                "__main__", "__mp_main__"):  # fmt: skip
+            "__main__",
+            "__mp_main__",
+        ):
             self.main.append(getattr(obj, "__qualname__", repr(obj)))
         return NotImplemented
 

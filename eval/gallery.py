@@ -52,8 +52,20 @@ object is shown whole, resampled)."""
 TRUTH, FOUND, FOCUS, IGNORE, OUTSIDE = 1, 2, 4, 8, 16
 """Bits of a crop's mask: ground truth, detections at the operating point, the case's own
 object, don't-care pixels, outside the image."""
-CASE_COLUMNS = ["dataset", "detector", "kind", "rank", "image", "row", "col", "score", "area",
-                "class", "why", "file"]  # fmt: skip
+CASE_COLUMNS = [
+    "dataset",
+    "detector",
+    "kind",
+    "rank",
+    "image",
+    "row",
+    "col",
+    "score",
+    "area",
+    "class",
+    "why",
+    "file",
+]
 """Columns of ``gallery/cases.csv``."""
 _MAX_FACTS = 6
 
@@ -106,11 +118,21 @@ class Cases:
         self._pending = []
         if todo:
             info, image, masks = zip(*(make() for _, make in todo), strict=True)
-            new = Cases(self.kind, self.size, [k for k, _ in todo], list(info), np.stack(image),
-                        np.stack(masks))  # fmt: skip
+            new = Cases(
+                self.kind,
+                self.size,
+                [k for k, _ in todo],
+                list(info),
+                np.stack(image),
+                np.stack(masks),
+            )
             merged = self + new
-            self.keys, self.info, self.image, self.masks = (merged.keys, merged.info,
-                                                            merged.image, merged.masks)  # fmt: skip
+            self.keys, self.info, self.image, self.masks = (
+                merged.keys,
+                merged.info,
+                merged.image,
+                merged.masks,
+            )
         return self
 
     def __add__(self, other: Cases) -> Cases:
@@ -121,11 +143,16 @@ class Cases:
         info = self.info + other.info
         image = np.concatenate([self.image, other.image])[order]
         masks = np.concatenate([self.masks, other.masks])[order]
-        return Cases(self.kind, self.size, [keys[i] for i in order], [info[i] for i in order],
-                     image, masks)  # fmt: skip
+        return Cases(
+            self.kind, self.size, [keys[i] for i in order], [info[i] for i in order], image, masks
+        )
 
-    def offer(self, keys: list[tuple], make: Callable[[int], tuple[dict, np.ndarray, np.ndarray]],
-              defer: bool = False) -> None:  # fmt: skip
+    def offer(
+        self,
+        keys: list[tuple],
+        make: Callable[[int], tuple[dict, np.ndarray, np.ndarray]],
+        defer: bool = False,
+    ) -> None:
         """Add the candidates ``keys`` that make the cut; ``make(j)`` builds candidate
         ``j``'s ``(info, image, masks)``, only for those kept. With ``defer`` a kept
         candidate is built when the cases are next merged, saved or read (:meth:`settle`),
@@ -169,10 +196,13 @@ class Gallery:
             self.hits = Cases("hit", HITS)
 
     def __add__(self, other: Gallery) -> Gallery:
-        return Gallery(self.false_alarms + other.false_alarms, self.misses + other.misses,
-                       _facts(self.shapes, other.shapes),
-                       _facts(self.spacings, other.spacings),
-                       self.hits + other.hits)  # fmt: skip
+        return Gallery(
+            self.false_alarms + other.false_alarms,
+            self.misses + other.misses,
+            _facts(self.shapes, other.shapes),
+            _facts(self.spacings, other.spacings),
+            self.hits + other.hits,
+        )
 
     @property
     def kinds(self) -> list[tuple[Cases, str]]:
@@ -185,9 +215,16 @@ class Gallery:
             cases.settle()
         return self
 
-    def add(self, obj: Objects, gt: GroundTruth, info: list[ImageInfo], m: BatchMatch,
-            image, rule: Matching | None = None,
-            types: np.ndarray | None = None) -> None:  # fmt: skip
+    def add(
+        self,
+        obj: Objects,
+        gt: GroundTruth,
+        info: list[ImageInfo],
+        m: BatchMatch,
+        image,
+        rule: Matching | None = None,
+        types: np.ndarray | None = None,
+    ) -> None:
         """Offer one batch's false alarms and misses at the design operating point
         (``image``: the batch's ``(B, C, H, W)`` images; ``rule`` and ``types``, the matching
         rule and each detection's false-alarm type, say why each case is one)."""
@@ -195,8 +232,9 @@ class Gallery:
         h, w = gt.shape
         self.shapes = _facts(self.shapes, [(h, w)] * bool(n))
         sp = gt.spacing if gt.spacing is not None else np.full((n, 2), np.nan)
-        self.spacings = _facts(self.spacings, [tuple(map(float, s)) for s in sp
-                                               if np.isfinite(s).all()])  # fmt: skip
+        self.spacings = _facts(
+            self.spacings, [tuple(map(float, s)) for s in sp if np.isfinite(s).all()]
+        )
         at_op = at_operating_point(obj)
         fa = np.flatnonzero(at_op & (m.op == -1))
         found = np.zeros(len(gt), bool)
@@ -206,18 +244,27 @@ class Gallery:
         defer = _deferrable(image)
         score = np.nan_to_num(obj.score.astype(np.float64), nan=-np.inf)
         keys, idx = _keys(-score[fa], obj.plane[fa], obj.box[fa], info, self.false_alarms)
-        self.false_alarms.offer(keys, _maker(planes, fa[idx], obj.box, score, obj.area,
-                                             obj.classes, obj.plane, "det"), defer)  # fmt: skip
+        self.false_alarms.offer(
+            keys,
+            _maker(planes, fa[idx], obj.box, score, obj.area, obj.classes, obj.plane, "det"),
+            defer,
+        )
         gt_score = np.where(found, -np.inf, m.gt_score)
         area = gt.area[missed].astype(np.float64)
         keys, idx = _keys(-area, gt.plane[missed], gt.box[missed], info, self.misses)
-        self.misses.offer(keys, _maker(planes, missed[idx], gt.box, gt_score, gt.area,
-                                       gt.classes, gt.plane, "gt"), defer)  # fmt: skip
+        self.misses.offer(
+            keys,
+            _maker(planes, missed[idx], gt.box, gt_score, gt.area, gt.classes, gt.plane, "gt"),
+            defer,
+        )
         hit = np.flatnonzero(at_op & (m.op >= 0))
         draw = _draws(obj.box[hit], obj.plane[hit], info)
         keys, idx = _keys(draw, obj.plane[hit], obj.box[hit], info, self.hits)
-        self.hits.offer(keys, _maker(planes, hit[idx], obj.box, score, obj.area, obj.classes,
-                                     obj.plane, "hit"), defer)  # fmt: skip
+        self.hits.offer(
+            keys,
+            _maker(planes, hit[idx], obj.box, score, obj.area, obj.classes, obj.plane, "hit"),
+            defer,
+        )
 
 
 DEFER_BYTES = 8 << 20
@@ -246,8 +293,9 @@ class _Why:
         if own == "det":
             if self.types is None:
                 return ""
-            return false_alarm_reasons(self.types, self.m, self.obj, self.gt, self.rule,
-                                       np.array([k]))[0]  # fmt: skip
+            return false_alarm_reasons(
+                self.types, self.m, self.obj, self.gt, self.rule, np.array([k])
+            )[0]
         return miss_reasons(self.m, self.obj, self.gt, self.rule, self.at_op, np.array([k]))[0]
 
 
@@ -273,8 +321,7 @@ def _maker(planes: _Planes, which: np.ndarray, box, score, area, classes, plane,
 
     def make(j: int) -> tuple[dict, np.ndarray, np.ndarray]:
         k = which[j]
-        return planes.case(k, box[k], float(score[k]), int(area[k]), _class(classes, k), plane,
-                           own)  # fmt: skip
+        return planes.case(k, box[k], float(score[k]), int(area[k]), _class(classes, k), plane, own)
 
     return make
 
@@ -286,8 +333,10 @@ def observed_facts(results: list) -> dict:
     gallery = next((r.gallery for r in results if getattr(r, "gallery", None) is not None), None)
     if gallery is None:
         return {}
-    return {"image_size": [list(v) for v in gallery.shapes],
-            "pixel_spacing": [list(v) for v in gallery.spacings]}  # fmt: skip
+    return {
+        "image_size": [list(v) for v in gallery.shapes],
+        "pixel_spacing": [list(v) for v in gallery.spacings],
+    }
 
 
 def at_operating_point(obj: Objects) -> np.ndarray:
@@ -300,8 +349,9 @@ def _class(classes, k: int) -> str:
     return "" if classes is None or classes[k] is None else str(classes[k])
 
 
-def _keys(value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[ImageInfo],
-          cases: Cases) -> tuple[list[tuple], np.ndarray]:  # fmt: skip
+def _keys(
+    value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[ImageInfo], cases: Cases
+) -> tuple[list[tuple], np.ndarray]:
     """Rank keys ``(value, image order, image name, centre row, centre col, box)`` of the
     candidates that may make the cut (value within the batch's best ``size`` and not worse
     than the worst kept case), and their positions among the candidates."""
@@ -318,16 +368,18 @@ def _keys(value: np.ndarray, plane: np.ndarray, box: np.ndarray, info: list[Imag
         i = info[int(plane[j])]
         r0, c0, r1, c1 = (float(v) for v in box[j])
         order = -1 if i.order is None else int(i.order)
-        keys.append((float(value[j]), order, str(i.key), (r0 + r1) / 2, (c0 + c1) / 2, r0, c0,
-                     r1, c1))  # fmt: skip
+        keys.append(
+            (float(value[j]), order, str(i.key), (r0 + r1) / 2, (c0 + c1) / 2, r0, c0, r1, c1)
+        )
     return keys, idx
 
 
 class _Planes:
     """Crops of one batch's planes."""
 
-    def __init__(self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info,
-                 why: _Why) -> None:  # fmt: skip
+    def __init__(
+        self, image, gt: GroundTruth, obj: Objects, at_op: np.ndarray, info, why: _Why
+    ) -> None:
         self.image, self.gt, self.obj, self.at_op, self.info = image, gt, obj, at_op, info
         self.why = why
         self.channels = gt.planes // max(1, int(image.shape[0])) if image is not None else 1
@@ -356,8 +408,7 @@ class _Planes:
         x = x[ch] if x.shape[0] == c else x.abs().mean(0)
         return x.detach().cpu().numpy().astype(np.float64, copy=False)
 
-    def case(self, k: int, box, score: float, area: int, cls: str, planes: np.ndarray,
-             own: str):  # fmt: skip
+    def case(self, k: int, box, score: float, area: int, cls: str, planes: np.ndarray, own: str):
         """``(info, image, masks)`` of the case of object or instance ``k`` (``own``:
         ``"det"`` or ``"gt"``; ``planes``: the plane of each)."""
         k = int(k)
@@ -400,9 +451,17 @@ class _Planes:
                 crop = 10 * np.log10(np.maximum(x[np.ix_(ri, ci)], 1e-30))
             crop[~inside] = np.nan
             lo, hi = self.stretch(p, x)
-        info = {"image": self.info[p].key, "row": round(cr, 1), "col": round(cc, 1),
-                "score": score if math.isfinite(score) else None, "area": area,
-                "class": cls, "why": self.why(k, own), "lo_db": lo, "hi_db": hi}  # fmt: skip
+        info = {
+            "image": self.info[p].key,
+            "row": round(cr, 1),
+            "col": round(cc, 1),
+            "score": score if math.isfinite(score) else None,
+            "area": area,
+            "class": cls,
+            "why": self.why(k, own),
+            "lo_db": lo,
+            "hi_db": hi,
+        }
         return info, crop.astype(np.float16), masks
 
     def _object(self, d: int, rr, cs, ri, ci, step: float) -> np.ndarray:
@@ -432,11 +491,11 @@ def _overlaps(box, rr: np.ndarray, cs: np.ndarray) -> bool:
 _GREYS = 64  # grey levels (plenty for speckle; fewer bytes per PNG)
 _OUTSIDE, _TRUTH, _FOUND, _IGNORE = 64, 65, 66, 67
 _PALETTE = [v for g in range(_GREYS) for v in (round(g * 255 / (_GREYS - 1)),) * 3] + [
-    223, 228, 234,  # outside the image
-    0, 230, 118,  # ground truth outline
-    255, 64, 255,  # detection outline
-    255, 212, 0,  # don't-care outline
-]  # fmt: skip
+    *(223, 228, 234),  # outside the image
+    *(0, 230, 118),  # ground truth outline
+    *(255, 64, 255),  # detection outline
+    *(255, 212, 0),  # don't-care outline
+]
 SCALE = 2
 """Crops are drawn at twice their size (outlines fall between samples)."""
 
@@ -455,8 +514,12 @@ def _ring(mask: np.ndarray, width: int) -> np.ndarray:
     return grown & ~mask
 
 
-def render_case(image: np.ndarray, masks: np.ndarray, kind: str = "false_alarm",
-                stretch: tuple[float, float] | None = None) -> np.ndarray:  # fmt: skip
+def render_case(
+    image: np.ndarray,
+    masks: np.ndarray,
+    kind: str = "false_alarm",
+    stretch: tuple[float, float] | None = None,
+) -> np.ndarray:
     """Palette indices ``(SCALE * side, SCALE * side)`` of one case: the crop in grey
     (``stretch``: the image's dB range, else the 2nd to 99.5th percentile of the crop's),
     outlines of the don't-care pixels (yellow), the ground truth (green) and the detections
@@ -512,11 +575,28 @@ def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[s
                     rel = sub / f"{short}-{rank:02d}.png"
                     (folder / sub).mkdir(parents=True, exist_ok=True)
                     stretch = (info.get("lo_db", math.nan), info.get("hi_db", math.nan))
-                    _png(render_case(cases.image[rank - 1], cases.masks[rank - 1], cases.kind,
-                                     stretch), folder / rel)  # fmt: skip
-                    rows.append([name, r.detector.name, cases.kind, rank, info["image"],
-                                 info["row"], info["col"], info["score"], info["area"],
-                                 info["class"], info.get("why", ""), rel.as_posix()])  # fmt: skip
+                    _png(
+                        render_case(
+                            cases.image[rank - 1], cases.masks[rank - 1], cases.kind, stretch
+                        ),
+                        folder / rel,
+                    )
+                    rows.append(
+                        [
+                            name,
+                            r.detector.name,
+                            cases.kind,
+                            rank,
+                            info["image"],
+                            info["row"],
+                            info["col"],
+                            info["score"],
+                            info["area"],
+                            info["class"],
+                            info.get("why", ""),
+                            rel.as_posix(),
+                        ]
+                    )
     if not rows and not any(getattr(r, "gallery", None) for rs in results.values() for r in rs):
         return []
     (folder / "gallery").mkdir(exist_ok=True)

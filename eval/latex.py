@@ -29,10 +29,19 @@ COLUMNS = [
 """The metric columns of a table (those with a value in some row), with their headers."""
 
 _SPECIAL = {
-    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-    "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
-    "<": r"\textless{}", ">": r"\textgreater{}",
-}  # fmt: skip
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+    "<": r"\textless{}",
+    ">": r"\textgreater{}",
+}
 
 
 def escape(text: object) -> str:
@@ -111,8 +120,7 @@ def dataset_table(dataset: str, rows: pd.DataFrame) -> str:
             printed = number(m, row[m])
             cells.append(_cell(m, row, printed != "--" and float(printed) == best[m]))
         lines.append(" & ".join(cells) + r" \\")
-    lines += [r"\bottomrule", r"\end{tabular}", rf"\label{{tab:{_label(dataset)}}}",
-              r"\end{table}"]  # fmt: skip
+    lines += [r"\bottomrule", r"\end{tabular}", rf"\label{{tab:{_label(dataset)}}}", r"\end{table}"]
     return "\n".join(lines) + "\n"
 
 

@@ -19,13 +19,29 @@ from torchsar_eval.errors import EvalError
 if TYPE_CHECKING:
     from torchsar_eval.html_report.runfiles import RunFiles
 
-__all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "NO_DETECTION", "RANK_METRICS", "Board",
-           "caveats", "check_rank_by", "number", "short_value"]  # fmt: skip
+__all__ = [
+    "DEFAULT_RANK",
+    "LOWER_IS_BETTER",
+    "NO_DETECTION",
+    "RANK_METRICS",
+    "Board",
+    "caveats",
+    "check_rank_by",
+    "number",
+    "short_value",
+]
 
 LOWER_IS_BETTER = {
-    "false_alarms_per_image", "false_alarms", "fp", "fn", "pfa_pixel", "fa_per_km2",
-    "fragmentation", "ms_per_image", "object_ms_per_image",
-}  # fmt: skip
+    "false_alarms_per_image",
+    "false_alarms",
+    "fp",
+    "fn",
+    "pfa_pixel",
+    "fa_per_km2",
+    "fragmentation",
+    "ms_per_image",
+    "object_ms_per_image",
+}
 NO_DETECTION = "no detection above its threshold on this data"
 FEW_TARGETS = 30
 """Below this many targets a dataset's card says that its intervals are wide."""
@@ -37,8 +53,9 @@ def check_rank_by(metric: str, columns: Iterable[str] = ()) -> str:
     column ``columns`` of the run's summary); :class:`EvalError` otherwise."""
     if metric in RANK_METRICS or metric in set(columns) - _NOT_COMPARED - {"images", "targets"}:
         return metric
-    raise EvalError(f"{{opt:rank_by}}{metric!r}: not a metric; choose one of "
-                    f"{', '.join(RANK_METRICS)}")  # fmt: skip
+    raise EvalError(
+        f"{{opt:rank_by}}{metric!r}: not a metric; choose one of {', '.join(RANK_METRICS)}"
+    )
 
 
 def number(v: object) -> float:
@@ -64,8 +81,12 @@ class Board:
             t = run.table("timing", dataset)
             extra = [c for c in ("ms_per_image", "images_per_s") if c in t.columns]
             if extra and "detector" in t.columns:
-                s = s.merge(t[["detector", *extra]].drop_duplicates("detector"), on="detector",
-                            how="left", suffixes=("", "_timing"))  # fmt: skip
+                s = s.merge(
+                    t[["detector", *extra]].drop_duplicates("detector"),
+                    on="detector",
+                    how="left",
+                    suffixes=("", "_timing"),
+                )
             s["run"], s["_run"] = run.name, k
             frames.append(s)
         self.rows = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -78,8 +99,11 @@ class Board:
 
     def _rank(self) -> None:
         m = self.rank_by
-        values = (pd.to_numeric(self.rows[m], errors="coerce") if m in self.rows.columns
-                  else pd.Series(np.nan, index=self.rows.index))  # fmt: skip
+        values = (
+            pd.to_numeric(self.rows[m], errors="coerce")
+            if m in self.rows.columns
+            else pd.Series(np.nan, index=self.rows.index)
+        )
         sign = 1.0 if m in LOWER_IS_BETTER else -1.0
         key = (sign * values).fillna(np.inf)
         order = np.argsort(key.to_numpy(), kind="stable")
@@ -106,8 +130,11 @@ class Board:
         for (_, d), mine in zip(rows, opts, strict=True):
             others = [o for (_, d2), o in zip(rows, opts, strict=True) if d2 == d]
             keys = sorted({k for o in others for k in o}, key=str)
-            differ = [k for k in keys if len({json.dumps(o.get(k), default=str, sort_keys=True)
-                                             for o in others}) > 1]  # fmt: skip
+            differ = [
+                k
+                for k in keys
+                if len({json.dumps(o.get(k), default=str, sort_keys=True) for o in others}) > 1
+            ]
             out.append(", ".join(f"{k}={short_value(mine.get(k))}" for k in differ))
         return out
 
@@ -134,8 +161,9 @@ class Board:
             if number(r.get("tp")) == 0 and number(r.get("fp")) == 0:
                 notes.append(NO_DETECTION)
                 continue
-            key = tuple(None if isinstance(v, float) and math.isnan(v) else v
-                        for v in (r[c] for c in cols))  # fmt: skip
+            key = tuple(
+                None if isinstance(v, float) and math.isnan(v) else v for v in (r[c] for c in cols)
+            )
             key += self._curve(int(r["_run"]), r["detector"])
             if key in seen:
                 notes.append(f"identical results to {seen[key]}")
@@ -169,8 +197,10 @@ def caveats(run: RunFiles, dataset: str, board: Board) -> list[str]:
     first = summary.iloc[0] if not summary.empty else pd.Series(dtype=object)
     out = []
     if ds_opts.get("sample_type") == "display":
-        out.append("display data (8/16-bit renderings of unknown transfer): the detectors' "
-                   "design Pfa is not meaningful on it")  # fmt: skip
+        out.append(
+            "display data (8/16-bit renderings of unknown transfer): the detectors' "
+            "design Pfa is not meaningful on it"
+        )
     if ds_opts.get("gt") == "box":
         out.append("box ground truth: no pixel metrics, AP at box IoU")
     n_targets = number(first.get("targets"))
@@ -180,8 +210,7 @@ def caveats(run: RunFiles, dataset: str, board: Board) -> list[str]:
         out.append("the worst cases in the gallery are at the design operating point")
     failed, skipped = thr.get("failed") or [], thr.get("skipped_items") or []
     if failed or skipped:
-        out.append(f"{len(failed)} failed shard(s) and {len(skipped)} unreadable file(s) "
-                   "left out")  # fmt: skip
+        out.append(f"{len(failed)} failed shard(s) and {len(skipped)} unreadable file(s) left out")
     if any(n.startswith("identical") for n in board.notes):
         out.append("some detectors give identical results (see the notes)")
     return out

@@ -161,13 +161,17 @@ def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[st
     out: dict[str, dict[str, Any]] = {}
     for item in items:
         if len(item) > MAX_PARAM:
-            raise EvalError(f"{option} {item[:40]}...: {len(item)} characters, more than the "
-                            f"{MAX_PARAM} an option value may have")  # fmt: skip
+            raise EvalError(
+                f"{option} {item[:40]}...: {len(item)} characters, more than the "
+                f"{MAX_PARAM} an option value may have"
+            )
         key, eq, raw = item.partition("=")
         name, dot, param = key.partition(".") if "." in key else (EVERY, ".", key)
         if not (eq and dot and name and param) or "." in param:
-            raise EvalError(f"{option} must look like DETECTOR.NAME=VALUE (or NAME=VALUE for "
-                            f"every detector that has the option), got {item!r}")  # fmt: skip
+            raise EvalError(
+                f"{option} must look like DETECTOR.NAME=VALUE (or NAME=VALUE for "
+                f"every detector that has the option), got {item!r}"
+            )
         try:
             value = ast.literal_eval(raw)
         except (ValueError, SyntaxError, RecursionError, MemoryError):

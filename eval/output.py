@@ -264,8 +264,9 @@ def write_marker(folder: Path) -> None:
     """Write :data:`RUN_MARKER` into a finished run folder: every file in it, by path."""
     files = sorted(
         os.path.relpath(os.path.join(d, f), folder)
-        for d, _, names in os.walk(folder, followlinks=False) for f in names
-    )  # fmt: skip
+        for d, _, names in os.walk(folder, followlinks=False)
+        for f in names
+    )
     record = {"tool": MARKER_TOOL, "files": [f for f in files if f != RUN_MARKER]}
     (folder / RUN_MARKER).write_text(json.dumps(record, indent=0) + "\n")
 

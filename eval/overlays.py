@@ -77,21 +77,11 @@ _GREYS = 64
 FOUND, MISSED, HIT, FALSE_ALARM, IGNORE = range(_GREYS, _GREYS + 5)
 """Palette indices of the outlines (below them, 64 grey levels)."""
 _PALETTE = [v for g in range(_GREYS) for v in (round(g * 255 / (_GREYS - 1)),) * 3] + [
-    0,
-    230,
-    118,  # target found
-    255,
-    140,
-    0,  # target missed
-    0,
-    190,
-    255,  # detection matching a target
-    255,
-    64,
-    255,  # false alarm
-    255,
-    212,
-    0,  # don't-care region
+    *(0, 230, 118),  # target found
+    *(255, 140, 0),  # target missed
+    *(0, 190, 255),  # detection matching a target
+    *(255, 64, 255),  # false alarm
+    *(255, 212, 0),  # don't-care region
 ]
 
 

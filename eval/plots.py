@@ -49,10 +49,21 @@ __all__ = [
 ]
 
 MARKERS: dict[str, str] = {
-    "ca": "o", "two_parameter": "s", "go": "^", "so": "v", "os": "D", "vi": "P", "ac": "X",
-    "lognormal": "<", "weibull": ">", "gamma": "h", "k": "p", "g0": "*", "region": "d",
+    "ca": "o",
+    "two_parameter": "s",
+    "go": "^",
+    "so": "v",
+    "os": "D",
+    "vi": "P",
+    "ac": "X",
+    "lognormal": "<",
+    "weibull": ">",
+    "gamma": "h",
+    "k": "p",
+    "g0": "*",
+    "region": "d",
     "region-paper": "H",
-}  # fmt: skip
+}
 """The built-in detectors' markers: pairwise distinct, so curves stay apart in grey print
 and for colour-blind readers even where colours are close."""
 _OTHER_MARKERS = ["o", "s", "^", "v", "D", "P", "X", "<", ">", "h", "p", "*", "d", "H", "8"]
@@ -77,8 +88,9 @@ def detector_style(name: str) -> dict:
     """
     marker = MARKERS.get(name)
     if marker is None:
-        marker = _OTHER_MARKERS[int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "big")
-                                % len(_OTHER_MARKERS)]  # fmt: skip
+        marker = _OTHER_MARKERS[
+            int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "big") % len(_OTHER_MARKERS)
+        ]
     color, line = detector_colour(name), detector_dash(name)
     return {"color": color, "linestyle": line, "marker": marker}
 
@@ -99,8 +111,12 @@ def legend_handles(names: Iterable[str], notes: dict[str, str] | None = None) ->
     from matplotlib.lines import Line2D
 
     notes = notes or {}
-    return [Line2D([], [], label=plain(n) + (f" ({notes[n]})" if n in notes else ""),
-                   **detector_style(n)) for n in names]  # fmt: skip
+    return [
+        Line2D(
+            [], [], label=plain(n) + (f" ({notes[n]})" if n in notes else ""), **detector_style(n)
+        )
+        for n in names
+    ]
 
 
 def not_shown(left_out: Mapping[str, str]) -> str:
@@ -265,8 +281,14 @@ def roc_figure(
     for name in names:
         st = detector_style(name)
         op = summary[summary["detector"] == name]
-        point = {"color": st["color"], "marker": st["marker"], "markersize": 9,
-                 "markeredgecolor": "black", "linestyle": "none", "zorder": 3}  # fmt: skip
+        point = {
+            "color": st["color"],
+            "marker": st["marker"],
+            "markersize": 9,
+            "markeredgecolor": "black",
+            "linestyle": "none",
+            "zorder": 3,
+        }
         px_all = pixel[pixel["detector"] == name]
         px = px_all[px_all["pfa_pixel"] > 0]
         if px.empty:
@@ -279,16 +301,23 @@ def roc_figure(
         if fr.empty:
             left[1][name] = "no object scored"
         else:
-            axes[1].step(fr["false_alarms_per_image"], fr["pd_object"], where="post",
-                         label=plain(name), **st, **marks)  # fmt: skip
+            axes[1].step(
+                fr["false_alarms_per_image"],
+                fr["pd_object"],
+                where="post",
+                label=plain(name),
+                **st,
+                **marks,
+            )
             axes[1].plot(op["false_alarms_per_image"], op["pd_object"], **point)
         p = pooled_pr(pr[pr["detector"] == name])
         ap = _ap50(summary, name)
         if p.empty or not ap > 0:
             left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"
         else:
-            axes[2].plot(p["recall"], p["precision"], label=f"{plain(name)} (AP50 {ap:.3f})",
-                         **st, **marks)  # fmt: skip
+            axes[2].plot(
+                p["recall"], p["precision"], label=f"{plain(name)} (AP50 {ap:.3f})", **st, **marks
+            )
             aps[name] = f"AP50 {ap:.3f}"
     log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
     log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
@@ -305,8 +334,17 @@ def roc_figure(
     from matplotlib.lines import Line2D
 
     handles = legend_handles(names, aps)  # every curve's AP50 in the figure's legend
-    handles.append(Line2D([], [], color="grey", marker="o", markeredgecolor="black",
-                          linestyle="none", label="design operating point"))  # fmt: skip
+    handles.append(
+        Line2D(
+            [],
+            [],
+            color="grey",
+            marker="o",
+            markeredgecolor="black",
+            linestyle="none",
+            label="design operating point",
+        )
+    )
     fig.legend(handles=handles, loc="lower center", ncol=LEGEND_COLUMNS, fontsize=8)
     fig.suptitle(plain(short_label(title)))
     return fig

@@ -94,8 +94,11 @@ def run_in_processes(
     while queue:
         suspects = _round(fn, items, queue, workers, threads, hooks)
         if suspects:
-            warnings.warn(f"{DIED}: running its {len(suspects)} {what}(s) again one at a time",
-                          RuntimeWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{DIED}: running its {len(suspects)} {what}(s) again one at a time",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         for key in suspects:
             _round(fn, items, [key], 1, threads, hooks, solo=True)
 
@@ -106,8 +109,9 @@ def _round(fn, items, queue, workers, threads, hooks, solo: bool = False) -> lis
     on_result, on_error, on_died = hooks
     ctx = multiprocessing.get_context("spawn")
     started = ctx.Value("i", 0)
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(threads, started, os.getpid()))  # fmt: skip
+    pool = ProcessPoolExecutor(
+        workers, mp_context=ctx, initializer=_init_worker, initargs=(threads, started, os.getpid())
+    )
     finished, broken = False, []
     running: dict = {}
     try:

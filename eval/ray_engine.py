@@ -120,9 +120,11 @@ def check_workers(ray, detectors: list) -> None:
         try:
             ray.get(probe(_arrived).remote(det))
         except Exception as exc:
-            raise EvalError(f"detector {det.name} cannot be rebuilt in a Ray worker "
-                            f"({last_line(exc)}): install its package on every node, or give "
-                            "Ray its module through runtime_env") from None  # fmt: skip
+            raise EvalError(
+                f"detector {det.name} cannot be rebuilt in a Ray worker "
+                f"({last_line(exc)}): install its package on every node, or give "
+                "Ray its module through runtime_env"
+            ) from None
 
 
 def _scored_one_thread(job, k: int) -> bytes:
@@ -141,8 +143,13 @@ def run_on_ray(job, todo, on_done, fail, address: str | None) -> None:
     except ImportError:
         raise EvalError("{opt:engine}ray needs Ray: pip install 'ray>=2.9'") from None
     if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                 configure_logging=False, runtime_env=_runtime_env(address))  # fmt: skip
+        ray.init(
+            address=address,
+            include_dashboard=False,
+            log_to_driver=False,
+            configure_logging=False,
+            runtime_env=_runtime_env(address),
+        )
     check_workers(ray, job.detectors)
     task = ray.remote(num_cpus=1, max_retries=0)(_scored_one_thread)
     refs = {task.remote(job, k): (k, path) for k, path in todo}  # retried here, counted

@@ -90,8 +90,9 @@ def _import(path: str) -> object:
         try:
             obj = getattr(obj, part)
         except AttributeError:
-            raise EvalError(f"cannot import detector {path!r}: module {module!r} has no "
-                            f"attribute {attr!r}") from None  # fmt: skip
+            raise EvalError(
+                f"cannot import detector {path!r}: module {module!r} has no attribute {attr!r}"
+            ) from None
     return obj
 
 
@@ -105,7 +106,8 @@ def _is_factory(obj: object) -> bool:
         return False
     positional = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
     return not any(p.kind in positional and p.default is p.empty for p in params) and not any(
-        p.kind is inspect.Parameter.VAR_POSITIONAL for p in params)  # fmt: skip
+        p.kind is inspect.Parameter.VAR_POSITIONAL for p in params
+    )
 
 
 def _target(ref: str) -> tuple[object, str]:
@@ -115,11 +117,15 @@ def _target(ref: str) -> tuple[object, str]:
         try:
             return eps[ref].load(), ref
         except Exception as exc:
-            raise EvalError(f"cannot load registered detector {ref!r} ({eps[ref].value}): "
-                            f"{type(exc).__name__}: {exc}") from None  # fmt: skip
+            raise EvalError(
+                f"cannot load registered detector {ref!r} ({eps[ref].value}): "
+                f"{type(exc).__name__}: {exc}"
+            ) from None
     if ":" not in ref:
-        raise EvalError(f"unknown detector {ref!r}; valid: {', '.join(available())}, or an "
-                        "import path package.module:name")  # fmt: skip
+        raise EvalError(
+            f"unknown detector {ref!r}; valid: {', '.join(available())}, or an "
+            "import path package.module:name"
+        )
     return _import(ref), ref.rpartition(":")[2].rpartition(".")[2]
 
 
@@ -157,8 +163,9 @@ def load(
         except TypeError as exc:
             raise EvalError(f"detector {ref!r} rejects its options {passed}: {exc}") from None
         except (Exception, SystemExit) as exc:  # its own __init__ failed: one line naming it
-            raise EvalError(f"detector {ref!r} could not be built: "
-                            f"{type(exc).__name__}: {exc}") from None  # fmt: skip
+            raise EvalError(
+                f"detector {ref!r} could not be built: {type(exc).__name__}: {exc}"
+            ) from None
         base = replace(as_detector(built), options=passed, call_options={}, **harness)
     else:
         base = as_detector(obj).with_options(options)
@@ -170,6 +177,8 @@ def _settings(
     det: Detector, threshold: float | None, instances: str, scale: str = "auto"
 ) -> dict[str, Any]:
     """The harness settings: explicit arguments over the detector's own."""
-    return {"threshold": det.threshold if threshold is None else threshold,
-            "instances": det.instances if instances == "auto" else instances,
-            "scale": det.scale if scale == "auto" else scale}  # fmt: skip
+    return {
+        "threshold": det.threshold if threshold is None else threshold,
+        "instances": det.instances if instances == "auto" else instances,
+        "scale": det.scale if scale == "auto" else scale,
+    }

@@ -152,14 +152,18 @@ def throughput(st: dict) -> str:
     """
     scored, reused = st.get("scored", st["images"]), st.get("reused", 0)
     if scored:
-        text = (f"{scored} {'scored' if reused else 'images'} in {st['wall_s']:.1f} s "
-                f"({st['images_per_s']:.3g} images/s)")  # fmt: skip
+        text = (
+            f"{scored} {'scored' if reused else 'images'} in {st['wall_s']:.1f} s "
+            f"({st['images_per_s']:.3g} images/s)"
+        )
     else:
         text = f"nothing scored ({st['wall_s']:.1f} s)"
     if reused:
         text += f", {reused} reused from the saved run"
-    return (f"{text}; shards {st['shards']}: done {st['done']}, resumed {st['skipped']}, "
-            f"retried {st['retried']}, failed {len(st['failed'])}")  # fmt: skip
+    return (
+        f"{text}; shards {st['shards']}: done {st['done']}, resumed {st['skipped']}, "
+        f"retried {st['retried']}, failed {len(st['failed'])}"
+    )
 
 
 def _stats_lines(stats: dict) -> str:
@@ -192,8 +196,10 @@ def ranked_summary(folder: Path, summary: pd.DataFrame, rank_by: str) -> str:
         if rank_by in board.rows.columns and rank_by not in rows.columns:
             rows.insert(2, rank_by, board.rows[rank_by].to_numpy())
         rows["note"] = board.notes
-        parts.append(f"\n## {dataset}: ranked by {rank_by} ({arrow})\n\n"
-                     + markdown(rows.reset_index(drop=True)))  # fmt: skip
+        parts.append(
+            f"\n## {dataset}: ranked by {rank_by} ({arrow})\n\n"
+            + markdown(rows.reset_index(drop=True))
+        )
         notes = caveats(run, dataset, board)
         parts += ["\n"] + [f"- {c}\n" for c in notes] if notes else []
     return "".join(parts)
@@ -244,9 +250,13 @@ def write_run(
     for name, label in labels.items():
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(
-            sel["pixel_roc"], sel["froc"], sel["pr"], sel["summary"],
-            tmp / f"roc_{label}.png", name,
-        )  # fmt: skip
+            sel["pixel_roc"],
+            sel["froc"],
+            sel["pr"],
+            sel["summary"],
+            tmp / f"roc_{label}.png",
+            name,
+        )
     if results is not None:
         files += write_gallery(tmp, results, labels)
     if overlays:

@@ -91,15 +91,22 @@ class Scoring:
 
     def __post_init__(self) -> None:
         if self.bootstrap_unit not in BOOTSTRAP_UNITS:
-            raise EvalError(f"{{opt:bootstrap_unit}}{self.bootstrap_unit!r}: expected "
-                            f"{' or '.join(map(repr, BOOTSTRAP_UNITS))}")  # fmt: skip
+            raise EvalError(
+                f"{{opt:bootstrap_unit}}{self.bootstrap_unit!r}: expected "
+                f"{' or '.join(map(repr, BOOTSTRAP_UNITS))}"
+            )
         if self.instances not in ("auto", "discriminate"):
-            raise EvalError(f"{{opt:instances}}{self.instances!r}: expected 'auto' or "
-                            "'discriminate'")  # fmt: skip
-        if isinstance(self.replicates, bool) or not isinstance(self.replicates, int) or (
-                self.replicates < 0):  # fmt: skip
-            raise EvalError(f"bootstrap replicates must be an integer >= 0, got "
-                            f"{self.replicates!r}")  # fmt: skip
+            raise EvalError(
+                f"{{opt:instances}}{self.instances!r}: expected 'auto' or 'discriminate'"
+            )
+        if (
+            isinstance(self.replicates, bool)
+            or not isinstance(self.replicates, int)
+            or (self.replicates < 0)
+        ):
+            raise EvalError(
+                f"bootstrap replicates must be an integer >= 0, got {self.replicates!r}"
+            )
 
     def as_dict(self) -> dict:
         return {
@@ -129,10 +136,12 @@ def detector_name(detector) -> DetectorName:
     """What a saved state keeps of a detector (a :class:`DetectorName`, or anything without
     a callable, is kept by its fields)."""
     if not hasattr(detector, "fn"):
-        return DetectorName(detector.name, detector.instances, bool(getattr(detector, "saved",
-                                                                          False)))  # fmt: skip
-    return DetectorName(detector.name, detector.instances,
-                        bool(getattr(detector.fn, "saved_predictions", False)))  # fmt: skip
+        return DetectorName(
+            detector.name, detector.instances, bool(getattr(detector, "saved", False))
+        )
+    return DetectorName(
+        detector.name, detector.instances, bool(getattr(detector.fn, "saved_predictions", False))
+    )
 
 
 @dataclass
@@ -265,8 +274,9 @@ class Evaluator:
 
         predictions, targets = list(predictions), list(targets)
         if len(predictions) != len(targets):
-            raise EvalError(f"{len(predictions)} predictions for {len(targets)} targets: give "
-                            "one per image")  # fmt: skip
+            raise EvalError(
+                f"{len(predictions)} predictions for {len(targets)} targets: give one per image"
+            )
         first = self.images
         opts = {
             "box_format": box_format,
@@ -274,10 +284,13 @@ class Evaluator:
             "mask_threshold": mask_threshold,
         }
         if images is not None and len(images) != len(targets):
-            raise EvalError(f"{{opt:images}} holds {len(images)} images for {len(targets)} "
-                            "targets: give one per image")  # fmt: skip
-        seen = [seen_shape(p, None if images is None else images[k])
-                for k, p in enumerate(predictions)]  # fmt: skip
+            raise EvalError(
+                f"{{opt:images}} holds {len(images)} images for {len(targets)} "
+                "targets: give one per image"
+            )
+        seen = [
+            seen_shape(p, None if images is None else images[k]) for k, p in enumerate(predictions)
+        ]
         truths = [truth_from(t, first + k, seen=seen[k], **opts) for k, t in enumerate(targets)]
         groups: dict[tuple[int, int], list[int]] = {}
         for k, (_, meta) in enumerate(truths):
@@ -313,8 +326,9 @@ class Evaluator:
         rows = self.rows
         if len(self.row_order) == len(rows):
             rows = [rows[k] for k in np.argsort(np.array(self.row_order), kind="stable")]
-        per_image = pd.DataFrame([[dataset, self.detector.name, *r] for r in rows],
-                                 columns=PER_IMAGE_COLUMNS)  # fmt: skip
+        per_image = pd.DataFrame(
+            [[dataset, self.detector.name, *r] for r in rows], columns=PER_IMAGE_COLUMNS
+        )
         stats = {dataset: {"images": self.images, "scored": self.images}}
         return Results(tables, per_image=per_image, states={dataset: [self]}, stats=stats)
 
@@ -336,8 +350,9 @@ class Evaluator:
 
     def reset(self) -> None:
         """Forget every image added."""
-        fresh = Evaluator(detector_name(self.detector),
-                          self.scoring, default_class=self.default_class)  # fmt: skip
+        fresh = Evaluator(
+            detector_name(self.detector), self.scoring, default_class=self.default_class
+        )
         self.__dict__.update(fresh.__dict__)
 
     def state_dict(self) -> dict:
@@ -406,8 +421,10 @@ class Evaluator:
         masks = obj.has_masks and self.scoring.matching.iou_kind == "mask"
         iou_type = "segm" if masks and not gt.box_only.any() else "bbox"
         if len(obj) and self.coco_iou_type not in (None, iou_type):
-            raise EvalError(f"detector {self.detector.name}: COCO IoU type changes from "
-                            f"{self.coco_iou_type} to {iou_type} within a dataset")  # fmt: skip
+            raise EvalError(
+                f"detector {self.detector.name}: COCO IoU type changes from "
+                f"{self.coco_iou_type} to {iou_type} within a dataset"
+            )
         if len(obj):
             self.coco_iou_type = iou_type
         orders = [p if i.order is None else i.order for p, i in enumerate(info)]
@@ -417,9 +434,15 @@ class Evaluator:
         """Merge the results of two disjoint parts of a dataset (e.g. shards, in order)."""
         if self.detector.name != other.detector.name or self.scoring != other.scoring:
             raise ValueError("cannot add results of different detectors or scoring settings")
-        out = Evaluator(self.detector, self.scoring, self.pixels + other.pixels,
-                             self.roc + other.roc, calibrated=self.calibrated,
-                             chosen=self.chosen, default_class=self.default_class)  # fmt: skip
+        out = Evaluator(
+            self.detector,
+            self.scoring,
+            self.pixels + other.pixels,
+            self.roc + other.roc,
+            calibrated=self.calibrated,
+            chosen=self.chosen,
+            default_class=self.default_class,
+        )
         if self.coco is not None:
             out.coco = self.coco + other.coco
             out.coco_iou_type = self.coco_iou_type or other.coco_iou_type
@@ -448,12 +471,14 @@ class Evaluator:
         seen = state.threshold if state.thresholded else None
         if threshold is None or seen is None or threshold == seen:
             return
-        raise EvalError(f"detector {self.detector.name}: its operating threshold changed from "
-                        f"{seen:.6g} to {threshold:.6g} between batches, so its scores would "
-                        "change scale: declare one for its objects (--param "
-                        f"{self.detector.name}.threshold=T) or score its statistic on "
-                        f"statistic / threshold (--param {self.detector.name}.scale=ratio; "
-                        "Python: Detector(..., scale='ratio'))")  # fmt: skip
+        raise EvalError(
+            f"detector {self.detector.name}: its operating threshold changed from "
+            f"{seen:.6g} to {threshold:.6g} between batches, so its scores would "
+            "change scale: declare one for its objects (--param "
+            f"{self.detector.name}.threshold=T) or score its statistic on "
+            f"statistic / threshold (--param {self.detector.name}.scale=ratio; "
+            "Python: Detector(..., scale='ratio'))"
+        )
 
     def objects_of(self, out: Detection | Objects, batch: dict) -> Objects:
         """The scored objects of one batch: the detector's own instances (``Objects``, or a
@@ -465,9 +490,11 @@ class Evaluator:
                 return out
             view = pixel_view(out)
             if view is None:
-                raise EvalError(f"detector {self.detector.name} returns {out.geometry}es, "
-                                "which the discrimination stage cannot use: score its own "
-                                "instances ({opt:instances}'auto')")  # fmt: skip
+                raise EvalError(
+                    f"detector {self.detector.name} returns {out.geometry}es, "
+                    "which the discrimination stage cannot use: score its own "
+                    "instances ({opt:instances}'auto')"
+                )
             statistic = view[0]
             threshold = -np.inf if out.threshold is None else out.threshold
         else:
@@ -477,8 +504,9 @@ class Evaluator:
             statistic, threshold = out.statistic, out.threshold
         rules = self.scoring.rules
         area = pixel_areas(batch) if rules.units == "m2" else None
-        return discriminate(statistic, threshold, rules=rules, pixel_area=area,
-                            scale=self.score_scale(threshold))  # fmt: skip
+        return discriminate(
+            statistic, threshold, rules=rules, pixel_area=area, scale=self.score_scale(threshold)
+        )
 
     def score_scale(self, threshold) -> str:
         """The scale of the objects the discrimination stage makes of a statistic with this
@@ -538,8 +566,9 @@ def _sparse_pixel_metrics(res: DetectorResult, out: Objects, batch: dict) -> boo
     ti = torch.from_numpy(idx)
     t, ig = target[ti], ignore[ti]
     det = torch.from_numpy(best > level) & ~ig
-    res.pixels = res.pixels + PixelCounts(int((det & t).sum()), int((det & ~t).sum()),
-                                          n_target, n_clutter)  # fmt: skip
+    res.pixels = res.pixels + PixelCounts(
+        int((det & t).sum()), int((det & ~t).sum()), n_target, n_clutter
+    )
     res.roc.update_sparse(torch.from_numpy(best), t, ig, n_target, n_clutter)
     return True
 
@@ -551,8 +580,11 @@ def _row_columns(rows: list) -> dict | list:
     if not all(len(r) == 7 and isinstance(r[0], str) for r in rows):
         return rows
     counts = np.array([r[1:6] for r in rows], dtype=np.int64).reshape(len(rows), 5)
-    return {"image": [r[0] for r in rows], "counts": counts,
-            "max_score": np.array([r[6] for r in rows], dtype=np.float64)}  # fmt: skip
+    return {
+        "image": [r[0] for r in rows],
+        "counts": counts,
+        "max_score": np.array([r[6] for r in rows], dtype=np.float64),
+    }
 
 
 def _column_rows(rows: dict | list) -> list:
@@ -560,8 +592,10 @@ def _column_rows(rows: dict | list) -> list:
     if not isinstance(rows, dict):
         return list(rows)
     counts = rows["counts"].tolist()
-    return [(k, *c, s) for k, c, s in zip(rows["image"], counts, rows["max_score"].tolist(),
-                                          strict=True)]  # fmt: skip
+    return [
+        (k, *c, s)
+        for k, c, s in zip(rows["image"], counts, rows["max_score"].tolist(), strict=True)
+    ]
 
 
 DetectorResult = Evaluator

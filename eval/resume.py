@@ -14,17 +14,29 @@ __all__ = ["check_resumable", "fingerprint"]
 def fingerprint(plan, datasets: dict) -> dict:
     """Everything a saved shard depends on (a resumed run must match it exactly)."""
     cal = plan.calibration
-    return json.loads(json.dumps({
-        "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
-        "detectors": {d.name: d.describe() for d in plan.detectors},
-        "despeckle": plan.despeckle,
-        "scoring": plan.scoring.as_dict(), "shard_size": plan.execution.shard_size,
-        "calibration": None if cal is None else cal.as_dict(),
-        "export_coco": plan.export_coco,  # shards saved without their COCO part cannot serve
-        "manifests": {n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")},
-        "predictions": {d.name: [str(d.fn.path), d.fn.digest] for d in plan.detectors
-                        if getattr(d.fn, "digest", None) is not None},
-    }, default=str))  # fmt: skip
+    return json.loads(
+        json.dumps(
+            {
+                "datasets": {n: getattr(d, "options", {}) for n, d in datasets.items()},
+                "detectors": {d.name: d.describe() for d in plan.detectors},
+                "despeckle": plan.despeckle,
+                "scoring": plan.scoring.as_dict(),
+                "shard_size": plan.execution.shard_size,
+                "calibration": None if cal is None else cal.as_dict(),
+                # shards saved without their COCO part cannot serve
+                "export_coco": plan.export_coco,
+                "manifests": {
+                    n: d.manifest() for n, d in datasets.items() if hasattr(d, "manifest")
+                },
+                "predictions": {
+                    d.name: [str(d.fn.path), d.fn.digest]
+                    for d in plan.detectors
+                    if getattr(d.fn, "digest", None) is not None
+                },
+            },
+            default=str,
+        )
+    )
 
 
 def check_resumable(path: Path, expected: dict) -> None:
@@ -35,18 +47,24 @@ def check_resumable(path: Path, expected: dict) -> None:
         for name, now in expected.get("manifests", {}).items():
             before = saved.get("manifests", {}).get(name)
             if before is not None and before != now:
-                raise EvalError(f"{{opt:resume}}: dataset {name} changed since the interrupted "
-                                f"run ({_manifest_change(before, now)}); start over with "
-                                "{opt:discard}")  # fmt: skip
+                raise EvalError(
+                    f"{{opt:resume}}: dataset {name} changed since the interrupted "
+                    f"run ({_manifest_change(before, now)}); start over with "
+                    "{opt:discard}"
+                )
         for name, (path, now) in expected.get("predictions", {}).items():
             before = saved.get("predictions", {}).get(name)
             if before is None or before[1] != now:
-                raise EvalError(f"{{opt:resume}}: the predictions of {name} ({path}) are not "
-                                "those of the interrupted run (the file was replaced or "
-                                "changed); start over with {opt:discard}")  # fmt: skip
+                raise EvalError(
+                    f"{{opt:resume}}: the predictions of {name} ({path}) are not "
+                    "those of the interrupted run (the file was replaced or "
+                    "changed); start over with {opt:discard}"
+                )
         if saved != expected:
-            raise EvalError(f"{{opt:resume}}: the options differ from those of the interrupted "
-                            f"run (see {path.name} in its folder)")  # fmt: skip
+            raise EvalError(
+                f"{{opt:resume}}: the options differ from those of the interrupted "
+                f"run (see {path.name} in its folder)"
+            )
         return
     path.write_text(json.dumps(expected, indent=2) + "\n")
 
@@ -54,8 +72,10 @@ def check_resumable(path: Path, expected: dict) -> None:
 def _manifest_change(before: dict, now: dict) -> str:
     """What changed in a dataset's manifest, in words."""
     if before.get("files") != now.get("files") or before.get("bytes") != now.get("bytes"):
-        return (f"{before.get('files')} files of {before.get('bytes')} bytes then, "
-                f"{now.get('files')} files of {now.get('bytes')} bytes now")  # fmt: skip
+        return (
+            f"{before.get('files')} files of {before.get('bytes')} bytes then, "
+            f"{now.get('files')} files of {now.get('bytes')} bytes now"
+        )
     if before.get("sha256") != now.get("sha256"):
         return "files renamed or resized"
     if before.get("sha256_mtime") != now.get("sha256_mtime"):

@@ -13,8 +13,16 @@ from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import Objects
 
-__all__ = ["BOOTSTRAP_UNITS", "batch_truth", "declared_boxes", "image_infos", "image_rows",
-           "known_scr", "pixel_areas", "truth_from_targets"]  # fmt: skip
+__all__ = [
+    "BOOTSTRAP_UNITS",
+    "batch_truth",
+    "declared_boxes",
+    "image_infos",
+    "image_rows",
+    "known_scr",
+    "pixel_areas",
+    "truth_from_targets",
+]
 
 BOOTSTRAP_UNITS = ("image", "group")
 """What the bootstrap resamples: images, or groups of images (``meta["group"]``, e.g. the
@@ -96,7 +104,7 @@ def batch_truth(
         areas=[list(m.get("areas") or []) for m in metas],
         known_scr_db=[k or [] for k in known] if any(known) else None,
         shadow=np.array([m.get("shadow") == "ignore" for m in metas]),
-    )  # fmt: skip
+    )
     return _with_scr(gt, batch, b * c, h, w), image_infos(metas, dataset, c, (h, w), unit)
 
 
@@ -109,8 +117,9 @@ def _with_scr(gt: GroundTruth, batch: dict, n: int, h: int, w: int) -> GroundTru
     return replace(gt, scr_db=target_scr_db(image, gt.ids, gt.ignore, gt.box, gt.plane))
 
 
-def image_infos(metas: list[dict], dataset: str, c: int, shape: tuple[int, int],
-                unit: str = "image") -> list[ImageInfo]:  # fmt: skip
+def image_infos(
+    metas: list[dict], dataset: str, c: int, shape: tuple[int, int], unit: str = "image"
+) -> list[ImageInfo]:
     """Each plane's facts (:class:`~torchsar.metrics.object_state.ImageInfo`): its key (the
     image name, ``#channel`` with several channels), image class, group, area in km², order
     in the dataset and bootstrap unit."""
@@ -128,8 +137,9 @@ def image_infos(metas: list[dict], dataset: str, c: int, shape: tuple[int, int],
     return info
 
 
-def truth_from_targets(targets: list, shape: tuple[int, int], *, box_only=None, spacing=None,
-                       shadow=None) -> GroundTruth:  # fmt: skip
+def truth_from_targets(
+    targets: list, shape: tuple[int, int], *, box_only=None, spacing=None, shadow=None
+) -> GroundTruth:
     """:class:`~torchsar.metrics.GroundTruth` of a stack of planes of ``shape`` from each
     plane's :class:`~torchsar_eval.items.Targets` (as given: nothing painted)."""
     from torchsar.metrics.truth import Regions
@@ -141,18 +151,30 @@ def truth_from_targets(targets: list, shape: tuple[int, int], *, box_only=None, 
     cplane = np.repeat(np.arange(len(targets)), k)
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)  # noqa: E731
     return GroundTruth.build(
-        plane, cat([t.boxes for t in targets]).reshape(-1, 4), planes=len(targets),
-        shape=(h, w), classes=[c for t in targets for c in t.classes],
+        plane,
+        cat([t.boxes for t in targets]).reshape(-1, 4),
+        planes=len(targets),
+        shape=(h, w),
+        classes=[c for t in targets for c in t.classes],
         pixels=[p for t in targets for p in t.pixels],
-        crowd=Regions.build(cplane, cat([t.crowd_boxes for t in targets]).reshape(-1, 4),
-                            shape=(h, w), classes=[c for t in targets for c in t.crowd_classes],
-                            pixels=[p for t in targets for p in t.crowd_pixels]),
-        box_only=box_only, spacing=spacing, length_m=cat([t.lengths_m for t in targets]),
+        crowd=Regions.build(
+            cplane,
+            cat([t.crowd_boxes for t in targets]).reshape(-1, 4),
+            shape=(h, w),
+            classes=[c for t in targets for c in t.crowd_classes],
+            pixels=[p for t in targets for p in t.crowd_pixels],
+        ),
+        box_only=box_only,
+        spacing=spacing,
+        length_m=cat([t.lengths_m for t in targets]),
         declared_area=cat([t.areas for t in targets]),
-        known_scr_db=(cat([t.scr_db for t in targets])
-                      if any(np.isfinite(t.scr_db).any() for t in targets) else None),
+        known_scr_db=(
+            cat([t.scr_db for t in targets])
+            if any(np.isfinite(t.scr_db).any() for t in targets)
+            else None
+        ),
         shadow=shadow,
-    )  # fmt: skip
+    )
 
 
 def pixel_areas(batch: dict) -> np.ndarray | None:
@@ -180,7 +202,14 @@ def image_rows(m: BatchMatch, obj: Objects, gt: GroundTruth, info: list[ImageInf
     best = np.full(n, -np.inf)
     np.maximum.at(best, obj.plane, obj.score)
     return [
-        (i.key, int(n_gt[p]), int(tp[p]), int(fp[p]), int(n_gt[p] - tp[p]), int(count[p]),
-         float(best[p]))
+        (
+            i.key,
+            int(n_gt[p]),
+            int(tp[p]),
+            int(fp[p]),
+            int(n_gt[p] - tp[p]),
+            int(count[p]),
+            float(best[p]),
+        )
         for p, i in enumerate(info)
-    ]  # fmt: skip
+    ]

@@ -71,8 +71,9 @@ class Execution:
                     f"{{opt:device}}{self.device!r} is not a device (cpu, cuda, cuda:N)"
                 ) from None
             if torch.device(self.device).type == "meta":
-                raise EvalError(f"{{opt:device}}{self.device!r} holds no data (shapes only): "
-                                "use cpu or cuda")  # fmt: skip
+                raise EvalError(
+                    f"{{opt:device}}{self.device!r} holds no data (shapes only): use cpu or cuda"
+                )
             try:
                 check_device(self.device, "device")
             except TorchSARError:

@@ -64,7 +64,7 @@ for _cls in (
     Gallery,
     Cases,
 ):
-    statefile.register(_cls)  # fmt: skip
+    statefile.register(_cls)
 statefile.register(RocAccumulator)
 statefile.register(CocoState, transient=("_cache", "_consolidated"))
 
@@ -82,8 +82,9 @@ ROWS_FILE = "rows.jsonl"
 """The per-image rows of a folder's shards, in shard order, written while they are merged."""
 
 
-def merge(parts: Iterable[list[DetectorResult]], rows_to: IO[str] | None = None
-          ) -> list[DetectorResult]:  # fmt: skip
+def merge(
+    parts: Iterable[list[DetectorResult]], rows_to: IO[str] | None = None
+) -> list[DetectorResult]:
     """Add shard results detector by detector, in shard order (one shard in memory at a
     time; the per-image rows are dropped, after being written to ``rows_to`` as JSON lines
     ``[detector, rows]`` when given: :func:`shard_rows` streams them from there)."""
@@ -93,8 +94,9 @@ def merge(parts: Iterable[list[DetectorResult]], rows_to: IO[str] | None = None
     return out or []
 
 
-def _add(out: list[DetectorResult] | None, part: list[DetectorResult],
-         rows_to: IO[str] | None) -> list[DetectorResult]:  # fmt: skip
+def _add(
+    out: list[DetectorResult] | None, part: list[DetectorResult], rows_to: IO[str] | None
+) -> list[DetectorResult]:
     """``out + part`` detector by detector, ``part``'s rows written to ``rows_to`` and
     dropped."""
     for r in part:
@@ -196,8 +198,7 @@ class ShardMerger:
         if self._merged != shard_files(self.folder):
             self._rows.seek(0)
             self._rows.truncate()
-            self._out = merge((load_shard(p).results for p in shard_files(self.folder)),
-                              self._rows)  # fmt: skip
+            self._out = merge((load_shard(p).results for p in shard_files(self.folder)), self._rows)
         self._rows.close()
         os.replace(self._tmp, self.folder / ROWS_FILE)
         return self._out or []

@@ -215,9 +215,15 @@ def _processes(job, todo, track: _Track, fail: _Failures, workers: int) -> None:
         fail(k, RuntimeError(DIED))
         track.settled(k)
 
-    run_in_processes(_scored, {k: (job, k) for k in paths}, workers,
-                     on_result=lambda k, data: track.saved(k, paths[k], data),
-                     on_error=failed, on_died=died, what="shard")  # fmt: skip
+    run_in_processes(
+        _scored,
+        {k: (job, k) for k in paths},
+        workers,
+        on_result=lambda k, data: track.saved(k, paths[k], data),
+        on_error=failed,
+        on_died=died,
+        what="shard",
+    )
 
 
 def _ray(job, todo, track: _Track, fail: _Failures, address: str | None) -> None:
@@ -266,8 +272,7 @@ def run_shards(
     folder.mkdir(parents=True, exist_ok=True)
     sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
     todo = _pending(job, folder)
-    bar = tqdm(total=len(job.indices), desc=short_label(job.name), disable=not progress,
-               unit="img")  # fmt: skip
+    bar = tqdm(total=len(job.indices), desc=short_label(job.name), disable=not progress, unit="img")
     bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
     with ShardMerger(folder, len(sizes), (k for k, _ in todo)) as merger:
         track, fail = _Track(bar, sizes, merger, persist), _Failures(skip_bad, merger.lost)
@@ -281,13 +286,19 @@ def run_shards(
         finally:
             bar.close()
         merged = merger.finish()
-    merged = merged or [DetectorResult(d, job.scoring, default_class=job.default_class)
-                        for d in job.detectors]  # fmt: skip
+    merged = merged or [
+        DetectorResult(d, job.scoring, default_class=job.default_class) for d in job.detectors
+    ]
     lost = {f["shard"] for f in fail.failed}
     scored = sum(sizes[k] for k, _ in todo if k not in lost)
     reused = len(job.indices) - sum(sizes[k] for k, _ in todo)
-    counts = {"shards": len(sizes), "done": len(todo) - len(fail.failed),
-              "skipped": len(sizes) - len(todo), "retried": len(fail.retried),
-              "failed": fail.failed, "scored_images": scored,
-              "reused_images": reused}  # fmt: skip
+    counts = {
+        "shards": len(sizes),
+        "done": len(todo) - len(fail.failed),
+        "skipped": len(sizes) - len(todo),
+        "retried": len(fail.retried),
+        "failed": fail.failed,
+        "scored_images": scored,
+        "reused_images": reused,
+    }
     return merged, counts

@@ -234,8 +234,7 @@ def unpack(raw: bytes) -> tuple[Any, list[np.ndarray]]:
 
 
 def _entries(table: Any) -> list:
-    if not isinstance(table, list) or not all(isinstance(e, list) and len(e) == 3
-                                              for e in table):  # fmt: skip
+    if not isinstance(table, list) or not all(isinstance(e, list) and len(e) == 3 for e in table):
         raise ValueError("unexpected array table")
     return table
 
@@ -259,11 +258,13 @@ def _plain(descr: Any) -> bool:
     if isinstance(descr, str):
         return bool(_DESCR.match(descr))
     return isinstance(descr, list) and all(
-        isinstance(f, list) and len(f) in (2, 3) and isinstance(f[0], str)
+        isinstance(f, list)
+        and len(f) in (2, 3)
+        and isinstance(f[0], str)
         and (_plain(f[1]) or (f[0] == "" and isinstance(f[1], str) and _PAD.match(f[1])))
         and (len(f) == 2 or _dims(f[2]))
         for f in descr
-    )  # fmt: skip
+    )
 
 
 def _dims(shape: Any) -> bool:
@@ -275,8 +276,10 @@ def _as_descr(descr: Any) -> Any:
     """JSON's lists back into the tuples of numpy's record descriptions."""
     if isinstance(descr, str):
         return descr
-    return [(f[0], _as_descr(f[1])) if len(f) == 2 else (f[0], _as_descr(f[1]), tuple(f[2]))
-            for f in descr]  # fmt: skip
+    return [
+        (f[0], _as_descr(f[1])) if len(f) == 2 else (f[0], _as_descr(f[1]), tuple(f[2]))
+        for f in descr
+    ]
 
 
 def encode(obj: Any) -> tuple[Any, list[np.ndarray]]:
@@ -325,8 +328,16 @@ def loads(data: bytes, what: str = "state") -> Any:
     try:
         tree, arrays = (unpack if version == 2 else _unpack_npz)(zlib.decompress(body))
         return _decode(tree, arrays)
-    except (zlib.error, ValueError, KeyError, TypeError, IndexError, OSError,
-            zipfile.BadZipFile, EOFError) as exc:  # fmt: skip
+    except (
+        zlib.error,
+        ValueError,
+        KeyError,
+        TypeError,
+        IndexError,
+        OSError,
+        zipfile.BadZipFile,
+        EOFError,
+    ) as exc:
         raise CorruptStateError(f"{what} holds an unexpected structure ({exc})") from None
 
 

@@ -155,8 +155,10 @@ def check_item(arrays: dict[str, np.ndarray], meta: object) -> str | None:
     if not np.array_equal(mask, covered):
         lost = int(np.count_nonzero(mask & ~covered))
         if lost:
-            return (f"mask marks {lost} target pixels that no instance covers (object "
-                    "scoring would miss their targets; give them instance ids)")  # fmt: skip
+            return (
+                f"mask marks {lost} target pixels that no instance covers (object "
+                "scoring would miss their targets; give them instance ids)"
+            )
         extra = int(np.count_nonzero(covered & ~mask))
         return f"instances cover {extra} pixels that the mask does not mark as target"
     return _check_meta(meta, int(inst.max()))
@@ -316,8 +318,10 @@ def write_store(
         raise EvalError(f"--out {out}: cannot create {out.parent} ({exc.strerror})") from None
     if not os.access(out.parent, os.W_OK | os.X_OK):
         raise EvalError(f"--out {out}: cannot write in {out.parent} (permission denied)")
-    busy = (f"--out {out} is being written by another make-dataset (it holds "
-            f"{lock_path(out).name}); wait for it to finish or choose another folder")  # fmt: skip
+    busy = (
+        f"--out {out} is being written by another make-dataset (it holds "
+        f"{lock_path(out).name}); wait for it to finish or choose another folder"
+    )
     with hold(lock_path(out), wait=LOCK_WAIT_S, message=busy):
         if out.exists() or out.is_symlink():  # the other writer finished meanwhile
             raise EvalError(exists)
@@ -332,8 +336,9 @@ def write_store(
             try:
                 _write_folder(tmp, items, n, shard_size, info or {})
             except OSError as exc:  # a full disk, a quota: one line, nothing kept
-                raise EvalError(f"--out {out}: cannot write the store "
-                                f"({exc.strerror or exc}); nothing was kept") from None  # fmt: skip
+                raise EvalError(
+                    f"--out {out}: cannot write the store ({exc.strerror or exc}); nothing was kept"
+                ) from None
             try:
                 os.rename(tmp, out)
             except OSError as exc:
@@ -361,9 +366,14 @@ def _write_folder(tmp: Path, items: Iterable[dict], n: int, shard_size: int, inf
         finally:
             shard.close()
     np.save(tmp / "index.npy", index)
-    header = {"format": FORMAT, "version": VERSION, "n": n, "shard_size": shard_size,
-              "fields": list(MEMBERS),
-              "checksum": "crc32 of each item's bytes (index row 5)"}  # fmt: skip
+    header = {
+        "format": FORMAT,
+        "version": VERSION,
+        "n": n,
+        "shard_size": shard_size,
+        "fields": list(MEMBERS),
+        "checksum": "crc32 of each item's bytes (index row 5)",
+    }
     header.update({k: v for k, v in info.items() if k not in header})
     (tmp / "store.json").write_text(json.dumps(header, indent=2, default=str) + "\n")
 
@@ -385,8 +395,10 @@ def _read_header(head: Path) -> dict:
         raise EvalError(f"{head}: expected a JSON object (the store header), got a {got}")
     fmt, version = header.get("format"), header.get("version")
     if fmt != FORMAT or type(version) is not int or version not in ROWS:
-        raise EvalError(f"{head}: not a {FORMAT} header of version {' or '.join(map(str, ROWS))} "
-                        f"(format={_short(fmt)}, version={_short(version)})")  # fmt: skip
+        raise EvalError(
+            f"{head}: not a {FORMAT} header of version {' or '.join(map(str, ROWS))} "
+            f"(format={_short(fmt)}, version={_short(version)})"
+        )
     for key, least in (("n", 0), ("shard_size", 1)):
         if key not in header:
             raise EvalError(f"{head}: {key} is missing")
@@ -416,11 +428,15 @@ def _check_index(root: Path, header: dict) -> tuple[int, ...]:
     if index.dtype != np.int64:
         raise EvalError(f"{path}: dtype {index.dtype}, expected int64 offsets")
     if index.ndim != 3 or index.shape[1:] != (ROWS[version], 2):
-        raise EvalError(f"{path}: shape {index.shape}, expected (n, {ROWS[version]}, 2) "
-                        f"for a version {version} store")  # fmt: skip
+        raise EvalError(
+            f"{path}: shape {index.shape}, expected (n, {ROWS[version]}, 2) "
+            f"for a version {version} store"
+        )
     if len(index) != n:
-        raise EvalError(f"{root / 'store.json'}: n={n} but index.npy has {len(index)} rows "
-                        "(n must equal the index length)")  # fmt: skip
+        raise EvalError(
+            f"{root / 'store.json'}: n={n} but index.npy has {len(index)} rows "
+            "(n must equal the index length)"
+        )
     index = np.array(index[:, : len(MEMBERS)])
     shards = [root / f"shard-{k:06d}.tar" for k in range(-(-n // size_k))]
     sizes = np.array([require_regular(p, "store shard").st_size for p in shards], np.int64)
@@ -437,16 +453,22 @@ def _check_index(root: Path, header: dict) -> tuple[int, ...]:
         i, k = (int(v) for v in np.argwhere(bad | past)[0])
         o, s, tar = int(off[i, k]), int(size[i, k]), shards[shard_of[i]]
         if past[i, k]:
-            raise EvalError(f"{row(i)}: member {MEMBERS[k]} at byte {o:,} of {s:,} bytes "
-                            f"ends past the end of {tar.name} ({sizes[shard_of[i]]:,} bytes: "
-                            "truncated, or not the shard this index was written with)")  # fmt: skip
-        raise EvalError(f"{row(i)}: member {MEMBERS[k]} at byte {o:,} of {s:,} bytes is no "
-                        f"place for a tar member of {tar.name}")  # fmt: skip
+            raise EvalError(
+                f"{row(i)}: member {MEMBERS[k]} at byte {o:,} of {s:,} bytes "
+                f"ends past the end of {tar.name} ({sizes[shard_of[i]]:,} bytes: "
+                "truncated, or not the shard this index was written with)"
+            )
+        raise EvalError(
+            f"{row(i)}: member {MEMBERS[k]} at byte {o:,} of {s:,} bytes is no "
+            f"place for a tar member of {tar.name}"
+        )
     follows = off[:, 1:] == off[:, :-1] + size[:, :-1] + (-size[:, :-1] % _BLOCK) + _BLOCK
     if not follows.all():
         i, k = (int(v) for v in np.argwhere(~follows)[0])
-        raise EvalError(f"{row(i)}: member {MEMBERS[k + 1]} does not follow member "
-                        f"{MEMBERS[k]} in {shards[shard_of[i]].name}")  # fmt: skip
+        raise EvalError(
+            f"{row(i)}: member {MEMBERS[k + 1]} does not follow member "
+            f"{MEMBERS[k]} in {shards[shard_of[i]].name}"
+        )
     start, end = off[:, 0] - _BLOCK, off[:, -1] + size[:, -1]
     for k, tar in enumerate(shards):
         rows = np.arange(k * size_k, min(n, (k + 1) * size_k))
@@ -456,8 +478,10 @@ def _check_index(root: Path, header: dict) -> tuple[int, ...]:
             a, b = sorted((int(order[clash[0]]), int(order[clash[0] + 1])))
             same = np.array_equal(index[a], index[b])
             how = "point to the same bytes of" if same else "overlap in"
-            raise EvalError(f"{path}: rows {a} and {b} {how} {tar.name} (each item must "
-                            "have bytes of its own: one would be read twice)")  # fmt: skip
+            raise EvalError(
+                f"{path}: rows {a} and {b} {how} {tar.name} (each item must "
+                "have bytes of its own: one would be read twice)"
+            )
     return (n, ROWS[version], 2)
 
 
@@ -519,17 +543,22 @@ class StoreDataset(Dataset):
         first, end = int(rows[0, 0]) - _BLOCK, int(rows[len(MEMBERS) - 1].sum())
         size = require_regular(shard, "store shard").st_size
         if not 0 <= first < end <= size:  # checked on opening; the files changed since
-            raise self._bad(shard, key, f"its index row (bytes {first:,} to {end:,}) does not "
-                            f"fit the shard's {size:,} bytes: the store changed since it was "
-                            "opened")  # fmt: skip
+            raise self._bad(
+                shard,
+                key,
+                f"its index row (bytes {first:,} to {end:,}) does not "
+                f"fit the shard's {size:,} bytes: the store changed since it was "
+                "opened",
+            )
         with open(shard, "rb") as f:
             f.seek(first)
             data = f.read(end - first)
         if len(data) != end - first:
             raise self._bad(shard, key, f"the shard is truncated (item ends at byte {end:,})")
         if self.version >= 2 and zlib.crc32(data) != int(rows[len(MEMBERS), 0]):
-            raise self._bad(shard, key, "checksum mismatch: its bytes changed since the "
-                            "store was written")  # fmt: skip
+            raise self._bad(
+                shard, key, "checksum mismatch: its bytes changed since the store was written"
+            )
         return data
 
     def __getitem__(self, i: int) -> dict:
@@ -546,8 +575,11 @@ class StoreDataset(Dataset):
             want = _member_name(key, k)
             name, size = _tar_header(data[o - _BLOCK : o])
             if name != want or size != s:
-                raise self._bad(shard, key, f"the index points to member {_short(name)} of "
-                                f"{size} bytes, not {want} of {s}")  # fmt: skip
+                raise self._bad(
+                    shard,
+                    key,
+                    f"the index points to member {_short(name)} of {size} bytes, not {want} of {s}",
+                )
             parts.append(data[o : o + s])
         arrays = {}
         for f, part in zip(FIELDS, parts, strict=False):
@@ -569,8 +601,11 @@ class StoreDataset(Dataset):
     def manifest(self) -> dict:
         """Files, bytes and the store header (the store is the data's identity)."""
         files = sorted(p for p in self.root.iterdir() if p.is_file())
-        return {"files": len(files), "bytes": sum(p.stat().st_size for p in files),
-                "header": self.header}  # fmt: skip
+        return {
+            "files": len(files),
+            "bytes": sum(p.stat().st_size for p in files),
+            "header": self.header,
+        }
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)

@@ -31,11 +31,27 @@ from torchsar_eval.calibrate import Target
 from torchsar_eval.detector import HARNESS_OPTIONS, Detector
 from torchsar_eval.errors import EvalError
 
-__all__ = ["SWEEP_COLUMNS", "Setting", "as_frame", "check_sweep", "choose", "sweep_table",
-           "variants"]  # fmt: skip
+__all__ = [
+    "SWEEP_COLUMNS",
+    "Setting",
+    "as_frame",
+    "check_sweep",
+    "choose",
+    "sweep_table",
+    "variants",
+]
 
-SWEEP_COLUMNS = ["dataset", "detector", "setting", "options", "f1", "recall",
-                 "false_alarms_per_image", "within_target", "chosen"]  # fmt: skip
+SWEEP_COLUMNS = [
+    "dataset",
+    "detector",
+    "setting",
+    "options",
+    "f1",
+    "recall",
+    "false_alarms_per_image",
+    "within_target",
+    "chosen",
+]
 """Columns of ``sweep.csv``."""
 MAX_SETTINGS = 512
 """Most settings one detector may be tried at (the grid is a product: it grows fast)."""
@@ -61,12 +77,16 @@ def check_sweep(sweep: Mapping[str, Sequence]) -> dict[str, list]:
         {'pfa': [0.001, 0.0001], 'train': [4, 8]}
     """
     if not isinstance(sweep, Mapping) or not sweep:
-        raise EvalError("{opt:sweep} must map option names to lists of values, e.g. "
-                        "{'pfa': [1e-3, 1e-4]}")  # fmt: skip
+        raise EvalError(
+            "{opt:sweep} must map option names to lists of values, e.g. {'pfa': [1e-3, 1e-4]}"
+        )
     out = {}
     for key, values in sweep.items():
-        values = list(values) if isinstance(values, Sequence) and not isinstance(values, str) \
-            else [values]  # fmt: skip
+        values = (
+            list(values)
+            if isinstance(values, Sequence) and not isinstance(values, str)
+            else [values]
+        )
         if not isinstance(key, str) or not key or not values:
             raise EvalError(f"{{opt:sweep}} option {key!r} needs at least one value")
         if len({json.dumps(v, sort_keys=True, default=str) for v in values}) != len(values):
@@ -83,8 +103,10 @@ def variants(det: Detector, sweep: Mapping[str, list]) -> list[Detector]:
         return []
     grid = list(itertools.product(*(sweep[k] for k in keys)))
     if len(grid) > MAX_SETTINGS:
-        raise EvalError(f"{{opt:sweep}} tries detector {det.name} at {len(grid)} settings, more "
-                        f"than {MAX_SETTINGS}: sweep fewer values")  # fmt: skip
+        raise EvalError(
+            f"{{opt:sweep}} tries detector {det.name} at {len(grid)} settings, more "
+            f"than {MAX_SETTINGS}: sweep fewer values"
+        )
     out = []
     for k, values in enumerate(grid):
         point = dict(zip(keys, values, strict=True))
@@ -105,8 +127,9 @@ def _point(det: Detector, keys: list[str]) -> dict[str, Any]:
     return {k: got.get(k) for k in keys}
 
 
-def choose(tried: list[Detector], results: list, target: Target,
-           keys: list[str]) -> tuple[int, list[Setting]]:  # fmt: skip
+def choose(
+    tried: list[Detector], results: list, target: Target, keys: list[str]
+) -> tuple[int, list[Setting]]:
     """The index of the variant that best meets ``target`` on the calibration split
     (``results``: the variants' results there, in order; ``keys``: the swept options), and
     every setting tried."""
@@ -114,8 +137,16 @@ def choose(tried: list[Detector], results: list, target: Target,
     for k, (det, r) in enumerate(zip(tried, results, strict=True)):
         m = r.objects.metrics("design")
         name = det.name.rpartition("@")[0] or det.name
-        settings.append(Setting(name, k, _point(det, keys), float(m["f1"]),
-                                float(m["recall"]), float(m["fa_per_image"])))  # fmt: skip
+        settings.append(
+            Setting(
+                name,
+                k,
+                _point(det, keys),
+                float(m["f1"]),
+                float(m["recall"]),
+                float(m["fa_per_image"]),
+            )
+        )
     return min(range(len(settings)), key=lambda k: _rank(settings[k], target)), settings
 
 
@@ -135,8 +166,19 @@ def sweep_table(dataset: str, settings: list[Setting], chosen: int, target: Targ
     rows = []
     for s in settings:
         within = True if target.kind == "f1" else s.fa_per_image <= target.level
-        rows.append([dataset, s.detector, s.index, json.dumps(s.options, default=str), s.f1,
-                     s.recall, s.fa_per_image, within, s.index == chosen])  # fmt: skip
+        rows.append(
+            [
+                dataset,
+                s.detector,
+                s.index,
+                json.dumps(s.options, default=str),
+                s.f1,
+                s.recall,
+                s.fa_per_image,
+                within,
+                s.index == chosen,
+            ]
+        )
     return rows
 
 

@@ -40,9 +40,17 @@ __all__ = [
 ]
 
 HEADLINE = ["precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image"]
-INTERVALS = [*HEADLINE, "false_alarms_per_image", "fa_per_km2", "fom", "ap50_95",
-             "pd_at_0.1_fa_per_image", "pd_at_10_fa_per_image", "pauc",
-             "ap_distance"]  # fmt: skip
+INTERVALS = [
+    *HEADLINE,
+    "false_alarms_per_image",
+    "fa_per_km2",
+    "fom",
+    "ap50_95",
+    "pd_at_0.1_fa_per_image",
+    "pd_at_10_fa_per_image",
+    "pauc",
+    "ap_distance",
+]
 """The summary columns with ``_lo`` / ``_hi`` bounds (NaN with the reason in
 ``interval_note`` where there is none)."""
 _STATE_NAME = {"false_alarms_per_image": "fa_per_image"}
@@ -84,28 +92,112 @@ SUMMARY_COLUMNS = [
     "interval_note",
     "score_threshold",
 ]
-CONSOLE_COLUMNS = ["dataset", "detector", "images", "pd_pixel", "pfa_pixel", "tp", "fp", "fn",
-                   "precision", "recall", "f1", "ap50", "pd_at_1_fa_per_image",
-                   "false_alarms_per_image", "mean_iou", "ms_per_image"]  # fmt: skip
+CONSOLE_COLUMNS = [
+    "dataset",
+    "detector",
+    "images",
+    "pd_pixel",
+    "pfa_pixel",
+    "tp",
+    "fp",
+    "fn",
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "pd_at_1_fa_per_image",
+    "false_alarms_per_image",
+    "mean_iou",
+    "ms_per_image",
+]
 """What ``torchsar-eval run`` prints (summary and timing columns)."""
-TIMING_COLUMNS = ["dataset", "detector", "images", "ms_per_image", "object_ms_per_image",
-                  "images_per_s"]  # fmt: skip
-FROC_COLUMNS = ["dataset", "detector", "threshold", "tp", "fp", "false_alarms_per_image",
-                "pd_object", "precision"]  # fmt: skip
+TIMING_COLUMNS = [
+    "dataset",
+    "detector",
+    "images",
+    "ms_per_image",
+    "object_ms_per_image",
+    "images_per_s",
+]
+FROC_COLUMNS = [
+    "dataset",
+    "detector",
+    "threshold",
+    "tp",
+    "fp",
+    "false_alarms_per_image",
+    "pd_object",
+    "precision",
+]
 PR_COLUMNS = ["dataset", "detector", "class", "threshold", "recall", "precision"]
-BREAKDOWN_COLUMNS = ["dataset", "detector", "by", "key", "images", "targets", "tp", "fp",
-                     "fn", "precision", "recall", "f1", "ap50", "ap50_95"]  # fmt: skip
-COCO_STATS = ["AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large", "AR1", "AR10",
-              "AR100", "AR_small", "AR_medium", "AR_large"]  # fmt: skip
+BREAKDOWN_COLUMNS = [
+    "dataset",
+    "detector",
+    "by",
+    "key",
+    "images",
+    "targets",
+    "tp",
+    "fp",
+    "fn",
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "ap50_95",
+]
+COCO_STATS = [
+    "AP",
+    "AP50",
+    "AP75",
+    "AP_small",
+    "AP_medium",
+    "AP_large",
+    "AR1",
+    "AR10",
+    "AR100",
+    "AR_small",
+    "AR_medium",
+    "AR_large",
+]
 """``COCOeval.stats`` in order (-1 where pycocotools gives -1: nothing to average)."""
 COCO_COLUMNS = ["dataset", "detector", "iou_type", *COCO_STATS]
-PER_IMAGE_COLUMNS = ["dataset", "detector", "image", "targets", "tp", "fp", "fn", "objects",
-                     "max_score"]  # fmt: skip
-SCR_COLUMNS = ["dataset", "detector", "source", "scr_bin", "scr_lo_db", "scr_hi_db",
-               "scr_mean_db", "targets", "detected", "pd", "pd_lo", "pd_hi"]  # fmt: skip
+PER_IMAGE_COLUMNS = [
+    "dataset",
+    "detector",
+    "image",
+    "targets",
+    "tp",
+    "fp",
+    "fn",
+    "objects",
+    "max_score",
+]
+SCR_COLUMNS = [
+    "dataset",
+    "detector",
+    "source",
+    "scr_bin",
+    "scr_lo_db",
+    "scr_hi_db",
+    "scr_mean_db",
+    "targets",
+    "detected",
+    "pd",
+    "pd_lo",
+    "pd_hi",
+]
 ERRORS_COLUMNS = ["dataset", "detector", "error", "type", "count"]
-PAIRED_COLUMNS = ["dataset", "detector", "reference", "metric", "difference", "lo", "hi",
-                  "significant"]  # fmt: skip
+PAIRED_COLUMNS = [
+    "dataset",
+    "detector",
+    "reference",
+    "metric",
+    "difference",
+    "lo",
+    "hi",
+    "significant",
+]
 
 
 def summary_row(dataset: str, r: DetectorResult) -> dict:
@@ -202,12 +294,21 @@ def froc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
             t, n = f["tp"].astype(np.int64), f["fp"].astype(np.int64)
             with np.errstate(invalid="ignore", divide="ignore"):
                 precision = np.where(t + n > 0, t / np.maximum(t + n, 1), np.nan)
-            parts.append(pd.DataFrame({
-                "dataset": ds, "detector": r.detector.name,
-                "threshold": f["threshold"].astype(np.float64), "tp": t, "fp": n,
-                "false_alarms_per_image": f["fa_per_image"].astype(np.float64),
-                "pd_object": f["pd"].astype(np.float64), "precision": precision,
-            }, columns=FROC_COLUMNS))  # fmt: skip
+            parts.append(
+                pd.DataFrame(
+                    {
+                        "dataset": ds,
+                        "detector": r.detector.name,
+                        "threshold": f["threshold"].astype(np.float64),
+                        "tp": t,
+                        "fp": n,
+                        "false_alarms_per_image": f["fa_per_image"].astype(np.float64),
+                        "pd_object": f["pd"].astype(np.float64),
+                        "precision": precision,
+                    },
+                    columns=FROC_COLUMNS,
+                )
+            )
     parts = [p for p in parts if len(p)]
     if not parts:
         return pd.DataFrame(columns=FROC_COLUMNS)
@@ -256,8 +357,23 @@ def _breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
                 continue  # the sink of unattributed false alarms
             op.update(fp=nan, precision=nan, f1=nan)
         ap = class_ap.get(name, (nan, nan)) if by == "class" else (nan, nan)
-        rows.append([ds, r.detector.name, by, name, k["images"] or None, k["n_gt"], op["tp"],
-                     op["fp"], op["fn"], op["precision"], op["recall"], op["f1"], *ap])  # fmt: skip
+        rows.append(
+            [
+                ds,
+                r.detector.name,
+                by,
+                name,
+                k["images"] or None,
+                k["n_gt"],
+                op["tp"],
+                op["fp"],
+                op["fn"],
+                op["precision"],
+                op["recall"],
+                op["f1"],
+                *ap,
+            ]
+        )
     return rows
 
 
@@ -266,18 +382,34 @@ def _scr_breakdown_rows(ds: str, r: DetectorResult) -> list[list]:
     found and missed; false alarms have no SCR, so precision and F1 are NaN."""
     nan = float("nan")
     return [
-        [ds, r.detector.name, "scr" if row["source"] == "measured" else f"scr_{row['source']}",
-         row["scr_bin"], None, row["targets"], row["detected"], nan,
-         row["targets"] - row["detected"], nan, row["pd"], nan, nan, nan]
+        [
+            ds,
+            r.detector.name,
+            "scr" if row["source"] == "measured" else f"scr_{row['source']}",
+            row["scr_bin"],
+            None,
+            row["targets"],
+            row["detected"],
+            nan,
+            row["targets"] - row["detected"],
+            nan,
+            row["pd"],
+            nan,
+            nan,
+            nan,
+        ]
         for row in r.objects.scr_rows(r.threshold)
-    ]  # fmt: skip
+    ]
 
 
 def breakdown_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """Operating-point counts per ground-truth class, size bin, image class, group and
     signal-to-clutter ratio bin (measured, and known where the data declare it)."""
-    return _frame(results, lambda ds, r: _breakdown_rows(ds, r) + _scr_breakdown_rows(ds, r),
-                  BREAKDOWN_COLUMNS)  # fmt: skip
+    return _frame(
+        results,
+        lambda ds, r: _breakdown_rows(ds, r) + _scr_breakdown_rows(ds, r),
+        BREAKDOWN_COLUMNS,
+    )
 
 
 def _scr_rows(ds: str, r: DetectorResult) -> list[list]:
@@ -305,8 +437,9 @@ def _errors_rows(ds: str, r: DetectorResult) -> list[list]:
         rows.append([ds, det, "miss", f"size:{name}", 0 if k is None else k["n_gt"] - k["tp"]])
     for row in r.objects.scr_rows(thr):
         prefix = "scr" if row["source"] == "measured" else f"scr_{row['source']}"
-        rows.append([ds, det, "miss", f"{prefix}:{row['scr_bin']}",
-                     row["targets"] - row["detected"]])  # fmt: skip
+        rows.append(
+            [ds, det, "miss", f"{prefix}:{row['scr_bin']}", row["targets"] - row["detected"]]
+        )
     return rows
 
 
@@ -346,8 +479,18 @@ def paired_table(results: dict[str, list[DetectorResult]], level: float = 0.95) 
             for metric in PAIRED_METRICS:
                 d, lo, hi = diffs[metric]
                 name = "ap_distance" if distance and metric == "ap50" else metric
-                rows.append([ds, r.detector.name, rs[ref].detector.name, name, d, lo, hi,
-                             bool(lo > 0 or hi < 0)])  # fmt: skip
+                rows.append(
+                    [
+                        ds,
+                        r.detector.name,
+                        rs[ref].detector.name,
+                        name,
+                        d,
+                        lo,
+                        hi,
+                        bool(lo > 0 or hi < 0),
+                    ]
+                )
     return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
 
 
@@ -365,8 +508,9 @@ def coco_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
 
 def per_image_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     """One row per image and detector at the design operating point."""
-    return _frame(results, lambda ds, r: [[ds, r.detector.name, *row] for row in r.rows],
-                  PER_IMAGE_COLUMNS)  # fmt: skip
+    return _frame(
+        results, lambda ds, r: [[ds, r.detector.name, *row] for row in r.rows], PER_IMAGE_COLUMNS
+    )
 
 
 def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
@@ -386,8 +530,17 @@ def pixel_roc_table(results: dict[str, list[DetectorResult]]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols)
 
 
-HEADLINE_SHOWN = ["dataset", "detector", "images", "targets", "tp", "fp", "fn", "fom",
-                  "false_alarms_per_image"]  # fmt: skip
+HEADLINE_SHOWN = [
+    "dataset",
+    "detector",
+    "images",
+    "targets",
+    "tp",
+    "fp",
+    "fn",
+    "fom",
+    "false_alarms_per_image",
+]
 
 
 def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
@@ -400,8 +553,10 @@ def headline_table(summary: pd.DataFrame) -> pd.DataFrame:
     for m in [*HEADLINE, "ap_distance", "false_alarms_per_image"]:
         if m.startswith("ap") and summary[m].isna().all():
             continue
-        out[m] = [_with_interval(v, lo, hi) for v, lo, hi in
-                  zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)]  # fmt: skip
+        out[m] = [
+            _with_interval(v, lo, hi)
+            for v, lo, hi in zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"], strict=True)
+        ]
     if summary["ap50_95"].notna().any():
         out["ap50_95"] = summary["ap50_95"]
     out["interval_note"] = summary["interval_note"]

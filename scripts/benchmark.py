@@ -78,8 +78,9 @@ def load_cases(only: str | None, topic: str | None = None) -> list[tuple[str, Ca
     return out
 
 
-def run_report(mod, n: int | None, workers: list[int] | None, device: str | None,
-               csv: Path | None) -> int:  # fmt: skip
+def run_report(
+    mod, n: int | None, workers: list[int] | None, device: str | None, csv: Path | None
+) -> int:
     """Run a report topic (a module with ``report``), print its table, optionally write it
     as CSV."""
     kwargs = {"device": device}
@@ -103,8 +104,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--n", type=int, help="images of a report topic (throughput: default 256)")
-    p.add_argument("--workers", type=int, nargs="+", help="worker counts of a report topic "
-                   "(throughput: default 1 2)")  # fmt: skip
+    p.add_argument(
+        "--workers",
+        type=int,
+        nargs="+",
+        help="worker counts of a report topic (throughput: default 1 2)",
+    )
     p.add_argument("--device", help="where a report topic's detectors run (cpu, cuda, ...)")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
@@ -115,9 +120,16 @@ def main(argv: list[str] | None = None) -> int:
     for name, ours, ref in load_cases(args.only, args.topic):
         (t_ours, c_ours), (t_ref, c_ref) = interleaved(ours, ref, args.repeat)
         rows.append(
-            (name, t_ours * 1e3, t_ref * 1e3, c_ours * 1e3, c_ref * 1e3, t_ref / t_ours,
-             c_ref / max(c_ours, 1e-9))
-        )  # fmt: skip
+            (
+                name,
+                t_ours * 1e3,
+                t_ref * 1e3,
+                c_ours * 1e3,
+                c_ref * 1e3,
+                t_ref / t_ours,
+                c_ref / max(c_ours, 1e-9),
+            )
+        )
         print(
             f"{name:<70s} ours {t_ours * 1e3:9.2f} ms  ref {t_ref * 1e3:9.2f} ms  "
             f"ratio {t_ref / t_ours:6.2f}x  (cpu {c_ours * 1e3:9.2f} / {c_ref * 1e3:9.2f} ms, "

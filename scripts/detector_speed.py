@@ -106,9 +106,16 @@ def main(argv: list[str] | None = None) -> int:
             got = medians(fns, x, args.repeat)
             for path, (wall, cpu) in got.items():
                 rows.append(
-                    (kind, spec.name, path, wall * 1e3 / mp, cpu * 1e3 / mp,
-                     wall * 1e3 / n_img, cpu * 1e3 / n_img)
-                )  # fmt: skip
+                    (
+                        kind,
+                        spec.name,
+                        path,
+                        wall * 1e3 / mp,
+                        cpu * 1e3 / mp,
+                        wall * 1e3 / n_img,
+                        cpu * 1e3 / n_img,
+                    )
+                )
                 print(
                     f"{kind:24s} {spec.name:14s} {path:8s} {rows[-1][3]:8.1f} ms/MP "
                     f"(cpu {rows[-1][4]:8.1f})  {rows[-1][5]:8.2f} ms/image "
@@ -121,8 +128,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.csv:
         import pandas as pd
 
-        cols = ["images", "detector", "path", "ms_per_mp", "cpu_ms_per_mp", "ms_per_image",
-                "cpu_ms_per_image"]  # fmt: skip
+        cols = [
+            "images",
+            "detector",
+            "path",
+            "ms_per_mp",
+            "cpu_ms_per_mp",
+            "ms_per_image",
+            "cpu_ms_per_image",
+        ]
         pd.DataFrame(rows, columns=cols).to_csv(args.csv, index=False)
     return 0
 

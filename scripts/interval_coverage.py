@@ -165,9 +165,15 @@ def _subset(pool: ObjectState, idx: np.ndarray, replicates: int, seed: int) -> O
     g = rec.targets[keep[rec.targets["image"]]].copy()
     d["image"], g["image"] = new[d["image"]], new[g["image"]]
     part = Records(rec.images[keep].copy(), d, g, list(rec.names))
-    return ObjectState(replicates=replicates, seed=seed, thresholded=pool.thresholded,
-                       threshold=pool.threshold, ap_kind=pool.ap_kind, parts=[part],
-                       scr_sources=pool.scr_sources)  # fmt: skip
+    return ObjectState(
+        replicates=replicates,
+        seed=seed,
+        thresholded=pool.thresholded,
+        threshold=pool.threshold,
+        ap_kind=pool.ap_kind,
+        parts=[part],
+        scr_sources=pool.scr_sources,
+    )
 
 
 def _formed(pool: ObjectState, idx: np.ndarray, replicates: int, seed: int) -> dict:
@@ -210,8 +216,9 @@ def formed(folder: str, draws: int) -> tuple[dict, list[dict]]:
             drawn = [np.sort(rng.choice(size, n, replace=False)) for _ in range(extra)]
             for j, idx in enumerate(blocks + drawn):
                 r = _formed(pool, idx, settings["replicates"], settings["seed"])
-                recs.append({"detector": det, "size": n, "dataset": j,
-                             "drawn": j >= len(blocks), **r})  # fmt: skip
+                recs.append(
+                    {"detector": det, "size": n, "dataset": j, "drawn": j >= len(blocks), **r}
+                )
     if not cache.exists():
         cache.write_text("".join(json.dumps(r) + "\n" for r in recs))
     return truth, recs
@@ -288,8 +295,10 @@ def report(folders: list[str], rules: list[str], draws: int = 0) -> None:
     """Coverage per cell (kind, size, detector), metric and rule, with its Monte-Carlo
     standard error (at least that of a coverage of 0.95), the share of intervals wholly
     below / above the truth, mean width and zero-width count."""
-    print("| data | n | detector | metric | truth | rule | coverage ± MC se | below | above | "
-          "mean width | zero-width | datasets |")  # fmt: skip
+    print(
+        "| data | n | detector | metric | truth | rule | coverage ± MC se | below | above | "
+        "mean width | zero-width | datasets |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for folder in folders:
         kind, truth, cells = _cells(folder, draws)
@@ -341,9 +350,13 @@ def main() -> None:
     p.add_argument("--report", nargs="+", default=None, metavar="FOLDER")
     p.add_argument("--rules", nargs="+", default=["pct", "default"])
     p.add_argument("--compact", action="store_true", help="with --report: one row per cell")
-    p.add_argument("--draws", type=int, default=0,
-                   help="with --report: form datasets from the pool's records, at least "
-                   "this many per size (blocks, then draws from the pool)")  # fmt: skip
+    p.add_argument(
+        "--draws",
+        type=int,
+        default=0,
+        help="with --report: form datasets from the pool's records, at least "
+        "this many per size (blocks, then draws from the pool)",
+    )
     args = p.parse_args()
     if args.report and args.compact:
         for rule in args.rules:

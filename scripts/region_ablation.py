@@ -42,9 +42,12 @@ class BenchScenes(torch.utils.data.Dataset):
     def __getitem__(self, i: int) -> dict:
         x, inst = scene(512, 12, self.seed + i)
         return {
-            "image": x[0], "mask": inst[0] > 0, "instances": inst[0],
-            "ignore": torch.zeros_like(inst[0], dtype=torch.bool), "meta": {"name": f"bench/{i}"},
-        }  # fmt: skip
+            "image": x[0],
+            "mask": inst[0] > 0,
+            "instances": inst[0],
+            "ignore": torch.zeros_like(inst[0], dtype=torch.bool),
+            "meta": {"name": f"bench/{i}"},
+        }
 
 
 STEPS = [
@@ -89,8 +92,16 @@ def main() -> None:
     sp = specs()
     table = summary_table({args.dataset: run_detectors(ds, sp, batch_size=4, progress=False)})
     table["accepted_floods"] = [floods(ds, s, 4) for s in sp]
-    cols = ["detector", "pd_object", "false_alarms_per_image", "fragmentation", "mean_iou",
-            "fom", "accepted_floods", "ms_per_image"]  # fmt: skip
+    cols = [
+        "detector",
+        "pd_object",
+        "false_alarms_per_image",
+        "fragmentation",
+        "mean_iou",
+        "fom",
+        "accepted_floods",
+        "ms_per_image",
+    ]
     print(markdown(table[cols], floatfmt=".3g"))
 
 

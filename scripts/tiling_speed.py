@@ -66,8 +66,9 @@ def main() -> None:
         if not path.exists():
             subprocess.run(
                 [sys.executable, "-m", "tests.tiling._rss", "write", str(path), str(size)],
-                cwd=ROOT, check=True,
-            )  # fmt: skip
+                cwd=ROOT,
+                check=True,
+            )
         for det in a.detectors:
             for mode in ("untiled", "tiled"):
                 if mode == "untiled" and f"{det}:{size}" in a.skip_untiled:
@@ -75,8 +76,11 @@ def main() -> None:
                     continue
                 r = subprocess.run(
                     [sys.executable, __file__, "--child", str(path), det, mode, a.dir],
-                    cwd=ROOT, capture_output=True, text=True, check=True,
-                )  # fmt: skip
+                    cwd=ROOT,
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                )
                 res = json.loads(r.stdout.strip().splitlines()[-1])
                 mpx = size * size / 1e6 / res["seconds"]
                 print(det, size, mode, f"{mpx:.2f}", f"{res['peak'] / 2**30:.2f}", flush=True)

@@ -62,8 +62,9 @@ def _phase_history(batch: int = 1, size: int = 16) -> torch.Tensor:
     f[:, 5, 9] = 1.0
     f[:, 2, 3] = 0.5j
     phi = 2.0 * torch.linspace(-1, 1, size)[None].expand(batch, size) ** 2
-    noise = torch.randn(batch, size, size, dtype=torch.complex64,
-                        generator=torch.Generator().manual_seed(3))  # fmt: skip
+    noise = torch.randn(
+        batch, size, size, dtype=torch.complex64, generator=torch.Generator().manual_seed(3)
+    )
     return apply_phase_error(fft2c(f), phi) + 0.01 * noise
 
 
@@ -87,65 +88,147 @@ M2 = ObjectRules(units="m2")
 
 # (id, call, expected exception, regex naming the argument)
 CASES = [
-    ("ground_truth-fractional-ids", lambda: ground_truth(_ids(np.array(1.5))),
-     InputTypeError, "instances"),
-    ("ground_truth-nan-ids", lambda: ground_truth(_ids(np.array(NAN))), InputTypeError,
-     "instances"),
-    ("ground_truth-negative-ids", lambda: ground_truth(_ids(np.array(-1))), InputValueError,
-     "instances"),
-    ("ground_truth-2d-ids", lambda: ground_truth(_ids(np.array(1))[0]), ShapeError,
-     "instances"),
-    ("ground_truth-ignore-shape", lambda: ground_truth(_ids(np.array(1)), np.zeros((1, 3, 3))),
-     ShapeError, "ignore"),
-    ("discriminate-nan-threshold", lambda: discriminate(_stat(), NAN), InputValueError,
-     "threshold"),
-    ("discriminate-nan-in-threshold-map",
-     lambda: discriminate(_stat(), torch.full((1, 1, 8, 8), NAN)), InputValueError,
-     "threshold"),
-    ("discriminate-threshold-shape", lambda: discriminate(_stat(), torch.ones(3)), ShapeError,
-     "threshold"),
-    ("discriminate-complex-threshold", lambda: discriminate(_stat(), torch.tensor(2.0 + 1j)),
-     InputTypeError, "threshold"),
-    ("discriminate-negative-pixel-area",
-     lambda: discriminate(_stat(), 1.0, rules=M2, pixel_area=-1.0), InputValueError,
-     "pixel_area"),
-    ("discriminate-nan-pixel-area", lambda: discriminate(_stat(), 1.0, rules=M2, pixel_area=NAN),
-     InputValueError, "pixel_area"),
-    ("discriminate-pixel-area-count",
-     lambda: discriminate(_stat((1, 2)), 1.0, rules=M2, pixel_area=np.ones(3)), ShapeError,
-     "pixel_area"),
-    ("discriminate-closing-beyond-image",
-     lambda: discriminate(_stat(size=4), 1.0, rules=ObjectRules(closing=5)), WindowSizeError,
-     "closing"),
-    ("discriminate-rules-not-ObjectRules",
-     lambda: discriminate(_stat(), 1.0, rules={"closing": 1}), OptionError, "rules"),
-    ("sparse_autofocus-nan-lam",
-     lambda: sparse_autofocus(_phase_history(), lam=torch.tensor([NAN]), max_iter=2),
-     OptionError, "lam"),
-    ("lp_image-inf-lam", lambda: lp_image(_phase_history(), lam=torch.tensor([float("inf")])),
-     OptionError, "lam"),
-    ("default_lam-nan-kappa", lambda: default_lam(_phase_history(), kappa=NAN), OptionError,
-     "kappa"),
-    ("pga-several-channels",
-     lambda: pga(ifft2c(_phase_history(2)).reshape(1, 2, 16, 16)), ShapeError, "image"),
-    ("pga-nan-window_db",
-     lambda: pga(ifft2c(_phase_history()).unsqueeze(1), window_db=NAN), OptionError,
-     "window_db"),
-    ("pulse_autofocus-p-above-2", lambda: pulse_autofocus(_pulses(), p=3.0), OptionError,
-     r"\bp\b"),
-    ("pulse_autofocus-nan-kappa", lambda: pulse_autofocus(_pulses(), kappa=NAN), OptionError,
-     "kappa"),
-    ("pulse_autofocus-negative-tol", lambda: pulse_autofocus(_pulses(), tol=-1.0), OptionError,
-     "tol"),
-    ("pulse_autofocus-zero-inner", lambda: pulse_autofocus(_pulses(), inner=0), OptionError,
-     "inner"),
-    ("apply_phase_error-nan-phi",
-     lambda: apply_phase_error(_phase_history(), torch.full((1, 16), NAN)), InputValueError,
-     "phi"),
-    ("region_cfar-despeckle-returns-inf",
-     lambda: region_cfar(_region_image(), despeckle=lambda t: t * float("inf")),
-     InputValueError, "despeckle"),
-]  # fmt: skip
+    (
+        "ground_truth-fractional-ids",
+        lambda: ground_truth(_ids(np.array(1.5))),
+        InputTypeError,
+        "instances",
+    ),
+    (
+        "ground_truth-nan-ids",
+        lambda: ground_truth(_ids(np.array(NAN))),
+        InputTypeError,
+        "instances",
+    ),
+    (
+        "ground_truth-negative-ids",
+        lambda: ground_truth(_ids(np.array(-1))),
+        InputValueError,
+        "instances",
+    ),
+    ("ground_truth-2d-ids", lambda: ground_truth(_ids(np.array(1))[0]), ShapeError, "instances"),
+    (
+        "ground_truth-ignore-shape",
+        lambda: ground_truth(_ids(np.array(1)), np.zeros((1, 3, 3))),
+        ShapeError,
+        "ignore",
+    ),
+    (
+        "discriminate-nan-threshold",
+        lambda: discriminate(_stat(), NAN),
+        InputValueError,
+        "threshold",
+    ),
+    (
+        "discriminate-nan-in-threshold-map",
+        lambda: discriminate(_stat(), torch.full((1, 1, 8, 8), NAN)),
+        InputValueError,
+        "threshold",
+    ),
+    (
+        "discriminate-threshold-shape",
+        lambda: discriminate(_stat(), torch.ones(3)),
+        ShapeError,
+        "threshold",
+    ),
+    (
+        "discriminate-complex-threshold",
+        lambda: discriminate(_stat(), torch.tensor(2.0 + 1j)),
+        InputTypeError,
+        "threshold",
+    ),
+    (
+        "discriminate-negative-pixel-area",
+        lambda: discriminate(_stat(), 1.0, rules=M2, pixel_area=-1.0),
+        InputValueError,
+        "pixel_area",
+    ),
+    (
+        "discriminate-nan-pixel-area",
+        lambda: discriminate(_stat(), 1.0, rules=M2, pixel_area=NAN),
+        InputValueError,
+        "pixel_area",
+    ),
+    (
+        "discriminate-pixel-area-count",
+        lambda: discriminate(_stat((1, 2)), 1.0, rules=M2, pixel_area=np.ones(3)),
+        ShapeError,
+        "pixel_area",
+    ),
+    (
+        "discriminate-closing-beyond-image",
+        lambda: discriminate(_stat(size=4), 1.0, rules=ObjectRules(closing=5)),
+        WindowSizeError,
+        "closing",
+    ),
+    (
+        "discriminate-rules-not-ObjectRules",
+        lambda: discriminate(_stat(), 1.0, rules={"closing": 1}),
+        OptionError,
+        "rules",
+    ),
+    (
+        "sparse_autofocus-nan-lam",
+        lambda: sparse_autofocus(_phase_history(), lam=torch.tensor([NAN]), max_iter=2),
+        OptionError,
+        "lam",
+    ),
+    (
+        "lp_image-inf-lam",
+        lambda: lp_image(_phase_history(), lam=torch.tensor([float("inf")])),
+        OptionError,
+        "lam",
+    ),
+    (
+        "default_lam-nan-kappa",
+        lambda: default_lam(_phase_history(), kappa=NAN),
+        OptionError,
+        "kappa",
+    ),
+    (
+        "pga-several-channels",
+        lambda: pga(ifft2c(_phase_history(2)).reshape(1, 2, 16, 16)),
+        ShapeError,
+        "image",
+    ),
+    (
+        "pga-nan-window_db",
+        lambda: pga(ifft2c(_phase_history()).unsqueeze(1), window_db=NAN),
+        OptionError,
+        "window_db",
+    ),
+    ("pulse_autofocus-p-above-2", lambda: pulse_autofocus(_pulses(), p=3.0), OptionError, r"\bp\b"),
+    (
+        "pulse_autofocus-nan-kappa",
+        lambda: pulse_autofocus(_pulses(), kappa=NAN),
+        OptionError,
+        "kappa",
+    ),
+    (
+        "pulse_autofocus-negative-tol",
+        lambda: pulse_autofocus(_pulses(), tol=-1.0),
+        OptionError,
+        "tol",
+    ),
+    (
+        "pulse_autofocus-zero-inner",
+        lambda: pulse_autofocus(_pulses(), inner=0),
+        OptionError,
+        "inner",
+    ),
+    (
+        "apply_phase_error-nan-phi",
+        lambda: apply_phase_error(_phase_history(), torch.full((1, 16), NAN)),
+        InputValueError,
+        "phi",
+    ),
+    (
+        "region_cfar-despeckle-returns-inf",
+        lambda: region_cfar(_region_image(), despeckle=lambda t: t * float("inf")),
+        InputValueError,
+        "despeckle",
+    ),
+]
 
 
 @pytest.mark.parametrize(
@@ -175,8 +258,11 @@ def test_scalar_pixel_area_equals_per_plane_calls():
     each = np.full(6, 2.0)
     same = discriminate(stat, 2.0, rules=rules, pixel_area=each)
     assert np.array_equal(whole.labels, same.labels)
-    parts = [discriminate(stat[i : i + 1, j : j + 1], 2.0, rules=rules, pixel_area=2.0)
-             for i in range(2) for j in range(3)]  # fmt: skip
+    parts = [
+        discriminate(stat[i : i + 1, j : j + 1], 2.0, rules=rules, pixel_area=2.0)
+        for i in range(2)
+        for j in range(3)
+    ]
     assert whole.area.tolist() == np.concatenate([p.area for p in parts]).tolist()
     assert whole.score.tolist() == np.concatenate([p.score for p in parts]).tolist()
     assert whole.plane.tolist() == [k for k, p in enumerate(parts) for _ in range(len(p))]

@@ -16,8 +16,9 @@ def gpu():
 
 
 def test_dry_run_rows_are_consistent(gpu):
-    rows = gpu.report(n=3, device="cpu", cpu_images=2, repeat=1, size=48,
-                      detectors=("ca", "os", "g0"))  # fmt: skip
+    rows = gpu.report(
+        n=3, device="cpu", cpu_images=2, repeat=1, size=48, detectors=("ca", "os", "g0")
+    )
     assert [r["detector"] for r in rows] == ["ca", "os", "g0"]
     for r in rows:
         assert r["error"] is None and r["images"] == 3 and r["cpu_images"] == 2

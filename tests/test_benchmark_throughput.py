@@ -16,8 +16,23 @@ def bench():
 
 def test_throughput_topic_reports_consistent_rows(bench, tmp_path, capsys):
     csv = tmp_path / "throughput.csv"
-    assert bench.main(["--topic", "throughput", "--n", "3", "--workers", "1",
-                       "--device", "cpu", "--csv", str(csv)]) == 0  # fmt: skip
+    assert (
+        bench.main(
+            [
+                "--topic",
+                "throughput",
+                "--n",
+                "3",
+                "--workers",
+                "1",
+                "--device",
+                "cpu",
+                "--csv",
+                str(csv),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "images/s" in printed and "scoring ms/chip/det" in printed
     rows = pd.read_csv(csv)

@@ -25,8 +25,20 @@ import torchsar as ts
 import torchsar_eval as te
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
-CFARS = ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "lognormal", "weibull", "gamma",
-         "k", "g0"]  # fmt: skip
+CFARS = [
+    "ca",
+    "two_parameter",
+    "go",
+    "so",
+    "os",
+    "vi",
+    "ac",
+    "lognormal",
+    "weibull",
+    "gamma",
+    "k",
+    "g0",
+]
 
 
 @pytest.fixture(scope="module")
@@ -108,8 +120,10 @@ def test_imaging(device):
     got = ts.imaging.sparse_autofocus(on, max_iter=5)
     want = ts.imaging.sparse_autofocus(g_err, max_iter=5)
     _close_images(got.image, want.image)
-    _close_images(ts.imaging.pga(ts.imaging.ifft2c(on)[:, None]).image,
-                  ts.imaging.pga(ts.imaging.ifft2c(g_err)[:, None]).image)  # fmt: skip
+    _close_images(
+        ts.imaging.pga(ts.imaging.ifft2c(on)[:, None]).image,
+        ts.imaging.pga(ts.imaging.ifft2c(g_err)[:, None]).image,
+    )
 
 
 @pytest.mark.parametrize("device", DEVICES)
@@ -118,8 +132,8 @@ def test_a_default_run_gives_the_same_tables(device):
     if device == "cpu":  # CPU against CPU only checks that the option is honoured
         dets = ["ca", "region"]
     want = te.evaluate("sim-chips", dets, n=6, progress=False)
-    got = te.evaluate("sim-chips", dets, n=6, progress=False,
-                      execution=te.Execution(device=device))  # fmt: skip
+    got = te.evaluate("sim-chips", dets, n=6, progress=False, execution=te.Execution(device=device))
     for table in ("summary", "froc", "pr", "breakdown"):
-        pd.testing.assert_frame_equal(getattr(got, table), getattr(want, table),
-                                      check_exact=False, rtol=1e-6)  # fmt: skip
+        pd.testing.assert_frame_equal(
+            getattr(got, table), getattr(want, table), check_exact=False, rtol=1e-6
+        )

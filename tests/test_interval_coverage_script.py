@@ -21,8 +21,15 @@ def cov():
 @pytest.fixture(scope="module")
 def run(cov, tmp_path_factory):
     out = tmp_path_factory.mktemp("cov") / "chips"
-    args = argparse.Namespace(kind="sim-chips", sizes=[2, 4], datasets=2, detectors=["region"],
-                              replicates=30, seed=3, out=str(out))  # fmt: skip
+    args = argparse.Namespace(
+        kind="sim-chips",
+        sizes=[2, 4],
+        datasets=2,
+        detectors=["region"],
+        replicates=30,
+        seed=3,
+        out=str(out),
+    )
     cov.score(args)
     return out
 

@@ -72,17 +72,29 @@ def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
 
     import torchsar_eval as te
 
-    names = ["torchsar._windows_kernels", "torchsar.cfar._kernels", "torchsar.metrics._kernels",
-             "torchsar.objects._kernels", "torchsar.order_statistics._kernels",
-             "torchsar.region._kernels"]  # fmt: skip
+    names = [
+        "torchsar._windows_kernels",
+        "torchsar.cfar._kernels",
+        "torchsar.metrics._kernels",
+        "torchsar.objects._kernels",
+        "torchsar.order_statistics._kernels",
+        "torchsar.region._kernels",
+    ]
 
     def compiled() -> dict:
-        return {(n, k): list(f.signatures) for n in names
-                for k, f in vars(importlib.import_module(n)).items()
-                if isinstance(f, CPUDispatcher)}  # fmt: skip
+        return {
+            (n, k): list(f.signatures)
+            for n in names
+            for k, f in vars(importlib.import_module(n)).items()
+            if isinstance(f, CPUDispatcher)
+        }
 
     assert _warm.warm() > 0
     before = compiled()
-    te.evaluate("sim-chips", ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "region"], n=2,
-                progress=False)  # fmt: skip
+    te.evaluate(
+        "sim-chips",
+        ["ca", "two_parameter", "go", "so", "os", "vi", "ac", "region"],
+        n=2,
+        progress=False,
+    )
     assert compiled() == before

@@ -69,8 +69,7 @@ def run(algorithm: str, imgs: np.ndarray, ring: Ring, k: np.ndarray, valid=None)
     ("algorithm", "groups"), [(a, "cpu") for a in sorted(ALGORITHMS)] + [("bisection", "device")]
 )
 @pytest.mark.parametrize("budget", [None, 700])
-def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorithm, budget,
-                                                            groups):  # fmt: skip
+def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorithm, budget, groups):
     if groups == "device":  # the GPU's grouping: every piece of every plane in one group
         monkeypatch.setattr(bisection, "_COMPARE_BUDGET", bisection.DEVICE_COMPARE_BUDGET)
     if budget is not None:  # force many small tiles (planes, rows and columns)
@@ -222,8 +221,20 @@ class TestCompiled:
         elif kind == "constant":
             img = np.full((h, w), 2.5)
         elif kind == "extremes":
-            pool = np.array([0.0, -0.0, 5e-324, 1e-310, np.finfo(float).tiny, 1.0,
-                             np.finfo(float).max, np.inf, -np.inf, -np.finfo(float).max])  # fmt: skip
+            pool = np.array(
+                [
+                    0.0,
+                    -0.0,
+                    5e-324,
+                    1e-310,
+                    np.finfo(float).tiny,
+                    1.0,
+                    np.finfo(float).max,
+                    np.inf,
+                    -np.inf,
+                    -np.finfo(float).max,
+                ]
+            )
             img = rng.choice(pool, size=(h, w))
         elif kind == "signed":
             img = rng.normal(size=(h, w))

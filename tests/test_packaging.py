@@ -60,10 +60,22 @@ def test_make_wheel_builds_an_installable_wheel(tmp_path):
     """What ``make wheel`` runs: a wheel named after the distribution, holding both import
     packages and no tests."""
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-         "--wheel-dir", str(tmp_path), str(ROOT)],
-        check=True, capture_output=True, cwd=tmp_path,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "--wheel-dir",
+            str(tmp_path),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+        cwd=tmp_path,
+    )
     (wheel,) = tmp_path.glob("*.whl")
     assert wheel.name.startswith("torchsar_detect-")
     with zipfile.ZipFile(wheel) as z:
@@ -79,9 +91,12 @@ def test_a_worker_loads_without_the_table_and_plot_libraries():
     """A worker process imports torchsar and the harness's scoring modules only: pandas,
     kornia and matplotlib (half a second of start-up per process together) are imported
     where they are used, by the driver's tables and plots or a metric that needs them."""
-    code = ("import sys, torchsar, torchsar_eval.shards, torchsar_eval.registry, "
-            "torchsar_eval.store; print(sorted(m for m in ('pandas', 'kornia', 'matplotlib') "
-            "if m in sys.modules))")  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, check=True)  # fmt: skip
+    code = (
+        "import sys, torchsar, torchsar_eval.shards, torchsar_eval.registry, "
+        "torchsar_eval.store; print(sorted(m for m in ('pandas', 'kornia', 'matplotlib') "
+        "if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
     assert done.stdout.strip() == "[]"

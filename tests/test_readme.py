@@ -55,8 +55,14 @@ def test_readme_examples_run(tmp_path, monkeypatch):
             for line in body.splitlines():
                 if line.startswith("torchsar-eval "):
                     argv = [sys.executable, "-m", "torchsar_eval.cli", *shlex.split(line)[1:]]
-                    done = subprocess.run([*argv, "--no-progress"], cwd=tmp_path, env=env,
-                                          capture_output=True, text=True, timeout=600)  # fmt: skip
+                    done = subprocess.run(
+                        [*argv, "--no-progress"],
+                        cwd=tmp_path,
+                        env=env,
+                        capture_output=True,
+                        text=True,
+                        timeout=600,
+                    )
                     assert done.returncode == 0, f"{line}\n{done.stderr}"
     assert (tmp_path / "results" / "mine" / "summary.csv").is_file()
     assert (tmp_path / "results" / "saved" / "summary.csv").is_file()

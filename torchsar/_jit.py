@@ -43,9 +43,13 @@ def _numba_imports() -> bool:
         try:
             import numba  # noqa: F401
         except Exception as exc:  # any failure of a third-party import: fall back
-            warnings.warn(f"numba is installed but cannot be imported ({type(exc).__name__}: "
-                          f"{exc}); torchsar uses its numpy/torch code instead (same results, "
-                          "slower)", UserWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"numba is installed but cannot be imported ({type(exc).__name__}: "
+                f"{exc}); torchsar uses its numpy/torch code instead (same results, "
+                "slower)",
+                UserWarning,
+                stacklevel=3,
+            )
             _IMPORTS = False
         else:
             _IMPORTS = True

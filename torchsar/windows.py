@@ -209,8 +209,9 @@ def _region_count(region: Region, n_rows: int, n_cols: int, r: int, rr: int, dev
 
 
 @functools.lru_cache(maxsize=64)
-def _region_count_cached(region: Region, n_rows: int, n_cols: int, r: int, rr: int,
-                         device) -> Tensor:  # fmt: skip
+def _region_count_cached(
+    region: Region, n_rows: int, n_cols: int, r: int, rr: int, device
+) -> Tensor:
     out = torch.zeros((rr, n_cols), dtype=torch.float64, device=device)
     for sign, rect in region.signed():
         rows = _axis_counts(n_rows, rect.r0, rect.r1, r, r + rr, device)
@@ -330,15 +331,26 @@ def _compiled_strip_sums(
 
     b, c, h, w = x.shape
     table = np.array(
-        [(q, sign, pad + t.r0, pad + t.r1 + 1, pad + t.c0, pad + t.c1 + 1)
-         for q, reg in enumerate(rects) for sign, t in reg.signed()],
+        [
+            (q, sign, pad + t.r0, pad + t.r1 + 1, pad + t.c0, pad + t.c1 + 1)
+            for q, reg in enumerate(rects)
+            for sign, t in reg.signed()
+        ],
         dtype=np.int64,
-    )  # fmt: skip
+    )
     mask = np.zeros((1, 1, 1, 1), np.bool_) if vmask is None else vmask.contiguous().numpy()
     cnt, s1, s2 = _windows_kernels.strip_sums(
-        x.detach().contiguous().numpy(), r, rr, pad, shift.reshape(b, c).numpy(), mask,
-        vmask is not None, moments, table, len(rects),
-    )  # fmt: skip
+        x.detach().contiguous().numpy(),
+        r,
+        rr,
+        pad,
+        shift.reshape(b, c).numpy(),
+        mask,
+        vmask is not None,
+        moments,
+        table,
+        len(rects),
+    )
     cnt, s1, s2 = torch.from_numpy(cnt), torch.from_numpy(s1), torch.from_numpy(s2)
     out = []
     for q, rect in enumerate(rects):

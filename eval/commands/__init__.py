@@ -8,9 +8,17 @@ import importlib
 __all__ = ["COMMANDS", "load"]
 
 COMMANDS = [
-    "run", "detect", "report", "pfa", "speckle", "autofocus", "movers", "compare-region",
-    "make-dataset", "clean",
-]  # fmt: skip
+    "run",
+    "detect",
+    "report",
+    "pfa",
+    "speckle",
+    "autofocus",
+    "movers",
+    "compare-region",
+    "make-dataset",
+    "clean",
+]
 
 
 def load(name: str):

@@ -39,7 +39,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--shard-size", type=int, default=1000, help="items per tar shard")
     p.add_argument("--out", type=Path, required=True, help="the new store folder")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    p.set_defaults(func=run)  # fmt: skip
+    p.set_defaults(func=run)
 
 
 def sim_items(kind: str, n: int, seed: int, block: int = 64) -> Iterator[dict]:

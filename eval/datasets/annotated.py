@@ -89,8 +89,9 @@ class ObjectColumns:
 
     def annotation(self, k: int) -> CocoAnnotation:
         """Row ``k`` as the annotation that paints it (its segmentation, else its box)."""
-        return CocoAnnotation(-1, self.cls[k], tuple(self.box[k].tolist()),
-                              self.segmentation[k], bool(self.ignore[k]))  # fmt: skip
+        return CocoAnnotation(
+            -1, self.cls[k], tuple(self.box[k].tolist()), self.segmentation[k], bool(self.ignore[k])
+        )
 
 
 class _AnyIgnore:
@@ -116,8 +117,11 @@ def _grouped(image: np.ndarray, n_images: int, **columns) -> ObjectColumns:
     start = np.zeros(n_images + 1, np.int64)
     np.cumsum(np.bincount(image, minlength=n_images), out=start[1:])
     seg = columns.pop("segmentation")
-    return ObjectColumns(start, segmentation=tuple(seg[k] for k in order.tolist()),
-                         **{k: v[order] for k, v in columns.items()})  # fmt: skip
+    return ObjectColumns(
+        start,
+        segmentation=tuple(seg[k] for k in order.tolist()),
+        **{k: v[order] for k, v in columns.items()},
+    )
 
 
 class AnnotatedDataset(FileDataset):
@@ -132,9 +136,17 @@ class AnnotatedDataset(FileDataset):
         check for split or merged objects (and reading images for it would cost reads)."""
         return []
 
-    def __init__(self, scheme: str, root: Path, entries: list, objects: ObjectColumns,
-                 annotation_files: list, *, image_ids: list[int] | None = None,
-                 **kw):  # fmt: skip
+    def __init__(
+        self,
+        scheme: str,
+        root: Path,
+        entries: list,
+        objects: ObjectColumns,
+        annotation_files: list,
+        *,
+        image_ids: list[int] | None = None,
+        **kw,
+    ):
         self.scheme = scheme
         super().__init__(root, **kw)
         self.items = entries
@@ -214,20 +226,27 @@ class AnnotatedDataset(FileDataset):
         metas = []
         for k, i in enumerate(items):
             a, b = int(obj.start[i]), int(obj.start[i + 1])
-            classes = [c for c, g in zip(obj.names[a:b], obj.ignore[a:b].tolist(), strict=True)
-                       if not g]  # fmt: skip
+            classes = [
+                c for c, g in zip(obj.names[a:b], obj.ignore[a:b].tolist(), strict=True) if not g
+            ]
             meta = self._meta(i, bool(n_real[k]), classes)
             meta["index"] = i
             metas.append(meta)
         spacing = spacings(metas)
         gt = GroundTruth.build(
-            plane[~crowd], obj.box[real], planes=idx.size, shape=shape,
+            plane[~crowd],
+            obj.box[real],
+            planes=idx.size,
+            shape=shape,
             classes=obj.cls[real].tolist(),
-            crowd=Regions.build(plane[crowd], obj.box[regions], shape=shape,
-                                classes=obj.cls[regions].tolist()),
-            box_only=n_real > 0, spacing=spacing, length_m=np.full(real.size, np.nan),
+            crowd=Regions.build(
+                plane[crowd], obj.box[regions], shape=shape, classes=obj.cls[regions].tolist()
+            ),
+            box_only=n_real > 0,
+            spacing=spacing,
+            length_m=np.full(real.size, np.nan),
             declared_area=obj.area[real],
-        )  # fmt: skip
+        )
         return shape, items, gt, metas
 
     def _meta(self, i: int, boxes_only: bool, classes: list[str]) -> dict:
@@ -256,8 +275,9 @@ class AnnotatedDataset(FileDataset):
         pixels: list = [None] * len(rows)
         if segmented:
             try:
-                decoded = annotation_pixels([self.objects.annotation(k) for k in segmented],
-                                            *shape, checked=True)  # fmt: skip
+                decoded = annotation_pixels(
+                    [self.objects.annotation(k) for k in segmented], *shape, checked=True
+                )
             except FileFormatError as exc:
                 raise FileFormatError(path, exc.problem) from None
             for k, pix in zip(segmented, decoded, strict=True):
@@ -269,8 +289,11 @@ class AnnotatedDataset(FileDataset):
     def load(self, i: int, images: bool = True) -> dict:
         path, size, _ = self.items[i]
         if path in self.missing and (images or size is None):
-            raise FileFormatError(path, "does not exist (scoring saved predictions reads no "
-                                  "image; detectors that read pixels need it)")  # fmt: skip
+            raise FileFormatError(
+                path,
+                "does not exist (scoring saved predictions reads no "
+                "image; detectors that read pixels need it)",
+            )
         shape = tuple(size) if size is not None and not images else raster_shape(path)[:2]
         if size is not None and tuple(shape) != tuple(size):
             raise FileFormatError(
@@ -292,8 +315,9 @@ class AnnotatedDataset(FileDataset):
             raise FileFormatError(path, exc.problem) from None
         targets = _targets(self.objects, rows, pixels)
         k = 0
-        for is_ignore, pix in zip(self.objects.ignore[rows.start : rows.stop].tolist(), pixels,
-                                  strict=True):  # fmt: skip
+        for is_ignore, pix in zip(
+            self.objects.ignore[rows.start : rows.stop].tolist(), pixels, strict=True
+        ):
             if is_ignore:
                 ignore[pix] = True
             else:
@@ -319,21 +343,28 @@ def _targets(objects: ObjectColumns, rows: range, pixels: list) -> Targets:
     if not objects.any_ignore[a:b]:  # (the common case, without an index per row)
         n = b - a
         return Targets(
-            objects.box[a:b], tuple(cls),
+            objects.box[a:b],
+            tuple(cls),
             tuple(p if s is not None else None for p, s in zip(pixels, seg, strict=True)),
-            objects.area[a:b], np.full(n, np.nan), np.full(n, np.nan),
-        )  # fmt: skip
+            objects.area[a:b],
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+        )
     ignore = objects.ignore[a:b]
     real, crowd = np.flatnonzero(~ignore).tolist(), np.flatnonzero(ignore).tolist()
     box, n = objects.box[a:b], len(real)
     # checked when the annotation file was read: built as they are
     return Targets(
-        box[real], tuple(cls[k] for k in real),
+        box[real],
+        tuple(cls[k] for k in real),
         tuple(pixels[k] if seg[k] is not None else None for k in real),
-        objects.area[a:b][real], np.full(n, np.nan), np.full(n, np.nan),
-        box[crowd], tuple(cls[k] for k in crowd),
+        objects.area[a:b][real],
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        box[crowd],
+        tuple(cls[k] for k in crowd),
         tuple(pixels[k] if seg[k] is not None else None for k in crowd),
-    )  # fmt: skip
+    )
 
 
 def _identity(path: str) -> tuple[int, int] | None:
@@ -391,8 +422,9 @@ def _all_inside(folder: Path, names: list[str], what: Callable[[int], str]) -> N
 
 def _joined(folder: str, name: str) -> str:
     """``str(Path(folder) / name)`` (without building a path for a plain name)."""
-    return os.path.join(folder, name) if os.path.normpath(name) == name else str(
-        Path(folder) / name)  # fmt: skip
+    return (
+        os.path.join(folder, name) if os.path.normpath(name) == name else str(Path(folder) / name)
+    )
 
 
 def coco_dataset(
@@ -407,8 +439,9 @@ def coco_dataset(
     folder = images or path.parent
     names = [im["file_name"] for im in coco.images]
     if not outside:
-        _all_inside(folder, names, lambda k: f"{path}: images[{k}] (id "
-                    f"{coco.images[k]['id']}) file_name")  # fmt: skip
+        _all_inside(
+            folder, names, lambda k: f"{path}: images[{k}] (id {coco.images[k]['id']}) file_name"
+        )
     ids = np.array([im["id"] for im in coco.images], np.int64)
     order = np.argsort(ids, kind="stable")  # pycocotools' image order
     position = np.empty_like(order)
@@ -417,19 +450,27 @@ def coco_dataset(
     codes = {c: k for k, c in enumerate(coco.categories)}
     category = np.array([codes[c] for c in coco.category.tolist()], np.int64)
     objects = _grouped(
-        position[coco.image], order.size, box=coco.box, cls=cats[category].reshape(-1),
-        ignore=coco.iscrowd, area=coco.area, segmentation=coco.segmentation,
-    )  # fmt: skip
+        position[coco.image],
+        order.size,
+        box=coco.box,
+        cls=cats[category].reshape(-1),
+        ignore=coco.iscrowd,
+        area=coco.area,
+        segmentation=coco.segmentation,
+    )
     base = os.fspath(folder)
     entries = [
-        (_joined(base, names[k]), (coco.images[k]["height"], coco.images[k]["width"]),
-         names[k])
+        (_joined(base, names[k]), (coco.images[k]["height"], coco.images[k]["width"]), names[k])
         for k in order.tolist()
-    ]  # fmt: skip
-    ds = AnnotatedDataset("coco", path, entries, objects, [path],
-                          image_ids=ids[order].tolist(), **kw)  # fmt: skip
-    ds.options.update(images=str(folder), categories=sorted(set(coco.categories.values())),
-                      outside=OUTSIDE[outside])  # fmt: skip
+    ]
+    ds = AnnotatedDataset(
+        "coco", path, entries, objects, [path], image_ids=ids[order].tolist(), **kw
+    )
+    ds.options.update(
+        images=str(folder),
+        categories=sorted(set(coco.categories.values())),
+        outside=OUTSIDE[outside],
+    )
     ds.categories = dict(coco.categories)  # id -> name: saved predictions give ids
     if coco.categories:
         ds.default_class = coco.categories[min(coco.categories)]
@@ -468,12 +509,14 @@ def voc_dataset(
         entries.append((str(img), (ann.height, ann.width), str(xml.relative_to(root))))
     m = len(objs)
     objects = _grouped(
-        np.array([k for k, _ in objs], np.int64).reshape(m), len(entries),
+        np.array([k for k, _ in objs], np.int64).reshape(m),
+        len(entries),
         box=np.array([o.box for _, o in objs], np.float64).reshape(m, 4),
         cls=np.array([o.name for _, o in objs], dtype=object).reshape(m),
         ignore=np.array([o.difficult for _, o in objs], bool).reshape(m),
-        area=np.full(m, np.nan), segmentation=(None,) * m,
-    )  # fmt: skip
+        area=np.full(m, np.nan),
+        segmentation=(None,) * m,
+    )
     ds = AnnotatedDataset("voc", root, entries, objects, xmls, **kw)
     ds.options["labels"] = "VOC boxes (gt=box); difficult = ignore"
     ds.options["outside"] = OUTSIDE[outside]

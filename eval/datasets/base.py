@@ -211,8 +211,9 @@ def require_dir(root: Path, scheme: str) -> None:
 
 def _unlistable(exc: OSError) -> None:
     """os.walk's error hook: a folder that cannot be listed would silently drop its files."""
-    raise EvalError(f"cannot list folder {exc.filename} ({exc.strerror}); its images would be "
-                    "left out")  # fmt: skip
+    raise EvalError(
+        f"cannot list folder {exc.filename} ({exc.strerror}); its images would be left out"
+    )
 
 
 def walk_files(root: Path) -> list[Path]:

@@ -172,9 +172,12 @@ class FolderDataset(FileDataset):
         """The decoded ``<stem>.instances.png``; every target pixel must have an id."""
         path = self._beside(mask, IDS)
         if not (path.exists() or path.is_symlink()):
-            raise FileFormatError(path, "is missing: instances=idmap (the default when any "
-                                  "mask has one) needs an id map beside every mask; or "
-                                  "pass ?instances=components")  # fmt: skip
+            raise FileFormatError(
+                path,
+                "is missing: instances=idmap (the default when any "
+                "mask has one) needs an id map beside every mask; or "
+                "pass ?instances=components",
+            )
         check_same_size(img, path)
         ids = decode_id_map(read_raster(path, max_pixels=self.max_pixels), str(path))
         missing = int((target & (ids == 0)).sum())

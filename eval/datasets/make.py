@@ -76,8 +76,10 @@ def own_count(spec: str) -> tuple[str, int | None]:
             kept.append(kv)
             continue
         if not (value.isascii() and value.isdigit()) or int(value) > MAX_N:
-            raise EvalError(f"dataset option n={value[:20]!r} in {spec[:80]!r} must be a whole "
-                            f"number from 0 to {MAX_N:,}")  # fmt: skip
+            raise EvalError(
+                f"dataset option n={value[:20]!r} in {spec[:80]!r} must be a whole "
+                f"number from 0 to {MAX_N:,}"
+            )
         own = int(value)
     return head + ("?" + "&".join(kept) if kept else ""), own
 

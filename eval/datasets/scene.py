@@ -68,11 +68,14 @@ def _column(df: pd.DataFrame, names: tuple[str, ...], path: Path) -> np.ndarray:
             bad = ~np.isfinite(values) | (values != np.round(values))
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
-                raise EvalError(f"truth {path}: row {k + 2}: {n} {df[n].iloc[k]!r} is not a "
-                                "whole pixel index")  # fmt: skip
+                raise EvalError(
+                    f"truth {path}: row {k + 2}: {n} {df[n].iloc[k]!r} is not a whole pixel index"
+                )
             return values.astype(np.int64)
-    raise EvalError(f"truth {path} has no column {' or '.join(names)} "
-                    f"(columns: {', '.join(map(str, df.columns))})")  # fmt: skip
+    raise EvalError(
+        f"truth {path} has no column {' or '.join(names)} "
+        f"(columns: {', '.join(map(str, df.columns))})"
+    )
 
 
 def read_truth(path: Path, scene_id: str, shape: tuple[int, int]) -> pd.DataFrame:
@@ -96,8 +99,10 @@ def read_truth(path: Path, scene_id: str, shape: tuple[int, int]) -> pd.DataFram
     outside = (out["row"] < 0) | (out["row"] >= h) | (out["col"] < 0) | (out["col"] >= w)
     if outside.any():
         k = int(np.flatnonzero(outside.to_numpy())[0])
-        raise EvalError(f"truth {path}: target ({out['row'][k]}, {out['col'][k]}) lies outside "
-                        f"the {h}x{w} scene")  # fmt: skip
+        raise EvalError(
+            f"truth {path}: target ({out['row'][k]}, {out['col'][k]}) lies outside "
+            f"the {h}x{w} scene"
+        )
     return out
 
 
@@ -123,13 +128,18 @@ class SceneDataset(FileDataset):
             shape, found, file_spacing = reader.shape, reader.sample_type, reader.pixel_spacing
         sample_type = sample_type or found
         if sample_type is None:
-            raise EvalError(f"scene {path} does not say what its samples are: declare "
-                            "?type=amplitude|intensity|db|complex")  # fmt: skip
+            raise EvalError(
+                f"scene {path} does not say what its samples are: declare "
+                "?type=amplitude|intensity|db|complex"
+            )
         if chip * chip > max_pixels:
-            raise EvalError(f"scene option chip={chip}: {chip * chip:,} pixels per chip, over "
-                            f"max_pixels={max_pixels:,}")  # fmt: skip
-        super().__init__(path, sample_type=sample_type, spacing=spacing or file_spacing,
-                         max_pixels=max_pixels)  # fmt: skip
+            raise EvalError(
+                f"scene option chip={chip}: {chip * chip:,} pixels per chip, over "
+                f"max_pixels={max_pixels:,}"
+            )
+        super().__init__(
+            path, sample_type=sample_type, spacing=spacing or file_spacing, max_pixels=max_pixels
+        )
         self.scene_id = self.root.stem
         self.shape = (int(shape[0]), int(shape[1]))
         self.items = scene_chips(self.shape, chip)
@@ -137,16 +147,18 @@ class SceneDataset(FileDataset):
         if self.truth_path is None:
             import pandas as pd  # here, not at import: workers load datasets without pandas
 
-            self.targets = pd.DataFrame({c: pd.Series(dtype="int64")
-                                         for c in ("row", "col", "height", "width")})  # fmt: skip
+            self.targets = pd.DataFrame(
+                {c: pd.Series(dtype="int64") for c in ("row", "col", "height", "width")}
+            )
         else:
             if not self.truth_path.is_file():
                 raise EvalError(f"truth {self.truth_path} does not exist or is not a file")
             self.targets = read_truth(self.truth_path, self.scene_id, self.shape)
             self.shared_files = [self.truth_path]
         self.chip = chip
-        self.options.update(chip=chip, truth=None if truth is None else str(truth),
-                            targets=len(self.targets))  # fmt: skip
+        self.options.update(
+            chip=chip, truth=None if truth is None else str(truth), targets=len(self.targets)
+        )
         self.limit(limit)
         self.options["instances"] = "points"
 
@@ -185,14 +197,17 @@ class SceneDataset(FileDataset):
         names = {self.scene_id, self.root.name}
         other = [r for r in dict.fromkeys(refs.tolist()) if str(r) not in names]
         if other:
-            raise EvalError(f"{what}: rows of scene {other[0]!r}, but the dataset is scene "
-                            f"{self.scene_id!r}")  # fmt: skip
+            raise EvalError(
+                f"{what}: rows of scene {other[0]!r}, but the dataset is scene {self.scene_id!r}"
+            )
         pix = np.floor(points + 0.5).astype(np.int64)  # the pixel whose centre is nearest
         items = self._chip_of(pix[:, 0], pix[:, 1])
         if (items < 0).any():
             k = int(np.flatnonzero(items < 0)[0])
-            raise EvalError(f"{what}: point {points[k].tolist()} lies outside the "
-                            f"{self.shape[0]}x{self.shape[1]} scene's chips")  # fmt: skip
+            raise EvalError(
+                f"{what}: point {points[k].tolist()} lies outside the "
+                f"{self.shape[0]}x{self.shape[1]} scene's chips"
+            )
         corners = np.array([self.items[i][:2] for i in range(len(self.items))], np.float64)
         return items, corners[items].reshape(-1, 2)
 

@@ -72,8 +72,11 @@ def build_report(folders: Sequence[str | Path], rank_by: str | None = None) -> s
     return build_page(runs, _rank_of(runs, rank_by))
 
 
-def write_report(folders: Sequence[str | Path] | str | Path, out: str | Path | None = None,
-                 rank_by: str | None = None) -> Path:  # fmt: skip
+def write_report(
+    folders: Sequence[str | Path] | str | Path,
+    out: str | Path | None = None,
+    rank_by: str | None = None,
+) -> Path:
     """Write :func:`build_report` of ``folders`` to ``out`` (default: ``report.html`` in the
     one run folder), replacing it at once (temporary name, then rename); returns its path."""
     if isinstance(folders, str | Path):

@@ -49,8 +49,11 @@ def _svg(fig: plt.Figure, salt: str, label: str) -> str:
     """The figure as an inline ``<svg>`` element (no XML prolog, no metadata, scalable)."""
     buf = io.StringIO()
     with plt.rc_context({"svg.hashsalt": salt, "svg.fonttype": "none"}):
-        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None, "Format": None,
-                                                  "Type": None})  # fmt: skip
+        fig.savefig(
+            buf,
+            format="svg",
+            metadata={"Date": None, "Creator": None, "Format": None, "Type": None},
+        )
     plt.close(fig)
     text = buf.getvalue()
     text = text[text.index("<svg") :]
@@ -96,12 +99,18 @@ def _froc(ax, df: pd.DataFrame, series: list[Series]) -> bool:
         d = _rows(df, s)
         if d.empty:
             continue
-        ax.step(d["false_alarms_per_image"], d["pd_object"], where="post", color=s.colour,
-                linestyle=s.dash, lw=1.4, label=plain(s.label))  # fmt: skip
+        ax.step(
+            d["false_alarms_per_image"],
+            d["pd_object"],
+            where="post",
+            color=s.colour,
+            linestyle=s.dash,
+            lw=1.4,
+            label=plain(s.label),
+        )
         op = s.summary
         if op is not None and "false_alarms_per_image" in op and "pd_object" in op:
-            ax.plot([op["false_alarms_per_image"]], [op["pd_object"]], "o", color=s.colour,
-                    ms=4)  # fmt: skip
+            ax.plot([op["false_alarms_per_image"]], [op["pd_object"]], "o", color=s.colour, ms=4)
         drawn = True
     ax.set_xscale("symlog", linthresh=0.1)
     ax.xaxis.set_major_formatter(_PLAIN)
@@ -132,8 +141,14 @@ def _pr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
     for s in series:
         d = _rows(df, s)
         if not d.empty:
-            ax.plot(d["recall"], d["precision"], color=s.colour, linestyle=s.dash, lw=1.4,
-                    label=pr_label(s))  # fmt: skip
+            ax.plot(
+                d["recall"],
+                d["precision"],
+                color=s.colour,
+                linestyle=s.dash,
+                lw=1.4,
+                label=pr_label(s),
+            )
             drawn = True
     if drawn and len(ax.lines) <= LEGEND_MAX:  # more: the page's shared legend has the APs
         ax.legend(loc="lower left", fontsize=7, framealpha=0.8)
@@ -207,8 +222,16 @@ def _scr(ax, df: pd.DataFrame, series: list[Series]) -> bool:
             line.set_gid(f"scr-line-{_id(s.label)}")  # the page's tests find the points by it
             ok = np.isfinite(lo) & np.isfinite(hi)
             err = [np.maximum(y[ok] - lo[ok], 0.0), np.maximum(hi[ok] - y[ok], 0.0)]
-            ax.errorbar(x[ok], y[ok], yerr=err, fmt="none",
-                        ecolor=s.colour, elinewidth=0.8, capsize=2, alpha=0.7)  # fmt: skip
+            ax.errorbar(
+                x[ok],
+                y[ok],
+                yerr=err,
+                fmt="none",
+                ecolor=s.colour,
+                elinewidth=0.8,
+                capsize=2,
+                alpha=0.7,
+            )
             drawn = True
     ax.set_ylim(0, 1.02)
     return drawn

@@ -37,23 +37,64 @@ from torchsar_eval.leaderboard import number as _num
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
 
-_UNIT = {"f1", "precision", "recall", "ap50", "ap50_95", "ap_distance", "pd_at_0.1_fa_per_image",
-         "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc", "fom", "mean_iou",
-         "pd_object", "pd_pixel"}  # fmt: skip
+_UNIT = {
+    "f1",
+    "precision",
+    "recall",
+    "ap50",
+    "ap50_95",
+    "ap_distance",
+    "pd_at_0.1_fa_per_image",
+    "pd_at_1_fa_per_image",
+    "pd_at_10_fa_per_image",
+    "pauc",
+    "fom",
+    "mean_iou",
+    "pd_object",
+    "pd_pixel",
+}
 LABELS = {
-    "f1": "F1", "precision": "precision", "recall": "recall", "ap50": "AP50",
-    "ap50_95": "AP50:95", "ap_distance": "AP (distance)",
+    "f1": "F1",
+    "precision": "precision",
+    "recall": "recall",
+    "ap50": "AP50",
+    "ap50_95": "AP50:95",
+    "ap_distance": "AP (distance)",
     "pd_at_0.1_fa_per_image": "Pd @ 0.1 FA/img",
-    "pd_at_1_fa_per_image": "Pd @ 1 FA/img", "pd_at_10_fa_per_image": "Pd @ 10 FA/img",
-    "pauc": "pAUC", "fom": "FoM", "mean_iou": "mean IoU", "pd_object": "Pd (object)",
-    "pd_pixel": "Pd pixel", "pfa_pixel": "Pfa pixel", "false_alarms_per_image": "FA/img",
-    "fa_per_km2": "FA/km²", "false_alarms": "false alarms", "tp": "TP", "fp": "FP",
-    "fn": "FN", "fragmentation": "fragments", "length_score": "length score",
-    "ms_per_image": "ms/img", "images_per_s": "images/s",
-}  # fmt: skip
-SHOWN = ["precision", "recall", "f1", "ap50", "ap_distance", "pd_at_1_fa_per_image",
-         "false_alarms_per_image", "tp", "fp", "fn", "pd_pixel", "pfa_pixel",
-         "ms_per_image"]  # fmt: skip
+    "pd_at_1_fa_per_image": "Pd @ 1 FA/img",
+    "pd_at_10_fa_per_image": "Pd @ 10 FA/img",
+    "pauc": "pAUC",
+    "fom": "FoM",
+    "mean_iou": "mean IoU",
+    "pd_object": "Pd (object)",
+    "pd_pixel": "Pd pixel",
+    "pfa_pixel": "Pfa pixel",
+    "false_alarms_per_image": "FA/img",
+    "fa_per_km2": "FA/km²",
+    "false_alarms": "false alarms",
+    "tp": "TP",
+    "fp": "FP",
+    "fn": "FN",
+    "fragmentation": "fragments",
+    "length_score": "length score",
+    "ms_per_image": "ms/img",
+    "images_per_s": "images/s",
+}
+SHOWN = [
+    "precision",
+    "recall",
+    "f1",
+    "ap50",
+    "ap_distance",
+    "pd_at_1_fa_per_image",
+    "false_alarms_per_image",
+    "tp",
+    "fp",
+    "fn",
+    "pd_pixel",
+    "pfa_pixel",
+    "ms_per_image",
+]
 """Leaderboard columns after the ranking metric (those a run has a value in)."""
 _SAMPLE_TYPES = {
     "intensity": "intensity (power), used as is",
@@ -162,16 +203,21 @@ def _series(board: Board) -> list[Series]:
     board compares runs)."""
     out = []
     for _, r in board.rows.sort_values(["_run"], kind="stable").iterrows():
-        dash = detector_dash(r["detector"]) if len(board.runs) == 1 else (
-            ["-", "--", ":", "-."][int(r["_run"]) % 4])  # fmt: skip
+        dash = (
+            detector_dash(r["detector"])
+            if len(board.runs) == 1
+            else (["-", "--", ":", "-."][int(r["_run"]) % 4])
+        )
         out.append(Series(r["label"], r["detector"], detector_colour(r["detector"]), dash, r))
     return out
 
 
 def _swatch(detector: str, dash: str = "-") -> str:
     style = {"-": "solid", "--": "dashed", ":": "dotted", "-.": "dashed"}[dash]
-    return (f'<span class="sw" style="border-top-color:{detector_colour(detector)};'
-            f'border-top-style:{style}"></span>')  # fmt: skip
+    return (
+        f'<span class="sw" style="border-top-color:{detector_colour(detector)};'
+        f'border-top-style:{style}"></span>'
+    )
 
 
 def _bar(value: float, lo: float, hi: float, top: float, zero: float | None = None) -> str:
@@ -186,8 +232,10 @@ def _bar(value: float, lo: float, hi: float, top: float, zero: float | None = No
     if zero is not None:
         parts.append(f'<span class="zero" style="left:{pos(0):.1f}%"></span>')
     if not (math.isnan(lo) or math.isnan(hi)):
-        parts.append(f'<span class="iv" style="left:{pos(lo):.1f}%;'
-                     f'width:{max(pos(hi) - pos(lo), 0.8):.1f}%"></span>')  # fmt: skip
+        parts.append(
+            f'<span class="iv" style="left:{pos(lo):.1f}%;'
+            f'width:{max(pos(hi) - pos(lo), 0.8):.1f}%"></span>'
+        )
     if not math.isnan(value):
         parts.append(f'<span class="pt" style="left:{pos(value):.1f}%"></span>')
     return "".join(parts) + "</span>"
@@ -204,8 +252,11 @@ def _leaderboard(board: Board) -> str:
     rows, m = board.rows, board.rank_by
     if rows.empty:
         return '<p class="muted">No rows.</p>'
-    shown = [c for c in SHOWN if c in rows.columns and c != m
-             and pd.to_numeric(rows[c], errors="coerce").notna().any()]  # fmt: skip
+    shown = [
+        c
+        for c in SHOWN
+        if c in rows.columns and c != m and pd.to_numeric(rows[c], errors="coerce").notna().any()
+    ]
     many = len(board.runs) > 1
     val = {c: [_num(v) for v in rows[c]] for c in [m, *shown] if c in rows.columns}
     silent = [n == NO_DETECTION for n in board.notes]  # fewest false alarms, trivially
@@ -219,13 +270,18 @@ def _leaderboard(board: Board) -> str:
     has_ci = f"{m}_lo" in rows.columns and f"{m}_hi" in rows.columns
     lo = [_num(v) for v in rows[f"{m}_lo"]] if has_ci else [math.nan] * len(rows)
     hi = [_num(v) for v in rows[f"{m}_hi"]] if has_ci else [math.nan] * len(rows)
-    top = 1.0 if m in _UNIT else max([x for x in [*val.get(m, []), *hi] if not math.isnan(x)]
-                                     or [1.0]) or 1.0  # fmt: skip
+    top = (
+        1.0
+        if m in _UNIT
+        else max([x for x in [*val.get(m, []), *hi] if not math.isnan(x)] or [1.0]) or 1.0
+    )
     head = ['<th class="l">#</th>', '<th class="l">detector</th>']
     head += ['<th class="l">run</th>'] if many else []
     arrow = "↓ lower is better" if m in LOWER_IS_BETTER else "↑ higher is better"
-    head.append(f'<th class="l" title="{_e(arrow)}">{_e(LABELS.get(m, m))} '
-                f'<span class="lohi">95 % interval</span></th>')  # fmt: skip
+    head.append(
+        f'<th class="l" title="{_e(arrow)}">{_e(LABELS.get(m, m))} '
+        f'<span class="lohi">95 % interval</span></th>'
+    )
     head += [f'<th title="{_e(c)}">{_e(LABELS.get(c, c))}</th>' for c in shown]
     head.append(
         '<th class="l" title="the IoU of each row\'s AP (a cell\'s title: its matching rule)">'
@@ -236,8 +292,11 @@ def _leaderboard(board: Board) -> str:
         rank = board.rank[i]
         v = val[m][i] if m in val else math.nan
         cls = ' class="l best"' if best.get(m) is not None and v == best[m] else ' class="l"'
-        interval = (f'<span class="lohi">{_fmt(m, lo[i])}–{_fmt(m, hi[i])}</span>'
-                    if has_ci and not math.isnan(lo[i]) else "")  # fmt: skip
+        interval = (
+            f'<span class="lohi">{_fmt(m, lo[i])}–{_fmt(m, hi[i])}</span>'
+            if has_ci and not math.isnan(lo[i])
+            else ""
+        )
         why = f'<div class="why">{_e(board.notes[i])}</div>' if board.notes[i] else ""
         cells = [
             f'<td class="l">{"" if rank is None else rank}</td>',
@@ -247,16 +306,23 @@ def _leaderboard(board: Board) -> str:
             differs = board.settings[i]
             note = f'<div class="why">{_e(differs)}</div>' if differs else ""
             cells.append(f'<td class="l runcell">{_e(r["run"])}{note}</td>')
-        cells.append(f'<td{cls}><span class="ci"><b>{_fmt(m, v)}</b>'
-                     f'{_bar(v, lo[i], hi[i], top)}{interval}</span></td>')  # fmt: skip
+        cells.append(
+            f'<td{cls}><span class="ci"><b>{_fmt(m, v)}</b>'
+            f"{_bar(v, lo[i], hi[i], top)}{interval}</span></td>"
+        )
         for c in shown:
             x = val[c][i]
             mark = ' class="best"' if best[c] is not None and x == best[c] else ""
             cells.append(f"<td{mark}>{_fmt(c, x)}</td>")
         cells.append(f'<td class="l rule" title="{_e(_measured_by(r))}">{_e(_iou(r))}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return ('<div class="wrap"><table class="leaderboard"><thead><tr>' + "".join(head)
-            + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+    return (
+        '<div class="wrap"><table class="leaderboard"><thead><tr>'
+        + "".join(head)
+        + "</tr></thead><tbody>"
+        + "".join(body)
+        + "</tbody></table></div>"
+    )
 
 
 def _iou(row: pd.Series) -> str:
@@ -290,8 +356,13 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
     if source:
         scheme = ds_opts.get("scheme")
         files = manifest.get("files")
-        facts.append(("source", f"{scheme + ': ' if scheme else ''}{source}"
-                      + (f" ({files} files)" if files is not None else "")))  # fmt: skip
+        facts.append(
+            (
+                "source",
+                f"{scheme + ': ' if scheme else ''}{source}"
+                + (f" ({files} files)" if files is not None else ""),
+            )
+        )
     facts.append(("images", _fmt("images", first.get("images"))))
     facts.append(("targets", _fmt("targets", first.get("targets"))))
     bd = run.table("breakdown", dataset)
@@ -322,8 +393,12 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
         )
     )
     if ds_opts.get("gt") or ds_opts.get("instances"):
-        facts.append(("ground truth", " · ".join(str(ds_opts[k]) for k in ("gt", "instances")
-                                                 if ds_opts.get(k))))  # fmt: skip
+        facts.append(
+            (
+                "ground truth",
+                " · ".join(str(ds_opts[k]) for k in ("gt", "instances") if ds_opts.get(k)),
+            )
+        )
     scoring = opts.get("scoring") or {}
     match = scoring.get("matching") or {}
     if match:
@@ -333,30 +408,46 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
         except (KeyError, ValueError):
             text = None
         if text is None:
-            text = f"{match.get('kind')}" + (f", within {match.get('max_distance')} "
-                                             f"{match.get('distance_units', '')}"
-                                             if match.get("max_distance") else "")  # fmt: skip
+            text = f"{match.get('kind')}" + (
+                f", within {match.get('max_distance')} {match.get('distance_units', '')}"
+                if match.get("max_distance")
+                else ""
+            )
         facts.append(("matching rule", text))
     rules = scoring.get("objects") or {}
     if rules:
-        facts.append(("objects", f"closing {rules.get('closing')} px, components of score > "
-                      f"{_num(rules.get('floor', 1)):g}, area ≥ {_num(rules.get('min_area')):g} "
-                      f"{rules.get('units', 'px')}"))  # fmt: skip
+        facts.append(
+            (
+                "objects",
+                f"closing {rules.get('closing')} px, components of score > "
+                f"{_num(rules.get('floor', 1)):g}, area ≥ {_num(rules.get('min_area')):g} "
+                f"{rules.get('units', 'px')}",
+            )
+        )
     boot = scoring.get("bootstrap") or {}
     if boot:
-        facts.append(("intervals", f"95 %, effective-count Jeffreys / Poisson from a Poisson "
-                      f"bootstrap over images, {boot.get('replicates')} replicates"
-                      if boot.get("replicates")
-                      else "none (bootstrap off)"))  # fmt: skip
+        facts.append(
+            (
+                "intervals",
+                f"95 %, effective-count Jeffreys / Poisson from a Poisson "
+                f"bootstrap over images, {boot.get('replicates')} replicates"
+                if boot.get("replicates")
+                else "none (bootstrap off)",
+            )
+        )
     cal = opts.get("calibration")
     if isinstance(cal, dict) and cal.get("sweep"):
         swept = ", ".join(f"{k} in {{{', '.join(map(str, v))}}}" for k, v in cal["sweep"].items())
-        point = (f"settings chosen on {cal.get('fraction')} of the images for "
-                 f"{cal.get('target')} ({swept}), each at its design threshold; reported on "
-                 "the rest (see Tuned settings)")  # fmt: skip
+        point = (
+            f"settings chosen on {cal.get('fraction')} of the images for "
+            f"{cal.get('target')} ({swept}), each at its design threshold; reported on "
+            "the rest (see Tuned settings)"
+        )
     elif isinstance(cal, dict):
-        point = (f"calibrated on {cal.get('fraction')} of the images for {cal.get('target')}, "
-                 "reported on the rest")  # fmt: skip
+        point = (
+            f"calibrated on {cal.get('fraction')} of the images for {cal.get('target')}, "
+            "reported on the rest"
+        )
     else:
         point = "each detector's design threshold"
     facts.append(("operating point", point))
@@ -364,15 +455,15 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
         facts.append(("despeckling", ", ".join(f"{k}={v}" for k, v in opts["despeckle"].items())))
     thr = (opts.get("throughput") or {}).get(dataset) or {}
     if thr.get("wall_s") is not None:
-        facts.append(("time", f"{_num(thr['wall_s']):.1f} s ({_num(thr.get('images_per_s')):.3g}"
-                      " images/s)"))  # fmt: skip
+        facts.append(
+            ("time", f"{_num(thr['wall_s']):.1f} s ({_num(thr.get('images_per_s')):.3g} images/s)")
+        )
     notes = caveats(run, dataset, board)
     out = ['<dl class="card">']
     out += [f"<div><dt>{_e(k)}</dt><dd>{_e(v)}</dd></div>" for k, v in facts]
     out.append("</dl>")
     if notes:
-        out.append('<ul class="caveats">' + "".join(f"<li>{_e(c)}</li>" for c in notes)
-                   + "</ul>")  # fmt: skip
+        out.append('<ul class="caveats">' + "".join(f"<li>{_e(c)}</li>" for c in notes) + "</ul>")
     return "".join(out)
 
 
@@ -394,14 +485,18 @@ def _tuned(board: Board) -> str:
         tried = sweep.groupby("detector").size()
         order = [d for d in _order(board, run) if d in set(chosen["detector"])]
         rows = chosen.set_index("detector").loc[order].reset_index()
-        df = pd.DataFrame({
-            "detector": rows["detector"],
-            "chosen settings": [", ".join(f"{k}={short_value(v)}" for k, v in json.loads(o).items())
-                                for o in rows["options"]],
-            "F1 (calibration)": rows["f1"].astype(float),
-            "FA/img (calibration)": rows["false_alarms_per_image"].astype(float),
-            "settings tried": [int(tried[d]) for d in rows["detector"]],
-        })  # fmt: skip
+        df = pd.DataFrame(
+            {
+                "detector": rows["detector"],
+                "chosen settings": [
+                    ", ".join(f"{k}={short_value(v)}" for k, v in json.loads(o).items())
+                    for o in rows["options"]
+                ],
+                "F1 (calibration)": rows["f1"].astype(float),
+                "FA/img (calibration)": rows["false_alarms_per_image"].astype(float),
+                "settings tried": [int(tried[d]) for d in rows["detector"]],
+            }
+        )
         title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
         out.append(title + _table(df))
     if not out:
@@ -431,8 +526,10 @@ def _figures(board: Board, salt: str) -> str:
             figs.append(f"<figure>{svg}</figure>")
     if not figs:
         return '<p class="muted">No curves in this run.</p>'
-    note = ('<p class="note">Filled dots: each detector\'s operating point. Colours are '
-            "fixed per detector name.</p>")  # fmt: skip
+    note = (
+        '<p class="note">Filled dots: each detector\'s operating point. Colours are '
+        "fixed per detector name.</p>"
+    )
     return _legend(series) + '<div class="figs">' + "".join(figs) + "</div>" + note
 
 
@@ -445,8 +542,9 @@ def _relabel(df: pd.DataFrame, run: str) -> pd.DataFrame:
 
 
 def _table(df: pd.DataFrame, left: int = 1) -> str:
-    head = "".join(f'<th{" class=l" if i < left else ""}>{_e(c)}</th>'
-                   for i, c in enumerate(df.columns))  # fmt: skip
+    head = "".join(
+        f"<th{' class=l' if i < left else ''}>{_e(c)}</th>" for i, c in enumerate(df.columns)
+    )
     body = []
     for row in df.itertuples(index=False):
         cells = []
@@ -454,8 +552,13 @@ def _table(df: pd.DataFrame, left: int = 1) -> str:
             text = _fmt(str(df.columns[i]), v) if isinstance(v, float) else str(v)
             cells.append(f"<td{' class=l' if i < left else ''}>{_e(text)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return ('<div class="wrap"><table><thead><tr>' + head + "</tr></thead><tbody>"
-            + "".join(body) + "</tbody></table></div>")  # fmt: skip
+    return (
+        '<div class="wrap"><table><thead><tr>'
+        + head
+        + "</tr></thead><tbody>"
+        + "".join(body)
+        + "</tbody></table></div>"
+    )
 
 
 def _order(board: Board, run: RunFiles) -> list[str]:
@@ -464,8 +567,13 @@ def _order(board: Board, run: RunFiles) -> list[str]:
     return list(dict.fromkeys(r["detector"]))
 
 
-_AP_SIZES = [("ap50", "AP50"), ("ap50_95", "AP50:95"), ("ap_small", "small"),
-             ("ap_medium", "medium"), ("ap_large", "large")]  # fmt: skip
+_AP_SIZES = [
+    ("ap50", "AP50"),
+    ("ap50_95", "AP50:95"),
+    ("ap_small", "small"),
+    ("ap_medium", "medium"),
+    ("ap_large", "large"),
+]
 
 
 def ap_frame(summary: pd.DataFrame, breakdown: pd.DataFrame, order: list[str]) -> pd.DataFrame:
@@ -501,8 +609,11 @@ def _ap(board: Board) -> str:
     """AP by size and per class, one table per run."""
     out = []
     for run in board.runs:
-        df = ap_frame(run.table("summary", board.dataset), run.table("breakdown", board.dataset),
-                      _order(board, run))  # fmt: skip
+        df = ap_frame(
+            run.table("summary", board.dataset),
+            run.table("breakdown", board.dataset),
+            _order(board, run),
+        )
         if df.empty:
             continue
         title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
@@ -527,8 +638,10 @@ def _breakdown(board: Board) -> str:
         head = ['<th class="l">detector</th>']
         for by, key in keys:
             n = bd[(bd["by"] == by) & (bd["key"] == key)]["targets"].iloc[0]
-            head.append(f'<th>{_e(by)}: {_e(key)}<br><span class="lohi">'
-                        f"{_fmt('targets', n)} targets</span></th>")  # fmt: skip
+            head.append(
+                f'<th>{_e(by)}: {_e(key)}<br><span class="lohi">'
+                f"{_fmt('targets', n)} targets</span></th>"
+            )
         body = []
         for det in _order(board, run):
             d = bd[bd["detector"] == det]
@@ -541,15 +654,26 @@ def _breakdown(board: Board) -> str:
                 tp, n = _num(row["tp"].iloc[0]), _num(row["targets"].iloc[0])
                 fp = _num(row["fp"].iloc[0]) if "fp" in row else math.nan
                 rec = tp / n if n else math.nan
-                shade = "" if math.isnan(rec) else (
-                    f' style="background:rgba(46,160,67,{0.08 + 0.32 * rec:.2f})"')  # fmt: skip
+                shade = (
+                    ""
+                    if math.isnan(rec)
+                    else (f' style="background:rgba(46,160,67,{0.08 + 0.32 * rec:.2f})"')
+                )
                 extra = "" if math.isnan(fp) else f" · {fp:.0f} FA"
-                cells.append(f'<td class="heat"{shade}>{tp:.0f}/{n:.0f}<span class="lohi">'
-                             f"{extra}</span></td>")  # fmt: skip
+                cells.append(
+                    f'<td class="heat"{shade}>{tp:.0f}/{n:.0f}<span class="lohi">'
+                    f"{extra}</span></td>"
+                )
             body.append("<tr>" + "".join(cells) + "</tr>")
         title = f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else ""
-        out.append(title + '<div class="wrap"><table><thead><tr>' + "".join(head)
-                   + "</tr></thead><tbody>" + "".join(body) + "</tbody></table></div>")  # fmt: skip
+        out.append(
+            title
+            + '<div class="wrap"><table><thead><tr>'
+            + "".join(head)
+            + "</tr></thead><tbody>"
+            + "".join(body)
+            + "</tbody></table></div>"
+        )
     if not out:
         return ""
     return (
@@ -559,11 +683,17 @@ def _breakdown(board: Board) -> str:
 
 
 _ERROR_FAMILIES = [
-    ("false_alarm", "False alarms by type",
-     "each false alarm counted once, under the first type that applies"),
-    ("miss", "Missed targets by size and SCR",
-     "each missed target counted once per family: size bins, then SCR bins"),
-]  # fmt: skip
+    (
+        "false_alarm",
+        "False alarms by type",
+        "each false alarm counted once, under the first type that applies",
+    ),
+    (
+        "miss",
+        "Missed targets by size and SCR",
+        "each missed target counted once per family: size bins, then SCR bins",
+    ),
+]
 
 
 def _errors(board: Board) -> str:
@@ -584,12 +714,15 @@ def _errors(board: Board) -> str:
             part = df[df["error"] == family]
             if part.empty:
                 continue
-            piv = part.pivot_table(index="detector", columns="type", values="count",
-                                   aggfunc="sum", sort=False)  # fmt: skip
-            piv = piv.reindex([d for d in order if d in piv.index]
-                              + [d for d in piv.index if d not in order])  # fmt: skip
-            parts.append(f'<h4>{_e(title)}</h4><p class="note">{_e(note)}</p>'
-                         + _table(piv.reset_index()))  # fmt: skip
+            piv = part.pivot_table(
+                index="detector", columns="type", values="count", aggfunc="sum", sort=False
+            )
+            piv = piv.reindex(
+                [d for d in order if d in piv.index] + [d for d in piv.index if d not in order]
+            )
+            parts.append(
+                f'<h4>{_e(title)}</h4><p class="note">{_e(note)}</p>' + _table(piv.reset_index())
+            )
         out.append(head + "".join(parts))
     return "<h3>Errors</h3>" + "".join(out) if out else ""
 
@@ -622,20 +755,28 @@ def _paired(board: Board) -> str:
             if math.isnan(d):  # not defined for this pair (e.g. AP of points): no bar
                 cells += '<td class="l">–</td>'
             else:
-                cells += (f'<td class="l"><span class="ci"><b>{d:+.3g}</b>'
-                          f"{_bar(d, a, b, top, zero=0.0)}{interval}</span></td>")  # fmt: skip
+                cells += (
+                    f'<td class="l"><span class="ci"><b>{d:+.3g}</b>'
+                    f"{_bar(d, a, b, top, zero=0.0)}{interval}</span></td>"
+                )
             if sig:
                 yes = str(r[sig]).strip().lower() in ("true", "1", "yes", "1.0")
                 cells += f'<td class="l">{"<b>yes</b>" if yes else "no"}</td>'
             body.append("<tr>" + cells + "</tr>")
-        out.append((f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else "")
-                   + '<div class="wrap"><table><thead><tr>' + head + "</tr></thead><tbody>"
-                   + "".join(body) + "</tbody></table></div>")  # fmt: skip
+        out.append(
+            (f"<h4>{_e(run.name)}</h4>" if len(board.runs) > 1 else "")
+            + '<div class="wrap"><table><thead><tr>'
+            + head
+            + "</tr></thead><tbody>"
+            + "".join(body)
+            + "</tbody></table></div>"
+        )
     if not out:
         return ""
-    return ('<h3>Paired differences</h3><p class="note">Differences to the reference detector '
-            "on the same images (paired bootstrap); the bar is centred on zero.</p>"
-            + "".join(out))  # fmt: skip
+    return (
+        '<h3>Paired differences</h3><p class="note">Differences to the reference detector '
+        "on the same images (paired bootstrap); the bar is centred on zero.</p>" + "".join(out)
+    )
 
 
 def _coco(board: Board) -> str:
@@ -647,8 +788,11 @@ def _coco(board: Board) -> str:
     return "<h3>COCO-compatible statistics</h3>" + "".join(out) if out else ""
 
 
-_KINDS = [("false_alarm", "highest-scoring false alarms"), ("miss", "largest missed targets"),
-          ("hit", "typical hits (true positives drawn at random)")]  # fmt: skip
+_KINDS = [
+    ("false_alarm", "highest-scoring false alarms"),
+    ("miss", "largest missed targets"),
+    ("hit", "typical hits (true positives drawn at random)"),
+]
 
 
 def _caption(kind: str, rank: int, r: pd.Series) -> str:
@@ -690,9 +834,11 @@ def _gallery(board: Board) -> str:
                     if uri is None:
                         continue
                     alt = f"{kind.replace('_', ' ')} {rank} of {det}"
-                    figs.append(f'<figure class="case"><img src="{uri}" width="160" '
-                                f'height="160" alt="{_e(alt)}"><figcaption>'
-                                f"{_caption(kind, rank, r)}</figcaption></figure>")  # fmt: skip
+                    figs.append(
+                        f'<figure class="case"><img src="{uri}" width="160" '
+                        f'height="160" alt="{_e(alt)}"><figcaption>'
+                        f"{_caption(kind, rank, r)}</figcaption></figure>"
+                    )
                 count = f"{len(figs)} shown" if figs else "none"
                 parts.append(f'<div class="kind">{_e(title)}: {count}</div>')
                 if figs:
@@ -734,8 +880,10 @@ def _overlays(board: Board) -> str:
                     f"found, {fa} false alarm{'s' * (fa != 1)}{at}</figcaption></figure>"
                 )
             if figs:
-                out.append(f'<div class="kind">{_e(str(image))}</div>'
-                           f'<div class="cases">{"".join(figs)}</div>')  # fmt: skip
+                out.append(
+                    f'<div class="kind">{_e(str(image))}</div>'
+                    f'<div class="cases">{"".join(figs)}</div>'
+                )
     if not out:
         return ""
     return (
@@ -757,9 +905,13 @@ def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:
             sub.append(f"torchsar {cfg['torchsar_version']}, torch {cfg.get('torch_version')}")
     else:
         title = "Evaluation report: " + " vs ".join(r.name for r in runs)
-        sub = [f"{len(runs)} runs: " + ", ".join(
-            f"{r.name}" + (f" ({r.config['time']})" if r.config.get("time") else "")
-            for r in runs)]  # fmt: skip
+        sub = [
+            f"{len(runs)} runs: "
+            + ", ".join(
+                f"{r.name}" + (f" ({r.config['time']})" if r.config.get("time") else "")
+                for r in runs
+            )
+        ]
     sub.append(f"ranked by {LABELS.get(rank_by, rank_by)}")
     return title, f'<h1>{_e(title)}</h1><p class="sub">{_e(" · ".join(sub))}</p>'
 
@@ -775,16 +927,23 @@ def _others(runs: list[RunFiles]) -> str:
             uri = _png_uri(run.folder, path.name)
             if uri:
                 name = path.name if len(runs) == 1 else f"{run.name}/{path.name}"
-                out.append(f'<figure><img class="other" src="{uri}" alt="{_e(name)}">'
-                           f"<figcaption>{_e(name)}</figcaption></figure>")  # fmt: skip
+                out.append(
+                    f'<figure><img class="other" src="{uri}" alt="{_e(name)}">'
+                    f"<figcaption>{_e(name)}</figcaption></figure>"
+                )
     return "<section><h2>Other figures</h2>" + "".join(out) + "</section>" if out else ""
 
 
 def _glossary() -> str:
-    rows = "".join(f'<tr><td class="l">{_e(k)}</td><td class="l" style="white-space:normal">'
-                   f"{_e(v)}</td></tr>" for k, v in _TERMS)  # fmt: skip
-    return ('<section><h2>Glossary</h2><div class="wrap"><table><tbody>' + rows
-            + "</tbody></table></div></section>")  # fmt: skip
+    rows = "".join(
+        f'<tr><td class="l">{_e(k)}</td><td class="l" style="white-space:normal">{_e(v)}</td></tr>'
+        for k, v in _TERMS
+    )
+    return (
+        '<section><h2>Glossary</h2><div class="wrap"><table><tbody>'
+        + rows
+        + "</tbody></table></div></section>"
+    )
 
 
 def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
@@ -797,13 +956,18 @@ def build_page(runs: list[RunFiles], rank_by: str = DEFAULT_RANK) -> str:
     title, header = _header(runs, rank_by)
     names = _datasets(runs)
     short = short_labels(names)  # the full spec is in the card's source and config.json
-    nav = "".join(f'<li><a href="#ds-{i}" title="{_e(n)}">{_e(short[n])}</a></li>'
-                  for i, n in enumerate(names, 1))  # fmt: skip
+    nav = "".join(
+        f'<li><a href="#ds-{i}" title="{_e(n)}">{_e(short[n])}</a></li>'
+        for i, n in enumerate(names, 1)
+    )
     sections = []
     for i, name in enumerate(names, 1):
         board = Board(runs, name, rank_by)
-        cards = "".join(_card(run, name, board, run.name if len(runs) > 1 else None)
-                        for run in runs if name in run.datasets)  # fmt: skip
+        cards = "".join(
+            _card(run, name, board, run.name if len(runs) > 1 else None)
+            for run in runs
+            if name in run.datasets
+        )
         sections.append(
             f'<section class="dataset" id="ds-{i}"><h2 title="{_e(name)}">{_e(short[name])}</h2>'
             f"{cards}"

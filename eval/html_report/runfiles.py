@@ -122,8 +122,9 @@ def _read_csv(path: Path) -> pd.DataFrame:
     try:  # only empty cells are missing: "n/a" is a bin name (SCR not measurable)
         return pd.read_csv(path, keep_default_na=False, na_values=[""])
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
-        warnings.warn(f"{path}: unreadable table, left out of the report ({exc})", UserWarning,
-                      stacklevel=3)  # fmt: skip
+        warnings.warn(
+            f"{path}: unreadable table, left out of the report ({exc})", UserWarning, stacklevel=3
+        )
         return pd.DataFrame()
 
 
@@ -140,8 +141,10 @@ def read_run(folder: str | Path) -> RunFiles:
     }  # (only the run's own files: no link out)
     summary = tables["summary"]
     if summary.empty or not {"dataset", "detector"} <= set(summary.columns):
-        raise EvalError(f"{folder} is not a run folder of torchsar-eval run: it has no "
-                        "summary.csv with dataset and detector columns")  # fmt: skip
+        raise EvalError(
+            f"{folder} is not a run folder of torchsar-eval run: it has no "
+            "summary.csv with dataset and detector columns"
+        )
     for df in tables.values():
         for col in ("dataset", "detector"):
             if col in df.columns:
@@ -157,6 +160,7 @@ def read_run(folder: str | Path) -> RunFiles:
     options = config.get("options")
     out = options.get("out") if isinstance(options, dict) else None
     name = Path(str(out)).name if out else folder.resolve().name
-    figures = sorted(p for p in folder.glob("*.png")
-                     if not p.name.startswith(REDRAWN) and not p.is_symlink())  # fmt: skip
+    figures = sorted(
+        p for p in folder.glob("*.png") if not p.name.startswith(REDRAWN) and not p.is_symlink()
+    )
     return RunFiles(folder, name, config, tables, figures)

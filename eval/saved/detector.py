@@ -58,8 +58,10 @@ def _format(path: Path, fmt: str) -> str:
         return "coco"
     if suffix in (".csv", ".txt"):
         return "points"
-    raise EvalError(f"predictions {path}: cannot tell the format from the name: give "
-                    "format='coco' (JSON), 'points' (CSV) or 'masks' (a folder)")  # fmt: skip
+    raise EvalError(
+        f"predictions {path}: cannot tell the format from the name: give "
+        "format='coco' (JSON), 'points' (CSV) or 'masks' (a folder)"
+    )
 
 
 def _read(path: Path, fmt: str, iou_type: str, digest: str) -> PredictionTable | MaskFolder:
@@ -121,8 +123,9 @@ def segmentation_pixels(
     return rle_pixels(counts, owner, len(segs), (h, w))
 
 
-def _class_names(classes: np.ndarray | None, dataset: Dataset, what: str,
-                 rows: np.ndarray) -> np.ndarray | None:  # fmt: skip
+def _class_names(
+    classes: np.ndarray | None, dataset: Dataset, what: str, rows: np.ndarray
+) -> np.ndarray | None:
     """Class names of the rows: COCO category ids named by the dataset's categories (a
     ``coco:`` dataset; an id it does not list is refused); on other datasets, ids that are
     all 1 (what ``--export-coco`` writes for class-agnostic detectors) mean class-agnostic.
@@ -139,9 +142,11 @@ def _class_names(classes: np.ndarray | None, dataset: Dataset, what: str,
         if bad:
             k = int(rows[bad[0]]) if rows.size else bad[0]
             listed = ", ".join(f"{i} ({n})" for i, n in sorted(known.items()))
-            raise EvalError(f"{what}: entry {k} has category_id {classes[bad[0]]}, which the "
-                            f"dataset does not list (its categories: {listed}); "
-                            f"{len(bad)} entries have unknown ids")  # fmt: skip
+            raise EvalError(
+                f"{what}: entry {k} has category_id {classes[bad[0]]}, which the "
+                f"dataset does not list (its categories: {listed}); "
+                f"{len(bad)} entries have unknown ids"
+            )
         return np.array([ids[c] for c in classes.tolist()], dtype=object)
     return None if set(classes.tolist()) <= {"1"} else classes
 
@@ -164,8 +169,15 @@ class SavedPredictions:
 
     reads_only = True  # (the detector harness passes it the batch itself)
 
-    def __init__(self, path: str | Path, *, format: str = "auto", iou_type: str = "auto",
-                 threshold: float | None = None, ids: str = "name") -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        format: str = "auto",
+        iou_type: str = "auto",
+        threshold: float | None = None,
+        ids: str = "name",
+    ) -> None:
         self.path = Path(path)
         if ids not in IDS:
             raise EvalError(f"ids must be one of {', '.join(IDS)}, got {ids!r}")
@@ -196,12 +208,17 @@ class SavedPredictions:
             # whole-scene points (scene: datasets): each goes to the chip holding it
             items, bound._point_offset = place(self.table.refs, self.table.point, what)
         else:
-            items = locate(self.table.refs, dataset_keys(dataset), what,
-                           positions=getattr(self, "ids", "name") == "position")  # fmt: skip
+            items = locate(
+                self.table.refs,
+                dataset_keys(dataset),
+                what,
+                positions=getattr(self, "ids", "name") == "position",
+            )
         order = np.argsort(items, kind="stable")
         bound._item_rows = (items[order], order)
-        bound._classes = _class_names(getattr(self.table, "classes", None), dataset, what,
-                                      np.arange(len(items)))  # fmt: skip
+        bound._classes = _class_names(
+            getattr(self.table, "classes", None), dataset, what, np.arange(len(items))
+        )
         return bound
 
     def __getstate__(self) -> dict:
@@ -212,8 +229,10 @@ class SavedPredictions:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if _digest(self.path, self.format) != self.digest:
-            raise EvalError(f"predictions {self.path} changed during the run (a worker read "
-                            "other contents than the run did); run again")  # fmt: skip
+            raise EvalError(
+                f"predictions {self.path} changed during the run (a worker read "
+                "other contents than the run did); run again"
+            )
         self.table = _read(self.path, self.format, self.iou_type, self.digest)
 
     def rows_of(self, item: int) -> np.ndarray:
@@ -246,8 +265,9 @@ class SavedPredictions:
         common = {"plane": plane, "planes": b * c, "classes": classes}
         area = None if t.declared_area is None else t.declared_area[r]
         if t.geometry == "mask":
-            owner, pixels = segmentation_pixels([t.segmentation[i] for i in r], h, w,
-                                                r.tolist(), self.path)  # fmt: skip
+            owner, pixels = segmentation_pixels(
+                [t.segmentation[i] for i in r], h, w, r.tolist(), self.path
+            )
             obj = Objects.from_pixels(owner, pixels, t.score[r], shape=(h, w), **common)
             return obj.with_declared_area(area)
         if t.geometry == "box":
@@ -256,8 +276,7 @@ class SavedPredictions:
         length = None if t.length_m is None else t.length_m[r]
         offset = getattr(self, "_point_offset", None)
         point = t.point[r] if offset is None else t.point[r] - offset[r]
-        return Objects.from_points(point, t.score[r], shape=(h, w), length_m=length,
-                                   **common)  # fmt: skip
+        return Objects.from_points(point, t.score[r], shape=(h, w), length_m=length, **common)
 
 
 def predictions(
@@ -294,12 +313,17 @@ def predictions(
         >>> d.name, d.threshold
         ('dets', 0.5)
     """
-    saved = SavedPredictions(path, format=format, iou_type=iou_type, threshold=threshold,
-                             ids=ids)  # fmt: skip
+    saved = SavedPredictions(path, format=format, iou_type=iou_type, threshold=threshold, ids=ids)
     opts = {"path": str(path), "format": saved.format}
     if ids != "name":
         opts["ids"] = ids
     if saved.format == "coco":
         opts["iou_type"] = (saved.table.geometry == "mask" and "segm") or "bbox"
-    return Detector(name or Path(path).stem, saved, opts, threshold=threshold,
-                    instances=instances, call_options={})  # fmt: skip
+    return Detector(
+        name or Path(path).stem,
+        saved,
+        opts,
+        threshold=threshold,
+        instances=instances,
+        call_options={},
+    )

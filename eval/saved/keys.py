@@ -52,8 +52,11 @@ def _by_name(keys: list[dict]) -> list[dict[str, int]]:
     names = [k.get("name") for k in keys]
     files = [PurePath(k.get("path") or k.get("name") or "").name or None for k in keys]
     stems = [PurePath(f).stem if f else None for f in files]
-    return [_unique_index([str(n) if n is not None else None for n in names]),
-            _unique_index(files), _unique_index(stems)]  # fmt: skip
+    return [
+        _unique_index([str(n) if n is not None else None for n in names]),
+        _unique_index(files),
+        _unique_index(stems),
+    ]
 
 
 def locate(refs: np.ndarray, keys: list[dict], what: str, positions: bool = False) -> np.ndarray:
@@ -68,10 +71,12 @@ def locate(refs: np.ndarray, keys: list[dict], what: str, positions: bool = Fals
     by_id = _unique_index(ids) if any(i is not None for i in ids) else None
     values = refs.tolist()
     if by_id is None and not positions and any(type(v) is not str for v in values):
-        raise EvalError(f"{what}: the predictions name images by integer id, but the dataset "
-                        "has no image ids: give each prediction its image's file_name (COCO) "
-                        "or name (CSV), or declare the ids 1-based positions in dataset order "
-                        "with ids='position' (--param NAME.ids=position)")  # fmt: skip
+        raise EvalError(
+            f"{what}: the predictions name images by integer id, but the dataset "
+            "has no image ids: give each prediction its image's file_name (COCO) "
+            "or name (CSV), or declare the ids 1-based positions in dataset order "
+            "with ids='position' (--param NAME.ids=position)"
+        )
     memo: dict[object, int] = dict.fromkeys(values, -1)
     tables = _by_name(keys) if any(type(ref) is str for ref in memo) else []  # names: by need
     for ref in memo:
@@ -79,12 +84,17 @@ def locate(refs: np.ndarray, keys: list[dict], what: str, positions: bool = Fals
     out = np.array([memo[ref] for ref in values], dtype=np.int64).reshape(len(values))
     missing = [ref for ref, i in memo.items() if i < 0]
     if missing:
-        hint = (" (it is given as a name; an integer id goes in the image_id field or column)"
-                if isinstance(missing[0], str) and missing[0].isdigit() else "")  # fmt: skip
-        raise EvalError(f"{what}: {len(missing)} image(s) not in the dataset, e.g. "
-                        f"{missing[0]!r}{hint} (images are matched by COCO id, or by name, "
-                        "file name or file stem; ids of other datasets count from 1 in "
-                        "dataset order)")  # fmt: skip
+        hint = (
+            " (it is given as a name; an integer id goes in the image_id field or column)"
+            if isinstance(missing[0], str) and missing[0].isdigit()
+            else ""
+        )
+        raise EvalError(
+            f"{what}: {len(missing)} image(s) not in the dataset, e.g. "
+            f"{missing[0]!r}{hint} (images are matched by COCO id, or by name, "
+            "file name or file stem; ids of other datasets count from 1 in "
+            "dataset order)"
+        )
     return out
 
 

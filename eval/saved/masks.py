@@ -35,18 +35,28 @@ class MaskFolder:
 
     def __init__(self, root: Path) -> None:
         self.root = Path(root)
-        files = sorted(f for f in self.root.rglob("*") if f.is_file()
-                       and f.suffix.lower() in MASK_EXTS)  # fmt: skip
+        files = sorted(
+            f for f in self.root.rglob("*") if f.is_file() and f.suffix.lower() in MASK_EXTS
+        )
         if not files:
             raise EvalError(f"predictions {root}: no mask files ({', '.join(MASK_EXTS)})")
         self.files = files
-        self.refs = np.array([str(f.relative_to(self.root).with_suffix("")) if f.parent != (
-            self.root) else _stem(f) for f in files], dtype=object)  # fmt: skip
+        self.refs = np.array(
+            [
+                str(f.relative_to(self.root).with_suffix(""))
+                if f.parent != (self.root)
+                else _stem(f)
+                for f in files
+            ],
+            dtype=object,
+        )
         seen: dict[str, Path] = {}
         for f, ref in zip(files, self.refs.tolist(), strict=True):
             if ref in seen:
-                raise EvalError(f"predictions {root}: {seen[ref].name} and {f.name} are both "
-                                f"the mask of image {ref}; keep one")  # fmt: skip
+                raise EvalError(
+                    f"predictions {root}: {seen[ref].name} and {f.name} are both "
+                    f"the mask of image {ref}; keep one"
+                )
             seen[ref] = f
         self.score = np.ones(len(files))
 
@@ -60,8 +70,7 @@ class MaskFolder:
             except (ValueError, OSError) as exc:  # a header the bytes do not back
                 raise EvalError(f"predictions {path}: not a readable .npy mask ({exc})") from None
             if int(np.prod(arr.shape)) != shape[0] * shape[1]:
-                raise EvalError(f"predictions {path}: a {arr.shape} mask for an image of "
-                                f"{shape}")  # fmt: skip
+                raise EvalError(f"predictions {path}: a {arr.shape} mask for an image of {shape}")
             arr = np.array(arr)
         else:
             from torchsar.io import read_raster
@@ -73,8 +82,10 @@ class MaskFolder:
         if arr.dtype == bool:
             arr = arr.astype(np.int32)
         if arr.dtype.kind not in "iuf":
-            raise EvalError(f"predictions {path}: a mask of {arr.dtype} values; expected "
-                            "integer instance ids or float scores")  # fmt: skip
+            raise EvalError(
+                f"predictions {path}: a mask of {arr.dtype} values; expected "
+                "integer instance ids or float scores"
+            )
         if arr.dtype.kind == "f" and not np.isfinite(arr).all():
             raise EvalError(f"predictions {path}: a score map holding NaN or inf")
         if arr.dtype.kind == "u" and arr.size and int(arr.max()) > np.iinfo(np.int64).max:
@@ -89,10 +100,17 @@ class MaskFolder:
             check_regular_file(side)
             raw = json.loads(side.read_text())
             return {int(k): float(v) for k, v in raw.items()}
-        except (ValueError, TypeError, AttributeError, RecursionError, OSError,
-                FileFormatError) as exc:  # fmt: skip
-            raise EvalError(f'predictions {side}: expected {{"id": score}} '
-                            f"({str(exc)[:200]})") from None  # fmt: skip
+        except (
+            ValueError,
+            TypeError,
+            AttributeError,
+            RecursionError,
+            OSError,
+            FileFormatError,
+        ) as exc:
+            raise EvalError(
+                f'predictions {side}: expected {{"id": score}} ({str(exc)[:200]})'
+            ) from None
 
     def batch(self, rows: list[np.ndarray], shape: tuple[int, int, int, int], threshold):
         """The objects (integer maps) or the detection (score maps) of a batch; ``rows``:
@@ -102,8 +120,10 @@ class MaskFolder:
         kinds = {np.issubdtype(m.dtype, np.floating) for m in maps if m is not None}
         if kinds == {True}:
             if threshold is None:
-                raise EvalError(f"predictions {self.root} are score maps: declare their "
-                                "operating threshold (threshold=...)")  # fmt: skip
+                raise EvalError(
+                    f"predictions {self.root} are score maps: declare their "
+                    "operating threshold (threshold=...)"
+                )
             stat = np.full((b, c, h, w), -np.inf)
             for k, m in enumerate(maps):
                 if m is not None:

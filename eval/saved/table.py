@@ -78,8 +78,11 @@ def _coco_row(row: object, k: int, path: Path) -> tuple:
         raise _fail(path, f"entry {k} is not an object: {row!r:.60}")
     ref = row.get("image_id", row.get("file_name"))
     if "image_id" in row and (isinstance(ref, bool) or not isinstance(ref, int)):
-        raise _fail(path, f"entry {k} image_id {ref!r:.40} is not an integer id (an image's "
-                    "name goes in file_name)")  # fmt: skip
+        raise _fail(
+            path,
+            f"entry {k} image_id {ref!r:.40} is not an integer id (an image's "
+            "name goes in file_name)",
+        )
     if isinstance(ref, bool) or not isinstance(ref, int | str):
         raise _fail(path, f"entry {k} has no image_id (an integer) or file_name")
     score = _number(row.get("score"), path, f"entry {k} score")
@@ -131,12 +134,16 @@ def _plain_box_rows(data: list, path: Path) -> PredictionTable | None:
         rc = np.stack([y, x, y + h, x + w], axis=1).reshape(n, 4)
         area = w * h
     return PredictionTable(
-        path=path, refs=np.array(refs, dtype=object).reshape(n), score=score.reshape(n),
-        geometry="box", box=rc,
-        classes=None if all(c is None for c in cats) else np.array(
-            [str(c) for c in cats], dtype=object),
+        path=path,
+        refs=np.array(refs, dtype=object).reshape(n),
+        score=score.reshape(n),
+        geometry="box",
+        box=rc,
+        classes=None
+        if all(c is None for c in cats)
+        else np.array([str(c) for c in cats], dtype=object),
         declared_area=area if n else None,
-    )  # fmt: skip
+    )
 
 
 @jsontext.without_gc  # the parsed document is dropped on return
@@ -157,8 +164,11 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: too many digits
         raise _fail(path, f"is not a readable JSON file ({str(exc)[:200]})") from None
     if isinstance(data, dict) and "annotations" in data and "images" in data:
-        raise _fail(path, "is a COCO ground-truth file: give it as --dataset coco:FILE and the "
-                    "detections as a results list [{image_id, bbox, score}, ...]")  # fmt: skip
+        raise _fail(
+            path,
+            "is a COCO ground-truth file: give it as --dataset coco:FILE and the "
+            "detections as a results list [{image_id, bbox, score}, ...]",
+        )
     if not isinstance(data, list):
         raise _fail(path, "is not a COCO results list [{image_id, bbox|segmentation, score}]")
     fast = _plain_box_rows(data, path) if iou_type != "segm" else None
@@ -173,22 +183,26 @@ def read_coco_results(path: str | Path, iou_type: str = "auto") -> PredictionTab
         what = "segmentation" if iou_type == "segm" else "bbox"
         raise _fail(path, f"iou_type {iou_type} needs a {what} in every entry")
     n = len(rows)
-    box = np.array([r[2] if r[2] is not None else (np.nan,) * 4 for r in rows],
-                   dtype=np.float64).reshape(n, 4)  # fmt: skip
+    box = np.array(
+        [r[2] if r[2] is not None else (np.nan,) * 4 for r in rows], dtype=np.float64
+    ).reshape(n, 4)
     cats = [r[4] for r in rows]
     area = None
     if rows and rows[0][2] is not None:  # pycocotools' loadRes: the bbox branch, w * h
         with np.errstate(over="ignore", invalid="ignore"):
             area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
     return PredictionTable(
-        path=path, refs=np.array([r[0] for r in rows], dtype=object).reshape(n),
+        path=path,
+        refs=np.array([r[0] for r in rows], dtype=object).reshape(n),
         score=np.array([r[1] for r in rows], dtype=np.float64).reshape(n),
-        geometry="mask" if iou_type == "segm" else "box", box=box,
+        geometry="mask" if iou_type == "segm" else "box",
+        box=box,
         segmentation=[r[3] for r in rows] if iou_type == "segm" else None,
-        classes=None if all(c is None for c in cats) else np.array(
-            [str(c) for c in cats], dtype=object),
+        classes=None
+        if all(c is None for c in cats)
+        else np.array([str(c) for c in cats], dtype=object),
         declared_area=area,
-    )  # fmt: skip
+    )
 
 
 _IMAGE = ("image", "file_name", "image_id", "scene_id")
@@ -238,8 +252,11 @@ def _refs(df: pd.DataFrame, path: Path) -> np.ndarray:
     bad = [k for k, v in enumerate(text) if not (v.isascii() and v.isdigit() and len(v) <= 18)]
     if bad:
         k = bad[0]
-        raise _fail(path, f"row {k + 2}: image_id {text[k][:40]!r} is not an integer id "
-                    "(an image's name goes in an image or file_name column)")  # fmt: skip
+        raise _fail(
+            path,
+            f"row {k + 2}: image_id {text[k][:40]!r} is not an integer id "
+            "(an image's name goes in an image or file_name column)",
+        )
     return np.array([int(v) for v in text], dtype=object).reshape(len(text))
 
 
@@ -257,20 +274,32 @@ def read_points(path: str | Path) -> PredictionTable:
     except pd.errors.EmptyDataError:
         raise _fail(path, "is empty (expected a header image,row,col,score)") from None
     refs = _refs(df, path)
-    point = np.stack([_floats(_column(df, _ROW, path), path, "row"),
-                      _floats(_column(df, _COL, path), path, "col")], axis=1)  # fmt: skip
+    point = np.stack(
+        [
+            _floats(_column(df, _ROW, path), path, "row"),
+            _floats(_column(df, _COL, path), path, "col"),
+        ],
+        axis=1,
+    )
     score_col = _column(df, ("score",), path, required=False)
     score = np.ones(len(df)) if score_col is None else _floats(score_col, path, "score")
     length_col = _column(df, _LENGTH, path, required=False)
     length = None if length_col is None else _floats(length_col, path, "length", finite=False)
     if length is not None and ((length < 0) | np.isinf(length)).any():
         k = int(np.flatnonzero((length < 0) | np.isinf(length))[0])
-        raise _fail(path, f"row {k + 2}: length {length[k]:g} is not a length in metres "
-                    "(a non-negative number, or empty when unknown)")  # fmt: skip
+        raise _fail(
+            path,
+            f"row {k + 2}: length {length[k]:g} is not a length in metres "
+            "(a non-negative number, or empty when unknown)",
+        )
     cls = _column(df, ("class",), path, required=False)
     return PredictionTable(
-        path=path, refs=refs, score=score, geometry="point",
-        box=np.concatenate([point + 0.5, point + 0.5], axis=1), point=point,
+        path=path,
+        refs=refs,
+        score=score,
+        geometry="point",
+        box=np.concatenate([point + 0.5, point + 0.5], axis=1),
+        point=point,
         classes=None if cls is None else cls.astype(str).to_numpy(dtype=object),
         length_m=length,
-    )  # fmt: skip
+    )

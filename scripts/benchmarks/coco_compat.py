@@ -78,11 +78,18 @@ def coco_images(gt: dict, dets: list) -> list[CocoImage]:
         db = np.array([x["bbox"] for x in d], np.float64).reshape(-1, 4)
         crowd = np.array([a["iscrowd"] for a in g], np.uint8)
         iou = mask_utils.iou(db, gb, crowd) if len(g) and len(d) else np.zeros((len(d), len(g)))
-        out.append(CocoImage(
-            order, [a["category_id"] for a in g], [a["area"] for a in g], crowd.astype(bool),
-            [x["category_id"] for x in d], [x["score"] for x in d], db[:, 2] * db[:, 3],
-            np.asarray(iou, np.float64),
-        ))  # fmt: skip
+        out.append(
+            CocoImage(
+                order,
+                [a["category_id"] for a in g],
+                [a["area"] for a in g],
+                crowd.astype(bool),
+                [x["category_id"] for x in d],
+                [x["score"] for x in d],
+                db[:, 2] * db[:, 3],
+                np.asarray(iou, np.float64),
+            )
+        )
     return out
 
 
@@ -123,19 +130,35 @@ def cases() -> list[tuple[str, Callable, Callable]]:
     name = f"coco_compat {N_IMAGES} img x {N_GT} gt x {N_DET} det bbox"
     out = [
         (f"{name}: update+stats vs pycocotools", lambda: ours(images), partial(reference, ev)),
-        (f"{name}: update+stats vs pycocotools, IoUs given",
-         lambda: ours(images), partial(reference, given)),
-        (f"{name}: incl. IoU vs pycocotools",
-         lambda: ours(coco_images(gt, dets)), partial(reference, ev)),
-    ]  # fmt: skip
+        (
+            f"{name}: update+stats vs pycocotools, IoUs given",
+            lambda: ours(images),
+            partial(reference, given),
+        ),
+        (
+            f"{name}: incl. IoU vs pycocotools",
+            lambda: ours(coco_images(gt, dets)),
+            partial(reference, ev),
+        ),
+    ]
     try:
         import faster_coco_eval
     except ImportError:
         return out
     fast = evaluator(gt, dets, faster_coco_eval.COCOeval_faster, faster_coco_eval.COCO)
     assert np.array_equal(reference(fast), want), (reference(fast), want)
-    out.append((f"{name}: update+stats vs faster-coco-eval", lambda: ours(images),
-                partial(reference, fast)))  # fmt: skip
-    out.append((f"{name}: incl. IoU vs faster-coco-eval", lambda: ours(coco_images(gt, dets)),
-                partial(reference, fast)))  # fmt: skip
+    out.append(
+        (
+            f"{name}: update+stats vs faster-coco-eval",
+            lambda: ours(images),
+            partial(reference, fast),
+        )
+    )
+    out.append(
+        (
+            f"{name}: incl. IoU vs faster-coco-eval",
+            lambda: ours(coco_images(gt, dets)),
+            partial(reference, fast),
+        )
+    )
     return out

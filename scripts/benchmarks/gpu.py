@@ -23,12 +23,35 @@ from collections.abc import Callable
 
 import torch
 
-CFARS = ("ca", "two_parameter", "go", "so", "os", "vi", "ac", "lognormal", "weibull", "gamma",
-         "k", "g0")  # fmt: skip
+CFARS = (
+    "ca",
+    "two_parameter",
+    "go",
+    "so",
+    "os",
+    "vi",
+    "ac",
+    "lognormal",
+    "weibull",
+    "gamma",
+    "k",
+    "g0",
+)
 DEFAULT_N = 64
 SIZE = 1024
-COLUMNS = ("detector", "device", "images", "device_ms", "device_mp_per_s", "device_ms_per_mp",
-           "cpu_images", "cpu_ms_per_mp", "speedup", "mask_pixels_differ", "error")  # fmt: skip
+COLUMNS = (
+    "detector",
+    "device",
+    "images",
+    "device_ms",
+    "device_mp_per_s",
+    "device_ms_per_mp",
+    "cpu_images",
+    "cpu_ms_per_mp",
+    "speedup",
+    "mask_pixels_differ",
+    "error",
+)
 
 
 def _median_seconds(fn: Callable[[], object], sync: Callable[[], None], repeat: int) -> float:
@@ -64,8 +87,7 @@ def _on_device(fn, xd: torch.Tensor, cpu_images: int, sync, repeat: int):
     return seconds, fn(xd[:cpu_images]).mask.cpu()
 
 
-def measure(name: str, x: torch.Tensor, dev: torch.device, cpu_images: int,
-            repeat: int) -> dict:  # fmt: skip
+def measure(name: str, x: torch.Tensor, dev: torch.device, cpu_images: int, repeat: int) -> dict:
     """One row of :data:`COLUMNS` for the CFAR ``name`` on the batch ``x`` (on the CPU)."""
     import torchsar as ts
 
@@ -93,9 +115,15 @@ def measure(name: str, x: torch.Tensor, dev: torch.device, cpu_images: int,
     return row
 
 
-def report(n: int = DEFAULT_N, device: str | None = None, workers: tuple[int, ...] = (),
-           cpu_images: int = 2, repeat: int = 3, size: int = SIZE,
-           detectors: tuple[str, ...] = CFARS) -> list[dict]:  # fmt: skip
+def report(
+    n: int = DEFAULT_N,
+    device: str | None = None,
+    workers: tuple[int, ...] = (),
+    cpu_images: int = 2,
+    repeat: int = 3,
+    size: int = SIZE,
+    detectors: tuple[str, ...] = CFARS,
+) -> list[dict]:
     """Rows of :data:`COLUMNS`, one per detector (``workers`` is not used: one process)."""
     dev = _device(device)
     torch.set_num_threads(1)
@@ -105,16 +133,22 @@ def report(n: int = DEFAULT_N, device: str | None = None, workers: tuple[int, ..
 
 def format_rows(rows: list[dict]) -> str:
     """The rows as an aligned text table."""
-    lines = [f"{'detector':<14s} {'device':<7s} {'images':>6s} {'device ms':>10s} "
-             f"{'MP/s':>9s} {'dev ms/MP':>10s} {'cpu ms/MP':>10s} {'speedup':>8s} "
-             f"{'differ':>7s}"]  # fmt: skip
+    lines = [
+        f"{'detector':<14s} {'device':<7s} {'images':>6s} {'device ms':>10s} "
+        f"{'MP/s':>9s} {'dev ms/MP':>10s} {'cpu ms/MP':>10s} {'speedup':>8s} "
+        f"{'differ':>7s}"
+    ]
     for r in rows:
         head = f"{r['detector']:<14s} {r['device']:<7s} {r['images']:6d} "
         if r["error"]:
-            lines.append(head + f"{'':>10s} {'':>9s} {'':>10s} {r['cpu_ms_per_mp']:10.3f}   "
-                         f"error: {r['error']}")  # fmt: skip
+            lines.append(
+                head + f"{'':>10s} {'':>9s} {'':>10s} {r['cpu_ms_per_mp']:10.3f}   "
+                f"error: {r['error']}"
+            )
             continue
-        lines.append(head + f"{r['device_ms']:10.2f} {r['device_mp_per_s']:9.1f} "
-                     f"{r['device_ms_per_mp']:10.4f} {r['cpu_ms_per_mp']:10.3f} "
-                     f"{r['speedup']:8.1f} {r['mask_pixels_differ']:7d}")  # fmt: skip
+        lines.append(
+            head + f"{r['device_ms']:10.2f} {r['device_mp_per_s']:9.1f} "
+            f"{r['device_ms_per_mp']:10.4f} {r['cpu_ms_per_mp']:10.3f} "
+            f"{r['speedup']:8.1f} {r['mask_pixels_differ']:7d}"
+        )
     return "\n".join(lines)

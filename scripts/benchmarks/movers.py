@@ -30,8 +30,10 @@ def _scene(gen: torch.Generator, index: int) -> tuple[torch.Tensor, torch.Tensor
     vel[-1, 1] = 2 + 8 * float(torch.rand(1, generator=gen))  # along track
     if index % 2:
         vel[-2, 0] = 4.0  # folded once or twice, depending on the azimuth
-    amp = torch.polar(10 ** (15 * torch.rand(n, generator=gen, dtype=torch.float64) / 20),
-                      2 * math.pi * torch.rand(n, generator=gen, dtype=torch.float64))  # fmt: skip
+    amp = torch.polar(
+        10 ** (15 * torch.rand(n, generator=gen, dtype=torch.float64) / 20),
+        2 * math.pi * torch.rand(n, generator=gen, dtype=torch.float64),
+    )
     return pos, vel, amp
 
 
@@ -41,8 +43,9 @@ def _movers_case():
         params = SpotlightParams.from_system(image_size=(256, 512))
     gen = torch.Generator().manual_seed(0)
     pos, vel, amp = zip(*[_scene(gen, i) for i in range(12)], strict=True)
-    g = simulate_phase_history(list(pos), params.geometry, velocities=list(vel),
-                               amplitudes=list(amp))  # fmt: skip
+    g = simulate_phase_history(
+        list(pos), params.geometry, velocities=list(vel), amplitudes=list(amp)
+    )
     g = add_noise(g, std=image_noise_std(params.geometry, 28.0), seed=0).to(torch.complex64)
 
     def one_at_a_time():

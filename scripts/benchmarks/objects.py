@@ -45,10 +45,13 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     out = []
     for kind, n in (("chips", 64), ("scenes", 4)):
         items = _dataset(kind, n)
-        out.append((
-            f"default run, sim-{kind} x{n}, all detectors: without / with object stage",
-            lambda items=items: run_detectors(items, list(BUILTIN.values()), scoring=scoring,
-                                         progress=False),
-            lambda items=items: _pixels_only(items, 16),
-        ))  # fmt: skip
+        out.append(
+            (
+                f"default run, sim-{kind} x{n}, all detectors: without / with object stage",
+                lambda items=items: run_detectors(
+                    items, list(BUILTIN.values()), scoring=scoring, progress=False
+                ),
+                lambda items=items: _pixels_only(items, 16),
+            )
+        )
     return out

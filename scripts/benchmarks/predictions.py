@@ -63,8 +63,16 @@ def box_files(n_images: int) -> tuple[Path, Path]:
             w, h = rng.uniform(10, 80, 2)
             x, y = rng.uniform(0, SIZE - 100, 2)
             c = int(rng.integers(1, CATEGORIES + 1))
-            anns.append({"id": len(anns) + 1, "image_id": i, "category_id": c,
-                         "bbox": [x, y, w, h], "area": w * h, "iscrowd": 0})  # fmt: skip
+            anns.append(
+                {
+                    "id": len(anns) + 1,
+                    "image_id": i,
+                    "category_id": c,
+                    "bbox": [x, y, w, h],
+                    "area": w * h,
+                    "iscrowd": 0,
+                }
+            )
             targets.append((x, y, w, h, c))
         for _ in range(int(rng.poisson(N_DET))):
             if targets and rng.random() < 0.6:
@@ -77,8 +85,14 @@ def box_files(n_images: int) -> tuple[Path, Path]:
                 w, h = rng.uniform(10, 80, 2)
                 x, y = rng.uniform(0, SIZE - 100, 2)
                 c = int(rng.integers(1, CATEGORIES + 1))
-            dets.append({"image_id": i, "category_id": c, "bbox": [x, y, w, h],
-                         "score": float(rng.random())})  # fmt: skip
+            dets.append(
+                {
+                    "image_id": i,
+                    "category_id": c,
+                    "bbox": [x, y, w, h],
+                    "score": float(rng.random()),
+                }
+            )
     cats = [{"id": k, "name": f"class{k}"} for k in range(1, CATEGORIES + 1)]
     return _write({"images": images, "annotations": anns, "categories": cats}, dets)
 
@@ -89,8 +103,9 @@ def mask_files() -> tuple[Path, Path]:
     rng = np.random.default_rng(1)
     images, anns, dets = [], [], []
     for i in range(1, N_MASK_IMAGES + 1):
-        images.append({"id": i, "file_name": f"{i:05d}.png", "height": MASK_SIZE,
-                       "width": MASK_SIZE})  # fmt: skip
+        images.append(
+            {"id": i, "file_name": f"{i:05d}.png", "height": MASK_SIZE, "width": MASK_SIZE}
+        )
         ships = []
         for _ in range(N_GT):
             h, w = rng.integers(6, 40, 2)
@@ -98,18 +113,33 @@ def mask_files() -> tuple[Path, Path]:
             m = np.zeros((MASK_SIZE, MASK_SIZE), bool)
             m[r : r + h, c : c + w] = True
             ships.append((r, c, h, w))
-            anns.append({"id": len(anns) + 1, "image_id": i, "category_id": 1, "iscrowd": 0,
-                         "segmentation": _rle(m), "area": float(m.sum()),
-                         "bbox": [float(c), float(r), float(w), float(h)]})  # fmt: skip
+            anns.append(
+                {
+                    "id": len(anns) + 1,
+                    "image_id": i,
+                    "category_id": 1,
+                    "iscrowd": 0,
+                    "segmentation": _rle(m),
+                    "area": float(m.sum()),
+                    "bbox": [float(c), float(r), float(w), float(h)],
+                }
+            )
         for _ in range(N_DET):
             r, c, h, w = ships[int(rng.integers(len(ships)))]
             r, c = int(r + rng.normal(0, 2)), int(c + rng.normal(0, 2))
             m = np.zeros((MASK_SIZE, MASK_SIZE), bool)
             m[max(r, 0) : r + h, max(c, 0) : c + w] = True
-            dets.append({"image_id": i, "category_id": 1, "segmentation": _rle(m),
-                         "score": float(rng.random())})  # fmt: skip
-    return _write({"images": images, "annotations": anns,
-                   "categories": [{"id": 1, "name": "ship"}]}, dets)  # fmt: skip
+            dets.append(
+                {
+                    "image_id": i,
+                    "category_id": 1,
+                    "segmentation": _rle(m),
+                    "score": float(rng.random()),
+                }
+            )
+    return _write(
+        {"images": images, "annotations": anns, "categories": [{"id": 1, "name": "ship"}]}, dets
+    )
 
 
 def _write(gt: dict, dets: list) -> tuple[Path, Path]:
@@ -132,14 +162,16 @@ def torchsar_ap(files: tuple[Path, Path], iou_type: str, replicates: int) -> flo
     rule = te.Matching(kind="box" if iou_type == "bbox" else "mask")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # display scaling: no design Pfa (nothing reads it)
-        res = te.evaluate({"set": f"coco:{gt}"}, [te.predictions(results, name="cnn")],
-                          scoring=te.Scoring(matching=rule, replicates=replicates),
-                          progress=False)  # fmt: skip
+        res = te.evaluate(
+            {"set": f"coco:{gt}"},
+            [te.predictions(results, name="cnn")],
+            scoring=te.Scoring(matching=rule, replicates=replicates),
+            progress=False,
+        )
     return float(res.summary.ap50_95.iloc[0])
 
 
-def pycocotools_ap(files: tuple[Path, Path], iou_type: str, evaluator=COCOeval,
-                   coco=COCO) -> float:  # fmt: skip
+def pycocotools_ap(files: tuple[Path, Path], iou_type: str, evaluator=COCOeval, coco=COCO) -> float:
     """AP50:95 by pycocotools (or faster-coco-eval); no image has 100 detections, so its
     cap ranks every one, as torchsar."""
     gt, results = files
@@ -171,12 +203,22 @@ def cases() -> list[tuple[str, Callable, Callable]]:
         ap_only = partial(torchsar_ap, files, iou_type, 0)
         assert abs(ap_only() - ref()) < 1e-9, (label, ap_only(), ref())
         out.append((f"predictions {label}: AP only (replicates 0) vs pycocotools", ap_only, ref))
-        out.append((f"predictions {label}: default tables vs pycocotools",
-                    partial(torchsar_ap, files, iou_type, 200), ref))  # fmt: skip
+        out.append(
+            (
+                f"predictions {label}: default tables vs pycocotools",
+                partial(torchsar_ap, files, iou_type, 200),
+                ref,
+            )
+        )
         if fast is not None:
             fref = partial(pycocotools_ap, files, iou_type, fast[1], fast[0])
             assert abs(fref() - ref()) < 1e-9
             out.append((f"predictions {label}: AP only vs faster-coco-eval", ap_only, fref))
-            out.append((f"predictions {label}: default tables vs faster-coco-eval",
-                        partial(torchsar_ap, files, iou_type, 200), fref))  # fmt: skip
+            out.append(
+                (
+                    f"predictions {label}: default tables vs faster-coco-eval",
+                    partial(torchsar_ap, files, iou_type, 200),
+                    fref,
+                )
+            )
     return out

@@ -50,8 +50,10 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     folder = make_dataset(spec)
     write_store((folder[i] for i in range(len(folder))), len(folder), tmp / "store")
     store = make_dataset(f"store:{tmp / 'store'}")
-    return [(
-        f"read every item, {what} x{len(folder)}: store / folder",
-        lambda: _read_all(store),
-        lambda: _read_all(folder),
-    )]  # fmt: skip
+    return [
+        (
+            f"read every item, {what} x{len(folder)}: store / folder",
+            lambda: _read_all(store),
+            lambda: _read_all(folder),
+        )
+    ]

@@ -25,8 +25,15 @@ from pathlib import Path
 
 DETECTORS = ("ca", "two_parameter", "go", "so", "os", "vi", "ac", "region")
 DEFAULT_N = 256
-COLUMNS = ("workers", "images", "wall_s", "images_per_s", "detector_ms_per_image",
-           "scoring_ms_per_image", "scoring_ms_per_chip_and_detector")  # fmt: skip
+COLUMNS = (
+    "workers",
+    "images",
+    "wall_s",
+    "images_per_s",
+    "detector_ms_per_image",
+    "scoring_ms_per_image",
+    "scoring_ms_per_chip_and_detector",
+)
 
 
 def make_store(root: Path, n: int, seed: int = 0) -> str:
@@ -62,8 +69,9 @@ def measure(spec: str, workers: int, device: str | None = None) -> dict:
     }
 
 
-def report(n: int = DEFAULT_N, workers: tuple[int, ...] = (1, 2), device: str | None = None,
-           seed: int = 0) -> list[dict]:  # fmt: skip
+def report(
+    n: int = DEFAULT_N, workers: tuple[int, ...] = (1, 2), device: str | None = None, seed: int = 0
+) -> list[dict]:
     """Rows of :data:`COLUMNS`, one per worker count, on one store of ``n`` chips."""
     from torchsar_eval import Execution, evaluate
 
@@ -81,8 +89,10 @@ def format_rows(rows: list[dict]) -> str:
         f"{'detector ms/img':>15s} {'scoring ms/img':>14s} {'scoring ms/chip/det':>19s}"
     ]
     for r in rows:
-        lines.append(f"{r['workers']:7d} {r['images']:6d} {r['wall_s']:8.2f} "
-                     f"{r['images_per_s']:9.2f} {r['detector_ms_per_image']:15.2f} "
-                     f"{r['scoring_ms_per_image']:14.2f} "
-                     f"{r['scoring_ms_per_chip_and_detector']:19.3f}")  # fmt: skip
+        lines.append(
+            f"{r['workers']:7d} {r['images']:6d} {r['wall_s']:8.2f} "
+            f"{r['images_per_s']:9.2f} {r['detector_ms_per_image']:15.2f} "
+            f"{r['scoring_ms_per_image']:14.2f} "
+            f"{r['scoring_ms_per_chip_and_detector']:19.3f}"
+        )
     return "\n".join(lines)

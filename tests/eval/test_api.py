@@ -37,13 +37,28 @@ class Peaks(torch.nn.Module):
 
 def test_cli_and_api_give_the_same_tables(tmp_path):
     out = tmp_path / "cli"
-    assert main(["run", "--dataset", "sim-chips", "--n", "6", "--detectors", "ca,region",
-                 "--no-progress", "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "6",
+                "--detectors",
+                "ca,region",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     res = te.evaluate("sim-chips", ["ca", "region"], n=6, progress=False)
-    pd.testing.assert_frame_equal(res.summary, pd.read_csv(out / "summary.csv"),
-                                  check_dtype=False)  # fmt: skip
-    pd.testing.assert_frame_equal(res.per_image, pd.read_csv(out / "per_image.csv"),
-                                  check_dtype=False)  # fmt: skip
+    pd.testing.assert_frame_equal(res.summary, pd.read_csv(out / "summary.csv"), check_dtype=False)
+    pd.testing.assert_frame_equal(
+        res.per_image, pd.read_csv(out / "per_image.csv"), check_dtype=False
+    )
     assert res.out is None and res.files == []
 
 
@@ -51,9 +66,12 @@ def test_objects_detectors_dicts_and_datasets_as_objects(tmp_path):
     from torchsar_eval.datasets import make_dataset
 
     chips = make_dataset("sim-chips", n=6)
-    res = te.evaluate({"chips": chips}, {"peaks": Peaks(level=6.0), "os": "os",
-                                         "mine": lambda x: ts.cfar.go(x, pfa=1e-2)},
-                      scoring=te.Scoring(replicates=0), progress=False)  # fmt: skip
+    res = te.evaluate(
+        {"chips": chips},
+        {"peaks": Peaks(level=6.0), "os": "os", "mine": lambda x: ts.cfar.go(x, pfa=1e-2)},
+        scoring=te.Scoring(replicates=0),
+        progress=False,
+    )
     s = res.summary.set_index("detector")
     assert list(s.index) == ["peaks", "os", "mine"] and (s.images == 6).all()
     assert s.loc["peaks", "tp"] > 0 and pd.isna(s.loc["peaks", "pd_pixel"])
@@ -64,8 +82,9 @@ def test_objects_detectors_dicts_and_datasets_as_objects(tmp_path):
 
 def test_declared_threshold_sets_the_operating_point():
     det = te.Detector("peaks", Peaks(level=6.0), threshold=0.9)
-    loose = te.evaluate("sim-chips", [te.Detector("peaks", Peaks(level=6.0))], n=6,
-                        progress=False).summary.iloc[0]  # fmt: skip
+    loose = te.evaluate(
+        "sim-chips", [te.Detector("peaks", Peaks(level=6.0))], n=6, progress=False
+    ).summary.iloc[0]
     strict = te.evaluate("sim-chips", [det], n=6, progress=False).summary.iloc[0]
     assert strict.score_threshold == pytest.approx(0.9)
     assert strict.tp + strict.fp <= loose.tp + loose.fp
@@ -126,10 +145,40 @@ def test_settings_are_checked_when_built(make, message):
 
 def test_cli_renders_the_same_errors_as_flags(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca",
-                 "--no-progress", "--out", str(out)]) == 0  # fmt: skip
-    assert main(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca",
-                 "--no-progress", "--out", str(out)]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "2",
+                "--detectors",
+                "ca",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "2",
+                "--detectors",
+                "ca",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "error: --out " in err and "pass --overwrite to replace it" in err
 
@@ -138,15 +187,27 @@ def test_wrong_outputs_are_named():
     with pytest.raises(EvalError, match="returned ndarray: a detector must return"):
         te.evaluate("sim-chips", {"bad": lambda x: np.zeros(3)}, n=2, progress=False)
     with pytest.raises(EvalError, match="returned Objects of 1 planes"):
-        te.evaluate("sim-chips", {"bad": lambda x: Objects.empty(1, (9, 9))}, n=2,
-                    execution=te.Execution(batch_size=2, progress=False))  # fmt: skip
+        te.evaluate(
+            "sim-chips",
+            {"bad": lambda x: Objects.empty(1, (9, 9))},
+            n=2,
+            execution=te.Execution(batch_size=2, progress=False),
+        )
 
 
 def test_results_do_not_depend_on_batch_or_shard_size():
-    a = te.evaluate("sim-chips", {"peaks": Peaks(6.0), "region": "region"}, n=7,
-                    execution=te.Execution(batch_size=3, shard_size=2, progress=False))  # fmt: skip
-    b = te.evaluate("sim-chips", {"peaks": Peaks(6.0), "region": "region"}, n=7,
-                    execution=te.Execution(batch_size=16, shard_size=256, progress=False))  # fmt: skip
+    a = te.evaluate(
+        "sim-chips",
+        {"peaks": Peaks(6.0), "region": "region"},
+        n=7,
+        execution=te.Execution(batch_size=3, shard_size=2, progress=False),
+    )
+    b = te.evaluate(
+        "sim-chips",
+        {"peaks": Peaks(6.0), "region": "region"},
+        n=7,
+        execution=te.Execution(batch_size=16, shard_size=256, progress=False),
+    )
     pd.testing.assert_frame_equal(a.summary, b.summary)
     pd.testing.assert_frame_equal(a.froc, b.froc)
     pd.testing.assert_frame_equal(a.pr, b.pr)
@@ -158,10 +219,15 @@ def test_region_cfar_is_scored_by_its_regions_unless_discrimination_is_asked():
     from torchsar_eval.datasets import make_dataset
 
     chips = make_dataset("sim-chips", n=4)
-    own = te.evaluate({"c": chips}, ["region"], progress=False,
-                      scoring=te.Scoring(replicates=0)).states["c"][0]  # fmt: skip
-    forced = te.evaluate({"c": chips}, ["region"], progress=False,
-                         scoring=te.Scoring(replicates=0, instances="discriminate"))  # fmt: skip
+    own = te.evaluate(
+        {"c": chips}, ["region"], progress=False, scoring=te.Scoring(replicates=0)
+    ).states["c"][0]
+    forced = te.evaluate(
+        {"c": chips},
+        ["region"],
+        progress=False,
+        scoring=te.Scoring(replicates=0, instances="discriminate"),
+    )
     x = torch.stack([chips[i]["image"] for i in range(4)])
     d = ts.region.region_cfar(x)
     regions = sum(int(np.unique(d.labels[i].numpy()).size) - 1 for i in range(4))
@@ -177,8 +243,11 @@ def test_idle_workers_are_named_in_one_line():
     from torchsar_eval.api import _note_idle_workers
     from torchsar_eval.settings import Execution
 
-    with pytest.warns(UserWarning, match=r"100 images make 1 shard\(s\) of at most 256, so only "
-                      r"1 of the 2 workers have work"):  # fmt: skip
+    with pytest.warns(
+        UserWarning,
+        match=r"100 images make 1 shard\(s\) of at most 256, so only "
+        r"1 of the 2 workers have work",
+    ):
         _note_idle_workers("d", 100, Execution(workers=2))
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -154,114 +154,283 @@ def _duplicate_image(same: str) -> Callable[[dict], None]:
 HUGE = 10**6
 A = r"ann\.json: "
 CASES = [
-    Case("coco-bomb-polygon-1e300", coco(ann(0, segmentation=[[2, 1, 10, 1, 1e300, 6]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 point 2 .*outside "
-         r"image a\.png \(32x32\)"),
-    Case("coco-polygon-far-outside", coco(ann(0, segmentation=[[2, 1, 10, 1, 10, 6e5]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 point 2 .*outside"),
-    Case("coco-polygon-nan", coco(ann(0, segmentation=[[2, 1, float("nan"), 1, 10, 6]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 holds nan"),
-    Case("coco-polygon-3-numbers", coco(ann(0, segmentation=[[2, 1, 10]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 3 numbers"),
-    Case("coco-polygon-odd", coco(ann(0, segmentation=[[2, 1, 10, 1, 10, 6, 2]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 7 numbers"),
-    Case("coco-polygon-4-numbers", coco(ann(0, segmentation=[[2, 1, 10, 6]])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 4 numbers"),
-    Case("coco-polygon-flat", coco(ann(0, segmentation=[2, 1, 10, 1, 10, 6])),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation .*polygons"),
-    Case("coco-segmentation-integer", coco(ann(0, segmentation=5)),
-         EvalError, A + r"annotations\[0\] \(id 1\) segmentation 5 is neither polygons"),
-    Case("coco-rle-string-undecodable", coco(lambda d: _compressed_counts(d, "ab~~")),
-         EvalError, A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE"),
-    Case("coco-rle-string-unfinished", coco(lambda d: _compressed_counts(d, "PPo")),
-         EvalError, A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE"),
-    Case("coco-rle-string-overflow", coco(lambda d: _compressed_counts(d, "o" * 30 + "0")),
-         EvalError, A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE"),
-    Case("coco-rle-string-wrong-sum", coco(lambda d: _compressed_counts(d, "52")),
-         EvalError, A + r"annotations\[2\] \(id 3\) segmentation counts sum to 7, not "
-         r"32x32 = 1024"),
-    Case("coco-rle-list-wrong-sum", coco(_drop_first_count),
-         EvalError, A + r"annotations\[1\] \(id 2\) segmentation counts sum to 1023, not "
-         r"32x32 = 1024"),
-    Case("coco-rle-list-negative", coco(lambda d: d["annotations"][1]["segmentation"].update(
-        counts=[1025, -1])),
-         EvalError, A + r"annotations\[1\] \(id 2\) segmentation counts .*non-negative"),
-    Case("coco-rle-size-mismatch", coco(lambda d: d["annotations"][1]["segmentation"].update(
-        size=[16, 64])),
-         EvalError, A + r"annotations\[1\] \(id 2\) segmentation size \[16, 64\] is not image "
-         r"a\.png's \[32, 32\]"),
-    Case("coco-bbox-nan", coco(ann(3, bbox=[25, 2, float("nan"), 3])),
-         EvalError, A + r"annotations\[3\] \(id 4\) bbox .*finite"),
-    Case("coco-bbox-huge-int", coco(ann(3, bbox=[25, 2, 10**400, 3])),
-         EvalError, A + r"annotations\[3\] \(id 4\) bbox .*finite"),
-    Case("coco-area-nan", coco(ann(0, area=float("nan"))),
-         EvalError, A + r"annotations\[0\] \(id 1\) area nan"),
-    Case("coco-iscrowd-string", coco(ann(0, iscrowd="no")),
-         EvalError, A + r"annotations\[0\] \(id 1\) iscrowd 'no' must be 0 or 1"),
-    Case("coco-category-id-unhashable", coco(ann(0, category_id=[1])),
-         EvalError, A + r"annotations\[0\] \(id 1\) has unknown category_id \[1\]"),
-    Case("coco-image-id-unhashable", coco(ann(0, image_id={"a": 1})),
-         EvalError, A + r"annotations\[0\] \(id 1\) refers to unknown image_id"),
-    Case("coco-categories-not-a-list", coco(top(categories={"id": 1, "name": "ship"})),
-         EvalError, A + r"'categories' must be a list"),
-    Case("coco-category-without-name", coco(lambda d: d["categories"][1].pop("name")),
-         EvalError, A + r"categories\[1\] has no name"),
-    Case("coco-annotation-not-an-object", coco(lambda d: d["annotations"].insert(0, 3)),
-         EvalError, A + r"annotations\[0\] is not an object"),
-    Case("coco-annotations-not-a-list", coco(top(annotations={"id": 1})),
-         EvalError, A + r"'annotations' must be a list"),
-    Case("coco-deep-nesting", coco_text("[" * 100_000 + "]" * 100_000),
-         EvalError, A + r"is not a readable JSON file \(nested too deeply\)"),
-    Case("coco-5000-digit-number",
-         coco_text('{"images": [{"id": ' + "7" * 5000 + ', "file_name": "a.png"}]}'),
-         EvalError, A + r"is not a readable JSON file \(.*digits"),
-    Case("coco-height-fraction", coco(image(height=32.5)),
-         EvalError, A + r"images\[0\] \(id 7\) height 32\.5 must be a positive integer"),
-    Case("coco-height-string", coco(image(height="32")),
-         EvalError, A + r"images\[0\] \(id 7\) height '32' must be a positive integer"),
-    Case("coco-image-huge", coco(image(height=HUGE, width=HUGE)),
-         EvalError, A + r"images\[0\] \(id 7\) a\.png is 1000000x1000000 = 1,000,000,000,000 "
-         r"pixels, over the limit of 16,777,216"),
-    Case("coco-file-name-dotdot", escaping("dotdot"),
-         EvalError, r"ann\.json: images\[0\] \(id 7\) file_name '\.\./x\.png' .*outside the "
-         r"image folder .*outside=allow"),
-    Case("coco-file-name-absolute", escaping("absolute"),
-         EvalError, r"ann\.json: images\[0\] \(id 7\) file_name '/.*x\.png' .*outside the image "
-         r"folder"),
-    Case("coco-file-name-symlink-escapes", escaping("symlink"),
-         EvalError, r"ann\.json: images\[0\] \(id 7\) file_name 'a\.png' .*x\.png, outside the "
-         r"image folder"),
-    Case("coco-same-image-id-twice", coco(_duplicate_image("id"), ("a.png", "b.png")),
-         EvalError, A + r"images\[0\] and images\[1\] both have id 7 \(a\.png, b\.png\)"),
-    Case("coco-tiff-0-d", zero_d_tiff,
-         EvalError, r"a\.tif: holds no 2-D image \(header shape \(\)"),
-    Case("voc-height-nan", voc(voc_text(size=("nan", SIZE))),
-         EvalError, r"a\.xml: <size> <height> 'nan' must be a positive integer"),
-    Case("voc-height-negative", voc(voc_text(size=(-32, SIZE))),
-         EvalError, r"a\.xml: <size> <height> '-32' must be a positive integer"),
-    Case("voc-width-fraction", voc(voc_text(size=(SIZE, "31.5"))),
-         EvalError, r"a\.xml: <size> <width> '31\.5' must be a positive integer"),
-    Case("voc-size-huge", voc(voc_text(size=(HUGE, HUGE), objects=())),
-         EvalError, r"a\.xml: <size> is 1000000x1000000 = 1,000,000,000,000 pixels, over the "
-         r"limit of 16,777,216"),
-    Case("voc-filename-dotdot", voc_escaping,
-         EvalError, r"a\.xml: <filename> '\.\./x\.png' .*outside the image folder"),
-]  # fmt: skip
+    Case(
+        "coco-bomb-polygon-1e300",
+        coco(ann(0, segmentation=[[2, 1, 10, 1, 1e300, 6]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 point 2 .*outside "
+        r"image a\.png \(32x32\)",
+    ),
+    Case(
+        "coco-polygon-far-outside",
+        coco(ann(0, segmentation=[[2, 1, 10, 1, 10, 6e5]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 point 2 .*outside",
+    ),
+    Case(
+        "coco-polygon-nan",
+        coco(ann(0, segmentation=[[2, 1, float("nan"), 1, 10, 6]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 holds nan",
+    ),
+    Case(
+        "coco-polygon-3-numbers",
+        coco(ann(0, segmentation=[[2, 1, 10]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 3 numbers",
+    ),
+    Case(
+        "coco-polygon-odd",
+        coco(ann(0, segmentation=[[2, 1, 10, 1, 10, 6, 2]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 7 numbers",
+    ),
+    Case(
+        "coco-polygon-4-numbers",
+        coco(ann(0, segmentation=[[2, 1, 10, 6]])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation polygon 0 has 4 numbers",
+    ),
+    Case(
+        "coco-polygon-flat",
+        coco(ann(0, segmentation=[2, 1, 10, 1, 10, 6])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation .*polygons",
+    ),
+    Case(
+        "coco-segmentation-integer",
+        coco(ann(0, segmentation=5)),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) segmentation 5 is neither polygons",
+    ),
+    Case(
+        "coco-rle-string-undecodable",
+        coco(lambda d: _compressed_counts(d, "ab~~")),
+        EvalError,
+        A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE",
+    ),
+    Case(
+        "coco-rle-string-unfinished",
+        coco(lambda d: _compressed_counts(d, "PPo")),
+        EvalError,
+        A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE",
+    ),
+    Case(
+        "coco-rle-string-overflow",
+        coco(lambda d: _compressed_counts(d, "o" * 30 + "0")),
+        EvalError,
+        A + r"annotations\[2\] \(id 3\) segmentation counts .*not .*RLE",
+    ),
+    Case(
+        "coco-rle-string-wrong-sum",
+        coco(lambda d: _compressed_counts(d, "52")),
+        EvalError,
+        A + r"annotations\[2\] \(id 3\) segmentation counts sum to 7, not "
+        r"32x32 = 1024",
+    ),
+    Case(
+        "coco-rle-list-wrong-sum",
+        coco(_drop_first_count),
+        EvalError,
+        A + r"annotations\[1\] \(id 2\) segmentation counts sum to 1023, not "
+        r"32x32 = 1024",
+    ),
+    Case(
+        "coco-rle-list-negative",
+        coco(lambda d: d["annotations"][1]["segmentation"].update(counts=[1025, -1])),
+        EvalError,
+        A + r"annotations\[1\] \(id 2\) segmentation counts .*non-negative",
+    ),
+    Case(
+        "coco-rle-size-mismatch",
+        coco(lambda d: d["annotations"][1]["segmentation"].update(size=[16, 64])),
+        EvalError,
+        A + r"annotations\[1\] \(id 2\) segmentation size \[16, 64\] is not image "
+        r"a\.png's \[32, 32\]",
+    ),
+    Case(
+        "coco-bbox-nan",
+        coco(ann(3, bbox=[25, 2, float("nan"), 3])),
+        EvalError,
+        A + r"annotations\[3\] \(id 4\) bbox .*finite",
+    ),
+    Case(
+        "coco-bbox-huge-int",
+        coco(ann(3, bbox=[25, 2, 10**400, 3])),
+        EvalError,
+        A + r"annotations\[3\] \(id 4\) bbox .*finite",
+    ),
+    Case(
+        "coco-area-nan",
+        coco(ann(0, area=float("nan"))),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) area nan",
+    ),
+    Case(
+        "coco-iscrowd-string",
+        coco(ann(0, iscrowd="no")),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) iscrowd 'no' must be 0 or 1",
+    ),
+    Case(
+        "coco-category-id-unhashable",
+        coco(ann(0, category_id=[1])),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) has unknown category_id \[1\]",
+    ),
+    Case(
+        "coco-image-id-unhashable",
+        coco(ann(0, image_id={"a": 1})),
+        EvalError,
+        A + r"annotations\[0\] \(id 1\) refers to unknown image_id",
+    ),
+    Case(
+        "coco-categories-not-a-list",
+        coco(top(categories={"id": 1, "name": "ship"})),
+        EvalError,
+        A + r"'categories' must be a list",
+    ),
+    Case(
+        "coco-category-without-name",
+        coco(lambda d: d["categories"][1].pop("name")),
+        EvalError,
+        A + r"categories\[1\] has no name",
+    ),
+    Case(
+        "coco-annotation-not-an-object",
+        coco(lambda d: d["annotations"].insert(0, 3)),
+        EvalError,
+        A + r"annotations\[0\] is not an object",
+    ),
+    Case(
+        "coco-annotations-not-a-list",
+        coco(top(annotations={"id": 1})),
+        EvalError,
+        A + r"'annotations' must be a list",
+    ),
+    Case(
+        "coco-deep-nesting",
+        coco_text("[" * 100_000 + "]" * 100_000),
+        EvalError,
+        A + r"is not a readable JSON file \(nested too deeply\)",
+    ),
+    Case(
+        "coco-5000-digit-number",
+        coco_text('{"images": [{"id": ' + "7" * 5000 + ', "file_name": "a.png"}]}'),
+        EvalError,
+        A + r"is not a readable JSON file \(.*digits",
+    ),
+    Case(
+        "coco-height-fraction",
+        coco(image(height=32.5)),
+        EvalError,
+        A + r"images\[0\] \(id 7\) height 32\.5 must be a positive integer",
+    ),
+    Case(
+        "coco-height-string",
+        coco(image(height="32")),
+        EvalError,
+        A + r"images\[0\] \(id 7\) height '32' must be a positive integer",
+    ),
+    Case(
+        "coco-image-huge",
+        coco(image(height=HUGE, width=HUGE)),
+        EvalError,
+        A + r"images\[0\] \(id 7\) a\.png is 1000000x1000000 = 1,000,000,000,000 "
+        r"pixels, over the limit of 16,777,216",
+    ),
+    Case(
+        "coco-file-name-dotdot",
+        escaping("dotdot"),
+        EvalError,
+        r"ann\.json: images\[0\] \(id 7\) file_name '\.\./x\.png' .*outside the "
+        r"image folder .*outside=allow",
+    ),
+    Case(
+        "coco-file-name-absolute",
+        escaping("absolute"),
+        EvalError,
+        r"ann\.json: images\[0\] \(id 7\) file_name '/.*x\.png' .*outside the image "
+        r"folder",
+    ),
+    Case(
+        "coco-file-name-symlink-escapes",
+        escaping("symlink"),
+        EvalError,
+        r"ann\.json: images\[0\] \(id 7\) file_name 'a\.png' .*x\.png, outside the "
+        r"image folder",
+    ),
+    Case(
+        "coco-same-image-id-twice",
+        coco(_duplicate_image("id"), ("a.png", "b.png")),
+        EvalError,
+        A + r"images\[0\] and images\[1\] both have id 7 \(a\.png, b\.png\)",
+    ),
+    Case(
+        "coco-tiff-0-d", zero_d_tiff, EvalError, r"a\.tif: holds no 2-D image \(header shape \(\)"
+    ),
+    Case(
+        "voc-height-nan",
+        voc(voc_text(size=("nan", SIZE))),
+        EvalError,
+        r"a\.xml: <size> <height> 'nan' must be a positive integer",
+    ),
+    Case(
+        "voc-height-negative",
+        voc(voc_text(size=(-32, SIZE))),
+        EvalError,
+        r"a\.xml: <size> <height> '-32' must be a positive integer",
+    ),
+    Case(
+        "voc-width-fraction",
+        voc(voc_text(size=(SIZE, "31.5"))),
+        EvalError,
+        r"a\.xml: <size> <width> '31\.5' must be a positive integer",
+    ),
+    Case(
+        "voc-size-huge",
+        voc(voc_text(size=(HUGE, HUGE), objects=())),
+        EvalError,
+        r"a\.xml: <size> is 1000000x1000000 = 1,000,000,000,000 pixels, over the "
+        r"limit of 16,777,216",
+    ),
+    Case(
+        "voc-filename-dotdot",
+        voc_escaping,
+        EvalError,
+        r"a\.xml: <filename> '\.\./x\.png' .*outside the image folder",
+    ),
+]
 
 GUARDS = [
-    Case("coco-two-ids-one-file", coco(_duplicate_image("file_name")),
-         EvalError, r"a\.png"),
+    Case("coco-two-ids-one-file", coco(_duplicate_image("file_name")), EvalError, r"a\.png"),
     Case("coco-top-level-list", coco_text("[]"), EvalError, A + r"is not a COCO annotation"),
     Case("coco-not-json", coco_text("{nope"), EvalError, A + r"is not a readable JSON file"),
-    Case("coco-box-outside", coco(ann(3, bbox=[30, 2, 4, 3])),
-         EvalError, A + r"annotation.*4.* box .*outside image a\.png"),
-    Case("voc-height-not-a-number", voc(voc_text(size=("abc", SIZE))),
-         EvalError, r"a\.xml: .*<height>"),
-    Case("voc-box-nan", voc(voc_text(objects=(("ship", ("nan", 2, 10, 8), 0),))),
-         EvalError, r"a\.xml: .*xmin"),
-    Case("voc-box-outside", voc(voc_text(objects=(("ship", (3, 2, 40, 8), 0),))),
-         EvalError, r"a\.xml: box of 'ship' .*outside"),
-]  # fmt: skip
+    Case(
+        "coco-box-outside",
+        coco(ann(3, bbox=[30, 2, 4, 3])),
+        EvalError,
+        A + r"annotation.*4.* box .*outside image a\.png",
+    ),
+    Case(
+        "voc-height-not-a-number",
+        voc(voc_text(size=("abc", SIZE))),
+        EvalError,
+        r"a\.xml: .*<height>",
+    ),
+    Case(
+        "voc-box-nan",
+        voc(voc_text(objects=(("ship", ("nan", 2, 10, 8), 0),))),
+        EvalError,
+        r"a\.xml: .*xmin",
+    ),
+    Case(
+        "voc-box-outside",
+        voc(voc_text(objects=(("ship", (3, 2, 40, 8), 0),))),
+        EvalError,
+        r"a\.xml: box of 'ship' .*outside",
+    ),
+]
 
 
 @pytest.mark.parametrize("case", CASES + GUARDS, ids=lambda c: c.name)
@@ -308,8 +477,11 @@ def test_duplicate_annotation_ids_warn_naming_them(tmp_path):
 
     doc = coco_doc()
     doc["annotations"][1]["id"] = 1
-    with pytest.warns(AnnotationWarning, match=r"ann\.json: annotations\[0\] and "
-                      r"annotations\[1\] both have id 1"):  # fmt: skip
+    with pytest.warns(
+        AnnotationWarning,
+        match=r"ann\.json: annotations\[0\] and "
+        r"annotations\[1\] both have id 1",
+    ):
         coco_set = read_coco(write_coco_file(tmp_path, doc))
     assert len(coco_set.images[0].annotations) == 5  # both kept
 
@@ -334,14 +506,22 @@ def _one_line(capsys) -> str:
 
 
 def _run(spec: str, out: Path, *extra: str) -> int:
-    return main(["run", "--dataset", spec, "--detectors", "ca", "--out", str(out),
-                 "--no-progress", *extra])  # fmt: skip
+    return main(
+        ["run", "--dataset", spec, "--detectors", "ca", "--out", str(out), "--no-progress", *extra]
+    )
 
 
 @pytest.mark.parametrize(
-    "name", ["coco-bomb-polygon-1e300", "coco-rle-size-mismatch", "coco-deep-nesting",
-             "voc-height-nan", "coco-file-name-dotdot", "coco-tiff-0-d"]
-)  # fmt: skip
+    "name",
+    [
+        "coco-bomb-polygon-1e300",
+        "coco-rle-size-mismatch",
+        "coco-deep-nesting",
+        "voc-height-nan",
+        "coco-file-name-dotdot",
+        "coco-tiff-0-d",
+    ],
+)
 def test_cli_exits_2_with_one_line(name, tmp_path, capsys):
     case = next(c for c in CASES if c.name == name)
     spec = case.write(tmp_path)
@@ -395,17 +575,26 @@ def test_coco_bomb_under_a_memory_limit(tmp_path):
     no segfault, with the address space limited to 2 GiB above what the interpreter holds."""
     import resource
 
-    text = ('{"images":[{"id":1,"file_name":"a.png","height":32,"width":32}],"annotations":'
-            '[{"image_id":1,"category_id":1,"bbox":[0,0,1,1],"segmentation":'
-            '[[0,0,1,0,1e300,1]]}],"categories":[{"id":1,"name":"s"}]}')  # fmt: skip
+    text = (
+        '{"images":[{"id":1,"file_name":"a.png","height":32,"width":32}],"annotations":'
+        '[{"image_id":1,"category_id":1,"bbox":[0,0,1,1],"segmentation":'
+        '[[0,0,1,0,1e300,1]]}],"categories":[{"id":1,"name":"s"}]}'
+    )
     assert len(text) <= 200
     write_coco_file(tmp_path, text)
     # torch maps a lot of address space at import: measure it, then allow 2 GiB more
     probe = subprocess.run(
-        [sys.executable, "-c", "import torchsar_eval.datasets, resource, os;"
-         "print(int(open('/proc/self/statm').read().split()[0]) * os.sysconf('SC_PAGE_SIZE'))"],
-        capture_output=True, text=True, check=True, cwd=REPO,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            "import torchsar_eval.datasets, resource, os;"
+            "print(int(open('/proc/self/statm').read().split()[0]) * os.sysconf('SC_PAGE_SIZE'))",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=REPO,
+    )
     limit = int(probe.stdout) + 2 * 2**30
 
     def cap() -> None:
@@ -414,8 +603,13 @@ def test_coco_bomb_under_a_memory_limit(tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1")
     done = subprocess.run(
         [sys.executable, "-c", BOMB_SCRIPT, str(tmp_path)],
-        capture_output=True, text=True, preexec_fn=cap, timeout=120, cwd=REPO, env=env,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        preexec_fn=cap,
+        timeout=120,
+        cwd=REPO,
+        env=env,
+    )
     assert done.returncode == 2, (done.returncode, done.stdout[-500:], done.stderr[-2000:])
     lines = done.stdout.strip().splitlines()
     assert len(lines) == 1 and "ann.json: annotations[0] segmentation polygon 0 point 2" in lines[0]
@@ -428,8 +622,10 @@ def test_coco_bomb_under_a_memory_limit(tmp_path):
 def _predictions(tmp: Path, segmentations: list) -> tuple[str, Path]:
     """The valid ground truth and a results file with one detection per segmentation."""
     gt = write_coco_file(tmp, coco_doc())
-    rows = [{"image_id": 7, "category_id": 1, "score": 0.5 + 0.1 * k, "segmentation": s}
-            for k, s in enumerate(segmentations)]  # fmt: skip
+    rows = [
+        {"image_id": 7, "category_id": 1, "score": 0.5 + 0.1 * k, "segmentation": s}
+        for k, s in enumerate(segmentations)
+    ]
     dets = tmp / "dets.json"
     dets.write_text(json.dumps(rows))
     return f"coco:{gt}?type=amplitude", dets
@@ -475,8 +671,11 @@ def test_an_image_record_listed_twice_is_read_once_with_a_warning(tmp_path):
 
     doc = coco_doc()
     doc["images"].append(dict(doc["images"][0]))
-    with pytest.warns(AnnotationWarning, match=r"ann\.json: images\[0\] is listed again as "
-                      r"images\[1\]"):  # fmt: skip
+    with pytest.warns(
+        AnnotationWarning,
+        match=r"ann\.json: images\[0\] is listed again as "
+        r"images\[1\]",
+    ):
         coco_set = read_coco(write_coco_file(tmp_path, doc))
     assert [im.file_name for im in coco_set.images] == ["a.png"]
     assert len(coco_set.images[0].annotations) == 5

@@ -31,33 +31,52 @@ def _running(tmp_path):
         "import sys; from torchsar_eval.locks import hold\n"
         f"with hold({str(left) + '.lock'!r}):\n    print('held', flush=True); sys.stdin.read()"
     )
-    proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     assert proc.stdout.readline().strip() == "held"
     return proc
 
 
 CASES = {
-    "n beyond any dataset": (["--n", "100000000000000"], None,
-                             r"--n 100000000000000: must be an integer from 1 to 10,000,000"),
+    "n beyond any dataset": (
+        ["--n", "100000000000000"],
+        None,
+        r"--n 100000000000000: must be an integer from 1 to 10,000,000",
+    ),
     "n not an integer": (["--n", "1e14"], None, r"argument --n: invalid int value: '1e14'"),
-    "a 100k-character --param": (["--param", "ca.train=" + "9" * 100_000], None,
-                                 r"--param ca.train=9+\.\.\.: 100009 characters"),
-    "a deeply nested --param": (["--param", "ca.train=" + "[" * 900], None,
-                                r"detector ca rejects its options"),
+    "a 100k-character --param": (
+        ["--param", "ca.train=" + "9" * 100_000],
+        None,
+        r"--param ca.train=9+\.\.\.: 100009 characters",
+    ),
+    "a deeply nested --param": (
+        ["--param", "ca.train=" + "[" * 900],
+        None,
+        r"detector ca rejects its options",
+    ),
     "resume and discard": (["--resume", "--discard"], None, r"--resume and --discard exclude"),
-    "max-bad beyond 1": (["--skip-bad", "--max-bad", "2"], None,
-                         r"--max-bad 2\.0: must be a share from 0 to 1"),
+    "max-bad beyond 1": (
+        ["--skip-bad", "--max-bad", "2"],
+        None,
+        r"--max-bad 2\.0: must be a share from 0 to 1",
+    ),
     "a device without data": (["--device", "meta"], None, r"--device 'meta' holds no data"),
     "a closing of 300 px": (["--closing", "300"], None, r"closing must be at most 64 px"),
-    "rank-by not a metric": (["--rank-by", "speed"], None,
-                             r"--rank-by 'speed': not a metric; choose one of f1, precision"),
-    "saved work, no --resume": ([], _saved_work,
-                                r"an interrupted run left its saved work in .*1 saved shard.*"
-                                r"continue it with --resume, or start over with --discard"),
+    "rank-by not a metric": (
+        ["--rank-by", "speed"],
+        None,
+        r"--rank-by 'speed': not a metric; choose one of f1, precision",
+    ),
+    "saved work, no --resume": (
+        [],
+        _saved_work,
+        r"an interrupted run left its saved work in .*1 saved shard.*"
+        r"continue it with --resume, or start over with --discard",
+    ),
     "another run writes --out": ([], _running, r"being written by another run \(process 999999"),
     "another run writes --out, resume": (["--resume"], _running, r"being written by another"),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -121,15 +140,27 @@ def fine(images):
         ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights", []),
     ],
 )
-def test_a_detector_that_exits_or_fails_to_build_is_one_line(spec, message, extra, tmp_path,
-                                                             capsys, monkeypatch):  # fmt: skip
+def test_a_detector_that_exits_or_fails_to_build_is_one_line(
+    spec, message, extra, tmp_path, capsys, monkeypatch
+):
     """A detector calling ``sys.exit(0)`` (before: exit 0, no output) or a class whose
     ``__init__`` raises (before: a traceback) ends the run with exit 2 and one line."""
     mod = f"dets_{abs(hash(str(tmp_path))) % 10**8}"
     (tmp_path / f"{mod}.py").write_text(DETECTORS)
     monkeypatch.chdir(tmp_path)
-    code = main([*BASE[:3], "--n", "2", "--detectors", spec.format(mod=mod), "--no-progress",
-                 "--out", str(tmp_path / "out"), *extra])  # fmt: skip
+    code = main(
+        [
+            *BASE[:3],
+            "--n",
+            "2",
+            "--detectors",
+            spec.format(mod=mod),
+            "--no-progress",
+            "--out",
+            str(tmp_path / "out"),
+            *extra,
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2, err
     assert len(err.splitlines()) == 1 and re.search(message, err), err
@@ -143,8 +174,18 @@ def test_names_are_drawn_as_plain_text(tmp_path, monkeypatch):
     (tmp_path / f"{mod}.py").write_text(DETECTORS)
     monkeypatch.chdir(tmp_path)
     name = "a$\\x$b"
-    code = main([*BASE[:3], "--n", "2", "--detectors", f"{name}={mod}:fine", "--no-progress",
-                 "--out", str(tmp_path / "out")])  # fmt: skip
+    code = main(
+        [
+            *BASE[:3],
+            "--n",
+            "2",
+            "--detectors",
+            f"{name}={mod}:fine",
+            "--no-progress",
+            "--out",
+            str(tmp_path / "out"),
+        ]
+    )
     assert code == 0
     assert name in (tmp_path / "out" / "summary.csv").read_text()
     assert (tmp_path / "out" / "report.html").is_file()

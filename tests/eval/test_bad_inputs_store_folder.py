@@ -320,17 +320,37 @@ CASES = [
     ("store.json huge", _sparse("store.json", 64 << 20), EvalError, rf"{HEAD}: .*bytes"),
     ("store.json a FIFO", _fifo_for("store.json"), EvalError, rf"{HEAD}: is not a regular file"),
     # index.npy
-    ("duplicated index row", _index(lambda x: _set(x, 3, x[2])), EvalError,
-     rf"{INDEX}: rows 2 and 3 point to the same bytes of {SHARD1}"),
-    ("offset beyond the tar", _index(lambda x: _set(x, (1, 0, 0), 10**13)), EvalError,
-     rf"{INDEX}: row 1 .*past the end of {SHARD0}"),
-    ("size beyond the tar", _index(lambda x: _set(x, (1, 4, 1), 10**13)), EvalError,
-     rf"{INDEX}: row 1 .*past the end of {SHARD0}"),
+    (
+        "duplicated index row",
+        _index(lambda x: _set(x, 3, x[2])),
+        EvalError,
+        rf"{INDEX}: rows 2 and 3 point to the same bytes of {SHARD1}",
+    ),
+    (
+        "offset beyond the tar",
+        _index(lambda x: _set(x, (1, 0, 0), 10**13)),
+        EvalError,
+        rf"{INDEX}: row 1 .*past the end of {SHARD0}",
+    ),
+    (
+        "size beyond the tar",
+        _index(lambda x: _set(x, (1, 4, 1), 10**13)),
+        EvalError,
+        rf"{INDEX}: row 1 .*past the end of {SHARD0}",
+    ),
     ("negative offset", _index(lambda x: _set(x, (0, 0, 0), -512)), EvalError, rf"{INDEX}: row 0"),
-    ("offsets overflowing", _index(lambda x: _set(x, (0, 4), (2**62, 2**62))), EvalError,
-     rf"{INDEX}: row 0"),
-    ("swapped rows", _index(_swap_rows), BadItemError,
-     rf"{SHARD0}: item 000000000: .*000000001\.image\.npy"),
+    (
+        "offsets overflowing",
+        _index(lambda x: _set(x, (0, 4), (2**62, 2**62))),
+        EvalError,
+        rf"{INDEX}: row 0",
+    ),
+    (
+        "swapped rows",
+        _index(_swap_rows),
+        BadItemError,
+        rf"{SHARD0}: item 000000000: .*000000001\.image\.npy",
+    ),
     ("index wrong shape", _index(lambda x: x[:, :3]), EvalError, rf"{INDEX}: .*shape"),
     ("index not npy", _index(lambda x: b"garbage" * 20), EvalError, rf"{INDEX}: not a \.npy file"),
     ("index a FIFO", _fifo_for("index.npy"), EvalError, rf"{INDEX}: is not a regular file"),
@@ -338,34 +358,82 @@ CASES = [
     # shards
     ("shard a FIFO", _fifo_for("shard-000001.tar"), EvalError, rf"{SHARD1}: is not a regular"),
     ("shard missing", _missing("shard-000001.tar"), EvalError, rf"{SHARD1}: .*missing"),
-    ("npy magic changed", _patch_member(0, 0, lambda b: b"X" + b[1:]), BadItemError,
-     rf"{SHARD0}: item 000000000"),
-    ("image byte flipped", _patch_member(1, 0, lambda b: b[:-1] + bytes([b[-1] ^ 0x40])),
-     BadItemError, rf"{SHARD0}: item 000000001: .*checksum"),
-    ("json broken", _patch_member(0, 4, lambda b: b"[" + b[1:]), BadItemError,
-     rf"{SHARD0}: item 000000000"),
+    (
+        "npy magic changed",
+        _patch_member(0, 0, lambda b: b"X" + b[1:]),
+        BadItemError,
+        rf"{SHARD0}: item 000000000",
+    ),
+    (
+        "image byte flipped",
+        _patch_member(1, 0, lambda b: b[:-1] + bytes([b[-1] ^ 0x40])),
+        BadItemError,
+        rf"{SHARD0}: item 000000001: .*checksum",
+    ),
+    (
+        "json broken",
+        _patch_member(0, 4, lambda b: b"[" + b[1:]),
+        BadItemError,
+        rf"{SHARD0}: item 000000000",
+    ),
     # item contract: a target no instance covers
-    ("legacy store: instances lost", _legacy_store_without_instances, BadItemError,
-     rf"{SHARD0}: item 000000001: mask marks \d+ target pixels that no instance covers"),
-    ("write: instances lost", _writing_an_item_without_instances, EvalError,
-     r"item 1 .*mask marks \d+ target pixels that no instance covers"),
+    (
+        "legacy store: instances lost",
+        _legacy_store_without_instances,
+        BadItemError,
+        rf"{SHARD0}: item 000000001: mask marks \d+ target pixels that no instance covers",
+    ),
+    (
+        "write: instances lost",
+        _writing_an_item_without_instances,
+        EvalError,
+        r"item 1 .*mask marks \d+ target pixels that no instance covers",
+    ),
     # folder datasets
-    ("spacing sidecar a FIFO", _folder_sidecar_fifo, BadItemError,
-     r"a\.spacing\.txt: is not a regular file"),
-    ("spacing sidecar huge", _folder_sidecar_huge, BadItemError,
-     r"a\.spacing\.txt: .*bytes.*expected"),
-    ("image reached by a symlink", _folder_alias(os.symlink), EvalError,
-     r"b\.png is the same file as .*a\.png"),
-    ("image reached by a hard link", _folder_alias(os.link), EvalError,
-     r"b\.png is the same file as .*a\.png"),
-    ("9000x9000 blank image", _folder_big_blank_image, BadItemError,
-     r"a\.png: .*9000x9000.*max_pixels=\d+"),
-    ("unlistable subfolder", _folder_unlistable_subfolder, EvalError,
-     r"cannot list folder .*locked \(Permission denied\)"),
+    (
+        "spacing sidecar a FIFO",
+        _folder_sidecar_fifo,
+        BadItemError,
+        r"a\.spacing\.txt: is not a regular file",
+    ),
+    (
+        "spacing sidecar huge",
+        _folder_sidecar_huge,
+        BadItemError,
+        r"a\.spacing\.txt: .*bytes.*expected",
+    ),
+    (
+        "image reached by a symlink",
+        _folder_alias(os.symlink),
+        EvalError,
+        r"b\.png is the same file as .*a\.png",
+    ),
+    (
+        "image reached by a hard link",
+        _folder_alias(os.link),
+        EvalError,
+        r"b\.png is the same file as .*a\.png",
+    ),
+    (
+        "9000x9000 blank image",
+        _folder_big_blank_image,
+        BadItemError,
+        r"a\.png: .*9000x9000.*max_pixels=\d+",
+    ),
+    (
+        "unlistable subfolder",
+        _folder_unlistable_subfolder,
+        EvalError,
+        r"cannot list folder .*locked \(Permission denied\)",
+    ),
     ("n of 2.5 items", _folder_fractional_n, EvalError, r"n=2\.5: must be a whole number"),
-    ("datasets sharing files", _datasets_sharing_a_file, UserWarning,
-     r"datasets A and B both read .*a\.png"),
-]  # fmt: skip
+    (
+        "datasets sharing files",
+        _datasets_sharing_a_file,
+        UserWarning,
+        r"datasets A and B both read .*a\.png",
+    ),
+]
 
 
 @pytest.fixture
@@ -393,8 +461,9 @@ def fifo_watchdog(tmp_path):
     t.join()
 
 
-@pytest.mark.parametrize(("writer", "kind", "pattern"), [c[1:] for c in CASES],
-                         ids=[c[0] for c in CASES])  # fmt: skip
+@pytest.mark.parametrize(
+    ("writer", "kind", "pattern"), [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
 def test_bad_input_is_one_clear_error(tmp_path, fifo_watchdog, writer, kind, pattern):
     attempt = writer(tmp_path)
     if issubclass(kind, Warning):
@@ -427,8 +496,16 @@ def _one_error_line(capsys) -> str:
 )
 def test_run_on_a_bad_store_exits_2_with_one_line(tmp_path, capsys, writer, pattern):
     writer(tmp_path)
-    argv = ["run", "--dataset", f"store:{tmp_path / 's'}", "--detectors", "ca",
-            "--out", str(tmp_path / "out"), "--no-progress"]  # fmt: skip
+    argv = [
+        "run",
+        "--dataset",
+        f"store:{tmp_path / 's'}",
+        "--detectors",
+        "ca",
+        "--out",
+        str(tmp_path / "out"),
+        "--no-progress",
+    ]
     assert main(argv) == 2
     assert re.search(pattern, _one_error_line(capsys))
 
@@ -450,12 +527,24 @@ def test_make_dataset_while_another_writes_the_same_out(tmp_path, capsys, monkey
     monkeypatch.setattr(store, "LOCK_WAIT_S", 0.2)
     out = tmp_path / "s"
     lock = store.lock_path(out)
-    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(lock)], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(lock)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "held"
-        argv = ["make-dataset", "--kind", "sim-chips", "--n", "2", "--out", str(out),
-                "--no-progress"]  # fmt: skip
+        argv = [
+            "make-dataset",
+            "--kind",
+            "sim-chips",
+            "--n",
+            "2",
+            "--out",
+            str(out),
+            "--no-progress",
+        ]
         assert main(argv) == 2
         assert "is being written by another make-dataset" in _one_error_line(capsys)
         assert not out.exists()
@@ -484,8 +573,9 @@ def test_a_killed_make_dataset_leaves_a_partial_store_the_next_one_removes(tmp_p
     import torchsar_eval.store as store
 
     out = tmp_path / "s"
-    proc = subprocess.Popen([sys.executable, "-c", KILLED, str(out)], stdout=subprocess.PIPE,
-                            text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED, str(out)], stdout=subprocess.PIPE, text=True
+    )
     try:
         assert proc.stdout.readline().strip() == "writing"
         partial = store.partial_path(out)

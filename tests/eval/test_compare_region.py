@@ -13,11 +13,26 @@ def test_compare_region_tiny(tmp_path, capsys):
     out = tmp_path / "out"
     code = main(
         [
-            "compare-region", "--out", str(out), "--sim", "sim-chips", "--n", "2", "--n-tune", "1",
-            "--mstar", str(tmp_path / "absent"), "--guards", "4", "--trains", "4",
-            "--pfas", "1e-4", "--no-progress",
+            "compare-region",
+            "--out",
+            str(out),
+            "--sim",
+            "sim-chips",
+            "--n",
+            "2",
+            "--n-tune",
+            "1",
+            "--mstar",
+            str(tmp_path / "absent"),
+            "--guards",
+            "4",
+            "--trains",
+            "4",
+            "--pfas",
+            "1e-4",
+            "--no-progress",
         ]
-    )  # fmt: skip
+    )
     assert code == 0
     summary = pd.read_csv(out / "summary.csv")
     assert {"region-paper", "region", "ca", "two_parameter"} <= set(summary.detector)

@@ -48,8 +48,9 @@ def fragile(x, meta=None):
 def _run(out, shard_size=2, workers=1, detectors=None, **kwargs):
     ex = Execution(batch_size=2, shard_size=shard_size, workers=workers, progress=False)
     dets = detectors or [BUILTIN["ca"], BUILTIN["so"], BUILTIN["region"]]
-    return evaluate({"chips": Chips()}, dets, out=out, execution=ex,
-                    scoring=Scoring(replicates=0), **kwargs)  # fmt: skip
+    return evaluate(
+        {"chips": Chips()}, dets, out=out, execution=ex, scoring=Scoring(replicates=0), **kwargs
+    )
 
 
 def test_short_labels_keep_the_last_path_part_and_the_options():

@@ -31,11 +31,51 @@ from tests.eval.coco_voc_inputs import (
 from torchsar_eval.errors import EvalError
 
 DIGITS, NEST = "__DIGITS__", "__NEST__"
-JSON_VALUES = [math.nan, math.inf, -math.inf, 1e300, -1e300, -1, 0, 0.5, 3, 31, 33, 10**30,
-               "x", "", "7", None, True, [], {}, [[1, 2]], [0, 0, 1, 0, 1, 1],
-               {"size": [SIZE, SIZE], "counts": "0"}, "../b.png", DIGITS, NEST]  # fmt: skip
-TEXT_VALUES = ["nan", "inf", "-inf", "1e300", "1e400", "-5", "0", "0.5", "", "abc", "9" * 5000,
-               "  3  ", "1", "40", "../b.png", "/etc/hostname"]  # fmt: skip
+JSON_VALUES = [
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e300,
+    -1e300,
+    -1,
+    0,
+    0.5,
+    3,
+    31,
+    33,
+    10**30,
+    "x",
+    "",
+    "7",
+    None,
+    True,
+    [],
+    {},
+    [[1, 2]],
+    [0, 0, 1, 0, 1, 1],
+    {"size": [SIZE, SIZE], "counts": "0"},
+    "../b.png",
+    DIGITS,
+    NEST,
+]
+TEXT_VALUES = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e300",
+    "1e400",
+    "-5",
+    "0",
+    "0.5",
+    "",
+    "abc",
+    "9" * 5000,
+    "  3  ",
+    "1",
+    "40",
+    "../b.png",
+    "/etc/hostname",
+]
 OPS = ("replace", "replace", "delete", "repeat", "wrap", "stringify", "truncate")
 
 MUTATION = st.tuples(

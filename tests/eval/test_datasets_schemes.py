@@ -137,8 +137,10 @@ def test_coco_image_under_two_names(tmp_path, alias):
     (tmp_path / "sub").mkdir()
     (tmp_path / "link.png").symlink_to(tmp_path / "s1.png")
     first = "missing.png" if alias == "./missing.png" else "s1.png"
-    images = [{"id": k + 1, "file_name": n, "height": 20, "width": 30}
-              for k, n in enumerate([first, alias])]  # fmt: skip
+    images = [
+        {"id": k + 1, "file_name": n, "height": 20, "width": 30}
+        for k, n in enumerate([first, alias])
+    ]
     (tmp_path / "gt.json").write_text(
         json.dumps({"images": images, "annotations": [], "categories": [{"id": 1, "name": "ship"}]})
     )

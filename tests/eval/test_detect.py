@@ -34,13 +34,15 @@ pytestmark = pytest.mark.usefixtures("one_thread")
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     path = tmp_path_factory.mktemp("detect") / "small.tif"
-    return write_scene_file(path, shape=(700, 600), tile=128, n_targets=10, seed=3, pool=4,
-                            separation=40)  # fmt: skip
+    return write_scene_file(
+        path, shape=(700, 600), tile=128, n_targets=10, seed=3, pool=4, separation=40
+    )
 
 
 def _detect(scene, out: Path, *extra: str) -> int:
-    return main(["detect", "--scene", str(scene.path), *CA, "--out", str(out), "--no-progress",
-                 *extra])  # fmt: skip
+    return main(
+        ["detect", "--scene", str(scene.path), *CA, "--out", str(out), "--no-progress", *extra]
+    )
 
 
 def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
@@ -48,8 +50,9 @@ def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
     got = pd.read_csv(tmp_path / "r" / "detections.csv", dtype={"scene_id": str})
     with open_scene(scene.path, as_intensity=True) as reader:
         objects = scene_objects(reader, "ca", tile=128, **CA_OPTS)
-        expect = detection_table(objects, "small", georef=reader.georef,
-                                 pixel_spacing=reader.pixel_spacing)  # fmt: skip
+        expect = detection_table(
+            objects, "small", georef=reader.georef, pixel_spacing=reader.pixel_spacing
+        )
         whole = torch.from_numpy(reader[:, :])[None, None]
     pd.testing.assert_frame_equal(got, expect, check_dtype=False)
     full = ts.cfar.ca(whole, **CA_OPTS)  # the untiled detector, one image
@@ -65,7 +68,11 @@ def test_table_equals_scene_objects_and_untiled_components(scene, tmp_path):
     assert cfg["scenes"][0]["manifest"]["bytes"] == os.path.getsize(scene.path)
     assert cfg["scenes"][0]["objects"] == len(got) and cfg["tiles_total"] == 30
     assert sorted(p.name for p in (tmp_path / "r").iterdir()) == [
-        ".torchsar-run.json", "config.json", "detections.csv", "detections.geojson"]  # fmt: skip
+        ".torchsar-run.json",
+        "config.json",
+        "detections.csv",
+        "detections.geojson",
+    ]
 
 
 def test_ac_scene_clutter_mean_computed_once_and_shared(scene, tmp_path, monkeypatch):
@@ -75,30 +82,56 @@ def test_ac_scene_clutter_mean_computed_once_and_shared(scene, tmp_path, monkeyp
 
     passes = []
     original = trun.scene_clutter_mean
-    monkeypatch.setattr(trun, "scene_clutter_mean",
-                        lambda *a, **k: passes.append(1) or original(*a, **k))  # fmt: skip
+    monkeypatch.setattr(
+        trun, "scene_clutter_mean", lambda *a, **k: passes.append(1) or original(*a, **k)
+    )
     opts = ["--param", "guard=2", "--param", "train=4", "--param", "pfa=1e-6"]
-    argv = ["detect", "--scene", str(scene.path), "--detector", "ac", *opts, "--tile", "128",
-            "--out", str(tmp_path / "r"), "--no-progress"]  # fmt: skip
+    argv = [
+        "detect",
+        "--scene",
+        str(scene.path),
+        "--detector",
+        "ac",
+        *opts,
+        "--tile",
+        "128",
+        "--out",
+        str(tmp_path / "r"),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     assert len(passes) == 1  # 30 tiles in 8 tasks, one estimate
     got = pd.read_csv(tmp_path / "r" / "detections.csv", dtype={"scene_id": str})
     with open_scene(scene.path, as_intensity=True) as reader:
         objects = scene_objects(reader, "ac", tile=128, guard=2, train=4, pfa=1e-6)
-        expect = detection_table(objects, "small", georef=reader.georef,
-                                 pixel_spacing=reader.pixel_spacing)  # fmt: skip
+        expect = detection_table(
+            objects, "small", georef=reader.georef, pixel_spacing=reader.pixel_spacing
+        )
     pd.testing.assert_frame_equal(got, expect, check_dtype=False)
 
 
 def test_region_table_equals_scene_objects(scene, tmp_path):
-    argv = ["detect", "--scene", str(scene.path), "--detector", "region", "--param",
-            "min_size=2", "--tile", "300", "--out", str(tmp_path / "r"), "--no-progress"]  # fmt: skip
+    argv = [
+        "detect",
+        "--scene",
+        str(scene.path),
+        "--detector",
+        "region",
+        "--param",
+        "min_size=2",
+        "--tile",
+        "300",
+        "--out",
+        str(tmp_path / "r"),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     got = pd.read_csv(tmp_path / "r" / "detections.csv", dtype={"scene_id": str})
     with open_scene(scene.path, as_intensity=True) as reader:
         objects = scene_objects(reader, "region", tile=300, min_size=2)
-        expect = detection_table(objects, "small", georef=reader.georef,
-                                 pixel_spacing=reader.pixel_spacing)  # fmt: skip
+        expect = detection_table(
+            objects, "small", georef=reader.georef, pixel_spacing=reader.pixel_spacing
+        )
     assert (objects["area"] >= 2).all() and len(objects) > 0
     pd.testing.assert_frame_equal(got, expect, check_dtype=False)
 
@@ -172,8 +205,19 @@ def test_same_bytes_for_two_workers_and_after_a_kill(scene, tmp_path):
 
     out = tmp_path / "killed" / "run"
     out.parent.mkdir()
-    cmd = [sys.executable, "-m", "torchsar_eval.cli", "detect", "--scene", str(scene.path), *CA,
-           *tile, "--out", str(out), "--no-progress"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "torchsar_eval.cli",
+        "detect",
+        "--scene",
+        str(scene.path),
+        *CA,
+        *tile,
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     _kill_after_records(cmd, out.parent, records=40)
     assert not out.exists()
     (staging,) = _hidden(out.parent)
@@ -212,11 +256,10 @@ def test_bad_inputs_one_line_exit_2(scene, tmp_path, capsys):
         (["--scene", str(scene.path), *CA, "--engine", "ray"], "--engine ray is not supported"),
         (["--scene", str(scene.path), *CA, "--workers", "0"], "--workers"),
         (["--scene", f"{scene.path},{scene.path}", *CA], "same scene id"),
-        (["--scene", str(scene.path), "--detector", "region", "--param", "max_halo=1"],
-         "max_halo"),
+        (["--scene", str(scene.path), "--detector", "region", "--param", "max_halo=1"], "max_halo"),
         (["--scene", str(scene.path), *CA, "--device", "meta"], "holds no data"),
         (["--scene", "/proc/self/mem", *CA], "cannot be read"),
-    ]  # fmt: skip
+    ]
     for argv, message in cases:
         assert main([*base, *argv]) == 2, argv
         assert message in _error(capsys), argv

@@ -49,9 +49,23 @@ def _found(table: pd.DataFrame, targets: pd.DataFrame) -> np.ndarray:
 
 def _score(scene, csv: Path, out: Path, name: str, *argv: str) -> pd.Series:
     dataset = f"scene:{scene.path}?truth={scene.targets_csv}&chip=512"
-    args = ["run", "--dataset", dataset, "--predictions", f"{name}={csv}", "--match",
-            "distance", "--max-distance", "1px", "--bootstrap", "0", "--out", str(out),
-            "--no-progress", *argv]  # fmt: skip
+    args = [
+        "run",
+        "--dataset",
+        dataset,
+        "--predictions",
+        f"{name}={csv}",
+        "--match",
+        "distance",
+        "--max-distance",
+        "1px",
+        "--bootstrap",
+        "0",
+        "--out",
+        str(out),
+        "--no-progress",
+        *argv,
+    ]
     assert main(args) == 0
     return pd.read_csv(out / "summary.csv").iloc[0]
 
@@ -59,8 +73,15 @@ def _score(scene, csv: Path, out: Path, name: str, *argv: str) -> pd.Series:
 @pytest.mark.parametrize("detector", ["ca", "region"])
 def test_planted_targets_reported_and_scored_back(planted, tmp_path, detector, capsys):
     out = tmp_path / detector
-    argv = ["detect", "--scene", str(planted.path), *DETECTORS[detector], "--out", str(out),
-            "--no-progress"]  # fmt: skip
+    argv = [
+        "detect",
+        "--scene",
+        str(planted.path),
+        *DETECTORS[detector],
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     table = pd.read_csv(out / "detections.csv")
     assert (_found(table, planted.targets) <= TOLERANCE_PX).all()
@@ -104,8 +125,9 @@ def test_a_target_across_a_chip_border_is_ignored_in_the_neighbour(tmp_path):
     assert top["meta"]["boxes"] == [(30, 19, 32, 22)]
     assert below["meta"]["boxes"] == [] and below["ignore"][0, 0, 19:22].all()
     assert int(below["ignore"].sum()) == 3
-    items, offsets = ds.locate_points(np.array(["s", "s"], object),
-                                      np.array([[31.0, 20.0], [40.0, 50.0]]), "p")  # fmt: skip
+    items, offsets = ds.locate_points(
+        np.array(["s", "s"], object), np.array([[31.0, 20.0], [40.0, 50.0]]), "p"
+    )
     assert items.tolist() == [0, 3] and offsets.tolist() == [[0, 0], [32, 32]]
     with pytest.raises(EvalError, match="rows of scene 'other'"):
         ds.locate_points(np.array(["other"], object), np.array([[1.0, 1.0]]), "p")
@@ -150,11 +172,21 @@ def test_full_size_scene_end_to_end(tmp_path, detector):
     scene = write_scene_file(tmp_path / "big.tif", n_targets=300, seed=0)
     written = time.perf_counter() - t0
     out = tmp_path / "det"
-    argv = ["detect", "--scene", str(scene.path), *DETECTORS[detector], "--out", str(out),
-            "--no-progress", "--workers", "2"]  # fmt: skip
+    argv = [
+        "detect",
+        "--scene",
+        str(scene.path),
+        *DETECTORS[detector],
+        "--out",
+        str(out),
+        "--no-progress",
+        "--workers",
+        "2",
+    ]
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    proc = subprocess.run([sys.executable, "-c", _BIG, *argv], capture_output=True, text=True,
-                          env=env, check=True)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-c", _BIG, *argv], capture_output=True, text=True, env=env, check=True
+    )
     stats = json.loads(proc.stdout.strip().splitlines()[-1])
     workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     print(

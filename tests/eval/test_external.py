@@ -21,17 +21,37 @@ from torchsar_eval.errors import EvalError
 EXTERNAL = Path(__file__).parent / "external"
 TABLES = ["summary.csv", "roc.csv", "pr.csv", "breakdown.csv", "per_image.csv", "roc_pixel.csv"]
 ARGS = [
-    "run", "--dataset", "sim-chips", "--n", "6", "--batch-size", "2", "--shard-size", "2",
-    "--detectors", "ca,ratio=mydets:RatioNet,mydets:bright_boxes",
-    "--param", "ratio.window=7", "--param", "bright_boxes.threshold=0.5",
-    "--bootstrap", "20", "--no-progress",
-]  # fmt: skip
+    "run",
+    "--dataset",
+    "sim-chips",
+    "--n",
+    "6",
+    "--batch-size",
+    "2",
+    "--shard-size",
+    "2",
+    "--detectors",
+    "ca,ratio=mydets:RatioNet,mydets:bright_boxes",
+    "--param",
+    "ratio.window=7",
+    "--param",
+    "bright_boxes.threshold=0.5",
+    "--bootstrap",
+    "20",
+    "--no-progress",
+]
 
 
 def _cli(args: list[str], extra_path: Path = EXTERNAL, cwd: Path | None = None):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(extra_path), *sys.path])}
-    return subprocess.run([sys.executable, "-m", "torchsar_eval.cli", *args], env=env,
-                          capture_output=True, text=True, timeout=600, cwd=cwd)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "torchsar_eval.cli", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=cwd,
+    )
 
 
 def _tables(out: Path) -> dict[str, bytes]:
@@ -81,8 +101,23 @@ def test_an_entry_point_detector_is_found_by_name(tmp_path, monkeypatch, capsys)
     monkeypatch.syspath_prepend(str(EXTERNAL))
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
     out = tmp_path / "ep"
-    assert main(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ratio-net",
-                 "--no-progress", "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "2",
+                "--detectors",
+                "ratio-net",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert pd.read_csv(out / "summary.csv").detector.tolist() == ["ratio-net"]
     capsys.readouterr()
     assert main(["run", "--help"]) == 0
@@ -105,8 +140,9 @@ def test_a_main_only_detector_with_two_workers_gets_one_line(tmp_path):
                        "--no-progress", "--out", {str(tmp_path / "out")!r}]))
     """)
     )
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                          timeout=300)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300
+    )
     lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert "defined in __main__" in lines[0] and "--workers 1" in lines[0]
@@ -124,8 +160,9 @@ def test_python_api_refuses_main_objects_and_lambdas_for_workers():
     with pytest.raises(EvalError, match="cannot be sent to worker processes"):
         check_portable([Detector("l", lambda x: x)])
     with pytest.raises(EvalError, match="workers=1"):
-        te.evaluate("sim-chips", {"l": lambda x: x}, n=2,
-                    execution=te.Execution(workers=2, progress=False))  # fmt: skip
+        te.evaluate(
+            "sim-chips", {"l": lambda x: x}, n=2, execution=te.Execution(workers=2, progress=False)
+        )
 
 
 @pytest.mark.parametrize(
@@ -143,8 +180,19 @@ def test_python_api_refuses_main_objects_and_lambdas_for_workers():
 )
 def test_bad_references_are_one_line(tmp_path, monkeypatch, capsys, extra, message):
     monkeypatch.syspath_prepend(str(EXTERNAL))
-    code = main(["run", "--dataset", "sim-chips", "--n", "2", "--no-progress",
-                 "--out", str(tmp_path / "x"), *extra])  # fmt: skip
+    code = main(
+        [
+            "run",
+            "--dataset",
+            "sim-chips",
+            "--n",
+            "2",
+            "--no-progress",
+            "--out",
+            str(tmp_path / "x"),
+            *extra,
+        ]
+    )
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert code == 2 and len(lines) == 1, lines
     assert message in lines[0]

@@ -54,8 +54,16 @@ SCORING = Scoring(DEFAULT_RULES, DEFAULT_MATCH, replicates=0)
 
 
 def _galleries(tmp_path, shard_size: int, batch_size: int) -> dict[str, Gallery]:
-    job = ShardJob("chips", Chips(N), list(range(N)), [BUILTIN[d] for d in DETECTORS], SCORING,
-                   batch_size, None, shard_size)  # fmt: skip
+    job = ShardJob(
+        "chips",
+        Chips(N),
+        list(range(N)),
+        [BUILTIN[d] for d in DETECTORS],
+        SCORING,
+        batch_size,
+        None,
+        shard_size,
+    )
     merged, _ = run_shards(job, tmp_path / f"s{shard_size}-b{batch_size}", progress=False)
     return {r.detector.name: r.gallery for r in merged}
 
@@ -78,14 +86,26 @@ def reference():
             m = match_batch(obj, gt, DEFAULT_MATCH)
             counted = obj.score > obj.threshold  # the design threshold
             hit = set(m.op[counted & (m.op >= 0)].tolist())
-            found[name][0].extend((float(s), info[p].key) for s, p in
-                                  zip(obj.score[counted & (m.op == -1)],
-                                      obj.plane[counted & (m.op == -1)], strict=True))  # fmt: skip
-            found[name][1].extend((int(gt.area[g]), info[gt.plane[g]].key)
-                                  for g in range(len(gt)) if g not in hit)  # fmt: skip
+            found[name][0].extend(
+                (float(s), info[p].key)
+                for s, p in zip(
+                    obj.score[counted & (m.op == -1)],
+                    obj.plane[counted & (m.op == -1)],
+                    strict=True,
+                )
+            )
+            found[name][1].extend(
+                (int(gt.area[g]), info[gt.plane[g]].key) for g in range(len(gt)) if g not in hit
+            )
 
-    results = run_detectors(Chips(N), [BUILTIN[d] for d in DETECTORS], batch_size=N,
-                            scoring=SCORING, progress=False, on_batch=collect)  # fmt: skip
+    results = run_detectors(
+        Chips(N),
+        [BUILTIN[d] for d in DETECTORS],
+        batch_size=N,
+        scoring=SCORING,
+        progress=False,
+        on_batch=collect,
+    )
     rows = {r.detector.name: r.rows for r in results}
     for d in DETECTORS:  # the reference agrees with the per-image counts
         assert len(found[d][0]) == sum(row[3] for row in rows[d])
@@ -109,8 +129,9 @@ def test_the_gallery_holds_the_global_top_cases(reference):
 
 
 @pytest.mark.parametrize(("shard_size", "batch_size"), [(1, 1), (5, 2), (4, 3)])
-def test_any_shard_or_batch_size_gives_the_same_gallery(tmp_path, reference, shard_size,
-                                                        batch_size):  # fmt: skip
+def test_any_shard_or_batch_size_gives_the_same_gallery(
+    tmp_path, reference, shard_size, batch_size
+):
     whole = reference[1]
     parts = _galleries(tmp_path, shard_size, batch_size)
     for d in DETECTORS:
@@ -123,10 +144,14 @@ def test_any_shard_or_batch_size_gives_the_same_gallery(tmp_path, reference, sha
 def test_merging_is_associative_and_keeps_the_best():
     def cases(values: list[float], image: str) -> Cases:
         n = len(values)
-        return Cases("false_alarm", 3, [(-v, 0, image, 0.0, 0.0) for v in values],
-                     [{"score": v, "image": image} for v in values],
-                     np.full((n, CROP, CROP), 1, np.float16),
-                     np.zeros((n, CROP, CROP), np.uint8))  # fmt: skip
+        return Cases(
+            "false_alarm",
+            3,
+            [(-v, 0, image, 0.0, 0.0) for v in values],
+            [{"score": v, "image": image} for v in values],
+            np.full((n, CROP, CROP), 1, np.float16),
+            np.zeros((n, CROP, CROP), np.uint8),
+        )
 
     a, b, c = cases([5, 1], "a"), cases([4, 3, 2], "b"), cases([5, 0.5], "c")
     left, right = (a + b) + c, a + (b + c)
@@ -185,15 +210,15 @@ def test_written_gallery_matches_its_index(tmp_path, reference):
 
 
 @pytest.mark.parametrize("defer_bytes", [0, 1 << 40])
-def test_deferred_cases_are_the_cases_built_at_once(tmp_path, reference, monkeypatch,
-                                                    defer_bytes):  # fmt: skip
+def test_deferred_cases_are_the_cases_built_at_once(tmp_path, reference, monkeypatch, defer_bytes):
     """Cases built only when the gallery is saved (candidates pushed out meanwhile never
     built) equal those built as offered, batch after batch."""
     import torchsar_eval.gallery as gallery_module
 
     monkeypatch.setattr(gallery_module, "DEFER_BYTES", defer_bytes)
-    results = run_detectors(Chips(N), [BUILTIN[d] for d in DETECTORS], batch_size=2,
-                            scoring=SCORING, progress=False)  # fmt: skip
+    results = run_detectors(
+        Chips(N), [BUILTIN[d] for d in DETECTORS], batch_size=2, scoring=SCORING, progress=False
+    )
     for r in results:
         whole = reference[1][r.detector.name]
         _same(whole.false_alarms, r.gallery.false_alarms)

@@ -136,14 +136,21 @@ def test_parser_defaults_equal_the_library_defaults(parser):
     run = parser.parse_args(["run"])
     ex = Execution()
     assert (run.batch_size, run.shard_size, run.workers) == (
-        ex.batch_size, ex.shard_size, ex.workers
-    )  # fmt: skip
+        ex.batch_size,
+        ex.shard_size,
+        ex.workers,
+    )
     assert run.calibration_fraction == Calibration("f1").fraction
     af = parser.parse_args(["autofocus"])
     cfg = Config()
     assert (af.scenes, af.size, af.density, af.snr, af.seed, af.pfa) == (
-        cfg.scenes, cfg.size, cfg.density, cfg.snr_db, cfg.seed, cfg.pfa
-    )  # fmt: skip
+        cfg.scenes,
+        cfg.size,
+        cfg.density,
+        cfg.snr_db,
+        cfg.seed,
+        cfg.pfa,
+    )
 
 
 def test_cli_prints_a_warning_as_one_line(tmp_path):

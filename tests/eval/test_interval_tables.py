@@ -20,8 +20,7 @@ from torchsar_eval.tables import INTERVALS, paired_table, summary_table
 
 def _run(n=24, replicates=200, unit="image", detectors=None):
     scoring = te.Scoring(replicates=replicates, bootstrap_unit=unit)
-    return te.evaluate({"sq": Squares(n)}, detectors or DETECTORS, scoring=scoring,
-                       progress=False)  # fmt: skip
+    return te.evaluate({"sq": Squares(n)}, detectors or DETECTORS, scoring=scoring, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -93,9 +92,13 @@ class OneTarget(torch.utils.data.Dataset):
         inst = torch.zeros(1, SIZE, SIZE, dtype=torch.int32)
         inst[0, 10:15, 10:15] = 1
         image[inst == 1] = 100.0 if i % 5 == 0 else 300.0
-        return {"image": image, "mask": inst > 0, "instances": inst,
-                "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
-                "meta": {"name": f"one/{i}"}}  # fmt: skip
+        return {
+            "image": image,
+            "mask": inst > 0,
+            "instances": inst,
+            "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
+            "meta": {"name": f"one/{i}"},
+        }
 
 
 def bright(x):
@@ -107,8 +110,12 @@ def test_one_target_per_image_agrees_with_jeffreys():
     bootstrap's Monte-Carlo error) Jeffreys' on the number of images, with no Student
     factor (count = units; the slow reference: scipy's beta quantiles)."""
     n = 60
-    res = te.evaluate({"one": OneTarget(n)}, {"bright": bright},
-                      scoring=te.Scoring(replicates=2000), progress=False)  # fmt: skip
+    res = te.evaluate(
+        {"one": OneTarget(n)},
+        {"bright": bright},
+        scoring=te.Scoring(replicates=2000),
+        progress=False,
+    )
     row = res.summary.iloc[0]
     assert row.recall == 0.8
     m = n * t_shrink(n, 0.95, count=n)
@@ -120,15 +127,18 @@ def test_one_target_per_image_agrees_with_jeffreys():
 
 
 def _csv(runs) -> list[tuple[str, str]]:
-    return [(summary_table({"chips": r}).to_csv(), paired_table({"chips": r}).to_csv())
-            for r in runs]  # fmt: skip
+    return [
+        (summary_table({"chips": r}).to_csv(), paired_table({"chips": r}).to_csv()) for r in runs
+    ]
 
 
 def test_summary_and_paired_bytes_do_not_depend_on_the_shard_size(tmp_path):
     """The intervals come from states that add up: the same CSV bytes for one shard and
     for small shards."""
-    runs = [run_shards(_job(9, 100), tmp_path / "a", progress=False)[0],
-            run_shards(_job(9, 2), tmp_path / "b", progress=False)[0]]  # fmt: skip
+    runs = [
+        run_shards(_job(9, 100), tmp_path / "a", progress=False)[0],
+        run_shards(_job(9, 2), tmp_path / "b", progress=False)[0],
+    ]
     a, b = _csv(runs)
     assert a == b
 

@@ -148,8 +148,18 @@ def test_stacked_truth_equals_the_item_by_item_truth(tmp_path, seed):
     assert fast is not None and not skipped and len(fast) == len(slow) >= 1
     for (shape, items, gt, metas), (shape2, items2, gt2, metas2) in zip(fast, slow, strict=True):
         assert (shape, items, metas) == (shape2, items2, metas2)
-        for field in ("plane", "area", "box", "classes", "has_mask", "box_only", "centroid",
-                      "spacing", "length_m", "declared_area"):  # fmt: skip
+        for field in (
+            "plane",
+            "area",
+            "box",
+            "classes",
+            "has_mask",
+            "box_only",
+            "centroid",
+            "spacing",
+            "length_m",
+            "declared_area",
+        ):
             np.testing.assert_array_equal(getattr(gt, field), getattr(gt2, field), err_msg=field)
         for field in ("plane", "classes", "box", "has_mask"):
             np.testing.assert_array_equal(getattr(gt.crowd, field), getattr(gt2.crowd, field))

@@ -103,10 +103,28 @@ def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
 def test_a_finished_two_worker_run_is_quiet(tmp_path):
     """A run that ends normally lets its worker processes exit by themselves: nothing on
     stderr (no semaphores of killed workers left for the resource tracker)."""
-    argv = ["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca", "--no-progress",
-            "--workers", "2", "--shard-size", "2", "--out", str(tmp_path / "run")]  # fmt: skip
-    done = subprocess.run([sys.executable, "-m", "torchsar_eval.cli", *argv],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    argv = [
+        "run",
+        "--dataset",
+        "sim-chips",
+        "--n",
+        "4",
+        "--detectors",
+        "ca",
+        "--no-progress",
+        "--workers",
+        "2",
+        "--shard-size",
+        "2",
+        "--out",
+        str(tmp_path / "run"),
+    ]
+    done = subprocess.run(
+        [sys.executable, "-m", "torchsar_eval.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0 and done.stderr == "", done.stderr
 
 
@@ -149,8 +167,11 @@ def test_workers_die_with_their_driver(tmp_path):
         "--out",
         str(tmp_path / "o"),
     ]
-    proc = subprocess.Popen([sys.executable, "-m", "torchsar_eval.cli", *argv],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "torchsar_eval.cli", *argv],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 120
     workers: list[int] = []
     while time.monotonic() < deadline and proc.poll() is None:

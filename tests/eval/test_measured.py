@@ -24,15 +24,22 @@ def _targets(masks: bool):
 
 
 def _boxes():
-    return {"boxes": torch.tensor([[2.0, 2, 10, 10], [18, 21, 30, 28], [0, 25, 5, 31]]),
-            "scores": torch.tensor([0.9, 0.8, 0.3]), "labels": torch.tensor([1, 1, 1])}  # fmt: skip
+    return {
+        "boxes": torch.tensor([[2.0, 2, 10, 10], [18, 21, 30, 28], [0, 25, 5, 31]]),
+        "scores": torch.tensor([0.9, 0.8, 0.3]),
+        "labels": torch.tensor([1, 1, 1]),
+    }
 
 
 @pytest.mark.parametrize(
     ("masks", "pred_masks", "kind", "iou_type"),
-    [(True, True, "mask", "mask"), (True, False, "mask", "box"), (False, False, "mask", "box"),
-     (True, True, "box", "box")],
-)  # fmt: skip
+    [
+        (True, True, "mask", "mask"),
+        (True, False, "mask", "box"),
+        (False, False, "mask", "box"),
+        (True, True, "box", "box"),
+    ],
+)
 def test_the_iou_type_follows_what_was_compared(masks, pred_masks, kind, iou_type):
     ev = te.Evaluator("d", te.Scoring(matching=te.Matching(kind=kind), replicates=0))
     pred = _boxes()
@@ -81,9 +88,10 @@ def test_distance_rule_reports_ap_distance_not_ap50():
         ev = te.Evaluator(name, te.Scoring(matching=rule, replicates=50))
         for i in range(6):
             pts = torch.tensor([[5.0 + jitter, 5.0], [20.0, 20.0 + jitter], [28.0, 3.0]])
-            ev.update([{"points": pts, "scores": torch.tensor([0.9, 0.7, 0.2])}],
-                      [{"boxes": torch.tensor([[3.0, 3, 7, 7], [18, 18, 22, 22]]),
-                        "image_id": i}])  # fmt: skip
+            ev.update(
+                [{"points": pts, "scores": torch.tensor([0.9, 0.7, 0.2])}],
+                [{"boxes": torch.tensor([[3.0, 3, 7, 7], [18, 18, 22, 22]]), "image_id": i}],
+            )
         evs.append(ev)
     rows = [ev.compute().summary.iloc[0] for ev in evs]
     for row in rows:
@@ -108,9 +116,10 @@ def test_paired_rows_name_the_distance_ap():
             pts = torch.tensor([[5.0, 5.0], [20.0, 20.0]]) + torch.from_numpy(
                 rng.normal(0, 1.5, (2, 2))
             )
-            ev.update([{"points": pts.float(), "scores": torch.tensor([0.9, 0.4])}],
-                      [{"boxes": torch.tensor([[3.0, 3, 7, 7], [18, 18, 22, 22]]),
-                        "image_id": i}])  # fmt: skip
+            ev.update(
+                [{"points": pts.float(), "scores": torch.tensor([0.9, 0.4])}],
+                [{"boxes": torch.tensor([[3.0, 3, 7, 7], [18, 18, 22, 22]]), "image_id": i}],
+            )
         evs.append(ev)
     paired = result_tables({"set": evs})["paired"]
     assert "ap_distance" in set(paired.metric) and "ap50" not in set(paired.metric)

@@ -62,17 +62,27 @@ def _with_header(text: str) -> bytes:
         (_with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (-1,), }"), "shape"),
         (_with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (2.5,), }"), "shape"),
         (_with_header("{'descr': '<f8', 'fortran_order': 0, 'shape': (), }"), "fortran_order"),
-        (_with_header("{'descr': [('a', '<f8')], 'fortran_order': False, 'shape': (), }"),
-         "not a plain number"),
-        (_with_header("{'descr': '<M8[s]', 'fortran_order': False, 'shape': (), }"),
-         "not a plain number"),
-        (_with_header("{'descr': 'x', 'fortran_order': False, 'shape': (), }"),
-         "not a plain number"),
+        (
+            _with_header("{'descr': [('a', '<f8')], 'fortran_order': False, 'shape': (), }"),
+            "not a plain number",
+        ),
+        (
+            _with_header("{'descr': '<M8[s]', 'fortran_order': False, 'shape': (), }"),
+            "not a plain number",
+        ),
+        (
+            _with_header("{'descr': 'x', 'fortran_order': False, 'shape': (), }"),
+            "not a plain number",
+        ),
         (_npy(np.arange(4.0)) + b"\0" * 8, "oversized .npy data"),
-        (_with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (1099511627776, 1099511627776), }"),
-         "truncated .npy data"),
+        (
+            _with_header(
+                "{'descr': '<f8', 'fortran_order': False, 'shape': (1099511627776, 1099511627776), }"
+            ),
+            "truncated .npy data",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_headers_are_one_value_error(data, message):
     with pytest.raises(NpyError, match=message):
         read_npy(data)

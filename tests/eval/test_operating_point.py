@@ -32,13 +32,21 @@ def test_choose_threshold_by_hand():
     """Two images, two targets; ranked TP 0.9, FP 0.7, FP 0.6, TP 0.2: the threshold is a
     detection score (the highest one left out), never a grid level."""
     score = np.array([0.9, 0.7, 0.6, 0.2])
-    obj = Objects.from_points(np.zeros((4, 2)), score, shape=(8, 8),
-                              plane=np.array([0, 0, 1, 1]), planes=2)  # fmt: skip
+    obj = Objects.from_points(
+        np.zeros((4, 2)), score, shape=(8, 8), plane=np.array([0, 0, 1, 1]), planes=2
+    )
     inst = np.zeros((2, 8, 8), int)
     inst[0, 0, 0] = inst[1, 4, 4] = 1
     op = np.array([0, -1, -1, 1])
-    m = BatchMatch(np.tile(op, (4, 10, 1)), op, np.zeros(4), np.array([0.9, 0.2]),
-                   np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
+    m = BatchMatch(
+        np.tile(op, (4, 10, 1)),
+        op,
+        np.zeros(4),
+        np.array([0.9, 0.2]),
+        np.zeros(2, np.int64),
+        np.array([0, 3]),
+        "iou",
+    )
     st = ObjectState(replicates=0)
     st.update(m, obj, ground_truth(inst), [ImageInfo("a", order=0), ImageInfo("b", order=1)])
     assert choose_threshold(st, Target("fa", 0.0)) == 0.7  # only the top TP
@@ -57,9 +65,23 @@ def test_parse_target():
 
 def test_run_with_calibration_and_coco_export(tmp_path):
     out = tmp_path / "out"
-    argv = ["run", "--dataset", "sim-chips", "--n", "10", "--detectors", "ca,region",
-            "--calibrate-on", "fa=1", "--export-coco", "--bootstrap", "20", "--no-progress",
-            "--out", str(out)]  # fmt: skip
+    argv = [
+        "run",
+        "--dataset",
+        "sim-chips",
+        "--n",
+        "10",
+        "--detectors",
+        "ca,region",
+        "--calibrate-on",
+        "fa=1",
+        "--export-coco",
+        "--bootstrap",
+        "20",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     s = pd.read_csv(out / "summary.csv")
     test = split_indices(10, "sim-chips", 0.3)[1]
@@ -104,9 +126,26 @@ def test_an_unreadable_file_stops_the_run_or_is_skipped_and_counted(tmp_path, ca
 
 def test_windows_in_metres_are_converted_with_the_pixel_spacing(tmp_path):
     out = tmp_path / "m"
-    argv = ["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca", "--window-units",
-            "m", "--param", "ca.guard=0.9", "--param", "ca.train=1.2", "--bootstrap", "0",
-            "--no-progress", "--out", str(out)]  # fmt: skip
+    argv = [
+        "run",
+        "--dataset",
+        "sim-chips",
+        "--n",
+        "2",
+        "--detectors",
+        "ca",
+        "--window-units",
+        "m",
+        "--param",
+        "ca.guard=0.9",
+        "--param",
+        "ca.train=1.2",
+        "--bootstrap",
+        "0",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0  # simulated chips: 0.3 m pixels
     cfg = json.loads((out / "config.json").read_text())["options"]
     assert cfg["detectors_in_pixels"]["sim-chips"]["ca"]["guard"] == 3

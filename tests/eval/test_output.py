@@ -143,8 +143,9 @@ def holder():
             "import sys; from torchsar_eval.locks import hold\n"
             f"with hold({str(lock)!r}):\n    print('held', flush=True); sys.stdin.read()"
         )
-        proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
-                                stdout=subprocess.PIPE, text=True)  # fmt: skip
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
         assert proc.stdout.readline().strip() == "held"
         procs.append(proc)
         return proc
@@ -188,13 +189,21 @@ def test_resume_adopts_the_staging_folder_of_an_ended_run(tmp_path):
         (tmp / "summary.csv").write_text("x")
     assert not left.exists()
     assert sorted(os.listdir(out)) == [
-        RUN_MARKER, "config.json", "resume.json", "shard-000000.state", "summary.csv"
-    ]  # fmt: skip
+        RUN_MARKER,
+        "config.json",
+        "resume.json",
+        "shard-000000.state",
+        "summary.csv",
+    ]
     assert list(tmp_path.iterdir()) == [out]
 
 
-FAILURES = [EvalError("shard 3 failed"), OSError(28, "No space left on device"),
-            KeyboardInterrupt(), RuntimeError("a bug")]  # fmt: skip
+FAILURES = [
+    EvalError("shard 3 failed"),
+    OSError(28, "No space left on device"),
+    KeyboardInterrupt(),
+    RuntimeError("a bug"),
+]
 
 
 @pytest.mark.parametrize("error", FAILURES)
@@ -367,8 +376,7 @@ def test_overwrite_touches_only_what_a_run_wrote(tmp_path, prepare):
     out.mkdir()
     prepare(out)
     before = _tree(out)
-    with pytest.raises(EvalError, match="not a run of torchsar-eval"), \
-            claim(out, overwrite=True):  # fmt: skip
+    with pytest.raises(EvalError, match="not a run of torchsar-eval"), claim(out, overwrite=True):
         raise AssertionError("the body must not run")
     assert _tree(out) == before
 

@@ -61,15 +61,17 @@ def test_outlines_sit_on_the_objects_they_draw():
 
 def test_boxes_small_images_doubled_and_large_ones_reduced():
     gt = ground_truth(np.zeros((1, 40, 40), np.int64))
-    obj = Objects.from_boxes([np.array([[10.0, 12.0, 20.0, 30.0]])], [np.array([0.9])],
-                             shape=(40, 40), threshold=0.5)  # fmt: skip
+    obj = Objects.from_boxes(
+        [np.array([[10.0, 12.0, 20.0, 30.0]])], [np.array([0.9])], shape=(40, 40), threshold=0.5
+    )
     px, counts = render_overlay(None, 0, obj, gt, np.array([-1]))
     assert px.shape == (80, 80) and counts["false_alarms"] == 1
     rows, cols = np.nonzero(px == FALSE_ALARM)  # a frame of one image pixel just outside it
     assert (rows.min(), rows.max(), cols.min(), cols.max()) == (18, 41, 22, 61)
     assert not (px[20:40, 24:60] == FALSE_ALARM).any()
-    below = Objects.from_boxes([np.array([[1.0, 1, 5, 5]])], [np.array([0.2])], shape=(40, 40),
-                               threshold=0.5)  # fmt: skip
+    below = Objects.from_boxes(
+        [np.array([[1.0, 1, 5, 5]])], [np.array([0.2])], shape=(40, 40), threshold=0.5
+    )
     px, counts = render_overlay(None, 0, below, gt, np.array([-1]))
     assert counts["false_alarms"] == 0 and not (px == FALSE_ALARM).any()  # below the threshold
     big = ground_truth(np.zeros((1, 2 * MAX_SIDE + 2, 64), np.int64))
@@ -80,9 +82,27 @@ def test_boxes_small_images_doubled_and_large_ones_reduced():
 
 def test_counts_equal_the_run_per_image_rows(tmp_path):
     out = tmp_path / "run"
-    assert main(["run", "--dataset", "sim-chips", "--n", "8", "--detectors", "ca,os,region",
-                 "--overlay", "3", "--no-progress", "--bootstrap", "0",
-                 "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "8",
+                "--detectors",
+                "ca,os,region",
+                "--overlay",
+                "3",
+                "--no-progress",
+                "--bootstrap",
+                "0",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     drawn = pd.read_csv(out / "overlays" / "overlays.csv")
     rows = pd.read_csv(out / "per_image.csv")
     summary = pd.read_csv(out / "summary.csv").set_index("detector")
@@ -101,9 +121,29 @@ def test_a_calibrated_run_is_drawn_at_its_chosen_threshold(tmp_path):
     """Every image of the test split drawn: the overlays' counts add up to the summary's
     (which is at the chosen threshold, not the design one)."""
     out = tmp_path / "run"
-    assert main(["run", "--dataset", "sim-chips", "--n", "16", "--detectors", "ca,os",
-                 "--calibrate-on", "f1", "--overlay", "16", "--no-progress", "--bootstrap",
-                 "0", "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "16",
+                "--detectors",
+                "ca,os",
+                "--calibrate-on",
+                "f1",
+                "--overlay",
+                "16",
+                "--no-progress",
+                "--bootstrap",
+                "0",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     drawn = pd.read_csv(out / "overlays" / "overlays.csv")
     summary = pd.read_csv(out / "summary.csv").set_index("detector")
     for det, d in drawn.groupby("detector"):
@@ -115,8 +155,14 @@ def test_a_calibrated_run_is_drawn_at_its_chosen_threshold(tmp_path):
 
 def test_names_are_checked_before_the_run_and_need_a_folder(tmp_path):
     with pytest.raises(EvalError, match="has no image 'nope'"):
-        te.evaluate("sim-chips", ["ca"], n=4, overlay=["sim-chips/1", "nope"],
-                    out=tmp_path / "x", progress=False)  # fmt: skip
+        te.evaluate(
+            "sim-chips",
+            ["ca"],
+            n=4,
+            overlay=["sim-chips/1", "nope"],
+            out=tmp_path / "x",
+            progress=False,
+        )
     assert not list((tmp_path).glob("**/shard-*"))
     with pytest.raises(EvalError, match="overlay.*needs.*out"):
         te.evaluate("sim-chips", ["ca"], n=4, overlay=2, progress=False)

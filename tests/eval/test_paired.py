@@ -38,9 +38,13 @@ class Squares(torch.utils.data.Dataset):
         inst[0, r : r + 5, 4:9] = 1
         inst[0, 30:35, r + 20 : r + 25] = 2
         image[inst == 1], image[inst == 2] = 300.0, 100.0
-        return {"image": image, "mask": inst > 0, "instances": inst,
-                "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
-                "meta": {"name": f"sq/{i}", "group": f"scene{i // 4}"}}  # fmt: skip
+        return {
+            "image": image,
+            "mask": inst > 0,
+            "instances": inst,
+            "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
+            "meta": {"name": f"sq/{i}", "group": f"scene{i // 4}"},
+        }
 
 
 def every_target(x):
@@ -66,8 +70,13 @@ DETECTORS = {"all": every_target, "bright": bright_only, "fa": with_false_alarms
 
 def _run(n=24, shard_size=256, unit="image", replicates=200):
     scoring = te.Scoring(replicates=replicates, bootstrap_unit=unit)
-    return te.evaluate({"sq": Squares(n)}, DETECTORS, scoring=scoring,
-                       execution=te.Execution(shard_size=shard_size), progress=False)  # fmt: skip
+    return te.evaluate(
+        {"sq": Squares(n)},
+        DETECTORS,
+        scoring=scoring,
+        execution=te.Execution(shard_size=shard_size),
+        progress=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -87,8 +96,16 @@ def test_detectors_that_differ_by_construction_differ_significantly(results):
     p = results.paired.set_index(["detector", "metric"])
     assert set(results.paired.reference) == {"all"}  # the best F1: every target, no false alarm
     assert set(results.paired.detector) == {"bright", "fa"}
-    assert list(results.paired.columns) == ["dataset", "detector", "reference", "metric",
-                                            "difference", "lo", "hi", "significant"]  # fmt: skip
+    assert list(results.paired.columns) == [
+        "dataset",
+        "detector",
+        "reference",
+        "metric",
+        "difference",
+        "lo",
+        "hi",
+        "significant",
+    ]
     bright = p.loc["bright"]
     assert bright.loc["recall", "difference"] == pytest.approx(-0.5)
     assert bright.loc["recall", "hi"] < 0 and bright.loc["recall", "significant"]
@@ -113,10 +130,12 @@ def test_the_paired_interval_recovers_the_two_intervals_and_their_correlation(re
     ok = np.isfinite(a["f1"]) & np.isfinite(b["f1"])
     r = np.corrcoef(a["f1"][ok], b["f1"][ok])[0, 1] if b["f1"][ok].std() > 0 else 0.0
     pa, pb = ia.centre, ib.centre
-    lo = (pa - pb) - np.sqrt((pa - ia.lo) ** 2 + (ib.hi - pb) ** 2
-                             - 2 * r * (pa - ia.lo) * (ib.hi - pb))  # fmt: skip
-    hi = (pa - pb) + np.sqrt((ia.hi - pa) ** 2 + (pb - ib.lo) ** 2
-                             - 2 * r * (ia.hi - pa) * (pb - ib.lo))  # fmt: skip
+    lo = (pa - pb) - np.sqrt(
+        (pa - ia.lo) ** 2 + (ib.hi - pb) ** 2 - 2 * r * (pa - ia.lo) * (ib.hi - pb)
+    )
+    hi = (pa - pb) + np.sqrt(
+        (ia.hi - pa) ** 2 + (pb - ib.lo) ** 2 - 2 * r * (ia.hi - pa) * (pb - ib.lo)
+    )
     row = results.paired.set_index(["detector", "metric"]).loc[("fa", "f1")]
     d = row.difference  # the interval is widened to its point when the centres moved past it
     assert (row.lo, row.hi) == pytest.approx((min(lo, d), max(hi, d)))

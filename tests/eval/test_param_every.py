@@ -24,7 +24,9 @@ def _args(*params, detectors="ca,os,region", predictions=()):
 
 def test_parse_accepts_every_detector_forms():
     assert parse_params(["pfa=1e-6", "*.guard=3", "ca.train=9"]) == {
-        "*": {"pfa": 1e-6, "guard": 3}, "ca": {"train": 9}}  # fmt: skip
+        "*": {"pfa": 1e-6, "guard": 3},
+        "ca": {"train": 9},
+    }
     with pytest.raises(EvalError, match="DETECTOR.NAME=VALUE"):
         parse_params(["a.b.c=1"])
 
@@ -45,16 +47,37 @@ def test_an_option_no_detector_has_is_refused():
 def test_saved_predictions_take_the_harness_options_only(tmp_path):
     path = tmp_path / "p.json"
     path.write_text(json.dumps([]))
-    dets = {d.name: d for d in check_run_args(
-        _args("guard=3", "threshold=0.5", detectors="ca", predictions=[f"cnn={path}"])).detectors}  # fmt: skip
+    dets = {
+        d.name: d
+        for d in check_run_args(
+            _args("guard=3", "threshold=0.5", detectors="ca", predictions=[f"cnn={path}"])
+        ).detectors
+    }
     assert dets["ca"].options["guard"] == 3 and dets["ca"].threshold == 0.5
     assert dets["cnn"].threshold == 0.5
 
 
 def test_the_cli_records_the_options_applied(tmp_path):
     out = tmp_path / "run"
-    main(["run", "--dataset", "sim-chips", "--n", "2", "--detectors", "ca,so", "--param",
-          "train=6", "--param", "so.train=5", "--bootstrap", "0", "--out", str(out)])  # fmt: skip
+    main(
+        [
+            "run",
+            "--dataset",
+            "sim-chips",
+            "--n",
+            "2",
+            "--detectors",
+            "ca,so",
+            "--param",
+            "train=6",
+            "--param",
+            "so.train=5",
+            "--bootstrap",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["options"]["detectors"]["ca"]["train"] == 6
     assert cfg["options"]["detectors"]["so"]["train"] == 5

@@ -21,8 +21,18 @@ def test_pfa_on_a_dataset_counts_only_clutter_pixels(tmp_path):
         io.imsave(root / f"c{k}.png", img, check_contrast=False)
         io.imsave(root / f"c{k}.mask.png", lab, check_contrast=False)
     out = tmp_path / "out"
-    argv = ["pfa", "--dataset", f"folder:{root}?type=amplitude", "--detectors", "ca,go",
-            "--pfa", "0.01,0.001", "--out", str(out), "--no-progress"]  # fmt: skip
+    argv = [
+        "pfa",
+        "--dataset",
+        f"folder:{root}?type=amplitude",
+        "--detectors",
+        "ca,go",
+        "--pfa",
+        "0.01,0.001",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     t = pd.read_csv(out / "pfa.csv")
     assert len(t) == 4 and set(t.detector) == {"ca", "go"}

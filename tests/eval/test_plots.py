@@ -63,8 +63,9 @@ def test_unknown_names_get_a_stable_style_unlike_any_builtin():
     here = repr([detector_style(n) for n in names])
     for seed in ("0", "12345"):  # other processes, other string-hash seeds
         env = {**os.environ, "PYTHONHASHSEED": seed}
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True, env=env)  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+        )
         assert out.stdout.strip() == here
     builtin = {(c, line) for c, line, _ in STYLES.values()}
     for n in names:
@@ -81,12 +82,21 @@ def _tables(names: list[str], ap50: dict[str, float] | None = None):
         pfa = np.sort(rng.uniform(1e-4, 1e-1, 6))
         pixel += [{"detector": n, "pfa_pixel": f, "pd_pixel": min(1, 0.2 + 5 * f)} for f in pfa]
         fa = [0.0, 2.0, 3.5, 6.0]
-        froc += [{"detector": n, "false_alarms_per_image": f, "pd_object": 0.1 * k % 1 + f / 10}
-                 for f in fa]  # fmt: skip
+        froc += [
+            {"detector": n, "false_alarms_per_image": f, "pd_object": 0.1 * k % 1 + f / 10}
+            for f in fa
+        ]
         pr += [{"detector": n, "recall": r, "precision": 1 - r / 2} for r in (0.1, 0.5, 0.9)]
-        summary.append({"detector": n, "pfa_pixel": pfa[2], "pd_pixel": 0.5,
-                        "false_alarms_per_image": 2.0, "pd_object": 0.5,
-                        "ap50": (ap50 or {}).get(n, 0.6)})  # fmt: skip
+        summary.append(
+            {
+                "detector": n,
+                "pfa_pixel": pfa[2],
+                "pd_pixel": 0.5,
+                "false_alarms_per_image": 2.0,
+                "pd_object": 0.5,
+                "ap50": (ap50 or {}).get(n, 0.6),
+            }
+        )
     return [pd.DataFrame(t) for t in (pixel, froc, pr, summary)]
 
 

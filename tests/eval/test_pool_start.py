@@ -17,8 +17,9 @@ def test_unguarded_script_gets_the_main_guard_message(tmp_path):
         evaluate("sim-chips", ["ca"], n=4, execution=Execution(progress=False, workers=2))
     """)
     )
-    out = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600
+    )
     assert out.returncode != 0
     last = out.stderr.strip().splitlines()[-1]
     assert last.startswith("torchsar_eval.errors.EvalError: no worker process could start")

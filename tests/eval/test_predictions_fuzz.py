@@ -26,15 +26,23 @@ from torchsar_eval.errors import EvalError
 
 SIZE = 32
 GT = {
-    "images": [{"id": 1, "file_name": "a.png", "height": SIZE, "width": SIZE},
-               {"id": 2, "file_name": "b.png", "height": SIZE, "width": SIZE}],
+    "images": [
+        {"id": 1, "file_name": "a.png", "height": SIZE, "width": SIZE},
+        {"id": 2, "file_name": "b.png", "height": SIZE, "width": SIZE},
+    ],
     "categories": [{"id": 1, "name": "ship"}, {"id": 2, "name": "boat"}],
     "annotations": [
         {"id": 1, "image_id": 1, "category_id": 1, "bbox": [2, 2, 8, 8], "area": 64, "iscrowd": 0},
-        {"id": 2, "image_id": 2, "category_id": 2, "bbox": [10, 10, 6, 5], "area": 30,
-         "iscrowd": 0},
+        {
+            "id": 2,
+            "image_id": 2,
+            "category_id": 2,
+            "bbox": [10, 10, 6, 5],
+            "area": 30,
+            "iscrowd": 0,
+        },
     ],
-}  # fmt: skip
+}
 RESULTS = [
     {"image_id": 1, "category_id": 1, "bbox": [2.5, 2, 8, 8], "score": 0.9},
     {"image_id": 2, "category_id": 2, "bbox": [10, 10, 6, 5], "score": 0.4},
@@ -49,8 +57,12 @@ def _score(gt: Path, pred: Path, matching: te.Matching) -> str:
         saved = te.predictions(pred, name="p", threshold=0.5)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = te.evaluate({"gt": f"coco:{gt}"}, [saved], progress=False,
-                              scoring=te.Scoring(matching=matching, replicates=0))  # fmt: skip
+            res = te.evaluate(
+                {"gt": f"coco:{gt}"},
+                [saved],
+                progress=False,
+                scoring=te.Scoring(matching=matching, replicates=0),
+            )
     except EvalError as exc:
         message = str(exc)
         assert "\n" not in message and len(message) < 2000, message[:3000]
@@ -115,15 +127,38 @@ def check_points(mutations) -> str:
         return _score(root / "gt.json", root / "points.csv", rule)
 
 
-MASK_DTYPES = [np.bool_, np.int8, np.uint8, np.uint16, np.int32, np.int64, np.float32,
-               np.float64, np.complex64]  # fmt: skip
+MASK_DTYPES = [
+    np.bool_,
+    np.int8,
+    np.uint8,
+    np.uint16,
+    np.int32,
+    np.int64,
+    np.float32,
+    np.float64,
+    np.complex64,
+]
 MASK_VALUES = [0, 1, 2, -1, 255, 2**31 - 1, 2**40, np.nan, np.inf, 0.7]
 MASK_SHAPES = [(SIZE, SIZE), (1, SIZE, SIZE), (SIZE, SIZE + 1), (SIZE,), (), (2, SIZE, SIZE)]
-SCORES = ['{"1": 0.7}', "{}", '{"1": "x"}', '{"x": 1}', "[1]", "", "{", '{"1": 1e400}',
-          "[" * 50_000, '{"1": ' + "9" * 5000 + "}"]  # fmt: skip
-MASK_CASES = st.tuples(st.sampled_from(MASK_DTYPES), st.sampled_from(MASK_VALUES),
-                       st.sampled_from(MASK_SHAPES), st.sampled_from(SCORES),
-                       st.booleans())  # fmt: skip
+SCORES = [
+    '{"1": 0.7}',
+    "{}",
+    '{"1": "x"}',
+    '{"x": 1}',
+    "[1]",
+    "",
+    "{",
+    '{"1": 1e400}',
+    "[" * 50_000,
+    '{"1": ' + "9" * 5000 + "}",
+]
+MASK_CASES = st.tuples(
+    st.sampled_from(MASK_DTYPES),
+    st.sampled_from(MASK_VALUES),
+    st.sampled_from(MASK_SHAPES),
+    st.sampled_from(SCORES),
+    st.booleans(),
+)
 
 
 def check_masks(dtype, value, shape, scores, both) -> str:
@@ -137,8 +172,11 @@ def check_masks(dtype, value, shape, scores, both) -> str:
             bad = np.zeros(shape, np.float64)
             if bad.size:
                 bad.reshape(-1)[: max(bad.size // 4, 1)] = value
-            bad = bad.astype(dtype) if not (np.isnan(value) and dtype not in (
-                np.float32, np.float64, np.complex64)) else bad  # fmt: skip
+            bad = (
+                bad.astype(dtype)
+                if not (np.isnan(value) and dtype not in (np.float32, np.float64, np.complex64))
+                else bad
+            )
         np.save(folder / "a.npy", good)
         np.save(folder / "b.npy", bad)
         (folder / "b.scores.json").write_text(scores)

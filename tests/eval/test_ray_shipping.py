@@ -51,11 +51,16 @@ def bare_python(tmp_path_factory):
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     python = venv / "bin" / "python"
     code = "import sysconfig; print(sysconfig.get_paths()['purelib'])"
-    site = subprocess.run([python, "-c", code], capture_output=True, text=True,
-                          check=True).stdout.strip()  # fmt: skip
+    site = subprocess.run(
+        [python, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.strip()
     Path(site, "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    check = subprocess.run([python, "-c", "import torch, ray; import torchsar"],
-                           capture_output=True, text=True, cwd=venv)  # fmt: skip
+    check = subprocess.run(
+        [python, "-c", "import torch, ray; import torchsar"],
+        capture_output=True,
+        text=True,
+        cwd=venv,
+    )
     assert "No module named 'torchsar'" in check.stderr, check.stderr
     return python
 
@@ -70,8 +75,14 @@ def test_workers_without_torchsar_score_with_the_shipped_copy(bare_python, tmp_p
     # the copy has no compiled-kernel cache: the numpy/torch code spares every process a
     # minute of numba compilation (the kernels are not what is shipped-tested here)
     env = {**os.environ, "TORCHSAR_NUMBA": "0"}
-    done = subprocess.run([bare_python, str(script)], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=600, env=env)  # fmt: skip
+    done = subprocess.run(
+        [bare_python, str(script)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
+        env=env,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     seen = json.loads(done.stdout.strip().splitlines()[-1])
     assert seen["driver"].startswith(str(src))

@@ -106,8 +106,10 @@ def test_every_run_folder_has_a_report_and_a_gallery(run):
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
     config = json.loads((out / "config.json").read_text())["options"]
     assert config["rank_by"] == "f1"
-    assert config["observed"]["sim-chips"] == {"image_size": [[128, 128]],
-                                               "pixel_spacing": [[0.3, 0.3]]}  # fmt: skip
+    assert config["observed"]["sim-chips"] == {
+        "image_size": [[128, 128]],
+        "pixel_spacing": [[0.3, 0.3]],
+    }
 
 
 def test_the_leaderboard_is_in_ranked_order_with_its_intervals(run):
@@ -163,9 +165,15 @@ def test_the_report_command_rebuilds_the_same_page(run, capsys):
 def test_the_dataset_card(run, tmp_path):
     out, _ = run
     text = (out / "report.html").read_text()
-    for fact in ("intensity (power), used as is", "128 × 128 px", "0.3 × 0.3 m",
-                 "vehicle (4)", "prescreening rule", "200 replicates",
-                 "only 4 targets: intervals are wide"):  # fmt: skip
+    for fact in (
+        "intensity (power), used as is",
+        "128 × 128 px",
+        "0.3 × 0.3 m",
+        "vehicle (4)",
+        "prescreening rule",
+        "200 replicates",
+        "only 4 targets: intervals are wide",
+    ):
         assert fact in text, fact
     assert "design Pfa is not meaningful" not in text
     copy = _copy(run, tmp_path)
@@ -195,21 +203,46 @@ def test_notes_name_detectors_without_detections_and_identical_ones(run, tmp_pat
 def test_optional_tables_are_shown_when_present(run, tmp_path):
     copy = _copy(run, tmp_path)
     rows = [
-        ["sim-chips", d, "measured", f"{c - 2.5:g}-{c + 2.5:g}", c - 2.5, c + 2.5, c, n, k,
-         k / n, max(0, k / n - 0.2), min(1, k / n + 0.1)]
+        [
+            "sim-chips",
+            d,
+            "measured",
+            f"{c - 2.5:g}-{c + 2.5:g}",
+            c - 2.5,
+            c + 2.5,
+            c,
+            n,
+            k,
+            k / n,
+            max(0, k / n - 0.2),
+            min(1, k / n + 0.1),
+        ]
         for d in ("ca", "so")
         for c, n, k in ((2.5, 5, 2), (7.5, 4, 3), (12.5, 6, 6))
-    ]  # fmt: skip
+    ]
     pd.DataFrame(rows, columns=SCR_COLUMNS).to_csv(copy / "scr.csv", index=False)
-    pd.DataFrame([["sim-chips", "ca", "false_alarm", "fragment", 7],
-                  ["sim-chips", "ca", "false_alarm", "clutter", 3],
-                  ["sim-chips", "so", "false_alarm", "clutter", 11],
-                  ["sim-chips", "so", "miss", "size:small", 2]],
-                 columns=["dataset", "detector", "error", "type", "count"]).to_csv(
-        copy / "errors.csv", index=False)  # fmt: skip
-    pd.DataFrame([["sim-chips", "so", "ca", "f1", -0.25, -0.4, -0.1, True]],
-                 columns=["dataset", "detector", "reference", "metric", "difference", "lo",
-                          "hi", "significant"]).to_csv(copy / "paired.csv", index=False)  # fmt: skip
+    pd.DataFrame(
+        [
+            ["sim-chips", "ca", "false_alarm", "fragment", 7],
+            ["sim-chips", "ca", "false_alarm", "clutter", 3],
+            ["sim-chips", "so", "false_alarm", "clutter", 11],
+            ["sim-chips", "so", "miss", "size:small", 2],
+        ],
+        columns=["dataset", "detector", "error", "type", "count"],
+    ).to_csv(copy / "errors.csv", index=False)
+    pd.DataFrame(
+        [["sim-chips", "so", "ca", "f1", -0.25, -0.4, -0.1, True]],
+        columns=[
+            "dataset",
+            "detector",
+            "reference",
+            "metric",
+            "difference",
+            "lo",
+            "hi",
+            "significant",
+        ],
+    ).to_csv(copy / "paired.csv", index=False)
     text = build_report([copy])
     page = Page(text)
     assert page.figures == 4 and "Pd vs SCR" in text
@@ -224,8 +257,7 @@ def test_optional_tables_are_shown_when_present(run, tmp_path):
     pd.DataFrame({"dataset": ["sim-chips"], "detector": ["so"], "delta": [0.1]}).to_csv(
         copy / "paired.csv", index=False
     )
-    pd.DataFrame({"dataset": ["sim-chips"], "what": ["x"]}).to_csv(copy / "errors.csv",
-                                                                    index=False)  # fmt: skip
+    pd.DataFrame({"dataset": ["sim-chips"], "what": ["x"]}).to_csv(copy / "errors.csv", index=False)
     page = Page(build_report([copy]))
     assert page.figures == 3  # no Pd-vs-SCR figure without its columns
 
@@ -295,14 +327,25 @@ def test_the_report_embeds_only_figures_inside_the_run_folder(run, tmp_path):
     (copy / "gallery" / "text.png").write_text("not a png")
     cases = pd.read_csv(copy / "gallery" / "cases.csv")
     row = cases.iloc[0]
-    names = [str(secret), "../" * 12 + str(secret)[1:], "gallery/link.png",
-             "gallery/fifo.png", "gallery/text.png", "/dev/zero", "gallery/inside.png"]  # fmt: skip
+    names = [
+        str(secret),
+        "../" * 12 + str(secret)[1:],
+        "gallery/link.png",
+        "gallery/fifo.png",
+        "gallery/text.png",
+        "/dev/zero",
+        "gallery/inside.png",
+    ]
     pd.concat([pd.DataFrame([{**row.to_dict(), "file": n} for n in names]), cases]).to_csv(
-        copy / "gallery" / "cases.csv", index=False)  # fmt: skip
+        copy / "gallery" / "cases.csv", index=False
+    )
     assert main(["report", str(copy)]) == 0
     text = (copy / "report.html").read_text()
-    embedded = b"".join(base64.b64decode(src.split(",", 1)[1]) for src in Page(text).images
-                        if src.startswith("data:"))  # fmt: skip
+    embedded = b"".join(
+        base64.b64decode(src.split(",", 1)[1])
+        for src in Page(text).images
+        if src.startswith("data:")
+    )
     assert b"SECRET-OUTSIDE-THE-RUN" not in embedded
     assert b"A-FIGURE-OF-THE-RUN" in embedded
     # a table that is a link out of the run is not read either
@@ -343,10 +386,18 @@ def test_pd_vs_scr_labels_with_negative_looking_bins_are_not_parsed():
     """'5-10' is the bin [5, 10): its point sits at the targets' mean SCR (7.5 here)."""
     from torchsar_eval.html_report.figures import scr_points
 
-    d = pd.DataFrame({"source": ["measured"] * 3, "scr_bin": ["5-10", "10-15", "15-20"],
-                      "scr_lo_db": [5.0, 10.0, 15.0], "scr_hi_db": [10.0, 15.0, 20.0],
-                      "scr_mean_db": [7.5, 12.0, 16.0], "pd": [0.2, 0.6, 0.9],
-                      "pd_lo": [0.1, 0.4, 0.7], "pd_hi": [0.4, 0.8, 1.0]})  # fmt: skip
+    d = pd.DataFrame(
+        {
+            "source": ["measured"] * 3,
+            "scr_bin": ["5-10", "10-15", "15-20"],
+            "scr_lo_db": [5.0, 10.0, 15.0],
+            "scr_hi_db": [10.0, 15.0, 20.0],
+            "scr_mean_db": [7.5, 12.0, 16.0],
+            "pd": [0.2, 0.6, 0.9],
+            "pd_lo": [0.1, 0.4, 0.7],
+            "pd_hi": [0.4, 0.8, 1.0],
+        }
+    )
     ((source, x, y, _),) = scr_points(d)
     assert source == "measured"
     assert x.tolist() == [7.5, 12.0, 16.0] and y.tolist() == [0.2, 0.6, 0.9]
@@ -360,8 +411,10 @@ def test_every_leaderboard_row_says_what_it_measured(run):
         row = summary.loc[cells[1].split(" ")[0]]
         assert row.iou_type == "mask" and cells[-1] == "mask IoU"
         assert "AP: mask IoU" in row.matching
-    assert all(f'title="{m}"' in (out / "report.html").read_text().replace("&lt;", "<")
-               for m in summary.matching)  # fmt: skip
+    assert all(
+        f'title="{m}"' in (out / "report.html").read_text().replace("&lt;", "<")
+        for m in summary.matching
+    )
 
 
 def test_every_case_says_why_it_is_one(run):

@@ -29,8 +29,7 @@ WIDTH, HEIGHT = 1366, 2600
 
 
 def _browser() -> str:
-    found = os.environ.get("TORCHSAR_BROWSER") or next(filter(None, map(shutil.which, NAMES)),
-                                                        None)  # fmt: skip
+    found = os.environ.get("TORCHSAR_BROWSER") or next(filter(None, map(shutil.which, NAMES)), None)
     if not found:
         pytest.skip("no Chromium installed (apt-get install chromium, or set TORCHSAR_BROWSER)")
     return found
@@ -38,9 +37,19 @@ def _browser() -> str:
 
 def _chromium(tmp_path, *args: str) -> subprocess.CompletedProcess:
     """Headless Chromium with its own profile, no network (every host unresolvable)."""
-    argv = [_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-            f"--user-data-dir={tmp_path / 'profile'}", "--host-resolver-rules=MAP * ~NOTFOUND",
-            "--enable-logging=stderr", "--v=0", "--virtual-time-budget=5000", *args]  # fmt: skip
+    argv = [
+        _browser(),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--host-resolver-rules=MAP * ~NOTFOUND",
+        "--enable-logging=stderr",
+        "--v=0",
+        "--virtual-time-budget=5000",
+        *args,
+    ]
     return subprocess.run(argv, capture_output=True, text=True, timeout=180, cwd=tmp_path)
 
 
@@ -95,8 +104,9 @@ def test_leaderboard_figures_and_images_are_laid_out(report, tmp_path):
 
 def test_a_screenshot_shows_the_page(report, tmp_path):
     shot = tmp_path / "shot.png"
-    done = _chromium(tmp_path, f"--window-size={WIDTH},{HEIGHT}", f"--screenshot={shot}",
-                     report.as_uri())  # fmt: skip
+    done = _chromium(
+        tmp_path, f"--window-size={WIDTH},{HEIGHT}", f"--screenshot={shot}", report.as_uri()
+    )
     assert shot.is_file(), done.stderr[-2000:]
     with Image.open(shot) as im:
         rgb = np.asarray(im.convert("RGB")).astype(int)
@@ -139,8 +149,13 @@ def _boxes(images):
     r, c = (peak // w).double(), (peak % w).double()
     boxes = torch.stack([r - 4, c - 4, r + 5, c + 5], 1).clamp(min=0).numpy()
     boxes[:, 2:] = np.minimum(boxes[:, 2:], [h, w])
-    return Objects.from_boxes(boxes, torch.log10(flat.max(dim=1).values).numpy(), shape=(h, w),
-                              plane=np.arange(b), planes=b)  # fmt: skip
+    return Objects.from_boxes(
+        boxes,
+        torch.log10(flat.max(dim=1).values).numpy(),
+        shape=(h, w),
+        plane=np.arange(b),
+        planes=b,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -151,14 +166,25 @@ def compared(tmp_path_factory):
     root = tmp_path_factory.mktemp("compare")
     base = te.evaluate("sim-chips", ["ca"], n=6, progress=False, scoring=te.Scoring(replicates=0))
     pts = root / "points.csv"
-    pts.write_text("image,row,col,score\n" + "".join(f"{im},64,64,0.7\n{im},10,100,0.2\n"
-                                                      for im in base.per_image.image))  # fmt: skip
+    pts.write_text(
+        "image,row,col,score\n"
+        + "".join(f"{im},64,64,0.7\n{im},10,100,0.2\n" for im in base.per_image.image)
+    )
     runs = []
     for name, pfa in (("a", 1e-3), ("b", 1e-6)):
-        dets = {"ca": te.load("ca", options={"pfa": pfa}), "boxes": te.Detector("boxes", _boxes),
-                "points": te.predictions(pts, name="points")}  # fmt: skip
-        te.evaluate("sim-chips", dets, n=6, out=root / name, progress=False,
-                    scoring=te.Scoring(replicates=50))  # fmt: skip
+        dets = {
+            "ca": te.load("ca", options={"pfa": pfa}),
+            "boxes": te.Detector("boxes", _boxes),
+            "points": te.predictions(pts, name="points"),
+        }
+        te.evaluate(
+            "sim-chips",
+            dets,
+            n=6,
+            out=root / name,
+            progress=False,
+            scoring=te.Scoring(replicates=50),
+        )
         runs.append(root / name)
     page = root / "compare.html"
     from torchsar_eval.html_report import write_report
@@ -181,8 +207,9 @@ def test_the_compare_page_fits_and_says_what_each_row_measured(compared, tmp_pat
     boxes = [c[0] for c in r["cases"]]
     for i, a in enumerate(boxes):  # no caption (no tile) overlaps another
         for b in boxes[i + 1 :]:
-            assert a[2] <= b[0] + 0.5 or b[2] <= a[0] + 0.5 or a[3] <= b[1] + 0.5 or \
-                b[3] <= a[1] + 0.5, (a, b)  # fmt: skip
+            assert (
+                a[2] <= b[0] + 0.5 or b[2] <= a[0] + 0.5 or a[3] <= b[1] + 0.5 or b[3] <= a[1] + 0.5
+            ), (a, b)
     for tile, caption, _ in r["cases"]:  # each caption inside its tile
         assert tile[0] - 0.5 <= caption[0] and caption[2] <= tile[2] + 0.5
 

@@ -14,14 +14,31 @@ import pytest
 from torchsar_eval.cli import main
 
 TABLES = ["summary.csv", "roc.csv", "pr.csv", "roc_pixel.csv", "breakdown.csv", "per_image.csv"]
-ARGS = ["run", "--dataset", "sim-chips", "--n", "12", "--detectors", "ca,so", "--shard-size",
-        "2", "--batch-size", "2", "--bootstrap", "10", "--export-coco", "--no-progress"]  # fmt: skip
+ARGS = [
+    "run",
+    "--dataset",
+    "sim-chips",
+    "--n",
+    "12",
+    "--detectors",
+    "ca,so",
+    "--shard-size",
+    "2",
+    "--batch-size",
+    "2",
+    "--bootstrap",
+    "10",
+    "--export-coco",
+    "--no-progress",
+]
 COCO = ["coco/sim-chips__gt.json", "coco/sim-chips__ca.json", "coco/sim-chips__so.json"]
 
 
 def _saved(parent: Path, name: str) -> int:
-    return sum(len(list(p.glob("shards/sim-chips/test/shard-*.state")))
-               for p in parent.glob(f".{name}.torchsar-partial-*"))  # fmt: skip
+    return sum(
+        len(list(p.glob("shards/sim-chips/test/shard-*.state")))
+        for p in parent.glob(f".{name}.torchsar-partial-*")
+    )
 
 
 def _interrupt_after(out: Path, shards: int, sig: int) -> int:
@@ -124,8 +141,17 @@ def test_resume_refuses_predictions_that_changed(tmp_path):
     record = tmp_path / "resume.json"
 
     def check():
-        plan = _Plan([predictions(path, name="cnn")], Scoring(), Execution(), None, None, None,
-                     "px", False, 0)  # fmt: skip
+        plan = _Plan(
+            [predictions(path, name="cnn")],
+            Scoring(),
+            Execution(),
+            None,
+            None,
+            None,
+            "px",
+            False,
+            0,
+        )
         check_resumable(record, fingerprint(plan, {}))
 
     check()

@@ -83,8 +83,9 @@ def test_a_detector_that_writes_into_its_input_corrupts_nothing_after_it():
         return ca(images + 1.0)
 
     alone = te.evaluate("sim-chips", ["ca"], n=6, progress=False).summary
-    both = te.evaluate("sim-chips", [te.Detector("vandal", vandal), "ca"], n=6,
-                       progress=False).summary  # fmt: skip
+    both = te.evaluate(
+        "sim-chips", [te.Detector("vandal", vandal), "ca"], n=6, progress=False
+    ).summary
     rows = both[both.detector == "ca"].drop(columns=["detector"]).reset_index(drop=True)
     pd.testing.assert_frame_equal(rows, alone.drop(columns=["detector"]).reset_index(drop=True))
     assert int(alone.tp.iloc[0]) > 0

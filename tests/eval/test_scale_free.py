@@ -41,14 +41,22 @@ class Boxes:
                 boxes.append([r0, c0, r0 + 12, c0 + 12])
                 scores.append(int(rng.integers(1, 128)) / 64.0)
                 planes.append(k)
-        return Objects.from_boxes(np.array(boxes, float).reshape(-1, 4),
-                                  self.f(np.array(scores)), shape=images.shape[-2:],
-                                  plane=np.array(planes), planes=len(meta),
-                                  threshold=float(self.f(np.float64(self.threshold))))  # fmt: skip
+        return Objects.from_boxes(
+            np.array(boxes, float).reshape(-1, 4),
+            self.f(np.array(scores)),
+            shape=images.shape[-2:],
+            plane=np.array(planes),
+            planes=len(meta),
+            threshold=float(self.f(np.float64(self.threshold))),
+        )
 
 
-SCORE_COLUMNS = {"froc": "threshold", "pr": "threshold", "summary": "score_threshold",
-                 "per_image": "max_score"}  # fmt: skip
+SCORE_COLUMNS = {
+    "froc": "threshold",
+    "pr": "threshold",
+    "summary": "score_threshold",
+    "per_image": "max_score",
+}
 
 
 def _run(f, **kw):
@@ -90,8 +98,14 @@ def test_calibrated_operating_points_map_with_the_scores():
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 1000), n=st.integers(3, 12))
 def test_every_printed_interval_contains_its_point(seed, n):
-    res = te.evaluate({"chips": "sim-chips"}, {"a": te.Detector("a", Boxes()), "ca": "ca"},
-                      n=n, seed=seed, scoring=te.Scoring(replicates=40), progress=False)  # fmt: skip
+    res = te.evaluate(
+        {"chips": "sim-chips"},
+        {"a": te.Detector("a", Boxes()), "ca": "ca"},
+        n=n,
+        seed=seed,
+        scoring=te.Scoring(replicates=40),
+        progress=False,
+    )
     s = res.summary
     for col in [c[:-3] for c in s.columns if c.endswith("_lo")]:
         lo, hi, v = s[f"{col}_lo"], s[f"{col}_hi"], s[col]
@@ -126,8 +140,13 @@ def test_clutter_squares_as_boxes_and_as_masks_score_the_same(kind):
     """A box that lies on no ignore pixel is never ignored: the same squares given as boxes
     and as masks on simulated scenes (with shadows as ignore pixels) score the same."""
     scoring = te.Scoring(matching=te.Matching(kind=kind), replicates=0)
-    res = te.evaluate({"scenes": "sim-scenes"}, {"boxes": Squares(False), "masks": Squares(True)},
-                      n=2, scoring=scoring, progress=False).summary.set_index("detector")  # fmt: skip
+    res = te.evaluate(
+        {"scenes": "sim-scenes"},
+        {"boxes": Squares(False), "masks": Squares(True)},
+        n=2,
+        scoring=scoring,
+        progress=False,
+    ).summary.set_index("detector")
     assert res.loc["boxes", "fp"] == res.loc["masks", "fp"] > 100
     assert res.loc["boxes", "tp"] == res.loc["masks", "tp"]
     scenes = ts.simulate.scenes(2, seed=0)

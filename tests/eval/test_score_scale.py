@@ -31,10 +31,15 @@ class Probability(torch.nn.Module):
 
 def _run(tmp_path, name: str, scale: str):
     det = te.Detector("prob", Probability(), scale=scale)
-    return te.evaluate("sim-chips", {"prob": det}, n=N, out=tmp_path / name, export_coco=True,
-                       scoring=te.Scoring(replicates=20,
-                                          rules=te.ObjectRules(floor=0.5)),
-                       progress=False)  # fmt: skip
+    return te.evaluate(
+        "sim-chips",
+        {"prob": det},
+        n=N,
+        out=tmp_path / name,
+        export_coco=True,
+        scoring=te.Scoring(replicates=20, rules=te.ObjectRules(floor=0.5)),
+        progress=False,
+    )
 
 
 def test_probabilities_stay_probabilities_and_no_number_moves(tmp_path):
@@ -82,9 +87,27 @@ def test_a_threshold_that_changes_between_batches_is_named(tmp_path):
 
 def test_scale_is_a_param_of_every_detector(tmp_path):
     out = tmp_path / "run"
-    assert main(["run", "--dataset", "sim-chips", "--n", "4", "--detectors", "ca,os",
-                 "--param", "ca.scale=ratio", "--no-progress", "--bootstrap", "0",
-                 "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--dataset",
+                "sim-chips",
+                "--n",
+                "4",
+                "--detectors",
+                "ca,os",
+                "--param",
+                "ca.scale=ratio",
+                "--no-progress",
+                "--bootstrap",
+                "0",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     s = pd.read_csv(out / "summary.csv").set_index("detector")
     assert s.loc["ca", "score_threshold"] == 1.0 and s.loc["os", "score_threshold"] > 1.0
     cfg = json.loads((out / "config.json").read_text())

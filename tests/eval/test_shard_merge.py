@@ -29,8 +29,16 @@ from torchsar_eval.tables import summary_table
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory):
     """A folder of 5 saved shards (9 chips, shards of 2, two detectors)."""
-    job = ShardJob("chips", make_dataset("sim-chips", n=9), list(range(9)),
-                   [BUILTIN["ca"], BUILTIN["so"]], te.Scoring(replicates=5), 2, None, 2)  # fmt: skip
+    job = ShardJob(
+        "chips",
+        make_dataset("sim-chips", n=9),
+        list(range(9)),
+        [BUILTIN["ca"], BUILTIN["so"]],
+        te.Scoring(replicates=5),
+        2,
+        None,
+        2,
+    )
     folder = tmp_path_factory.mktemp("saved")
     run_shards(job, folder, progress=False)
     return folder

@@ -45,15 +45,35 @@ class Chips(torch.utils.data.Dataset):
 
 def _tables(results) -> list[pd.DataFrame]:
     r = {"chips": results}
-    return [f(r) for f in (summary_table, froc_table, pr_table, pixel_roc_table,
-                           breakdown_table, scr_table, errors_table, paired_table)]  # fmt: skip
+    return [
+        f(r)
+        for f in (
+            summary_table,
+            froc_table,
+            pr_table,
+            pixel_roc_table,
+            breakdown_table,
+            scr_table,
+            errors_table,
+            paired_table,
+        )
+    ]
 
 
 def _job(n: int, shard_size: int, export_coco: bool = False) -> ShardJob:
     specs = [BUILTIN["ca"], BUILTIN["so"]]
     scoring = Scoring(DEFAULT_RULES, DEFAULT_MATCH, replicates=10)
-    return ShardJob("chips", Chips(n), list(range(n)), specs, scoring, 3, None, shard_size,
-                    export_coco=export_coco)  # fmt: skip
+    return ShardJob(
+        "chips",
+        Chips(n),
+        list(range(n)),
+        specs,
+        scoring,
+        3,
+        None,
+        shard_size,
+        export_coco=export_coco,
+    )
 
 
 def _coco_json(folder) -> dict[str, str]:
@@ -73,8 +93,10 @@ def _assert_same(a, b, folder_a=None, folder_b=None) -> None:
     for x, y in zip(_tables(a), _tables(b), strict=True):
         pd.testing.assert_frame_equal(x, y)
     for ra, rb in zip(a, b, strict=True):  # the worst-case galleries too
-        for ca, cb in ((ra.gallery.false_alarms, rb.gallery.false_alarms),
-                       (ra.gallery.misses, rb.gallery.misses)):  # fmt: skip
+        for ca, cb in (
+            (ra.gallery.false_alarms, rb.gallery.false_alarms),
+            (ra.gallery.misses, rb.gallery.misses),
+        ):
             assert ca.keys == cb.keys and ca.info == cb.info
             assert np.array_equal(ca.image, cb.image, equal_nan=True)
             assert np.array_equal(ca.masks, cb.masks)
@@ -92,8 +114,15 @@ def test_shard_ranges_cover_every_item_once():
 def test_any_shard_size_gives_the_same_tables(tmp_path, size):
     whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
     parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
-    assert counts == {"shards": 1, "done": 1, "skipped": 0, "retried": 0, "failed": [],
-                      "scored_images": 9, "reused_images": 0}  # fmt: skip
+    assert counts == {
+        "shards": 1,
+        "done": 1,
+        "skipped": 0,
+        "retried": 0,
+        "failed": [],
+        "scored_images": 9,
+        "reused_images": 0,
+    }
     assert counts_p["shards"] == -(-9 // size)
     _assert_same(whole, parts, tmp_path / "a", tmp_path / "b")
 
@@ -102,8 +131,15 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
     (tmp_path / "shard-000001.state").unlink()  # as if killed before shard 1 was saved
     again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
-    assert counts == {"shards": 3, "done": 1, "skipped": 2, "retried": 0, "failed": [],
-                      "scored_images": 3, "reused_images": 5}  # shard 1 scored again  # fmt: skip
+    assert counts == {
+        "shards": 3,
+        "done": 1,
+        "skipped": 2,
+        "retried": 0,
+        "failed": [],
+        "scored_images": 3,
+        "reused_images": 5,
+    }  # shard 1 scored again
     _assert_same(first, again)
 
 
@@ -150,8 +186,9 @@ def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
     from torchsar_eval.errors import EvalError
 
     job = _job(6, 2)
-    job = ShardJob("chips", Poisoned(6), job.indices, [Detector("x", _explode_on_big)],
-                   job.scoring, 2, None, 2)  # fmt: skip
+    job = ShardJob(
+        "chips", Poisoned(6), job.indices, [Detector("x", _explode_on_big)], job.scoring, 2, None, 2
+    )
     with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
         run_shards(job, tmp_path / "a", progress=False)
     merged, counts = run_shards(job, tmp_path / "b", skip_bad=True, progress=False)
@@ -199,17 +236,26 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
     it (run again, each in a fresh process), and fails alone; the others are scored."""
     from torchsar_eval.detector import Detector
 
-    job = ShardJob("chips", Poisoned(6), list(range(6)), [Detector("x", _die_on_big)],
-                   _job(6, 2).scoring, 2, None, 2)  # fmt: skip
+    job = ShardJob(
+        "chips",
+        Poisoned(6),
+        list(range(6)),
+        [Detector("x", _die_on_big)],
+        _job(6, 2).scoring,
+        2,
+        None,
+        2,
+    )
     with pytest.warns(RuntimeWarning, match="worker process died.*again one at a time"):
-        merged, counts = run_shards(job, tmp_path / "run", workers=2, skip_bad=True,
-                                    progress=False)  # fmt: skip
+        merged, counts = run_shards(job, tmp_path / "run", workers=2, skip_bad=True, progress=False)
     assert [f["shard"] for f in counts["failed"]] == [2]
     assert "worker process died" in counts["failed"][0]["error"]
     assert merged[0].images == 4 and counts["done"] == 2
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [
-        "rows.jsonl", "shard-000000.state", "shard-000001.state"
-    ]  # fmt: skip
+        "rows.jsonl",
+        "shard-000000.state",
+        "shard-000001.state",
+    ]
     alone = ShardJob("chips", Poisoned(6), [4, 5], job.detectors, job.scoring, 2, None, 2)
     with (  # without skip_bad it stops the run (the poisoned shard alone: fewer processes)
         pytest.raises(EvalError, match="shard 0 failed: a worker process died"),

@@ -81,8 +81,19 @@ def test_the_command_line_exits_2_when_no_image_is_left(tmp_path, capsys):
     for name in ("a", "b"):
         (data / f"{name}.png").write_bytes(b"not a png")
         (data / f"{name}.mask.png").write_bytes(b"not a png")
-    code = main(["run", "--dataset", f"folder:{data}", "--detectors", "ca", "--skip-bad",
-                 "--out", str(tmp_path / "out"), "--no-progress"])  # fmt: skip
+    code = main(
+        [
+            "run",
+            "--dataset",
+            f"folder:{data}",
+            "--detectors",
+            "ca",
+            "--skip-bad",
+            "--out",
+            str(tmp_path / "out"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and "2 of 2 images failed" in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "out").exists()

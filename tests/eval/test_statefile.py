@@ -32,8 +32,13 @@ class _Marker:
 
 
 def _one_run(tmp_path, **scoring):
-    return te.evaluate("sim-chips", ["ca", "region"], n=5, progress=False,
-                       scoring=te.Scoring(replicates=10, **scoring))  # fmt: skip
+    return te.evaluate(
+        "sim-chips",
+        ["ca", "region"],
+        n=5,
+        progress=False,
+        scoring=te.Scoring(replicates=10, **scoring),
+    )
 
 
 def test_state_round_trip_keeps_every_table(tmp_path):
@@ -53,8 +58,16 @@ def test_a_planted_pickle_runs_nothing_and_the_shard_is_scored_again(tmp_path):
     from torchsar_eval.registry import BUILTIN
     from torchsar_eval.shards import ShardJob
 
-    job = ShardJob("chips", make_dataset("sim-chips", n=4), list(range(4)), [BUILTIN["ca"]],
-                   te.Scoring(replicates=0), 2, None, 2)  # fmt: skip
+    job = ShardJob(
+        "chips",
+        make_dataset("sim-chips", n=4),
+        list(range(4)),
+        [BUILTIN["ca"]],
+        te.Scoring(replicates=0),
+        2,
+        None,
+        2,
+    )
     folder = tmp_path / "shards"
     folder.mkdir()
     payload = zlib.compress(pickle.dumps(_Marker(marker)), 1)
@@ -104,24 +117,26 @@ def test_changed_states_are_refused(tmp_path, how):
 
 
 def _recompute(body: bytes, version: int = statefile.VERSION) -> bytes:
-    header = {"format": statefile.FORMAT, "version": version,
-              "blake2b": statefile._digest(body)}  # fmt: skip
+    header = {"format": statefile.FORMAT, "version": version, "blake2b": statefile._digest(body)}
     return statefile.MAGIC + json.dumps(header).encode() + b"\n" + body
 
 
-@pytest.mark.parametrize("entry", [
-    [0, "|O", [1]],  # an object array: never
-    [0, "<f8", [10**6]],  # past the end of the body
-    [-64, "<f8", [1]],
-    [0, "<f8", [-1]],
-    [0, "<f8", "12"],
-    [0, ["<f8"], [1]],
-    [0, "V8", [1]],
-    [0, [["a", "|O"]], [1]],  # nor inside a record
-    [0, [["a", "<f8", [-1]]], [1]],
-    [0, [["a", "|V8"]], [1]],  # raw bytes only as unnamed padding
-    "a0",
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "entry",
+    [
+        [0, "|O", [1]],  # an object array: never
+        [0, "<f8", [10**6]],  # past the end of the body
+        [-64, "<f8", [1]],
+        [0, "<f8", [-1]],
+        [0, "<f8", "12"],
+        [0, ["<f8"], [1]],
+        [0, "V8", [1]],
+        [0, [["a", "|O"]], [1]],  # nor inside a record
+        [0, [["a", "<f8", [-1]]], [1]],
+        [0, [["a", "|V8"]], [1]],  # raw bytes only as unnamed padding
+        "a0",
+    ],
+)
 def test_an_array_table_out_of_bounds_or_of_other_types_is_refused(entry):
     """Even with a valid hash, the table names only plain arrays inside the body."""
     raw = bytearray(statefile.pack({"__array__": 0}, [np.arange(3.0)]))
@@ -139,8 +154,14 @@ def test_records_and_odd_layouts_come_back_equal():
     a = np.zeros(4, rec)
     a["score"], a["sub"]["b"] = [1, 2, 3, 4], [5, -6, 7, 8]
     padded = np.dtype({"names": ["x", "y"], "formats": ["u1", "<f8"], "offsets": [0, 8]})
-    values = [a, np.ones(2, padded), np.arange(12.0).reshape(3, 4)[:, ::2], np.array(5.0),
-              np.zeros((0, 3), np.float32), np.array([True, False])]  # fmt: skip
+    values = [
+        a,
+        np.ones(2, padded),
+        np.arange(12.0).reshape(3, 4)[:, ::2],
+        np.array(5.0),
+        np.zeros((0, 3), np.float32),
+        np.array([True, False]),
+    ]
     for v, b in zip(values, statefile.loads(statefile.dumps(values), "test"), strict=True):
         assert b.dtype == v.dtype and b.shape == v.shape and np.array_equal(b, v)
         assert b.flags.writeable and b.flags.owndata  # no view keeping a whole file alive
@@ -180,8 +201,10 @@ def test_a_valid_hash_does_not_let_a_foreign_type_in(tmp_path):
 @pytest.mark.parametrize("dtype", [np.int64, np.uint64])
 def test_wide_integer_arrays_come_back_in_their_own_type_and_values(dtype):
     info = np.iinfo(dtype)
-    arrays = [np.array(v, dtype=dtype) for v in (
-        [0, 1, 127], [200, 0], [70_000], [info.max, 0], [info.min, 3], [])]  # fmt: skip
+    arrays = [
+        np.array(v, dtype=dtype)
+        for v in ([0, 1, 127], [200, 0], [70_000], [info.max, 0], [info.min, 3], [])
+    ]
     if dtype is np.int64:
         arrays += [np.array([-128, 127], dtype), np.array([-(2**31), 2**31 - 1], dtype)]
     tensors = [torch.from_numpy(a.astype(np.int64)) for a in arrays if dtype is np.int64]
@@ -205,11 +228,14 @@ def test_a_stored_type_other_than_a_wide_integer_is_refused():
         statefile.loads(_pack({**header, "blake2b": "recompute"}, tree, arrays), "test")
 
 
-@pytest.mark.parametrize("rows", [
-    [("a", 1, 1, 0, 0, 2, 0.5), ("b", 0, 0, 1, 0, 1, float("-inf"))],
-    [],
-    [("odd", 1)],
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "rows",
+    [
+        [("a", 1, 1, 0, 0, 2, 0.5), ("b", 0, 0, 1, 0, 1, float("-inf"))],
+        [],
+        [("odd", 1)],
+    ],
+)
 def test_per_image_rows_come_back_as_the_same_tuples(rows):
     res = _one_run(None)
     result = res.states["sim-chips"][0]
@@ -225,8 +251,16 @@ def test_rows_written_while_merging_are_the_saved_shards_rows(tmp_path):
     from torchsar_eval.registry import BUILTIN
     from torchsar_eval.shards import ROWS_FILE, ShardJob, shard_rows
 
-    job = ShardJob("chips", make_dataset("sim-chips", n=7), list(range(7)),
-                   [BUILTIN["ca"], BUILTIN["so"]], te.Scoring(replicates=0), 2, None, 3)  # fmt: skip
+    job = ShardJob(
+        "chips",
+        make_dataset("sim-chips", n=7),
+        list(range(7)),
+        [BUILTIN["ca"], BUILTIN["so"]],
+        te.Scoring(replicates=0),
+        2,
+        None,
+        3,
+    )
     folder = tmp_path / "shards"
     run_shards(job, folder, progress=False)
     written = [(d, [tuple(r) for r in rows]) for d, rows in shard_rows(folder)]

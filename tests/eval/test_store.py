@@ -38,8 +38,20 @@ def test_sim_items_equal_the_batch_generation():
 
 def test_make_dataset_round_trip_and_lazy_reads(tmp_path):
     out = tmp_path / "store"
-    argv = ["make-dataset", "--kind", "sim-chips", "--n", "7", "--seed", "4",
-            "--shard-size", "3", "--out", str(out), "--no-progress"]  # fmt: skip
+    argv = [
+        "make-dataset",
+        "--kind",
+        "sim-chips",
+        "--n",
+        "7",
+        "--seed",
+        "4",
+        "--shard-size",
+        "3",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     assert sorted(p.name for p in out.glob("*.tar")) == [f"shard-00000{k}.tar" for k in range(3)]
     ds = StoreDataset(out)
@@ -51,8 +63,10 @@ def test_make_dataset_round_trip_and_lazy_reads(tmp_path):
         assert ds[i]["meta"]["boxes"] == [list(b) for b in batch.meta[i]["boxes"]]
     assert pickle.loads(pickle.dumps(ds))._index is None  # workers get no open map
     with tarfile.open(out / "shard-000001.tar") as tar:  # the WebDataset layout
-        assert tar.getnames()[:5] == [f"000000003.{f}" for f in
-                                      ("image.npy", "mask.npy", "instances.npy", "ignore.npy", "json")]  # fmt: skip
+        assert tar.getnames()[:5] == [
+            f"000000003.{f}"
+            for f in ("image.npy", "mask.npy", "instances.npy", "ignore.npy", "json")
+        ]
     header = json.loads((out / "store.json").read_text())
     assert (header["n"], header["source"], header["seed"]) == (7, "sim-chips", 4)
     assert main(argv) == 2  # the store exists: refused
@@ -127,8 +141,12 @@ def test_only_dead_writers_partial_stores_are_removed(tmp_path):
         partial_path(out).mkdir()
         (partial_path(out) / "shard-000000.tar").write_bytes(b"x")
     lock_path(dead).write_text("")  # a killed writer's lock file: there, but free
-    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(lock_path(live))],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(lock_path(live))],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "held"
         assert remove_dead_partials(tmp_path) == [partial_path(dead)]
@@ -177,8 +195,18 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsy
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(store, "_write_folder", full)
-    code = main(["make-dataset", "--kind", "sim-chips", "--n", "2", "--no-progress",
-                 "--out", str(tmp_path / "s")])  # fmt: skip
+    code = main(
+        [
+            "make-dataset",
+            "--kind",
+            "sim-chips",
+            "--n",
+            "2",
+            "--no-progress",
+            "--out",
+            str(tmp_path / "s"),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "No space left on device" in err, err
     assert not [p for p in tmp_path.iterdir() if not p.name.endswith(".store-lock")]

@@ -47,16 +47,24 @@ def _items(seed: int) -> list[dict]:
             boxes.append([int(rr.min()), int(cc.min()), int(rr.max()) + 1, int(cc.max()) + 1])
         ignore = np.zeros((c, h, w), bool)
         ignore[:, -1, :] = inst[:, -1, :] == 0
-        meta = {"name": f"item{i}", "classes": ["ship"] * len(boxes), "boxes": boxes,
-                "gt": "mask", "class": None, "pixel_spacing": [0.5, 0.5],
-                "sample_type": "intensity"}  # fmt: skip
-        out.append({
-            "image": torch.from_numpy(rng.exponential(1.0, (c, h, w)).astype(np.float32)),
-            "mask": torch.from_numpy(inst > 0),
-            "instances": torch.from_numpy(inst),
-            "ignore": torch.from_numpy(ignore),
-            "meta": meta,
-        })  # fmt: skip
+        meta = {
+            "name": f"item{i}",
+            "classes": ["ship"] * len(boxes),
+            "boxes": boxes,
+            "gt": "mask",
+            "class": None,
+            "pixel_spacing": [0.5, 0.5],
+            "sample_type": "intensity",
+        }
+        out.append(
+            {
+                "image": torch.from_numpy(rng.exponential(1.0, (c, h, w)).astype(np.float32)),
+                "mask": torch.from_numpy(inst > 0),
+                "instances": torch.from_numpy(inst),
+                "ignore": torch.from_numpy(ignore),
+                "meta": meta,
+            }
+        )
     return out
 
 
@@ -129,8 +137,16 @@ def _mutate_index(root: Path, rng) -> str:
         np.save(path, index)
         return f"index rows {a}, {b} swapped"
     if kind == 4:
-        np.save(path, [index[:-1], index.astype(np.int32), index.astype(float),
-                       index[:, :3], index.reshape(-1)][int(rng.integers(5))])  # fmt: skip
+        np.save(
+            path,
+            [
+                index[:-1],
+                index.astype(np.int32),
+                index.astype(float),
+                index[:, :3],
+                index.reshape(-1),
+            ][int(rng.integers(5))],
+        )
         return "index reshaped"
     data = bytearray(path.read_bytes()) or bytearray(b"\0")
     if kind == 5:
@@ -182,15 +198,22 @@ def _valid(item: dict) -> bool:
     k = int(inst.max())
     meta = item["meta"]
     return (
-        image.dtype == torch.float32 and image.ndim == 3 and min(image.shape) >= 1
-        and mask.dtype == ignore.dtype == torch.bool and inst.dtype == torch.int32
+        image.dtype == torch.float32
+        and image.ndim == 3
+        and min(image.shape) >= 1
+        and mask.dtype == ignore.dtype == torch.bool
+        and inst.dtype == torch.int32
         and image.shape == mask.shape == inst.shape == ignore.shape
-        and torch.equal(mask, inst > 0) and bool(torch.isfinite(image).all())
-        and bool((image >= 0).all()) and isinstance(meta, dict)
-        and all(isinstance(v := meta.get(key, [None] * k), list) and len(v) >= k
-                for key in ("boxes", "classes"))
+        and torch.equal(mask, inst > 0)
+        and bool(torch.isfinite(image).all())
+        and bool((image >= 0).all())
+        and isinstance(meta, dict)
+        and all(
+            isinstance(v := meta.get(key, [None] * k), list) and len(v) >= k
+            for key in ("boxes", "classes")
+        )
         and meta.get("gt", "mask") in ("mask", "box")
-    )  # fmt: skip
+    )
 
 
 def _same(a: dict, b: dict) -> bool:

@@ -19,8 +19,10 @@ def _board(text: str, dataset: str) -> tuple[list[dict], list[str]]:
     lines = text.split(f"## {dataset}: ranked by", 1)[1].splitlines()[1:]
     table = [ln for ln in lines[: lines.index("", 2)] if ln.startswith("|")]
     head = [c.strip() for c in table[0].strip("|").split("|")]
-    rows = [dict(zip(head, (c.strip() for c in ln.strip("|").split("|")), strict=True))
-            for ln in table[2:]]  # fmt: skip
+    rows = [
+        dict(zip(head, (c.strip() for c in ln.strip("|").split("|")), strict=True))
+        for ln in table[2:]
+    ]
     rest = lines[lines.index("", 2) :]
     bullets = []
     for ln in rest[1:]:
@@ -59,8 +61,9 @@ def test_rows_are_ranked_by_f1_with_notes(run):
 
 def test_rank_by_a_lower_is_better_metric(tmp_path):
     out = tmp_path / "run"
-    te.evaluate("sim-chips", ["so", "ca"], n=4, out=out, progress=False,
-                rank_by="false_alarms_per_image")  # fmt: skip
+    te.evaluate(
+        "sim-chips", ["so", "ca"], n=4, out=out, progress=False, rank_by="false_alarms_per_image"
+    )
     text = (out / "summary.md").read_text()
     assert "ranked by false_alarms_per_image (lower is better)" in text
     rows, _ = _board(text, "sim-chips")

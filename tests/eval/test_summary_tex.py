@@ -19,8 +19,14 @@ from torchsar_eval.leaderboard import LOWER_IS_BETTER
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("tex") / "run"
-    res = te.evaluate("sim-chips", ["ca", "so", "os"], n=4, out=out, progress=False,
-                      scoring=te.Scoring(replicates=40))  # fmt: skip
+    res = te.evaluate(
+        "sim-chips",
+        ["ca", "so", "os"],
+        n=4,
+        out=out,
+        progress=False,
+        scoring=te.Scoring(replicates=40),
+    )
     return out, res
 
 
@@ -71,8 +77,16 @@ def test_rows_follow_the_leaderboard_and_the_rule_is_stated(run):
 
 
 def test_names_are_escaped():
-    s = pd.DataFrame({"dataset": ["ships_2&3"], "detector": ["my_det%"], "images": [1],
-                      "targets": [1], "matching": ["box IoU >= 0.5"], "f1": [0.5]})  # fmt: skip
+    s = pd.DataFrame(
+        {
+            "dataset": ["ships_2&3"],
+            "detector": ["my_det%"],
+            "images": [1],
+            "targets": [1],
+            "matching": ["box IoU >= 0.5"],
+            "f1": [0.5],
+        }
+    )
     tex = summary_tex(s)
     assert r"my\_det\%" in tex and r"ships\_2\&3" in tex and r"\textgreater{}=" in tex
 
@@ -81,9 +95,17 @@ def test_names_are_escaped():
 def test_summary_tex_compiles(run, tmp_path):
     out, _ = run
     doc = tmp_path / "doc.tex"
-    doc.write_text("\\documentclass{article}\\usepackage{booktabs}\\begin{document}\n"
-                   + (out / "summary.tex").read_text() + "\\end{document}\n")  # fmt: skip
-    done = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", doc.name],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=120)  # fmt: skip
+    doc.write_text(
+        "\\documentclass{article}\\usepackage{booktabs}\\begin{document}\n"
+        + (out / "summary.tex").read_text()
+        + "\\end{document}\n"
+    )
+    done = subprocess.run(
+        ["pdflatex", "-interaction=nonstopmode", "-halt-on-error", doc.name],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stdout[-2000:]
     assert (tmp_path / "doc.pdf").stat().st_size > 0

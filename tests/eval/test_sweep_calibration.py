@@ -39,15 +39,22 @@ class PermutedTestTruth(Dataset):
             other = self.base[self.swap[i]]
             for key in ("mask", "instances", "ignore"):
                 item[key] = other[key]
-            item["meta"] = {**item["meta"], **{k: other["meta"][k] for k in ("classes", "boxes")
-                                                if k in other["meta"]}}  # fmt: skip
+            item["meta"] = {
+                **item["meta"],
+                **{k: other["meta"][k] for k in ("classes", "boxes") if k in other["meta"]},
+            }
         return item
 
 
 def _run(ds):
     cal = te.Calibration("f1", 0.5, sweep=SWEEP)
-    return te.evaluate({"chips": ds}, ["ca", "so"], calibration=cal, progress=False,
-                       scoring=te.Scoring(replicates=0))  # fmt: skip
+    return te.evaluate(
+        {"chips": ds},
+        ["ca", "so"],
+        calibration=cal,
+        progress=False,
+        scoring=te.Scoring(replicates=0),
+    )
 
 
 def test_the_choice_never_looks_at_the_test_split():
@@ -69,8 +76,9 @@ def test_each_detector_keeps_its_best_calibration_setting():
     sweep = res.sweep
     assert len(sweep) == 2 * 6 and sweep.groupby("detector").chosen.sum().eq(1).all()
     for det, part in sweep.groupby("detector"):
-        best = part.sort_values(["f1", "false_alarms_per_image", "setting"],
-                                ascending=[False, True, True]).iloc[0]  # fmt: skip
+        best = part.sort_values(
+            ["f1", "false_alarms_per_image", "setting"], ascending=[False, True, True]
+        ).iloc[0]
         assert part[part.chosen].setting.iloc[0] == best.setting
         row = res.summary.set_index("detector").loc[det]
         assert row.images == len(split_indices(N, "chips", 0.5)[1])  # the test split
@@ -82,8 +90,13 @@ def test_each_detector_keeps_its_best_calibration_setting():
 
 def test_a_false_alarm_target_prefers_settings_within_it():
     cal = te.Calibration("fa=1", 0.5, sweep=SWEEP)
-    res = te.evaluate({"chips": make_dataset("sim-chips", n=N, seed=3)}, ["ca"],
-                      calibration=cal, progress=False, scoring=te.Scoring(replicates=0))  # fmt: skip
+    res = te.evaluate(
+        {"chips": make_dataset("sim-chips", n=N, seed=3)},
+        ["ca"],
+        calibration=cal,
+        progress=False,
+        scoring=te.Scoring(replicates=0),
+    )
     sweep = res.sweep
     pick = sweep[sweep.chosen].iloc[0]
     within = sweep[sweep.false_alarms_per_image <= 1]
@@ -95,17 +108,42 @@ def test_a_false_alarm_target_prefers_settings_within_it():
 
 def test_a_sweep_no_detector_takes_is_refused():
     with pytest.raises(EvalError, match="names no option"):
-        te.evaluate("sim-chips", ["ca"], n=4, progress=False,
-                    calibration=te.Calibration("f1", 0.5, sweep={"gaurd": [1, 2]}))  # fmt: skip
+        te.evaluate(
+            "sim-chips",
+            ["ca"],
+            n=4,
+            progress=False,
+            calibration=te.Calibration("f1", 0.5, sweep={"gaurd": [1, 2]}),
+        )
     with pytest.raises(EvalError, match="repeats a value"):
         te.Calibration("f1", 0.5, sweep={"pfa": [1e-3, 1e-3]})
 
 
 def test_the_cli_writes_the_sweep_and_the_chosen_settings(tmp_path):
     out = tmp_path / "run"
-    main(["run", "--dataset", "sim-chips", "--n", "12", "--detectors", "ca", "--calibrate-on",
-          "f1", "--calibration-fraction", "0.5", "--sweep", "pfa=1e-2,1e-4", "--sweep",
-          "train=4,8", "--bootstrap", "0", "--out", str(out)])  # fmt: skip
+    main(
+        [
+            "run",
+            "--dataset",
+            "sim-chips",
+            "--n",
+            "12",
+            "--detectors",
+            "ca",
+            "--calibrate-on",
+            "f1",
+            "--calibration-fraction",
+            "0.5",
+            "--sweep",
+            "pfa=1e-2,1e-4",
+            "--sweep",
+            "train=4,8",
+            "--bootstrap",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     sweep = pd.read_csv(out / "sweep.csv")
     cfg = json.loads((out / "config.json").read_text())["options"]
     chosen = json.loads(sweep[sweep.chosen].options.iloc[0])
@@ -124,12 +162,29 @@ def test_the_sweep_on_real_ship_chips(data_dir, tmp_path):
     spec = f"hrsid:{data_dir / 'hrsid'}"
     n = len(make_dataset(spec))
     # four chips: a fraction whose hashed split leaves images on both sides
-    fraction = next(f for f in (0.5, 0.4, 0.6, 0.3, 0.7)
-                    if all(split_indices(n, spec, f)))  # fmt: skip
+    fraction = next(f for f in (0.5, 0.4, 0.6, 0.3, 0.7) if all(split_indices(n, spec, f)))
     out = tmp_path / "hrsid"
-    main(["run", "--dataset", spec, "--detectors", "ca,go", "--calibrate-on", "f1",
-          "--calibration-fraction", str(fraction), "--sweep", "pfa=1e-3,1e-6", "--sweep",
-          "train=8,16", "--bootstrap", "50", "--out", str(out)])  # fmt: skip
+    main(
+        [
+            "run",
+            "--dataset",
+            spec,
+            "--detectors",
+            "ca,go",
+            "--calibrate-on",
+            "f1",
+            "--calibration-fraction",
+            str(fraction),
+            "--sweep",
+            "pfa=1e-3,1e-6",
+            "--sweep",
+            "train=8,16",
+            "--bootstrap",
+            "50",
+            "--out",
+            str(out),
+        ]
+    )
     sweep = pd.read_csv(out / "sweep.csv")
     summary = pd.read_csv(out / "summary.csv")
     calib, test = split_indices(n, summary.dataset.iloc[0], fraction)

@@ -75,8 +75,9 @@ def test_integers_past_64_bits_are_never_read_as_ids(tmp_path):
 
     for big in (2**64, -(2**63) - 1):
         path = tmp_path / "gt.json"
-        path.write_text(json.dumps({"images": [{"id": big, "file_name": "a.png", "height": 4,
-                                                "width": 4}]}))  # fmt: skip
+        path.write_text(
+            json.dumps({"images": [{"id": big, "file_name": "a.png", "height": 4, "width": 4}]})
+        )
         with pytest.raises(FileFormatError, match="id"):
             read_coco_table(path)
 

@@ -67,8 +67,15 @@ def test_absurd_dimensions(tmp_path):
 def test_empty_image(tmp_path):
     path = tmp_path / "zero.tif"
     # a hand-built little-endian TIFF: one IFD declaring a 0 x 5 uint8 image
-    entries = [(256, 3, 1, 5), (257, 3, 1, 0), (258, 3, 1, 8), (273, 4, 1, 8),
-               (277, 3, 1, 1), (278, 3, 1, 1), (279, 4, 1, 0)]  # fmt: skip
+    entries = [
+        (256, 3, 1, 5),
+        (257, 3, 1, 0),
+        (258, 3, 1, 8),
+        (273, 4, 1, 8),
+        (277, 3, 1, 1),
+        (278, 3, 1, 1),
+        (279, 4, 1, 0),
+    ]
     ifd = struct.pack("<H", len(entries))
     ifd += b"".join(struct.pack("<HHII", *e) for e in entries) + struct.pack("<I", 0)
     path.write_bytes(b"II*\x00" + struct.pack("<I", 8) + ifd)

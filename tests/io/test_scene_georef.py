@@ -112,12 +112,17 @@ def test_tie_point_grid_matches_slow_bilinear_reference(tmp_path):
     cols = [0.5, 40.5, 133.5, 199.5, 250.5]
     lon = [[4 + 0.01 * j + 0.003 * i + 0.001 * rng.random() for j in range(5)] for i in range(4)]
     lat = [[52 - 0.01 * i + 0.002 * j + 0.001 * rng.random() for j in range(5)] for i in range(4)]
-    ties = [v for i, r in enumerate(rows) for j, c in enumerate(cols)
-            for v in (c, r, 0.0, lon[i][j], lat[i][j], 0.0)]  # fmt: skip
+    ties = [
+        v
+        for i, r in enumerate(rows)
+        for j, c in enumerate(cols)
+        for v in (c, r, 0.0, lon[i][j], lat[i][j], 0.0)
+    ]
     order = rng.permutation(len(ties) // 6)  # tie points in any order
     ties = np.asarray(ties).reshape(-1, 6)[order].ravel().tolist()
-    path = _write(tmp_path / "gcp.tif", [(33922, "d", ties), (34735, "H", GEOGRAPHIC_KEYS)],
-                  shape=(300, 251))  # fmt: skip
+    path = _write(
+        tmp_path / "gcp.tif", [(33922, "d", ties), (34735, "H", GEOGRAPHIC_KEYS)], shape=(300, 251)
+    )
     pr = rng.uniform(-5, 305, 400)  # inside the grid and past its edges
     pc = rng.uniform(-5, 255, 400)
     with open_scene(path) as scene:
@@ -135,9 +140,12 @@ def test_tie_point_grid_matches_slow_bilinear_reference(tmp_path):
 
 def test_tie_point_grid_across_the_antimeridian():
     g = TiePointGrid.from_points(
-        [0, 0, 10, 10], [0, 10, 0, 10], [179.9, -179.9, 179.9, -179.9], [1, 1, 0, 0],
+        [0, 0, 10, 10],
+        [0, 10, 0, 10],
+        [179.9, -179.9, 179.9, -179.9],
+        [1, 1, 0, 0],
         pixel_is_point=True,
-    )  # fmt: skip
+    )
     lon, lat = g.pixel_to_lonlat([5, 5], [5, 2.5])
     np.testing.assert_allclose(lon, [-180.0, 179.95], atol=1e-9)
     np.testing.assert_allclose(lat, [0.5, 0.5])

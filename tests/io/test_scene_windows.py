@@ -277,8 +277,9 @@ def test_a_compressed_tile_that_would_inflate_to_gigabytes_is_refused(tmp_path):
     from torchsar.io.tiff_scene import MAX_SEGMENT_BYTES
 
     path = tmp_path / "bomb.tif"
-    tifffile.imwrite(path, np.zeros((256, 256), np.float32), tile=(256, 256),
-                     compression="zlib", bigtiff=True)  # fmt: skip
+    tifffile.imwrite(
+        path, np.zeros((256, 256), np.float32), tile=(256, 256), compression="zlib", bigtiff=True
+    )
     with tifffile.TiffFile(path, mode="r+b") as tif:
         for code in (322, 323):  # TileWidth, TileLength
             tif.pages[0].tags[code].overwrite(32768)

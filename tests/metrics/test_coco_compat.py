@@ -287,10 +287,15 @@ def test_other_parameters_match_pycocotools():
         areas={"all": (0.0, 1e10), "small": (0.0, 40.0**2), "tiny": (0.0, 100.0)},
     )
     ref = _pycocotools(
-        images, gts, dts, "bbox",
-        iouThrs=np.array(params["iou_thresholds"]), maxDets=[1, 5, 20],
-        areaRng=[list(v) for v in params["areas"].values()], areaRngLbl=list(params["areas"]),
-    )  # fmt: skip
+        images,
+        gts,
+        dts,
+        "bbox",
+        iouThrs=np.array(params["iou_thresholds"]),
+        maxDets=[1, 5, 20],
+        areaRng=[list(v) for v in params["areas"].values()],
+        areaRngLbl=list(params["areas"]),
+    )
     state = CocoState(**params)
     state.update(_coco_images(images, gts, dts, "bbox"))
     _assert_same(state, ref)

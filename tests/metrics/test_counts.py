@@ -35,10 +35,17 @@ class TestPixelCounts:
             else rng.random((3, 1, 6, 7)) < (0.2 if with_ignore == "some" else 0)
         )
         care = np.ones_like(pred) if ign is None else ~ign
-        got = pixel_counts(torch.as_tensor(pred), torch.as_tensor(tgt),
-                           ignore=None if ign is None else torch.as_tensor(ign))  # fmt: skip
-        want = PixelCounts(tp=int((pred & tgt & care).sum()), fp=int((pred & ~tgt & care).sum()),
-                           targets=int((tgt & care).sum()), clutter=int((~tgt & care).sum()))  # fmt: skip
+        got = pixel_counts(
+            torch.as_tensor(pred),
+            torch.as_tensor(tgt),
+            ignore=None if ign is None else torch.as_tensor(ign),
+        )
+        want = PixelCounts(
+            tp=int((pred & tgt & care).sum()),
+            fp=int((pred & ~tgt & care).sum()),
+            targets=int((tgt & care).sum()),
+            clutter=int((~tgt & care).sum()),
+        )
         assert got == want
 
     def test_additive(self):

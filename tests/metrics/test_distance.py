@@ -255,9 +255,26 @@ def test_parse_distance_accepts(text, expected):
 
 
 @pytest.mark.parametrize(
-    "text", ["-200m", "0", "0px", "nan", "NaN m", "inf", "infm", "-inf px", "200km", "20 pixels",
-             "m", "", "200 m m", "2 00m", None, 200],
-)  # fmt: skip
+    "text",
+    [
+        "-200m",
+        "0",
+        "0px",
+        "nan",
+        "NaN m",
+        "inf",
+        "infm",
+        "-inf px",
+        "200km",
+        "20 pixels",
+        "m",
+        "",
+        "200 m m",
+        "2 00m",
+        None,
+        200,
+    ],
+)
 def test_parse_distance_refuses(text):
     with pytest.raises(OptionError, match="max_distance"):
         parse_distance(text)

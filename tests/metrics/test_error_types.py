@@ -60,8 +60,10 @@ def test_one_false_alarm_of_each_type(geometry, rule):
     gt, obj = _truth(), _objects(geometry)
     m = match_batch(obj, gt, rule)
     types = false_alarm_types(m, obj, gt, rule)
-    got = {name: None if t < 0 else FA_TYPES[t] for (name, *_), t in
-           zip(DETECTIONS, types.tolist(), strict=True)}  # fmt: skip
+    got = {
+        name: None if t < 0 else FA_TYPES[t]
+        for (name, *_), t in zip(DETECTIONS, types.tolist(), strict=True)
+    }
     assert got == {name: want for name, _, _, want in DETECTIONS}
     assert list(m.op).count(-1) == len(DETECTIONS) - 1  # every other detection is a false alarm
 
@@ -115,15 +117,17 @@ class Scenes(torch.utils.data.Dataset):
         return self.n
 
     def __getitem__(self, i: int) -> dict:
-        item = ts.simulate.scenes(1, size=192, n_targets=(6, 12), building_px=(30, 40),
-                                  seed=5, start=i)[0]  # fmt: skip
+        item = ts.simulate.scenes(
+            1, size=192, n_targets=(6, 12), building_px=(30, 40), seed=5, start=i
+        )[0]
         item["meta"] = {"name": f"s{i}", **item["meta"]}
         return item
 
 
 def test_every_false_alarm_and_miss_is_counted_once_on_simulated_scenes():
-    res = te.evaluate({"scenes": Scenes(3)}, ["ca", "so"], scoring=te.Scoring(replicates=0),
-                      progress=False)  # fmt: skip
+    res = te.evaluate(
+        {"scenes": Scenes(3)}, ["ca", "so"], scoring=te.Scoring(replicates=0), progress=False
+    )
     e = res.errors
     s = res.summary.set_index("detector")
     for det in ("ca", "so"):

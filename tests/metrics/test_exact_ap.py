@@ -54,8 +54,9 @@ def _predictions(rng, inst, kind: str, ties: bool, crowded: int):
         boxes = np.stack([r0, c0, np.minimum(r0 + h, SIZE), np.minimum(c0 + w, SIZE)], axis=1)
         per_plane.append((boxes, _scores(rng, n, ties)))
     if kind == "bbox":
-        return Objects.from_boxes([b for b, _ in per_plane], [s for _, s in per_plane],
-                                  shape=(SIZE, SIZE))  # fmt: skip
+        return Objects.from_boxes(
+            [b for b, _ in per_plane], [s for _, s in per_plane], shape=(SIZE, SIZE)
+        )
     masks = []
     for boxes, _ in per_plane:
         m = np.zeros((len(boxes), SIZE, SIZE), bool)
@@ -83,12 +84,14 @@ def _ours(inst, ignore, obj, kind, cuts):
 
 def _subset(obj: Objects, sel: np.ndarray, lo: int, planes: int) -> Objects:
     if obj.geometry == "box":
-        return Objects.from_boxes(obj.box[sel], obj.score[sel], shape=obj.shape,
-                                  plane=obj.plane[sel] - lo, planes=planes)  # fmt: skip
+        return Objects.from_boxes(
+            obj.box[sel], obj.score[sel], shape=obj.shape, plane=obj.plane[sel] - lo, planes=planes
+        )
     h, w = obj.shape
     pixels = [obj.masks.of(k) - obj.plane[k] * h * w for k in np.flatnonzero(sel)]
-    return Objects.from_pixel_lists(pixels, obj.score[sel], shape=obj.shape,
-                                    plane=obj.plane[sel] - lo, planes=planes)  # fmt: skip
+    return Objects.from_pixel_lists(
+        pixels, obj.score[sel], shape=obj.shape, plane=obj.plane[sel] - lo, planes=planes
+    )
 
 
 def _pycocotools(inst, ignore, obj, kind):
@@ -96,15 +99,21 @@ def _pycocotools(inst, ignore, obj, kind):
     from pycocotools.cocoeval import COCOeval
 
     ex = CocoExport("t")
-    batch = {"instances": torch.as_tensor(inst)[:, None], "ignore": torch.as_tensor(ignore)[:, None],
-             "meta": [{"name": str(i), "index": i} for i in range(len(inst))]}  # fmt: skip
+    batch = {
+        "instances": torch.as_tensor(inst)[:, None],
+        "ignore": torch.as_tensor(ignore)[:, None],
+        "meta": [{"name": str(i), "index": i} for i in range(len(inst))],
+    }
     ex.add(batch, {"d": obj})
     ex._category("target")
     results = [{**r, "category_id": 1} for r in ex.results["d"]]
     with contextlib.redirect_stdout(io.StringIO()):
         gt = COCO()
-        gt.dataset = {"images": ex.images, "annotations": ex.annotations,
-                      "categories": [{"id": i, "name": n} for n, i in ex.categories.items()]}  # fmt: skip
+        gt.dataset = {
+            "images": ex.images,
+            "annotations": ex.annotations,
+            "categories": [{"id": i, "name": n} for n, i in ex.categories.items()],
+        }
         gt.createIndex()
         dt = gt.loadRes(results)
         ev = COCOeval(gt, dt, kind)

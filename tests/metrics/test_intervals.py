@@ -38,8 +38,7 @@ def _t_factor(units: int, count: float | None = None, level: float = 0.95) -> fl
     """Korn & Graubard's factor written out with scipy: (t_{n-1} / t_{units-1})^2, n the
     count (at least the units; None: the normal quantile)."""
     a = (1 - level) / 2
-    top = (stats.norm.ppf(1 - a) if count is None
-           else stats.t.ppf(1 - a, max(count, units) - 1))  # fmt: skip
+    top = stats.norm.ppf(1 - a) if count is None else stats.t.ppf(1 - a, max(count, units) - 1)
     return (top / stats.t.ppf(1 - a, units - 1)) ** 2
 
 
@@ -190,8 +189,14 @@ def test_bias_correction_moves_the_centre_against_the_bootstrap_bias():
 def _metrics(tp=30, fp=5, n_gt=40):
     m = {"tp": tp, "fp": fp, "fn": n_gt - tp, "precision": tp / (tp + fp), "recall": tp / n_gt}
     m["f1"] = 2 * tp / (2 * tp + fp + n_gt - tp)
-    for k in ("fom", "ap50", "pd_at_0.1_fa_per_image", "pd_at_1_fa_per_image",
-              "pd_at_10_fa_per_image", "pauc"):  # fmt: skip
+    for k in (
+        "fom",
+        "ap50",
+        "pd_at_0.1_fa_per_image",
+        "pd_at_1_fa_per_image",
+        "pd_at_10_fa_per_image",
+        "pauc",
+    ):
         m[k] = 0.5
     return m
 
@@ -199,9 +204,20 @@ def _metrics(tp=30, fp=5, n_gt=40):
 def test_headline_intervals_cover_every_metric_or_say_why_not():
     rng = np.random.default_rng(0)
     m = _metrics()
-    reps = {k: np.clip(rng.normal(m.get(k, 0.2), 0.03, 200), 0, 1)
-            for k in ("precision", "recall", "f1", "fom", "ap50", "pd_at_0.1_fa_per_image",
-                      "pd_at_1_fa_per_image", "pd_at_10_fa_per_image", "pauc")}  # fmt: skip
+    reps = {
+        k: np.clip(rng.normal(m.get(k, 0.2), 0.03, 200), 0, 1)
+        for k in (
+            "precision",
+            "recall",
+            "f1",
+            "fom",
+            "ap50",
+            "pd_at_0.1_fa_per_image",
+            "pd_at_1_fa_per_image",
+            "pd_at_10_fa_per_image",
+            "pauc",
+        )
+    }
     reps["fa_per_image"] = rng.normal(0.2, 0.05, 200)
     out = headline_intervals(m, reps, units=25, n_gt=40, images_per_km2=4.0)
     for k, iv in out.items():

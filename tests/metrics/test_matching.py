@@ -21,8 +21,9 @@ def test_greedy_equals_the_pycocotools_loop(seed, d, g):
     q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))  # ties on purpose
     crowd = rng.choice([0.0, 0.5, 0.8], size=d)
     got = greedy_match(q, crowd, COCO_IOUS)
-    ref = coco_match(np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
-                     COCO_IOUS)  # fmt: skip
+    ref = coco_match(
+        np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0, COCO_IOUS
+    )
     assert np.array_equal(got, np.where(ref == g, -2, ref))
 
 
@@ -75,13 +76,15 @@ def test_problems_with_ignored_instances_per_area_range_equal_the_dense_matcher(
         for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
             a.append(v)
         d0, g0 = d0 + d, g0 + g
-    col = assign_pairs(d_problem, g_problem, ignore, crowd,
-                       tuple(np.concatenate(a) for a in pairs), COCO_IOUS)  # fmt: skip
+    col = assign_pairs(
+        d_problem, g_problem, ignore, crowd, tuple(np.concatenate(a) for a in pairs), COCO_IOUS
+    )
     d0 = g0 = 0
     for (d, g), q in zip(sizes, dense, strict=True):
         quality = np.where(q > 0, q, -np.inf)[None]
-        ref = greedy_assign(quality, ignore[g0 : g0 + g].T[None], crowd[g0 : g0 + g][None],
-                            np.array([d]), COCO_IOUS)[0]  # fmt: skip
+        ref = greedy_assign(
+            quality, ignore[g0 : g0 + g].T[None], crowd[g0 : g0 + g][None], np.array([d]), COCO_IOUS
+        )[0]
         got = col[d0 : d0 + d]
         assert np.array_equal(np.where(got >= 0, got - g0, -1), ref)
         d0, g0 = d0 + d, g0 + g
@@ -96,8 +99,9 @@ def test_greedy_with_at_most_one_instance_equals_the_pycocotools_loop(seed, d, g
     crowd = rng.choice([0.0, 0.5, 0.8, 1.0], size=d)
     thresholds = np.r_[COCO_IOUS, 1e-12]
     got = greedy_match(q, crowd, thresholds)
-    ref = coco_match(np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0,
-                     thresholds)  # fmt: skip
+    ref = coco_match(
+        np.concatenate([q, crowd[:, None]], axis=1), np.r_[np.zeros(g), 1] > 0, thresholds
+    )
     assert np.array_equal(got, np.where(ref == g, -2, ref))
 
 
@@ -240,8 +244,11 @@ def _reference_plane(obj, gt, p, rule):
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 10_000), kind=st.sampled_from(["mask", "box", "centroid"]),
-       iou=st.sampled_from([0.5, 0.3]))  # fmt: skip
+@given(
+    seed=st.integers(0, 10_000),
+    kind=st.sampled_from(["mask", "box", "centroid"]),
+    iou=st.sampled_from([0.5, 0.3]),
+)
 def test_match_batch_equals_brute_force_per_plane(seed, kind, iou):
     """Planes with 0, 1 and several instances in one batch (the first two kinds are matched
     all at once, the last plane by plane)."""

@@ -91,8 +91,11 @@ def _pycocotools(inst, ignore, obj, iou_type):
     ex._category("target")
     with contextlib.redirect_stdout(io.StringIO()):
         gt = COCO()
-        gt.dataset = {"images": ex.images, "annotations": ex.annotations,
-                      "categories": [{"id": 1, "name": "target"}]}  # fmt: skip
+        gt.dataset = {
+            "images": ex.images,
+            "annotations": ex.annotations,
+            "categories": [{"id": 1, "name": "target"}],
+        }
         gt.createIndex()
         dt = gt.loadRes(ex.results["d"])
         ev = COCOeval(gt, dt, iou_type)
@@ -109,8 +112,7 @@ def _pycocotools(inst, ignore, obj, iou_type):
 
 
 @settings(max_examples=12, deadline=None)
-@given(seed=st.integers(0, 100_000), iou_type=st.sampled_from(["segm", "bbox"]),
-       ties=st.booleans())  # fmt: skip
+@given(seed=st.integers(0, 100_000), iou_type=st.sampled_from(["segm", "bbox"]), ties=st.booleans())
 def test_ap_equals_pycocotools(seed, iou_type, ties):
     inst, ignore, stat = _scene(np.random.default_rng(seed), ties=ties)
     rule = Matching(kind="mask" if iou_type == "segm" else "box")
@@ -174,8 +176,15 @@ def _records(state: ObjectState, m, obj, info) -> list[dict]:
     for k in range(len(obj)):
         p = int(obj.plane[k])
         rank[p] = rank.get(p, -1) + 1
-        out.append({"score": float(obj.score[k]), "order": info[p].order, "rank": rank[p],
-                    "op": code[int(op[k])], "ap50": code[int(ap[k])]})  # fmt: skip
+        out.append(
+            {
+                "score": float(obj.score[k]),
+                "order": info[p].order,
+                "rank": rank[p],
+                "op": code[int(op[k])],
+                "ap50": code[int(ap[k])],
+            }
+        )
     return out
 
 
@@ -191,8 +200,11 @@ def _data(seed, ties, n_img=5):
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 100_000), ties=st.booleans(),
-       threshold=st.sampled_from(["design", None, 1.0, 1.6, 5.0]))  # fmt: skip
+@given(
+    seed=st.integers(0, 100_000),
+    ties=st.booleans(),
+    threshold=st.sampled_from(["design", None, 1.0, 1.6, 5.0]),
+)
 def test_metrics_equal_the_slow_reference(seed, ties, threshold):
     m, obj, gt, info = _data(seed, ties)
     state = ObjectState(replicates=0)
@@ -218,8 +230,13 @@ def test_every_replicate_equals_the_slow_reference_on_the_resampled_images(seed,
     n_gt = np.bincount(gt.plane, minlength=len(info))
     for r in range(12):
         weight = {i.order: int(w[r, p]) for p, i in enumerate(info)}
-        want = ref.metrics(ref.expand(dets, weight.__getitem__), float(w[r] @ n_gt),
-                           float(w[r].sum()), 1.3, expanded=True)  # fmt: skip
+        want = ref.metrics(
+            ref.expand(dets, weight.__getitem__),
+            float(w[r] @ n_gt),
+            float(w[r].sum()),
+            1.3,
+            expanded=True,
+        )
         for k, v in want.items():
             assert got[k][r] == pytest.approx(v, abs=1e-12, nan_ok=True), (k, r)
 
@@ -236,8 +253,9 @@ def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, n
     f = MAPS[name]
     m, obj, gt, info = _data(seed, ties)
     mapped = _mapped(obj, f)
-    assert np.array_equal(np.argsort(-obj.score, kind="stable"),
-                          np.argsort(-mapped.score, kind="stable"))  # fmt: skip
+    assert np.array_equal(
+        np.argsort(-obj.score, kind="stable"), np.argsort(-mapped.score, kind="stable")
+    )
     a, b = ObjectState(replicates=30), ObjectState(replicates=30)
     a.update(m, obj, gt, info)
     b.update(match_batch(mapped, gt, Matching("centroid")), mapped, gt, info)
@@ -258,8 +276,12 @@ def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, n
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 100_000), ties=st.booleans(), n_img=st.integers(1, 8),
-       threshold=st.sampled_from(["design", None, 1.0, 1.6]))  # fmt: skip
+@given(
+    seed=st.integers(0, 100_000),
+    ties=st.booleans(),
+    n_img=st.integers(1, 8),
+    threshold=st.sampled_from(["design", None, 1.0, 1.6]),
+)
 def test_every_interval_contains_its_point(seed, ties, n_img, threshold):
     m, obj, gt, info = _data(seed, ties, n_img)
     state = ObjectState(replicates=50, seed=seed)
@@ -277,7 +299,8 @@ def test_curve_helpers_by_hand():
     assert pd_at_fa(fa, pd, 0.1) == 0.5 and pd_at_fa(fa, pd, 0.5) == 1.0
     assert partial_auc(fa, pd, 1.0) == pytest.approx(0.5 * 0.5 + 1.0 * 0.5)
     assert coco_ap(np.array([1, 0, 1]), np.array([0, 1, 0]), 2) == pytest.approx(
-        (51 + 50 * 2 / 3) / 101)  # fmt: skip
+        (51 + 50 * 2 / 3) / 101
+    )
     assert np.isnan(coco_ap(np.array([1]), np.array([0]), 0))
     assert levels(np.array([3.0, 3.0, 2.0, 1.0, 1.0])).tolist() == [1, 2, 4]
 
@@ -287,14 +310,22 @@ def test_choose_threshold_by_hand():
     from torchsar.metrics.assign import BatchMatch
 
     score = np.array([0.9, 0.8, 0.8, 0.5])
-    obj = Objects.from_points(np.zeros((4, 2)), score, shape=(8, 8),
-                              plane=np.array([0, 0, 1, 1]), planes=2)  # fmt: skip
+    obj = Objects.from_points(
+        np.zeros((4, 2)), score, shape=(8, 8), plane=np.array([0, 0, 1, 1]), planes=2
+    )
     inst = np.zeros((2, 8, 8), int)
     inst[0, 0, 0] = inst[1, 4, 4] = 1
     gt = ground_truth(inst)
     op = np.array([0, -1, -1, 1])
-    m = BatchMatch(np.tile(op, (4, 10, 1)), op, np.zeros(4), np.array([0.9, 0.5]),
-                   np.zeros(2, np.int64), np.array([0, 3]), "iou")  # fmt: skip
+    m = BatchMatch(
+        np.tile(op, (4, 10, 1)),
+        op,
+        np.zeros(4),
+        np.array([0.9, 0.5]),
+        np.zeros(2, np.int64),
+        np.array([0, 3]),
+        "iou",
+    )
     state = ObjectState(replicates=0)
     state.update(m, obj, gt, [ImageInfo("a", order=0), ImageInfo("b", order=1)])
     assert state.choose_threshold("fa", 0.0) == 0.8  # only the top TP
@@ -319,8 +350,9 @@ def test_all_true_and_all_false_masks_on_simulated_data(kind):
     for n, sim in ((8, ts.simulate.chips), (2, ts.simulate.scenes)):
         b = sim(n, seed=1)
         ds = [{**b[i], "meta": {"name": str(i), **b[i]["meta"]}} for i in range(n)]
-        yes, no = (r.objects.metrics() for r in run_detectors(ds, specs, scoring=scoring,
-                                                         progress=False))  # fmt: skip
+        yes, no = (
+            r.objects.metrics() for r in run_detectors(ds, specs, scoring=scoring, progress=False)
+        )
         assert yes["tp"] == 0 and yes["fp"] == n and yes["recall"] == 0  # one flood per image
         assert yes["ap50"] == 0 and yes["pd_at_1_fa_per_image"] == 0
         assert no["tp"] == no["fp"] == 0 and np.isnan(no["precision"]) and no["recall"] == 0

@@ -25,8 +25,9 @@ def _case(rng, planes: int):
     plane = np.repeat(np.arange(planes), n)
     points = rng.integers(0, SIZE, (plane.size, 2)).astype(np.float64)
     scores = rng.choice([0.2, 0.6, 0.9, 1.4, 2.0], plane.size)  # ties on purpose
-    return inst, Objects.from_points(points, scores, shape=(SIZE, SIZE), plane=plane,
-                                     planes=planes, threshold=1.0)  # fmt: skip
+    return inst, Objects.from_points(
+        points, scores, shape=(SIZE, SIZE), plane=plane, planes=planes, threshold=1.0
+    )
 
 
 @settings(max_examples=40, deadline=None)

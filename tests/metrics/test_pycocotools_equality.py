@@ -39,8 +39,13 @@ def _ap(ev, area: int = 0) -> tuple[float, float]:
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10**6), iou_type=st.sampled_from(["bbox", "segm"]),
-       many=st.booleans(), ties=st.booleans(), classes=st.sampled_from(["auto", "agnostic"]))  # fmt: skip
+@given(
+    seed=st.integers(0, 10**6),
+    iou_type=st.sampled_from(["bbox", "segm"]),
+    many=st.booleans(),
+    ties=st.booleans(),
+    classes=st.sampled_from(["auto", "agnostic"]),
+)
 def test_sar_ap_equals_pycocotools(seed, iou_type, many, ties, classes):
     # class-agnostic pycocotools (useCats=0) breaks ties in score within an image by
     # category id first; torchsar by the detections' order: tied scores only per class
@@ -61,13 +66,28 @@ def test_sar_ap_equals_pycocotools(seed, iou_type, many, ties, classes):
 def test_overlapping_boxes_stay_separate_targets():
     """Two ground-truth boxes that overlap, each hit by its own detection: both are true
     positives (painting them into one plane lost the lower one)."""
-    gt = {"images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
-          "categories": [{"id": 1, "name": "ship"}],
-          "annotations": [
-              {"id": 1, "image_id": 1, "category_id": 1, "bbox": [5.0, 5.0, 20.0, 10.0],
-               "area": 200.0, "iscrowd": 0},
-              {"id": 2, "image_id": 1, "category_id": 1, "bbox": [10.0, 8.0, 20.0, 10.0],
-               "area": 200.0, "iscrowd": 0}]}  # fmt: skip
+    gt = {
+        "images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
+        "categories": [{"id": 1, "name": "ship"}],
+        "annotations": [
+            {
+                "id": 1,
+                "image_id": 1,
+                "category_id": 1,
+                "bbox": [5.0, 5.0, 20.0, 10.0],
+                "area": 200.0,
+                "iscrowd": 0,
+            },
+            {
+                "id": 2,
+                "image_id": 1,
+                "category_id": 1,
+                "bbox": [10.0, 8.0, 20.0, 10.0],
+                "area": 200.0,
+                "iscrowd": 0,
+            },
+        ],
+    }
     dets = [
         {"image_id": 1, "category_id": 1, "bbox": [5.0, 5.0, 20.0, 10.0], "score": 0.9},
         {"image_id": 1, "category_id": 1, "bbox": [10.0, 8.0, 20.0, 10.0], "score": 0.8},
@@ -77,10 +97,20 @@ def test_overlapping_boxes_stay_separate_targets():
 
 
 def test_a_detection_of_the_wrong_class_is_a_false_alarm_unless_agnostic():
-    gt = {"images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
-          "categories": [{"id": 1, "name": "ship"}, {"id": 2, "name": "tank"}],
-          "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [5.0, 5.0, 20.0, 10.0],
-                           "area": 200.0, "iscrowd": 0}]}  # fmt: skip
+    gt = {
+        "images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
+        "categories": [{"id": 1, "name": "ship"}, {"id": 2, "name": "tank"}],
+        "annotations": [
+            {
+                "id": 1,
+                "image_id": 1,
+                "category_id": 1,
+                "bbox": [5.0, 5.0, 20.0, 10.0],
+                "area": 200.0,
+                "iscrowd": 0,
+            }
+        ],
+    }
     dets = [{"image_id": 1, "category_id": 2, "bbox": [5.0, 5.0, 20.0, 10.0], "score": 0.9}]
     per_class = _state(gt, dets, "bbox").metrics()
     agnostic = _state(gt, dets, "bbox", "agnostic").metrics()
@@ -91,10 +121,20 @@ def test_a_detection_of_the_wrong_class_is_a_false_alarm_unless_agnostic():
 def test_crowd_regions_apply_to_their_class_only():
     """A detection on a crowd region of another class is a false alarm; on one of its own
     class (or class-agnostic matching) it is ignored."""
-    gt = {"images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
-          "categories": [{"id": 1, "name": "ship"}, {"id": 2, "name": "tank"}],
-          "annotations": [{"id": 1, "image_id": 1, "category_id": 2, "bbox": [0.0, 0.0, 20.0, 20.0],
-                           "area": 400.0, "iscrowd": 1}]}  # fmt: skip
+    gt = {
+        "images": [{"id": 1, "file_name": "a", "height": 40, "width": 40}],
+        "categories": [{"id": 1, "name": "ship"}, {"id": 2, "name": "tank"}],
+        "annotations": [
+            {
+                "id": 1,
+                "image_id": 1,
+                "category_id": 2,
+                "bbox": [0.0, 0.0, 20.0, 20.0],
+                "area": 400.0,
+                "iscrowd": 1,
+            }
+        ],
+    }
     for cat, fp in ((1, 1), (2, 0)):
         dets = [{"image_id": 1, "category_id": cat, "bbox": [2.0, 2.0, 8.0, 8.0], "score": 0.9}]
         assert _state(gt, dets, "bbox").metrics()["fp"] == fp
@@ -102,8 +142,12 @@ def test_crowd_regions_apply_to_their_class_only():
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 10**6), iou_type=st.sampled_from(["bbox", "segm"]),
-       many=st.booleans(), ties=st.booleans())  # fmt: skip
+@given(
+    seed=st.integers(0, 10**6),
+    iou_type=st.sampled_from(["bbox", "segm"]),
+    many=st.booleans(),
+    ties=st.booleans(),
+)
 def test_coco_compatible_arrays_equal_cocoeval(seed, iou_type, many, ties):
     """The whole ``eval['precision']`` and ``eval['recall']`` arrays (every IoU threshold,
     recall point, category, area range and cap), and the 12 stats."""

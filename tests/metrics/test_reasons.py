@@ -22,8 +22,13 @@ def _truth():
 
 
 def _boxes(boxes, scores):
-    return Objects.from_boxes(np.array(boxes, float), np.array(scores, float), shape=(64, 64),
-                              plane=np.zeros(len(boxes), np.int64), planes=1)  # fmt: skip
+    return Objects.from_boxes(
+        np.array(boxes, float),
+        np.array(scores, float),
+        shape=(64, 64),
+        plane=np.zeros(len(boxes), np.int64),
+        planes=1,
+    )
 
 
 def test_miss_reasons_under_an_iou_rule():

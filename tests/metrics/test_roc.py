@@ -123,10 +123,17 @@ def _near_power(e: int, sign: float, step: float) -> float:
 
 def _float64s():
     """Finite and infinite float64 values, subnormals, zeros and neighbours of powers of two."""
-    powers = st.builds(_near_power, st.integers(-1074, 1023), st.sampled_from([1.0, -1.0]),
-                       st.sampled_from([1.0, -1.0, 0.0]))  # fmt: skip
-    return st.one_of(st.floats(allow_nan=False), powers,
-                     st.sampled_from([0.0, -0.0, math.inf, -math.inf, 5e-324, -5e-324]))  # fmt: skip
+    powers = st.builds(
+        _near_power,
+        st.integers(-1074, 1023),
+        st.sampled_from([1.0, -1.0]),
+        st.sampled_from([1.0, -1.0, 0.0]),
+    )
+    return st.one_of(
+        st.floats(allow_nan=False),
+        powers,
+        st.sampled_from([0.0, -0.0, math.inf, -math.inf, 5e-324, -5e-324]),
+    )
 
 
 def _float32s():
@@ -254,8 +261,12 @@ def test_an_empty_accumulator_has_one_point():
 
 
 @settings(derandomize=True, max_examples=30, deadline=None)
-@given(st.integers(0, 2**16), st.lists(st.integers(0, 3 * 32 * 32), max_size=5),
-       st.randoms(use_true_random=False), st.sampled_from(COMPILED))  # fmt: skip
+@given(
+    st.integers(0, 2**16),
+    st.lists(st.integers(0, 3 * 32 * 32), max_size=5),
+    st.randoms(use_true_random=False),
+    st.sampled_from(COMPILED),
+)
 def test_merging_in_any_split_and_order_equals_one_pass(seed, cuts, rnd, compiled):
     stat, target, ignore = _data(seed)
     stat, target, ignore = stat.view(-1), target.view(-1), ignore.view(-1)
@@ -299,8 +310,9 @@ def test_update_sparse_equals_update_on_the_dense_batch(compiled):
         dense.update(stat, target, ignore)
         care = ~ignore
         n_target = int((target & care).sum())
-        sparse.update_sparse(stat[idx], target[idx], ignore[idx], n_target,
-                             int(care.sum()) - n_target)  # fmt: skip
+        sparse.update_sparse(
+            stat[idx], target[idx], ignore[idx], n_target, int(care.sum()) - n_target
+        )
     assert sparse == dense
 
 
@@ -382,8 +394,13 @@ def test_a_state_round_trips_and_an_old_grid_state_is_refused():
     acc.update(stat, target, ignore)
     again = pickle.loads(pickle.dumps(acc))
     assert again == acc and again.pixel_curve()["threshold"].size == acc.keys.size + 1
-    old = {"pixel_grid": torch.zeros(3), "target_hits": torch.zeros(3, dtype=torch.int64),
-           "clutter_hits": torch.zeros(3, dtype=torch.int64), "targets": 0, "clutter": 0}  # fmt: skip
+    old = {
+        "pixel_grid": torch.zeros(3),
+        "target_hits": torch.zeros(3, dtype=torch.int64),
+        "clutter_hits": torch.zeros(3, dtype=torch.int64),
+        "targets": 0,
+        "clutter": 0,
+    }
     with pytest.raises(ValueError, match="not a RocAccumulator state"):
         RocAccumulator.__new__(RocAccumulator).__setstate__(old)
     unsorted = {**vars(acc), "keys": acc.keys[::-1].copy()}

@@ -54,8 +54,13 @@ def test_scr_equals_the_pixel_by_pixel_ring(seed):
     ignore = (rng.random((n, h, w)) < 0.1) & (ids == 0)
     g = int(ids.max())
     plane = np.array([np.flatnonzero((ids == i).any(axis=(1, 2)))[0] for i in range(1, g + 1)])
-    box = np.array([[*np.argwhere(ids == i)[:, 1:].min(0), *(np.argwhere(ids == i)[:, 1:].max(0)
-                     + 1)] for i in range(1, g + 1)], dtype=float)  # fmt: skip
+    box = np.array(
+        [
+            [*np.argwhere(ids == i)[:, 1:].min(0), *(np.argwhere(ids == i)[:, 1:].max(0) + 1)]
+            for i in range(1, g + 1)
+        ],
+        dtype=float,
+    )
     for guard, width in ((3, 8), (0, 2), (1, 30)):
         got = target_scr_db(image, ids, ignore, box, plane, guard=guard, width=width)
         np.testing.assert_allclose(got, _slow_scr(image, ids, ignore, guard, width), rtol=1e-12)
@@ -76,7 +81,15 @@ def test_scr_is_nan_without_clutter_and_infinite_without_clutter_power():
 def test_bins_are_half_open_and_named():
     edges = [-0.01, 0.0, 4.99, 5.0, 19.99, 20.0, 1e9, -1e9]
     assert [SCR_NAMES[b] for b in scr_bins(np.array(edges))] == [
-        "<0", "0-5", "0-5", "5-10", "15-20", ">=20", ">=20", "<0"]  # fmt: skip
+        "<0",
+        "0-5",
+        "0-5",
+        "5-10",
+        "15-20",
+        ">=20",
+        ">=20",
+        "<0",
+    ]
     assert SCR_NAMES[scr_bins(np.array([np.nan]))[0]] == "n/a"
 
 
@@ -116,8 +129,10 @@ def test_the_simulator_declares_each_targets_known_scr():
         assert b.meta[i]["shadow"] == "ignore"
         ids = b.instances[i].numpy().astype(np.int64)
         box = np.array([b.meta[i]["boxes"][0]], dtype=float)
-        measured.append(target_scr_db(b.image[i].numpy(), ids, b.ignore[i].numpy(), box,
-                                      np.zeros(1, int))[0] - t["scr_db"])  # fmt: skip
+        measured.append(
+            target_scr_db(b.image[i].numpy(), ids, b.ignore[i].numpy(), box, np.zeros(1, int))[0]
+            - t["scr_db"]
+        )
     assert np.median(np.abs(measured)) < 0.5
 
 
@@ -144,15 +159,20 @@ class PointTargets(torch.utils.data.Dataset):
         clean = torch.ones(SIZE, SIZE, dtype=torch.float64)
         inst = torch.zeros(SIZE, SIZE, dtype=torch.int32)
         scr = []
-        for k, (r, c) in enumerate((r, c) for r in range(8, SIZE, GRID)
-                                   for c in range(8, SIZE, GRID)):  # fmt: skip
+        for k, (r, c) in enumerate(
+            (r, c) for r in range(8, SIZE, GRID) for c in range(8, SIZE, GRID)
+        ):
             scr.append(SCR_LEVELS[(k + i) % len(SCR_LEVELS)])
             clean[r, c] = 10 ** (scr[-1] / 10)
             inst[r, c] = k + 1
         speckle = torch.empty(SIZE, SIZE, dtype=torch.float64).exponential_(1.0, generator=gen)
-        return {"image": (clean * speckle).float()[None], "mask": inst[None] > 0,
-                "instances": inst[None], "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
-                "meta": {"name": f"points/{i}", "scr_db": scr}}  # fmt: skip
+        return {
+            "image": (clean * speckle).float()[None],
+            "mask": inst[None] > 0,
+            "instances": inst[None],
+            "ignore": torch.zeros(1, SIZE, SIZE, dtype=torch.bool),
+            "meta": {"name": f"points/{i}", "scr_db": scr},
+        }
 
 
 def _textbook_pd(scr_db: float, n: int, alpha: float) -> float:
@@ -185,8 +205,9 @@ def test_ca_cfar_pd_versus_scr_follows_the_textbook_curve():
     g, t, pfa = 2, 4, 1e-3
     n = (2 * (g + t) + 1) ** 2 - (2 * g + 1) ** 2
     alpha = n * (pfa ** (-1 / n) - 1)  # Pfa = (1 + alpha / N)^-N
-    scoring = te.Scoring(rules=ObjectRules(closing=0, min_area=1), matching=Matching("centroid"),
-                         replicates=0)  # fmt: skip
+    scoring = te.Scoring(
+        rules=ObjectRules(closing=0, min_area=1), matching=Matching("centroid"), replicates=0
+    )
     res = te.evaluate({"points": PointTargets(24)}, ["ca"], scoring=scoring, progress=False)
     known = res.scr[res.scr.source == "known"].set_index("scr_bin")
     r = res.states["points"][0]

@@ -102,9 +102,12 @@ def _separated(scene: Scene, params: SpotlightParams) -> bool:
     for t in (-0.25, 0.0, 0.25):
         t = t * params.geometry.aperture_time
         shift = torch.stack(
-            [-scene.fold.double() * params.geometry.blind_speed * t,
-             look_displacement(scene.velocity[:, 1], t, params)], -1,
-        )  # fmt: skip
+            [
+                -scene.fold.double() * params.geometry.blind_speed * t,
+                look_displacement(scene.velocity[:, 1], t, params),
+            ],
+            -1,
+        )
         at = scene.image + shift
         d = wrap(at[:, None] - at[None], period).norm(dim=-1)
         if bool((d + 1e9 * torch.eye(len(d))).min() < MIN_SEPARATION):
@@ -232,6 +235,7 @@ def _score_folded(tally: Tally, report, b: int, offset: Tensor, fold: int, param
     if int(on.sum()) == 1 and folds == [abs(fold)]:
         tally.radial_right += 1
     else:
-        tally.misses.append(f"scene {b}: fold {fold} streak with {int(on.sum())} detections, "
-                            f"radial folds {folds}")  # fmt: skip
+        tally.misses.append(
+            f"scene {b}: fold {fold} streak with {int(on.sum())} detections, radial folds {folds}"
+        )
     return on

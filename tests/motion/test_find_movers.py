@@ -63,8 +63,9 @@ class TestRefocus:
         assert torch.equal(bank, -bank.flip(0)) and bank.abs().max() >= 16.0
 
     def test_refocus_restores_a_mover_peak(self, table1):
-        g = simulate_phase_history(torch.zeros(1, 1, 2), table1.geometry,
-                                   velocities=torch.tensor([[[0.0, 6.0]]]))  # fmt: skip
+        g = simulate_phase_history(
+            torch.zeros(1, 1, 2), table1.geometry, velocities=torch.tensor([[[0.0, 6.0]]])
+        )
         img = polar_format(g, table1)
         peaks = refocus(img, table1, torch.tensor([0.0, 6.0])).abs().flatten(-2).amax(-1)[0]
         assert peaks[0] < 0.3 and peaks[1] > 0.95
@@ -136,8 +137,9 @@ class TestControlsAndEdgeCases:
             n = int(one.valid.sum())
             assert torch.equal(whole.pixel[b, :n], one.pixel[0, :n])
             assert torch.equal(whole.mover[b, :n], one.mover[0, :n])
-            assert torch.allclose(whole.velocity[b, :n], one.velocity[0, :n], atol=1e-6,
-                                  equal_nan=True)  # fmt: skip
+            assert torch.allclose(
+                whole.velocity[b, :n], one.velocity[0, :n], atol=1e-6, equal_nan=True
+            )
 
     def test_empty_scenes_and_empty_batch(self, small):
         g = torch.zeros(2, small.geometry.pulses, small.geometry.samples, dtype=torch.complex64)

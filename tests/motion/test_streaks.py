@@ -39,8 +39,9 @@ def _image(params, speed: float, fold: int, image_speed: float, image_fold: int)
     ``(image_speed, image_fold)``, and its offsets (m) from where it focuses."""
     v_r = 0.0 if fold == 0 else 2.0 * -fold  # 2 m/s per fold at x = 20: shown 100 m off
     vel = torch.tensor([[[v_r, speed]]], dtype=torch.float64)
-    g = simulate_phase_history(torch.tensor([[[-19.0, 20.0]]], dtype=torch.float64),
-                               params.geometry, velocities=vel)  # fmt: skip
+    g = simulate_phase_history(
+        torch.tensor([[[-19.0, 20.0]]], dtype=torch.float64), params.geometry, velocities=vel
+    )
     img = polar_format(g, params)
 
     def bank(v: float, k: int):

@@ -19,8 +19,9 @@ def table1():
 
 
 def _image(params, positions, velocities, amplitudes, snr_db=28.0, seed=0):
-    g = simulate_phase_history(positions, params.geometry, velocities=velocities,
-                               amplitudes=amplitudes)  # fmt: skip
+    g = simulate_phase_history(
+        positions, params.geometry, velocities=velocities, amplitudes=amplitudes
+    )
     g = add_noise(g, std=image_noise_std(params.geometry, snr_db), seed=seed)
     return polar_format(g.to(torch.complex64), params)
 
@@ -74,8 +75,10 @@ class TestBank:
         t = detect_targets(img, table1, max_fold=2)
         assert int(t.valid.sum()) == 4
         step = 1.5 * 0.96
-        found = {tuple(_positions(table1, p).round().tolist()): (float(v), int(k))
-                 for p, v, k in zip(t.pixel[0], t.speed[0], t.fold[0], strict=True)}  # fmt: skip
+        found = {
+            tuple(_positions(table1, p).round().tolist()): (float(v), int(k))
+            for p, v, k in zip(t.pixel[0], t.speed[0], t.fold[0], strict=True)
+        }
         motions = sorted(found.values())
         assert motions[0][0] == pytest.approx(-11.0, abs=step / 2)
         assert motions[-1][0] == pytest.approx(6.0, abs=step / 2)
@@ -88,7 +91,8 @@ class TestBank:
         bank = bank_detect(img, table1, speeds, default_detector(res_px), folds=torch.arange(-1, 2))
         assert bank.best.shape == (2, 1, 256, 512) and bank.fold.dtype == torch.long
         assert bank.speed[0, 0, 128, 256] == 0 and bank.fold[0, 0, 128, 256] == 0
-        one = bank_detect(img[1:], table1, speeds, default_detector(res_px),
-                          folds=torch.arange(-1, 2))  # fmt: skip
+        one = bank_detect(
+            img[1:], table1, speeds, default_detector(res_px), folds=torch.arange(-1, 2)
+        )
         assert torch.equal(one.mask[0], bank.mask[1]) and torch.equal(one.fold[0], bank.fold[1])
         assert math.isclose(float(one.best.max()), float(bank.best[1].max()), rel_tol=1e-5)

@@ -31,15 +31,26 @@ def _tests(rows):
     t = torch.tensor([r[:7] for r in rows], dtype=torch.float64)[None]
     nan, yes = torch.full_like(t[..., 0], math.nan), torch.ones_like(t[..., 0], dtype=torch.bool)
     look = LookTest(
-        displacement=torch.zeros(*t.shape[:2], 2, 2), rate=2 * t[..., 0], velocity=t[..., 0],
-        sigma=t[..., 1], snr=torch.full((*t.shape[:2], 2), 500.0),
-        score=t[..., 0].abs() / t[..., 1], mover=t[..., 0].abs() > 5 * t[..., 1],
-        walk=t[..., 4], walk_sigma=t[..., 5], interference=torch.zeros(*t.shape[:2], 2), seen=yes,
-    )  # fmt: skip
+        displacement=torch.zeros(*t.shape[:2], 2, 2),
+        rate=2 * t[..., 0],
+        velocity=t[..., 0],
+        sigma=t[..., 1],
+        snr=torch.full((*t.shape[:2], 2), 500.0),
+        score=t[..., 0].abs() / t[..., 1],
+        mover=t[..., 0].abs() > 5 * t[..., 1],
+        walk=t[..., 4],
+        walk_sigma=t[..., 5],
+        interference=torch.zeros(*t.shape[:2], 2),
+        seen=yes,
+    )
     focus = FocusTest(
-        velocity=t[..., 2], sigma=t[..., 3], gain=nan, snr=nan,
-        score=t[..., 2].abs() / t[..., 3], mover=t[..., 2].abs() > 5 * t[..., 3],
-    )  # fmt: skip
+        velocity=t[..., 2],
+        sigma=t[..., 3],
+        gain=nan,
+        snr=nan,
+        score=t[..., 2].abs() / t[..., 3],
+        mover=t[..., 2].abs() > 5 * t[..., 3],
+    )
     return look, focus, t[..., 6].long()
 
 
@@ -48,8 +59,10 @@ def test_rules():
     look, focus, bank = _tests(ROWS)
     position = torch.zeros(1, len(ROWS), 2, dtype=torch.float64)
     v = verdict(look, focus, bank, position, p, max_fold=2)
-    kinds = ["mover" if m else "radial" if r else "conflict" if c else "still"
-             for m, r, c in zip(v.mover[0], v.radial[0], v.conflict[0], strict=True)]  # fmt: skip
+    kinds = [
+        "mover" if m else "radial" if r else "conflict" if c else "still"
+        for m, r, c in zip(v.mover[0], v.radial[0], v.conflict[0], strict=True)
+    ]
     assert kinds == [r[-1] for r in ROWS]
     assert not (v.mover & v.radial).any() and not (v.conflict & (v.mover | v.radial)).any()
     assert v.fold[0].tolist() == [0, 0, 0, 1, -2, 0, 0, -3, 0, 1]

@@ -27,8 +27,8 @@ def test_objects_match_skimage_regionprops(seed, density, conn):
             assert obj.box[k].tolist() == list(r.bbox)
             np.testing.assert_allclose(obj.centroid[k], r.centroid, atol=1e-9)
             np.testing.assert_allclose(
-                [obj.length[k], obj.width[k]],
-                [r.axis_major_length, r.axis_minor_length], atol=1e-6)  # fmt: skip
+                [obj.length[k], obj.width[k]], [r.axis_major_length, r.axis_minor_length], atol=1e-6
+            )
             assert obj.score[k] == pytest.approx(r.intensity_max)
             assert np.array_equal(obj.labels[p] == k + 1, lab == r.label)
             k += 1
@@ -108,8 +108,13 @@ def test_batch_invariance_empty_batch_and_errors():
         discriminate(torch.zeros(4, 4), 1.0)
     with pytest.raises(InputTypeError):
         discriminate(torch.zeros(1, 1, 4, 4, dtype=torch.int32), 1.0)
-    for bad in ({"closing": -1}, {"connectivity": 6}, {"floor": 0}, {"min_area": 5, "max_area": 2},
-                {"units": "acres"}):  # fmt: skip
+    for bad in (
+        {"closing": -1},
+        {"connectivity": 6},
+        {"floor": 0},
+        {"min_area": 5, "max_area": 2},
+        {"units": "acres"},
+    ):
         with pytest.raises(OptionError):
             ObjectRules(**bad)
 
@@ -139,8 +144,9 @@ def test_statistic_scale_keeps_the_objects_and_scores_their_peak(seed, thr, clos
         scored = ratio_px > rules.floor
         assert own.score[k] == inside[scored].max()
     # a strictly increasing map of each other: the same order, ties included
-    assert np.array_equal(np.argsort(-own.score, kind="stable"),
-                          np.argsort(-ratio.score, kind="stable"))  # fmt: skip
+    assert np.array_equal(
+        np.argsort(-own.score, kind="stable"), np.argsort(-ratio.score, kind="stable")
+    )
 
 
 def test_statistic_scale_needs_one_threshold():

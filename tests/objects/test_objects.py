@@ -29,8 +29,9 @@ def test_masks_measure_like_regionprops_and_may_overlap(seed, n):
         (r,) = regionprops(masks[k].astype(np.uint8))
         assert o.area[k] == r.area and o.box[k].tolist() == list(r.bbox)
         np.testing.assert_allclose(o.centroid[k], r.centroid, atol=1e-9)
-        np.testing.assert_allclose([o.length[k], o.width[k]],
-                                   [r.axis_major_length, r.axis_minor_length], atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            [o.length[k], o.width[k]], [r.axis_major_length, r.axis_minor_length], atol=1e-6
+        )
         assert np.array_equal(o.mask_of(k), masks[k]) and o.plane[k] == plane[k]
     assert np.array_equal(o.score, scores)
 
@@ -43,8 +44,13 @@ def test_per_plane_lists_equal_flat_arrays():
     ]
     scores = [np.array([0.5]), np.zeros(0), np.array([0.9, 0.1])]
     a = Objects.from_boxes(boxes, scores, shape=(10, 10))
-    b = Objects.from_boxes(np.concatenate(boxes), np.concatenate(scores), shape=(10, 10),
-                           plane=np.array([0, 2, 2]), planes=3)  # fmt: skip
+    b = Objects.from_boxes(
+        np.concatenate(boxes),
+        np.concatenate(scores),
+        shape=(10, 10),
+        plane=np.array([0, 2, 2]),
+        planes=3,
+    )
     for field in ("plane", "score", "box", "area", "centroid"):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
     assert a.planes == b.planes == 3
@@ -52,10 +58,12 @@ def test_per_plane_lists_equal_flat_arrays():
 
 def test_box_formats_agree():
     rc = Objects.from_boxes(np.array([[2.0, 1.0, 6.0, 4.0]]), np.array([1.0]), shape=(8, 8))
-    xyxy = Objects.from_boxes(np.array([[1.0, 2.0, 4.0, 6.0]]), np.array([1.0]), shape=(8, 8),
-                              box_format="xyxy")  # fmt: skip
-    xywh = Objects.from_boxes(np.array([[1.0, 2.0, 3.0, 4.0]]), np.array([1.0]), shape=(8, 8),
-                              box_format="xywh")  # fmt: skip
+    xyxy = Objects.from_boxes(
+        np.array([[1.0, 2.0, 4.0, 6.0]]), np.array([1.0]), shape=(8, 8), box_format="xyxy"
+    )
+    xywh = Objects.from_boxes(
+        np.array([[1.0, 2.0, 3.0, 4.0]]), np.array([1.0]), shape=(8, 8), box_format="xywh"
+    )
     for o in (xyxy, xywh):
         assert np.array_equal(o.box, rc.box) and np.array_equal(o.centroid, rc.centroid)
     assert rc.area.tolist() == [12] and (rc.length[0], rc.width[0]) == (4.0, 3.0)
@@ -69,8 +77,14 @@ def test_labels_pixels_and_masks_give_the_same_objects():
     a = Objects.from_labels(lab, smap)
     masks = np.stack([lab[0] == 5, lab[1] == 2])
     b = Objects.from_masks(masks, a.score, plane=np.array([0, 1]), planes=2, threshold=1.0)
-    c = Objects.from_pixel_lists([np.flatnonzero(m) for m in masks], a.score, shape=(6, 6),
-                                 plane=np.array([0, 1]), planes=2, threshold=1.0)  # fmt: skip
+    c = Objects.from_pixel_lists(
+        [np.flatnonzero(m) for m in masks],
+        a.score,
+        shape=(6, 6),
+        plane=np.array([0, 1]),
+        planes=2,
+        threshold=1.0,
+    )
     for o in (b, c):
         for field in ("plane", "area", "box", "centroid", "length", "width", "score"):
             np.testing.assert_array_equal(getattr(o, field), getattr(a, field), field)
@@ -78,17 +92,28 @@ def test_labels_pixels_and_masks_give_the_same_objects():
 
 
 def test_points_and_torchvision():
-    p = Objects.from_points([np.array([[3.0, 4.0]]), np.zeros((0, 2))],
-                            [np.array([0.7]), np.zeros(0)], shape=(8, 8),
-                            length_m=np.array([12.0]))  # fmt: skip
-    assert (p.geometry, p.planes, p.area.tolist(), p.length_m.tolist()) == (
-        "point", 2, [0], [12.0])  # fmt: skip
-    out = [{"boxes": torch.tensor([[1.0, 2.0, 3.0, 5.0]]), "scores": torch.tensor([0.5]),
+    p = Objects.from_points(
+        [np.array([[3.0, 4.0]]), np.zeros((0, 2))],
+        [np.array([0.7]), np.zeros(0)],
+        shape=(8, 8),
+        length_m=np.array([12.0]),
+    )
+    assert (p.geometry, p.planes, p.area.tolist(), p.length_m.tolist()) == ("point", 2, [0], [12.0])
+    out = [
+        {
+            "boxes": torch.tensor([[1.0, 2.0, 3.0, 5.0]]),
+            "scores": torch.tensor([0.5]),
             "labels": torch.tensor([2]),
-            "masks": torch.zeros(1, 1, 8, 8).index_fill_(2, torch.tensor([2, 3]), 0.9)}]  # fmt: skip
+            "masks": torch.zeros(1, 1, 8, 8).index_fill_(2, torch.tensor([2, 3]), 0.9),
+        }
+    ]
     t = Objects.from_torchvision(out, shape=(8, 8), threshold=0.3)
     assert (t.geometry, t.area.tolist(), t.classes.tolist(), t.threshold) == (
-        "mask", [16], ["2"], 0.3)  # fmt: skip
+        "mask",
+        [16],
+        ["2"],
+        0.3,
+    )
 
 
 @pytest.mark.parametrize(

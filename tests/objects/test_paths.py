@@ -40,8 +40,9 @@ SHAPES = st.sampled_from([(1, 1, 1), (2, 7, 9), (3, 1, 12), (2, 12, 1), (1, 16, 
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10_000), shape=SHAPES, density=st.floats(0.0, 0.7),
-       radius=st.integers(0, 4))  # fmt: skip
+@given(
+    seed=st.integers(0, 10_000), shape=SHAPES, density=st.floats(0.0, 0.7), radius=st.integers(0, 4)
+)
 def test_closing_equals_scipy(path, seed, shape, density, radius):
     mask = _mask(seed, shape, density)
     got = close_pixels(np.flatnonzero(mask), shape, radius)
@@ -51,8 +52,12 @@ def test_closing_equals_scipy(path, seed, shape, density, radius):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10_000), shape=SHAPES, density=st.floats(0.0, 0.9),
-       connectivity=st.sampled_from([1, 2]))  # fmt: skip
+@given(
+    seed=st.integers(0, 10_000),
+    shape=SHAPES,
+    density=st.floats(0.0, 0.9),
+    connectivity=st.sampled_from([1, 2]),
+)
 def test_labels_equal_scipy(path, seed, shape, density, connectivity):
     mask = _mask(seed, shape, density)
     idx = np.flatnonzero(mask)
@@ -69,13 +74,27 @@ def _objects(seed: int, rules: ObjectRules) -> Objects:
 
 
 def _fields(obj: Objects) -> list[np.ndarray]:
-    return [obj.labels, obj.plane, obj.score, obj.area, obj.box, obj.centroid, obj.length,
-            obj.width]  # fmt: skip
+    return [
+        obj.labels,
+        obj.plane,
+        obj.score,
+        obj.area,
+        obj.box,
+        obj.centroid,
+        obj.length,
+        obj.width,
+    ]
 
 
-@pytest.mark.parametrize("rules", [ObjectRules(), ObjectRules(closing=2, min_area=5),
-                                   ObjectRules(closing=1, connectivity=4, max_area=30),
-                                   ObjectRules(floor=0.5, closing=3)])  # fmt: skip
+@pytest.mark.parametrize(
+    "rules",
+    [
+        ObjectRules(),
+        ObjectRules(closing=2, min_area=5),
+        ObjectRules(closing=1, connectivity=4, max_area=30),
+        ObjectRules(floor=0.5, closing=3),
+    ],
+)
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_discriminate_same_objects_on_both_paths(rules, seed):
     old = _jit.ENABLED
@@ -110,8 +129,9 @@ def test_own_regions_equal_labels_scored_on_the_whole_map(threshold):
     labels = torch.as_tensor(rng.integers(0, 4, (2, 2, 9, 11)) * (rng.random((2, 2, 9, 11)) < 0.3))
     thr = torch.tensor([1.5, 3.0]).reshape(2, 1, 1, 1) if threshold == "per image" else threshold
     got = own_regions(stat, thr, labels)
-    want = Objects.from_labels(labels.reshape(4, 9, 11).numpy(),
-                               normalised_score(stat, thr).reshape(4, 9, 11).numpy())  # fmt: skip
+    want = Objects.from_labels(
+        labels.reshape(4, 9, 11).numpy(), normalised_score(stat, thr).reshape(4, 9, 11).numpy()
+    )
     for a, b in zip(_fields(want), _fields(got), strict=True):
         assert a.dtype == b.dtype and np.array_equal(a, b)
     assert np.array_equal(got.pixel_lists()[1], np.flatnonzero(got.labels))

@@ -127,8 +127,15 @@ def vi_statistic(
         return x.size <= 1 or 1 + x.var(ddof=1) / x.mean() ** 2 > k_vi
 
     va, vb = variable(a), variable(b)
-    n_full = len(ring_cells(np.ones((4 * (guard + train) + 1,) * 2), 2 * (guard + train),
-                            2 * (guard + train), guard, train))  # fmt: skip
+    n_full = len(
+        ring_cells(
+            np.ones((4 * (guard + train) + 1,) * 2),
+            2 * (guard + train),
+            2 * (guard + train),
+            guard,
+            train,
+        )
+    )
     full = ca_factor(n_full, pfa)
     if a.size == 0 or b.size == 0:  # one half empty: CA on the other
         c = a if a.size else b

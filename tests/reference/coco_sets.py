@@ -23,15 +23,25 @@ CATEGORIES = [{"id": 3, "name": "ship"}, {"id": 7, "name": "tank"}, {"id": 9, "n
 
 def _polygon(rng, x, y, w, h) -> list[float]:
     """A random quadrilateral inside the box ``(x, y, w, h)``."""
-    pts = [(x + rng.uniform(0, w / 3), y + rng.uniform(0, h / 3)),
-           (x + w - rng.uniform(0, w / 3), y + rng.uniform(0, h / 3)),
-           (x + w - rng.uniform(0, w / 3), y + h - rng.uniform(0, h / 3)),
-           (x + rng.uniform(0, w / 3), y + h - rng.uniform(0, h / 3))]  # fmt: skip
+    pts = [
+        (x + rng.uniform(0, w / 3), y + rng.uniform(0, h / 3)),
+        (x + w - rng.uniform(0, w / 3), y + rng.uniform(0, h / 3)),
+        (x + w - rng.uniform(0, w / 3), y + h - rng.uniform(0, h / 3)),
+        (x + rng.uniform(0, w / 3), y + h - rng.uniform(0, h / 3)),
+    ]
     return [float(v) for p in pts for v in p]
 
 
-def make_set(seed: int, *, n_images: int = 4, segm: bool = False, crowd: bool = True,
-             many: bool = False, ties: bool = False, categories: int = 3):  # fmt: skip
+def make_set(
+    seed: int,
+    *,
+    n_images: int = 4,
+    segm: bool = False,
+    crowd: bool = True,
+    many: bool = False,
+    ties: bool = False,
+    categories: int = 3,
+):
     """``(gt dict, results list)`` of a random set (see the module docstring)."""
     rng = np.random.default_rng(seed)
     cats = CATEGORIES[:categories]
@@ -46,8 +56,13 @@ def make_set(seed: int, *, n_images: int = 4, segm: bool = False, crowd: bool = 
             x, y = rng.uniform(0, w - bw), rng.uniform(0, h - bh)
             c = int(rng.choice([c["id"] for c in cats]))
             is_crowd = crowd and rng.random() < 0.15
-            ann = {"id": len(anns) + 1, "image_id": iid, "category_id": c,
-                   "bbox": [float(x), float(y), float(bw), float(bh)], "iscrowd": int(is_crowd)}  # fmt: skip
+            ann = {
+                "id": len(anns) + 1,
+                "image_id": iid,
+                "category_id": c,
+                "bbox": [float(x), float(y), float(bw), float(bh)],
+                "iscrowd": int(is_crowd),
+            }
             if segm or is_crowd:
                 poly = [_polygon(rng, x, y, bw, bh)]
                 if is_crowd or rng.random() < 0.3:  # RLE
@@ -55,8 +70,11 @@ def make_set(seed: int, *, n_images: int = 4, segm: bool = False, crowd: bool = 
                     ann["segmentation"]["counts"] = ann["segmentation"]["counts"].decode()
                 else:
                     ann["segmentation"] = poly
-            ann["area"] = float(bw * bh) if "segmentation" not in ann else float(
-                mask_utils.area(_rle(ann["segmentation"], h, w)))  # fmt: skip
+            ann["area"] = (
+                float(bw * bh)
+                if "segmentation" not in ann
+                else float(mask_utils.area(_rle(ann["segmentation"], h, w)))
+            )
             if is_crowd and not segm:
                 ann.pop("segmentation")  # a crowd box in the box set
             anns.append(ann)
@@ -93,12 +111,15 @@ def _rle(seg, h: int, w: int) -> dict:
         return mask_utils.merge(mask_utils.frPyObjects(seg, h, w))
     if isinstance(seg.get("counts"), list):
         return mask_utils.frPyObjects(seg, h, w)
-    return {"size": seg["size"], "counts": seg["counts"].encode()
-            if isinstance(seg["counts"], str) else seg["counts"]}  # fmt: skip
+    return {
+        "size": seg["size"],
+        "counts": seg["counts"].encode() if isinstance(seg["counts"], str) else seg["counts"],
+    }
 
 
-def pycocotools_eval(gt: dict, dets: list, iou_type: str, *, max_dets=(1, 10, 100),
-                     use_cats: bool = True) -> COCOeval:  # fmt: skip
+def pycocotools_eval(
+    gt: dict, dets: list, iou_type: str, *, max_dets=(1, 10, 100), use_cats: bool = True
+) -> COCOeval:
     """``COCOeval`` run on in-memory data (evaluate, accumulate, summarize), quietly."""
     with contextlib.redirect_stdout(io.StringIO()):
         coco = COCO()
@@ -145,17 +166,22 @@ def torchsar_inputs(gt: dict, dets: list, iou_type: str):
         t = [a for a in t if not a["iscrowd"]]
         truth = GroundTruth.build(
             np.array([plane[a["image_id"]] for a in t], np.int64),
-            np.array([_rc(a["bbox"]) for a in t]).reshape(-1, 4), planes=len(ims), shape=(h, w),
+            np.array([_rc(a["bbox"]) for a in t]).reshape(-1, 4),
+            planes=len(ims),
+            shape=(h, w),
             classes=[names[a["category_id"]] for a in t],
             pixels=[_pixels(a["segmentation"], h, w) if iou_type == "segm" else None for a in t],
             declared_area=np.array([a["area"] for a in t], np.float64),
             crowd=Regions.build(
                 np.array([plane[a["image_id"]] for a in r], np.int64),
-                np.array([_rc(a["bbox"]) for a in r]).reshape(-1, 4), shape=(h, w),
+                np.array([_rc(a["bbox"]) for a in r]).reshape(-1, 4),
+                shape=(h, w),
                 classes=[names[a["category_id"]] for a in r],
-                pixels=[_pixels(a["segmentation"], h, w) if "segmentation" in a else None
-                        for a in r]),
-        )  # fmt: skip
+                pixels=[
+                    _pixels(a["segmentation"], h, w) if "segmentation" in a else None for a in r
+                ],
+            ),
+        )
         mine = [d for d in dets if d["image_id"] in plane]
         pl = np.array([plane[d["image_id"]] for d in mine], np.int64)
         score = np.array([d["score"] for d in mine], np.float64)
@@ -174,9 +200,15 @@ def torchsar_inputs(gt: dict, dets: list, iou_type: str):
                 np.array([d["bbox"][2] * d["bbox"][3] if "bbox" in d else np.nan for d in mine])
             )
         else:  # (the boxes' declared areas, w * h, are their own)
-            obj = Objects.from_boxes(np.array([d["bbox"] for d in mine]).reshape(-1, 4), score,
-                                     shape=(h, w), plane=pl, planes=len(ims), box_format="xywh",
-                                     classes=cls)  # fmt: skip
+            obj = Objects.from_boxes(
+                np.array([d["bbox"] for d in mine]).reshape(-1, 4),
+                score,
+                shape=(h, w),
+                plane=pl,
+                planes=len(ims),
+                box_format="xywh",
+                classes=cls,
+            )
         out.append((truth, obj, [ids.index(im["id"]) for im in ims]))
     return out
 

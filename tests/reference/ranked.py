@@ -81,8 +81,9 @@ def coco_ap(statuses: list[str], n_gt: float) -> float:
     return total / 101
 
 
-def metrics(dets: list[dict], n_gt: float, images: float, threshold: float | None,
-            expanded: bool = False) -> dict:  # fmt: skip
+def metrics(
+    dets: list[dict], n_gt: float, images: float, threshold: float | None, expanded: bool = False
+) -> dict:
     """The headline metrics of (already expanded, in order) or plain detections."""
     order = dets if expanded else ranked(dets)
     kept = [d for d in order if threshold is None or d["score"] > threshold]

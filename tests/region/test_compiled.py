@@ -257,6 +257,10 @@ def test_compiled_equals_python_on_many_chips_and_scenes(model):
         for options in ({}, {"preset": "paper"}):
             _assert_same(x, **options)
     scenes = ts.simulate.scenes(2, seed=1, model=model).image
-    for options in ({}, {"preset": "paper"}, {"max_size": None, "max_fraction": None},
-                    {"floor": 0.02}):  # fmt: skip
+    for options in (
+        {},
+        {"preset": "paper"},
+        {"max_size": None, "max_fraction": None},
+        {"floor": 0.02},
+    ):
         _assert_same(scenes, **options)

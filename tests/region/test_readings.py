@@ -155,8 +155,13 @@ class TestTargetImage:
 def test_paper_preset_is_the_paper():
     p = PRESETS["paper"]
     assert (p.tau, p.n_init, p.guard, p.background, p.k, p.min_background) == (
-        0.3, 4, 3, 3, 0.25, 15,
-    )  # fmt: skip
+        0.3,
+        4,
+        3,
+        3,
+        0.25,
+        15,
+    )
     assert p.despeckle == "enhanced_frost" and p.connectivity == 4 and p.seed_window == 5
     assert (p.max_size, p.min_size, p.merge) == (None, 1, None)
     assert p == RegionParams()

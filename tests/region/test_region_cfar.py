@@ -50,9 +50,12 @@ class TestAgainstReference:
         opts = dict(connectivity=conn, target_on=target_on, blocking=blocking, budget=8)
         r = region_search(x, preset="paper", despeckle=lambda _: f, **opts)
         stat, rows = ref.region_cfar(
-            x[0, 0].numpy(), f[0, 0].numpy(), connectivity=conn, target_on=target_on,
+            x[0, 0].numpy(),
+            f[0, 0].numpy(),
+            connectivity=conn,
+            target_on=target_on,
             blocking=blocking,
-        )  # fmt: skip
+        )
         np.testing.assert_allclose(r.detection.statistic[0, 0].numpy(), stat, rtol=1e-9)
         assert [t.accepted for t in r.tables[0].rows] == [row["accepted"] for row in rows]
         assert [t.size for t in r.tables[0].rows] == [len(row["region"]) for row in rows]

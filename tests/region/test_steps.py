@@ -120,8 +120,9 @@ class TestGrow:
             for budget in (None, 1, 5):
                 g = Grid.new(f, connectivity=conn)
                 g.free2d()[blocked] = 0
-                out.append(np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget,
-                                        floor=floor)))  # fmt: skip
+                out.append(
+                    np.sort(grow(g, start, 1, tau=0.3, n_init=n_init, budget=budget, floor=floor))
+                )
             np.testing.assert_array_equal(out[0], out[1])
             np.testing.assert_array_equal(out[0], out[2])
             assert (f.flat[out[0]] >= floor * f.flat[start]).all()
@@ -202,9 +203,12 @@ class TestRings:
         np.testing.assert_array_equal(c, rc)
 
     @given(
-        st.integers(0, 10_000), st.integers(1, 30), st.integers(1, 30), st.integers(0, 4),
+        st.integers(0, 10_000),
+        st.integers(1, 30),
+        st.integers(1, 30),
         st.integers(0, 4),
-    )  # fmt: skip
+        st.integers(0, 4),
+    )
     def test_random_masks_equal_reference(self, seed, h, w, guard, background):
         t = np.random.default_rng(seed).random((h, w)) < 0.1
         k, c = ring_masks(t, guard, background)

@@ -59,9 +59,12 @@ def test_off_grid_points_match_the_triple_loop():
     amp = torch.randn(1, 3, generator=gen, dtype=torch.complex128)
     g = simulate_phase_history(pos, geo, amplitudes=amp)
     ref = exact_phase_history(
-        amp[0].numpy(), pos[0, :, 0].numpy(), pos[0, :, 1].numpy(),
-        geo.wavenumbers().numpy(), geo.angles().numpy(),
-    )  # fmt: skip
+        amp[0].numpy(),
+        pos[0, :, 0].numpy(),
+        pos[0, :, 1].numpy(),
+        geo.wavenumbers().numpy(),
+        geo.angles().numpy(),
+    )
     np.testing.assert_allclose(g[0].numpy(), ref, atol=1e-10)
 
 

@@ -8,9 +8,15 @@ from scipy import ndimage
 
 
 def scene(
-    h: int, w: int, seed: int, *, seams: tuple[int, int] = (32, 32), n_points: int = 12,
-    n_boxes: int = 10, big: int = 0,
-) -> np.ndarray:  # fmt: skip
+    h: int,
+    w: int,
+    seed: int,
+    *,
+    seams: tuple[int, int] = (32, 32),
+    n_points: int = 12,
+    n_boxes: int = 10,
+    big: int = 0,
+) -> np.ndarray:
     """Exponential clutter (mean 1) with point targets (30-300) and speckled extended objects
     (mean 6-30; placed, not multiplied, so the dynamic range stays SAR-like), some
     planted across the seams and corners of a ``seams`` tiling and the scene border; with
@@ -55,12 +61,18 @@ def reference_objects(mask: np.ndarray, score: np.ndarray, connectivity: int = 2
         best = max(range(rr.size), key=lambda j: (s[j], -(rr[j] * mask.shape[1] + cc[j])))
         rows.append(
             {
-                "row": rr.mean(), "col": cc.mean(), "peak_row": int(rr[best]),
-                "peak_col": int(cc[best]), "score": s[best], "area": int(rr.size),
-                "row_min": int(rr.min()), "row_max": int(rr.max()),
-                "col_min": int(cc.min()), "col_max": int(cc.max()),
+                "row": rr.mean(),
+                "col": cc.mean(),
+                "peak_row": int(rr[best]),
+                "peak_col": int(cc[best]),
+                "score": s[best],
+                "area": int(rr.size),
+                "row_min": int(rr.min()),
+                "row_max": int(rr.max()),
+                "col_min": int(cc.min()),
+                "col_max": int(cc.max()),
             }
-        )  # fmt: skip
+        )
     rows.sort(key=lambda d: (-d["score"], d["peak_row"], d["peak_col"]))
     return pd.DataFrame(rows, columns=list(rows[0]) if rows else None)
 

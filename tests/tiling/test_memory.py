@@ -16,8 +16,12 @@ ROOT = Path(__file__).resolve().parents[2]
 def _python(*args: str) -> str:
     out = subprocess.run(
         [sys.executable, "-m", "tests.tiling._rss", *args],
-        cwd=ROOT, capture_output=True, text=True, check=True, timeout=3600,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=3600,
+    )
     return out.stdout
 
 

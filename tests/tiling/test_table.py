@@ -25,13 +25,24 @@ def _reference(mask: np.ndarray, score: np.ndarray) -> pd.DataFrame:
         rr, cc = np.nonzero(lab == k)
         s = score[rr, cc]
         best = max(range(rr.size), key=lambda i: (s[i], -rr[i], -cc[i]))
-        rows.append({"row": rr.mean(), "col": cc.mean(), "peak_row": rr[best],
-                     "peak_col": cc[best], "score": s[best], "area": rr.size,
-                     "row_min": rr.min(), "row_max": rr.max(), "col_min": cc.min(),
-                     "col_max": cc.max()})  # fmt: skip
+        rows.append(
+            {
+                "row": rr.mean(),
+                "col": cc.mean(),
+                "peak_row": rr[best],
+                "peak_col": cc[best],
+                "score": s[best],
+                "area": rr.size,
+                "row_min": rr.min(),
+                "row_max": rr.max(),
+                "col_min": cc.min(),
+                "col_max": cc.max(),
+            }
+        )
     df = pd.DataFrame(rows)
-    return df.sort_values(["score", "peak_row", "peak_col"], ascending=[False, True, True],
-                          kind="mergesort").reset_index(drop=True)  # fmt: skip
+    return df.sort_values(
+        ["score", "peak_row", "peak_col"], ascending=[False, True, True], kind="mergesort"
+    ).reset_index(drop=True)
 
 
 def _scene(seed: int, shape=(47, 61)) -> tuple[np.ndarray, np.ndarray]:

@@ -67,8 +67,9 @@ def block_cfar(
             est = extreme_mean(sums, reduce)
             stat = ratio(xs.to(est.dtype), est)
         counts = [s.count for s in sums]
-        scale = geometric_cached(("block", interior, pfa, reduce), counts,
-                                 lambda: block_scale(counts, interior, factor))  # fmt: skip
+        scale = geometric_cached(
+            ("block", interior, pfa, reduce), counts, lambda: block_scale(counts, interior, factor)
+        )
         if scale is not None:
             stat = stat * scale
         return finish(stat, sum(counts), dtype)
@@ -85,8 +86,9 @@ def _compiled_extreme_ratio(xs: Tensor, sums: list[Sums], reduce: str) -> Tensor
     count = stack_planes([s.count for s in sums])
     s1 = stack_planes([s.s1 for s in sums])
     shift = sums[0].shift.reshape(xs.shape[:2])
-    out = _kernels.block_extreme_ratio(xs.contiguous().numpy(), count.numpy(), s1.numpy(),
-                                       shift.numpy(), reduce == "max")  # fmt: skip
+    out = _kernels.block_extreme_ratio(
+        xs.contiguous().numpy(), count.numpy(), s1.numpy(), shift.numpy(), reduce == "max"
+    )
     return torch.from_numpy(out)
 
 

@@ -112,8 +112,9 @@ def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]
         if 0 < c != n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
             scale[c] = (1.0 / factor(int(c))) * factor(n)
     shift = s.shift.reshape(xs.shape[:2]).numpy()
-    out = _kernels.ring_mean_ratio_masked(xs.contiguous().numpy(), count, s.s1.numpy(), shift,
-                                          n, scale)  # fmt: skip
+    out = _kernels.ring_mean_ratio_masked(
+        xs.contiguous().numpy(), count, s.s1.numpy(), shift, n, scale
+    )
     return torch.from_numpy(out)
 
 

@@ -68,9 +68,13 @@ def _adjacent(planes: list[Tensor]) -> Tensor | None:
     in memory as contiguous float64 tensors of one shape (the window sums of one strip do)."""
     first = planes[0]
     step = first.numel() * first.element_size()
-    if not all(p.dtype == torch.float64 and p.is_contiguous() and p.shape == first.shape
-               and p.data_ptr() == first.data_ptr() + i * step
-               for i, p in enumerate(planes)):  # fmt: skip
+    if not all(
+        p.dtype == torch.float64
+        and p.is_contiguous()
+        and p.shape == first.shape
+        and p.data_ptr() == first.data_ptr() + i * step
+        for i, p in enumerate(planes)
+    ):
         return None
     return torch.as_strided(first, (len(planes), *first.shape), (first.numel(), *first.stride()))
 
@@ -88,8 +92,11 @@ def geometric_cached(key: tuple, counts: list[Tensor], make: Callable[[], Tensor
     is never handed to another). Other counts: ``make()`` as is."""
     if any(c.dim() > 2 and (c.shape[0] != 1 or c.shape[1] != 1) for c in counts):
         return make()
-    full = (key, str(counts[0].device),
-            *((tuple(c.shape), c.cpu().numpy().tobytes()) for c in counts))  # fmt: skip
+    full = (
+        key,
+        str(counts[0].device),
+        *((tuple(c.shape), c.cpu().numpy().tobytes()) for c in counts),
+    )
     if full in _GEOMETRIC:
         _GEOMETRIC.move_to_end(full)
         return _GEOMETRIC[full]

@@ -124,17 +124,24 @@ def _compiled(
     count = stack_planes([s.count for s in sums[:4]])
     count_a, count_b = count[0] + count[1], count[2] + count[3]
     scale = geometric_cached(
-        ("vi", n, full, factor.keywords["pfa"]), [count_a, count_b],
+        ("vi", n, full, factor.keywords["pfa"]),
+        [count_a, count_b],
         lambda: torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)]),
-    )  # fmt: skip
+    )
     ring = sums[4]
     ring_count = ring.count if ring.count.dim() == 4 else ring.count.view(1, 1, *ring.count.shape)
     out = _kernels.vi_rule_ratio(
-        xs.contiguous().numpy(), count.numpy(), stack_planes([s.s1 for s in sums[:4]]).numpy(),
-        stack_planes([s.s2 for s in sums[:4]]).numpy(), ring_count.contiguous().numpy(),
-        ring.s1.contiguous().numpy(), ring.shift.reshape(xs.shape[:2]).numpy(), k_vi, k_mr,
+        xs.contiguous().numpy(),
+        count.numpy(),
+        stack_planes([s.s1 for s in sums[:4]]).numpy(),
+        stack_planes([s.s2 for s in sums[:4]]).numpy(),
+        ring_count.contiguous().numpy(),
+        ring.s1.contiguous().numpy(),
+        ring.shift.reshape(xs.shape[:2]).numpy(),
+        k_vi,
+        k_mr,
         scale.contiguous().numpy(),
-    )  # fmt: skip
+    )
     return finish(torch.from_numpy(out), count_a + count_b, dtype)
 
 
@@ -179,8 +186,9 @@ def _one_rule(
     factor: Callable[[tuple[int, ...]], float],
 ) -> Tensor:
     """``full / alpha_rule`` at every pixel of the half-size planes for one rule."""
-    out = torch.full(count_a.shape, _inner(rule, n, full, factor), dtype=torch.float64,
-                     device=count_a.device)  # fmt: skip
+    out = torch.full(
+        count_a.shape, _inner(rule, n, full, factor), dtype=torch.float64, device=count_a.device
+    )
     edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
     if edge[0].numel():
         keys = torch.stack([torch.full_like(count_a[edge], rule), count_a[edge], count_b[edge]], -1)

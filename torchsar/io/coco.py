@@ -122,14 +122,23 @@ class CocoTable:
         for k, (row, box) in enumerate(zip(self.image.tolist(), self.box.tolist(), strict=True)):
             area = float(self.area[k])
             name = self.categories[int(self.category[k])]
-            anns[row].append(CocoAnnotation(int(self.id[k]), name, tuple(box),
-                                            self.segmentation[k], bool(self.iscrowd[k]),
-                                            None if area != area else area))  # fmt: skip
+            anns[row].append(
+                CocoAnnotation(
+                    int(self.id[k]),
+                    name,
+                    tuple(box),
+                    self.segmentation[k],
+                    bool(self.iscrowd[k]),
+                    None if area != area else area,
+                )
+            )
         return CocoSet(
-            tuple(CocoImage(**rec, annotations=tuple(a)) for rec, a in zip(self.images, anns,
-                                                                             strict=True)),
+            tuple(
+                CocoImage(**rec, annotations=tuple(a))
+                for rec, a in zip(self.images, anns, strict=True)
+            ),
             self.categories,
-        )  # fmt: skip
+        )
 
 
 def _is_int(v: object) -> bool:
@@ -195,9 +204,10 @@ def _categories(entries: list, path) -> dict[int, str]:
             raise FileFormatError(path, f"categories[{k}] has no name (a string): {_show(c)}")
         if out.get(c["id"], c["name"]) != c["name"]:
             raise FileFormatError(
-                path, f"categories[{k}] gives id {c['id']} a second name "
-                f"({out[c['id']]!r}, {c['name']!r})"
-            )  # fmt: skip
+                path,
+                f"categories[{k}] gives id {c['id']} a second name "
+                f"({out[c['id']]!r}, {c['name']!r})",
+            )
         out[c["id"]] = c["name"]
     return out
 
@@ -228,45 +238,64 @@ def _images(entries: list, path, max_pixels: int) -> list[dict]:
         h, w = (_dimension(im, key, where, path) for key in ("height", "width"))
         if h * w > max_pixels:
             raise FileFormatError(
-                path, f"{where} {name} is {w}x{h} = {w * h:,} pixels, over the limit of "
-                f"{max_pixels:,} (raise it with max_pixels)"
-            )  # fmt: skip
+                path,
+                f"{where} {name} is {w}x{h} = {w * h:,} pixels, over the limit of "
+                f"{max_pixels:,} (raise it with max_pixels)",
+            )
         rec = {"id": im["id"], "file_name": name, "height": h, "width": w}
         if im["id"] in by_id:
             j, first = by_id[im["id"]]
             if first == rec:  # the same record again: harmless, but say so
-                warnings.warn(f"{path}: images[{j}] is listed again as images[{k}]; read once",
-                              AnnotationWarning, stacklevel=3)  # fmt: skip
+                warnings.warn(
+                    f"{path}: images[{j}] is listed again as images[{k}]; read once",
+                    AnnotationWarning,
+                    stacklevel=3,
+                )
                 continue
-            raise FileFormatError(path, f"images[{j}] and images[{k}] both have id {im['id']} "
-                                  f"({first['file_name']}, {name})")  # fmt: skip
+            raise FileFormatError(
+                path,
+                f"images[{j}] and images[{k}] both have id {im['id']} "
+                f"({first['file_name']}, {name})",
+            )
         if name in by_name:
             j, other = by_name[name]
-            raise FileFormatError(path, f"images[{j}] (id {other}) and {where} both name file "
-                                  f"{name}; an image is listed once")  # fmt: skip
+            raise FileFormatError(
+                path,
+                f"images[{j}] (id {other}) and {where} both name file "
+                f"{name}; an image is listed once",
+            )
         by_id[im["id"]], by_name[name] = (k, rec), (k, im["id"])
         records.append(rec)
     return records
 
 
-def _polygon_problem(k: int, poly: list, height: int, width: int, image: str,
-                     tolerance: float) -> str | None:  # fmt: skip
+def _polygon_problem(
+    k: int, poly: list, height: int, width: int, image: str, tolerance: float
+) -> str | None:
     if not set(map(type, poly)) <= {int, float}:  # bool is neither
-        return (f"segmentation polygon {k} {_show(poly)} is not a list of numbers "
-                "[x0, y0, x1, y1, ...]")  # fmt: skip
+        return (
+            f"segmentation polygon {k} {_show(poly)} is not a list of numbers [x0, y0, x1, y1, ...]"
+        )
     if len(poly) < 6 or len(poly) % 2:
-        return (f"segmentation polygon {k} has {len(poly)} numbers; a polygon is "
-                "[x0, y0, x1, y1, x2, y2, ...]: an even count, at least 6")  # fmt: skip
+        return (
+            f"segmentation polygon {k} has {len(poly)} numbers; a polygon is "
+            "[x0, y0, x1, y1, x2, y2, ...]: an even count, at least 6"
+        )
     if not _all_finite(poly):
         bad = next(v for v in poly if _finite(v) is None)
         return f"segmentation polygon {k} holds {_show(bad)}; coordinates are finite numbers"
     xs, ys = poly[0::2], poly[1::2]
     lo, hi = -tolerance, (width + tolerance, height + tolerance)
     if min(xs) < lo or min(ys) < lo or max(xs) > hi[0] or max(ys) > hi[1]:
-        i = next(i for i, (x, y) in enumerate(zip(xs, ys, strict=True))
-                 if not (lo <= x <= hi[0] and lo <= y <= hi[1]))  # fmt: skip
-        return (f"segmentation polygon {k} point {i} ({xs[i]:g}, {ys[i]:g}) lies outside "
-                f"{image} ({width}x{height}) by more than {tolerance:g} pixel(s)")  # fmt: skip
+        i = next(
+            i
+            for i, (x, y) in enumerate(zip(xs, ys, strict=True))
+            if not (lo <= x <= hi[0] and lo <= y <= hi[1])
+        )
+        return (
+            f"segmentation polygon {k} point {i} ({xs[i]:g}, {ys[i]:g}) lies outside "
+            f"{image} ({width}x{height}) by more than {tolerance:g} pixel(s)"
+        )
     return None
 
 
@@ -281,8 +310,10 @@ def _rle_problem(seg: dict, height: int, width: int, image: str) -> tuple[str | 
     if isinstance(counts, str):
         return None, counts
     if not isinstance(counts, list) or not all(map(_is_int, counts)):
-        return (f"segmentation counts {_show(counts)} are neither run lengths (a list of "
-                "integers) nor a compressed RLE string"), None  # fmt: skip
+        return (
+            f"segmentation counts {_show(counts)} are neither run lengths (a list of "
+            "integers) nor a compressed RLE string"
+        ), None
     return _runs_problem(sum(counts), min(counts, default=0), height, width), None
 
 
@@ -306,23 +337,27 @@ def _string_problems(strings: list[str], sizes: list[tuple[int, int]]) -> list[s
     ]
 
 
-def _problem_now(seg: object, height: int, width: int, image: str,
-                 tolerance: float) -> tuple[str | None, str | None]:  # fmt: skip
+def _problem_now(
+    seg: object, height: int, width: int, image: str, tolerance: float
+) -> tuple[str | None, str | None]:
     """``(problem, string)``: what is wrong with ``seg``, or its compressed RLE string
     still to check."""
     if isinstance(seg, dict):
         return _rle_problem(seg, height, width, image)
     if isinstance(seg, list) and seg:
         if not all(isinstance(poly, list) for poly in seg):
-            return (f"segmentation {_show(seg)} is not a list of polygons "
-                    "[[x0, y0, x1, y1, ...], ...]"), None  # fmt: skip
+            return (
+                f"segmentation {_show(seg)} is not a list of polygons [[x0, y0, x1, y1, ...], ...]"
+            ), None
         for k, poly in enumerate(seg):
             problem = _polygon_problem(k, poly, height, width, image, tolerance)
             if problem is not None:
                 return problem, None
         return None, None
-    return (f"segmentation {_show(seg)} is neither polygons [[x0, y0, x1, y1, ...], ...] "
-            "nor RLE {size, counts}"), None  # fmt: skip
+    return (
+        f"segmentation {_show(seg)} is neither polygons [[x0, y0, x1, y1, ...], ...] "
+        "nor RLE {size, counts}"
+    ), None
 
 
 def segmentation_problems(
@@ -393,8 +428,10 @@ def _bbox(a: dict, rec: dict) -> tuple[float, float, float, float] | str:
     x, y, w, h = map(float, box)
     W, H = rec["width"], rec["height"]
     if w < 0 or h < 0 or x < 0 or y < 0 or x + w > W + 1e-6 or y + h > H + 1e-6:
-        return (f"box [x={x:g}, y={y:g}, w={w:g}, h={h:g}] lies outside image "
-                f"{rec['file_name']} ({W}x{H})")  # fmt: skip
+        return (
+            f"box [x={x:g}, y={y:g}, w={w:g}, h={h:g}] lies outside image "
+            f"{rec['file_name']} ({W}x{H})"
+        )
     return x, y, w, h
 
 
@@ -430,15 +467,19 @@ def _annotation(k: int, a: object, categories: dict[int, str], images: dict, pat
     seg, string = a.get("segmentation"), None
     if seg is not None and seg != [] and seg != {}:
         image = f"image {rec['file_name']}"
-        problem, string = _problem_now(seg, rec["height"], rec["width"], image,
-                                       POLYGON_TOLERANCE)  # fmt: skip
+        problem, string = _problem_now(seg, rec["height"], rec["width"], image, POLYGON_TOLERANCE)
         if problem is not None:
             raise fail(problem)
     else:
         seg = None
-    ann = CocoAnnotation(-1 if aid is None else aid, categories[category_id],
-                         (y, x, y + h, x + w), seg, bool(iscrowd),
-                         None if area is None else float(area))  # fmt: skip
+    ann = CocoAnnotation(
+        -1 if aid is None else aid,
+        categories[category_id],
+        (y, x, y + h, x + w),
+        seg,
+        bool(iscrowd),
+        None if area is None else float(area),
+    )
     return image_id, ann, where, string
 
 
@@ -449,10 +490,21 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
     if type(entries) is not list or not set(map(type, entries)) <= {dict}:
         return None
     rows = {rec["id"]: k for k, rec in enumerate(records)}
-    fields = [(a.get("image_id"), a.get("category_id"), a.get("id"), a.get("iscrowd", 0),
-               a.get("bbox"), a.get("area"), a.get("segmentation")) for a in entries]  # fmt: skip
+    fields = [
+        (
+            a.get("image_id"),
+            a.get("category_id"),
+            a.get("id"),
+            a.get("iscrowd", 0),
+            a.get("bbox"),
+            a.get("area"),
+            a.get("segmentation"),
+        )
+        for a in entries
+    ]
     image_ids, category, ids, crowd, boxes, areas, segs = (
-        list(c) for c in zip(*fields, strict=True)) if fields else ([],) * 7  # fmt: skip
+        (list(c) for c in zip(*fields, strict=True)) if fields else ([],) * 7
+    )
     given = [v for v in ids if v is not None]
     if (
         not set(map(type, image_ids)) <= {int}
@@ -465,7 +517,7 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
         or any(s is not None and s != [] and s != {} for s in segs)
         or not jsontext.plain_boxes(boxes)
         or not set(map(type, areas)) <= {int, float, type(None)}
-    ):  # fmt: skip
+    ):
         return None
     image = [rows.get(v) for v in image_ids]
     if None in image:
@@ -482,10 +534,12 @@ def _box_columns(entries: list, categories: dict, records: list[dict]) -> dict |
     x, y, w, h = xywh.T
     with np.errstate(over="ignore", invalid="ignore"):
         good = (
-            np.isfinite(xywh).all(axis=1) & (xywh.min(axis=1, initial=0.0) >= 0)
-            & (x + w <= width + 1e-6) & (y + h <= height + 1e-6)
+            np.isfinite(xywh).all(axis=1)
+            & (xywh.min(axis=1, initial=0.0) >= 0)
+            & (x + w <= width + 1e-6)
+            & (y + h <= height + 1e-6)
             & (np.isnan(area) | ((area >= 0) & (area < np.inf)))
-        )  # fmt: skip
+        )
     if not good.all():
         return None
     return {
@@ -612,8 +666,9 @@ def _counts(seg: object, height: int, width: int) -> bytes:
     return seg["counts"].encode()
 
 
-def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int, *,
-                      checked: bool = False) -> list[np.ndarray]:  # fmt: skip
+def annotation_pixels(
+    anns: list[CocoAnnotation], height: int, width: int, *, checked: bool = False
+) -> list[np.ndarray]:
     """The flat pixel indices (``row * width + col``) of each annotation's mask (its
     filled box when unsegmented), the run lengths of all decoded at once (``checked``: the
     segmentations were checked already, by :func:`read_coco`).
@@ -641,8 +696,10 @@ def annotation_pixels(anns: list[CocoAnnotation], height: int, width: int, *,
         if k in decoded:
             out.append(decoded[k])
             continue
-        r0, c0, r1, c1 = (min(max(round(v), 0), lim) for v, lim in
-                          zip(a.box, (height, width, height, width), strict=True))  # fmt: skip
+        r0, c0, r1, c1 = (
+            min(max(round(v), 0), lim)
+            for v, lim in zip(a.box, (height, width, height, width), strict=True)
+        )
         rr, cc = np.mgrid[r0:r1, c0:c1]
         out.append((rr * width + cc).reshape(-1))
     return out

@@ -126,8 +126,9 @@ def check_strings(
     if bad.size:
         owner = np.searchsorted(starts, bad, side="right") - 1
         strings_hit, first = np.unique(owner, return_index=True)
-        for i, at in zip(strings_hit.tolist(), (bad[first] - starts[strings_hit]).tolist(),
-                         strict=True):  # fmt: skip
+        for i, at in zip(
+            strings_hit.tolist(), (bad[first] - starts[strings_hit]).tolist(), strict=True
+        ):
             char = chr(raw[i][at])
             problems[i] = f"character {char!r} at {at} is not a code ('0' to 'o')"
     for i in np.flatnonzero(lengths > 0).tolist():
@@ -147,8 +148,10 @@ def check_strings(
     for j, i in enumerate(keep):
         allowed = _allowed_span(totals[i])
         if longest[j] > allowed:
-            problems[i] = (f"a run length spans {longest[j]} characters, more than the "
-                           f"{allowed} a mask of {totals[i]} pixels needs")  # fmt: skip
+            problems[i] = (
+                f"a run length spans {longest[j]} characters, more than the "
+                f"{allowed} a mask of {totals[i]} pixels needs"
+            )
         else:
             decodable.append(i)
     if decodable:

@@ -224,15 +224,18 @@ class _Problems:
 
 
 def _problems(obj: Objects, gt: GroundTruth, by_class: bool) -> _Problems:
-    names = sorted({*map(str, gt.classes.tolist()), *(map(str, obj.classes.tolist())
-                    if by_class else ())})  # fmt: skip
+    names = sorted(
+        {*map(str, gt.classes.tolist()), *(map(str, obj.classes.tolist()) if by_class else ())}
+    )
     code = {n: k for k, n in enumerate(names)}
     n_cls = max(len(names), 1)
     if by_class:
-        d_key = obj.plane * n_cls + np.array([code[str(c)] for c in obj.classes.tolist()],
-                                             dtype=np.int64).reshape(-1)  # fmt: skip
-        g_key = gt.plane * n_cls + np.array([code[str(c)] for c in gt.classes.tolist()],
-                                            dtype=np.int64).reshape(-1)  # fmt: skip
+        d_key = obj.plane * n_cls + np.array(
+            [code[str(c)] for c in obj.classes.tolist()], dtype=np.int64
+        ).reshape(-1)
+        g_key = gt.plane * n_cls + np.array(
+            [code[str(c)] for c in gt.classes.tolist()], dtype=np.int64
+        ).reshape(-1)
     else:
         d_key, g_key = obj.plane.astype(np.int64), gt.plane.astype(np.int64)
     d_order = np.lexsort((np.arange(len(obj)), -obj.score, d_key))
@@ -283,8 +286,9 @@ class _Pairs:
     iou: np.ndarray
 
 
-def _target_iou(obj: Objects, gt: GroundTruth, rule: Matching, od: np.ndarray, g: np.ndarray,
-                inter: tuple) -> np.ndarray:  # fmt: skip
+def _target_iou(
+    obj: Objects, gt: GroundTruth, rule: Matching, od: np.ndarray, g: np.ndarray, inter: tuple
+) -> np.ndarray:
     """IoU of object ``od[k]`` with target ``g[k]``: mask IoU where both are masks and the
     rule reads masks, else box IoU (``inter``: the pixel intersections, :func:`pixel_pairs`)."""
     out = pair_box_iou(obj.box[od], gt.box[g])
@@ -320,8 +324,10 @@ def measured_as(obj: Objects, gt: GroundTruth, rule: Matching) -> set[str]:
 def region_lists(gt: GroundTruth, boxes: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """``(owner, flat index)`` of every don't-care region's pixels (box regions rasterised,
     or left out without ``boxes``)."""
-    parts = [gt.region_pixels(k) if boxes or gt.crowd.has_mask[k] else np.zeros(0, np.int64)
-             for k in range(len(gt.crowd))]  # fmt: skip
+    parts = [
+        gt.region_pixels(k) if boxes or gt.crowd.has_mask[k] else np.zeros(0, np.int64)
+        for k in range(len(gt.crowd))
+    ]
     owner = np.repeat(np.arange(len(parts)), [p.size for p in parts])
     return owner, np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
@@ -335,8 +341,9 @@ def _lookup(keys: np.ndarray, values: np.ndarray, want: np.ndarray) -> np.ndarra
     return np.where(keys[order][pos] == want, values[order][pos], 0)
 
 
-def _crowd_quality(obj: Objects, gt: GroundTruth, od: np.ndarray, k: np.ndarray,
-                   boxes: bool = False) -> np.ndarray:  # fmt: skip
+def _crowd_quality(
+    obj: Objects, gt: GroundTruth, od: np.ndarray, k: np.ndarray, boxes: bool = False
+) -> np.ndarray:
     """Share of object ``od[j]`` lying on don't-care region ``k[j]`` (COCO's crowd rule:
     intersection over the object's own area; a point: 1 on the region, else 0). Masks and
     mask regions intersect by pixels; a box meets a mask region, and a mask a box region, by
@@ -411,7 +418,8 @@ def _centroid_pairs(cen: np.ndarray, db: np.ndarray, gb: np.ndarray, m: Matching
 def _boxes_meet(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Whether boxes ``a[k]`` and ``b[k]`` share some area."""
     return (np.minimum(a[:, 2], b[:, 2]) > np.maximum(a[:, 0], b[:, 0])) & (
-        np.minimum(a[:, 3], b[:, 3]) > np.maximum(a[:, 1], b[:, 1]))  # fmt: skip
+        np.minimum(a[:, 3], b[:, 3]) > np.maximum(a[:, 1], b[:, 1])
+    )
 
 
 def touching_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -431,8 +439,11 @@ def touching_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarra
         b = gt.box[rest_g]
         inside = (r >= b[:, 0]) & (r < b[:, 2]) & (c >= b[:, 1]) & (c < b[:, 3])
         z = np.zeros(int(inside.sum()), np.int64)
-        return (np.concatenate([d, rest_d[inside]]), np.concatenate([g, rest_g[inside]]),
-                np.concatenate([n, z]))  # fmt: skip
+        return (
+            np.concatenate([d, rest_d[inside]]),
+            np.concatenate([g, rest_g[inside]]),
+            np.concatenate([n, z]),
+        )
     if obj.has_masks:
         d, g, n = pixel_pairs(obj, gt)
         rest_d, rest_g = same_plane_pairs(obj.plane, gt.plane)
@@ -444,8 +455,11 @@ def touching_pairs(obj: Objects, gt: GroundTruth) -> tuple[np.ndarray, np.ndarra
     rest_d, rest_g = rest_d[keep], rest_g[keep]
     meet = _boxes_meet(obj.box[rest_d], gt.box[rest_g])
     z = np.zeros(int(meet.sum()), np.int64)
-    return (np.concatenate([d, rest_d[meet]]), np.concatenate([g, rest_g[meet]]),
-            np.concatenate([n, z]))  # fmt: skip
+    return (
+        np.concatenate([d, rest_d[meet]]),
+        np.concatenate([g, rest_g[meet]]),
+        np.concatenate([n, z]),
+    )
 
 
 def _outside(area: np.ndarray, ranges: np.ndarray) -> np.ndarray:
@@ -485,26 +499,43 @@ def _match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     i_ignore[real] = _outside(gt.coco_area[pr.i_target[real]], _RANGES)
     i_crowd = ~real
     keep = quality > 0
-    col = assign_pairs(pr.d_problem, pr.i_problem, i_ignore, i_crowd,
-                       (dv[keep], iv[keep], quality[keep]), COCO_IOUS)  # fmt: skip
+    col = assign_pairs(
+        pr.d_problem,
+        pr.i_problem,
+        i_ignore,
+        i_crowd,
+        (dv[keep], iv[keep], quality[keep]),
+        COCO_IOUS,
+    )
     d_area = _det_area(obj, boxes=rule.iou_kind == "box")[pr.d_order]
     d_out = _outside(d_area, _RANGES)
     ap = _statuses(col, pr, i_ignore, d_out)
     if rule.kind == "centroid":
         q = np.zeros(dv.size)
-        q[is_t] = _centroid_pairs(obj.centroid[od[is_t]], obj.box[od[is_t]], gt.box[tg[is_t]],
-                                  rule)  # fmt: skip
+        q[is_t] = _centroid_pairs(obj.centroid[od[is_t]], obj.box[od[is_t]], gt.box[tg[is_t]], rule)
         q[~is_t] = (crowd >= 0.5).astype(np.float64)  # COCO's crowd rule at 0.5
         keep = q > 0
-        opc = assign_pairs(pr.d_problem, pr.i_problem, i_ignore[:, :1], i_crowd,
-                           (dv[keep], iv[keep], q[keep]), [1e-12])  # fmt: skip
+        opc = assign_pairs(
+            pr.d_problem,
+            pr.i_problem,
+            i_ignore[:, :1],
+            i_crowd,
+            (dv[keep], iv[keep], q[keep]),
+            [1e-12],
+        )
         op_v = _statuses(opc, pr, i_ignore[:, :1], np.zeros((len(obj), 1), bool))
     elif rule.iou == COCO_IOUS[0] and not d_out[:, 0].any():
         op_v = ap[:1, :1]  # (the operating point ignores no detection for its size: a box
         # past COCO's area range "all", 1e10 px, is a false alarm there, not ignored)
     else:
-        opc = assign_pairs(pr.d_problem, pr.i_problem, i_ignore[:, :1], i_crowd,
-                           (dv[keep], iv[keep], quality[keep]), [rule.iou])  # fmt: skip
+        opc = assign_pairs(
+            pr.d_problem,
+            pr.i_problem,
+            i_ignore[:, :1],
+            i_crowd,
+            (dv[keep], iv[keep], quality[keep]),
+            [rule.iou],
+        )
         op_v = _statuses(opc, pr, i_ignore[:, :1], np.zeros((len(obj), 1), bool))
     return _result(obj, gt, rule, pr, ap, op_v[0, 0], inter, by_class)
 

@@ -127,9 +127,13 @@ class CocoImage:
 
     def __post_init__(self) -> None:
         typed = {
-            "gt_category": np.int64, "gt_area": np.float64, "gt_crowd": bool,
-            "det_category": np.int64, "det_score": np.float64, "det_area": np.float64,
-        }  # fmt: skip
+            "gt_category": np.int64,
+            "gt_area": np.float64,
+            "gt_crowd": bool,
+            "det_category": np.int64,
+            "det_score": np.float64,
+            "det_area": np.float64,
+        }
         for name, dtype in typed.items():
             a = np.asarray(getattr(self, name))
             if a.ndim != 1:
@@ -288,14 +292,22 @@ def summarize(
         return -1.0 if s[s > -1].size == 0 else float(np.mean(s[s > -1]))
 
     m0, m1, m2 = max_dets[:3]
-    return np.array([
-        one(True), one(True, 0.5, cap=m2), one(True, 0.75, cap=m2),
-        one(True, area="small", cap=m2), one(True, area="medium", cap=m2),
-        one(True, area="large", cap=m2),
-        one(False, cap=m0), one(False, cap=m1), one(False, cap=m2),
-        one(False, area="small", cap=m2), one(False, area="medium", cap=m2),
-        one(False, area="large", cap=m2),
-    ])  # fmt: skip
+    return np.array(
+        [
+            one(True),
+            one(True, 0.5, cap=m2),
+            one(True, 0.75, cap=m2),
+            one(True, area="small", cap=m2),
+            one(True, area="medium", cap=m2),
+            one(True, area="large", cap=m2),
+            one(False, cap=m0),
+            one(False, cap=m1),
+            one(False, cap=m2),
+            one(False, area="small", cap=m2),
+            one(False, area="medium", cap=m2),
+            one(False, area="large", cap=m2),
+        ]
+    )
 
 
 class CocoState:
@@ -333,10 +345,15 @@ class CocoState:
             raise OptionError("areas and iou_thresholds must not be empty")
         self._ranges = np.array(list(self.areas.values()), dtype=np.float64)
         n_bytes = -(-2 * len(self.areas) * self.iou_thresholds.size // 8)
-        self.dtype = np.dtype([
-            ("score", "<f8"), ("category", "<i8"), ("order", "<i4"), ("rank", "<u2"),
-            ("bits", "u1", (n_bytes,)),
-        ])  # fmt: skip
+        self.dtype = np.dtype(
+            [
+                ("score", "<f8"),
+                ("category", "<i8"),
+                ("order", "<i4"),
+                ("rank", "<u2"),
+                ("bits", "u1", (n_bytes,)),
+            ]
+        )
         self._records: list[np.ndarray] = []
         self._orders: list[np.ndarray] = []
         self._npig: dict[int, np.ndarray] = {}

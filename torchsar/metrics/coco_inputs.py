@@ -133,12 +133,16 @@ def coco_images(
                 crowd_cats.append(cc)
         n_c = len(crowd_cols)
         iou = np.concatenate([iou, on[:, crowd_cols]], axis=1) if n_c else iou
-        out.append(CocoImage(
-            order=int(orders[p]),
-            gt_category=np.array(cats_g + crowd_cats, np.int64),
-            gt_area=np.concatenate([area[g], np.zeros(n_c)]),
-            gt_crowd=np.concatenate([np.zeros(g.size, bool), np.ones(n_c, bool)]),
-            det_category=np.array(cats_d, np.int64), det_score=obj.score[d],
-            det_area=d_area, iou=iou.reshape(d.size, g.size + n_c),
-        ))  # fmt: skip
+        out.append(
+            CocoImage(
+                order=int(orders[p]),
+                gt_category=np.array(cats_g + crowd_cats, np.int64),
+                gt_area=np.concatenate([area[g], np.zeros(n_c)]),
+                gt_crowd=np.concatenate([np.zeros(g.size, bool), np.ones(n_c, bool)]),
+                det_category=np.array(cats_d, np.int64),
+                det_score=obj.score[d],
+                det_area=d_area,
+                iou=iou.reshape(d.size, g.size + n_c),
+            )
+        )
     return out

@@ -95,8 +95,11 @@ def _on_shadow(obj: Objects, gt: GroundTruth, cand: np.ndarray) -> np.ndarray:
         p = int(obj.plane[k])
         if gt.shadow[p]:
             r0, c0, r1, c1 = (int(np.floor(v + 0.5)) for v in obj.box[k])
-            out[i] = bool(shadow[p, max(r0, 0) : min(max(r1, r0 + 1), h),
-                                 max(c0, 0) : min(max(c1, c0 + 1), w)].any())  # fmt: skip
+            out[i] = bool(
+                shadow[
+                    p, max(r0, 0) : min(max(r1, r0 + 1), h), max(c0, 0) : min(max(c1, c0 + 1), w)
+                ].any()
+            )
     return out
 
 

@@ -361,13 +361,20 @@ def headline_intervals(
     out: dict[str, Interval] = {}
     for name, bias in PROPORTIONS.items():
         if name in reps:
-            out[name] = proportion_interval(metrics[name], _count(name, metrics, n_gt),
-                                            reps[name], units, level, bias)  # fmt: skip
+            out[name] = proportion_interval(
+                metrics[name], _count(name, metrics, n_gt), reps[name], units, level, bias
+            )
     fa = rate_interval(metrics["fp"], units, reps["fa_per_image"], level)
     out["fa_per_image"] = fa
     if images_per_km2 is not None and np.isfinite(images_per_km2):
-        out["fa_per_km2"] = Interval(fa.lo * images_per_km2, fa.hi * images_per_km2, fa.method,
-                                     fa.undefined, fa.note, fa.centre * images_per_km2)  # fmt: skip
+        out["fa_per_km2"] = Interval(
+            fa.lo * images_per_km2,
+            fa.hi * images_per_km2,
+            fa.method,
+            fa.undefined,
+            fa.note,
+            fa.centre * images_per_km2,
+        )
     for name, why in NO_INTERVAL.items():
         out[name] = Interval(float("nan"), float("nan"), note=why)
     if 0 < units < MIN_UNITS:

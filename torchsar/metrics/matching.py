@@ -97,8 +97,9 @@ class Matching:
         d = self.max_distance
         if self.kind == "distance" and d is None:
             raise OptionError("the distance rule needs max_distance (pixels or metres)")
-        if d is not None and (isinstance(d, bool) or not isinstance(d, int | float)
-                              or not 0 < d < float("inf")):  # fmt: skip
+        if d is not None and (
+            isinstance(d, bool) or not isinstance(d, int | float) or not 0 < d < float("inf")
+        ):
             raise OptionError(f"max_distance must be a finite number > 0, got {d!r}")
 
     @property
@@ -120,8 +121,10 @@ class Matching:
         if self.kind == "distance":
             return f"distance < {self.max_distance:g} {self.distance_units} ({self.assign})"
         if self.kind == "centroid":
-            return (f"centroid in target box +{self.margin:g}, box <= {self.max_size_ratio:g}x "
-                    f"area (AP: {measured or self.iou_kind} IoU)")  # fmt: skip
+            return (
+                f"centroid in target box +{self.margin:g}, box <= {self.max_size_ratio:g}x "
+                f"area (AP: {measured or self.iou_kind} IoU)"
+            )
         return f"{measured or self.iou_kind} IoU >= {self.iou:g}"
 
     def as_dict(self) -> dict:
@@ -176,10 +179,12 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
     """
     q = np.asarray(quality, np.float64)
     d, g = q.shape
-    full = np.concatenate([np.where(q > 0, q, -np.inf), np.asarray(crowd, np.float64)[:, None]],
-                          axis=1)  # fmt: skip
+    full = np.concatenate(
+        [np.where(q > 0, q, -np.inf), np.asarray(crowd, np.float64)[:, None]], axis=1
+    )
     full[:, -1] = np.where(full[:, -1] > 0, full[:, -1], -np.inf)
     is_crowd = np.r_[np.zeros(g, bool), True]
-    col = greedy_assign(full[None], is_crowd[None, None], is_crowd[None], np.array([d]),
-                        thresholds)[0, :, 0, :].T  # fmt: skip
+    col = greedy_assign(
+        full[None], is_crowd[None, None], is_crowd[None], np.array([d]), thresholds
+    )[0, :, 0, :].T
     return np.where(col == g, IGNORED, col).astype(np.int64)

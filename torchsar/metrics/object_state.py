@@ -208,12 +208,16 @@ class ObjectState:
         if not len(obj):
             return
         if self.by_class is not None and m.by_class != self.by_class:
-            raise ValueError("detections with and without classes in one state: give every "
-                             "detection a class, or match class-agnostic")  # fmt: skip
+            raise ValueError(
+                "detections with and without classes in one state: give every "
+                "detection a class, or match class-agnostic"
+            )
         self.by_class = bool(m.by_class)
         declared = obj.threshold is not None
         if self.thresholded is not None and (self.thresholded, self.threshold) != (
-                declared, obj.threshold):  # fmt: skip
+            declared,
+            obj.threshold,
+        ):
             raise ValueError("objects with different operating thresholds in one state")
         self.thresholded, self.threshold = declared, obj.threshold
         if self.ap_kind is not None and m.ap_kind != self.ap_kind:
@@ -273,15 +277,22 @@ class ObjectState:
             if None not in (a, b) and a != b:
                 raise ValueError(f"cannot add states of different {k}")
         first = self if self.thresholded is not None else other
-        pick = {k: getattr(self, k) if getattr(self, k) is not None else getattr(other, k)
-                for k in ("ap_kind", "ap_areas", "by_class")}  # fmt: skip
+        pick = {
+            k: getattr(self, k) if getattr(self, k) is not None else getattr(other, k)
+            for k in ("ap_kind", "ap_areas", "by_class")
+        }
         out = ObjectState(
-            replicates=self.replicates, seed=self.seed, size_edges=self.size_edges,
-            size_names=self.size_names, thresholded=first.thresholded,
-            threshold=first.threshold, **pick,
-            parts=[*self.parts, *other.parts], added=self.added + other.added,
+            replicates=self.replicates,
+            seed=self.seed,
+            size_edges=self.size_edges,
+            size_names=self.size_names,
+            thresholded=first.thresholded,
+            threshold=first.threshold,
+            **pick,
+            parts=[*self.parts, *other.parts],
+            added=self.added + other.added,
             scr_sources=_sources(set(self.scr_sources) | set(other.scr_sources)),
-        )  # fmt: skip
+        )
         return out
 
     def __eq__(self, other: object) -> bool:
@@ -293,9 +304,14 @@ class ObjectState:
             other._declared(),
             other.scr_sources,
         )
-        return same and a.names == b.names and all(
-            getattr(a, k).tobytes() == getattr(b, k).tobytes()  # NaN equals NaN here
-            for k in ("images", "detections", "targets"))  # fmt: skip
+        return (
+            same
+            and a.names == b.names
+            and all(
+                getattr(a, k).tobytes() == getattr(b, k).tobytes()  # NaN equals NaN here
+                for k in ("images", "detections", "targets")
+            )
+        )
 
     def __getstate__(self) -> dict:
         state = {k: v for k, v in self.__dict__.items() if k != "_cache"}
@@ -385,8 +401,9 @@ class ObjectState:
         self._cache["ap_table"] = out
         return out
 
-    def _group_ap(self, det_sel: np.ndarray, gt_sel: np.ndarray, areas: int
-                  ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def _group_ap(
+        self, det_sel: np.ndarray, gt_sel: np.ndarray, areas: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """AP ``(areas, T)`` of the detections and targets selected, per area range and IoU
         threshold, and the targets counted in each range ``(areas,)``."""
         T = len(COCO_IOUS)
@@ -430,22 +447,23 @@ class ObjectState:
         d, g = rec.detections, rec.targets
         sel = above(d["score"], thr)
         tp_ = sel & (d["op"] == TARGET_OP)
-        out = ratios(int(tp_.sum()), int((sel & (d["op"] == SCORED)).sum()), self.n_gt,
-                     self.images)  # fmt: skip
+        out = ratios(int(tp_.sum()), int((sel & (d["op"] == SCORED)).sum()), self.n_gt, self.images)
         found = above(g["found"], thr) & ~np.isnan(g["found"])
         km2, nan = self.km2, float("nan")
         ap = self.ap()
         out.update(
             fom=out["tp"] / (out["fp"] + self.n_gt) if self.n_gt + out["fp"] else nan,
             fa_per_km2=out["fp"] / km2 if km2 else nan,
-            mean_iou=float(d["iou"][tp_].astype(np.float64).sum() / out["tp"]) if out["tp"]
+            mean_iou=float(d["iou"][tp_].astype(np.float64).sum() / out["tp"])
+            if out["tp"]
             else nan,
             fragmentation=float(g["touch"][found].sum() / found.sum()) if found.any() else nan,
-            length_score=LengthErrors().add(g["found_length"][found].astype(np.float64),
-                                            g["length"][found].astype(np.float64)).score,
+            length_score=LengthErrors()
+            .add(g["found_length"][found].astype(np.float64), g["length"][found].astype(np.float64))
+            .score,
             ap50=float(ap[0]),
             ap50_95=float(np.mean(ap)) if self.ap_kind != "distance" else nan,
-        )  # fmt: skip
+        )
         table = self.ap_table()
         for a, size in enumerate(("small", "medium", "large"), start=1):
             out[f"ap_{size}"] = float(np.mean(table[a])) if self.ap_kind == "iou" else nan
@@ -476,14 +494,21 @@ class ObjectState:
             self._cache[key] = replicate_metrics(res, w, thr, self.ap_kind)
         return self._cache[key]
 
-    def intervals(self, threshold: float | str | None = "design", level: float = 0.95
-                  ) -> dict[str, Interval]:  # fmt: skip
+    def intervals(
+        self, threshold: float | str | None = "design", level: float = 0.95
+    ) -> dict[str, Interval]:
         """Intervals of the headline metrics at an operating point (see
         :func:`~torchsar.metrics.intervals.headline_intervals`)."""
         km2 = self.km2
         per_km2 = self.images / km2 if km2 else None
-        return headline_intervals(self.metrics(threshold), self.replicate_metrics(threshold),
-                                  self.units, self.n_gt, level, per_km2)  # fmt: skip
+        return headline_intervals(
+            self.metrics(threshold),
+            self.replicate_metrics(threshold),
+            self.units,
+            self.n_gt,
+            level,
+            per_km2,
+        )
 
     def froc(self) -> dict[str, np.ndarray]:
         """The dense FROC: one point per score level where the counted detections change,
@@ -498,10 +523,12 @@ class ObjectState:
         ct, cf, thr = ct[keep], cf[keep], d["score"][ends][keep]
         nan = float("nan")
         return {
-            "threshold": thr, "tp": ct, "fp": cf,
+            "threshold": thr,
+            "tp": ct,
+            "fp": cf,
             "fa_per_image": cf / max(self.images, 1),
             "pd": ct / self.n_gt if self.n_gt else np.full(ct.shape, nan),
-        }  # fmt: skip
+        }
 
     def pr_curves(self, iou: int = 0) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
         """``[(class, recall points, precision, score)]`` at COCO IoU threshold index ``iou``
@@ -557,18 +584,22 @@ class ObjectState:
             for k in sorted(set(gt_key.tolist()) | set(fa_key.tolist())):
                 mine = gt_key == k
                 out[f"{prefix}:{k}"] = {
-                    "images": 0, "n_gt": int(mine.sum()), "tp": int((mine & found).sum()),
+                    "images": 0,
+                    "n_gt": int(mine.sum()),
+                    "tp": int((mine & found).sum()),
                     "fp": int((fa_key[sel[fa]] == k).sum()) if fa.any() else 0,
-                }  # fmt: skip
+                }
         tp_det = sel & (d["op"] == TARGET_OP)
         for prefix, field_ in (("group", "group"), ("image_class", "cls")):
             for idx in np.unique(im[field_][im[field_] >= 0]):
                 planes = im[field_] == idx
                 on_d, on_g = planes[d["image"]], planes[g["image"]]
                 out[f"{prefix}:{rec.names[idx]}"] = {
-                    "images": int(planes.sum()), "n_gt": int(on_g.sum()),
-                    "tp": int((on_d & tp_det).sum()), "fp": int((on_d & sel & fa).sum()),
-                }  # fmt: skip
+                    "images": int(planes.sum()),
+                    "n_gt": int(on_g.sum()),
+                    "tp": int((on_d & tp_det).sum()),
+                    "fp": int((on_d & sel & fa).sum()),
+                }
         return out
 
     def fa_types(self, threshold: float | str | None = "design") -> np.ndarray:
@@ -580,8 +611,7 @@ class ObjectState:
         sel = above(d["score"], self._threshold(threshold)) & (d["fa_type"] != NOT_FA)
         return np.bincount(d["fa_type"][sel], minlength=len(FA_TYPES))[: len(FA_TYPES)]
 
-    def scr_rows(self, threshold: float | str | None = "design", level: float = 0.95
-                 ) -> list[dict]:  # fmt: skip
+    def scr_rows(self, threshold: float | str | None = "design", level: float = 0.95) -> list[dict]:
         """Pd per signal-to-clutter ratio bin at an operating point (see
         :func:`torchsar.metrics.scr.scr_rows`)."""
         from torchsar.metrics.scr import scr_rows
@@ -612,8 +642,12 @@ class ObjectState:
             ok = np.flatnonzero(cf / max(self.images, 1) <= level)
             k = int(ok[-1]) if ok.size else 0
         else:
-            f1 = np.array([ratios(int(t), int(f), self.n_gt, self.images)["f1"]
-                           for t, f in zip(ct, cf, strict=True)])  # fmt: skip
+            f1 = np.array(
+                [
+                    ratios(int(t), int(f), self.n_gt, self.images)["f1"]
+                    for t, f in zip(ct, cf, strict=True)
+                ]
+            )
             f1 = np.nan_to_num(f1, nan=-1.0)
             k = int(np.flatnonzero(f1 == f1.max())[0])
         if k == ends.size:

@@ -42,12 +42,14 @@ Side = tuple[dict, dict, dict]
 """One detector's ``(metrics, replicate_metrics, intervals)``."""
 
 
-def side(state: ObjectState, threshold: float | str | None = "design", level: float = 0.95
-         ) -> Side:  # fmt: skip
+def side(state: ObjectState, threshold: float | str | None = "design", level: float = 0.95) -> Side:
     """What :func:`difference_intervals` needs of one detector at its operating point
     (``threshold``: see :meth:`ObjectState.metrics`)."""
-    return (state.metrics(threshold), state.replicate_metrics(threshold),
-            state.intervals(threshold, level))  # fmt: skip
+    return (
+        state.metrics(threshold),
+        state.replicate_metrics(threshold),
+        state.intervals(threshold, level),
+    )
 
 
 def paired_differences(

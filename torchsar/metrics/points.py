@@ -41,8 +41,10 @@ def _spacing(gt: GroundTruth, p: int, rule: Matching) -> tuple[float, float] | N
         return None
     sp = gt.spacing[p] if gt.spacing is not None else np.full(2, np.nan)
     if not np.isfinite(sp).all():
-        raise OptionError("distances in metres need the pixel spacing of every image; one "
-                          "has none (declare it, or give max_distance in pixels)")  # fmt: skip
+        raise OptionError(
+            "distances in metres need the pixel spacing of every image; one "
+            "has none (declare it, or give max_distance in pixels)"
+        )
     return float(sp[0]), float(sp[1])
 
 
@@ -98,8 +100,11 @@ def match_points(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
         dist = pair_distances(obj.centroid[d], centroid[g], sp)
         near = _ignore_distance(gt.ignore[p], obj.centroid[d], sp)
         greedy = greedy_match_by_score(dist, obj.score[d], tol)
-        chosen = greedy if rule.assign == "greedy" else _optimal_then_greedy(
-            dist, obj.score[d], top[d], tol)  # fmt: skip
+        chosen = (
+            greedy
+            if rule.assign == "greedy"
+            else _optimal_then_greedy(dist, obj.score[d], top[d], tol)
+        )
         for local, into in ((greedy, ap), (chosen, op)):
             status = np.where(local >= 0, g[np.maximum(local, 0)] if g.size else -1, -1)
             status[dont_care(obj.centroid[d], local, near, tol)] = -2

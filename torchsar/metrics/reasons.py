@@ -32,8 +32,9 @@ FA_WORDS = {
 """Each false-alarm type in words."""
 
 
-def _pair_iou(obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray, inter: np.ndarray,
-              rule: Matching) -> tuple[np.ndarray, str]:  # fmt: skip
+def _pair_iou(
+    obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray, inter: np.ndarray, rule: Matching
+) -> tuple[np.ndarray, str]:
     """The IoU of each pair as the rule measures it (mask IoU where both sides have pixels and
     the rule reads masks, else box IoU), and which one it was."""
     iou = pair_box_iou(obj.box[d], gt.box[g])
@@ -45,8 +46,9 @@ def _pair_iou(obj: Objects, gt: GroundTruth, d: np.ndarray, g: np.ndarray, inter
     return np.where(pixelled, mask_iou, iou), "mask"
 
 
-def _verdict(obj: Objects, gt: GroundTruth, d: int, g: int, iou: float, kind: str,
-             rule: Matching) -> str:  # fmt: skip
+def _verdict(
+    obj: Objects, gt: GroundTruth, d: int, g: int, iou: float, kind: str, rule: Matching
+) -> str:
     """Why the pair ``(d, g)`` fails ``rule`` (an IoU or a centroid rule)."""
     if rule.kind == "centroid":
         db, gb = obj.box[d], gt.box[g]
@@ -59,8 +61,14 @@ def _verdict(obj: Objects, gt: GroundTruth, d: int, g: int, iou: float, kind: st
     return f"best {kind} IoU {iou:.2f} < {rule.iou:g}"
 
 
-def miss_reasons(m: BatchMatch, obj: Objects, gt: GroundTruth, rule: Matching,
-                 counted: np.ndarray, which: np.ndarray) -> list[str]:  # fmt: skip
+def miss_reasons(
+    m: BatchMatch,
+    obj: Objects,
+    gt: GroundTruth,
+    rule: Matching,
+    counted: np.ndarray,
+    which: np.ndarray,
+) -> list[str]:
     """Why each target ``which[i]`` was missed, given the detections ``counted`` at the
     operating point (bools over ``obj``) and the batch's matches ``m`` under ``rule``."""
     if rule.kind == "distance":
@@ -101,12 +109,19 @@ def _far(obj: Objects, gt: GroundTruth, rule: Matching, counted: np.ndarray, t: 
     if rule.distance_units == "m" and gt.spacing is not None and np.isfinite(gt.spacing[p]).all():
         delta = delta * gt.spacing[p]
     dist = float(np.sqrt((delta**2).sum(axis=1)).min())
-    return (f"nearest detection {dist:.1f} {rule.distance_units} away (tolerance "
-            f"{rule.max_distance:g})")  # fmt: skip
+    return (
+        f"nearest detection {dist:.1f} {rule.distance_units} away (tolerance {rule.max_distance:g})"
+    )
 
 
-def false_alarm_reasons(types: np.ndarray, m: BatchMatch, obj: Objects, gt: GroundTruth,
-                        rule: Matching, which: np.ndarray) -> list[str]:  # fmt: skip
+def false_alarm_reasons(
+    types: np.ndarray,
+    m: BatchMatch,
+    obj: Objects,
+    gt: GroundTruth,
+    rule: Matching,
+    which: np.ndarray,
+) -> list[str]:
     """Each false alarm ``which[i]`` in words: its type (``types``: per detection, an index of
     :data:`~torchsar.metrics.error_types.FA_TYPES`), and for a localisation the rule's
     verdict on the target it overlaps."""

@@ -38,17 +38,33 @@ __all__ = [
 ]
 
 IMAGE = np.dtype(
-    [("order", "<i8"), ("unit", "<u8"), ("n_gt", "<i4"), ("group", "<i4"), ("cls", "<i4"),
-     ("km2", "<f8")]
-)  # fmt: skip
+    [
+        ("order", "<i8"),
+        ("unit", "<u8"),
+        ("n_gt", "<i4"),
+        ("group", "<i4"),
+        ("cls", "<i4"),
+        ("km2", "<f8"),
+    ]
+)
 """One image: its order key in the dataset (ties in score are ranked by it, as pycocotools
 ranks them by image id), the hash of its bootstrap unit, its ground-truth targets, its group
 and image class (indices into the names, -1: none) and its area in km² (NaN: unknown)."""
 
 DETECTION = np.dtype(
-    [("score", "<f8"), ("image", "<i4"), ("rank", "<u4"), ("ap_tp", "<u8"), ("ap_ig", "<u8"),
-     ("op", "u1"), ("fa_type", "u1"), ("size", "u1"), ("label", "<i4"), ("iou", "<f8")]
-)  # fmt: skip
+    [
+        ("score", "<f8"),
+        ("image", "<i4"),
+        ("rank", "<u4"),
+        ("ap_tp", "<u8"),
+        ("ap_ig", "<u8"),
+        ("op", "u1"),
+        ("fa_type", "u1"),
+        ("size", "u1"),
+        ("label", "<i4"),
+        ("iou", "<f8"),
+    ]
+)
 """One detection: its score (any finite or infinite float), its image (an index into the
 image records), its rank among its image's detections, bit ``a * T + t`` of ``ap_tp`` /
 ``ap_ig`` set when it is a true positive / ignored in COCO area range ``a`` (``all``, then
@@ -58,11 +74,20 @@ matching rule (``op``: 0 false alarm, 1 true positive, 2 ignored), its false-ala
 class-agnostic) and the IoU with the instance it matched under the rule (0: none)."""
 
 TARGET = np.dtype(
-    [("image", "<i4"), ("index", "<u4"), ("found", "<f8"), ("size", "u1"), ("label", "<i4"),
-     ("coco_area", "<f8"),
-     ("touch", "<u4"), ("scr", "<f8"), ("scr_known", "<f8"), ("length", "<f8"),
-     ("found_length", "<f8")]
-)  # fmt: skip
+    [
+        ("image", "<i4"),
+        ("index", "<u4"),
+        ("found", "<f8"),
+        ("size", "u1"),
+        ("label", "<i4"),
+        ("coco_area", "<f8"),
+        ("touch", "<u4"),
+        ("scr", "<f8"),
+        ("scr_known", "<f8"),
+        ("length", "<f8"),
+        ("found_length", "<f8"),
+    ]
+)
 """One ground-truth target: its image, its position among the image's targets, the score of
 the detection that matched it under the rule (NaN: missed), its size bin, its class, the
 area COCO's area ranges read (the declared one, else its own), the detections touching it,

@@ -22,8 +22,16 @@ from torchsar.metrics.records import Records
 __all__ = ["BLOCK_ELEMENTS", "FA_LEVELS", "METRICS", "Resampled", "replicate_metrics"]
 
 FA_LEVELS = (0.1, 1.0, 10.0)
-METRICS = ("precision", "recall", "f1", "fom", "fa_per_image",
-           *(f"pd_at_{level:g}_fa_per_image" for level in FA_LEVELS), "pauc", "ap50")  # fmt: skip
+METRICS = (
+    "precision",
+    "recall",
+    "f1",
+    "fom",
+    "fa_per_image",
+    *(f"pd_at_{level:g}_fa_per_image" for level in FA_LEVELS),
+    "pauc",
+    "ap50",
+)
 """The metrics :func:`replicate_metrics` returns."""
 BLOCK_ELEMENTS = 1 << 18
 """Elements (replicates x detections) of one block of the replicate computation: blocks that
@@ -81,13 +89,19 @@ class Resampled:
         per = np.zeros((units.size, max(classes.size, 1)))
         np.add.at(per, (g_unit, g_label), 1.0)
         return cls(
-            units=units, det_unit=image_unit[d["image"]] if d.size else np.zeros(0, np.int64),
-            score=d["score"], tp=d["op"] == 1, fa=d["op"] == 0, tp50=tp50,
-            fa50=~tp50 & ~(d["ap_ig"] & np.uint64(1)).astype(bool), ends=levels(d["score"]),
+            units=units,
+            det_unit=image_unit[d["image"]] if d.size else np.zeros(0, np.int64),
+            score=d["score"],
+            tp=d["op"] == 1,
+            fa=d["op"] == 0,
+            tp50=tp50,
+            fa50=~tp50 & ~(d["ap_ig"] & np.uint64(1)).astype(bool),
+            ends=levels(d["score"]),
             unit_gt=np.bincount(image_unit, weights=rec.images["n_gt"], minlength=units.size),
             unit_images=np.bincount(image_unit, minlength=units.size).astype(np.float64),
-            label=np.asarray(label, np.int64), unit_gt_class=per,
-        )  # fmt: skip
+            label=np.asarray(label, np.int64),
+            unit_gt_class=per,
+        )
 
 
 def _prefix(score: np.ndarray, threshold: float | None) -> int:
@@ -167,8 +181,17 @@ def replicate_metrics(
     for r0 in range(0, rows, step):
         blk = w[r0 : r0 + step]
         wd = blk[:, res.det_unit].astype(np.float64) if d else np.zeros((blk.shape[0], 0))
-        parts.append(_block(wd, res, top, n_gt_all[r0 : r0 + step], images_all[r0 : r0 + step],
-                            ap_kind != "none", n_gt_class[r0 : r0 + step]))  # fmt: skip
+        parts.append(
+            _block(
+                wd,
+                res,
+                top,
+                n_gt_all[r0 : r0 + step],
+                images_all[r0 : r0 + step],
+                ap_kind != "none",
+                n_gt_class[r0 : r0 + step],
+            )
+        )
     if not parts:
         return {k: np.zeros(0) for k in METRICS}
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

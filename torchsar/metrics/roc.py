@@ -227,8 +227,10 @@ class RocAccumulator:
 
     def __getstate__(self) -> dict:
         """The state as data: the keys, the counts and the two totals."""
-        return {k: getattr(self, k) for k in ("keys", "target_counts", "clutter_counts",
-                                              "targets", "clutter")}  # fmt: skip
+        return {
+            k: getattr(self, k)
+            for k in ("keys", "target_counts", "clutter_counts", "targets", "clutter")
+        }
 
     def __setstate__(self, state: dict) -> None:
         """Rebuild from saved data (a state file, a pickle), checked: a state of another
@@ -338,8 +340,9 @@ def _compiled_count(
     tgt = _flat(target)
     ign = tgt if ignore is None else _flat(ignore)
     det = tgt if detected is None else _flat(detected)
-    kmin, table, tp, det_n = _kernels.roc_pass(flat, lo, hi, tgt, ign, ignore is not None, det,
-                                               detected is not None)  # fmt: skip
+    kmin, table, tp, det_n = _kernels.roc_pass(
+        flat, lo, hi, tgt, ign, ignore is not None, det, detected is not None
+    )
     n_target, n_clutter = (int(v) for v in table.sum(0))
     keys, t, c = _sparse(int(kmin), table[:-2])
     if table[-2].any():  # +inf: the last key

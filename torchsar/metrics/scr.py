@@ -90,7 +90,8 @@ def target_scr_db(
     owner = flat[idx].astype(np.int64) - 1
     values = np.asarray(image).reshape(-1)[idx].astype(np.float64)
     t_mean = np.bincount(owner, weights=values, minlength=g) / np.maximum(
-        np.bincount(owner, minlength=g), 1)  # fmt: skip
+        np.bincount(owner, minlength=g), 1
+    )
     clutter = (ids == 0) & ~np.asarray(ignore, bool)
     b = np.asarray(box, dtype=np.float64)
     r0, c0 = np.floor(b[:, 0]).astype(np.int64), np.floor(b[:, 1]).astype(np.int64)
@@ -150,8 +151,7 @@ def wilson(k: np.ndarray, n: np.ndarray, level: float = 0.95) -> tuple[np.ndarra
     return np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan)
 
 
-def scr_rows(sources: dict[str, tuple[np.ndarray, np.ndarray]], level: float = 0.95
-             ) -> list[dict]:  # fmt: skip
+def scr_rows(sources: dict[str, tuple[np.ndarray, np.ndarray]], level: float = 0.95) -> list[dict]:
     """Pd per SCR bin: for each source (in the order given) ``(scr_db, found)`` of its
     targets, one row per non-empty bin with the targets, those found, Pd, its Wilson
     interval and the bin's mean finite SCR.
@@ -175,16 +175,18 @@ def scr_rows(sources: dict[str, tuple[np.ndarray, np.ndarray]], level: float = 0
         lo, hi = wilson(hit, n, level)
         for b in np.flatnonzero(n):
             known = b < nb - 1
-            out.append({
-                "source": source,
-                "scr_bin": SCR_NAMES[b],
-                "scr_lo_db": edges[b] if known else math.nan,
-                "scr_hi_db": edges[b + 1] if known else math.nan,
-                "scr_mean_db": float(total[b] / fin[b]) if fin[b] else math.nan,
-                "targets": int(n[b]),
-                "detected": int(hit[b]),
-                "pd": float(hit[b] / n[b]),
-                "pd_lo": float(lo[b]),
-                "pd_hi": float(hi[b]),
-            })  # fmt: skip
+            out.append(
+                {
+                    "source": source,
+                    "scr_bin": SCR_NAMES[b],
+                    "scr_lo_db": edges[b] if known else math.nan,
+                    "scr_hi_db": edges[b + 1] if known else math.nan,
+                    "scr_mean_db": float(total[b] / fin[b]) if fin[b] else math.nan,
+                    "targets": int(n[b]),
+                    "detected": int(hit[b]),
+                    "pd": float(hit[b] / n[b]),
+                    "pd_lo": float(lo[b]),
+                    "pd_hi": float(hi[b]),
+                }
+            )
     return out

@@ -89,8 +89,13 @@ class Regions:
     @classmethod
     def none(cls) -> Regions:
         """No region."""
-        return cls(np.zeros(0, np.int64), np.zeros(0, object), np.zeros((0, 4)),
-                   _csr([], 0), np.zeros(0, bool))  # fmt: skip
+        return cls(
+            np.zeros(0, np.int64),
+            np.zeros(0, object),
+            np.zeros((0, 4)),
+            _csr([], 0),
+            np.zeros(0, bool),
+        )
 
     @classmethod
     def from_planes(cls, ignore: np.ndarray) -> Regions:
@@ -135,15 +140,25 @@ class Regions:
         k = plane.size
         box = np.asarray(box, np.float64).reshape(k, 4)
         h, w = shape
-        cls_ = np.full(k, None, object) if classes is None else np.array(
-            [None if c is None else str(c) for c in classes], dtype=object)  # fmt: skip
+        cls_ = (
+            np.full(k, None, object)
+            if classes is None
+            else np.array([None if c is None else str(c) for c in classes], dtype=object)
+        )
         if pixels is None:  # box regions only
             return cls(plane, cls_.reshape(k), box, _no_pixels(k), np.zeros(k, bool))
         pix = list(pixels)
-        stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
-                 for i, p in enumerate(pix)]  # fmt: skip
-        return cls(plane, cls_.reshape(k), box, _csr(stack, k),
-                   np.array([p is not None for p in pix], bool).reshape(k))  # fmt: skip
+        stack = [
+            None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
+            for i, p in enumerate(pix)
+        ]
+        return cls(
+            plane,
+            cls_.reshape(k),
+            box,
+            _csr(stack, k),
+            np.array([p is not None for p in pix], bool).reshape(k),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,8 +292,10 @@ class GroundTruth:
             if len(pix) != g:
                 raise ShapeError(f"pixels must hold one entry per target ({g}), got {len(pix)}")
             has = np.array([p is not None for p in pix], bool).reshape(g)
-            stack = [None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
-                     for i, p in enumerate(pix)]  # fmt: skip
+            stack = [
+                None if p is None else np.asarray(p, np.int64) + plane[i] * h * w
+                for i, p in enumerate(pix)
+            ]
             masks = _csr(stack, g)
         counts = np.diff(masks.offsets).astype(np.float64)
         box_area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
@@ -287,16 +304,26 @@ class GroundTruth:
         if has.any():
             owner = masks.owner()
             local = masks.pixels - plane[owner] * h * w
-            sums = np.stack([np.bincount(owner, weights=v, minlength=g)
-                             for v in (local // w, local % w)], axis=1)  # fmt: skip
+            sums = np.stack(
+                [np.bincount(owner, weights=v, minlength=g) for v in (local // w, local % w)],
+                axis=1,
+            )
             mean = sums / np.maximum(counts, 1)[:, None]
             centroid = np.where((has & (counts > 0))[:, None], mean, centroid)
-        cls_ = np.array(["target"] * g if classes is None else [str(c) for c in classes],
-                        dtype=object).reshape(g)  # fmt: skip
+        cls_ = np.array(
+            ["target"] * g if classes is None else [str(c) for c in classes], dtype=object
+        ).reshape(g)
         nan = np.full(g, np.nan)
         return cls(
-            plane, area, box, cls_, masks, has, Regions.none() if crowd is None else crowd,
-            int(planes), (int(h), int(w)),
+            plane,
+            area,
+            box,
+            cls_,
+            masks,
+            has,
+            Regions.none() if crowd is None else crowd,
+            int(planes),
+            (int(h), int(w)),
             np.zeros(int(planes), bool) if box_only is None else np.asarray(box_only, bool),
             centroid,
             np.full((int(planes), 2), np.nan) if spacing is None else np.asarray(spacing, float),
@@ -305,7 +332,7 @@ class GroundTruth:
             None if known_scr_db is None else np.asarray(known_scr_db, np.float64),
             None,
             None if shadow is None else np.asarray(shadow, bool).reshape(int(planes)),
-        )  # fmt: skip
+        )
 
 
 def ground_truth(
@@ -376,8 +403,13 @@ def ground_truth(
         box[:, 1] = np.minimum.reduceat(cols, starts)
         box[:, 2] = np.maximum.reduceat(rows, starts) + 1
         box[:, 3] = np.maximum.reduceat(cols, starts) + 1
-    per = {"classes": classes, "boxes": boxes, "lengths": lengths, "areas": areas,
-           "known": known_scr_db}  # fmt: skip
+    per = {
+        "classes": classes,
+        "boxes": boxes,
+        "lengths": lengths,
+        "areas": areas,
+        "known": known_scr_db,
+    }
     values = {k: [None] * n for k in per}
     for k in range(n):
         p, i = int(plane[k]), int(local[k]) - 1
@@ -391,17 +423,22 @@ def ground_truth(
     on_box = bo[plane] if n else np.zeros(0, bool)
     ig = np.zeros(inst.shape, bool) if ignore is None else np.asarray(ignore, bool)
     gt = GroundTruth.build(
-        plane, box, planes=n_planes, shape=(h, w),
+        plane,
+        box,
+        planes=n_planes,
+        shape=(h, w),
         classes=["target" if c is None else str(c) for c in values["classes"]],
         pixels=[pix[offsets[k] : offsets[k + 1]] - plane[k] * h * w for k in range(n)],
-        crowd=Regions.from_planes(ig & (flat.reshape(inst.shape) == 0)), box_only=bo,
+        crowd=Regions.from_planes(ig & (flat.reshape(inst.shape) == 0)),
+        box_only=bo,
         spacing=spacing,
         length_m=np.array([np.nan if v is None else float(v) for v in values["lengths"]]),
         declared_area=np.array([np.nan if v is None else float(v) for v in values["areas"]]),
-        known_scr_db=None if known_scr_db is None else np.array(
-            [np.nan if v is None else float(v) for v in values["known"]]),
+        known_scr_db=None
+        if known_scr_db is None
+        else np.array([np.nan if v is None else float(v) for v in values["known"]]),
         shadow=shadow,
-    )  # fmt: skip
+    )
     if on_box.any():  # box-only planes: box IoU, box centres; their pixels stay (painted boxes)
         has = gt.has_mask & ~on_box
         centroid = gt.centroid.copy()

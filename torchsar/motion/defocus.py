@@ -69,8 +69,9 @@ def focus_curve(
     r = None if ranges is None else ranges[..., None]
     out = []
     for i in range(0, speeds.shape[-1], 16):
-        phase = fm_correction(params, speeds[..., i : i + 16], strips.shape[-1], 0.0,
-                              strips.device, ranges=r)  # fmt: skip
+        phase = fm_correction(
+            params, speeds[..., i : i + 16], strips.shape[-1], 0.0, strips.device, ranges=r
+        )
         power = intensity(torch.fft.ifft(spectrum * phase[..., None, :].to(strips.dtype), dim=-1))
         out.append(peak_in_window(power, column[..., None], half)[0])
     return torch.cat(out, dim=-1).double()

@@ -97,17 +97,25 @@ def _corrected_strips(looks, plan, params, flat, speed, fold, ranges, half, dy) 
     moving = (speed != 0).nonzero().flatten()
     if moving.numel():
         phase = torch.stack(
-            [fm_correction(params, speed[moving], x.shape[-1], float(t), x.device,
-                           ranges=ranges[moving]) for t in plan.time], dim=1,
-        )  # fmt: skip
+            [
+                fm_correction(
+                    params, speed[moving], x.shape[-1], float(t), x.device, ranges=ranges[moving]
+                )
+                for t in plan.time
+            ],
+            dim=1,
+        )
         spec = torch.fft.fft(x[moving], dim=-1)
         x[moving] = torch.fft.ifft(spec * phase[:, :, None, :].to(x.dtype), dim=-1)
     folded = (fold != 0).nonzero().flatten()
     if folded.numel():
         factor = torch.stack(
-            [walk_correction(params, fold[folded], x.shape[-2:], dy, float(t), x.device)
-             for t in plan.time], dim=1,
-        )  # fmt: skip
+            [
+                walk_correction(params, fold[folded], x.shape[-2:], dy, float(t), x.device)
+                for t in plan.time
+            ],
+            dim=1,
+        )
         x[folded] = torch.fft.ifft2(torch.fft.fft2(x[folded]) * factor.to(x.dtype))
     return x
 
@@ -261,8 +269,19 @@ def look_test(
     rates = rates - robust_pattern(rates, valid)
     sig_rates = torch.stack([_slope_sigma(sig_pos[..., a], times) for a in (0, 1)], -1)
     crowd = torch.zeros(b, n, k, dtype=torch.float64) if interference is None else interference
-    return _result(disp, rates, sig_rates.reshape(b, n, 2), snr, crowd.to(snr), valid, params,
-                   ranges, n_sigma, min_sigma, min_snr)  # fmt: skip
+    return _result(
+        disp,
+        rates,
+        sig_rates.reshape(b, n, 2),
+        snr,
+        crowd.to(snr),
+        valid,
+        params,
+        ranges,
+        n_sigma,
+        min_sigma,
+        min_snr,
+    )
 
 
 def _result(disp, rates, sig_rates, snr, crowd, valid, params, ranges, n_sigma, min_sigma, min_snr):

@@ -204,9 +204,14 @@ def find_movers(
     image = polar_format(phase_history, params, window=window)
     look_imgs = look_images(phase_history, params, looks=looks, overlap=overlap, window=window)
     targets = detect_targets(
-        image, params, max_speed=max_speed, max_fold=max_fold, detector=detector,
-        max_targets=max_targets, window=window,
-    )  # fmt: skip
+        image,
+        params,
+        max_speed=max_speed,
+        max_fold=max_fold,
+        detector=detector,
+        max_targets=max_targets,
+        window=window,
+    )
     bg = background(intensity(image))
     focus = _focus(image, params, targets, bg, max_speed, n_sigma, min_sigma)
     keep = _not_ghosts(targets, focus, params, image.shape[-2:], bg, window)
@@ -216,20 +221,48 @@ def find_movers(
     along = focus.mover & (targets.fold == 0).to(focus.mover.device)  # folded: no along-track
     speed = torch.where(along, focus.velocity, torch.zeros_like(focus.velocity))
     brightness = torch.maximum(focus.snr * bg.to(focus.snr)[:, None], targets.value.to(focus.snr))
-    crowding = look_interference(position, speed, targets.fold, brightness, valid, plan, params,
-                                 window=window)  # fmt: skip
+    crowding = look_interference(
+        position, speed, targets.fold, brightness, valid, plan, params, window=window
+    )
     look = look_test(
-        look_imgs, plan, params, pixel=pixel, valid=valid, speed=speed, fold=targets.fold,
-        max_fold=max_fold, interference=crowding, background=background(intensity(look_imgs)),
-        n_sigma=n_sigma, min_sigma=min_sigma,
-    )  # fmt: skip
-    decided = verdict(look, focus, targets.fold, position, params, n_sigma=n_sigma,
-                      agree_sigma=agree_sigma, max_fold=max_fold, walk=walkable)  # fmt: skip
+        look_imgs,
+        plan,
+        params,
+        pixel=pixel,
+        valid=valid,
+        speed=speed,
+        fold=targets.fold,
+        max_fold=max_fold,
+        interference=crowding,
+        background=background(intensity(look_imgs)),
+        n_sigma=n_sigma,
+        min_sigma=min_sigma,
+    )
+    decided = verdict(
+        look,
+        focus,
+        targets.fold,
+        position,
+        params,
+        n_sigma=n_sigma,
+        agree_sigma=agree_sigma,
+        max_fold=max_fold,
+        walk=walkable,
+    )
     sub = _subpatch(phase_history, params, position, valid, window, n_sigma) if subpatch else None
     return MoverReport(
-        image, look_imgs, plan, pixel, position, valid, targets, look, focus,
-        torch.zeros_like(valid) if sub is None else sub, decided,
-    )  # fmt: skip
+        image,
+        look_imgs,
+        plan,
+        pixel,
+        position,
+        valid,
+        targets,
+        look,
+        focus,
+        torch.zeros_like(valid) if sub is None else sub,
+        decided,
+    )
 
 
 def _focus(image, params, targets: Targets, bg, max_speed, n_sigma, min_sigma) -> FocusTest:
@@ -243,10 +276,17 @@ def _focus(image, params, targets: Targets, bg, max_speed, n_sigma, min_sigma) -
     x = strips(image[:, None], idx, rows, half)[:, 0].reshape(b, n, 2 * half + 1, image.shape[-1])
     ranges = (pixel[..., 0].double() - image.shape[-2] // 2) * params.pixel_spacing[0]
     return focus_test(
-        x, params, column=pixel[..., 1].clamp(min=0), valid=valid,
-        background=bg, max_speed=max_speed, n_sigma=n_sigma, min_sigma=min_sigma, ranges=ranges,
+        x,
+        params,
+        column=pixel[..., 1].clamp(min=0),
+        valid=valid,
+        background=bg,
+        max_speed=max_speed,
+        n_sigma=n_sigma,
+        min_sigma=min_sigma,
+        ranges=ranges,
         reference=(targets.speed == 0) & (targets.fold == 0),
-    )  # fmt: skip
+    )
 
 
 def _not_ghosts(targets: Targets, focus: FocusTest, params, shape, bg, window) -> Tensor:
@@ -263,10 +303,18 @@ def _not_ghosts(targets: Targets, focus: FocusTest, params, shape, bg, window) -
     for b in range(keep.shape[0]):
         n = int(targets.valid[b].sum())
         ghost = smear_ghosts(
-            targets.pixel[b, :n], bank_value[b, :n], targets.speed[b, :n], targets.fold[b, :n],
-            params, shape, source_value=source[b, :n], source_speed=speed[b, :n],
-            noise=GHOST_NOISE * float(bg[b]), window=window, speed_step=focus_step(params) / 2,
-        )  # fmt: skip
+            targets.pixel[b, :n],
+            bank_value[b, :n],
+            targets.speed[b, :n],
+            targets.fold[b, :n],
+            params,
+            shape,
+            source_value=source[b, :n],
+            source_speed=speed[b, :n],
+            noise=GHOST_NOISE * float(bg[b]),
+            window=window,
+            speed_step=focus_step(params) / 2,
+        )
         keep[b, :n] &= ~ghost.to(keep.device)
     return keep
 

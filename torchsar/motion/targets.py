@@ -89,8 +89,9 @@ def _bank_images(image: Tensor, params: SpotlightParams, speeds: list, folds: li
             yield intensity(torch.fft.ifft(spectrum * row, dim=-1))[:, None]
     if folds:
         spectrum2 = torch.fft.fft(spectrum, dim=-2)
-        factor = walk_correction(params, torch.tensor(folds), (h, w), params.image_extent[0] / h,
-                                 0.0, image.device)  # fmt: skip
+        factor = walk_correction(
+            params, torch.tensor(folds), (h, w), params.image_extent[0] / h, 0.0, image.device
+        )
         for f in factor.to(image.dtype):
             yield intensity(torch.fft.ifft2(spectrum2 * f))[:, None]
 
@@ -187,8 +188,17 @@ def detect_targets(
         order = value.argsort(descending=True)
         pix, value = pix[order], value[order]
         speed, fold = (x[b, 0][pix[:, 0], pix[:, 1]] for x in (bank.speed, bank.fold))
-        keep = ~smear_ghosts(pix, value, speed, fold, params, (h, w), speed_step=step,
-                             noise=float(noise[b]), window=window)  # fmt: skip
+        keep = ~smear_ghosts(
+            pix,
+            value,
+            speed,
+            fold,
+            params,
+            (h, w),
+            speed_step=step,
+            noise=float(noise[b]),
+            window=window,
+        )
         found.append([x[keep][:max_targets] for x in (pix, value, speed, fold)])
     return _pad(found, image.shape[0], image.device)
 

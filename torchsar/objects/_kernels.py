@@ -72,8 +72,15 @@ def close_disk(idx: np.ndarray, shape: tuple[int, int, int], radius: int) -> np.
     dy, dx = np.meshgrid(span, span, indexing="ij")
     disk = dy * dy + dx * dx <= radius * radius
     n, h, w = shape
-    return _close(np.ascontiguousarray(idx, dtype=np.int64), n, h, w, dy[disk].astype(np.int64),
-                  dx[disk].astype(np.int64), int(radius))  # fmt: skip
+    return _close(
+        np.ascontiguousarray(idx, dtype=np.int64),
+        n,
+        h,
+        w,
+        dy[disk].astype(np.int64),
+        dx[disk].astype(np.int64),
+        int(radius),
+    )
 
 
 @njit(**_JIT)
@@ -138,6 +145,7 @@ def label_planes(
     ``(labels, n, lab)``, the int32 label stack (``1..n``, unique across planes) and the
     label of each pixel of ``idx``."""
     n_planes, h, w = shape
-    labels, n, lab = _label(np.ascontiguousarray(idx, dtype=np.int64), n_planes, h, w,
-                            connectivity == 2)  # fmt: skip
+    labels, n, lab = _label(
+        np.ascontiguousarray(idx, dtype=np.int64), n_planes, h, w, connectivity == 2
+    )
     return labels.reshape(shape), int(n), lab

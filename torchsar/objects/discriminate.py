@@ -273,8 +273,13 @@ def discriminate(
     keep = _keep(props["area"], props["plane"], rules, pixel_area)
     if not keep.all():
         labels, lab, idx = _renumber(keep, lab, idx, shape)
-    obj = Objects(labels=labels, **{k: v[keep] for k, v in props.items()}, planes=b * c,
-                  shape=(h, w), threshold=1.0 if own is None else own)  # fmt: skip
+    obj = Objects(
+        labels=labels,
+        **{k: v[keep] for k, v in props.items()},
+        planes=b * c,
+        shape=(h, w),
+        threshold=1.0 if own is None else own,
+    )
     return obj.with_pixel_lists(lab - 1, idx)
 
 

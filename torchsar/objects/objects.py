@@ -176,8 +176,9 @@ class Objects:
             return replace(self, declared_area=None)
         a = np.asarray(area, dtype=np.float64).reshape(-1)
         if a.shape != (len(self),):
-            raise ShapeError(f"declared_area must have one entry per object ({len(self)}), "
-                             f"got {a.shape}")  # fmt: skip
+            raise ShapeError(
+                f"declared_area must have one entry per object ({len(self)}), got {a.shape}"
+            )
         return replace(self, declared_area=a)
 
     # -- constructors ------------------------------------------------------------------------
@@ -214,16 +215,19 @@ class Objects:
         """
         lab = np.asarray(labels)
         if lab.ndim != 3 or not np.issubdtype(lab.dtype, np.integer):
-            raise ShapeError(f"labels must be an integer array (N, H, W), got {lab.dtype} "
-                             f"{lab.shape}")  # fmt: skip
+            raise ShapeError(
+                f"labels must be an integer array (N, H, W), got {lab.dtype} {lab.shape}"
+            )
         smap = np.asarray(score_map, dtype=np.float64)
         if smap.shape != lab.shape:
-            raise ShapeError(f"score_map must have the shape of labels {lab.shape}, "
-                             f"got {smap.shape}")  # fmt: skip
+            raise ShapeError(
+                f"score_map must have the shape of labels {lab.shape}, got {smap.shape}"
+            )
         flat = lab.reshape(-1)
         idx = np.flatnonzero(flat > 0)  # the labelled pixels (the rest stays 0)
-        return cls.from_label_pixels(flat[idx], idx, smap.reshape(-1)[idx], lab.shape,
-                                     threshold=threshold)  # fmt: skip
+        return cls.from_label_pixels(
+            flat[idx], idx, smap.reshape(-1)[idx], lab.shape, threshold=threshold
+        )
 
     @classmethod
     def from_label_pixels(
@@ -254,8 +258,9 @@ class Objects:
         ids[idx] = new
         props = measure_pixels(new, idx, (h, w), used.size, np.asarray(values, np.float64))
         _check_scores(props["score"], "score_map")
-        built = _build(ids.reshape(shape), None, props, n_planes, (h, w), "mask", threshold,
-                       None, None)  # fmt: skip
+        built = _build(
+            ids.reshape(shape), None, props, n_planes, (h, w), "mask", threshold, None, None
+        )
         return built.with_pixel_lists(new - 1, idx)
 
     @classmethod
@@ -290,8 +295,15 @@ class Objects:
         arr = arr.astype(bool, copy=False)
         m, h, w = arr.shape
         pixels = [np.flatnonzero(a) for a in arr.reshape(m, h * w)]
-        return cls.from_pixel_lists(pixels, scores, shape=(h, w), plane=plane, planes=planes,
-                                    threshold=threshold, classes=classes)  # fmt: skip
+        return cls.from_pixel_lists(
+            pixels,
+            scores,
+            shape=(h, w),
+            plane=plane,
+            planes=planes,
+            threshold=threshold,
+            classes=classes,
+        )
 
     @classmethod
     def from_pixel_lists(
@@ -315,11 +327,21 @@ class Objects:
         """
         m = len(pixels)
         counts = np.array([len(p) for p in pixels], dtype=np.int64)
-        local = np.concatenate([np.asarray(p, np.int64) for p in pixels]) if m else np.zeros(
-            0, np.int64)  # fmt: skip
-        return cls.from_pixels(np.repeat(np.arange(m), counts), local, scores, shape=shape,
-                               plane=plane, planes=planes, threshold=threshold,
-                               classes=classes)  # fmt: skip
+        local = (
+            np.concatenate([np.asarray(p, np.int64) for p in pixels])
+            if m
+            else np.zeros(0, np.int64)
+        )
+        return cls.from_pixels(
+            np.repeat(np.arange(m), counts),
+            local,
+            scores,
+            shape=shape,
+            plane=plane,
+            planes=planes,
+            threshold=threshold,
+            classes=classes,
+        )
 
     @classmethod
     def from_pixels(
@@ -354,8 +376,7 @@ class Objects:
         ):
             raise ShapeError(f"owner must give each pixel its object in 0..{m - 1} in order")
         plane = np.zeros(m, np.int64) if plane is None else np.asarray(plane, np.int64)
-        _, scores, plane, planes = _per_plane(np.zeros((m, 0)), scores, plane, planes,
-                                              "pixels", 2)  # fmt: skip
+        _, scores, plane, planes = _per_plane(np.zeros((m, 0)), scores, plane, planes, "pixels", 2)
         if local.size and (local.min() < 0 or local.max() >= h * w):
             raise InputValueError(f"pixel indices must lie in [0, H*W={h * w})")
         counts = np.bincount(owner, minlength=m)
@@ -365,8 +386,9 @@ class Objects:
         props["plane"], props["score"] = plane, scores
         props["box"][props["area"] == 0] = 0.0  # an empty mask has no extent
         masks_ = ObjectMasks(offsets.astype(np.int64), flat.astype(np.int64))
-        return _build(None, masks_, props, planes, (h, w), "mask", threshold,
-                      _classes(classes, m), None)  # fmt: skip
+        return _build(
+            None, masks_, props, planes, (h, w), "mask", threshold, _classes(classes, m), None
+        )
 
     @classmethod
     def from_boxes(
@@ -403,18 +425,30 @@ class Objects:
             raise ShapeError(f"boxes must have shape (M, 4), got {arr.shape}")
         box = _to_rc(arr.astype(np.float64), box_format)
         if not np.isfinite(box).all() or (box[:, 2:] < box[:, :2]).any():
-            raise InputValueError("boxes must be finite with r1 >= r0 and c1 >= c0 "
-                                  f"({box_format})")  # fmt: skip
+            raise InputValueError(f"boxes must be finite with r1 >= r0 and c1 >= c0 ({box_format})")
         hh, ww = box[:, 2] - box[:, 0], box[:, 3] - box[:, 1]
         with np.errstate(over="ignore"):  # a finite box of 1e300 px: its area saturates
             area = np.minimum(np.rint(hh * ww), float(_MAX_AREA)).astype(np.int64)
         props = {
-            "plane": plane, "score": scores, "area": area,
-            "box": box, "centroid": 0.5 * (box[:, :2] + box[:, 2:]) - 0.5,
-            "length": np.maximum(hh, ww), "width": np.minimum(hh, ww),
-        }  # fmt: skip
-        return _build(None, None, props, planes, _shape(shape), "box", threshold,
-                      _classes(classes, len(scores)), None)  # fmt: skip
+            "plane": plane,
+            "score": scores,
+            "area": area,
+            "box": box,
+            "centroid": 0.5 * (box[:, :2] + box[:, 2:]) - 0.5,
+            "length": np.maximum(hh, ww),
+            "width": np.minimum(hh, ww),
+        }
+        return _build(
+            None,
+            None,
+            props,
+            planes,
+            _shape(shape),
+            "box",
+            threshold,
+            _classes(classes, len(scores)),
+            None,
+        )
 
     @classmethod
     def from_points(
@@ -453,18 +487,32 @@ class Objects:
             raise InputValueError("points must be finite (row, col) coordinates")
         m = len(scores)
         props = {
-            "plane": plane, "score": scores, "area": np.zeros(m, np.int64),
-            "box": np.concatenate([pts + 0.5, pts + 0.5], axis=1), "centroid": pts,
-            "length": np.zeros(m), "width": np.zeros(m),
-        }  # fmt: skip
+            "plane": plane,
+            "score": scores,
+            "area": np.zeros(m, np.int64),
+            "box": np.concatenate([pts + 0.5, pts + 0.5], axis=1),
+            "centroid": pts,
+            "length": np.zeros(m),
+            "width": np.zeros(m),
+        }
         lengths = None
         if length_m is not None:
             lengths = np.asarray(length_m, dtype=np.float64).reshape(-1)
             if lengths.shape != (m,):
-                raise ShapeError(f"length_m must have one value per point ({m}), "
-                                 f"got {lengths.shape}")  # fmt: skip
-        return _build(None, None, props, planes, _shape(shape), "point", threshold,
-                      _classes(classes, m), lengths)  # fmt: skip
+                raise ShapeError(
+                    f"length_m must have one value per point ({m}), got {lengths.shape}"
+                )
+        return _build(
+            None,
+            None,
+            props,
+            planes,
+            _shape(shape),
+            "point",
+            threshold,
+            _classes(classes, m),
+            lengths,
+        )
 
     @classmethod
     def from_torchvision(
@@ -495,11 +543,19 @@ class Objects:
             classes = [str(c) for d in outputs for c in arr(d, "labels").tolist()]
         if outputs and all("masks" in d for d in outputs):
             masks = [arr(d, "masks").reshape(-1, *shape) > mask_threshold for d in outputs]
-            return cls.from_masks(masks, scores, planes=len(outputs), threshold=threshold,
-                                  classes=classes)  # fmt: skip
+            return cls.from_masks(
+                masks, scores, planes=len(outputs), threshold=threshold, classes=classes
+            )
         boxes = [arr(d, "boxes").reshape(-1, 4) for d in outputs]
-        return cls.from_boxes(boxes, scores, shape=shape, box_format="xyxy", planes=len(outputs),
-                              threshold=threshold, classes=classes)  # fmt: skip
+        return cls.from_boxes(
+            boxes,
+            scores,
+            shape=shape,
+            box_format="xyxy",
+            planes=len(outputs),
+            threshold=threshold,
+            classes=classes,
+        )
 
 
 # -- helpers ---------------------------------------------------------------------------------
@@ -534,24 +590,33 @@ def _per_plane(items, scores, plane, planes, name: str, ndim: int):
     """Items and scores as one array each with a plane per item; accepts one array per plane."""
     if isinstance(items, list | tuple) and (len(items) == 0 or np.ndim(items[0]) == ndim):
         if not isinstance(scores, list | tuple) or len(scores) != len(items):
-            raise ShapeError(f"with one {name} array per plane, scores must be a list of the "
-                             f"same length ({len(items)})")  # fmt: skip
+            raise ShapeError(
+                f"with one {name} array per plane, scores must be a list of the "
+                f"same length ({len(items)})"
+            )
         counts = [len(np.asarray(s).reshape(-1)) for s in scores]
         plane = np.repeat(np.arange(len(items)), counts)
         planes = len(items) if planes is None else planes
         parts = [np.asarray(a) for a in items]
         tail = parts[0].shape[1:] if parts and parts[0].ndim == ndim else ()
-        arr = np.concatenate([a.reshape(-1, *a.shape[1:]) for a in parts]) if parts and sum(
-            counts) else np.zeros((0, *tail))  # fmt: skip
-        scores = np.concatenate([np.asarray(s, np.float64).reshape(-1) for s in scores]) if (
-            scores) else np.zeros(0)  # fmt: skip
+        arr = (
+            np.concatenate([a.reshape(-1, *a.shape[1:]) for a in parts])
+            if parts and sum(counts)
+            else np.zeros((0, *tail))
+        )
+        scores = (
+            np.concatenate([np.asarray(s, np.float64).reshape(-1) for s in scores])
+            if (scores)
+            else np.zeros(0)
+        )
     else:
         arr = np.asarray(items)
         scores = np.asarray(scores, dtype=np.float64).reshape(-1)
         plane = np.zeros(len(scores), np.int64) if plane is None else np.asarray(plane)
     if arr.ndim != ndim or arr.shape[0] != scores.shape[0]:
-        raise ShapeError(f"{name} must hold one entry per score ({scores.shape[0]}), "
-                         f"got shape {arr.shape}")  # fmt: skip
+        raise ShapeError(
+            f"{name} must hold one entry per score ({scores.shape[0]}), got shape {arr.shape}"
+        )
     plane = plane.astype(np.int64).reshape(-1)
     if plane.shape != scores.shape:
         raise ShapeError(f"plane must have one entry per score ({scores.shape[0]})")
@@ -582,19 +647,31 @@ def _classes(classes, m: int) -> np.ndarray | None:
 
 def _props_none(m: int) -> dict[str, np.ndarray]:
     return {
-        "plane": np.zeros(m, np.int64), "score": np.zeros(m), "area": np.zeros(m, np.int64),
-        "box": np.zeros((m, 4)), "centroid": np.zeros((m, 2)), "length": np.zeros(m),
+        "plane": np.zeros(m, np.int64),
+        "score": np.zeros(m),
+        "area": np.zeros(m, np.int64),
+        "box": np.zeros((m, 4)),
+        "centroid": np.zeros((m, 2)),
+        "length": np.zeros(m),
         "width": np.zeros(m),
-    }  # fmt: skip
+    }
 
 
 def _build(labels, masks, props, planes, shape, geometry, threshold, classes, length_m):
     return Objects(
-        labels=labels, plane=props["plane"].astype(np.int64),
-        score=props["score"].astype(np.float64), area=props["area"].astype(np.int64),
+        labels=labels,
+        plane=props["plane"].astype(np.int64),
+        score=props["score"].astype(np.float64),
+        area=props["area"].astype(np.int64),
         box=props["box"].astype(np.float64).reshape(-1, 4),
         centroid=props["centroid"].astype(np.float64).reshape(-1, 2),
-        length=props["length"].astype(np.float64), width=props["width"].astype(np.float64),
-        planes=int(planes), shape=shape, masks=masks, geometry=geometry,
-        threshold=_threshold(threshold), classes=classes, length_m=length_m,
-    )  # fmt: skip
+        length=props["length"].astype(np.float64),
+        width=props["width"].astype(np.float64),
+        planes=int(planes),
+        shape=shape,
+        masks=masks,
+        geometry=geometry,
+        threshold=_threshold(threshold),
+        classes=classes,
+        length_m=length_m,
+    )

@@ -272,9 +272,25 @@ def _statistic(mu_t, mu_c, sigma_c):
 
 @njit(**_JIT)
 def detect_loop(
-    f, raw, target, low, h, w, seeds, tau, n_init, guard, background, k, min_background,
-    conn, blocking_all, max_size, max_fraction, floor,
-):  # fmt: skip
+    f,
+    raw,
+    target,
+    low,
+    h,
+    w,
+    seeds,
+    tau,
+    n_init,
+    guard,
+    background,
+    k,
+    min_background,
+    conn,
+    blocking_all,
+    max_size,
+    max_fraction,
+    floor,
+):
     """Visit the seeds of one image (flat float64 planes ``(h * w,)``), brightest first.
 
     ``max_size < 0`` and ``max_fraction < 0`` mean no limit; ``floor`` 0 means none.
@@ -370,9 +386,18 @@ def detect_loop(
         out_stat[r * w : (r + 1) * w] = stat[(r + 1) * w2 + 1 : (r + 1) * w2 + 1 + w]
         out_id[r * w : (r + 1) * w] = region_id[(r + 1) * w2 + 1 : (r + 1) * w2 + 1 + w]
     return (
-        out_stat, out_id, r_seed[:nreg], r_size[:nreg], r_mu_t[:nreg], r_mu_c[:nreg],
-        r_sigma[:nreg], r_nbg[:nreg], r_stat[:nreg], r_ok[:nreg], r_reason[:nreg],
-    )  # fmt: skip
+        out_stat,
+        out_id,
+        r_seed[:nreg],
+        r_size[:nreg],
+        r_mu_t[:nreg],
+        r_mu_c[:nreg],
+        r_sigma[:nreg],
+        r_nbg[:nreg],
+        r_stat[:nreg],
+        r_ok[:nreg],
+        r_reason[:nreg],
+    )
 
 
 @njit(inline="always", **_JIT)

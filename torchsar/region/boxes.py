@@ -17,9 +17,11 @@ def _widen(
     ``margin`` on every side, clipped to ``shape``."""
     h, w = shape
     return (
-        max(rows[0] - margin, 0), min(rows[1] + margin + 1, h),
-        max(cols[0] - margin, 0), min(cols[1] + margin + 1, w),
-    )  # fmt: skip
+        max(rows[0] - margin, 0),
+        min(rows[1] + margin + 1, h),
+        max(cols[0] - margin, 0),
+        min(cols[1] + margin + 1, w),
+    )
 
 
 def index_box(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Box:
@@ -32,8 +34,9 @@ def index_box(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Box:
     w = shape[1]
     lo, hi = np.minimum.reduce, np.maximum.reduce  # ufunc reductions: no wrapper overhead
     cols = idx % w
-    return _widen((int(lo(idx)) // w, int(hi(idx)) // w), (int(lo(cols)), int(hi(cols))),
-                  shape, margin)  # fmt: skip
+    return _widen(
+        (int(lo(idx)) // w, int(hi(idx)) // w), (int(lo(cols)), int(hi(cols))), shape, margin
+    )
 
 
 def mask_box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
@@ -48,6 +51,7 @@ def mask_box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
     if rows.size == 0:
         return None
     cols = np.flatnonzero(mask.any(axis=0))
-    r0, r1, c0, c1 = _widen((int(rows[0]), int(rows[-1])), (int(cols[0]), int(cols[-1])),
-                            mask.shape, margin)  # fmt: skip
+    r0, r1, c0, c1 = _widen(
+        (int(rows[0]), int(rows[-1])), (int(cols[0]), int(cols[-1])), mask.shape, margin
+    )
     return slice(r0, r1), slice(c0, c1)

@@ -85,15 +85,29 @@ def _test_region(
     rs = ring_stats(crop, raw, target_img, low, g.taken, p.guard, p.background)
     if rs.n_background < p.min_background:
         return RegionRow(
-            seed, int(idx.size), rs.mu_t, rs.mu_c, rs.sigma_c, rs.n_background, -math.inf,
-            False, "few_background",
-        )  # fmt: skip
+            seed,
+            int(idx.size),
+            rs.mu_t,
+            rs.mu_c,
+            rs.sigma_c,
+            rs.n_background,
+            -math.inf,
+            False,
+            "few_background",
+        )
     z = _statistic(rs.mu_t, rs.mu_c, rs.sigma_c)
     ok = z > p.k
     return RegionRow(
-        seed, int(idx.size), rs.mu_t, rs.mu_c, rs.sigma_c, rs.n_background, z, ok,
+        seed,
+        int(idx.size),
+        rs.mu_t,
+        rs.mu_c,
+        rs.sigma_c,
+        rs.n_background,
+        z,
+        ok,
         "" if ok else "below_k",
-    )  # fmt: skip
+    )
 
 
 def _visit(
@@ -116,9 +130,12 @@ def _visit(
 
 
 def _visit_python(
-    st: _ImageState, f: np.ndarray, seeds: np.ndarray, imgs: tuple[np.ndarray, ...],
+    st: _ImageState,
+    f: np.ndarray,
+    seeds: np.ndarray,
+    imgs: tuple[np.ndarray, ...],
     p: RegionParams,
-) -> None:  # fmt: skip
+) -> None:
     """Steps b–i for every seed with the Python heap, flood fills and numpy rings."""
     g = _Growth(f, p)
     for s in seeds.tolist():
@@ -138,9 +155,12 @@ def _compiled_seeds(f: Tensor, peaks: Tensor | None, p: RegionParams) -> np.ndar
 
 
 def _visit_compiled(
-    st: _ImageState, f: np.ndarray, seeds: np.ndarray, imgs: tuple[np.ndarray, ...],
+    st: _ImageState,
+    f: np.ndarray,
+    seeds: np.ndarray,
+    imgs: tuple[np.ndarray, ...],
     p: RegionParams,
-) -> None:  # fmt: skip
+) -> None:
     """Steps b–i for every seed in one compiled loop (:mod:`torchsar.region._kernels`);
     the same painted statistic, region ids and table as :func:`_visit_python`."""
     from torchsar.region import _kernels
@@ -148,11 +168,22 @@ def _visit_compiled(
     h, w = st.shape
     flat = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1) for a in (f, *imgs)]
     out = _kernels.detect_loop(
-        *flat, h, w, np.ascontiguousarray(seeds, dtype=np.int64), float(p.tau), p.n_init,
-        p.guard, p.background, float(p.k), p.min_background, p.connectivity,
-        p.blocking == "all", -1 if p.max_size is None else p.max_size,
-        -1.0 if p.max_fraction is None else float(p.max_fraction), float(p.floor),
-    )  # fmt: skip
+        *flat,
+        h,
+        w,
+        np.ascontiguousarray(seeds, dtype=np.int64),
+        float(p.tau),
+        p.n_init,
+        p.guard,
+        p.background,
+        float(p.k),
+        p.min_background,
+        p.connectivity,
+        p.blocking == "all",
+        -1 if p.max_size is None else p.max_size,
+        -1.0 if p.max_fraction is None else float(p.max_fraction),
+        float(p.floor),
+    )
     st.stat, st.region_id = out[0], out[1]
     seed, size, mu_t, mu_c, sigma_c, n_bg, z, ok, reason = (a.tolist() for a in out[2:])
     st.table.rows.extend(

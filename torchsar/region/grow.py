@@ -116,9 +116,14 @@ class Grid:
 
 
 def _first_n(
-    grid: Grid, seed: int, tag: int, tau: float, n_init: int, nbrs: Callable[[int], list[int]],
+    grid: Grid,
+    seed: int,
+    tag: int,
+    tau: float,
+    n_init: int,
+    nbrs: Callable[[int], list[int]],
     low: float,
-) -> tuple[list[int], list[int], float, float, bool]:  # fmt: skip
+) -> tuple[list[int], list[int], float, float, bool]:
     """Grow the first ``n_init`` pixels with the running mean as reference (pixels with
     ``F < low`` are never queued).
 
@@ -279,15 +284,22 @@ def _touches_edge(m: np.ndarray, box: tuple[int, int, int, int], shape: tuple[in
     r0, r1, c0, c1 = box
     h, w = shape
     return bool(
-        (r0 > 0 and m[0].any()) or (r1 < h and m[-1].any())
-        or (c0 > 0 and m[:, 0].any()) or (c1 < w and m[:, -1].any())
-    )  # fmt: skip
+        (r0 > 0 and m[0].any())
+        or (r1 < h and m[-1].any())
+        or (c0 > 0 and m[:, 0].any())
+        or (c1 < w and m[:, -1].any())
+    )
 
 
 def _flood_crop(
-    grid: Grid, idx: np.ndarray, box: tuple[int, int, int, int], mu_n: float, beta: float,
-    tau: float, low: float,
-) -> tuple[np.ndarray, float, bool]:  # fmt: skip
+    grid: Grid,
+    idx: np.ndarray,
+    box: tuple[int, int, int, int],
+    mu_n: float,
+    beta: float,
+    tau: float,
+    low: float,
+) -> tuple[np.ndarray, float, bool]:
     """Iterate flood fills on one crop until ``beta`` is stable or the flood reaches an inner
     crop edge; return the flat indices of the flood, ``beta`` and whether it reached such an
     edge.

@@ -139,8 +139,13 @@ def _check_bool(value: object, name: str) -> bool:
 def _validate(p: RegionParams) -> RegionParams:
     max_size = None if p.max_size is None else check_int(p.max_size, "max_size", minimum=1)
     merge = None if p.merge is None else check_int(p.merge, "merge", minimum=0)
-    max_fraction = None if p.max_fraction is None else _check_fraction(
-        p.max_fraction, lambda v: 0 < v <= 1, "max_fraction must be None or in (0, 1]")  # fmt: skip
+    max_fraction = (
+        None
+        if p.max_fraction is None
+        else _check_fraction(
+            p.max_fraction, lambda v: 0 < v <= 1, "max_fraction must be None or in (0, 1]"
+        )
+    )
     conn = check_int(p.connectivity, "connectivity")
     if conn not in (4, 8):
         raise OptionError(f"connectivity must be 4 or 8, got {conn}")

@@ -38,10 +38,20 @@ __all__ = ["DETECTORS", "Operator", "operator"]
 DETECTORS: dict[str, Callable[..., cfar.Detection]] = {
     name: getattr(cfar, name)
     for name in (
-        "ca", "go", "so", "os", "vi", "ac", "two_parameter",
-        "lognormal", "weibull", "gamma", "k", "g0",
+        "ca",
+        "go",
+        "so",
+        "os",
+        "vi",
+        "ac",
+        "two_parameter",
+        "lognormal",
+        "weibull",
+        "gamma",
+        "k",
+        "g0",
     )
-}  # fmt: skip
+}
 
 
 @dataclass(frozen=True)

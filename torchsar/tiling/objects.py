@@ -36,9 +36,17 @@ if TYPE_CHECKING:
 __all__ = ["COLUMNS", "SeamMerger", "components_table"]
 
 COLUMNS = (
-    "row", "col", "peak_row", "peak_col", "score", "area",
-    "row_min", "row_max", "col_min", "col_max",
-)  # fmt: skip
+    "row",
+    "col",
+    "peak_row",
+    "peak_col",
+    "score",
+    "area",
+    "row_min",
+    "row_max",
+    "col_min",
+    "col_max",
+)
 
 _STRUCT = {1: ndimage.generate_binary_structure(2, 1), 2: np.ones((3, 3), dtype=bool)}
 

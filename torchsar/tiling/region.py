@@ -135,9 +135,11 @@ def _boxes(mask: np.ndarray) -> np.ndarray:
 def _overlaps(boxes: np.ndarray, box: tuple[int, int, int, int], pad: int) -> np.ndarray:
     r0, r1, c0, c1 = box
     return (
-        (boxes[:, 0] < r1 + pad) & (boxes[:, 1] > r0 - pad)
-        & (boxes[:, 2] < c1 + pad) & (boxes[:, 3] > c0 - pad)
-    )  # fmt: skip
+        (boxes[:, 0] < r1 + pad)
+        & (boxes[:, 1] > r0 - pad)
+        & (boxes[:, 2] < c1 + pad)
+        & (boxes[:, 3] > c0 - pad)
+    )
 
 
 def _settled(
@@ -159,9 +161,11 @@ def _settled(
     while todo:
         r0, r1, c0, c1 = box = todo.pop()
         if (
-            (cut[0] and r0 < margin) or (cut[1] and r1 > h - margin)
-            or (cut[2] and c0 < margin) or (cut[3] and c1 > w - margin)
-        ):  # fmt: skip
+            (cut[0] and r0 < margin)
+            or (cut[1] and r1 > h - margin)
+            or (cut[2] and c0 < margin)
+            or (cut[3] and c1 > w - margin)
+        ):
             return False
         near = _overlaps(accepted, box, ring + 1) & ~seen  # censor its ring (step g)
         seen |= near

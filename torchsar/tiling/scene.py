@@ -28,9 +28,14 @@ _REGION_ONLY = ("max_halo", "despeckle_reach", "preset")
 
 
 def _tiles(
-    sc: Scene, detector: str, tile: object, halo: object, batch: object, device: object,
+    sc: Scene,
+    detector: str,
+    tile: object,
+    halo: object,
+    batch: object,
+    device: object,
     options: dict[str, object],
-) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:  # fmt: skip
+) -> Iterator[tuple[Tile, dict[str, np.ndarray]]]:
     if detector == "region":
         return _region.iter_region_tiles(
             sc,
@@ -63,9 +68,11 @@ def _min_size(detector: str, options: dict[str, object]) -> int:
 
 
 def _out_arrays(
-    names: tuple[str, ...], shape: tuple[int, int], dtype: np.dtype,
+    names: tuple[str, ...],
+    shape: tuple[int, int],
+    dtype: np.dtype,
     out: Mapping[str, object] | None,
-) -> dict[str, object]:  # fmt: skip
+) -> dict[str, object]:
     arrays: dict[str, object] = {}
     for name in names:
         if out is not None and name in out:

@@ -45,9 +45,21 @@ if TYPE_CHECKING:
 __all__ = ["DETECTION_COLUMNS", "detection_table", "write_csv", "write_geojson"]
 
 DETECTION_COLUMNS = (
-    "scene_id", "detect_scene_row", "detect_scene_column", "centroid_row", "centroid_col",
-    "lon", "lat", "score", "area_px", "row_min", "row_max", "col_min", "col_max", "length_m",
-)  # fmt: skip
+    "scene_id",
+    "detect_scene_row",
+    "detect_scene_column",
+    "centroid_row",
+    "centroid_col",
+    "lon",
+    "lat",
+    "score",
+    "area_px",
+    "row_min",
+    "row_max",
+    "col_min",
+    "col_max",
+    "length_m",
+)
 
 _FLOATS = ("centroid_row", "centroid_col", "lon", "lat", "score", "length_m")
 

@@ -50,12 +50,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__.splitlines()[0],
     )
     d = AUTOFOCUS_DEFAULTS
-    p.add_argument("--out", type=Path, default=None,
-                   help="output folder (default: results/autofocus-*)")  # fmt: skip
+    p.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: results/autofocus-*)"
+    )
     p.add_argument("--scenes", type=int, default=d["scenes"], help="random scenes per error type")
     p.add_argument("--size", type=int, default=d["size"], help="image size (pixels, square)")
-    p.add_argument("--density", type=float, default=d["density"],
-                   help="fraction of bright pixels")  # fmt: skip
+    p.add_argument("--density", type=float, default=d["density"], help="fraction of bright pixels")
     p.add_argument("--snr", type=float, default=d["snr_db"], help="phase-history SNR in dB")
     p.add_argument("--seed", type=int, default=d["seed"], help="seed of the simulated scenes")
     p.add_argument(
@@ -162,9 +162,12 @@ def autofocus_panel(name: str, data: dict, formed: dict, path: Path) -> None:
         ax.set_title(title, fontsize=8)
         ax.axis("off")
     note = not_shown(left)
-    fig.suptitle(f"phase error {name} (dB, 40 dB range; each image circularly shifted to the "
-                 "true scene: a linear phase error is an unobservable shift)"
-                 + (f"\n{note}" if note else ""), fontsize=8)  # fmt: skip
+    fig.suptitle(
+        f"phase error {name} (dB, 40 dB range; each image circularly shifted to the "
+        "true scene: a linear phase error is an unobservable shift)"
+        + (f"\n{note}" if note else ""),
+        fontsize=8,
+    )
     save(fig, path)
 
 
@@ -228,8 +231,11 @@ def gotcha_figure(panel: dict[str, torch.Tensor], path: Path) -> None:
             key = f"{error} / {method}"
             if key in panel:
                 show(axes[r, c], panel[key], f"{error}\n{method}")
-    fig.suptitle("GOTCHA pass 1 HH: injected phase error (rows) corrected by each method "
-                 "(columns); dB, 40 dB range", fontsize=9)  # fmt: skip
+    fig.suptitle(
+        "GOTCHA pass 1 HH: injected phase error (rows) corrected by each method "
+        "(columns); dB, 40 dB range",
+        fontsize=9,
+    )
     save(fig, path)
 
 

@@ -29,9 +29,18 @@ TUNE_EVERY = 5
 """MSTAR: every 5th chip tunes the window CFARs; the summary reports on the others."""
 MSTAR = SHARED_DATA / "mstar_sarbake"
 SHOWN = [
-    "dataset", "detector", "images", "pd_object", "false_alarms_per_image", "f1", "ap50",
-    "fragmentation", "mean_iou", "fom", "ms_per_image",
-]  # fmt: skip
+    "dataset",
+    "detector",
+    "images",
+    "pd_object",
+    "false_alarms_per_image",
+    "f1",
+    "ap50",
+    "fragmentation",
+    "mean_iou",
+    "fom",
+    "ms_per_image",
+]
 
 
 @dataclass(frozen=True)
@@ -72,8 +81,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="region-growing CFAR vs window CFARs at their best settings",
         description=__doc__.splitlines()[0],
     )
-    p.add_argument("--out", type=Path, default=None,
-                   help="output folder (default: results/compare-region-*)")  # fmt: skip
+    p.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: results/compare-region-*)"
+    )
     p.add_argument(
         "--sim",
         action="append",

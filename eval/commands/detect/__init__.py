@@ -99,8 +99,9 @@ def _check_args(args: argparse.Namespace) -> None:
         if not value:
             raise EvalError(f"{flag} is required (see torchsar-eval detect --help)")
     if args.engine == "ray":
-        raise EvalError("--engine ray is not supported by detect yet: use --workers N (local "
-                        "processes)")  # fmt: skip
+        raise EvalError(
+            "--engine ray is not supported by detect yet: use --workers N (local processes)"
+        )
     at_least(args.workers, "--workers", 1)
     at_least(args.tile, "--tile", 1)
 
@@ -123,10 +124,14 @@ def run(args: argparse.Namespace) -> int:
     jobs = [
         plan.DetectJob(
             plan.Scene(sc.scene_id, sc.path, sc.shape, sc.sample_type, plan.grid(sc.shape, tile)),
-            args.detector, options, tile, batch, args.device,
+            args.detector,
+            options,
+            tile,
+            batch,
+            args.device,
         )
         for sc in scenes
-    ]  # fmt: skip
+    ]
     fingerprint = _fingerprint(jobs)
     written = _execute(args, jobs, fingerprint)
     for line in written["lines"]:
@@ -142,13 +147,29 @@ def _fingerprint(jobs: list) -> dict:
     from torchsar_eval.commands.detect.plan import scene_manifest
 
     j = jobs[0]
-    return json.loads(json.dumps({
-        "command": "detect", "records": 1, "detector": j.detector, "options": j.options,
-        "tile": list(j.tile), "connectivity": j.connectivity, "device": j.device,
-        "scenes": [{"scene_id": x.scene.scene_id, "sample_type": x.scene.sample_type,
-                    "shape": list(x.scene.shape)} for x in jobs],
-        "manifests": {x.scene.scene_id: scene_manifest(Path(x.scene.path)) for x in jobs},
-    }, default=str))  # fmt: skip
+    return json.loads(
+        json.dumps(
+            {
+                "command": "detect",
+                "records": 1,
+                "detector": j.detector,
+                "options": j.options,
+                "tile": list(j.tile),
+                "connectivity": j.connectivity,
+                "device": j.device,
+                "scenes": [
+                    {
+                        "scene_id": x.scene.scene_id,
+                        "sample_type": x.scene.sample_type,
+                        "shape": list(x.scene.shape),
+                    }
+                    for x in jobs
+                ],
+                "manifests": {x.scene.scene_id: scene_manifest(Path(x.scene.path)) for x in jobs},
+            },
+            default=str,
+        )
+    )
 
 
 def _prepared(job):
@@ -188,11 +209,14 @@ def _execute(args: argparse.Namespace, jobs: list, fingerprint: dict) -> dict:
             total = sum(len(job.scene.tiles()) for job in jobs)
             reused = total - sum(map(len, todo))
             jobs = [_prepared(job) if t else job for job, t in zip(jobs, todo, strict=True)]
-            tasks = [(job, chunk, f)
-                     for job, t, f in zip(jobs, todo, folders, strict=True)
-                     for chunk in tiles.chunks(t, job.batch)]  # fmt: skip
-            bar = tqdm(total=total, initial=reused, desc="detect", unit="tile",
-                       disable=args.no_progress)  # fmt: skip
+            tasks = [
+                (job, chunk, f)
+                for job, t, f in zip(jobs, todo, folders, strict=True)
+                for chunk in tiles.chunks(t, job.batch)
+            ]
+            bar = tqdm(
+                total=total, initial=reused, desc="detect", unit="tile", disable=args.no_progress
+            )
             try:
                 tiles.run_tasks(tasks, args.workers, bar)
             finally:
@@ -219,14 +243,22 @@ def _write_outputs(tmp: Path, jobs: list, folders: list[Path]) -> dict:
         sc = job.scene
         with open_scene(sc.path, sample_type=sc.sample_type) as reader:
             georef, spacing = reader.georef, reader.pixel_spacing
-        table = detection_table(scene_objects(job, folder), sc.scene_id, georef=georef,
-                                pixel_spacing=spacing)  # fmt: skip
+        table = detection_table(
+            scene_objects(job, folder), sc.scene_id, georef=georef, pixel_spacing=spacing
+        )
         parts.append(table)
         located = bool(table[["lon", "lat"]].notna().all().all()) and georef is not None
-        per_scene.append({"objects": len(table), "georeferenced": located,
-                          "pixel_spacing": None if spacing is None else list(spacing)})  # fmt: skip
-        lines.append(f"{sc.scene_id}: {len(table)} objects, {sc.grid[0] * sc.grid[1]} tiles "
-                     f"({sc.shape[0]}x{sc.shape[1]} px)")  # fmt: skip
+        per_scene.append(
+            {
+                "objects": len(table),
+                "georeferenced": located,
+                "pixel_spacing": None if spacing is None else list(spacing),
+            }
+        )
+        lines.append(
+            f"{sc.scene_id}: {len(table)} objects, {sc.grid[0] * sc.grid[1]} tiles "
+            f"({sc.shape[0]}x{sc.shape[1]} px)"
+        )
     table = pd.concat(parts, ignore_index=True)
     write_csv(table, tmp / "detections.csv")
     files = ["detections.csv"]
@@ -235,31 +267,53 @@ def _write_outputs(tmp: Path, jobs: list, folders: list[Path]) -> dict:
         files.append("detections.geojson")
         geojson = "written"
     else:
-        names = [j.scene.scene_id for j, s in zip(jobs, per_scene, strict=True)
-                 if not s["georeferenced"]]  # fmt: skip
+        names = [
+            j.scene.scene_id for j, s in zip(jobs, per_scene, strict=True) if not s["georeferenced"]
+        ]
         geojson = f"not written: no lon/lat for scene(s) {', '.join(names)}"
         lines.append(f"detections.geojson {geojson}")
     return {"files": files, "lines": lines, "scenes": per_scene, "geojson": geojson}
 
 
-def _write_config(tmp: Path, args, jobs: list, written: dict, total: int, reused: int,
-                  wall: float) -> None:  # fmt: skip
+def _write_config(
+    tmp: Path, args, jobs: list, written: dict, total: int, reused: int, wall: float
+) -> None:
     from torchsar_eval.commands.detect.plan import min_size, scene_manifest
     from torchsar_eval.output import write_config
 
     j = jobs[0]
     scenes = [
-        {"scene_id": x.scene.scene_id, "path": x.scene.path, "shape": list(x.scene.shape),
-         "sample_type": x.scene.sample_type, "tiles": list(x.scene.grid),
-         "clutter_mean": x.clutter_mean, "manifest": scene_manifest(Path(x.scene.path)), **s}
+        {
+            "scene_id": x.scene.scene_id,
+            "path": x.scene.path,
+            "shape": list(x.scene.shape),
+            "sample_type": x.scene.sample_type,
+            "tiles": list(x.scene.grid),
+            "clutter_mean": x.clutter_mean,
+            "manifest": scene_manifest(Path(x.scene.path)),
+            **s,
+        }
         for x, s in zip(jobs, written["scenes"], strict=True)
-    ]  # fmt: skip
-    write_config(tmp, "detect", {
-        "scenes": scenes, "detector": j.detector, "options": j.options, "tile": list(j.tile),
-        "batch": j.batch, "connectivity": j.connectivity,
-        "min_size": min_size(j.detector, j.options), "device": j.device,
-        "workers": args.workers, "engine": args.engine,
-        "point": "detect_scene_row/column: the peak pixel (highest statistic) of each object",
-        "tiles_total": total, "tiles_reused": reused, "geojson": written["geojson"],
-        "files": [*written["files"], "config.json"], "wall_s": round(wall, 3),
-    })  # fmt: skip
+    ]
+    write_config(
+        tmp,
+        "detect",
+        {
+            "scenes": scenes,
+            "detector": j.detector,
+            "options": j.options,
+            "tile": list(j.tile),
+            "batch": j.batch,
+            "connectivity": j.connectivity,
+            "min_size": min_size(j.detector, j.options),
+            "device": j.device,
+            "workers": args.workers,
+            "engine": args.engine,
+            "point": "detect_scene_row/column: the peak pixel (highest statistic) of each object",
+            "tiles_total": total,
+            "tiles_reused": reused,
+            "geojson": written["geojson"],
+            "files": [*written["files"], "config.json"],
+            "wall_s": round(wall, 3),
+        },
+    )

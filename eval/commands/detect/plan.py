@@ -73,8 +73,10 @@ def parse_options(items: list[str]) -> dict:
         except (ValueError, SyntaxError, RecursionError, MemoryError):
             value = raw
         if key.strip() in _RUNNER:
-            raise EvalError(f"--param {key.strip()}: set by detect itself (use --tile, "
-                            "--device); not a detector option")  # fmt: skip
+            raise EvalError(
+                f"--param {key.strip()}: set by detect itself (use --tile, "
+                "--device); not a detector option"
+            )
         out[key.strip()] = value
     return out
 
@@ -113,12 +115,16 @@ def open_scenes(text: str, sample_type: str | None) -> list[Scene]:
             if reader.raw_dtype.kind == "c":
                 found = "complex"
         if found is None:
-            raise EvalError(f"--scene {p} does not say what its samples are: pass "
-                            "--sample-type amplitude|intensity|db|complex")  # fmt: skip
+            raise EvalError(
+                f"--scene {p} does not say what its samples are: pass "
+                "--sample-type amplitude|intensity|db|complex"
+            )
         sid = p.stem
         if sid in seen:
-            raise EvalError(f"--scene {p} and {seen[sid]} have the same scene id {sid!r} "
-                            "(the file stem): rename one")  # fmt: skip
+            raise EvalError(
+                f"--scene {p} and {seen[sid]} have the same scene id {sid!r} "
+                "(the file stem): rename one"
+            )
         seen[sid] = p
         scenes.append(Scene(sid, str(p.resolve()), shape, found))
     return scenes

@@ -27,9 +27,16 @@ from torchsar_eval.errors import EvalError
 from torchsar_eval.pool import DIED, run_in_processes
 
 __all__ = [
-    "chunks", "close_readers", "load_record", "pending", "record_path", "run_tasks",
-    "run_tiles", "scene_objects", "scene_reader",
-]  # fmt: skip
+    "chunks",
+    "close_readers",
+    "load_record",
+    "pending",
+    "record_path",
+    "run_tasks",
+    "run_tiles",
+    "scene_objects",
+    "scene_reader",
+]
 
 Task = tuple[DetectJob, list[tuple[int, int]], Path]
 """A job, the indices of some of its scene's tiles, and the folder of their records."""
@@ -65,13 +72,13 @@ def _iterate(job: DetectJob, indices: list[tuple[int, int]]):
 
     reader = scene_reader(job)
     if job.detector == "region":
-        return iter_region_tiles(reader, tile=job.tile, device=job.device, only=indices,
-                                 **job.options)  # fmt: skip
+        return iter_region_tiles(
+            reader, tile=job.tile, device=job.device, only=indices, **job.options
+        )
     op = operator(job.detector, **job.options)
     if job.clutter_mean is not None:
         op = op.with_options(clutter_mean=job.clutter_mean)
-    return iter_tiles(reader, op, tile=job.tile, batch=job.batch, device=job.device,
-                      only=indices)  # fmt: skip
+    return iter_tiles(reader, op, tile=job.tile, batch=job.batch, device=job.device, only=indices)
 
 
 def run_tiles(job: DetectJob, indices: list[tuple[int, int]]) -> list[tuple[tuple, bytes]]:
@@ -150,12 +157,19 @@ def run_tasks(tasks: list[Task], workers: int, bar, fn: Callable = _task) -> Non
 
     def died(k: int) -> None:
         job, indices, _ = tasks[k]
-        raise EvalError(f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {DIED} "
-                        "twice; the other tiles' records are kept")  # fmt: skip
+        raise EvalError(
+            f"scene {job.scene.scene_id}, tiles {_tiles_text(indices)}: {DIED} "
+            "twice; the other tiles' records are kept"
+        )
 
-    run_in_processes(fn, {k: (t[0], t[1]) for k, t in enumerate(tasks)}, workers,
-                     on_result=lambda k, result: _done(tasks[k], result, bar), on_died=died,
-                     what="task")  # fmt: skip
+    run_in_processes(
+        fn,
+        {k: (t[0], t[1]) for k, t in enumerate(tasks)},
+        workers,
+        on_result=lambda k, result: _done(tasks[k], result, bar),
+        on_died=died,
+        what="task",
+    )
 
 
 def scene_objects(job: DetectJob, folder: Path) -> pd.DataFrame:

@@ -39,16 +39,28 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", type=Path, default=None, help="output folder (default results/movers-*)"
     )
-    p.add_argument("--size", type=int, default=1024,
-                   help="azimuth pixels (range pixels: a quarter; default 1024)")  # fmt: skip
-    p.add_argument("--azimuth-resolution", type=float, default=0.3,
-                   help="sets the aperture: 0.3 m = 2.5 s, the seed's Table 1 (m)")  # fmt: skip
-    p.add_argument("--speeds", default=",".join(map(str, SPEEDS)),
-                   help="comma-separated mover speeds in m/s")  # fmt: skip
+    p.add_argument(
+        "--size",
+        type=int,
+        default=1024,
+        help="azimuth pixels (range pixels: a quarter; default 1024)",
+    )
+    p.add_argument(
+        "--azimuth-resolution",
+        type=float,
+        default=0.3,
+        help="sets the aperture: 0.3 m = 2.5 s, the seed's Table 1 (m)",
+    )
+    p.add_argument(
+        "--speeds", default=",".join(map(str, SPEEDS)), help="comma-separated mover speeds in m/s"
+    )
     p.add_argument("--directions", default="along-track,range", help="along-track, range or both")
     p.add_argument("--snr-db", type=float, default=30.0, help="image peak SNR of every target")
-    p.add_argument("--snr-ladder", default="15,20,25",
-                   help="further SNRs (dB) for along-track movers ('' for none)")  # fmt: skip
+    p.add_argument(
+        "--snr-ladder",
+        default="15,20,25",
+        help="further SNRs (dB) for along-track movers ('' for none)",
+    )
     p.add_argument("--cnr-db", type=float, default=-5.0, help="clutter-to-noise ratio (dB)")
     p.add_argument("--clutter-points", type=int, default=400, help="scatterers per clutter field")
     p.add_argument("--clutter-fields", type=int, default=2, help="clutter realisations reused")
@@ -56,10 +68,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--looks", type=int, default=2, help="time sub-apertures (2-4)")
     p.add_argument("--overlap", type=float, default=0.0, help="overlap of the looks, [0, 1)")
     p.add_argument("--n-sigma", type=float, default=5.0, help="threshold of each test in sigmas")
-    p.add_argument("--max-fold", type=int, default=5,
-                   help="Doppler folds in the motion bank (5 covers 15.6 m/s radial)")  # fmt: skip
-    p.add_argument("--no-subpatch", dest="subpatch", action="store_false",
-                   help="skip the subpatch test (it forms four more images per scene)")  # fmt: skip
+    p.add_argument(
+        "--max-fold",
+        type=int,
+        default=5,
+        help="Doppler folds in the motion bank (5 covers 15.6 m/s radial)",
+    )
+    p.add_argument(
+        "--no-subpatch",
+        dest="subpatch",
+        action="store_false",
+        help="skip the subpatch test (it forms four more images per scene)",
+    )
     p.add_argument("--batch-size", type=int, default=4, help="scenes imaged at once")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated scenes")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -89,25 +109,40 @@ def config(args: argparse.Namespace) -> LadderConfig:
     if not directions or any(d not in ("along-track", "range") for d in directions):
         raise EvalError(f"--directions must be along-track, range or both; got {args.directions!r}")
     checks = {
-        "--size >= 128": args.size >= 128, "--batch-size >= 1": args.batch_size >= 1,
+        "--size >= 128": args.size >= 128,
+        "--batch-size >= 1": args.batch_size >= 1,
         "--clutter-points >= 0": args.clutter_points >= 0,
-        "--clutter-fields >= 1": args.clutter_fields >= 1, "--controls >= 0": args.controls >= 0,
-        "--looks in 2..4": 2 <= args.looks <= 4, "0 <= --overlap < 1": 0 <= args.overlap < 1,
-        "--n-sigma > 0": args.n_sigma > 0, "--azimuth-resolution > 0": args.azimuth_resolution > 0,
+        "--clutter-fields >= 1": args.clutter_fields >= 1,
+        "--controls >= 0": args.controls >= 0,
+        "--looks in 2..4": 2 <= args.looks <= 4,
+        "0 <= --overlap < 1": 0 <= args.overlap < 1,
+        "--n-sigma > 0": args.n_sigma > 0,
+        "--azimuth-resolution > 0": args.azimuth_resolution > 0,
         "0 <= --max-fold <= 8": 0 <= args.max_fold <= 8,
-    }  # fmt: skip
+    }
     bad = [k for k, ok in checks.items() if not ok]
     if bad:
         raise EvalError(f"need {', '.join(bad)}")
     return LadderConfig(
-        speeds=speeds, directions=directions, size=args.size, snr_db=args.snr_db,
+        speeds=speeds,
+        directions=directions,
+        size=args.size,
+        snr_db=args.snr_db,
         azimuth_resolution=args.azimuth_resolution,
         snr_ladder=floats(args.snr_ladder, "--snr-ladder", allow_empty=True),
-        cnr_db=args.cnr_db, clutter_points=args.clutter_points,
-        clutter_fields=args.clutter_fields, controls=args.controls, looks=args.looks,
-        overlap=args.overlap, n_sigma=args.n_sigma, max_fold=args.max_fold, subpatch=args.subpatch,
-        batch_size=args.batch_size, seed=args.seed, progress=not args.no_progress,
-    )  # fmt: skip
+        cnr_db=args.cnr_db,
+        clutter_points=args.clutter_points,
+        clutter_fields=args.clutter_fields,
+        controls=args.controls,
+        looks=args.looks,
+        overlap=args.overlap,
+        n_sigma=args.n_sigma,
+        max_fold=args.max_fold,
+        subpatch=args.subpatch,
+        batch_size=args.batch_size,
+        seed=args.seed,
+        progress=not args.no_progress,
+    )
 
 
 def run(args: argparse.Namespace) -> int:

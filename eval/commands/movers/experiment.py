@@ -19,12 +19,27 @@ from torchsar_eval.tables import markdown
 __all__ = ["SHOWN", "LadderConfig", "run_ladder", "sensitivity"]
 
 SHOWN = [
-    "kind", "direction", "speed_mps", "snr_db", "theory_look_shift_m", "look_shift_m",
-    "theory_smear_m", "focus_gain_db", "velocity_mps", "look_detected", "focus_detected",
-    "subpatch_detected", "combined_detected", "combined_false_stationary",
-    "combined_false_clutter", "theory_fold", "fold", "radial_detected", "radial_false_stationary",
+    "kind",
+    "direction",
+    "speed_mps",
+    "snr_db",
+    "theory_look_shift_m",
+    "look_shift_m",
+    "theory_smear_m",
+    "focus_gain_db",
+    "velocity_mps",
+    "look_detected",
+    "focus_detected",
+    "subpatch_detected",
+    "combined_detected",
+    "combined_false_stationary",
+    "combined_false_clutter",
+    "theory_fold",
+    "fold",
+    "radial_detected",
+    "radial_false_stationary",
     "radial_false_clutter",
-]  # fmt: skip
+]
 AXIS = {"along-track": 1, "range": 0}
 
 SCOPE = """\
@@ -99,14 +114,24 @@ def _batch(cfg, params, clutter, scenes: list[dict]) -> list[dict]:
             vel[i, AXIS[s["direction"]]] = s["speed_mps"]
     control = scenes[0]["kind"] == "control"
     g, pos = simulate_scenes(
-        params, vel, snr_db=torch.tensor([s["snr_db"] for s in scenes]), cnr_db=cfg.cnr_db,
-        clutter=clutter, seeds=torch.tensor([s["seed"] for s in scenes]), mover=not control,
-    )  # fmt: skip
+        params,
+        vel,
+        snr_db=torch.tensor([s["snr_db"] for s in scenes]),
+        cnr_db=cfg.cnr_db,
+        clutter=clutter,
+        seeds=torch.tensor([s["seed"] for s in scenes]),
+        mover=not control,
+    )
     report = find_movers(
-        g, params, looks=cfg.looks, overlap=cfg.overlap, n_sigma=cfg.n_sigma,
-        max_fold=cfg.max_fold, subpatch=cfg.subpatch and scenes[0]["kind"] == "ladder",
+        g,
+        params,
+        looks=cfg.looks,
+        overlap=cfg.overlap,
+        n_sigma=cfg.n_sigma,
+        max_fold=cfg.max_fold,
+        subpatch=cfg.subpatch and scenes[0]["kind"] == "ladder",
         max_targets=128,
-    )  # fmt: skip
+    )
     full_vel = torch.zeros(len(scenes), len(LAYOUT), 2, dtype=torch.float64)
     full_vel[:, MOVER] = vel
     return [
@@ -136,9 +161,12 @@ def run_ladder(cfg: LadderConfig, out: Path) -> str:
     """Run every scene, write the run folder, return the printed summary."""
     params = _params(cfg)
     clutter = make_clutter(
-        params, points=cfg.clutter_points, realisations=cfg.clutter_fields, seed=cfg.seed,
+        params,
+        points=cfg.clutter_points,
+        realisations=cfg.clutter_fields,
+        seed=cfg.seed,
         size=params.image_size,
-    )  # fmt: skip
+    )
     scenes = _scenes(cfg)
     rows: list[dict] = []
     bar = tqdm(total=len(scenes), disable=not cfg.progress, desc="movers")

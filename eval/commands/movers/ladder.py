@@ -73,10 +73,23 @@ def _mover_columns(report: MoverReport, b: int, i: int) -> dict:
     """Measured values of the mover's target ``i`` (NaN when not found)."""
     nan = float("nan")
     if i < 0:
-        return {k: nan for k in ("look_shift_m", "look_range_shift_m", "look_velocity_mps",
-                                 "focus_velocity_mps", "focus_gain_db", "velocity_mps",
-                                 "velocity_sigma_mps", "mover_snr_db", "walk_mps", "fold",
-                                 "radial_low_mps", "radial_high_mps")}  # fmt: skip
+        return {
+            k: nan
+            for k in (
+                "look_shift_m",
+                "look_range_shift_m",
+                "look_velocity_mps",
+                "focus_velocity_mps",
+                "focus_gain_db",
+                "velocity_mps",
+                "velocity_sigma_mps",
+                "mover_snr_db",
+                "walk_mps",
+                "fold",
+                "radial_low_mps",
+                "radial_high_mps",
+            )
+        }
     disp = report.look.displacement[b, i, -1]
     return {
         "look_shift_m": float(disp[1]),

@@ -47,10 +47,21 @@ def plot_displacement(table: pd.DataFrame, path: Path) -> None:
 def _plot_walk(ax, part: pd.DataFrame) -> None:
     """Measured walk of each range mover, the fold law, and the fold each was flagged with."""
     ax.plot(part.speed_mps, part.walk_mps, "s", label="measured")
-    ax.step(part.speed_mps, part.theory_walk_mps, "-", where="mid", color="grey",
-            label="theory -k λ PRF / 2")  # fmt: skip
+    ax.step(
+        part.speed_mps,
+        part.theory_walk_mps,
+        "-",
+        where="mid",
+        color="grey",
+        label="theory -k λ PRF / 2",
+    )
     found = part[part.radial_detected]
     ax.plot(found.speed_mps, found.walk_mps, "o", mfc="none", ms=12, label="flagged radial")
     for row in found.itertuples():
-        ax.annotate(f"k={row.fold:.0f}", (row.speed_mps, row.walk_mps), fontsize=7,
-                    textcoords="offset points", xytext=(6, -10))  # fmt: skip
+        ax.annotate(
+            f"k={row.fold:.0f}",
+            (row.speed_mps, row.walk_mps),
+            fontsize=7,
+            textcoords="offset points",
+            xytext=(6, -10),
+        )

@@ -144,8 +144,13 @@ def plot_pfa(table: pd.DataFrame, path: Path) -> None:
     for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
     handles = legend_handles(everyone)
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8,
-               title="open triangle: no false alarm (95 % upper bound)",
-               title_fontsize=8)  # fmt: skip
+    fig.legend(
+        handles=handles,
+        loc="lower center",
+        ncol=min(len(handles), 7),
+        fontsize=8,
+        title="open triangle: no false alarm (95 % upper bound)",
+        title_fontsize=8,
+    )
     legend_rows = -(-len(handles) // 7)
     save(fig, path, rect=(0, (0.06 * legend_rows + 0.05) / rows, 1, 1))

@@ -149,6 +149,21 @@ def measure_dataset(
     for (det, pfa), (k, n) in counts.items():
         lo, hi = binomial_interval(k, n) if n else (float("nan"), float("nan"))
         rate = k / n if n else float("nan")
-        rows.append([det, name, "real clutter", float("nan"), None, pfa, rate, lo, hi, k, n,
-                     rate / pfa, lo <= pfa <= hi])  # fmt: skip
+        rows.append(
+            [
+                det,
+                name,
+                "real clutter",
+                float("nan"),
+                None,
+                pfa,
+                rate,
+                lo,
+                hi,
+                k,
+                n,
+                rate / pfa,
+                lo <= pfa <= hi,
+            ]
+        )
     return pd.DataFrame(rows, columns=PFA_COLUMNS)

@@ -203,9 +203,12 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         default=choices.DEFAULT_MAX_AREA,
         help="largest object, in --area-units (default: no limit)",
     )
-    g.add_argument("--area-units", choices=["px", "m2"], default="px",
-                   help="units of --min-area and --max-area: pixels, or square metres with "
-                   "the pixel spacing")  # fmt: skip
+    g.add_argument(
+        "--area-units",
+        choices=["px", "m2"],
+        default="px",
+        help="units of --min-area and --max-area: pixels, or square metres with the pixel spacing",
+    )
     g.add_argument(
         "--floor",
         type=float,
@@ -278,8 +281,12 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         "TARGET ('fa=1': at most 1 false alarm per image; 'f1': best F1) and "
         "report on the disjoint rest",
     )
-    g.add_argument("--calibration-fraction", type=float, default=0.3,
-                   help="share of each dataset's images in the calibration split")  # fmt: skip
+    g.add_argument(
+        "--calibration-fraction",
+        type=float,
+        default=0.3,
+        help="share of each dataset's images in the calibration split",
+    )
     g.add_argument(
         "--sweep",
         action="append",
@@ -325,11 +332,12 @@ def run(args: argparse.Namespace) -> int:
     calibration = None
     sweep = options.parse_sweep(args.sweep)
     if sweep and args.calibrate_on is None:
-        raise EvalError("--sweep needs --calibrate-on TARGET (f1 or fa=LEVEL): the settings are "
-                        "chosen on the calibration split")  # fmt: skip
+        raise EvalError(
+            "--sweep needs --calibrate-on TARGET (f1 or fa=LEVEL): the settings are "
+            "chosen on the calibration split"
+        )
     if args.calibrate_on is not None:
-        calibration = Calibration(args.calibrate_on, args.calibration_fraction,
-                                  sweep=sweep or None)  # fmt: skip
+        calibration = Calibration(args.calibrate_on, args.calibration_fraction, sweep=sweep or None)
     datasets = args.dataset or DEFAULT_DATASETS
     if args.predictions and len(datasets) != 1:
         raise EvalError("--predictions scores one dataset: name it with --dataset")

@@ -71,15 +71,23 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> tuple[list[Detector],
 
     overrides = dict(overrides)
     every = overrides.pop(EVERY, {})
-    refs = [] if args.detectors is None and args.predictions else (
-        [(None, n) for n in BUILTIN] if args.detectors is None else detector_refs(args.detectors)
-    )  # fmt: skip
+    refs = (
+        []
+        if args.detectors is None and args.predictions
+        else (
+            [(None, n) for n in BUILTIN]
+            if args.detectors is None
+            else detector_refs(args.detectors)
+        )
+    )
     names = [name or ref.rpartition(":")[2].rpartition(".")[2] for name, ref in refs]
     names += [n for n, _ in _predictions(args.predictions)]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise EvalError(f"--detectors / --predictions name {', '.join(twice)} more than once: "
-                        "name each row with NAME=...")  # fmt: skip
+        raise EvalError(
+            f"--detectors / --predictions name {', '.join(twice)} more than once: "
+            "name each row with NAME=..."
+        )
     stray = sorted(set(overrides) - set(names))
     if stray:
         raise EvalError(f"--param given for detector(s) not being run: {stray}")
@@ -95,18 +103,20 @@ def _resolve(args: argparse.Namespace, overrides: dict) -> tuple[list[Detector],
             used |= shared.keys()
         dets.append(det)
     for name, path in _predictions(args.predictions):
-        opts = {**{k: v for k, v in every.items() if k in SAVED_OPTIONS},
-                **overrides.get(name, {})}  # fmt: skip
+        opts = {**{k: v for k, v in every.items() if k in SAVED_OPTIONS}, **overrides.get(name, {})}
         used |= {k for k in every if k in SAVED_OPTIONS}
         unknown = sorted(set(opts) - set(SAVED_OPTIONS))
         if unknown:
-            raise EvalError(f"--param {name}.{unknown[0]}: saved predictions take only "
-                            "threshold, instances, format, iou_type and ids")  # fmt: skip
+            raise EvalError(
+                f"--param {name}.{unknown[0]}: saved predictions take only "
+                "threshold, instances, format, iou_type and ids"
+            )
         dets.append(predictions(path, name=name, **opts))
     unused = sorted(set(every) - used)
     if unused:
-        raise EvalError(f"--param {unused[0]}=...: no detector of this run has the option "
-                        f"{unused[0]!r}")  # fmt: skip
+        raise EvalError(
+            f"--param {unused[0]}=...: no detector of this run has the option {unused[0]!r}"
+        )
     return dets, overrides
 
 
@@ -161,8 +171,13 @@ def _matching(args: argparse.Namespace) -> Matching:
     from torchsar.metrics.distance import parse_distance
 
     value, units = parse_distance(args.max_distance)
-    return Matching(kind="distance", max_distance=value, distance_units=units,
-                    assign=args.assign, classes=_classes(args))  # fmt: skip
+    return Matching(
+        kind="distance",
+        max_distance=value,
+        distance_units=units,
+        assign=args.assign,
+        classes=_classes(args),
+    )
 
 
 def _classes(args: argparse.Namespace) -> str:
@@ -175,12 +190,21 @@ def scoring_from(args: argparse.Namespace) -> Scoring:
         raise EvalError(f"--bootstrap must be >= 0, got {args.bootstrap}")
     try:
         rules = ObjectRules(
-            closing=args.closing, min_area=args.min_area, max_area=args.max_area,
-            units=args.area_units, floor=args.floor,
-        )  # fmt: skip
+            closing=args.closing,
+            min_area=args.min_area,
+            max_area=args.max_area,
+            units=args.area_units,
+            floor=args.floor,
+        )
         matching = _matching(args)
     except TorchSARError as exc:
         raise EvalError(f"bad object/matching option: {exc}") from exc
-    return Scoring(rules, matching, args.bootstrap, args.seed, instances=args.instances,
-                   coco_compatible=args.coco_compatible,
-                   bootstrap_unit=getattr(args, "bootstrap_unit", "image"))  # fmt: skip
+    return Scoring(
+        rules,
+        matching,
+        args.bootstrap,
+        args.seed,
+        instances=args.instances,
+        coco_compatible=args.coco_compatible,
+        bootstrap_unit=getattr(args, "bootstrap_unit", "image"),
+    )

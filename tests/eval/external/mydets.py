@@ -16,8 +16,9 @@ class RatioNet(torch.nn.Module):
 
     def __init__(self, window: int = 5, level: float = 4.0) -> None:
         super().__init__()
-        self.pool = torch.nn.AvgPool2d(window, stride=1, padding=window // 2,
-                                       count_include_pad=False)  # fmt: skip
+        self.pool = torch.nn.AvgPool2d(
+            window, stride=1, padding=window // 2, count_include_pad=False
+        )
         self.level = level
 
     def forward(self, x: torch.Tensor):
@@ -34,7 +35,10 @@ def bright_boxes(x: torch.Tensor, k: float = 6.0) -> Objects:
         labels, n = ndimage.label(plane > k * median)
         found = ndimage.find_objects(labels)
         peaks = ndimage.maximum(plane, labels, np.arange(1, n + 1)) if n else []
-        boxes.append(np.array([[s[0].start, s[1].start, s[0].stop, s[1].stop] for s in found],
-                              dtype=np.float64).reshape(-1, 4))  # fmt: skip
+        boxes.append(
+            np.array(
+                [[s[0].start, s[1].start, s[0].stop, s[1].stop] for s in found], dtype=np.float64
+            ).reshape(-1, 4)
+        )
         scores.append(1.0 - np.exp(-np.asarray(peaks, dtype=np.float64) / median / 20.0))
     return Objects.from_boxes(boxes, scores, shape=(h, w))
