@@ -14,7 +14,9 @@ percentile) with:
 
 Files: ``overlays/<dataset>/<detector>/<image>.png`` and their index ``overlays/overlays.csv``
 (:data:`OVERLAY_COLUMNS`). Images larger than :data:`MAX_SIDE` are block-averaged down;
-images of at most :data:`SMALL` pixels a side are drawn at twice their size.
+images of at most :data:`SMALL` pixels a side are drawn at twice their size. The report
+shows a copy of at most :data:`REPORT_SIDE` pixels a side (``<image>-small.png``, drawn
+afresh at that size, not resampled) linked to the full picture.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ __all__ = [
     "MAX_SIDE",
     "MISSED",
     "OVERLAY_COLUMNS",
+    "REPORT_SIDE",
     "SMALL",
     "Overlay",
     "collect_overlays",
@@ -54,6 +57,8 @@ __all__ = [
 
 MAX_SIDE = 2048
 """The largest side an overlay is drawn at (larger images are block-averaged down)."""
+REPORT_SIDE = 512
+"""The largest side of the copy the report embeds."""
 SMALL = 512
 """Images of at most this many pixels a side are drawn at twice their size."""
 MAX_OVERLAYS = 64
@@ -70,6 +75,7 @@ OVERLAY_COLUMNS = [
     "false_alarms",
     "threshold",
     "file",
+    "small",
 ]
 """Columns of ``overlays/overlays.csv``."""
 
@@ -169,8 +175,9 @@ class Overlay:
     pixels: np.ndarray
     counts: dict
     threshold: float | None
+    small: np.ndarray | None = None
 
-    def row(self, file: str) -> list:
+    def row(self, file: str, small: str) -> list:
         c = self.counts
         thr = "" if self.threshold is None else self.threshold
         return [
@@ -185,6 +192,7 @@ class Overlay:
             c["false_alarms"],
             thr,
             file,
+            small,
         ]
 
 
@@ -223,9 +231,21 @@ def collect_overlays(
             m = match_batch(obj, gt, scoring.matching)
             for p, facts in enumerate(info):
                 pixels, counts = render_overlay(image, p, obj, gt, m.op)
+                small = None
+                if max(pixels.shape) > REPORT_SIDE:
+                    small = render_overlay(image, p, obj, gt, m.op, max_side=REPORT_SIDE)[0]
                 meta = batch["meta"][p // max(1, gt.planes // len(batch["meta"]))]
                 out.append(
-                    Overlay(name, det.name, str(facts.key), int(meta["index"]), pixels, counts, thr)
+                    Overlay(
+                        name,
+                        det.name,
+                        str(facts.key),
+                        int(meta["index"]),
+                        pixels,
+                        counts,
+                        thr,
+                        small,
+                    )
                 )
 
     run_detectors(
@@ -339,14 +359,14 @@ class _Canvas:
 
 
 def render_overlay(
-    image, p: int, obj: Objects, gt: GroundTruth, op: np.ndarray
+    image, p: int, obj: Objects, gt: GroundTruth, op: np.ndarray, *, max_side: int = MAX_SIDE
 ) -> tuple[np.ndarray, dict]:
     """Palette indices of plane ``p`` with its ground truth and the detections at their
     operating point (``op``: each detection's matched target under the rule, ``-1`` a false
-    alarm, ``-2`` ignored), and the counts drawn."""
+    alarm, ``-2`` ignored), and the counts drawn; at most ``max_side`` pixels a side."""
     h, w = gt.shape
-    step = max(1, math.ceil(max(h, w) / MAX_SIDE))
-    up = 2 if max(h, w) <= SMALL else 1
+    step = max(1, math.ceil(max(h, w) / max_side))
+    up = 2 if max(h, w) <= min(SMALL, max_side // 2) else 1
     canvas = _Canvas(_grey(image, p, gt.planes, h, w, step), step, up)
     base = p * h * w
     for k in np.flatnonzero(gt.crowd.plane == p):
@@ -390,13 +410,19 @@ def _file_name(image: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "_", stem) or "image"
 
 
+def _png(pixels: np.ndarray, path: Path) -> None:
+    from PIL import Image
+
+    im = Image.fromarray(pixels, "P")
+    im.putpalette(_PALETTE)
+    im.save(path, compress_level=6)
+
+
 def write_overlays(
     folder: Path, overlays: dict[str, list[Overlay]], labels: dict[str, str]
 ) -> list[str]:
     """The overlays as PNGs ``overlays/<dataset>/<detector>/<image>.png`` and their index
     ``overlays/overlays.csv``; returns ``["overlays/"]`` (``[]`` when there are none)."""
-    from PIL import Image
-
     from torchsar_eval.output import file_slugs
     from torchsar_eval.plots import slug
 
@@ -408,10 +434,12 @@ def write_overlays(
             sub = Path("overlays") / labels[name] / dets[o.detector]
             (folder / sub).mkdir(parents=True, exist_ok=True)
             rel = sub / f"{files[o.image]}.png"
-            im = Image.fromarray(o.pixels, "P")
-            im.putpalette(_PALETTE)
-            im.save(folder / rel, compress_level=6)
-            rows.append(o.row(rel.as_posix()))
+            _png(o.pixels, folder / rel)
+            small = rel
+            if o.small is not None:
+                small = sub / f"{files[o.image]}-small.png"
+                _png(o.small, folder / small)
+            rows.append(o.row(rel.as_posix(), small.as_posix()))
     if not rows:
         return []
     with open(folder / "overlays" / "overlays.csv", "w", newline="") as f:

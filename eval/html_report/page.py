@@ -865,7 +865,9 @@ def _overlays(board: Board) -> str:
             rows = rows.sort_values("detector", key=lambda c: c.map(order).fillna(len(order)))
             figs = []
             for _, r in rows.iterrows():
-                uri = _png_uri(run.folder, str(r["file"]))
+                small = r.get("small")
+                small = str(small) if isinstance(small, str) and small else str(r["file"])
+                uri = _png_uri(run.folder, small)
                 if uri is None:
                     continue
                 det = str(r["detector"])
@@ -874,8 +876,11 @@ def _overlays(board: Board) -> str:
                 fa = int(_num(r.get("false_alarms")))
                 thr = _num(r.get("threshold"))
                 at = "" if math.isnan(thr) else f" · threshold {thr:.4g}"
+                img = f'<img src="{uri}" alt="{_e(det)} on {_e(image)}">'
+                if len(board.runs) == 1:  # the full-size picture, next to the report
+                    img = f'<a href="{_e(str(r["file"]))}">{img}</a>'
                 figs.append(
-                    f'<figure class="overlay"><img src="{uri}" alt="{_e(det)} on {_e(image)}">'
+                    f'<figure class="overlay">{img}'
                     f"<figcaption>{_swatch(det)}<b>{_e(label)}</b>: {found} of {n} targets "
                     f"found, {fa} false alarm{'s' * (fa != 1)}{at}</figcaption></figure>"
                 )

@@ -173,3 +173,25 @@ def test_names_are_checked_before_the_run_and_need_a_folder(tmp_path):
     )
     with pytest.raises(EvalError, match="from 0 to"):
         parse_overlay(1000)
+
+
+def test_the_report_copy_is_drawn_small_and_linked(tmp_path):
+    """A 600 x 600 image: the full picture and a copy drawn at half size (its outlines
+    drawn on the small grid, not resampled), both written; the copy is what the report
+    embeds, linked to the full one."""
+    from torchsar_eval.overlays import REPORT_SIDE, Overlay, write_overlays
+
+    inst = np.zeros((1, 600, 600), np.int64)
+    inst[0, 100:140, 200:260] = 1
+    gt = ground_truth(inst)
+    none = Objects.from_boxes([np.zeros((0, 4))], [np.zeros(0)], shape=(600, 600))
+    full, counts = render_overlay(None, 0, none, gt, np.zeros(0, int))
+    small, _ = render_overlay(None, 0, none, gt, np.zeros(0, int), max_side=REPORT_SIDE)
+    assert full.shape == (600, 600) and small.shape == (300, 300)
+    rows, cols = np.nonzero(small == MISSED)
+    assert (rows.min(), rows.max(), cols.min(), cols.max()) == (48, 71, 98, 131)
+    o = Overlay("d", "ca", "a/b.png", 0, full, counts, 1.0, small)
+    assert write_overlays(tmp_path, {"d": [o]}, {"d": "d"}) == ["overlays/"]
+    table = pd.read_csv(tmp_path / "overlays" / "overlays.csv")
+    assert table.file[0] == "overlays/d/ca/b.png" and table.small[0] == "overlays/d/ca/b-small.png"
+    assert Image.open(tmp_path / table.small[0]).size == (300, 300)
