@@ -62,7 +62,8 @@ class Execution:
         if self.engine not in ENGINES:
             raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
         if self.device is not None:
-            from torchsar._checks import TorchSARError, check_device
+            from torchsar._checks import check_device
+            from torchsar.errors import TorchSARError
 
             try:
                 torch.device(self.device)

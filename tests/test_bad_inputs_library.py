@@ -11,7 +11,7 @@ import torch
 from scipy import ndimage
 from skimage.morphology import disk
 
-from torchsar._checks import (
+from torchsar.errors import (
     InputTypeError,
     InputValueError,
     OptionError,

@@ -2,6 +2,7 @@
 
 from torchsar import (
     cfar,
+    errors,
     imaging,
     io,
     metrics,
@@ -20,6 +21,7 @@ __version__ = "0.1.0"
 __all__ = [
     "__version__",
     "cfar",
+    "errors",
     "imaging",
     "io",
     "metrics",

@@ -1,17 +1,8 @@
-"""Input validation and the error types used by every public function.
+"""Input validation used by every public function.
 
 One place decides what a valid input is, so every entry point raises the same typed errors
-with messages that name the argument, what was expected and what was given.
-
-Error types (all subclasses of the built-in ``ValueError`` / ``TypeError`` so callers that
-catch those keep working):
-
-- :class:`InputTypeError` (``TypeError``): not a tensor, integer where float is expected,
-  complex where real is expected (or the reverse).
-- :class:`ShapeError` (``ValueError``): wrong number of dimensions or mismatched shapes.
-- :class:`InputValueError` (``ValueError``): NaN, Inf or negative values.
-- :class:`WindowSizeError` (``ValueError``): a window that does not fit in the image.
-- :class:`OptionError` (``ValueError``): an invalid keyword option (out of range, unknown mode).
+(:mod:`torchsar.errors`) with messages that name the argument, what was expected and what
+was given.
 """
 
 from __future__ import annotations
@@ -22,13 +13,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar.errors import (
+    InputTypeError,
+    InputValueError,
+    OptionError,
+    ShapeError,
+    WindowSizeError,
+)
+
 __all__ = [
-    "InputTypeError",
-    "InputValueError",
-    "OptionError",
-    "ShapeError",
-    "TorchSARError",
-    "WindowSizeError",
     "all_finite",
     "check_choice",
     "check_complex",
@@ -49,30 +42,6 @@ __all__ = [
     "float_dtype",
     "has_nan",
 ]
-
-
-class TorchSARError(Exception):
-    """Base class of every error torchsar raises for bad input."""
-
-
-class InputTypeError(TorchSARError, TypeError):
-    """An argument has the wrong type or dtype (e.g. complex where real is expected)."""
-
-
-class ShapeError(TorchSARError, ValueError):
-    """An argument has the wrong number of dimensions or a mismatched shape."""
-
-
-class InputValueError(TorchSARError, ValueError):
-    """An argument holds invalid values (NaN, Inf, negative intensity)."""
-
-
-class WindowSizeError(TorchSARError, ValueError):
-    """A window (guard + training band, filter window) is larger than the image."""
-
-
-class OptionError(TorchSARError, ValueError):
-    """A keyword option is out of range or not one of the allowed values."""
 
 
 _AXES = {2: "(H, W)", 3: "(C, H, W)", 4: "(B, C, H, W)"}

@@ -122,7 +122,7 @@ class Ring:
         return Region((Rect.box(self.outer),), (Rect.box(self.guard),))
 
     def check_fits(self, x: Tensor) -> None:
-        """Raise :class:`~torchsar._checks.WindowSizeError` if the ring exceeds ``x``."""
+        """Raise :class:`~torchsar.errors.WindowSizeError` if the ring exceeds ``x``."""
         check_window_fits(x, self.extent, name=f"guard={self.guard} + train={self.train}")
 
     def offsets(self) -> Tensor:

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from torchsar._checks import TorchSARError
+from torchsar.errors import TorchSARError
 from torchsar.io import FileFormatError, raster_shape, to_intensity
 from torchsar_eval.datasets.manifest import file_manifest
 from torchsar_eval.datasets.semantics import boxes_of, check_instance_counts

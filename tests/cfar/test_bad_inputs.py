@@ -7,8 +7,8 @@ import torch
 from scipy import stats
 
 import torchsar as ts
-from torchsar._checks import InputTypeError, OptionError
 from torchsar.cfar.thresholds import block_factor, ca_factor
+from torchsar.errors import InputTypeError, OptionError
 
 DETECTORS = [n for n in ts.cfar.__all__ if n not in ("Detection", "detection_from", "threshold")]
 

@@ -9,14 +9,14 @@ from hypothesis import strategies as st
 import torchsar as ts
 from tests.reference.cfar_basic import binomial_interval, ca_alpha, ca_statistic
 from tests.reference.windows import interior
-from torchsar._checks import (
+from torchsar.cfar.thresholds import ca_factor
+from torchsar.errors import (
     InputTypeError,
     InputValueError,
     OptionError,
     ShapeError,
     WindowSizeError,
 )
-from torchsar.cfar.thresholds import ca_factor
 
 
 def _expo(seed, shape, dtype=torch.float64):

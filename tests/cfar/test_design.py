@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import torchsar as ts
-from torchsar._checks import OptionError
 from torchsar.cfar.design import THRESHOLDS
+from torchsar.errors import OptionError
 
 EXTRA = {
     "ca": {"looks": st.sampled_from([0.5, 1.0, 3.0])},

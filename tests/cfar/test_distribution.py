@@ -11,10 +11,10 @@ from scipy import special, stats
 
 import torchsar as ts
 from tests.reference.cfar import ring_cells, sample_clutter
-from torchsar._checks import OptionError
 from torchsar.cfar.distribution import shape_from_spread
 from torchsar.cfar.log_t import log_t_exact, log_t_table
 from torchsar.cfar.thresholds import ca_factor
+from torchsar.errors import OptionError
 
 NAMES = ["lognormal", "weibull", "gamma", "k", "g0"]
 

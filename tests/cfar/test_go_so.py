@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 import torchsar as ts
 from tests.reference.cfar import block_alpha, block_cells
-from torchsar._checks import InputValueError, OptionError, ShapeError, WindowSizeError
 from torchsar.cfar.thresholds import block_factor
+from torchsar.errors import InputValueError, OptionError, ShapeError, WindowSizeError
 
 VARIANTS = [("go", ts.cfar.go, np.max), ("so", ts.cfar.so, np.min)]
 

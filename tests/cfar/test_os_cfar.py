@@ -14,8 +14,8 @@ from scipy import ndimage
 
 import torchsar as ts
 from tests.reference.cfar import kth_smallest, os_alpha, ring_cells
-from torchsar._checks import OptionError
 from torchsar.cfar.thresholds import os_factor
+from torchsar.errors import OptionError
 
 
 def ring_footprint(guard: int, train: int) -> np.ndarray:

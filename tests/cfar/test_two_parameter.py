@@ -10,7 +10,7 @@ from scipy import stats
 import torchsar as ts
 from tests.reference.cfar_basic import two_parameter_statistic
 from tests.reference.windows import interior
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 
 
 def _expo(seed, shape, dtype=torch.float64):

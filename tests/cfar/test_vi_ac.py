@@ -8,9 +8,9 @@ import torch
 
 import torchsar as ts
 from tests.reference.cfar import block_cells, ring_cells
-from torchsar._checks import OptionError, ShapeError
 from torchsar.cfar.ac import global_censor_threshold
 from torchsar.cfar.thresholds import block_factor, ca_factor
+from torchsar.errors import OptionError, ShapeError
 
 
 @pytest.fixture(scope="module")

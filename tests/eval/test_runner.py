@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 import torch
 
-from torchsar._checks import InputValueError
+from torchsar.errors import InputValueError
 from torchsar_eval.registry import BUILTIN
 from torchsar_eval.runner import run_detectors
 

@@ -12,7 +12,7 @@ import pytest
 import torch
 from skimage import io
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar_eval.cli import main
 from torchsar_eval.commands import load
 from torchsar_eval.commands import speckle as command

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.imaging import (
     AutofocusResult,
     FourierOperator,

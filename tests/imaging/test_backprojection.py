@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputValueError, ShapeError
+from torchsar.errors import InputValueError, ShapeError
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.sar import SPEED_OF_LIGHT
 

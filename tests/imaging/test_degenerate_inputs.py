@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.imaging import (
     fft2c,
     min_entropy_autofocus,

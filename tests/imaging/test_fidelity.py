@@ -7,7 +7,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from torchsar._checks import ShapeError
+from torchsar.errors import ShapeError
 from torchsar.imaging.fidelity import align, magnitude_correlation, phase_rmse
 
 

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.imaging.focus import contrast, entropy, sharpness, target_to_background
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, OptionError, ShapeError
 from torchsar.imaging import FourierOperator, default_lam, ifft2c, lp_image
 from torchsar.imaging.fidelity import magnitude_correlation
 

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.reference.imaging import fft2c_dense
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.imaging import FourierOperator, fft2c, ifft2c
 
 

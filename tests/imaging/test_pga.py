@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError, OptionError
+from torchsar.errors import InputTypeError, OptionError
 from torchsar.imaging import (
     apply_phase_error,
     fft2c,

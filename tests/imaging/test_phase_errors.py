@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import OptionError, ShapeError
+from torchsar.errors import OptionError, ShapeError
 from torchsar.imaging.phase_errors import (
     apply_phase_error,
     polynomial_phase_error,

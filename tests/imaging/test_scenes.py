@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.imaging.scenes import point_scene, speckled_scene
 
 

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError
+from torchsar.errors import InputTypeError, InputValueError, OptionError
 from torchsar.io import SAMPLE_TYPES, to_intensity
 
 finite = st.floats(0, 1e6, allow_nan=False, width=32)

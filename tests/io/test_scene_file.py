@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 import tifffile
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.io import TiePointGrid, TiffScene, open_scene
 from torchsar.simulate.scene_file import scene_lonlat, write_scene_file
 

@@ -9,7 +9,7 @@ import pytest
 import tifffile
 
 from tests.io.scene_writers import scene_array, windows, write_complex_int16
-from torchsar._checks import OptionError, WindowSizeError
+from torchsar.errors import OptionError, WindowSizeError
 from torchsar.io import FileFormatError, TiffScene, WindowError, open_scene
 
 SHAPE = (203, 171)  # not a multiple of any tile: partial tiles at both edges

@@ -16,7 +16,7 @@ from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from torchsar._checks import InputValueError, OptionError
+from torchsar.errors import InputValueError, OptionError
 from torchsar.metrics.coco_compat import (
     COCO_AREAS,
     COCO_MAX_DETS,

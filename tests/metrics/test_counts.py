@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.reference.metrics import object_scores
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.metrics import ObjectCounts, PixelCounts, object_counts, pixel_counts
 
 
@@ -111,7 +111,7 @@ class TestObjectCounts:
 
 
 def test_object_counts_connectivity_is_validated():
-    from torchsar._checks import OptionError
+    from torchsar.errors import OptionError
 
     z = torch.zeros(1, 1, 4, 4, dtype=torch.bool)
     with pytest.raises(OptionError, match="connectivity"):

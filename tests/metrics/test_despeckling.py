@@ -11,7 +11,7 @@ from scipy import ndimage
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 import torchsar as ts
-from torchsar._checks import InputValueError, OptionError, ShapeError
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.metrics.despeckling import (
     edge_preservation,
     edge_ratio,

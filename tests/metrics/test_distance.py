@@ -15,7 +15,7 @@ from tests.reference.distance import (
     nearest_distance_loop,
     xview3_true_positives,
 )
-from torchsar._checks import InputValueError, OptionError, ShapeError
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.metrics.distance import (
     LengthErrors,
     dont_care,

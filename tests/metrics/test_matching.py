@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.reference.coco import coco_match
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
 from torchsar.metrics.greedy import assign_pairs, greedy_assign
 from torchsar.metrics.matching import COCO_IOUS

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from sklearn.metrics import roc_curve
 
 from torchsar import _jit
-from torchsar._checks import InputTypeError, InputValueError, ShapeError
+from torchsar.errors import InputTypeError, InputValueError, ShapeError
 from torchsar.metrics import RocAccumulator, pixel_counts, roc
 from torchsar.metrics.roc import key_thresholds, pixel_keys
 

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.motion import detect_movers, registration_sigma
 
 

@@ -11,7 +11,7 @@ import torch
 from tests.motion.conftest import make_params
 from tests.motion.scenes import STILL as KIND_STILL
 from tests.motion.scenes import random_scenes, score
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.motion import (
     find_movers,
     focus_step,

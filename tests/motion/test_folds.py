@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from tests.motion.conftest import make_params
 from tests.motion.test_looks import _peak, _position
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.motion import (
     doppler_fold,
     look_images,

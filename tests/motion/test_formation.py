@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from tests.reference.motion import planar_image
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, OptionError, ShapeError
 from torchsar.motion import (
     planar_image_positions,
     polar_format,

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from tests.motion.conftest import make_params
-from torchsar._checks import OptionError, ShapeError
+from torchsar.errors import OptionError, ShapeError
 from torchsar.motion import (
     estimate_shift,
     look_displacement,

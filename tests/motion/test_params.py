@@ -6,7 +6,7 @@ import warnings
 import pytest
 
 from tests.motion.conftest import make_params
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.motion import SpotlightConsistencyWarning, SpotlightParams
 
 

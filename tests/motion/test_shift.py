@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.ndimage import fourier_shift
 from skimage.registration import phase_cross_correlation
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.motion import estimate_shift
 
 

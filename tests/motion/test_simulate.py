@@ -8,7 +8,7 @@ import torch
 
 from tests.motion.conftest import make_params
 from tests.reference.motion import phase_history as phase_history_ref
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.sar import add_noise, simulate_phase_history
 
 

@@ -5,8 +5,8 @@ import math
 import pytest
 import torch
 
-from torchsar._checks import InputTypeError
 from torchsar.cfar import detection_from
+from torchsar.errors import InputTypeError
 from torchsar.motion import (
     associate,
     detect_peaks,

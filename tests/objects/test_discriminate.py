@@ -9,7 +9,7 @@ from scipy import ndimage
 from skimage.measure import label, regionprops
 from skimage.morphology import disk
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, InputValueError, OptionError, ShapeError
 from torchsar.objects import ObjectRules, discriminate, normalised_score
 
 

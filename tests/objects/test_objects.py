@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from skimage.measure import regionprops
 
-from torchsar._checks import InputValueError, OptionError, ShapeError
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.objects import Objects
 
 

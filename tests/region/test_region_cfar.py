@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import torchsar as ts
 from tests.reference import region as ref
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, OptionError, ShapeError
 from torchsar.region import PRESETS, RegionOptions, RegionParams, region_cfar, region_search
 from torchsar.region.grow import grow
 
@@ -185,7 +185,7 @@ def test_max_fraction_rejects_a_flood_covering_most_of_the_image():
     x[..., :, :24] = 20.0
     det = ts.region.region_cfar(x, despeckle=None, max_fraction=0.25, min_size=1)
     assert not det.mask[..., :, :24].any()
-    with pytest.raises(ts._checks.OptionError, match="max_fraction"):
+    with pytest.raises(ts.errors.OptionError, match="max_fraction"):
         ts.region.region_cfar(x, max_fraction=1.5)
 
 

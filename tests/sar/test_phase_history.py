@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from tests.reference.imaging import exact_phase_history
-from torchsar._checks import InputTypeError, OptionError, ShapeError
+from torchsar.errors import InputTypeError, OptionError, ShapeError
 from torchsar.imaging.fourier import fft2c, ifft2c
 from torchsar.imaging.scenes import point_scene
 from torchsar.sar import (

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.reference.imaging import exact_phase_history
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.imaging import point_scene, speckled_scene
 from torchsar.motion import SpotlightParams
 from torchsar.sar import SpotlightGeometry, Track, add_noise, simulate_phase_history

@@ -7,7 +7,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.simulate import SimBatch, chips, image_seed
 
 from .groundtruth import assert_ground_truth

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import special, stats
 
-from torchsar._checks import InputTypeError, OptionError
+from torchsar.errors import InputTypeError, OptionError
 from torchsar.simulate import CLUTTER_MODELS, DEFAULT_SHAPE_PARAM, clutter
 from torchsar.simulate.clutter import GAMMA_SHAPE_MIN, SHAPE_RANGE
 

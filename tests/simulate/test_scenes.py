@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.simulate import SimBatch, image_seed, scenes
 
 from .groundtruth import assert_ground_truth

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import torchsar as ts
 from tests.reference.speckle import reference_batch
 from tests.speckle._cases import DAMPED, NAMES, call, speckled
-from torchsar._checks import (
+from torchsar.errors import (
     InputTypeError,
     InputValueError,
     OptionError,

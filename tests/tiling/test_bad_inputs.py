@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from torchsar._checks import (
+from torchsar.errors import (
     InputTypeError,
     InputValueError,
     OptionError,

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 from scipy import ndimage
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.io.georef import AffineGeoref
 from torchsar.tiling import SeamMerger, plan_tiles
 from torchsar.tiling.table import DETECTION_COLUMNS, detection_table, write_csv, write_geojson

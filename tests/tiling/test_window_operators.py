@@ -88,8 +88,8 @@ def test_every_tile_is_yielded_once_and_cores_partition_the_scene(x):
 
 
 def test_ac_scene_clutter_mean_is_the_whole_image_estimate(x):
-    from torchsar._checks import OptionError
     from torchsar.cfar.ac import ac, global_censor_threshold
+    from torchsar.errors import OptionError
     from torchsar.tiling.plan import plan_tiles
     from torchsar.tiling.run import scene_clutter_mean
     from torchsar.tiling.source import as_scene

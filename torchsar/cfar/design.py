@@ -13,7 +13,6 @@ import inspect
 from collections.abc import Callable
 from typing import Any
 
-from torchsar._checks import OptionError
 from torchsar.cfar.ac import ac, ac_threshold
 from torchsar.cfar.ca import ca, ca_threshold
 from torchsar.cfar.distribution import distribution_threshold
@@ -28,6 +27,7 @@ from torchsar.cfar.two_parameter import two_parameter, two_parameter_threshold
 from torchsar.cfar.vi import vi, vi_threshold
 from torchsar.cfar.weibull import weibull
 from torchsar.detection import Detection
+from torchsar.errors import OptionError
 
 __all__ = ["THRESHOLDS", "threshold"]
 

@@ -8,10 +8,11 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int, check_probability
+from torchsar._checks import check_int, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, rescale_border_
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.detection import Detection
+from torchsar.errors import OptionError
 from torchsar.order_statistics import ring_order_statistic
 from torchsar.windows import Ring, Sums, region_count, windowed
 

@@ -16,7 +16,7 @@ import torch
 from scipy import optimize, special
 from torch import Tensor
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 
 __all__ = [
     "block_factor",

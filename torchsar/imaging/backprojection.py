@@ -22,7 +22,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputValueError, ShapeError, check_int
+from torchsar._checks import check_int
+from torchsar.errors import InputValueError, ShapeError
 from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.operators import LinearOperator
 from torchsar.sar.geometry import SPEED_OF_LIGHT

@@ -14,8 +14,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputValueError, ShapeError, check_same_shape
+from torchsar._checks import check_same_shape
 from torchsar._scale import unit_scale
+from torchsar.errors import InputValueError, ShapeError
 
 __all__ = ["align", "magnitude_correlation", "phase_rmse", "remove_linear_phase"]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.imaging._dtypes import complex_dtype
 
 __all__ = ["fft2c", "ifft2c"]

@@ -8,8 +8,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, all_finite, check_complex, check_int, check_positive
+from torchsar._checks import all_finite, check_complex, check_int, check_positive
 from torchsar._scale import unit_scale
+from torchsar.errors import OptionError
 from torchsar.imaging._solver import Settings, State, solve
 from torchsar.imaging.operators import FourierOperator, LinearOperator
 

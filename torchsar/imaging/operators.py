@@ -13,7 +13,8 @@ from abc import ABC, abstractmethod
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError, check_complex
+from torchsar._checks import check_complex
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.fourier import fft2c, ifft2c
 

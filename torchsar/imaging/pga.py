@@ -13,8 +13,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, ShapeError, check_image, check_int, check_positive
+from torchsar._checks import check_image, check_int, check_positive
 from torchsar._scale import unit_scale
+from torchsar.errors import OptionError, ShapeError
 from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.result import AutofocusResult
 

@@ -17,15 +17,8 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar._checks import (
-    InputValueError,
-    OptionError,
-    ShapeError,
-    all_finite,
-    check_complex,
-    check_int,
-    check_positive,
-)
+from torchsar._checks import all_finite, check_complex, check_int, check_positive
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 
 __all__ = [

@@ -15,8 +15,9 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_complex, check_int, check_positive
+from torchsar._checks import check_complex, check_int, check_positive
 from torchsar._scale import unit_scale
+from torchsar.errors import OptionError
 from torchsar.imaging._dtypes import as_complex
 from torchsar.imaging.focus import entropy_terms
 from torchsar.imaging.items import nonzero_items

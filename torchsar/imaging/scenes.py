@@ -14,7 +14,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_device, check_int, check_positive
+from torchsar._checks import check_device, check_int, check_positive
+from torchsar.errors import OptionError
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 
 __all__ = ["point_scene", "speckled_scene"]

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torchsar._checks import TorchSARError
+from torchsar.errors import GeorefError
 
 __all__ = [
     "AffineGeoref",
@@ -48,11 +48,6 @@ MODEL_TYPE, RASTER_TYPE, GEOGRAPHIC_TYPE, PROJECTED_TYPE = 1024, 1025, 2048, 307
 PROJECTED, GEOGRAPHIC = 1, 2
 PIXEL_IS_POINT = 2
 EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG)
-
-
-class GeorefError(TorchSARError, ValueError):
-    """A mapping cannot give what was asked (lon/lat of a projected CRS without pyproj),
-    or pixel coordinates that are not finite real numbers."""
 
 
 def geokeys(directory: tuple[int, ...] | None) -> dict[int, int]:

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputValueError
+from torchsar.errors import InputValueError
 
 __all__ = ["GotchaPass", "gotcha_files", "read_gotcha"]
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError
+from torchsar.errors import InputTypeError, InputValueError, OptionError
 
 __all__ = ["SAMPLE_TYPES", "to_intensity"]
 

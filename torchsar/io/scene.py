@@ -70,7 +70,7 @@ def open_scene(
         from torchsar.io.sicd import SicdScene
 
         if band not in (None, 0):
-            from torchsar._checks import OptionError
+            from torchsar.errors import OptionError
 
             raise OptionError(f"band must be None for a SICD product, got {band!r}")
         return SicdScene(path, sample_type=sample_type, as_intensity=as_intensity)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.io.scaling import SAMPLE_TYPES, to_intensity
 from torchsar.io.window import window_bounds
 

@@ -146,7 +146,7 @@ class TiffScene(SceneReader):
 
     def _choose(self, pages: list, band: int | None) -> tuple[object, int]:
         """The page to read and the sample within it."""
-        from torchsar._checks import OptionError
+        from torchsar.errors import OptionError
 
         full = [p for p in pages if not (getattr(p, "subfiletype", 0) & 1)]
         if not full:

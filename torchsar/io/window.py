@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-from torchsar._checks import WindowSizeError
+from torchsar.errors import WindowError
 
 __all__ = ["WindowError", "window_bounds"]
-
-
-class WindowError(WindowSizeError, IndexError):
-    """A window that is not two unit-step slices inside the scene."""
 
 
 def window_bounds(window: object, shape: tuple[int, int]) -> tuple[int, int, int, int]:

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torchsar._checks import InputValueError, OptionError, ShapeError
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.metrics.curves import RECALL_POINTS, interpolated_precision
 from torchsar.metrics.matching import COCO_IOUS
 

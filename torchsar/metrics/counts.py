@@ -23,7 +23,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, check_same_shape
+from torchsar._checks import check_same_shape
+from torchsar.errors import InputTypeError
 from torchsar.objects.components import label_components
 
 __all__ = ["ObjectCounts", "PixelCounts", "label_components", "object_counts", "pixel_counts"]

@@ -33,14 +33,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import (
-    InputValueError,
-    check_image,
-    check_mask,
-    check_positive,
-    check_same_shape,
-    float_dtype,
-)
+from torchsar._checks import check_image, check_mask, check_positive, check_same_shape, float_dtype
+from torchsar.errors import InputValueError
 
 __all__ = ["edge_preservation", "edge_ratio", "enl", "psnr", "ratio_moments", "ssim"]
 

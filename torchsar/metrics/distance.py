@@ -68,7 +68,7 @@ from numbers import Real
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from torchsar._checks import InputValueError, OptionError, ShapeError
+from torchsar.errors import InputValueError, OptionError, ShapeError
 
 __all__ = [
     "MAX_LENGTH_M",

@@ -28,7 +28,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from torchsar._checks import OptionError, check_choice
+from torchsar._checks import check_choice
+from torchsar.errors import OptionError
 from torchsar.metrics.greedy import greedy_assign
 from torchsar.metrics.truth import GroundTruth, Regions, ground_truth
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.metrics.assign import BatchMatch, by_plane
 from torchsar.metrics.distance import (
     dont_care,

@@ -34,7 +34,8 @@ import torch
 from torch import Tensor
 
 from torchsar import _jit
-from torchsar._checks import InputTypeError, InputValueError, check_same_shape, has_nan
+from torchsar._checks import check_same_shape, has_nan
+from torchsar.errors import InputTypeError, InputValueError
 from torchsar.metrics.counts import PixelCounts, pixel_counts
 
 __all__ = ["RocAccumulator", "key_thresholds", "pixel_keys"]

@@ -28,7 +28,8 @@ from functools import cached_property
 
 import numpy as np
 
-from torchsar._checks import ShapeError, check_ids, check_same_shape
+from torchsar._checks import check_ids, check_same_shape
+from torchsar.errors import ShapeError
 from torchsar.objects import ObjectMasks
 
 __all__ = ["GroundTruth", "Regions", "box_pixels", "ground_truth"]

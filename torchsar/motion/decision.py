@@ -8,13 +8,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import (
-    InputTypeError,
-    InputValueError,
-    ShapeError,
-    check_pairs,
-    check_positive,
-)
+from torchsar._checks import check_pairs, check_positive
+from torchsar.errors import InputTypeError, InputValueError, ShapeError
 
 __all__ = ["SAMPLING_ERROR", "MoverDecision", "detect_movers", "registration_sigma"]
 

@@ -21,7 +21,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError, check_positive
+from torchsar._checks import check_positive
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.motion.params import SpotlightParams
 
 __all__ = ["azimuth_times", "fm_correction", "focus_step", "refocus", "speed_bank"]

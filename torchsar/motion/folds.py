@@ -34,7 +34,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, ShapeError, check_pairs
+from torchsar._checks import check_pairs
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.motion.focus import azimuth_times
 from torchsar.motion.params import SpotlightParams
 

@@ -26,7 +26,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, ShapeError, check_choice, check_complex, check_int
+from torchsar._checks import check_choice, check_complex, check_int
+from torchsar.errors import OptionError, ShapeError
 from torchsar.motion.czt import czt
 from torchsar.motion.params import SpotlightParams
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int, check_positive
+from torchsar._checks import check_int, check_positive
+from torchsar.errors import OptionError
 from torchsar.motion.formation import polar_format
 from torchsar.motion.params import SpotlightParams
 

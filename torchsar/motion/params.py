@@ -15,7 +15,8 @@ import warnings
 from dataclasses import dataclass
 from typing import cast
 
-from torchsar._checks import OptionError, check_int, check_positive
+from torchsar._checks import check_int, check_positive
+from torchsar.errors import OptionError
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry, Track
 
 __all__ = ["HANN_BROADENING", "SpotlightConsistencyWarning", "SpotlightParams"]

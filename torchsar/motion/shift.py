@@ -7,7 +7,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, InputValueError, OptionError, ShapeError, check_int
+from torchsar._checks import check_int
+from torchsar.errors import InputTypeError, InputValueError, OptionError, ShapeError
 
 __all__ = ["estimate_shift"]
 

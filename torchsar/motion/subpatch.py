@@ -5,7 +5,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int
+from torchsar._checks import check_int
+from torchsar.errors import OptionError
 from torchsar.motion.formation import polar_format
 from torchsar.motion.params import SpotlightParams
 

@@ -12,7 +12,7 @@ import numpy as np
 from skimage.measure import label
 
 from torchsar import _jit
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 
 __all__ = ["label_components", "label_pixels"]
 

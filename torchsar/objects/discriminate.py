@@ -29,17 +29,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar._checks import (
+from torchsar._checks import broadcasts, check_choice, check_per_plane, check_real, has_nan
+from torchsar.errors import (
     InputTypeError,
     InputValueError,
     OptionError,
     ShapeError,
     WindowSizeError,
-    broadcasts,
-    check_choice,
-    check_per_plane,
-    check_real,
-    has_nan,
 )
 from torchsar.objects.closing import close_pixels
 from torchsar.objects.components import label_pixels

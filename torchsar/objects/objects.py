@@ -30,7 +30,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from torchsar._checks import InputValueError, OptionError, ShapeError, check_choice
+from torchsar._checks import check_choice
+from torchsar.errors import InputValueError, OptionError, ShapeError
 from torchsar.objects.properties import measure_pixels
 
 __all__ = ["GEOMETRIES", "ObjectMasks", "Objects"]

@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from torchsar._checks import OptionError, check_choice, check_int
+from torchsar._checks import check_choice, check_int
+from torchsar.errors import OptionError
 
 __all__ = ["MAX_CLOSING", "ObjectRules"]
 

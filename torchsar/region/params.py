@@ -16,13 +16,8 @@ from typing import TypedDict, Unpack
 
 from torch import Tensor
 
-from torchsar._checks import (
-    OptionError,
-    check_choice,
-    check_int,
-    check_odd,
-    check_positive,
-)
+from torchsar._checks import check_choice, check_int, check_odd, check_positive
+from torchsar.errors import OptionError
 from torchsar.region.grow import DEFAULT_BUDGET
 from torchsar.speckle import FILTERS
 

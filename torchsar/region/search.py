@@ -13,8 +13,9 @@ import torch
 from torch import Tensor
 
 from torchsar import _jit
-from torchsar._checks import InputValueError, OptionError, all_finite, check_image, float_dtype
+from torchsar._checks import all_finite, check_image, float_dtype
 from torchsar.detection import Detection
+from torchsar.errors import InputValueError, OptionError
 from torchsar.region.detector import detect_image
 from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
 from torchsar.region.seeds import local_maxima

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_device, check_int, check_positive
+from torchsar._checks import check_device, check_int, check_positive
+from torchsar.errors import OptionError
 
 __all__ = ["SPEED_OF_LIGHT", "SpotlightGeometry", "Track"]
 

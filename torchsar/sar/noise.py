@@ -7,7 +7,8 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_choice, check_complex, check_positive
+from torchsar._checks import check_choice, check_complex, check_positive
+from torchsar.errors import OptionError
 from torchsar.sar.geometry import SpotlightGeometry
 from torchsar.simulate.seeding import check_seed, image_seed, make_generator
 

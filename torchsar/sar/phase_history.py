@@ -17,7 +17,8 @@ import torch
 from torch import Tensor
 from torch.nn.utils.rnn import pad_sequence
 
-from torchsar._checks import InputTypeError, ShapeError, check_complex, check_int, check_pairs
+from torchsar._checks import check_complex, check_int, check_pairs
+from torchsar.errors import InputTypeError, ShapeError
 from torchsar.sar.geometry import SPEED_OF_LIGHT, SpotlightGeometry
 
 __all__ = ["phase_history", "simulate_phase_history"]

@@ -8,7 +8,8 @@ from functools import partial
 
 import torch
 
-from torchsar._checks import OptionError, check_int, check_positive, check_range
+from torchsar._checks import check_int, check_positive, check_range
+from torchsar.errors import OptionError
 from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
 from torchsar.simulate.seeding import Draws

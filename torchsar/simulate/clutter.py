@@ -62,7 +62,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import InputTypeError, OptionError, check_choice, check_int, check_positive
+from torchsar._checks import check_choice, check_int, check_positive
+from torchsar.errors import InputTypeError, OptionError
 from torchsar.simulate.seeding import check_device, check_seed, make_generator
 
 __all__ = [

@@ -23,7 +23,8 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import OptionError, check_int, check_range
+from torchsar._checks import check_int, check_range
+from torchsar.errors import OptionError
 from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
 from torchsar.simulate.regions import background, edge_pixels

@@ -12,7 +12,8 @@ from __future__ import annotations
 import torch
 
 from torchsar import _checks as checks
-from torchsar._checks import OptionError, check_int
+from torchsar._checks import check_int
+from torchsar.errors import OptionError
 
 __all__ = ["Draws", "check_device", "check_seed", "image_seed", "make_generator"]
 

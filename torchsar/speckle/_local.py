@@ -21,15 +21,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from torchsar._checks import (
-    OptionError,
-    check_image,
-    check_odd,
-    check_positive,
-    check_window_fits,
-    float_dtype,
-)
+from torchsar._checks import check_image, check_odd, check_positive, check_window_fits, float_dtype
 from torchsar._scale import power_of_two
+from torchsar.errors import OptionError
 from torchsar.windows import Rect, Sums, windowed
 
 __all__ = [

@@ -28,7 +28,8 @@ import torch
 from torch import Tensor
 
 from torchsar import cfar
-from torchsar._checks import OptionError, check_odd
+from torchsar._checks import check_odd
+from torchsar.errors import OptionError
 from torchsar.speckle import FILTERS
 from torchsar.windows import Ring
 

@@ -27,7 +27,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.tiling.plan import Tile
 
 if TYPE_CHECKING:

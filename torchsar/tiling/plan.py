@@ -18,7 +18,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from itertools import groupby
 
-from torchsar._checks import OptionError, WindowSizeError, check_int
+from torchsar._checks import check_int
+from torchsar.errors import OptionError, WindowSizeError
 
 __all__ = ["Tile", "batches", "check_tile", "plan_tiles", "widen"]
 

@@ -66,7 +66,8 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from torchsar._checks import OptionError, TorchSARError, check_device, check_int
+from torchsar._checks import check_device, check_int
+from torchsar.errors import OptionError, UnsettledError
 from torchsar.region.params import RegionParams, resolve_params
 from torchsar.region.search import region_search
 from torchsar.speckle import FILTERS
@@ -80,11 +81,6 @@ DEFAULT_HALO = 64
 DEFAULT_MAX_HALO = 512
 
 _EIGHT = np.ones((3, 3), dtype=bool)
-
-
-class UnsettledError(TorchSARError, RuntimeError):
-    """A region CFAR tile whose regions still reach a cut side of its window at
-    ``max_halo``."""
 
 
 def region_reach(p: RegionParams, despeckle_reach: int | None = None) -> tuple[int, int]:

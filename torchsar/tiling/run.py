@@ -18,7 +18,8 @@ from collections.abc import Collection, Iterator
 import numpy as np
 import torch
 
-from torchsar._checks import OptionError, check_device, check_int
+from torchsar._checks import check_device, check_int
+from torchsar.errors import OptionError
 from torchsar.tiling.footprint import Operator, operator, to_batch
 from torchsar.tiling.plan import Tile, batches, check_tile, plan_tiles
 from torchsar.tiling.source import Scene, as_scene

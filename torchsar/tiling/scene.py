@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 from torchsar.region.params import resolve_params
 from torchsar.tiling import region as _region
 from torchsar.tiling import run as _run

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from torchsar._checks import InputTypeError, InputValueError, ShapeError
+from torchsar.errors import InputTypeError, InputValueError, ShapeError
 
 __all__ = ["Scene", "as_scene"]
 

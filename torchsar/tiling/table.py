@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from torchsar._checks import OptionError
+from torchsar.errors import OptionError
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -97,7 +97,7 @@ def run_tiles(job: DetectJob, indices: list[tuple[int, int]]) -> list[tuple[tupl
 def _task(job: DetectJob, indices: list[tuple[int, int]]) -> tuple[str, object]:
     """:func:`run_tiles` in a worker: a library error (bad data in a tile, a region tile
     that does not settle) comes back as its message, to be raised as a user error."""
-    from torchsar._checks import TorchSARError
+    from torchsar.errors import TorchSARError
 
     try:
         return "ok", run_tiles(job, indices)

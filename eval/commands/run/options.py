@@ -10,7 +10,7 @@ from typing import Any, NamedTuple
 
 from torch import Tensor
 
-from torchsar._checks import TorchSARError
+from torchsar.errors import TorchSARError
 from torchsar.metrics import Matching
 from torchsar.objects import ObjectRules
 from torchsar_eval.detector import Detector
