@@ -49,7 +49,7 @@ _MARKUP = re.compile(r":\w+:`~?([^`]*)`|``([^`]*)``")
 def plain(text: str) -> str:
     """``text`` without docstring markup.
 
-    Example:
+    Examples:
         >>> plain("``torchsar-eval run``: see :func:`~torchsar_eval.evaluate`")
         'torchsar-eval run: see torchsar_eval.evaluate'
     """
@@ -245,10 +245,10 @@ def main(argv: list[str] | None = None) -> int:
         with _signals_raise(), _one_line_warnings():
             return _dispatch(_parse(argv))
     except Exception as exc:
-        checks = sys.modules.get("torchsar._checks")  # not imported: not a torchsar error
+        errors = sys.modules.get("torchsar.errors")  # not imported: not a torchsar error
         if isinstance(exc, EvalError):
             return _user_error(exc.render(cli_spelling(FLAGS)))
-        if checks is not None and isinstance(exc, checks.TorchSARError):
+        if errors is not None and isinstance(exc, errors.TorchSARError):
             return _user_error(exc)
         raise  # a bug: show the traceback
     except SystemExit as exc:

@@ -8,6 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from torchsar import _checks as C
+from torchsar import errors as E
 
 
 class TestCheckImage:
@@ -20,75 +21,75 @@ class TestCheckImage:
 
     @pytest.mark.parametrize("bad", [[1.0], None, 3.0])
     def test_not_a_tensor(self, bad):
-        with pytest.raises(C.InputTypeError, match="x must be a torch.Tensor"):
+        with pytest.raises(E.InputTypeError, match="x must be a torch.Tensor"):
             C.check_image(bad)
 
     def test_wrong_ndim_names_axes(self):
-        with pytest.raises(C.ShapeError, match=r"img must have shape \(B, C, H, W\).*\(4, 4\)"):
+        with pytest.raises(E.ShapeError, match=r"img must have shape \(B, C, H, W\).*\(4, 4\)"):
             C.check_image(torch.rand(4, 4), "img")
 
     def test_complex_where_real(self):
-        with pytest.raises(C.InputTypeError, match="must be real"):
+        with pytest.raises(E.InputTypeError, match="must be real"):
             C.check_image(torch.zeros(1, 1, 2, 2, dtype=torch.complex64))
 
     def test_real_where_complex(self):
-        with pytest.raises(C.InputTypeError, match="must be complex"):
+        with pytest.raises(E.InputTypeError, match="must be complex"):
             C.check_complex(torch.zeros(1, 2, 2))
 
     def test_integer_dtype(self):
-        with pytest.raises(C.InputTypeError, match="floating dtype"):
+        with pytest.raises(E.InputTypeError, match="floating dtype"):
             C.check_image(torch.zeros(1, 1, 2, 2, dtype=torch.int64))
 
     @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
     def test_non_finite(self, value):
         x = torch.ones(1, 1, 3, 3)
         x[0, 0, 1, 1] = value
-        with pytest.raises(C.InputValueError, match="must be finite"):
+        with pytest.raises(E.InputValueError, match="must be finite"):
             C.check_image(x)
 
     def test_negative(self):
         x = torch.ones(1, 1, 3, 3)
         x[0, 0, 0, 0] = -0.5
-        with pytest.raises(C.InputValueError, match="non-negative.*-0.5"):
+        with pytest.raises(E.InputValueError, match="non-negative.*-0.5"):
             C.check_image(x)
 
     def test_grad_refused_only_where_not_differentiable(self):
         x = torch.rand(1, 1, 3, 3, requires_grad=True)
         assert C.check_image(x) is x
-        with pytest.raises(C.InputTypeError, match=r"x requires grad; os is not .* x.detach\(\)"):
+        with pytest.raises(E.InputTypeError, match=r"x requires grad; os is not .* x.detach\(\)"):
             C.check_image(x, not_differentiable="os")
         assert C.check_image(x.detach(), not_differentiable="os") is not None
 
     def test_errors_are_builtin_subclasses(self):
-        assert issubclass(C.InputTypeError, TypeError)
-        assert issubclass(C.InputValueError, ValueError)
-        assert issubclass(C.WindowSizeError, ValueError)
+        assert issubclass(E.InputTypeError, TypeError)
+        assert issubclass(E.InputValueError, ValueError)
+        assert issubclass(E.WindowSizeError, ValueError)
 
 
 class TestOptions:
     def test_window_fits(self):
-        with pytest.raises(C.WindowSizeError, match="13x13 pixels is larger than the image"):
+        with pytest.raises(E.WindowSizeError, match="13x13 pixels is larger than the image"):
             C.check_window_fits(torch.zeros(1, 1, 10, 20), 13, "guard + train")
 
     @pytest.mark.parametrize("v", [0, 2, 1.0, True])
     def test_odd(self, v):
-        with pytest.raises(C.OptionError, match="window"):
+        with pytest.raises(E.OptionError, match="window"):
             C.check_odd(v, "window", minimum=3)
 
     @pytest.mark.parametrize("v", [0, 1, -0.1, 1.5, "a"])
     def test_probability(self, v):
-        with pytest.raises(C.OptionError, match="pfa must be a probability"):
+        with pytest.raises(E.OptionError, match="pfa must be a probability"):
             C.check_probability(v)
 
     def test_choice_lists_allowed(self):
-        with pytest.raises(C.OptionError, match="'a', 'b'.*'c'"):
+        with pytest.raises(E.OptionError, match="'a', 'b'.*'c'"):
             C.check_choice("c", "mode", ["a", "b"])
 
     def test_positive(self):
         assert C.check_positive(2, "looks") == 2.0
-        with pytest.raises(C.OptionError, match="looks"):
+        with pytest.raises(E.OptionError, match="looks"):
             C.check_positive(0, "looks")
-        with pytest.raises(C.OptionError, match="looks"):
+        with pytest.raises(E.OptionError, match="looks"):
             C.check_positive(float("nan"), "looks")
 
     def test_float_dtype_policy(self):
