@@ -155,10 +155,11 @@ def glossary(summary: pd.DataFrame, scoring) -> str:
     m = scoring.matching
     rule = _RULES[m.kind].format(**m.as_dict())
     r = scoring.rules
+    cut = "the design threshold" if r.floor == 1 else f"{r.floor:g} x the design threshold"
+    top = "∞" if r.max_area is None else f"{r.max_area:g}"
     stage = (
-        f"closing radius {r.closing} px, {r.connectivity}-connected components of score > "
-        f"{r.floor:g}, area {r.min_area:g}–{'∞' if r.max_area is None else f'{r.max_area:g}'} "
-        f"{r.units}"
+        f"closing radius {r.closing} px, {r.connectivity}-connected components over {cut}, "
+        f"area {r.min_area:g}–{top} {r.units}"
     )
     lines = [
         "# Run summary",

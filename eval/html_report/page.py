@@ -419,9 +419,9 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
         facts.append(
             (
                 "objects",
-                f"closing {rules.get('closing')} px, components of score > "
-                f"{_num(rules.get('floor', 1)):g}, area ≥ {_num(rules.get('min_area')):g} "
-                f"{rules.get('units', 'px')}",
+                f"closing {rules.get('closing')} px, components over "
+                f"{_floor_text(_num(rules.get('floor', 1)))}, area ≥ "
+                f"{_num(rules.get('min_area')):g} {rules.get('units', 'px')}",
             )
         )
     boot = scoring.get("bootstrap") or {}
@@ -581,7 +581,7 @@ def ap_frame(summary: pd.DataFrame, breakdown: pd.DataFrame, order: list[str]) -
     AP50:95 per ground-truth class (``breakdown.csv``'s class rows, when matching is per
     class); empty when no detector has an AP at an IoU.
 
-    Example:
+    Examples:
         >>> s = pd.DataFrame({"detector": ["a"], "ap50": [0.9], "ap50_95": [0.5],
         ...                   "ap_small": [0.2], "ap_medium": [0.6], "ap_large": [float("nan")]})
         >>> b = pd.DataFrame({"detector": ["a", "a"], "by": ["class", "class"],
@@ -896,6 +896,11 @@ def _overlays(board: Board) -> str:
         "point. Green: targets found; orange (thick): targets missed; cyan: detections "
         "matching a target; magenta: false alarms; yellow: don't-care regions.</p>" + "".join(out)
     )
+
+
+def _floor_text(floor: float) -> str:
+    """Where the discrimination stage cuts: the design threshold, or a fraction of it."""
+    return "the design threshold" if floor == 1 else f"{floor:g} x the design threshold"
 
 
 def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:

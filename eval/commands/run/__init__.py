@@ -213,8 +213,8 @@ def add_scoring_options(p: argparse.ArgumentParser) -> None:
         "--floor",
         type=float,
         default=1.0,
-        help="objects are components of score > FLOOR (1 = design mask; lower "
-        "extends the curves past the design point)",
+        help="objects are components of the pixels over FLOOR x each detector's design "
+        "threshold (1 = its design mask; lower extends the curves past the design point)",
     )
     g.add_argument(
         "--match",
