@@ -2,7 +2,7 @@
 import paths, your own callables, saved predictions) on any datasets and returns the tables;
 ``torchsar-eval run`` is a thin client of it.
 
-Example:
+Examples:
     >>> import torchsar_eval as te
     >>> res = te.evaluate("sim-chips", ["ca", "so"], n=4, progress=False)
     >>> res.summary[["detector", "images", "targets"]].values.tolist()
@@ -71,9 +71,9 @@ class Results:
     """
 
     summary = _table("summary", "One row per dataset x detector (``summary.csv``).")
-    froc = _table("froc", "Pd against false alarms per image (``froc.csv``).")
+    froc = _table("froc", "Pd against false alarms per image (``roc.csv``).")
     pr = _table("pr", "Precision and recall at every detection score (``pr.csv``).")
-    pixel_roc = _table("pixel_roc", "The pixel ROC (``pixel_roc.csv``).")
+    pixel_roc = _table("pixel_roc", "The pixel ROC (``roc_pixel.csv``).")
     breakdown = _table("breakdown", "Pd by size, SCR and class (``breakdown.csv``).")
     timing = _table("timing", "Run time per detector (``timing.csv``).")
     coco = _table("coco", "pycocotools' 12 stats (``coco.csv``).")

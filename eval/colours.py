@@ -62,7 +62,7 @@ def detector_colour(name: str) -> str:
     """The colour (``"#rrggbb"``) of detector ``name``: fixed for the built-in detectors,
     otherwise a hash of the name into :data:`PALETTE` (stable across runs and processes).
 
-    Example:
+    Examples:
         >>> detector_colour("ca"), detector_colour("ca") == detector_colour("ca")
         ('#1f77b4', True)
     """

@@ -83,7 +83,7 @@ def check_options(fn: Callable, options: Mapping[str, Any], what: str) -> None:
     """Every key of ``options`` must be a keyword option of ``fn`` (unless it takes
     ``**kwargs``, which then checks them itself).
 
-    Example:
+    Examples:
         >>> check_options(lambda x, guard=2: x, {"gaurd": 3}, "detector ca")
         Traceback (most recent call last):
         ...
@@ -311,7 +311,7 @@ def as_detector(obj: object, name: str | None = None) -> Detector:
     ``name``) or any callable, whose ``name``, ``threshold``, ``instances`` and ``scale``
     attributes are used when present.
 
-    Example:
+    Examples:
         >>> as_detector(lambda x: None, name="mine").name
         'mine'
     """

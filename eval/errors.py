@@ -6,7 +6,7 @@ without a space), NAME being the Python parameter
 ``workers=``, ``overwrite=True``); the command line renders it as its flag (``--out``,
 ``--workers``, ``--overwrite``) with :meth:`EvalError.render`.
 
-Example:
+Examples:
     >>> e = EvalError("{opt:out}runs/a holds a previous run: pass {opt:overwrite}")
     >>> str(e)
     'out=runs/a holds a previous run: pass overwrite=True'

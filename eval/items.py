@@ -71,7 +71,7 @@ class Targets:
         crowd_classes: the class each region applies to (``None``: every class).
         crowd_pixels: per region its pixels, or ``None`` (the region is its box).
 
-    Example:
+    Examples:
         >>> t = Targets.build([[0, 0, 4, 4], [2, 2, 6, 6]], classes=["ship", "ship"])
         >>> len(t), t.pixels  # two overlapping boxes, kept apart
         (2, (None, None))
@@ -185,7 +185,7 @@ class Item:
     ``Dataset`` yielding these is a dataset :func:`~torchsar_eval.evaluate` scores; a
     training loop hands them to :meth:`~torchsar_eval.Evaluator.update`.
 
-    Example:
+    Examples:
         >>> it = Item(None, Targets.build([[2, 2, 6, 6]]), ImageMeta("a", index=0, shape=(8, 8)))
         >>> sorted(it.as_dict())
         ['ignore', 'image', 'instances', 'mask', 'meta', 'targets']
@@ -257,7 +257,7 @@ def spacings(metas: Sequence[dict]) -> np.ndarray:
     """float64 ``(N, 2)``: each image's ``pixel_spacing`` (row, col) in metres from its meta
     dict, NaN where it has none.
 
-    Example:
+    Examples:
         >>> spacings([{"pixel_spacing": (0.3, 0.3)}, {}]).tolist()
         [[0.3, 0.3], [nan, nan]]
     """

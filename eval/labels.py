@@ -29,7 +29,7 @@ def _split(name: str) -> tuple[str, list[str], str] | None:
 def short_label(name: str, parts: int = 1) -> str:
     """``name`` with its path cut to its last ``parts`` parts.
 
-    Example:
+    Examples:
         >>> short_label("folder:/very/long/path/chips?type=display")
         'folder:chips?type=display'
         >>> short_label("folder:/very/long/path/chips", parts=2)
@@ -50,7 +50,7 @@ def short_labels(names: Iterable[str]) -> dict[str, str]:
     """A short label for each name, unique among them: each label gets more of its path
     until no other name shares it (the full name at worst).
 
-    Example:
+    Examples:
         >>> short_labels(["folder:/a/x/chips", "folder:/b/y/chips", "coco:/d/ann.json"])
         {'folder:/a/x/chips': 'folder:x/chips', 'folder:/b/y/chips': 'folder:y/chips', \
 'coco:/d/ann.json': 'coco:ann.json'}
@@ -72,7 +72,7 @@ def plain(text: object) -> str:
     """``text`` to draw as it is in a figure: matplotlib reads ``$...$`` as mathtext (a
     detector named ``a$\\x$b`` would stop the figure), so every ``$`` is escaped.
 
-    Example:
+    Examples:
         >>> print(plain("a$x$b"))
         a\\$x\\$b
     """

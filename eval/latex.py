@@ -47,7 +47,7 @@ _SPECIAL = {
 def escape(text: object) -> str:
     r"""``text`` with LaTeX's special characters escaped.
 
-    Example:
+    Examples:
         >>> escape("ca_2 & 50%")
         'ca\\_2 \\& 50\\%'
     """
@@ -58,7 +58,7 @@ def number(metric: str, v: float) -> str:
     """A value as printed: three decimals for a rate, three significant digits for false
     alarms per image; ``--`` for no value.
 
-    Example:
+    Examples:
         >>> number("f1", 0.81234), number("false_alarms_per_image", 12.345), number("f1", math.nan)
         ('0.812', '12.3', '--')
     """
@@ -132,7 +132,7 @@ def summary_tex(summary: pd.DataFrame, order: dict[str, list[str]] | None = None
     """``summary.tex``: one table per dataset of ``summary`` (``summary.csv``'s rows), its
     detectors in ``order[dataset]`` (the leaderboard's ranking; default: as given).
 
-    Example:
+    Examples:
         >>> s = pd.DataFrame({"dataset": ["d", "d"], "detector": ["ca", "so"],
         ...                   "images": [4, 4], "targets": [4, 4],
         ...                   "matching": ["box IoU >= 0.5"] * 2,

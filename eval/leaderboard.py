@@ -176,7 +176,7 @@ class Board:
 def short_value(v: object) -> str:
     """An option value as a row shows it (``1e-06``, ``16``, a path's last part).
 
-    Example:
+    Examples:
         >>> [short_value(v) for v in (1e-6, 16, "/data/runs/preds.json", None)]
         ['1e-06', '16', 'preds.json', '–']
     """

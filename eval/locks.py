@@ -17,7 +17,7 @@ the same process is refused too, and a child made by ``fork`` shares its parent'
 until it exits. Locks on network file systems are only as good as the server's ``flock``
 support (local disks and NFSv4 are fine).
 
-Example:
+Examples:
     >>> import tempfile, pathlib
     >>> lock = pathlib.Path(tempfile.mkdtemp()) / ".job.lock"
     >>> with hold(lock):

@@ -59,7 +59,7 @@ def read_npy(data: bytes | memoryview) -> np.ndarray:
         NpyError: (a ValueError) not ``.npy`` bytes, a bad header, a dtype other than
             bool, integer, float or complex, or data shorter or longer than the header says.
 
-    Example:
+    Examples:
         >>> import io
         >>> buf = io.BytesIO(); np.save(buf, np.arange(6).reshape(2, 3))
         >>> read_npy(buf.getvalue()).tolist()

@@ -4,7 +4,7 @@ Every parser raises :class:`~torchsar_eval.errors.EvalError` naming the option, 
 what was given, so the CLI reports it as one line with exit status 2. Commands parse their
 options here first, before any dataset is built (:func:`check_run_args` does it for ``run``).
 
-Example:
+Examples:
     >>> ints("3,5, 7", "--windows", minimum=3)
     [3, 5, 7]
     >>> floats("1e-3,1e-4", "--pfa", above=0, below=1)
@@ -154,7 +154,7 @@ def parse_params(items: list[str], option: str = "--param") -> dict[str, dict[st
     as Python literals where they parse, else strings); ``NAME=VALUE`` or ``*.NAME=VALUE``
     go under :data:`EVERY` (every detector that has the option).
 
-    Example:
+    Examples:
         >>> parse_params(["ca.guard=3", "mine.mode=fast", "pfa=1e-6", "*.train=8"])
         {'ca': {'guard': 3}, 'mine': {'mode': 'fast'}, '*': {'pfa': 1e-06, 'train': 8}}
     """

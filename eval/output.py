@@ -446,7 +446,7 @@ def file_slugs(names: Iterable[str], slug: Callable[[str], str]) -> dict[str, st
     ``slug(name)`` is used where it is unique; names whose slugs collide (two folders
     with the same basename) get their whole name made file-safe instead, then a counter.
 
-    Example:
+    Examples:
         >>> short = lambda n: n.rsplit("/", 1)[-1]
         >>> file_slugs(["folder:a/x", "folder:b/x", "sim"], short)
         {'folder:a/x': 'folder_a_x', 'folder:b/x': 'folder_b_x', 'sim': 'sim'}

@@ -95,7 +95,7 @@ def parse_overlay(value: object) -> int | tuple[str, ...] | None:
     """``--overlay``'s value: a count (``"3"``, ``3``) or image names (``"a.png,b.png"``, a
     list); ``None``/``0`` for none.
 
-    Example:
+    Examples:
         >>> parse_overlay("3"), parse_overlay("a.png, b.png"), parse_overlay(None)
         (3, ('a.png', 'b.png'), None)
     """

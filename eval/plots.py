@@ -80,7 +80,7 @@ def detector_style(name: str) -> dict:
     (:data:`STYLES`); any other name gets one from a hash of the name (stable across
     processes), never a built-in's colour.
 
-    Example:
+    Examples:
         >>> detector_style("ca")
         {'color': '#1f77b4', 'linestyle': '-', 'marker': 'o'}
         >>> detector_style("my-cnn") == detector_style("my-cnn")
@@ -122,7 +122,7 @@ def legend_handles(names: Iterable[str], notes: dict[str, str] | None = None) ->
 def not_shown(left_out: Mapping[str, str]) -> str:
     """The note of a panel that leaves detectors out, grouped by reason (``""`` if none).
 
-    Example:
+    Examples:
         >>> not_shown({"lognormal": "AP50 = 0", "g0": "AP50 = 0", "x": "no objects"})
         'not shown: lognormal, g0 (AP50 = 0); x (no objects)'
     """
@@ -163,7 +163,7 @@ def log_ticks(lo: float, hi: float, least: int = 3) -> list[float]:
     when the range spans two or more (every second or third one when they are many), else
     1-2-5 per decade, or finer where that leaves fewer than ``least`` in the range.
 
-    Example:
+    Examples:
         >>> log_ticks(2, 6)
         [2.0, 3.0, 5.0]
         >>> log_ticks(0.02, 1)

@@ -85,7 +85,7 @@ def last_line(exc: BaseException) -> str:
     """The last non-blank line of an error's text (a Ray task error ends with the worker's
     own error, e.g. ``ModuleNotFoundError: No module named 'mydets'``).
 
-    Example:
+    Examples:
         >>> last_line(RuntimeError("Traceback:\\n  File x\\nKeyError: 'a'\\n"))
         "KeyError: 'a'"
     """

@@ -142,7 +142,7 @@ def load(
     overriding its defaults and the harness settings ``threshold`` / ``instances`` /
     ``scale``.
 
-    Example:
+    Examples:
         >>> d = load("ca", options={"guard": 3})
         >>> d.name, d.options["guard"], d.options["train"]
         ('ca', 3, 4)

@@ -80,7 +80,7 @@ class LazyTables(Mapping):
     """:func:`result_tables` with each table built when it is first read (of final states:
     the run is over when it is made).
 
-    Example:
+    Examples:
         >>> tables = LazyTables({})
         >>> sorted(tables) == sorted(TABLE_FILES), tables.built
         (True, [])
@@ -117,7 +117,7 @@ def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[l
     Each detector's rows are spooled to a temporary file while the shards are read once, so
     memory does not grow with the dataset.
 
-    Example:
+    Examples:
         >>> shards = [("ca", [("a", 1)]), ("so", [("a", 2)]), ("ca", [("b", 3)]),
         ...           ("so", [("b", 4)])]
         >>> list(per_image_rows({"d": shards}))
@@ -141,7 +141,7 @@ def throughput(st: dict) -> str:
     """How a dataset's images were scored: those scored in this run apart from those reused
     from an interrupted run's saved shards (``--resume``), and the shards.
 
-    Example:
+    Examples:
         >>> st = {"images": 3000, "scored": 1000, "reused": 2000, "wall_s": 28.3,
         ...       "images_per_s": 35.3, "shards": 12, "done": 4, "skipped": 8, "retried": 0,
         ...       "failed": []}

@@ -163,7 +163,7 @@ class Evaluator:
         detector: the row's name (or the harness's :class:`~torchsar_eval.Detector`).
         scoring: matching, discrimination and bootstrap (default :class:`Scoring`).
 
-    Example:
+    Examples:
         >>> import torch
         >>> ev = Evaluator("cnn", Scoring(replicates=0))
         >>> targets = [{"boxes": torch.tensor([[2.0, 2, 10, 10]]), "image_id": 0}]

@@ -72,7 +72,7 @@ class Setting:
 def check_sweep(sweep: Mapping[str, Sequence]) -> dict[str, list]:
     """The sweep as ``{option: [values]}``, each a non-empty list without repeats.
 
-    Example:
+    Examples:
         >>> check_sweep({"pfa": [1e-3, 1e-4], "train": (4, 8)})
         {'pfa': [0.001, 0.0001], 'train': [4, 8]}
     """

@@ -113,7 +113,7 @@ def check_image(
         ShapeError: wrong number of dimensions.
         InputValueError: NaN, Inf, or negative values where forbidden.
 
-    Example:
+    Examples:
         >>> check_image(torch.ones(2, 1, 8, 8)).shape
         torch.Size([2, 1, 8, 8])
     """
@@ -281,7 +281,7 @@ def check_device(device: object, name: str = "device") -> torch.device | None:
     Raises:
         OptionError: not a device, or a CUDA/MPS device on a machine without one.
 
-    Example:
+    Examples:
         >>> check_device("cpu")
         device(type='cpu')
     """
@@ -314,7 +314,7 @@ def check_pairs(x: object, name: str, *, ndim: int, axes: str) -> Tensor:
     ``axes`` describes the expected layout in messages, e.g. ``"(B, N, 2) (range, azimuth)"``.
     NaN is allowed (a missing measurement).
 
-    Example:
+    Examples:
         >>> check_pairs(torch.zeros(1, 3, 2), "positions", ndim=3, axes="(B, N, 2)").shape
         torch.Size([1, 3, 2])
     """
@@ -333,7 +333,7 @@ def check_real(value: object, name: str) -> Tensor:
         InputTypeError: not a real number, or a complex, bool or non-numeric array.
         InputValueError: a NaN value.
 
-    Example:
+    Examples:
         >>> check_real(2.0, "threshold")
         tensor(2., dtype=torch.float64)
     """
@@ -361,7 +361,7 @@ def check_per_plane(value: object, name: str, planes: int) -> np.ndarray:
         ShapeError: neither one value nor ``planes`` values.
         InputValueError: a NaN, infinite or non-positive value.
 
-    Example:
+    Examples:
         >>> check_per_plane(0.25, "pixel_area", 3).tolist()
         [0.25, 0.25, 0.25]
     """
@@ -396,7 +396,7 @@ def check_ids(value: object, name: str, *, ndim: int = 3) -> np.ndarray:
         ShapeError: wrong number of dimensions.
         InputValueError: a negative id.
 
-    Example:
+    Examples:
         >>> check_ids(np.array([[[0.0, 2.0]]]), "instances").dtype
         dtype('int64')
     """

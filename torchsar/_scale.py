@@ -19,7 +19,7 @@ def power_of_two(peak: Tensor) -> Tensor:
     """The power of two that brings each non-negative ``peak`` into ``[1, 2)`` (1 where
     ``peak`` is 0), same shape and dtype.
 
-    Example:
+    Examples:
         >>> power_of_two(torch.tensor([3.0, 0.0, 0.1])).tolist()
         [2.0, 1.0, 0.0625]
     """
@@ -32,7 +32,7 @@ def unit_scale(x: Tensor, dims: int | None = None) -> Tensor:
     largest real or imaginary part) over the last ``dims`` dims (default: all but the
     first), in ``x``'s real dtype, with the reduced dims kept as size 1.
 
-    Example:
+    Examples:
         >>> g = torch.tensor([[3.0 + 0j], [0j], [0.1j]])
         >>> unit_scale(g).flatten().tolist()
         [2.0, 1.0, 0.0625]

@@ -39,7 +39,7 @@ def detection_from(
 ) -> Detection:
     """Build a :class:`Detection`, deriving ``mask = statistic > threshold``.
 
-    Example:
+    Examples:
         >>> d = detection_from(torch.tensor([[[[0.5, 2.0]]]]), 1.0)
         >>> d.mask.tolist()
         [[[[False, True]]]]

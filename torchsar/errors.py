@@ -20,7 +20,7 @@ given.
 - :class:`UnsettledError` (``RuntimeError``): a region CFAR tile whose regions still reach
   a cut side at the largest halo.
 
-Example:
+Examples:
     >>> import torch
     >>> from torchsar.cfar import ca
     >>> try:

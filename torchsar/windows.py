@@ -226,7 +226,7 @@ def region_count(
     """In-image cell count of a rectangle or region at every pixel of an ``h x w`` image,
     float64 ``(h, w)`` (no mask: the counts only depend on the geometry).
 
-    Example:
+    Examples:
         >>> n = region_count(9, 9, Ring(1, 2).region)
         >>> n[4, 4].item(), n[0, 0].item()  # full ring; corner: 4x4 box minus 2x2 guard
         (40.0, 12.0)
@@ -439,7 +439,7 @@ def rect_sums(
     Convenient for small images and tests; statistics on large images should use
     :func:`windowed`, which never materialises full-size float64 sums.
 
-    Example:
+    Examples:
         >>> x = torch.arange(16.0).reshape(1, 1, 4, 4)
         >>> rect_sums(x, [Rect.box(1)])[0].mean()[0, 0, 1, 1].item()
         5.0
@@ -471,7 +471,7 @@ def ring_sums(
 ) -> Sums:
     """Sums over the CFAR training ring (outer box minus guard box, CUT excluded).
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 9, 9)
         >>> ring_sums(x, 1, 2).count[0, 0, 4, 4].item()  # 7x7 box minus the 3x3 guard box
         40.0
@@ -502,7 +502,7 @@ def distance_shells(radius: int) -> list[tuple[int, tuple[tuple[int, int], ...]]
     ``(p, q)``, ``0 <= p <= q <= radius``, with ``p^2 + q^2 = d2``. An orbit stands for every
     offset ``(±p, ±q)`` and ``(±q, ±p)``; shells are sorted by distance.
 
-    Example:
+    Examples:
         >>> [d2 for d2, _ in distance_shells(1)]
         [0, 1, 2]
     """
@@ -593,7 +593,7 @@ def exp_distance_mean(x: Tensor, radius: int, decay: Tensor, *, strip: int | Non
     Returns:
         ``(B, C, H, W)`` weighted means (``decay = 0`` gives the in-image box mean).
 
-    Example:
+    Examples:
         >>> x = torch.arange(9.0).reshape(1, 1, 3, 3)
         >>> exp_distance_mean(x, 1, torch.zeros(1, 1, 3, 3))[0, 0, 1, 1].item()
         4.0

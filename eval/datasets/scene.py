@@ -47,7 +47,7 @@ _COL = ("col", "detect_scene_column")
 def scene_chips(shape: tuple[int, int], chip: int) -> list[tuple[int, int, int, int]]:
     """``(r0, c0, r1, c1)`` chips of at most ``chip x chip`` covering the scene, raster order.
 
-    Example:
+    Examples:
         >>> scene_chips((5, 3), 4)
         [(0, 0, 4, 3), (4, 0, 5, 3)]
     """

@@ -8,7 +8,7 @@ precision-recall, pixel ROC (and, when the run has ``scr.csv``, Pd vs SCR) curve
 paired differences, error types and breakdown tables the run has, and each detector's worst
 cases (``gallery/``).
 
-Example:
+Examples:
     >>> import tempfile, torchsar_eval as te
     >>> from torchsar_eval.html_report import build_report
     >>> with tempfile.TemporaryDirectory() as tmp:

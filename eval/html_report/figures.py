@@ -121,7 +121,7 @@ def _froc(ax, df: pd.DataFrame, series: list[Series]) -> bool:
 def pr_label(s: Series) -> str:
     """A PR curve's legend entry: its label and AP (AP50, or the distance rule's AP).
 
-    Example:
+    Examples:
         >>> pr_label(Series("ca", "ca", "#000", "-", pd.Series({"ap50": 0.41234})))
         'ca (AP50 0.412)'
     """
@@ -183,7 +183,7 @@ def scr_points(d: pd.DataFrame) -> list[tuple[str, np.ndarray, np.ndarray, np.nd
     (``scr_mean_db``; the bin's middle where that is not finite), in increasing ``x``; bins
     without a Pd (no targets) are left out.
 
-    Example:
+    Examples:
         >>> d = pd.DataFrame({"source": ["measured"] * 2, "scr_lo_db": [5.0, 10.0],
         ...                   "scr_hi_db": [10.0, 15.0], "scr_mean_db": [7.2, float("nan")],
         ...                   "pd": [0.5, 1.0], "pd_lo": [0.2, 0.6], "pd_hi": [0.8, 1.0]})

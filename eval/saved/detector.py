@@ -305,7 +305,7 @@ def predictions(
         ids: ``"position"``: integer image ids are 1-based positions in the dataset's order
             (on a dataset without ids; see :class:`SavedPredictions`).
 
-    Example:
+    Examples:
         >>> import json, tempfile, pathlib
         >>> f = pathlib.Path(tempfile.mkdtemp()) / "dets.json"
         >>> _ = f.write_text(json.dumps([{"image_id": 1, "bbox": [2, 3, 4, 5], "score": 0.9}]))

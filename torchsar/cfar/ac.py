@@ -77,7 +77,7 @@ def ac(
         based on automatic censoring for target detection in high-resolution SAR images,
         IEEE TGRS 47(6), 1685-1697, 2009, doi:10.1109/TGRS.2008.2006504.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 20.0; x[0, 0, 5, 5:12] = 100.0
         >>> ac(x, guard=1, train=2).mask[0, 0, 8, 8].item()  # the bright row is censored
         True
@@ -124,7 +124,7 @@ def global_censor_threshold(
     below ``T`` and divides it by ``E[X | X <= T] / E[X] = 1 - p ln(1/p) / (1 - p)``, the
     truncated-exponential ratio, so homogeneous clutter gives an unbiased ``mu``.
 
-    Example:
+    Examples:
         >>> x = torch.empty(1, 1, 256, 256).exponential_(generator=torch.Generator().manual_seed(0))
         >>> mu, t = global_censor_threshold(x, 1e-3)
         >>> abs(mu.item() - 1.0) < 0.02

@@ -63,7 +63,7 @@ def ca(
         Finn & Johnson, RCA Review 29, 1968; Gandhi & Kassam, IEEE TAES 24(4), 1988,
         doi:10.1109/7.7181.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> ca(x, guard=1, train=2, pfa=1e-3).mask.sum().item()
         1

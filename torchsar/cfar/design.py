@@ -63,7 +63,7 @@ def threshold(detector: str | Callable[..., Detection], **options: Any) -> float
         OptionError: unknown detector, an option the detector does not have, or an invalid
             option value (as the detector itself would raise).
 
-    Example:
+    Examples:
         >>> from torchsar.cfar.thresholds import ca_factor
         >>> threshold("ca", guard=1, train=2, pfa=1e-3) == ca_factor(40, 1e-3)
         True

@@ -63,7 +63,7 @@ def g0(
         doi:10.1109/36.581981; Tison et al., IEEE TGRS 42(10), 2004,
         doi:10.1109/TGRS.2004.834630 (log-cumulants).
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16) + 0.5 * torch.rand(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> g0(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True

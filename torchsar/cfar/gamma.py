@@ -55,7 +55,7 @@ def gamma(
         Oliver, C., Quegan, S., Understanding Synthetic Aperture Radar Images, SciTech, 2004;
         Gandhi & Kassam, IEEE TAES 24(4), 1988, doi:10.1109/7.7181.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> gamma(x, guard=1, train=2, looks=4.0).mask.sum().item()
         1

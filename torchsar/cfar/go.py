@@ -52,7 +52,7 @@ def go(
         Hansen, V. G., Sawyers, J. H., IEEE TAES 16(5), 648-650, 1980,
         doi:10.1109/TAES.1980.308989.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> go(x, guard=1, train=2).mask.sum().item()
         1

@@ -105,7 +105,7 @@ def log_t_exact(law: str, looks: float, pfa: float, n: int) -> tuple[float, ...]
     Weibull: one value (the standardised law is shape-free). K / G0: one value per shape of
     :data:`LOG_T_SHAPES`.
 
-    Example:
+    Examples:
         >>> t = log_t_exact("weibull", 1.0, 1e-3, 10**9)[0]  # n -> inf: the Gumbel quantile
         >>> round(t, 3) == round((math.log(math.log(1e3)) + 0.5772156649) / (math.pi / 6**0.5), 3)
         True

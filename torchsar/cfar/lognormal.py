@@ -53,7 +53,7 @@ def lognormal(
         Goldstein, G. B., False-alarm regulation in log-normal and Weibull clutter, IEEE TAES
         9(1), 84-92, 1973, doi:10.1109/TAES.1973.309705.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16) + 0.1 * torch.rand(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> lognormal(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True

@@ -58,7 +58,7 @@ def os(
     References:
         Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> os(x, guard=1, train=2).mask.sum().item()
         1

@@ -52,7 +52,7 @@ def so(
     References:
         Trunk, G. V., IEEE TAES 14(5), 750-755, 1978, doi:10.1109/TAES.1978.308625.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> so(x, guard=1, train=2).mask.sum().item()
         1

@@ -46,7 +46,7 @@ def ca_factor(n: int, pfa: float, looks: float = 1.0) -> float:
     References:
         Finn & Johnson (1968); Gandhi & Kassam, IEEE TAES 24(4), 1988, doi:10.1109/7.7181.
 
-    Example:
+    Examples:
         >>> round(ca_factor(16, 1e-3), 6) == round(16 * (1e-3 ** (-1 / 16) - 1), 6)
         True
     """
@@ -69,7 +69,7 @@ def gaussian_factor(pfa: float) -> float:
     """``K = Phi^-1(1 - pfa) = -Phi^-1(pfa)``, the two-parameter CFAR threshold (seed eq. 1),
     computed on the lower tail so that any ``pfa`` in ``(0, 1)`` gives a finite ``K``.
 
-    Example:
+    Examples:
         >>> round(gaussian_factor(1e-20), 4)
         9.2623
     """
@@ -111,7 +111,7 @@ def os_factor(n: int, rank: int, pfa: float) -> float:
     References:
         Rohling, H., IEEE TAES 19(4), 608-621, 1983, doi:10.1109/TAES.1983.309350.
 
-    Example:
+    Examples:
         >>> a = os_factor(16, 12, 1e-3)
         >>> p = 1.0
         >>> for i in range(12):
@@ -183,7 +183,7 @@ def block_factor(sizes: tuple[int, ...], pfa: float, reduce: str) -> float:
         Hansen & Sawyers, IEEE TAES 16(5), 1980 (GO); Trunk, IEEE TAES 14(5), 1978 (SO);
         Gandhi & Kassam, IEEE TAES 24(4), 1988, doi:10.1109/7.7181.
 
-    Example:
+    Examples:
         >>> abs(block_factor((16,), 1e-3, "max") - ca_factor(16, 1e-3)) < 1e-6
         True
     """
@@ -224,7 +224,7 @@ def keyed_factor_map(keys: Tensor, factor: Callable[[tuple[int, ...]], float]) -
     Returns:
         float64 tensor ``keys.shape[:-1]``.
 
-    Example:
+    Examples:
         >>> keyed_factor_map(torch.tensor([[1, 2], [3, 4], [1, 2]]), lambda k: k[0] + k[1]).tolist()
         [3.0, 7.0, 3.0]
     """

@@ -50,7 +50,7 @@ def two_parameter(
     References:
         Novak, Owirka & Netishen, Lincoln Lab. J. 6(1), 1993; Nar, seed paper eq. 1.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 5.0; x[0, 0, 0, 0] = 2.0
         >>> two_parameter(x, guard=1, train=2, k=3.0).mask[0, 0, 8, 8].item()
         True

@@ -79,7 +79,7 @@ def vi(
         Smith, M. E., Varshney, P. K., Intelligent CFAR processor based on data variability,
         IEEE TAES 36(3), 837-847, 2000, doi:10.1109/7.869503.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> vi(x, guard=1, train=2).mask.sum().item()
         1

@@ -52,7 +52,7 @@ def weibull(
         42(10), 2046-2057, 2004, doi:10.1109/TGRS.2004.834630 (method of log-cumulants);
         Goldstein, IEEE TAES 9(1), 1973, doi:10.1109/TAES.1973.309705.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 16, 16) + 0.1 * torch.rand(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
         >>> weibull(x, guard=1, train=2).mask[0, 0, 8, 8].item()
         True

@@ -98,7 +98,7 @@ def sparse_autofocus(
         Önhon & Çetin, "A sparsity-driven approach for joint SAR imaging and phase error
         correction", IEEE Trans. Image Process. 21(4), 2012, doi:10.1109/TIP.2011.2174795.
 
-    Example:
+    Examples:
         >>> from torchsar.imaging import fft2c, apply_phase_error
         >>> f = torch.zeros(1, 1, 16, 16, dtype=torch.complex64); f[0, 0, 5, 9] = 1
         >>> phi = torch.linspace(-1, 1, 16)[None] ** 2 * 2.0

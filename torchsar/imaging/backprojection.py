@@ -52,7 +52,7 @@ class BackprojectionOperator(LinearOperator):
         Gorham & Moore, "SAR image formation toolbox for MATLAB", Proc. SPIE 7699, 2010,
         doi:10.1117/12.855375.
 
-    Example:
+    Examples:
         >>> freq = torch.linspace(9.5e9, 9.6e9, 16, dtype=torch.float64)
         >>> ant = torch.tensor([[1e4, 0.0, 5e3]], dtype=torch.float64).repeat(4, 1)
         >>> ant[:, 1] = torch.linspace(-50, 50, 4, dtype=torch.float64)

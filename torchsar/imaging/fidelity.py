@@ -46,7 +46,7 @@ def align(estimate: Tensor, reference: Tensor, *, flip: bool = False) -> tuple[T
     Returns:
         ``(aligned estimate, correlation (B, C))``.
 
-    Example:
+    Examples:
         >>> ref = torch.zeros(1, 1, 4, 4); ref[0, 0, 1, 2] = 1
         >>> est, c = align(ref.roll(1, dims=-1), ref)
         >>> bool(torch.equal(est, ref)), round(float(c), 4)
@@ -88,7 +88,7 @@ def magnitude_correlation(estimate: Tensor, reference: Tensor, *, flip: bool = F
     Returns:
         ``(B, C)`` in ``[-1, 1]``.
 
-    Example:
+    Examples:
         >>> f = torch.zeros(1, 1, 8, 8, dtype=torch.complex64); f[0, 0, 2, 3] = 1j
         >>> round(float(magnitude_correlation(f.roll(3, -2), f)), 4)
         1.0
@@ -103,7 +103,7 @@ def remove_linear_phase(phi: Tensor) -> Tensor:
     slopes come from the mean phase increment along each axis, the constant from the circular
     mean; a final least-squares plane fit on the (now small) wrapped residual refines them.
 
-    Example:
+    Examples:
         >>> m = torch.arange(8.0)[None]
         >>> float(remove_linear_phase(0.3 + 0.7 * m).abs().max()) < 1e-5
         True
@@ -154,7 +154,7 @@ def phase_rmse(estimate: Tensor, truth: Tensor) -> Tensor:
         ShapeError: shapes differ or are not 2-D / 3-D.
         InputValueError: non-finite values.
 
-    Example:
+    Examples:
         >>> t = torch.rand(2, 16) * 6
         >>> float(phase_rmse(t + 1.0 + 0.2 * torch.arange(16.0), t).max()) < 1e-4
         True

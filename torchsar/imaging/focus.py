@@ -51,7 +51,7 @@ def entropy(x: Tensor) -> Tensor:
     References:
         Xi, Guosui & Ni, IEEE Trans. AES 35(4), 1999, doi:10.1109/7.805442.
 
-    Example:
+    Examples:
         >>> round(float(entropy(torch.ones(1, 1, 4, 4))[0, 0]), 4) == round(4 * 0.693147, 4)
         True
     """
@@ -70,7 +70,7 @@ def intensity_entropy(i: Tensor) -> Tensor:
     Returns:
         ``(...)``.
 
-    Example:
+    Examples:
         >>> round(float(intensity_entropy(torch.ones(4))), 4) == round(2 * 0.693147, 4)
         True
     """
@@ -80,7 +80,7 @@ def intensity_entropy(i: Tensor) -> Tensor:
 def entropy_terms(i: Tensor) -> Tensor:
     """The terms ``-q log q`` of :func:`intensity_entropy`, ``q = i / sum i`` along the last dim.
 
-    Example:
+    Examples:
         >>> [round(v, 4) for v in entropy_terms(torch.tensor([1.0, 1.0, 0.0])).tolist()]
         [0.3466, 0.3466, 0.0]
     """
@@ -92,7 +92,7 @@ def entropy_terms(i: Tensor) -> Tensor:
 def contrast(x: Tensor) -> Tensor:
     """Image contrast ``std(I) / mean(I)`` (higher is better focused).
 
-    Example:
+    Examples:
         >>> float(contrast(torch.ones(1, 1, 4, 4))[0, 0])
         0.0
     """
@@ -108,7 +108,7 @@ def sharpness(x: Tensor) -> Tensor:
     References:
         Fienup & Miller, JOSA A 20(4), 2003, doi:10.1364/JOSAA.20.000609.
 
-    Example:
+    Examples:
         >>> float(sharpness(torch.ones(1, 1, 2, 2))[0, 0])
         0.25
     """
@@ -126,7 +126,7 @@ def target_to_background(x: Tensor, mask: Tensor) -> Tensor:
     Returns:
         ``(B, C)`` in dB.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 2, 2); x[0, 0, 0, 0] = 10
         >>> m = torch.zeros(1, 1, 2, 2, dtype=torch.bool); m[0, 0, 0, 0] = True
         >>> float(target_to_background(x, m)[0, 0])

@@ -55,7 +55,7 @@ def fft2c(x: Tensor) -> Tensor:
         Jakowatz et al., *Spotlight-Mode Synthetic Aperture Radar*, Kluwer 1996,
         doi:10.1007/978-1-4613-1333-5.
 
-    Example:
+    Examples:
         >>> x = torch.zeros(1, 4, 4, dtype=torch.complex64); x[0, 2, 2] = 1
         >>> torch.allclose(fft2c(x).abs(), torch.full((1, 4, 4), 0.25))
         True
@@ -82,7 +82,7 @@ def ifft2c(g: Tensor) -> Tensor:
     Shape:
         ``(..., M, K) -> (..., M, K)``.
 
-    Example:
+    Examples:
         >>> x = torch.randn(2, 8, 8, dtype=torch.complex128)
         >>> torch.allclose(ifft2c(fft2c(x)), x)
         True

@@ -14,7 +14,7 @@ def nonzero_items(x: Tensor) -> Tensor:
     An all-zero item has no energy to focus: entropy and sparsity objectives have no
     gradient there (``0 * log 0``), so autofocus methods leave it out and report phase 0.
 
-    Example:
+    Examples:
         >>> x = torch.zeros(3, 2, 2, dtype=torch.complex64); x[1, 0, 0] = 1
         >>> nonzero_items(x).tolist()
         [False, True, False]
@@ -25,7 +25,7 @@ def nonzero_items(x: Tensor) -> Tensor:
 def fill_items(live: Tensor, values: Tensor, fill: float = 0.0) -> Tensor:
     """Values of the ``live`` items put back into a batch of ``len(live)`` (``fill`` elsewhere).
 
-    Example:
+    Examples:
         >>> fill_items(torch.tensor([False, True]), torch.tensor([[5.0, 6.0]])).tolist()
         [[0.0, 0.0], [5.0, 6.0]]
     """

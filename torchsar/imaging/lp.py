@@ -44,7 +44,7 @@ def default_lam(
     Raises:
         OptionError: ``kappa`` is not a finite number > 0.
 
-    Example:
+    Examples:
         >>> g = torch.ones(2, 8, 8, dtype=torch.complex64)
         >>> default_lam(g)
         tensor([3., 3.])
@@ -217,7 +217,7 @@ def lp_image(
     References:
         Çetin & Karl, IEEE Trans. Image Process. 10(4), 2001, doi:10.1109/83.913596.
 
-    Example:
+    Examples:
         >>> g = torch.zeros(1, 8, 8, dtype=torch.complex64); g[..., :] = 1 / 8
         >>> f = lp_image(g)
         >>> int(f.abs().flatten().argmax())  # the point at the image centre

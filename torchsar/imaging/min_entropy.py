@@ -44,7 +44,7 @@ def lbfgs_phases(
     Returns:
         ``(phases (B, M), iterations (B,) int64)``.
 
-    Example:
+    Examples:
         >>> like = torch.zeros(2, 3, dtype=torch.complex64)
         >>> phi, it = lbfgs_phases(lambda p: (p - 1).square().sum(), like, max_iter=20)
         >>> torch.allclose(phi, torch.ones(2, 3)), it.tolist() == [it[0].item()] * 2
@@ -109,7 +109,7 @@ def min_entropy_autofocus(g: Tensor, *, max_iter: int = 100) -> MinEntropyResult
         Xi, Guosui & Ni, "Autofocusing of ISAR images based on entropy minimization",
         IEEE Trans. AES 35(4), 1999, doi:10.1109/7.805442.
 
-    Example:
+    Examples:
         >>> from torchsar.imaging import fft2c, apply_phase_error
         >>> f = torch.zeros(1, 1, 16, 16, dtype=torch.complex64); f[0, 0, 3, 7] = 1
         >>> g = apply_phase_error(fft2c(f[:, 0]), 2 * torch.linspace(-1, 1, 16)[None] ** 2)

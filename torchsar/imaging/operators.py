@@ -77,7 +77,7 @@ class FourierOperator(LinearOperator):
     Raises:
         ShapeError: mask does not broadcast to ``shape``.
 
-    Example:
+    Examples:
         >>> op = FourierOperator((8, 8))
         >>> f = torch.randn(2, 1, 8, 8, dtype=torch.complex64)
         >>> torch.allclose(op.adjoint(op.forward(f)), f, atol=1e-6)

@@ -98,7 +98,7 @@ def pga(
         Wahl, Eichel, Ghiglia & Jakowatz, "Phase gradient autofocus - a robust tool for high
         resolution SAR phase correction", IEEE Trans. AES 30(3), 1994, doi:10.1109/7.303752.
 
-    Example:
+    Examples:
         >>> from torchsar.imaging import fft2c, ifft2c, apply_phase_error
         >>> f = torch.zeros(1, 1, 32, 32, dtype=torch.complex64); f[0, 0, 8, 20] = 1
         >>> phi = 3 * torch.linspace(-1, 1, 32)[None] ** 2

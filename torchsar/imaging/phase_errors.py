@@ -89,7 +89,7 @@ def uniform_phase_error(
         OptionError: invalid sizes, ``amplitude`` or ``seed``, or ``separable`` without
             ``samples``.
 
-    Example:
+    Examples:
         >>> uniform_phase_error(2, 8, seed=0).shape
         torch.Size([2, 8])
         >>> phi = uniform_phase_error(1, 4, 6, separable=True, amplitude=1.0)
@@ -123,7 +123,7 @@ def quadratic_phase_error(
 ) -> Tensor:
     """Quadratic ``c t^2``, t in [-1, 1], ``|c|`` uniform in ``[amplitude/2, amplitude]``.
 
-    Example:
+    Examples:
         >>> phi = quadratic_phase_error(1, 5, amplitude=2.0, seed=0)
         >>> bool(phi[0, 2] == 0)
         True
@@ -149,7 +149,7 @@ def polynomial_phase_error(
 ) -> Tensor:
     """Random polynomials of degrees 2..``order`` (Legendre basis), peak ``|phi|`` = ``amplitude``.
 
-    Example:
+    Examples:
         >>> phi = polynomial_phase_error(3, 16, amplitude=1.0, seed=0)
         >>> torch.allclose(phi.abs().amax(dim=1), torch.ones(3))
         True
@@ -185,7 +185,7 @@ def sinusoidal_phase_error(
 ) -> Tensor:
     """``amplitude * sin(2 pi c t + psi)`` with ``c`` uniform in ``cycles`` over the aperture.
 
-    Example:
+    Examples:
         >>> sinusoidal_phase_error(2, 32, amplitude=1.0).abs().max() <= 1.0
         tensor(True)
     """
@@ -208,7 +208,7 @@ def apply_phase_error(g: Tensor, phi: Tensor) -> Tensor:
         ShapeError: ``phi`` matches neither ``(B, M)`` nor ``(B, M, K)``.
         InputValueError: ``phi`` holds NaN or Inf.
 
-    Example:
+    Examples:
         >>> g = torch.ones(1, 2, 3, dtype=torch.complex64)
         >>> apply_phase_error(g, torch.zeros(1, 2)).equal(g)
         True

@@ -27,7 +27,7 @@ def phase_step_1d(g: Tensor, d: Tensor) -> Tensor:
     Returns:
         Real ``(B, M)``.
 
-    Example:
+    Examples:
         >>> import torch
         >>> d = torch.ones(1, 2, 3, dtype=torch.complex64)
         >>> phase_step_1d(1j * d, d)
@@ -47,7 +47,7 @@ def phase_step_separable(g: Tensor, d: Tensor, cols: Tensor) -> tuple[Tensor, Te
     Returns:
         ``(rows (B, M), cols (B, K))``; the error is ``rows[:, :, None] + cols[:, None, :]``.
 
-    Example:
+    Examples:
         >>> import torch
         >>> d = torch.ones(1, 2, 2, dtype=torch.complex128)
         >>> r, c = phase_step_separable(d, d, torch.zeros(1, 2, dtype=torch.float64))
@@ -63,7 +63,7 @@ def phase_step_separable(g: Tensor, d: Tensor, cols: Tensor) -> tuple[Tensor, Te
 def phase_step_2d(g: Tensor, d: Tensor) -> Tensor:
     """Per-sample phase ``phi_mk = angle(conj(d_mk) g_mk)`` (2-D non-separable).
 
-    Example:
+    Examples:
         >>> import torch
         >>> d = torch.ones(1, 1, 2, dtype=torch.complex64)
         >>> phase_step_2d(-d, d).abs()

@@ -67,7 +67,7 @@ def pulse_autofocus(
         Önhon & Çetin 2012, doi:10.1109/TIP.2011.2174795; Ash, "An autofocus method for
         backprojection imagery in SAR", IEEE GRSL 9(1), 2012, doi:10.1109/LGRS.2011.2161456.
 
-    Example:
+    Examples:
         >>> b = torch.zeros(1, 3, 4, 4, dtype=torch.complex64); b[0, :, 1, 1] = 1
         >>> b = b * torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))[None, :, None, None]
         >>> float(pulse_autofocus(b).image.abs().max()) > 2.0
@@ -126,7 +126,7 @@ def pulse_min_entropy(pulse_images: Tensor, *, max_iter: int = 100) -> MinEntrop
         :class:`MinEntropyResult` with ``image (B, 1, H, W)``, ``phase (B, M)``; an
         all-zero item gets a zero image, phase 0 and entropy 0.
 
-    Example:
+    Examples:
         >>> b = torch.zeros(1, 3, 4, 4, dtype=torch.complex64); b[0, :, 1, 1] = 1
         >>> b = b * torch.polar(torch.ones(3), torch.tensor([0.0, 1.0, 2.0]))[None, :, None, None]
         >>> out = pulse_min_entropy(b)

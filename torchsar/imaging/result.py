@@ -66,7 +66,7 @@ R = TypeVar("R", bound=AutofocusResult)
 def fill_result(live: Tensor, part: R) -> R:
     """A result for the ``live`` items put back into the full batch (zeros elsewhere).
 
-    Example:
+    Examples:
         >>> import torch
         >>> part = AutofocusResult(torch.ones(1, 1, 2, 2), torch.ones(1, 3), torch.tensor([2]))
         >>> fill_result(torch.tensor([False, True]), part).phase.tolist()

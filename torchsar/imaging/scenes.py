@@ -59,7 +59,7 @@ def point_scene(
     Returns:
         ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool support ``(B, 1, H, W)``.
 
-    Example:
+    Examples:
         >>> f, m = point_scene(2, size=(16, 16), points=5, seed=0)
         >>> f.shape, int(m.sum())
         (torch.Size([2, 1, 16, 16]), 10)
@@ -115,7 +115,7 @@ def speckled_scene(
     Returns:
         ``(reflectivity, mask)``: complex ``(B, 1, H, W)`` and bool target mask ``(B, 1, H, W)``.
 
-    Example:
+    Examples:
         >>> f, m = speckled_scene(1, size=(32, 32), seed=0)
         >>> f.shape, bool(m.any())
         (torch.Size([1, 1, 32, 32]), True)

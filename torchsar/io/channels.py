@@ -25,7 +25,7 @@ def single_channel(a: np.ndarray, path: str, *, tolerance: float = 0) -> np.ndar
     Raises:
         FileFormatError: colour channels that disagree, or an unexpected layout.
 
-    Example:
+    Examples:
         >>> single_channel(np.dstack([np.eye(2)] * 3), "x.png").tolist()
         [[1.0, 0.0], [0.0, 1.0]]
     """

@@ -379,7 +379,7 @@ def segmentation_problems(
         image: how to name the image in the messages (default ``"the image"``).
         tolerance: how far (pixels) polygon vertices may lie outside the image.
 
-    Example:
+    Examples:
         >>> p = segmentation_problems([[[0, 0, 4, 0, 4, 1e300]], [[0, 0, 4, 0, 4]]], 8, 8)
         >>> p[0].split(" by ")[0]
         'segmentation polygon 0 point 2 (4, 1e+300) lies outside the image (8x8)'
@@ -413,7 +413,7 @@ def segmentation_problem(
 ) -> str | None:
     """:func:`segmentation_problems` of one segmentation.
 
-    Example:
+    Examples:
         >>> segmentation_problem({"size": [2, 2], "counts": [1, 3]}, 2, 2) is None
         True
     """
@@ -676,7 +676,7 @@ def annotation_pixels(
     Raises:
         FileFormatError: a segmentation :func:`segmentation_problem` refuses (path ``""``).
 
-    Example:
+    Examples:
         >>> a = CocoAnnotation(1, "ship", (1.0, 1.0, 3.0, 2.0), None, False)
         >>> annotation_pixels([a], 4, 4)[0].tolist()
         [5, 9]

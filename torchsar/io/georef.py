@@ -53,7 +53,7 @@ EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG)
 def geokeys(directory: tuple[int, ...] | None) -> dict[int, int]:
     """Short-valued keys of a GeoKeyDirectory (header of 4, then 4 shorts per key).
 
-    Example:
+    Examples:
         >>> geokeys((1, 1, 0, 2, 1024, 0, 1, 2, 2048, 0, 1, 4326))
         {1024: 2, 2048: 4326}
     """
@@ -89,7 +89,7 @@ class AffineGeoref:
         geographic: ``x, y`` are lon/lat degrees (``True``) or projected units (``False``).
         pixel_is_point: the model refers to pixel centres (``PixelIsPoint``).
 
-    Example:
+    Examples:
         >>> g = AffineGeoref((0.001, 0.0, 10.0, 0.0, -0.001, 50.0), epsg=4326, geographic=True)
         >>> [v.tolist() for v in g.pixel_to_lonlat([0, 999], [0, 0])]
         [[10.0005, 10.0005], [49.9995, 49.0005]]
@@ -162,7 +162,7 @@ class TiePointGrid:
         lat: ``(m, n)`` latitudes (degrees).
         pixel_is_point: grid coordinates refer to pixel centres (``PixelIsPoint``).
 
-    Example:
+    Examples:
         >>> g = TiePointGrid.from_points([0, 0, 10, 10], [0, 20, 0, 20], [1, 3, 1, 3],
         ...                              [5, 5, 4, 4], pixel_is_point=True)
         >>> [v.tolist() for v in g.pixel_to_lonlat([5.0], [10.0])]
@@ -290,7 +290,7 @@ def ground_spacing(
     one pixel) either way from the centre; good to a few tenths of a percent. ``None`` when
     the mapping has no lon/lat.
 
-    Example:
+    Examples:
         >>> g = AffineGeoref((1e-4, 0.0, 0.0, 0.0, -1e-4, 0.0), epsg=4326, geographic=True)
         >>> [round(v, 2) for v in ground_spacing(g, (1000, 1000))]
         [11.12, 11.12]

@@ -47,7 +47,7 @@ def spacing_from_tags(scale: tuple | None, keys: tuple | None) -> tuple[float, f
     """``(row_m, col_m)`` from ModelPixelScale and GeoKeyDirectory tag values, or ``None``
     unless the model is projected in metres.
 
-    Example:
+    Examples:
         >>> spacing_from_tags((0.75, 0.5, 0.0), (1, 1, 0, 1, 1024, 0, 1, 1))
         (0.5, 0.75)
     """

@@ -119,7 +119,7 @@ def read_gotcha(paths: str | Path | Sequence[str | Path]) -> GotchaPass:
         InputValueError: an unreadable file (named), or files with different frequency
             samplings.
 
-    Example:
+    Examples:
         A two-pulse, three-frequency file in the GOTCHA layout:
 
         >>> import pathlib, tempfile

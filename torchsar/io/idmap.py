@@ -26,7 +26,7 @@ def decode_id_map(a: np.ndarray, path: str) -> np.ndarray:
     Raises:
         FileFormatError: a JPEG id map (compression invents colours) or a bad layout.
 
-    Example:
+    Examples:
         >>> m = np.zeros((2, 3, 3), np.uint8); m[0, 2] = (9, 0, 0); m[1, 0] = (0, 0, 7)
         >>> decode_id_map(m, "ids.png").tolist()
         [[0, 0, 1], [2, 0, 0]]

@@ -28,7 +28,7 @@ def without_gc(fn: F) -> F:
     built and read (measured: 0.14 s of a 0.7 s scoring of a 3 MB file pair, in a process
     that has imported torch).
 
-    Example:
+    Examples:
         >>> import json
         >>> @without_gc
         ... def count(text):
@@ -59,7 +59,7 @@ def loads(raw: bytes) -> Any:
     refuses such a number as an id or a size either way, and a coordinate or a score is a
     float in both.
 
-    Example:
+    Examples:
         >>> loads(b'{"id": 7, "score": 0.5, "box": [1, 2.5]}')
         {'id': 7, 'score': 0.5, 'box': [1, 2.5]}
         >>> loads(b"[NaN]")
@@ -90,7 +90,7 @@ def plain_boxes(values: list) -> bool:
     """Whether every value is a JSON box as COCO writes it: a list of four numbers (ints or
     floats; ``bool`` is neither), checked type by type at C speed.
 
-    Example:
+    Examples:
         >>> plain_boxes([[0, 1.5, 2, 3]]), plain_boxes([[0, 1, 2, True]]), plain_boxes([[0, 1]])
         (True, False, False)
     """

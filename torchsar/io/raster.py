@@ -77,7 +77,7 @@ def tifffile_log() -> Iterator[list[str]]:
     """Hold back tifffile's log messages on this thread while the block runs; yields the
     list they are collected in (for the error message of a file that fails).
 
-    Example:
+    Examples:
         >>> import logging
         >>> with tifffile_log() as messages:
         ...     logging.getLogger("tifffile").warning("<TiffPage 0 @8> missing data offset")

@@ -27,7 +27,7 @@ def counts_from_strings(strings: Sequence[bytes | str]) -> tuple[np.ndarray, np.
     """The run lengths of compressed COCO RLE strings: ``(counts, owner)``, the counts of
     every string concatenated and the string index of each.
 
-    Example:
+    Examples:
         >>> from pycocotools import mask as mask_utils
         >>> m = np.zeros((4, 3), np.uint8, order="F"); m[1:3, 1] = 1
         >>> s = mask_utils.encode(m)["counts"]
@@ -66,7 +66,7 @@ def rle_pixels(
     """Pixels set by RLE run lengths: ``(mask index, flat row-major index)`` for ``n``
     masks of ``shape`` (run lengths ``counts`` of mask ``owner``, in order, zeros first).
 
-    Example:
+    Examples:
         >>> rle_pixels(np.array([5, 2, 5]), np.array([0, 0, 0]), 1, (4, 3))[1].tolist()
         [4, 7]
     """
@@ -102,7 +102,7 @@ def check_strings(
     ``sums[i]`` and ``minima[i]`` are the sum and the least of its run lengths (``0`` for
     an empty string), for the caller to compare with ``totals[i]`` and zero.
 
-    Example:
+    Examples:
         >>> problems, sums, minima = check_strings(["52", "5~", "PPo"], [7, 7, 7])
         >>> problems[0], int(sums[0]), int(minima[0])
         (None, 7, 2)

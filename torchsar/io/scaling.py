@@ -38,7 +38,7 @@ def to_intensity(samples: np.ndarray, sample_type: str) -> np.ndarray:
         InputTypeError: complex samples declared real, or real samples declared complex.
         InputValueError: NaN/Inf samples, or negative intensity.
 
-    Example:
+    Examples:
         >>> to_intensity(np.array([0, 255], np.uint8), "display").tolist()
         [0.0, 1.0]
         >>> to_intensity(np.array([10.0, 20.0]), "db").tolist()

@@ -45,7 +45,7 @@ def open_scene(
         OptionError: a band the file lacks; ``as_intensity`` without a known sample type.
         ImportError: a SICD file without sarpy installed.
 
-    Example:
+    Examples:
         >>> import tempfile, numpy as np, tifffile
         >>> path = tempfile.mkdtemp() + "/grd.tif"
         >>> amp = np.full((300, 200), 3, np.uint16)

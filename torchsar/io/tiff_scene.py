@@ -46,7 +46,7 @@ _KINDS = "uifc"
 def is_sentinel1_grd(description: str) -> bool:
     """Whether a TIFF ImageDescription names a Sentinel-1 GRD product (amplitude samples).
 
-    Example:
+    Examples:
         >>> is_sentinel1_grd("Sentinel-1A IW GRD HR L1")
         True
     """
@@ -82,7 +82,7 @@ class TiffScene(SceneReader):
         FileFormatError: not a TIFF, truncated, an unsupported layout or sample type.
         OptionError: a ``band`` the file does not have, or intensity without a sample type.
 
-    Example:
+    Examples:
         >>> import tempfile, tifffile
         >>> path = tempfile.mkdtemp() + "/s.tif"
         >>> a = np.arange(60 * 80, dtype=np.uint16).reshape(60, 80)
@@ -283,7 +283,7 @@ class TiffScene(SceneReader):
     def segments(self, r0: int, r1: int, c0: int, c1: int) -> list[int]:
         """Indices (into the file's offsets) of the tiles or strips a window overlaps.
 
-        Example:
+        Examples:
             >>> import tempfile, tifffile
             >>> path = tempfile.mkdtemp() + "/s.tif"
             >>> tifffile.imwrite(path, np.zeros((64, 64), np.uint8), tile=(16, 16))

@@ -17,7 +17,7 @@ def window_bounds(window: object, shape: tuple[int, int]) -> tuple[int, int, int
     Raises:
         WindowError: not two slices, a step other than 1, or bounds outside the scene.
 
-    Example:
+    Examples:
         >>> window_bounds((slice(0, 10), slice(None)), (100, 50))
         (0, 10, 0, 50)
     """

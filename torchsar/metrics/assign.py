@@ -90,7 +90,7 @@ def by_plane(plane: np.ndarray, n_planes: int) -> list[np.ndarray]:
 def same_plane_pairs(plane_d: np.ndarray, plane_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every ``(detection, target)`` index pair that shares a key (a plane, a problem).
 
-    Example:
+    Examples:
         >>> [a.tolist() for a in same_plane_pairs(np.array([0, 1, 1]), np.array([1, 0]))]
         [[0, 1, 2], [1, 0, 0]]
     """

@@ -34,7 +34,7 @@ _COMMON = 7
 def unit_hash(key: str) -> int:
     """The 64-bit hash of a resampling unit's key (its image name, or ``group:NAME``).
 
-    Example:
+    Examples:
         >>> unit_hash("scene-3") == unit_hash("scene-3") != unit_hash("scene-4")
         True
     """
@@ -72,7 +72,7 @@ def poisson_weights(
         replicates: number of bootstrap replicates.
         seed: the bootstrap seed.
 
-    Example:
+    Examples:
         >>> w = poisson_weights(["a", "b"], 4, seed=1)
         >>> w.shape, w.dtype.name
         ((4, 2), 'uint8')

@@ -110,7 +110,7 @@ class CocoImage:
             ``pycocotools.mask.iou`` gives it (for a crowd instance: intersection over the
             detection's area). Only pairs of the same category are used.
 
-    Example:
+    Examples:
         >>> im = CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])
         >>> im.iou.shape, im.gt_crowd.dtype
         ((1, 1), dtype('bool'))
@@ -178,7 +178,7 @@ def greedy_coco_match(
     Returns:
         ``(matched, matched_ignored)``, each ``(P, D, A, T)`` bool.
 
-    Example:
+    Examples:
         >>> iou = np.array([[[0.6, 0.6], [0.7, 0.0]]])  # two detections, two instances
         >>> m, ig = greedy_coco_match(iou, np.zeros((1, 1, 2), bool), np.zeros((1, 2), bool),
         ...                           np.array([2]), [0.5, 0.65])
@@ -213,7 +213,7 @@ def greedy_coco_match(
 def _row_ranks(iou: np.ndarray) -> np.ndarray:
     """Rank of each entry within its last-axis row, ascending by value then by position.
 
-    Example:
+    Examples:
         >>> _row_ranks(np.array([[0.5, 0.2, 0.5]])).tolist()
         [[1, 0, 2]]
     """
@@ -226,7 +226,7 @@ def _row_ranks(iou: np.ndarray) -> np.ndarray:
 def _within(sizes: np.ndarray) -> np.ndarray:
     """Position of each element within its run, runs of ``sizes`` laid end to end.
 
-    Example:
+    Examples:
         >>> _within(np.array([2, 3])).tolist()
         [0, 1, 0, 1, 2]
     """
@@ -236,7 +236,7 @@ def _within(sizes: np.ndarray) -> np.ndarray:
 def _runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Distinct values of sorted ``keys`` with the start and length of each run.
 
-    Example:
+    Examples:
         >>> [a.tolist() for a in _runs(np.array([3, 3, 5]))]
         [[3, 5], [0, 2], [2, 1]]
     """
@@ -247,7 +247,7 @@ def _runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _outside(area: np.ndarray, ranges: np.ndarray) -> np.ndarray:
     """``(N, A)``: area outside each range, pycocotools' ``area < lo or area > hi``.
 
-    Example:
+    Examples:
         >>> _outside(np.array([1024.0]), np.array([[0, 1024], [1024, 9216]])).tolist()
         [[False, False]]
     """
@@ -274,7 +274,7 @@ def summarize(
         ``(12,)`` AP, AP50, AP75, AP small / medium / large, AR at the three caps, AR small /
         medium / large (each -1 when nothing is defined).
 
-    Example:
+    Examples:
         >>> p, r = np.ones((10, 101, 1, 4, 3)), np.full((10, 1, 4, 3), 0.5)
         >>> summarize(p, r, COCO_IOUS, list(COCO_AREAS), (1, 10, 100))[[0, 6]].tolist()
         [1.0, 0.5]
@@ -318,7 +318,7 @@ class CocoState:
         areas: area ranges ``{label: (lo, hi)}``, bounds inclusive.
         iou_thresholds: IoU thresholds (default pycocotools' own, :data:`COCO_IOUS`).
 
-    Example:
+    Examples:
         >>> s = CocoState()
         >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
         >>> s.stats()[[0, 1, 2, 3, 4]].round(3).tolist()  # matched at 0.5 ... 0.8: 7 of 10
@@ -379,7 +379,7 @@ class CocoState:
         Args:
             images: :class:`CocoImage` s, in any order, none added before.
 
-        Example:
+        Examples:
             >>> s = CocoState()
             >>> s.update([CocoImage(0, [1, 1], [500.0, 2e4], [False, False], [], [], [], [])])
             >>> s.recall()[0, 0, :, 2].tolist()  # no detection: recall 0 where there are instances
@@ -460,7 +460,7 @@ class CocoState:
     def __add__(self, other: object) -> CocoState:
         """Merge two states of disjoint image sets.
 
-        Example:
+        Examples:
             >>> a, b = CocoState(), CocoState()
             >>> a.update([CocoImage(0, [1], [500.0], [False], [], [], [], np.zeros((0, 1)))])
             >>> b.update([CocoImage(1, [], [], [], [1], [0.9], [480.0], np.zeros((1, 0)))])
@@ -494,7 +494,7 @@ class CocoState:
         """Equal parameters, images, ground-truth counts and detection records (whatever the
         split into updates and the order of merges).
 
-        Example:
+        Examples:
             >>> ims = [CocoImage(i, [1], [500.0], [False], [1], [0.5], [480.0], [[0.6]])
             ...        for i in range(3)]
             >>> a, b, c = CocoState(), CocoState(), CocoState()
@@ -555,7 +555,7 @@ class CocoState:
         category ids given (a dataset's whole list, as pycocotools lays them out: -1 for a
         category never seen).
 
-        Example:
+        Examples:
             >>> s = CocoState()
             >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
             >>> s.precision()[[0, 7], 50, 0, 0, 2].round(6).tolist()  # IoU 0.8: at 0.5, not 0.85
@@ -567,7 +567,7 @@ class CocoState:
         """``COCOeval.eval["recall"]``: ``(T, K, A, M)``, -1 as :meth:`precision` (and the
         same ``categories``).
 
-        Example:
+        Examples:
             >>> s = CocoState()
             >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
             >>> s.recall()[[0, 7], 0, 2, 2].tolist()  # no medium instance
@@ -578,7 +578,7 @@ class CocoState:
     def stats(self) -> np.ndarray:
         """``COCOeval.stats``: the 12 summary numbers (see :func:`summarize`).
 
-        Example:
+        Examples:
             >>> CocoState().stats()[:3].tolist()  # nothing to score
             [-1.0, -1.0, -1.0]
         """
@@ -597,7 +597,7 @@ def _category_curves(
         max_dets: the caps.
         T: IoU thresholds.
 
-    Example:
+    Examples:
         >>> s = CocoState(areas={"all": (0, 1e10)})
         >>> s.update([CocoImage(0, [1], [500.0], [False], [1], [0.9], [480.0], [[0.8]])])
         >>> p, r = _category_curves(s._merged()[0], np.array([1]), (1, 10, 100), 10)
@@ -633,7 +633,7 @@ def _padded(iou_flat, row, col, ignore, crowd, ds, dn, gs, gn):
     Returns:
         ``iou (P, D, G)`` (``-inf`` padding), ``ignore (P, A, G)``, ``crowd (P, G)``.
 
-    Example:
+    Examples:
         >>> iou, ignore, crowd = _padded(np.array([0.1, 0.2, 0.3]), np.array([0, 1]),
         ...     np.array([0, 1]), np.zeros((2, 1), bool), np.zeros(2, bool),
         ...     np.array([0, 1]), np.array([1, 1]), np.array([0, 1]), np.array([1, 1]))
@@ -659,7 +659,7 @@ def _batches(ds, dn, gs, gn, width: int):
     batches whose matcher arrays (IoUs, and instances or detections times ``width`` area ranges
     and thresholds, per problem) stay under ``_WORK`` elements.
 
-    Example:
+    Examples:
         >>> ds, dn, gs, gn = np.array([[0, 2, 3], [2, 1, 5], [0, 1, 4], [1, 3, 4]])
         >>> [b[3].tolist() for b in _batches(ds, dn, gs, gn, 40)]  # instances per problem
         [[1], [4, 3]]

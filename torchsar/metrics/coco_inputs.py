@@ -34,7 +34,7 @@ __all__ = ["category_id", "coco_images"]
 def category_id(name: str) -> int:
     """A stable positive int32 id of a class name.
 
-    Example:
+    Examples:
         >>> category_id("ship") == category_id("ship") != category_id("tank")
         True
     """

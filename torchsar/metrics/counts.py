@@ -116,7 +116,7 @@ def pixel_counts(pred: Tensor, target: Tensor, *, ignore: Tensor | None = None) 
         target: bool ground-truth target pixels, same shape.
         ignore: optional bool don't-care pixels, same shape.
 
-    Example:
+    Examples:
         >>> p = torch.tensor([True, True, False, False])
         >>> t = torch.tensor([True, False, True, False])
         >>> c = pixel_counts(p, t); (c.pd, c.pfa)
@@ -187,7 +187,7 @@ def object_counts(
         ignore: optional bool don't-care pixels.
         connectivity: 1 (4-connected) or 2 (8-connected) components.
 
-    Example:
+    Examples:
         >>> inst = torch.zeros(1, 1, 6, 6, dtype=torch.int32); inst[0, 0, 1:3, 1:3] = 1
         >>> pred = torch.zeros(1, 1, 6, 6, dtype=torch.bool); pred[0, 0, 1:3, 1:3] = True
         >>> pred[0, 0, 5, 5] = True

@@ -45,7 +45,7 @@ RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 def levels(score: np.ndarray) -> np.ndarray:
     """Index of the last detection of each score level of ranked ``score`` (descending).
 
-    Example:
+    Examples:
         >>> levels(np.array([0.9, 0.7, 0.7, 0.2])).tolist()
         [0, 2, 3]
     """
@@ -69,7 +69,7 @@ def interpolated_precision(
     Returns:
         ``(precision (101,), recall)``; precision is 0 at recall points never reached.
 
-    Example:
+    Examples:
         >>> p, r = interpolated_precision(np.array([1, 1, 2]), np.array([0, 1, 1]), 2)
         >>> round(float(p.mean()), 4), r  # precision 1 up to recall 0.5, then 2/3
         (0.835, 1.0)
@@ -89,7 +89,7 @@ def coco_ap(tp: np.ndarray, fp: np.ndarray, n_gt: int) -> float:
     """Average precision, COCO's 101-point interpolation, of ranked detections flagged true
     positive (``tp``) or false positive (``fp``; neither: ignored). NaN without ground truth.
 
-    Example:
+    Examples:
         >>> round(coco_ap(np.array([1, 0, 1]), np.array([0, 1, 0]), 2), 4)  # TP, FP, TP
         0.835
     """
@@ -103,7 +103,7 @@ def coco_ap_rows(tp: np.ndarray, fp: np.ndarray, n_gt: np.ndarray) -> np.ndarray
     bootstrap replicates: ``tp[r, i]`` the weight of detection ``i`` in replicate ``r`` when it
     is a true positive, else 0), ``n_gt`` ``(R,)``; NaN where a row has no ground truth.
 
-    Example:
+    Examples:
         >>> tp = np.array([[1, 0, 1], [2, 0, 0]]); fp = np.array([[0, 1, 0], [0, 1, 0]])
         >>> np.round(coco_ap_rows(tp, fp, np.array([2, 0])), 4).tolist()
         [0.835, nan]
@@ -133,7 +133,7 @@ def pd_at_fa(fa: np.ndarray, pd: np.ndarray, level: float) -> float:
     """Pd at ``level`` false alarms per image from FROC points (``fa`` non-decreasing, the
     first point ``(0, 0)``): the last point with ``fa <= level`` (see the module docstring).
 
-    Example:
+    Examples:
         >>> pd_at_fa(np.array([0.0, 0.5, 2.0]), np.array([0.0, 0.4, 0.8]), 1.0)
         0.4
     """
@@ -153,7 +153,7 @@ def pd_at_fa_rows(fa: np.ndarray, pd: np.ndarray, level: float) -> np.ndarray:
 def partial_auc(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> float:
     """Mean Pd over false alarms per image in ``[0, limit]`` (see the module docstring).
 
-    Example:
+    Examples:
         >>> partial_auc(np.array([0.0, 0.5, 2.0]), np.array([0.0, 0.4, 0.8]))
         0.2
     """
@@ -164,7 +164,7 @@ def partial_auc_rows(fa: np.ndarray, pd: np.ndarray, limit: float = 1.0) -> np.n
     """:func:`partial_auc` of every row of FROC points ``(R, K)`` at once (each row's false
     alarms non-decreasing from its first point, e.g. bootstrap replicates).
 
-    Example:
+    Examples:
         >>> fa = np.array([[0.0, 0.5, 2.0]]); pd = np.array([[0.0, 0.4, 0.8]])
         >>> partial_auc_rows(fa, pd).tolist() == [partial_auc(fa[0], pd[0])]
         True

@@ -78,7 +78,7 @@ def enl(x: Tensor, *, mask: Tensor | None = None) -> Tensor:
         C. Oliver, S. Quegan, *Understanding Synthetic Aperture Radar Images*, Artech House
         1998 (ENL of intensity images, §4).
 
-    Example:
+    Examples:
         >>> x = torch.tensor([[[[1.0, 3.0], [1.0, 3.0]]]])
         >>> enl(x).item()  # mean 2, variance 1
         4.0
@@ -111,7 +111,7 @@ def ratio_moments(
         Oliver & Quegan, *Understanding Synthetic Aperture Radar Images*, Artech House 1998,
         §6 (ratio image as a filter test).
 
-    Example:
+    Examples:
         >>> x = torch.tensor([[[[1.0, 3.0]]]]); f = torch.tensor([[[[2.0, 2.0]]]])
         >>> [t.item() for t in ratio_moments(f, x)]
         [1.0, 0.25]
@@ -157,7 +157,7 @@ def edge_preservation(estimate: Tensor, clean: Tensor) -> Tensor:
         F. Sattar, L. Floreby, G. Salomonsson, B. Lovstrom, "Image enhancement based on a
         nonlinear multiscale method", IEEE TIP 6(6), 1997, doi:10.1109/83.585239.
 
-    Example:
+    Examples:
         >>> s = torch.zeros(1, 1, 6, 6); s[..., 3:] = 1.0
         >>> edge_preservation(2 * s + 1, s).item()
         1.0
@@ -199,7 +199,7 @@ def edge_ratio(estimate: Tensor, noisy: Tensor) -> Tensor:
     Raises:
         InputTypeError, ShapeError, InputValueError: bad input.
 
-    Example:
+    Examples:
         >>> x = torch.tensor([[[[0.0, 2.0, 0.0]]]])
         >>> edge_ratio(x / 2, x).item()
         0.5
@@ -243,7 +243,7 @@ def psnr(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
         InputTypeError, ShapeError, InputValueError, OptionError: bad input.
         InputValueError: a clean image is constant and ``data_range`` is not given.
 
-    Example:
+    Examples:
         >>> c = torch.zeros(1, 1, 2, 2); c[..., 0, 0] = 1.0
         >>> psnr(c + 0.1, c).item()  # MSE 0.01, range 1
         20.0
@@ -280,7 +280,7 @@ def ssim(estimate: Tensor, clean: Tensor, *, data_range: float | None = None) ->
         error visibility to structural similarity", IEEE TIP 13(4), 2004,
         doi:10.1109/TIP.2003.819861.
 
-    Example:
+    Examples:
         >>> c = torch.rand(1, 1, 16, 16, generator=torch.Generator().manual_seed(0))
         >>> round(ssim(c, c).item(), 6)
         1.0

@@ -160,7 +160,7 @@ def parse_distance(text: str) -> tuple[float, str]:
         OptionError: (naming ``max_distance``) not a number, zero, negative, NaN, Inf, or a
             unit other than ``m`` / ``px``.
 
-    Example:
+    Examples:
         >>> parse_distance("200 m"), parse_distance("20")
         ((200.0, 'm'), (20.0, 'px'))
     """
@@ -198,7 +198,7 @@ def pair_distances(
         InputValueError: NaN or Inf positions.
         OptionError: ``spacing`` not a pair of finite spacings > 0.
 
-    Example:
+    Examples:
         >>> pair_distances(np.array([[0.0, 0.0]]), np.array([[3.0, 4.0], [4.0, 0.0]]))
         array([[5., 4.]])
         >>> pair_distances(np.array([[0.0, 0.0]]), np.array([[3.0, 4.0], [4.0, 0.0]]), (0.5, 2.0))
@@ -238,7 +238,7 @@ def optimal_match(dist: np.ndarray, max_distance: float) -> np.ndarray:
         InputValueError: NaN or negative distances.
         OptionError: ``max_distance`` not finite and > 0.
 
-    Example:
+    Examples:
         >>> dist = np.array([[1.0, 2.0], [1.5, 9.0]])  # greedy nearest-first would pair one
         >>> optimal_match(dist, 5.0)
         array([1, 0])
@@ -282,7 +282,7 @@ def greedy_match_by_score(dist: np.ndarray, score: np.ndarray, max_distance: flo
         InputValueError: NaN or negative distances, NaN scores.
         OptionError: ``max_distance`` not finite and > 0.
 
-    Example:
+    Examples:
         >>> dist = np.array([[1.0, 2.0], [1.5, 9.0]])
         >>> greedy_match_by_score(dist, np.array([0.9, 0.8]), 5.0)  # the second is left over
         array([ 0, -1])
@@ -332,7 +332,7 @@ def dont_care(
         InputValueError: NaN or negative ``ignore_dist``, non-integer ``matched``.
         OptionError: ``max_distance`` not finite and > 0.
 
-    Example:
+    Examples:
         >>> det = np.array([[0.0, 0.0], [0.0, 50.0], [0.0, 90.0]])
         >>> dont_care(det, np.array([0, -1, -1]), np.array([1.0, 3.0, np.inf]), 20.0)
         array([False,  True, False])
@@ -367,7 +367,7 @@ class LengthErrors:
             integer number of 1e-9 (so partial sums add exactly).
         count: number of pairs with both lengths known.
 
-    Example:
+    Examples:
         >>> a = LengthErrors().add(np.array([110.0]), np.array([100.0]))
         >>> b = LengthErrors().add(np.array([90.0, 7.0]), np.array([100.0, np.nan]))
         >>> (a + b).count, round((a + b).score, 9)
@@ -432,7 +432,7 @@ def length_score(pred_m: np.ndarray, true_m: np.ndarray) -> float:
         ShapeError: not two ``(K,)`` arrays of the same length.
         InputValueError: negative predictions or true lengths <= 0.
 
-    Example:
+    Examples:
         >>> length_score(np.array([110.0, 90.0, 600.0, 5.0]),
         ...              np.array([100.0, 100.0, 400.0, np.nan]))
         0.85

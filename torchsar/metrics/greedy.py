@@ -27,7 +27,7 @@ __all__ = ["assign_pairs", "greedy_assign"]
 def _row_ranks(q: np.ndarray) -> np.ndarray:
     """Rank of each entry within its last-axis row, ascending by value then by position.
 
-    Example:
+    Examples:
         >>> _row_ranks(np.array([[0.5, 0.2, 0.5]])).tolist()
         [[1, 0, 2]]
     """
@@ -53,7 +53,7 @@ def greedy_assign(
     Returns:
         int ``(P, D, A, T)``: the instance column each detection took, -1 none.
 
-    Example:
+    Examples:
         >>> q = np.array([[[0.6, 0.6], [0.7, 0.0]]])  # two detections, two instances
         >>> greedy_assign(q, np.zeros((1, 1, 2), bool), np.zeros((1, 2), bool),
         ...               np.array([2]), [0.5, 0.65])[0, :, 0].tolist()
@@ -110,7 +110,7 @@ def assign_pairs(
         int ``(D, A, T)``: the instance (an index into the instances) each detection took, -1
         none.
 
-    Example:
+    Examples:
         >>> d_problem, g_problem = np.array([0, 0, 1]), np.array([0, 1])
         >>> pairs = (np.array([0, 1, 2]), np.array([0, 0, 1]), np.array([0.7, 0.9, 0.2]))
         >>> assign_pairs(d_problem, g_problem, np.zeros((2, 1), bool), np.zeros(2, bool),

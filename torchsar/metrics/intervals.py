@@ -119,7 +119,7 @@ class ReplicateSpread:
 def spread(reps: np.ndarray) -> ReplicateSpread:
     """:class:`ReplicateSpread` of bootstrap replicates (NaN replicates counted, not used).
 
-    Example:
+    Examples:
         >>> s = spread(np.array([0.5, 0.7, np.nan]))
         >>> round(s.mean, 3), round(s.var, 3), s.used, s.undefined
         (0.6, 0.02, 2, 1)
@@ -142,7 +142,7 @@ def t_shrink(units: float, level: float, count: float | None = None) -> float:
     variance is known from the proportion, and Jeffreys' interval needs no Student factor.
     One unit gives 0 (it says nothing about the variance).
 
-    Example:
+    Examples:
         >>> round(t_shrink(4, 0.95), 3), round(t_shrink(36, 0.95, count=36), 3)
         (0.379, 1.0)
         >>> round(t_shrink(36, 0.95, count=700), 3)
@@ -200,7 +200,7 @@ def proportion_interval(
     Returns:
         :class:`Interval`; NaN bounds (and a note) without a point, a count or replicates.
 
-    Example:
+    Examples:
         >>> iv = proportion_interval(1.0, 50, np.ones(200), units=50)
         >>> round(iv.lo, 3), iv.hi  # 50 of 50: never [1, 1] (Clopper-Pearson's 0.025^(1/50))
         (0.929, 1.0)
@@ -230,7 +230,7 @@ def proportion_interval(
 def _holding(lo: float, hi: float, point: float) -> tuple[float, float]:
     """``[lo, hi]`` widened to contain ``point`` (see the module docstring).
 
-    Example:
+    Examples:
         >>> _holding(0.5, 0.7, 0.45), _holding(0.5, 0.7, 0.6)
         ((0.45, 0.7), (0.5, 0.7))
     """
@@ -277,7 +277,7 @@ def rate_interval(
         alarms as the count; the bounds are Poisson bounds on it (see the module
         docstring for why Jeffreys').
 
-    Example:
+    Examples:
         >>> iv = rate_interval(0, 36, np.zeros(200))
         >>> iv.lo, round(iv.hi, 4)  # no false alarm in 36 images: [0, 3.69 / 36], not [0, 0]
         (0.0, 0.1025)

@@ -113,7 +113,7 @@ class Matching:
         ``"box"``, ``"mask+box"``; default: the rule's own); under the centroid rule, AP's
         IoU too.
 
-        Example:
+        Examples:
             >>> Matching().describe("box"), Matching(kind="distance", max_distance=10).describe()
             ('box IoU >= 0.5', 'distance < 10 px (optimal)')
             >>> Matching(kind="centroid").describe("mask")
@@ -136,7 +136,7 @@ def box_iou(a: np.ndarray, b: np.ndarray, *, crowd: bool = False) -> np.ndarray:
     """IoU matrix ``(len(a), len(b))`` of end-exclusive boxes ``(r0, c0, r1, c1)``; with
     ``crowd`` the intersection over the area of ``a`` (COCO's crowd rule).
 
-    Example:
+    Examples:
         >>> box_iou(np.array([[0, 0, 2, 2.]]), np.array([[0, 1, 2, 3.]])).tolist()
         [[0.3333333333333333]]
     """
@@ -174,7 +174,7 @@ def greedy_match(quality: np.ndarray, crowd: np.ndarray, thresholds: np.ndarray)
         int ``(T, D)``: the matched instance column, ``-1`` unmatched, ``-2`` ignored.
         Among instances of equal quality the last one wins, as in ``pycocotools``.
 
-    Example:
+    Examples:
         >>> greedy_match(np.array([[0.9, 0.6], [0.8, 0.0]]), np.zeros(2), np.array([0.5]))
         array([[ 0, -1]])
     """

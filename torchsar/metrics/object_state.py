@@ -88,7 +88,7 @@ def size_bin(area: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
 def above(score: np.ndarray, threshold: float | None) -> np.ndarray:
     """Which scores count at an operating point: ``score > threshold`` (all for ``None``).
 
-    Example:
+    Examples:
         >>> above(np.array([0.2, 0.5, 0.9]), 0.5).tolist(), above(np.array([0.2]), None).tolist()
         ([False, False, True], [True])
     """
@@ -99,7 +99,7 @@ def above(score: np.ndarray, threshold: float | None) -> np.ndarray:
 def ratios(tp: int, fp: int, n_gt: int, images: int) -> dict:
     """TP, FP, FN, precision, recall, F1 and false alarms per image of counts.
 
-    Example:
+    Examples:
         >>> r = ratios(3, 1, 4, 2)
         >>> r["precision"], r["recall"], r["f1"], r["fa_per_image"]
         (0.75, 0.75, 0.75, 0.5)

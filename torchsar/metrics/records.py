@@ -105,7 +105,7 @@ BYTES_PER_IMAGE = IMAGE.itemsize
 def plane_ranks(plane: np.ndarray) -> np.ndarray:
     """Position of each object among the objects of its plane, in object order.
 
-    Example:
+    Examples:
         >>> plane_ranks(np.array([1, 0, 1, 1, 0])).tolist()
         [0, 0, 1, 2, 1]
     """
@@ -121,7 +121,7 @@ def plane_ranks(plane: np.ndarray) -> np.ndarray:
 def bits(flags: np.ndarray) -> np.ndarray:
     """``(K, M)`` bools as ``(M,)`` uint64 with bit ``k`` set where ``flags[k]`` (K <= 64).
 
-    Example:
+    Examples:
         >>> bits(np.array([[True, False], [True, True]])).tolist()
         [3, 2]
     """
@@ -133,7 +133,7 @@ def bits(flags: np.ndarray) -> np.ndarray:
 def bit(values: np.ndarray, k: int) -> np.ndarray:
     """Bit ``k`` of uint64 ``values``, as bool.
 
-    Example:
+    Examples:
         >>> bit(np.array([3, 2], np.uint64), 0).tolist()
         [True, False]
     """

@@ -59,7 +59,7 @@ def pixel_keys(x: Tensor) -> Tensor:
     """The int64 key of each value of ``x`` (any float tensor, free of NaN): the top 17 bits
     of the order-preserving integer of its float64 value, ``-0.0`` as ``+0.0``.
 
-    Example:
+    Examples:
         >>> pixel_keys(torch.tensor([-1.0, -0.0, 0.0, 1.0, 1.03, 1.04, torch.inf])).tolist()
         [-32737, 0, 0, 32736, 32736, 32737, 65504]
     """
@@ -71,7 +71,7 @@ def key_thresholds(keys: np.ndarray) -> np.ndarray:
     """The largest float64 of each key (``x > t`` exactly when ``x``'s key is above ``t``'s):
     ``+inf`` for the key of ``+inf``.
 
-    Example:
+    Examples:
         >>> key_thresholds(pixel_keys(torch.tensor([-1.0, 0.0, 1.0])).numpy()).tolist()
         [-1.0, 6.95335580783495e-310, 1.0312499999999998]
     """
@@ -136,7 +136,7 @@ class RocAccumulator:
         targets: target pixels counted.
         clutter: clutter pixels counted.
 
-    Example:
+    Examples:
         >>> a, b = RocAccumulator(), RocAccumulator()
         >>> tgt = torch.tensor([True, False, False])
         >>> _ = a.update(torch.tensor([3.0, 1e300, -2.0]), tgt)
@@ -165,7 +165,7 @@ class RocAccumulator:
         its :func:`~torchsar.metrics.pixel_counts` against ``target`` and ``ignore``, counted
         in the same compiled call where the kernels run (float32 or float64 on the CPU).
 
-        Example:
+        Examples:
             >>> acc = RocAccumulator()
             >>> stat = torch.tensor([0.5, 2.0, 3.0]); tgt = torch.tensor([False, True, False])
             >>> c = acc.update(stat, tgt, detected=stat > 1.0)
@@ -191,7 +191,7 @@ class RocAccumulator:
         counts of target and clutter pixels (``-inf`` exceeds no threshold, so only the
         listed pixels reach the per-key counts). Equal to :meth:`update` on the dense batch.
 
-        Example:
+        Examples:
             >>> a, b = RocAccumulator(), RocAccumulator()
             >>> stat = torch.full((6,), -torch.inf); stat[[1, 4]] = torch.tensor([2.0, 0.5])
             >>> tgt = torch.tensor([0, 1, 1, 0, 0, 0], dtype=torch.bool)
@@ -259,7 +259,7 @@ class RocAccumulator:
         ``statistic > threshold[i]`` (``pfa_pixel`` of clutter pixels; a fraction of 0
         pixels is 0).
 
-        Example:
+        Examples:
             >>> acc = RocAccumulator()
             >>> _ = acc.update(torch.tensor([0.5, 2.0, 3.0]), torch.tensor([False, True, False]))
             >>> c = acc.pixel_curve()

@@ -75,7 +75,7 @@ def target_scr_db(
     Returns:
         float64 ``(G,)`` SCR in dB (NaN: no clutter pixel in the ring, or no signal at all).
 
-    Example:
+    Examples:
         >>> img = np.ones((1, 32, 32)); img[0, 15:17, 15:17] = 100.0
         >>> ids = np.zeros((1, 32, 32), int); ids[0, 15:17, 15:17] = 1
         >>> target_scr_db(img, ids, ids < 0, np.array([[15, 15, 17, 17.]]), np.zeros(1, int))
@@ -118,7 +118,7 @@ def scr_bins(scr_db: np.ndarray, edges: tuple[float, ...] = SCR_EDGES) -> np.nda
     """SCR bin index of each value: ``i`` for ``[edges[i-1], edges[i])``, ``len(edges) + 1``
     (``n/a``) for NaN.
 
-    Example:
+    Examples:
         >>> scr_bins(np.array([-3.0, 0.0, 4.9, 25.0, np.inf, np.nan])).tolist()
         [0, 1, 1, 5, 5, 6]
     """
@@ -131,7 +131,7 @@ def wilson(k: np.ndarray, n: np.ndarray, level: float = 0.95) -> tuple[np.ndarra
     """Wilson score interval of a proportion ``k / n`` (NaN where ``n == 0``); it contains
     ``k / n``, and its bound at ``k = 0`` (``k = n``) is exactly 0 (1).
 
-    Example:
+    Examples:
         >>> lo, hi = wilson(np.array([0, 10]), np.array([10, 10]))
         >>> [round(float(v), 4) for v in (lo[0], hi[0], lo[1], hi[1])]
         [0.0, 0.2775, 0.7225, 1.0]
@@ -156,7 +156,7 @@ def scr_rows(sources: dict[str, tuple[np.ndarray, np.ndarray]], level: float = 0
     targets, one row per non-empty bin with the targets, those found, Pd, its Wilson
     interval and the bin's mean finite SCR.
 
-    Example:
+    Examples:
         >>> rows = scr_rows({"measured": (np.array([3.0, 4.0, 12.0]), np.array([1, 0, 1], bool))})
         >>> [(r["scr_bin"], r["targets"], r["detected"], r["scr_mean_db"]) for r in rows]
         [('0-5', 2, 1, 3.5), ('10-15', 1, 1, 12.0)]

@@ -53,7 +53,7 @@ def box_pixels(box: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Flat in-plane indices of the pixels whose centres lie in a box ``(r0, c0, r1, c1)``
     (end-exclusive), clipped to the plane.
 
-    Example:
+    Examples:
         >>> box_pixels(np.array([0.0, 1.0, 2.0, 3.0]), (4, 4)).tolist()
         [1, 2, 5, 6]
     """
@@ -103,7 +103,7 @@ class Regions:
         """One region of every class per plane: the plane's don't-care pixels (``(N, H, W)``
         bool).
 
-        Example:
+        Examples:
             >>> ig = np.zeros((2, 4, 4), bool); ig[1, 1:3, 2] = True
             >>> r = Regions.from_planes(ig)
             >>> r.plane.tolist(), r.box.tolist(), r.masks.pixels.tolist()
@@ -275,7 +275,7 @@ class GroundTruth:
         """Ground truth from its targets: plane, box ``(r0, c0, r1, c1)``, class (default
         ``"target"``) and pixels (flat in-plane indices; ``None``: a box target).
 
-        Example:
+        Examples:
             >>> box = np.array([[0, 0, 2, 2], [1, 1, 3, 3.]])
             >>> gt = GroundTruth.build(np.array([0, 0]), box, planes=1, shape=(4, 4),
             ...                        pixels=[np.array([0, 1, 4, 5]), None])
@@ -375,7 +375,7 @@ def ground_truth(
         InputValueError: ``instances`` holds a negative id.
         ShapeError: ``instances`` is not ``(N, H, W)``, or ``ignore`` has another shape.
 
-    Example:
+    Examples:
         >>> ids = np.zeros((1, 4, 4), int); ids[0, :2, :2] = 5; ids[0, 3, 3] = 2
         >>> gt = ground_truth(ids)
         >>> gt.area.tolist(), gt.box.tolist()  # ids in order: 2, then 5

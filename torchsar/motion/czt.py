@@ -29,7 +29,7 @@ def czt(a: Tensor, alpha: Tensor, n_out: int) -> Tensor:
         L. Bluestein, "A linear filtering approach to the computation of discrete Fourier
         transform", IEEE Trans. Audio Electroacoust. 18(4), 1970, doi:10.1109/TAU.1970.1162132.
 
-    Example:
+    Examples:
         >>> a = torch.randn(3, 8, dtype=torch.complex128)
         >>> y = czt(a, torch.tensor(-2 * math.pi / 8, dtype=torch.float64), 8)
         >>> bool(torch.allclose(y, torch.fft.fft(a)))

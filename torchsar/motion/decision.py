@@ -42,7 +42,7 @@ def registration_sigma(snr: Tensor, resolution: tuple[float, float]) -> Tensor:
     For a response of resolution ``rho`` (flat spectrum of width ``1 / rho``) and peak
     signal-to-noise ratio ``snr`` the position CRLB is ``sqrt(3) rho / (pi sqrt(2 snr))``.
 
-    Example:
+    Examples:
         >>> snr = torch.tensor([100.0], dtype=torch.float64)
         >>> registration_sigma(snr, (1.0, 0.5)).round(decimals=4).tolist()
         [[0.039, 0.0195]]
@@ -80,8 +80,9 @@ def detect_movers(
         :class:`MoverDecision`.
 
     Raises:
-        InputTypeError, ShapeError, OptionError: bad input; InputValueError: a ``sigma``
-        that is not finite and positive. ``N = 0`` targets is valid (empty decision).
+        InputTypeError, ShapeError, OptionError: bad input (``N = 0`` targets is valid:
+            an empty decision).
+        InputValueError: a ``sigma`` that is not finite and positive.
 
     Shape:
         ``(B, N, P, 2)`` -> ``(B, N)``.
@@ -91,7 +92,7 @@ def detect_movers(
         "Alternatives to the median absolute deviation", JASA 88(424), 1993,
         doi:10.1080/01621459.1993.10476408.
 
-    Example:
+    Examples:
         >>> d = torch.zeros(1, 4, 4, 2); d[0, 3, 1:, 0] = torch.tensor([0.5, -0.4, 0.6])
         >>> detect_movers(d, sigma=0.05).mover.tolist()
         [[False, False, False, True]]

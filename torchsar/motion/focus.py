@@ -33,7 +33,7 @@ def azimuth_times(
 ) -> Tensor:
     """Slow time (s) of each azimuth-spectrum bin of a ``width``-pixel image row, ``(W,)``.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> t = azimuth_times(SpotlightParams.from_system(), 4)  # 150 m rows: 1 bin = 1 pulse
         >>> (t * 200).round().tolist()
@@ -75,7 +75,7 @@ def refocus(
     Raises:
         InputTypeError, ShapeError: bad input.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.motion import polar_format
         >>> from torchsar.sar import simulate_phase_history
@@ -134,7 +134,7 @@ def focus_step(params: SpotlightParams, aperture_time: float | None = None) -> f
     The refocused peak of a mover stays within ~3 dB of its best for hypotheses within half a
     step (Hann taper), so a bank with this step detects every speed it spans.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(focus_step(SpotlightParams.from_system()), 3)
         0.96
@@ -155,7 +155,7 @@ def focus_step(params: SpotlightParams, aperture_time: float | None = None) -> f
 def speed_bank(max_speed: float, step: float) -> Tensor:
     """Symmetric float64 bank ``0, +-step, +-2 step, ...`` covering ``[-max_speed, max_speed]``.
 
-    Example:
+    Examples:
         >>> speed_bank(2.0, 1.0).tolist()
         [-2.0, -1.0, 0.0, 1.0, 2.0]
     """

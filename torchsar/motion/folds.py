@@ -45,7 +45,7 @@ __all__ = ["doppler_fold", "radial_speed_interval", "unwalk", "walk_correction",
 def walk_rate(fold: Tensor | float, params: SpotlightParams) -> Tensor | float:
     """Residual range walk ``-k lambda PRF / 2`` (m/s) of a scatterer folded ``k`` times.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(walk_rate(-1, SpotlightParams.from_system()), 3)  # m/s, Table 1
         2.998
@@ -63,7 +63,7 @@ def doppler_fold(
         params: the system.
         velocities: optional ``(..., 2)`` ``(v_r, v_a)`` in m/s (default stationary).
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> pos = torch.tensor([[20.0, 10.0], [20.0, 10.0], [0.0, 90.0]])
@@ -97,7 +97,7 @@ def radial_speed_interval(fold: Tensor, position: Tensor, params: SpotlightParam
         position: ``(..., 2)`` image ``(range, azimuth)`` positions in m.
         params: the system.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> pos = torch.tensor([[19.7, 65.0]], dtype=torch.float64)  # 1.9 m/s shown at +65 m
@@ -163,7 +163,7 @@ def unwalk(
     Raises:
         InputTypeError, ShapeError: bad input.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.motion import polar_format
         >>> from torchsar.sar import simulate_phase_history

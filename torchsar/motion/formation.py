@@ -54,7 +54,7 @@ def rereference(g: Tensor, params: SpotlightParams, center: tuple[float, float])
         params: the system.
         center: ``(range, azimuth)`` of the new reference point in m.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.sar import simulate_phase_history
         >>> p = SpotlightParams.from_system(azimuth_resolution=3.0)
@@ -153,7 +153,7 @@ def polar_format(
         migration based on the chirp z-transform", IEEE TGRS 33(5), 1995,
         doi:10.1109/36.469489.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.sar import simulate_phase_history
         >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(64, 64))

@@ -55,7 +55,7 @@ def look_plan(params: SpotlightParams, *, looks: int = 2, overlap: float = 0.0) 
     Raises:
         OptionError: ``looks < 1``, ``overlap`` outside ``[0, 1)``, or looks of < 2 pulses.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> plan = look_plan(SpotlightParams.from_system(), looks=2)
         >>> plan.start.tolist(), plan.stop.tolist(), plan.time.tolist()
@@ -108,7 +108,7 @@ def look_images(
         K. Ouchi, "On the multilook images of moving targets by synthetic aperture radars",
         IEEE Trans. Antennas Propag. 33(8), 1985, doi:10.1109/TAP.1985.1143684.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.sar import simulate_phase_history
         >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(64, 64))
@@ -148,7 +148,7 @@ def look_displacement(
         params: the system.
         ranges: range offset ``r`` of the scatterer from the scene centre (m).
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(look_displacement(4.0, 1.25, SpotlightParams.from_system()), 4)
         9.9
@@ -165,7 +165,7 @@ def look_velocity(
     ``v_a = V (1 - sqrt(1 - r' / V))``, ``r' = rate (R0 + r) / R0`` (the root near zero;
     ``r'`` clipped to ``<= V``).
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(float(look_velocity(torch.tensor(7.92), SpotlightParams.from_system())), 4)
         4.0

@@ -56,7 +56,7 @@ class SpotlightParams:
         W. G. Carrara, R. S. Goodman, R. M. Majewski, Spotlight Synthetic Aperture Radar,
         Artech House, 1995.
 
-    Example:
+    Examples:
         >>> import warnings
         >>> with warnings.catch_warnings():
         ...     warnings.simplefilter("ignore")

@@ -27,7 +27,7 @@ def default_detector(
         resolution_px: ``(range, azimuth)`` resolution in pixels.
         pfa: design false-alarm probability per pixel.
 
-    Example:
+    Examples:
         >>> d = default_detector((2.0, 1.0))
         >>> d(torch.ones(1, 1, 40, 40)).mask.any().item()
         False
@@ -57,7 +57,7 @@ def detect_peaks(
     Returns:
         bool ``(B, C, H, W)`` peak mask.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10, 12] = 1e4; x[0, 0, 10, 13] = 5e3
         >>> det = default_detector((1.0, 1.0), pfa=1e-3)
         >>> detect_peaks(x, detector=det, radius=2).nonzero().tolist()
@@ -81,7 +81,7 @@ def intensity(x: Tensor) -> Tensor:
 def window_max(x: Tensor, r: int) -> Tensor:
     """Maximum over the ``(2r+1)^2`` window with circular borders (separable, doubling).
 
-    Example:
+    Examples:
         >>> x = torch.zeros(1, 1, 5, 7); x[0, 0, 2, 3] = 1.0
         >>> window_max(x, 1)[0, 0, :, 3].tolist(), window_max(x, 1)[0, 0, 2].tolist()
         ([0.0, 1.0, 1.0, 1.0, 0.0], [0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0])

@@ -178,7 +178,7 @@ def find_movers(
     Shape:
         ``(B, M, K)`` -> decision ``(B, N)``.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.motion import SpotlightParams
         >>> from torchsar.sar import add_noise, image_noise_std, simulate_phase_history

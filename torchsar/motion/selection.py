@@ -27,7 +27,7 @@ def repack(result: T, keep: Tensor) -> T:
     each scene first, in their original order, then padding (NaN / False / -1) up to the
     largest kept count; other fields are left as they are.
 
-    Example:
+    Examples:
         >>> from torchsar.motion.targets import Targets
         >>> pixel = torch.tensor([[[1, 1], [2, 2], [3, 3]]])
         >>> value, zero = torch.tensor([[9.0, 5.0, 4.0]]), torch.zeros(1, 3)

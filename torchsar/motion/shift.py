@@ -89,7 +89,7 @@ def estimate_shift(
         M. Guizar-Sicairos, S. T. Thurman, J. R. Fienup, "Efficient subpixel image
         registration algorithms", Opt. Lett. 33(2), 2008, doi:10.1364/OL.33.000156.
 
-    Example:
+    Examples:
         >>> y, x = torch.meshgrid(torch.arange(32.0), torch.arange(32.0), indexing="ij")
         >>> blob = lambda cy, cx: torch.exp(-((y - cy) ** 2 + (x - cx) ** 2) / 8)
         >>> estimate_shift(blob(16, 16), blob(17.25, 15.5)).tolist()

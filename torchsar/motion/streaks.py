@@ -53,7 +53,7 @@ def streak_level(
         azimuth the cell a walk's dwell leaves), else the stationary-phase level, taken one
         coherent time towards the centre.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> d = torch.tensor([[0.0, 8.0]], dtype=torch.float64)  # 4 m/s speed error

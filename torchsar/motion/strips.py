@@ -59,7 +59,7 @@ def peak_in_box(
     Returns:
         ``(value (...), pixel (..., 2))``: the maximum and its ``(row, column)`` in the strip.
 
-    Example:
+    Examples:
         >>> x = torch.zeros(2, 9, 8); x[:, 1, 7] = 5.0; x[0, 6, 0] = 3.0; x[1, 4, 7] = 2.0
         >>> value, pix = peak_in_box(x, torch.tensor([[5, 1], [5, 1]]), (2, 2))
         >>> value.tolist(), pix.tolist()

@@ -21,7 +21,7 @@ def subpatch_centers(
     Row-major order (``p = row * cols + col``), rows from near to far range, columns from
     early to late azimuth. The default 2x2 tiling of a 200 m scene gives ``(+-50, +-50)``.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> subpatch_centers(SpotlightParams.from_system()).tolist()
         [[-50.0, -50.0], [-50.0, 50.0], [50.0, -50.0], [50.0, 50.0]]
@@ -70,7 +70,7 @@ def subpatch_images(
         M. Kartal, S. Paker, S. Kent, "A new subpatch focusing algorithm for spotlight SAR
         processing of large scenes", EUSAR 2010.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.sar import simulate_phase_history
         >>> p = SpotlightParams.from_system(azimuth_resolution=1.0, image_size=(32, 32))

@@ -86,7 +86,7 @@ def subpatch_movers(
     Shape:
         ``(B, M, K)`` -> decision ``(B, N)``.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> from torchsar.motion import SpotlightParams
         >>> from torchsar.sar import add_noise, simulate_phase_history

@@ -268,7 +268,7 @@ def smear_ghosts(
     Returns:
         bool ``(n,)``.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system(image_size=(256, 512))
         >>> pix = torch.tensor([[10, 100], [10, 140], [10, 180]])  # one row, 11.7 m apart

@@ -133,7 +133,7 @@ def planar_image_positions(
     Returns:
         float64 ``(..., N, P, 2)``: ``(range, azimuth)`` in m relative to each centre.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, 0.0]], dtype=torch.float64)
@@ -170,7 +170,7 @@ def scene_positions(
     Returns:
         float64 ``(..., P, 2)`` scene positions ``(range, azimuth)`` in m.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, 50.0]], dtype=torch.float64)
@@ -203,7 +203,7 @@ def first_order_offsets(
     Returns:
         float64 ``(..., N, P, 2)`` offsets ``(range, azimuth)`` in m.
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> p = SpotlightParams.from_system()
         >>> c = torch.tensor([[0.0, -50.0], [0.0, 50.0]], dtype=torch.float64)
@@ -223,7 +223,7 @@ def first_order_offsets(
 def folded_speed(speed: float | Tensor, params: SpotlightParams) -> float | Tensor:
     """Radial speed folded into ``[-lambda PRF / 4, lambda PRF / 4)`` (the sampled Doppler).
 
-    Example:
+    Examples:
         >>> import warnings; warnings.simplefilter("ignore")
         >>> round(folded_speed(2.34, SpotlightParams.from_system()), 3)
         -0.658

@@ -75,7 +75,7 @@ def associate(
     Returns:
         long ``(n,)``.
 
-    Example:
+    Examples:
         >>> ref = torch.tensor([[0.0, 0.0], [10.0, 0.0]])
         >>> cand = torch.tensor([[11.0, 1.0], [1.0, 1.0], [50.0, 50.0]])
         >>> associate(ref, cand, torch.zeros(2), torch.tensor([1e9, 1e9]), 3.0).tolist()

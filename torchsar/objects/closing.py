@@ -59,7 +59,7 @@ def close_mask(mask: np.ndarray, radius: int) -> np.ndarray:
     removes a pixel) also at the image border: dilation of the zero-padded mask, then
     erosion as the complement of the dilated complement (the outside counting as set).
 
-    Example:
+    Examples:
         >>> m = np.zeros((1, 5, 5), bool); m[0, 1:4, 1] = m[0, 1:4, 3] = True
         >>> close_mask(m, 1)[0, 2].astype(int).tolist()
         [0, 1, 1, 1, 0]
@@ -76,7 +76,7 @@ def close_pixels(idx: np.ndarray, shape: tuple[int, int, int], radius: int) -> n
     """:func:`close_mask` of the stack ``shape`` ``(N, H, W)`` whose set pixels are ``idx``
     (flat indices, ascending): the set pixels of the closing, ascending.
 
-    Example:
+    Examples:
         >>> close_pixels(np.array([6, 8, 11, 13, 16, 18]), (1, 5, 5), 1).tolist()
         [6, 8, 11, 12, 13, 16, 18]
     """

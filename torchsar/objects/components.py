@@ -31,7 +31,7 @@ def label_components(mask: np.ndarray, connectivity: int = 2) -> tuple[np.ndarra
     Raises:
         OptionError: connectivity other than 1 or 2.
 
-    Example:
+    Examples:
         >>> m = np.array([[1, 0, 0], [0, 1, 0]], bool)
         >>> label_components(m, 2)[1], label_components(m, 1)[1]
         (1, 2)
@@ -57,7 +57,7 @@ def label_pixels(
     pixel of ``idx`` (the numba kernel of :mod:`torchsar.objects._kernels` when
     :func:`torchsar._jit.enabled`, which visits only those pixels).
 
-    Example:
+    Examples:
         >>> labels, n, lab = label_pixels(np.array([0, 1, 8]), (1, 3, 3), connectivity=2)
         >>> n, lab.tolist()
         (2, [1, 1, 2])

@@ -52,7 +52,7 @@ def normalised_score(statistic: Tensor, threshold: Tensor | float) -> Tensor:
     """The detector-independent score: ``statistic / threshold`` (threshold > 0), else
     ``1 + statistic - threshold``; float64, ``-inf`` stays ``-inf``.
 
-    Example:
+    Examples:
         >>> normalised_score(torch.tensor([2.0, 8.0]), torch.tensor(4.0)).tolist()
         [0.5, 2.0]
     """
@@ -73,7 +73,7 @@ def single_threshold(threshold: Tensor | float) -> float | None:
     """The threshold's one value when it holds a single finite value (0-dim, or every
     entry equal), else ``None`` (a threshold per pixel or per image, or an infinite one).
 
-    Example:
+    Examples:
         >>> single_threshold(torch.tensor(0.5)), single_threshold(torch.tensor([1.0, 2.0]))
         (0.5, None)
     """
@@ -108,7 +108,7 @@ def own_regions(
     (``"ratio"``: :func:`normalised_score`, operating threshold 1; ``"statistic"``: the
     statistic itself, operating threshold the single ``threshold``).
 
-    Example:
+    Examples:
         >>> lab = torch.zeros(1, 1, 4, 4, dtype=torch.int64); lab[0, 0, :2, :2] = 3
         >>> o = own_regions(torch.arange(16.0).reshape(1, 1, 4, 4), 2.0, lab)
         >>> o.area.tolist(), o.score.tolist()
@@ -246,7 +246,7 @@ def discriminate(
         OptionError: areas in m^2 without ``pixel_area``; an unknown ``scale``, or
             ``"statistic"`` with a threshold that varies over the batch.
 
-    Example:
+    Examples:
         >>> s = torch.zeros(1, 1, 8, 8); s[0, 0, 1:3, 1:3] = 5.0; s[0, 0, 6, 6] = 3.0
         >>> o = discriminate(s, 2.0, rules=ObjectRules(min_area=2))
         >>> len(o), o.area.tolist(), o.score.tolist()

@@ -168,7 +168,7 @@ class Objects:
         """The same objects with the areas their source declares (see
         :attr:`declared_area`; NaN where none).
 
-        Example:
+        Examples:
             >>> o = Objects.from_points(np.zeros((1, 2)), np.array([1.0]), shape=(4, 4))
             >>> o.with_declared_area(np.array([6.0])).declared_area.tolist()
             [6.0]
@@ -208,7 +208,7 @@ class Objects:
             score_map: float ``(N, H, W)`` per-pixel score.
             threshold: the operating threshold on the scores.
 
-        Example:
+        Examples:
             >>> lab = np.zeros((1, 4, 4), int); lab[0, :2, :2] = 7; lab[0, 3, 3] = 2
             >>> o = Objects.from_labels(lab, np.arange(16.0).reshape(1, 4, 4))
             >>> o.area.tolist(), o.score.tolist()
@@ -244,7 +244,7 @@ class Objects:
         (ascending) into a stack of ``shape`` ``(N, H, W)``, their positive ids ``local``
         (per plane; need not be consecutive) and their scores ``values``.
 
-        Example:
+        Examples:
             >>> o = Objects.from_label_pixels(np.array([7, 7, 2]), np.array([0, 1, 15]),
             ...                               np.array([1.0, 3.0, 2.0]), (1, 4, 4))
             >>> o.area.tolist(), o.score.tolist()
@@ -286,7 +286,7 @@ class Objects:
             threshold: the operating threshold on the scores (``None``: every object counts).
             classes: ``(M,)`` class names (default: class-agnostic).
 
-        Example:
+        Examples:
             >>> m = np.zeros((2, 4, 4), bool); m[0, :2, :2] = True; m[1, 1:3, 1:3] = True
             >>> o = Objects.from_masks(m, [0.9, 0.4])  # the two masks overlap
             >>> o.area.tolist(), o.box[1].tolist()
@@ -321,7 +321,7 @@ class Objects:
         """Objects from the flat pixel indices (``row * W + col``) of each object's mask in
         its plane: :meth:`from_masks` without dense masks (e.g. decoded run lengths).
 
-        Example:
+        Examples:
             >>> o = Objects.from_pixel_lists([np.array([0, 1, 5])], np.array([1.0]), shape=(4, 4))
             >>> o.area.tolist(), o.box.tolist()
             ([3], [[0.0, 0.0, 2.0, 2.0]])
@@ -361,7 +361,7 @@ class Objects:
         ``pixels[i]`` (flat index in its plane) belongs to object ``owner[i]`` (objects in
         order: ``owner`` non-decreasing).
 
-        Example:
+        Examples:
             >>> o = Objects.from_pixels(np.array([0, 0, 1]), np.array([0, 1, 9]),
             ...                         np.array([0.5, 0.7]), shape=(4, 4))
             >>> o.area.tolist(), o.centroid.tolist()
@@ -414,7 +414,7 @@ class Objects:
             shape: ``(H, W)`` of the planes.
             plane, planes, threshold, classes: as in :meth:`from_masks`.
 
-        Example:
+        Examples:
             >>> o = Objects.from_boxes([np.array([[10, 20, 30, 40.]])], [np.array([0.8])],
             ...                        shape=(64, 64), box_format="xyxy")
             >>> o.box.tolist(), o.centroid.tolist()
@@ -475,7 +475,7 @@ class Objects:
                 estimation score.
             plane, planes, threshold, classes: as in :meth:`from_masks`.
 
-        Example:
+        Examples:
             >>> o = Objects.from_points(np.array([[5.0, 7.0]]), np.array([2.5]), shape=(16, 16))
             >>> o.centroid.tolist(), o.box.tolist(), o.geometry
             ([[5.0, 7.0]], [[5.5, 7.5, 5.5, 7.5]], 'point')
@@ -528,7 +528,7 @@ class Objects:
         ``(M, 4)`` xyxy, ``scores`` ``(M,)``, optional ``masks`` ``(M, 1, H, W)``
         (probabilities, cut at ``mask_threshold``) and ``labels`` (class ids, kept as names).
 
-        Example:
+        Examples:
             >>> out = [{"boxes": torch.tensor([[1.0, 2, 5, 6]]), "scores": torch.tensor([0.7])}]
             >>> Objects.from_torchvision(out, shape=(8, 8)).box.tolist()
             [[2.0, 1.0, 6.0, 5.0]]

@@ -45,7 +45,7 @@ class ObjectRules:
             detector's design mask; a lower floor adds weaker candidates so that precision /
             FROC curves extend beyond the design operating point.
 
-    Example:
+    Examples:
         >>> ObjectRules(closing=1, min_area=4).closing
         1
     """

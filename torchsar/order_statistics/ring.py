@@ -54,7 +54,7 @@ def ring_order_statistic(
     Returns:
         Tensor like ``x``: the ``k``-th smallest ring value (an element of ``x``).
 
-    Example:
+    Examples:
         >>> x = torch.arange(49.0).reshape(1, 1, 7, 7)
         >>> k = torch.full((1, 1, 7, 7), 16)  # the largest of the 16 cells of the 5x5 ring
         >>> ring_order_statistic(x, Ring(1, 1), k)[0, 0, 3, 3].item()

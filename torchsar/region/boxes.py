@@ -27,7 +27,7 @@ def _widen(
 def index_box(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Box:
     """The box of non-empty flat (row-major) indices ``idx`` of an image of ``shape``.
 
-    Example:
+    Examples:
         >>> index_box(np.array([5, 6]), (4, 4), 1)
         (0, 3, 0, 4)
     """
@@ -42,7 +42,7 @@ def index_box(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Box:
 def mask_box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
     """The box of the set pixels of a bool ``(H, W)`` mask, as slices; None when none is set.
 
-    Example:
+    Examples:
         >>> m = np.zeros((5, 5), bool); m[2, 3] = True
         >>> mask_box(m, 1)
         (slice(1, 4, None), slice(2, 5, None))

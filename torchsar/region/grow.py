@@ -196,7 +196,7 @@ def grow(
     Returns:
         int64 flat indices of the region, the seed first.
 
-    Example:
+    Examples:
         >>> g = Grid.new(np.array([[9.0, 8.0], [1.0, 8.5]]))
         >>> grow(g, 0, 1, tau=0.3, n_init=2).tolist()
         [0, 1, 3]

@@ -50,7 +50,7 @@ class Crop:
 def crop_around(idx: np.ndarray, shape: tuple[int, int], margin: int) -> Crop:
     """The bounding box of flat indices ``idx`` widened by ``margin``, clipped to ``shape``.
 
-    Example:
+    Examples:
         >>> c = crop_around(np.array([5]), (4, 4), 1)
         >>> (c.r0, c.r1, c.c0, c.c1), c.region.sum().item()
         ((0, 3, 0, 3), 1)
@@ -87,7 +87,7 @@ def _box_any(s: np.ndarray, pad: int, radius: int, shape: tuple[int, int]) -> np
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     """Dilate a bool ``(h, w)`` mask by a ``(2 radius + 1)^2`` square (outside = False).
 
-    Example:
+    Examples:
         >>> m = np.zeros((5, 5), dtype=bool); m[2, 2] = True
         >>> int(dilate(m, 1).sum())
         9
@@ -99,7 +99,7 @@ def ring_masks(region: np.ndarray, guard: int, background: int) -> tuple[np.ndar
     """Guard area K (region dilated by ``guard``, region included) and background ring C
     (K dilated by ``background``, minus K) — seed steps e and f.
 
-    Example:
+    Examples:
         >>> t = np.zeros((9, 9), dtype=bool); t[4, 4] = True
         >>> k, c = ring_masks(t, 1, 2)
         >>> int(k.sum()), int(c.sum())
@@ -117,7 +117,7 @@ def mean_std(v: np.ndarray) -> tuple[float, float]:
     """``(v.mean(), v.std())`` of a non-empty 1-D float64 array, computed as numpy computes
     them (the same pairwise sums and divisions, so equal to the bit) with one shared sum.
 
-    Example:
+    Examples:
         >>> mean_std(np.array([1.0, 2.0, 4.0, 5.0]))
         (3.0, 1.5811388300841898)
     """

@@ -127,7 +127,7 @@ def region_search(
     Takes the same keyword options as :func:`region_cfar` (typed by
     :class:`~torchsar.region.params.RegionOptions`).
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10:18, 10:18] = 10.0
         >>> x[0, 0, ::2, ::2] += 0.1  # mild clutter texture: grown into one flat region
         >>> r = region_search(x, despeckle=None)
@@ -293,7 +293,7 @@ def region_cfar(
         hedef tespit yöntemi" (A region based target detection method for SAR images),
         IEEE 19th Signal Processing and Communications Applications Conference (SIU), 2011.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 32, 32); x[0, 0, 10:18, 10:18] = 10.0
         >>> x[0, 0, ::2, ::2] += 0.1  # mild clutter texture: grown into one flat region
         >>> d = region_cfar(x, despeckle=None)

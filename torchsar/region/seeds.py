@@ -23,7 +23,7 @@ def local_maxima(f: Tensor, window: int = 5) -> Tensor:
     Returns:
         bool ``(B, C, H, W)``.
 
-    Example:
+    Examples:
         >>> f = torch.tensor([[[[0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 3.0]]]])
         >>> local_maxima(f)[0, 0, 0].nonzero().flatten().tolist()
         [1, 6]
@@ -52,7 +52,7 @@ def seed_order(f: Tensor, seeds: Tensor) -> np.ndarray:
     Returns:
         int64 numpy array of flat (row-major) indices.
 
-    Example:
+    Examples:
         >>> f = torch.tensor([[1.0, 3.0], [3.0, 2.0]])
         >>> seed_order(f, f > 1).tolist()
         [1, 2, 3]

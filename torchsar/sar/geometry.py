@@ -73,7 +73,7 @@ class SpotlightGeometry:
         track: the platform track (exact near-field ranges, movers); ``None`` for the
             far-field polar raster.
 
-    Example:
+    Examples:
         >>> geo = SpotlightGeometry.for_image((32, 32), pixel=1.0)
         >>> round(geo.range_resolution, 6), round(geo.cross_range_resolution, 6)
         (1.0, 1.0)

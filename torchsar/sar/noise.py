@@ -51,7 +51,7 @@ def add_noise(
         InputTypeError, ShapeError: ``g`` is not complex ``(B, M, K)``; OptionError: bad
         ``snr_db``, ``std`` or ``seed``.
 
-    Example:
+    Examples:
         >>> g = torch.ones(2, 8, 8, dtype=torch.complex64)
         >>> add_noise(g, snr_db=20.0, seed=0).shape
         torch.Size([2, 8, 8])
@@ -99,7 +99,7 @@ def image_noise_std(geometry: SpotlightGeometry, snr_db: float, *, window: str =
     Raises:
         OptionError: ``snr_db`` not a finite number, or an unknown ``window``.
 
-    Example:
+    Examples:
         >>> geo = SpotlightGeometry.for_image((64, 64))
         >>> round(image_noise_std(geo, 20.0, window="none"), 3)  # sqrt(64 * 64) / 10
         6.4

@@ -130,7 +130,7 @@ def simulate_phase_history(
         doi:10.1007/978-1-4613-1333-5, ch. 2 (deramp, residual video phase, deskew);
         Önhon & Çetin, SIU 2009, doi:10.1109/SIU.2009.5136449.
 
-    Example:
+    Examples:
         >>> geo = SpotlightGeometry.for_image((4, 4))
         >>> g = simulate_phase_history(torch.zeros(2, 1, 2), geo)
         >>> g.shape, bool(torch.allclose(g, torch.ones_like(g)))
@@ -190,7 +190,7 @@ def phase_history(scene: Tensor, geometry: SpotlightGeometry, *, rvp: bool = Fal
     Shape:
         ``(B, 1, H, W) -> (B, M, K)``.
 
-    Example:
+    Examples:
         >>> geo = SpotlightGeometry.for_image((8, 8))
         >>> f = torch.zeros(1, 1, 8, 8, dtype=torch.complex64); f[0, 0, 4, 4] = 1
         >>> g = phase_history(f, geo)

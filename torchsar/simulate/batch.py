@@ -38,7 +38,7 @@ class SimBatch:
             Each ``targets`` entry holds ``scr_db``, the target's known signal-to-clutter
             ratio (mean clean intensity over its pixels / clutter mean at its centre, dB).
 
-    Example:
+    Examples:
         >>> from torchsar.simulate import chips
         >>> b = chips(2, size=64, length_px=(16, 24))
         >>> len(b), b[1]["image"].shape, b[1]["meta"]["classes"]

@@ -153,7 +153,7 @@ def chips(
         Ross, T. D. et al. (1998). Standard SAR ATR evaluation experiments using the MSTAR
         public release data set. Proc. SPIE 3370. DOI: 10.1117/12.321859
 
-    Example:
+    Examples:
         >>> b = chips(3, size=96, length_px=(20, 40), seed=1)
         >>> b.image.shape, b.instances.max().item()
         (torch.Size([3, 1, 96, 96]), 1)

@@ -241,7 +241,7 @@ def clutter(
             that is not available.
         InputTypeError: unsupported dtype.
 
-    Example:
+    Examples:
         >>> x = clutter((2, 1, 64, 64), model="gamma", looks=4.0, seed=1)
         >>> x.shape, x.dtype
         (torch.Size([2, 1, 64, 64]), torch.float32)

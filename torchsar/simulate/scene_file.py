@@ -56,7 +56,7 @@ def scene_lonlat(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.nda
     """The smooth ground mapping the tie points sample: ~10 m pixels, rotated, with a
     slight quadratic stretch along columns (so bilinear interpolation is not exact).
 
-    Example:
+    Examples:
         >>> [round(float(v), 6) for v in scene_lonlat(np.array(0.0), np.array(0.0))]
         [4.0, 52.0]
     """
@@ -176,7 +176,7 @@ def write_scene_file(
     Raises:
         OptionError: a bad shape, tile, level, pool or target count.
 
-    Example:
+    Examples:
         >>> import tempfile
         >>> out = write_scene_file(tempfile.mkdtemp() + "/s.tif", shape=(600, 500),
         ...                        tile=256, n_targets=5, seed=1, pool=2)

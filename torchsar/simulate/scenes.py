@@ -279,7 +279,7 @@ def scenes(
         OptionError: invalid count, size, model, looks, shape_param, ranges, flags, seed or
             device (e.g. ``"cuda"`` on a machine without a GPU).
 
-    Example:
+    Examples:
         >>> b = scenes(1, size=256, n_targets=(5, 8), building_px=(30, 60))
         >>> b.image.shape, 1 <= int(b.instances.max()) <= 8
         (torch.Size([1, 1, 256, 256]), True)

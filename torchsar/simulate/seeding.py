@@ -45,7 +45,7 @@ def image_seed(seed: int, index: int) -> int:
     Raises:
         OptionError: ``seed`` or ``index`` is not a non-negative int (or seed >= 2**63).
 
-    Example:
+    Examples:
         >>> image_seed(7, 0)
         7
         >>> image_seed(7, 1) == image_seed(7, 1) != image_seed(7, 2)

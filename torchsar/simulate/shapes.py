@@ -84,7 +84,7 @@ def sweep_down(mask: Tensor, length: int) -> Tensor:
     Returns:
         bool ``(h, w)``.
 
-    Example:
+    Examples:
         >>> m = torch.zeros(5, 1, dtype=torch.bool); m[1] = True
         >>> sweep_down(m, 2).flatten().tolist()
         [False, True, True, True, False]

@@ -60,7 +60,7 @@ def frost(
         images and its application to adaptive digital filtering of multiplicative noise",
         IEEE TPAMI 4(2), 1982, doi:10.1109/TPAMI.1982.4767223.
 
-    Example:
+    Examples:
         >>> x = torch.full((1, 1, 8, 8), 5.0)
         >>> frost(x, window=3).unique().tolist()
         [5.0]
@@ -108,7 +108,7 @@ def enhanced_frost(
         A. Lopes, R. Touzi, E. Nezry, "Adaptive speckle filters and scene heterogeneity",
         IEEE TGRS 28(6), 1990, doi:10.1109/36.62623.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 9, 9); x[0, 0, 4, 4] = 100.0
         >>> enhanced_frost(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0

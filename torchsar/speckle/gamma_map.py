@@ -65,7 +65,7 @@ def gamma_map(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool
         first order texture models in SAR images", IGARSS 1990,
         doi:10.1109/IGARSS.1990.688742.
 
-    Example:
+    Examples:
         >>> x = torch.full((1, 1, 8, 8), 2.0)
         >>> gamma_map(x, window=3).unique().tolist()
         [2.0]

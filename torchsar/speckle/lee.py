@@ -62,7 +62,7 @@ def lee(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = Fal
         J.-S. Lee, "Digital image enhancement and noise filtering by use of local
         statistics", IEEE TPAMI 2(2), 1980, doi:10.1109/TPAMI.1980.4766994.
 
-    Example:
+    Examples:
         >>> x = torch.full((1, 1, 8, 8), 3.0)
         >>> lee(x, window=3).unique().tolist()
         [3.0]
@@ -95,7 +95,7 @@ def kuan(x: Tensor, *, window: int = 5, looks: float = 1.0, amplitude: bool = Fa
         for images with signal-dependent noise", IEEE TPAMI 7(2), 1985,
         doi:10.1109/TPAMI.1985.4767641.
 
-    Example:
+    Examples:
         >>> x = torch.zeros(1, 1, 8, 8)
         >>> kuan(x, window=3).abs().max().item()
         0.0
@@ -137,7 +137,7 @@ def enhanced_lee(
         A. Lopes, R. Touzi, E. Nezry, "Adaptive speckle filters and scene heterogeneity",
         IEEE TGRS 28(6), 1990, doi:10.1109/36.62623.
 
-    Example:
+    Examples:
         >>> x = torch.ones(1, 1, 9, 9); x[0, 0, 4, 4] = 100.0
         >>> enhanced_lee(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0

@@ -38,7 +38,7 @@ class _SpeckleFilter(nn.Module):
 class Lee(_SpeckleFilter):
     """Module form of :func:`~torchsar.speckle.lee`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> Lee(window=3)(torch.ones(1, 1, 5, 5)).shape
         torch.Size([1, 1, 5, 5])

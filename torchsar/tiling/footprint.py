@@ -120,7 +120,7 @@ def operator(name: str, **options: object) -> Operator:
     Raises:
         OptionError: unknown name or option, a bad ``guard`` / ``train`` / ``window``.
 
-    Example:
+    Examples:
         >>> op = operator("ca", guard=2, train=3)
         >>> op.reach, op.min_side, op.outputs
         (5, 11, ('mask', 'statistic'))

@@ -116,7 +116,7 @@ class SeamMerger:
             local labels 1..n (0 background), "aggregates": nine per-component arrays}``,
             numpy arrays and ints only.
 
-        Example:
+        Examples:
             >>> m = SeamMerger((2, 4))
             >>> t = Tile((0, 0), (slice(0, 2), slice(0, 4)), (slice(0, 2), slice(0, 4)))
             >>> rec = m.summarise(t, np.array([[1, 0, 0, 1], [1, 0, 0, 0]], bool), np.ones((2, 4)))
@@ -256,7 +256,7 @@ def components_table(mask: np.ndarray, score: np.ndarray, connectivity: int = 2)
     """The object table of a whole in-memory mask (one tile covering the image): the same
     rows :class:`SeamMerger` gives for any tiling of it.
 
-    Example:
+    Examples:
         >>> m = np.array([[1, 1, 0], [0, 0, 1]], bool)
         >>> s = np.array([[2.0, 5.0, 0.0], [0.0, 0.0, 3.0]])
         >>> t = components_table(m, s)

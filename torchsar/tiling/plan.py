@@ -85,7 +85,7 @@ def plan_tiles(
         OptionError: ``tile`` or ``halo`` not an int, ``tile < 1`` or ``halo < 0``.
         WindowSizeError: the scene is smaller than ``min_side`` (and not empty).
 
-    Example:
+    Examples:
         >>> [(t.core[1], t.window[1]) for t in plan_tiles((4, 10), (4, 4), 2)]
         [(slice(0, 4, None), slice(0, 6, None)), (slice(4, 8, None), slice(2, 10, None)), \
 (slice(8, 10, None), slice(6, 10, None))]

@@ -94,7 +94,7 @@ def prepare(scene: object, op: Operator, *, tile: int | tuple[int, int] = DEFAUL
     the clutter mean; other operators unchanged), so that tiles run separately
     (:func:`iter_tiles` with ``only``, other processes) share them.
 
-    Example:
+    Examples:
         >>> x = np.ones((40, 40), np.float32)
         >>> op = prepare(x, operator("ac", guard=1, train=2), tile=16)
         >>> round(op.options["clutter_mean"], 4)  # the mean, corrected for censoring

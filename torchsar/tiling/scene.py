@@ -130,7 +130,7 @@ def run_scene(
     ``150 * ((tile + 2 halo)^2 + (tile + 4 halo)^2)`` bytes per tile
     (:mod:`torchsar.tiling.region`); plus the outputs unless ``out`` holds them.
 
-    Example:
+    Examples:
         >>> x = np.random.default_rng(0).exponential(size=(40, 50)).astype(np.float32)
         >>> x[20, 25] = 300.0
         >>> r = run_scene(x, "ca", tile=16, guard=1, train=2)
@@ -217,7 +217,7 @@ def scene_objects(
         OptionError: a speckle filter (no mask), bad options; and the errors of
             :func:`run_scene`.
 
-    Example:
+    Examples:
         >>> x = np.random.default_rng(0).exponential(size=(40, 50)).astype(np.float32)
         >>> x[15, 15] = x[16, 16] = 500.0  # touching diagonally across a tile corner
         >>> t = scene_objects(x, "ca", tile=16, guard=1, train=2, pfa=1e-6)

@@ -118,7 +118,7 @@ def as_scene(scene: object, name: str = "scene") -> Scene:
             non-numeric dtype, or a tensor that requires grad.
         ShapeError: not 2-D.
 
-    Example:
+    Examples:
         >>> s = as_scene(np.ones((4, 6), np.uint8))
         >>> s.shape, s.dtype, s.read(slice(1, 3), slice(0, 2)).tolist()
         ((4, 6), dtype('float32'), [[1.0, 1.0], [1.0, 1.0]])

@@ -109,7 +109,7 @@ def detection_table(
     Raises:
         OptionError: ``objects`` lacks a column, a bad ``pixel_spacing`` or ``scene_id``.
 
-    Example:
+    Examples:
         >>> from torchsar.tiling import components_table
         >>> m = np.zeros((6, 8), bool); m[1:3, 2:6] = True
         >>> t = detection_table(components_table(m, m * 2.0), "s1", pixel_spacing=(10, 5))

@@ -23,7 +23,7 @@ def db_display(img: torch.Tensor | np.ndarray) -> np.ndarray:
     black pixels, a masked border) neither stretch the range to -120 dB and wash the
     image out nor take part in it (they show black).
 
-    Example:
+    Examples:
         >>> x = np.r_[np.zeros(50), np.geomspace(1e-3, 1, 950)]
         >>> d = db_display(x)
         >>> float(d[:50].max()), float(np.median(d[50:])) > 0.3

@@ -59,7 +59,7 @@ def parse_options(items: list[str]) -> dict:
     """``["guard=3", "pfa=1e-6", "preset=paper"]`` -> ``{"guard": 3, "pfa": 1e-06, "preset":
     "paper"}`` (Python literals where they parse, else strings).
 
-    Example:
+    Examples:
         >>> parse_options(["guard=3", "preset=paper"])
         {'guard': 3, 'preset': 'paper'}
     """

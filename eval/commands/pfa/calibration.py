@@ -78,7 +78,7 @@ PFA_COLUMNS = [
 def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     """Clopper-Pearson (exact) interval of a binomial rate ``k / n``.
 
-    Example:
+    Examples:
         >>> lo, hi = binomial_interval(10, 10_000)
         >>> round(lo, 5), round(hi, 5)
         (0.00048, 0.00184)

@@ -34,7 +34,7 @@ def detector_refs(text: str) -> list[tuple[str | None, str]]:
     """``(name, reference)`` of each comma-separated ``--detectors`` item: a built-in or
     registered name, ``package.module:name``, or ``NAME=REFERENCE`` to name the row.
 
-    Example:
+    Examples:
         >>> detector_refs("ca, mine=pkg.mod:Det, pkg.mod:fn")
         [(None, 'ca'), ('mine', 'pkg.mod:Det'), (None, 'pkg.mod:fn')]
     """
@@ -124,7 +124,7 @@ def parse_sweep(items: list[str]) -> dict[str, list]:
     """``--sweep KEY=V1,V2`` items as ``{KEY: [V1, V2]}`` (values as Python literals where
     they parse, else strings).
 
-    Example:
+    Examples:
         >>> parse_sweep(["pfa=1e-3,1e-4", "train=4,8"])
         {'pfa': [0.001, 0.0001], 'train': [4, 8]}
     """
