@@ -359,7 +359,8 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     from torchsar_eval.report import LazyTables, per_image_rows, result_tables, write_run
     from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
-    check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
+    if out is not None:  # a temporary folder is never resumed: nothing to record
+        check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
     results, stats, windows, overlays = {}, {}, {}, {}
     labels = file_slugs(datasets, slug)  # unique file names even for same-named folders
     for name, ds in datasets.items():
