@@ -8,11 +8,16 @@ filters, the scoring defaults); the tests check that they stay equal.
 
 from __future__ import annotations
 
+import ast
+import importlib.util
+from pathlib import Path
+
 __all__ = [
     "AUTOFOCUS_DEFAULTS",
     "AUTOFOCUS_ERRORS",
     "AUTOFOCUS_METHODS",
     "BUILTIN_DETECTORS",
+    "BUILTIN_ORDER",
     "DATASET_SCHEMES",
     "DEFAULT_AUTOFOCUS_METHODS",
     "DEFAULT_CLOSING",
@@ -26,21 +31,29 @@ __all__ = [
     "detector_names",
 ]
 
-BUILTIN_DETECTORS = (
-    "ca",
-    "two_parameter",
-    "go",
-    "so",
-    "os",
-    "vi",
-    "ac",
-    "lognormal",
-    "weibull",
-    "gamma",
-    "k",
-    "g0",
-    "region",
-)
+
+def _declared() -> dict[str, int]:
+    """The built-in detectors' names and orders as their modules declare them (each
+    module's ``SPEC = DetectorSpec(name=..., order=...)``, read from the source: no import
+    of torch), in order."""
+    root = Path(importlib.util.find_spec("torchsar").origin).parent
+    found: dict[str, int] = {}
+    for package in ("cfar", "region"):
+        for path in sorted((root / package).glob("*.py")):
+            text = path.read_text()
+            at = text.find("\nSPEC = DetectorSpec(")
+            if at < 0:
+                continue
+            end = text.find(")\n", at)
+            call = ast.parse(text[at + 1 : end + 1]).body[0].value  # the statement only
+            kw = {k.arg: k.value for k in call.keywords}
+            found[ast.literal_eval(kw["name"])] = ast.literal_eval(kw["order"])
+    return dict(sorted(found.items(), key=lambda item: item[1]))
+
+
+BUILTIN_ORDER = _declared()
+"""Each built-in detector's position in the default run (and colour slot)."""
+BUILTIN_DETECTORS = tuple(BUILTIN_ORDER)
 """The built-in detectors, in the registry's order (``torchsar_eval.registry.BUILTIN``)."""
 
 DATASET_SCHEMES = (

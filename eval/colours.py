@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import hashlib
 
+from torchsar_eval.choices import BUILTIN_ORDER
+
 __all__ = ["PALETTE", "detector_colour", "detector_dash"]
 
 PALETTE = [
@@ -34,21 +36,7 @@ PALETTE = [
 """Twenty colours readable on white (hex): the first 13 are the built-ins', the rest
 (with ``"region-paper"``'s, the region CFAR's colour dashed) go to other names."""
 
-_BUILTIN = {
-    "ca": 0,
-    "two_parameter": 1,
-    "go": 2,
-    "so": 3,
-    "os": 4,
-    "vi": 5,
-    "ac": 6,
-    "lognormal": 7,
-    "weibull": 8,
-    "gamma": 9,
-    "k": 10,
-    "g0": 11,
-    "region": 12,
-}
+_BUILTIN = BUILTIN_ORDER  # each built-in's slot, declared in its module
 _SAME_AS = {"region-paper": "region"}  # the published preset of compare-region
 _OTHERS = PALETTE[len(_BUILTIN) :]
 _DASHES = ["--", "-.", ":"]

@@ -22,12 +22,12 @@ import importlib
 import inspect
 import os
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import replace
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-import torchsar as ts
+from torchsar.catalog import builtin_specs
 from torchsar_eval.detector import Detector, as_detector, split_options
 from torchsar_eval.errors import EvalError
 
@@ -35,31 +35,8 @@ __all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "available", "load", "registered"]
 
 ENTRY_POINT_GROUP = "torchsar.detectors"
 
-WINDOW = {"guard": 2, "train": 4, "pfa": 1e-3}
-LOOKS = {**WINDOW, "looks": 1.0}
-
-
-def _builtin(name: str, fn: Callable, options: Mapping[str, Any]) -> Detector:
-    return Detector(name, fn, dict(options), ref=name)
-
-
 BUILTIN: dict[str, Detector] = {
-    d.name: d
-    for d in [
-        _builtin("ca", ts.cfar.ca, WINDOW),
-        _builtin("two_parameter", ts.cfar.two_parameter, WINDOW),
-        _builtin("go", ts.cfar.go, WINDOW),
-        _builtin("so", ts.cfar.so, WINDOW),
-        _builtin("os", ts.cfar.os, {**WINDOW, "rank": None}),
-        _builtin("vi", ts.cfar.vi, {**WINDOW, "k_vi": 4.76, "k_mr": 1.806}),
-        _builtin("ac", ts.cfar.ac, {**WINDOW, "censor_pfa": None, "iterations": 3}),
-        _builtin("lognormal", ts.cfar.lognormal, WINDOW),
-        _builtin("weibull", ts.cfar.weibull, WINDOW),
-        _builtin("gamma", ts.cfar.gamma, LOOKS),
-        _builtin("k", ts.cfar.k, LOOKS),
-        _builtin("g0", ts.cfar.g0, LOOKS),
-        _builtin("region", ts.region.region_cfar, {}),
-    ]
+    s.name: Detector(s.name, s.detect, dict(s.options), ref=s.name) for s in builtin_specs()
 }
 """The built-in detectors with their default options (the ``run`` command's default set)."""
 

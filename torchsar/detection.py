@@ -1,15 +1,21 @@
 """The detector output type: the contract of every CFAR variant, the region-growing detector
 and the moving-target pipeline (re-exported as ``torchsar.cfar.Detection`` and
-``torchsar.cfar.detection_from``)."""
+``torchsar.cfar.detection_from``); and :class:`DetectorSpec`, what a built-in detector's
+module declares about itself (every registry is built from these declarations)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 from torch import Tensor
 
-__all__ = ["Detection", "detection_from"]
+__all__ = ["WINDOW", "Detection", "DetectorSpec", "detection_from"]
+
+WINDOW: Mapping[str, Any] = {"guard": 2, "train": 4, "pfa": 1e-3}
+"""The default window and false-alarm rate the evaluator records for the window CFARs."""
 
 
 @dataclass(frozen=True)
@@ -46,3 +52,31 @@ def detection_from(
     """
     thr = torch.as_tensor(threshold, dtype=statistic.dtype, device=statistic.device)
     return Detection(mask=statistic > thr, statistic=statistic, threshold=thr, labels=labels)
+
+
+@dataclass(frozen=True)
+class DetectorSpec:
+    """A built-in detector as its module declares it (the module's ``SPEC``): the one place
+    that names it. The evaluator's registry, the CFAR design thresholds, the command line's
+    choices and the report's colours are all read from these declarations.
+
+    Attributes:
+        name: its name in the tables and on the command line (``"ca"``).
+        detect: the detector ``detect(images, **options) -> Detection``.
+        order: its position in the default run, which is also its colour in the report's
+            palette (distinct for every built-in).
+        options: the options the evaluator records (and passes) by default.
+        threshold: its design threshold from its options (``threshold(**options) ->
+            float``), for the CFARs; ``None`` for a detector without one.
+
+    Examples:
+        >>> spec = DetectorSpec("mine", lambda x: None, order=99)
+        >>> spec.name, dict(spec.options), spec.threshold
+        ('mine', {}, None)
+    """
+
+    name: str
+    detect: Callable[..., Detection]
+    order: int
+    options: Mapping[str, Any] = field(default_factory=dict)
+    threshold: Callable[..., float] | None = None

@@ -12,7 +12,7 @@ from torchsar._checks import check_int, check_positive, check_probability
 from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
 from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import ca_factor
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 
 __all__ = ["ac", "ac_threshold", "global_censor_threshold"]
 
@@ -143,3 +143,13 @@ def global_censor_threshold(
 def _masked_mean(x: Tensor, m: Tensor) -> Tensor:
     num = (x * m).sum(dim=(-2, -1), keepdim=True)
     return num / m.sum(dim=(-2, -1), keepdim=True).clamp_min(1)
+
+
+SPEC = DetectorSpec(
+    name="ac",
+    detect=ac,
+    order=6,
+    options={**WINDOW, "censor_pfa": None, "iterations": 3},
+    threshold=ac_threshold,
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

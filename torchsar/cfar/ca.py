@@ -21,7 +21,7 @@ from torchsar.cfar.core import (
     rescale_frame_,
 )
 from torchsar.cfar.thresholds import ca_factor
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
@@ -122,3 +122,7 @@ def ca_threshold(*, guard: int, train: int, pfa: float, looks: float) -> float:
     """The design threshold ``alpha(N)`` of :func:`ca` for these options (no image needed)."""
     n = Ring(guard, train).n
     return ca_factor(n, check_probability(pfa, "pfa"), check_positive(looks, "looks"))
+
+
+SPEC = DetectorSpec(name="ca", detect=ca, order=0, options=WINDOW, threshold=ca_threshold)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -13,39 +13,23 @@ import inspect
 from collections.abc import Callable
 from typing import Any
 
-from torchsar.cfar.ac import ac, ac_threshold
-from torchsar.cfar.ca import ca, ca_threshold
-from torchsar.cfar.distribution import distribution_threshold
-from torchsar.cfar.g0 import g0
-from torchsar.cfar.gamma import gamma
-from torchsar.cfar.go import go, go_threshold
-from torchsar.cfar.k import k
-from torchsar.cfar.lognormal import lognormal
-from torchsar.cfar.os_cfar import os, os_threshold
-from torchsar.cfar.so import so, so_threshold
-from torchsar.cfar.two_parameter import two_parameter, two_parameter_threshold
-from torchsar.cfar.vi import vi, vi_threshold
-from torchsar.cfar.weibull import weibull
+from torchsar.catalog import builtin_specs
 from torchsar.detection import Detection
 from torchsar.errors import OptionError
 
-__all__ = ["THRESHOLDS", "threshold"]
+__all__ = ["threshold"]  # and THRESHOLDS, built on first use (see __getattr__)
 
-THRESHOLDS: dict[Callable[..., Detection], Callable[..., float]] = {
-    ac: ac_threshold,
-    ca: ca_threshold,
-    g0: distribution_threshold,
-    gamma: distribution_threshold,
-    go: go_threshold,
-    k: distribution_threshold,
-    lognormal: distribution_threshold,
-    os: os_threshold,
-    so: so_threshold,
-    two_parameter: two_parameter_threshold,
-    vi: vi_threshold,
-    weibull: distribution_threshold,
-}
-"""Each CFAR detector and the function giving its design threshold from its options."""
+
+def __getattr__(name: str) -> Any:
+    if name == "THRESHOLDS":  # built on first use: the modules declare them
+        return _thresholds()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _thresholds() -> dict[Callable[..., Detection], Callable[..., float]]:
+    """Each CFAR detector and the function giving its design threshold from its options
+    (``THRESHOLDS``; from the detectors' own declarations, :mod:`torchsar.catalog`)."""
+    return {s.detect: s.threshold for s in builtin_specs() if s.threshold is not None}
 
 
 def threshold(detector: str | Callable[..., Detection], **options: Any) -> float:
@@ -76,16 +60,16 @@ def threshold(detector: str | Callable[..., Detection], **options: Any) -> float
         raise OptionError(f"{fn.__name__} has no option {', '.join(unknown)}; options: {allowed}")
     merged = {n: p.default for n, p in params.items() if p.default is not inspect.Parameter.empty}
     merged.update(options)
-    design = THRESHOLDS[fn]
+    design = _thresholds()[fn]
     wanted = inspect.signature(design).parameters
     return design(**{n: v for n, v in merged.items() if n in wanted})
 
 
 def _resolve(detector: str | Callable[..., Detection]) -> Callable[..., Detection]:
     """The detector function for a name or function; :class:`OptionError` if unknown."""
-    by_name = {fn.__name__: fn for fn in THRESHOLDS}
+    by_name = {fn.__name__: fn for fn in _thresholds()}
     fn = by_name.get(detector) if isinstance(detector, str) else detector
-    if fn not in THRESHOLDS:
+    if fn not in _thresholds():
         raise OptionError(
             f"detector must be one of {', '.join(sorted(by_name))} (or the function); "
             f"got {detector!r}"

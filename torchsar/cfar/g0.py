@@ -7,8 +7,8 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
-from torchsar.detection import Detection
+from torchsar.cfar.distribution import distribution_cfar, distribution_threshold, log_t_quantile
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums
 
 __all__ = ["g0"]
@@ -76,3 +76,13 @@ def g0(
 
 def _quantile(s: Sums, pfa: float, looks: float) -> Tensor:
     return log_t_quantile(s, pfa, "g0", looks)
+
+
+SPEC = DetectorSpec(
+    name="g0",
+    detect=g0,
+    order=11,
+    options={**WINDOW, "looks": 1.0},
+    threshold=distribution_threshold,
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

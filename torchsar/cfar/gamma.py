@@ -7,9 +7,9 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.distribution import distribution_cfar
+from torchsar.cfar.distribution import distribution_cfar, distribution_threshold
 from torchsar.cfar.thresholds import ca_factor, factor_map
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums
 
 __all__ = ["gamma"]
@@ -70,3 +70,13 @@ def gamma(
 def _quantile(s: Sums, pfa: float, looks: float) -> Tensor:
     alpha = factor_map(s.count.to(s.s1.dtype), partial(ca_factor, pfa=pfa, looks=looks))
     return s.mean() * alpha
+
+
+SPEC = DetectorSpec(
+    name="gamma",
+    detect=gamma,
+    order=9,
+    options={**WINDOW, "looks": 1.0},
+    threshold=distribution_threshold,
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from torch import Tensor
 
 from torchsar.cfar.blocks import block_cfar, block_threshold
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 
 __all__ = ["go", "go_threshold"]
 
@@ -63,3 +63,7 @@ def go(
 def go_threshold(*, guard: int, train: int, pfa: float) -> float:
     """The design threshold of :func:`go` for these options (no image needed)."""
     return block_threshold(guard, train, pfa, "max")
+
+
+SPEC = DetectorSpec(name="go", detect=go, order=2, options=WINDOW, threshold=go_threshold)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -7,8 +7,8 @@ from functools import partial
 from torch import Tensor
 
 from torchsar._checks import check_positive
-from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
-from torchsar.detection import Detection
+from torchsar.cfar.distribution import distribution_cfar, distribution_threshold, log_t_quantile
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums
 
 __all__ = ["k"]
@@ -74,3 +74,9 @@ def k(
 
 def _quantile(s: Sums, pfa: float, looks: float) -> Tensor:
     return log_t_quantile(s, pfa, "k", looks)
+
+
+SPEC = DetectorSpec(
+    name="k", detect=k, order=10, options={**WINDOW, "looks": 1.0}, threshold=distribution_threshold
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -6,9 +6,9 @@ from functools import partial
 
 from torch import Tensor
 
-from torchsar.cfar.distribution import distribution_cfar, log_cumulants
+from torchsar.cfar.distribution import distribution_cfar, distribution_threshold, log_cumulants
 from torchsar.cfar.thresholds import factor_map, student_factor
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums
 
 __all__ = ["lognormal"]
@@ -67,3 +67,9 @@ def _quantile(s: Sums, pfa: float) -> Tensor:
     m, v = log_cumulants(s)
     k = factor_map(s.count.to(m.dtype), partial(student_factor, pfa=pfa))
     return (m + v.sqrt() * k).exp()
+
+
+SPEC = DetectorSpec(
+    name="lognormal", detect=lognormal, order=7, options=WINDOW, threshold=distribution_threshold
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

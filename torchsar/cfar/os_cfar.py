@@ -11,7 +11,7 @@ from torch import Tensor
 from torchsar._checks import check_int, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, rescale_border_
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.errors import OptionError
 from torchsar.order_statistics import ring_order_statistic
 from torchsar.windows import Ring, Sums, region_count, windowed
@@ -104,3 +104,9 @@ def _ring_counts(x: Tensor, ring: Ring, vmask: Tensor | None) -> Tensor:
 
 def _factor(n: int, n_full: int, rank: int, pfa: float) -> float:
     return os_factor(n, os_rank(n, n_full, rank), pfa)
+
+
+SPEC = DetectorSpec(
+    name="os", detect=os, order=4, options={**WINDOW, "rank": None}, threshold=os_threshold
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from torch import Tensor
 
 from torchsar.cfar.blocks import block_cfar, block_threshold
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 
 __all__ = ["so", "so_threshold"]
 
@@ -63,3 +63,7 @@ def so(
 def so_threshold(*, guard: int, train: int, pfa: float) -> float:
     """The design threshold of :func:`so` for these options (no image needed)."""
     return block_threshold(guard, train, pfa, "min")
+
+
+SPEC = DetectorSpec(name="so", detect=so, order=3, options=WINDOW, threshold=so_threshold)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

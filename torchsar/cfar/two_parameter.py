@@ -8,7 +8,7 @@ from torch import Tensor
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_
 from torchsar.cfar.thresholds import gaussian_factor
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["two_parameter", "two_parameter_threshold"]
@@ -78,3 +78,13 @@ def two_parameter_threshold(*, guard: int, train: int, pfa: float, k: float | No
     if k is not None:
         return check_positive(k, "k", allow_zero=True)
     return gaussian_factor(check_probability(pfa, "pfa"))
+
+
+SPEC = DetectorSpec(
+    name="two_parameter",
+    detect=two_parameter,
+    order=1,
+    options=WINDOW,
+    threshold=two_parameter_threshold,
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

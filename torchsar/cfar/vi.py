@@ -21,7 +21,7 @@ from torchsar.cfar.core import (
     stack_planes,
 )
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
-from torchsar.detection import Detection
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums, pinwheel_rects, windowed
 
 __all__ = ["vi", "vi_threshold"]
@@ -241,3 +241,13 @@ def _rule_factor(key: tuple[int, ...], pfa: float) -> float:
     if rule == _CA_B:
         return ca_factor(nb, pfa)
     return block_factor(tuple(sorted((na, nb))), pfa, "max" if rule == _GO else "min")
+
+
+SPEC = DetectorSpec(
+    name="vi",
+    detect=vi,
+    order=5,
+    options={**WINDOW, "k_vi": 4.76, "k_mr": 1.806},
+    threshold=vi_threshold,
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

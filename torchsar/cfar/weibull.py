@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from torch import Tensor
 
-from torchsar.cfar.distribution import distribution_cfar, log_t_quantile
-from torchsar.detection import Detection
+from torchsar.cfar.distribution import distribution_cfar, distribution_threshold, log_t_quantile
+from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Sums
 
 __all__ = ["weibull"]
@@ -64,3 +64,9 @@ def weibull(
 
 def _quantile(s: Sums, pfa: float) -> Tensor:
     return log_t_quantile(s, pfa, "weibull", 1.0)
+
+
+SPEC = DetectorSpec(
+    name="weibull", detect=weibull, order=8, options=WINDOW, threshold=distribution_threshold
+)
+"""The registry entry of this detector (:class:`~torchsar.detection.DetectorSpec`)."""

@@ -14,7 +14,7 @@ from torch import Tensor
 
 from torchsar import _jit
 from torchsar._checks import all_finite, check_image, float_dtype
-from torchsar.detection import Detection
+from torchsar.detection import Detection, DetectorSpec
 from torchsar.errors import InputValueError, OptionError
 from torchsar.region.detector import detect_image
 from torchsar.region.params import Despeckle, RegionOptions, RegionParams, resolve_params
@@ -301,3 +301,8 @@ def region_cfar(
         (64, 1)
     """
     return region_search(x, preset=preset, **options).detection
+
+
+SPEC = DetectorSpec(name="region", detect=region_cfar, order=12)
+"""The registry entry of the region-growing CFAR (:class:`~torchsar.detection.DetectorSpec`):
+its preset's defaults, no recorded options."""
