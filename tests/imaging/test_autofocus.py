@@ -15,7 +15,7 @@ from torchsar.imaging import (
     uniform_phase_error,
 )
 from torchsar.imaging.fidelity import magnitude_correlation, phase_rmse
-from torchsar.simulate.seeding import image_seed
+from torchsar.seeding import image_seed
 
 
 class TestAcceptance:

@@ -13,7 +13,7 @@ from torchsar.imaging.phase_errors import (
     sinusoidal_phase_error,
     uniform_phase_error,
 )
-from torchsar.simulate.seeding import image_seed
+from torchsar.seeding import image_seed
 
 ONE_D = [uniform_phase_error, quadratic_phase_error, polynomial_phase_error, sinusoidal_phase_error]
 

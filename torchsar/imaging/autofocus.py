@@ -17,7 +17,7 @@ from torchsar.imaging._solver import State, solve
 from torchsar.imaging.lp import Problem, initial_state, resolve_operator, settings
 from torchsar.imaging.operators import LinearOperator
 from torchsar.imaging.result import SparseAutofocusResult
-from torchsar.simulate.seeding import check_seed, image_seed, make_generator
+from torchsar.seeding import check_seed, image_seed, make_generator
 
 __all__ = ["ERRORS", "sparse_autofocus"]
 
@@ -79,7 +79,7 @@ def sparse_autofocus(
             together with ``restarts``.
         restarts: extra random-phase restarts (best cost kept).
         seed: seed of the restarts' initial phases in ``[0, 2**63)``; item ``i`` draws them
-            from its own generator (:func:`~torchsar.simulate.seeding.image_seed`
+            from its own generator (:func:`~torchsar.seeding.image_seed`
             ``(seed, i)``), so its result does not depend on the batch size.
 
     Returns:

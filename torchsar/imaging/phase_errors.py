@@ -4,7 +4,7 @@ Convention: corrupted data ``g = exp(1j phi) * (C f)``; a 1-D error is ``(B, M)`
 a 2-D error ``(B, M, K)``. Every generator takes ``(batch, pulses[, samples])``, then its own
 keyword options, then the shared ``amplitude``, ``seed``, ``dtype`` and ``device``. Generators
 draw one independent error per batch item: item ``i``
-draws only from the generator seeded with :func:`~torchsar.simulate.seeding.image_seed`
+draws only from the generator seeded with :func:`~torchsar.seeding.image_seed`
 ``(seed, i)``, so an item's error does not depend on the batch size (``seed`` in
 ``[0, 2**63)``; the same seed gives the same errors).
 """
@@ -19,7 +19,7 @@ from torch import Tensor
 
 from torchsar._checks import all_finite, check_complex, check_int, check_positive
 from torchsar.errors import InputValueError, OptionError, ShapeError
-from torchsar.simulate.seeding import check_seed, image_seed, make_generator
+from torchsar.seeding import check_seed, image_seed, make_generator
 
 __all__ = [
     "apply_phase_error",

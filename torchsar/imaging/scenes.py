@@ -16,7 +16,7 @@ from torch import Tensor
 
 from torchsar._checks import check_device, check_int, check_positive
 from torchsar.errors import OptionError
-from torchsar.simulate.seeding import check_seed, image_seed, make_generator
+from torchsar.seeding import check_seed, image_seed, make_generator
 
 __all__ = ["point_scene", "speckled_scene"]
 

@@ -30,7 +30,7 @@ from torchsar.motion.pipeline import MoverReport, find_movers
 from torchsar.motion.shift import estimate_shift
 from torchsar.motion.streaks import look_interference, streak_level
 from torchsar.motion.subpatch import subpatch_centers, subpatch_images
-from torchsar.motion.subpatch_test import SubpatchResult, subpatch_movers
+from torchsar.motion.subpatch_movers import SubpatchResult, subpatch_movers
 from torchsar.motion.targets import (
     GHOST_MARGIN,
     GHOST_NOISE,

@@ -32,7 +32,7 @@ from torchsar.motion.peaks import intensity
 from torchsar.motion.selection import repack
 from torchsar.motion.streaks import look_interference
 from torchsar.motion.strips import background, strips
-from torchsar.motion.subpatch_test import subpatch_movers
+from torchsar.motion.subpatch_movers import subpatch_movers
 from torchsar.motion.targets import GHOST_NOISE, Targets, detect_targets, smear_ghosts
 from torchsar.motion.theory import wrap
 from torchsar.motion.verdict import Verdict, verdict
@@ -145,9 +145,10 @@ def find_movers(
        range; a radial (folded) mover when the range walk is significant and matches the
        bank's fold; a conflict when significant tests disagree. Velocity = inverse-variance
        mean of the two estimates.
-    5. With ``subpatch``, the subpatch test (:func:`~torchsar.motion.subpatch_test.subpatch_movers`)
-       is run and its decision attached to the nearest target (within 3 m); it is not part of
-       the verdict (it flags azimuth ambiguity, not motion).
+    5. With ``subpatch``, the subpatch test
+       (:func:`~torchsar.motion.subpatch_movers.subpatch_movers`) is run and its decision
+       attached to the nearest target (within 3 m); it is not part of the verdict (it
+       flags azimuth ambiguity, not motion).
 
     Args:
         phase_history: complex ``(B, M, K)`` deramped on the scene centre.

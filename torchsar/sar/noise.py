@@ -10,7 +10,7 @@ from torch import Tensor
 from torchsar._checks import check_choice, check_complex, check_positive
 from torchsar.errors import OptionError
 from torchsar.sar.geometry import SpotlightGeometry
-from torchsar.simulate.seeding import check_seed, image_seed, make_generator
+from torchsar.seeding import check_seed, image_seed, make_generator
 
 __all__ = ["add_noise", "image_noise_std"]
 

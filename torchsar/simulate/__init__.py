@@ -5,11 +5,11 @@ Complex reflectivity for phase-history experiments is :mod:`torchsar.imaging.sce
 phase histories themselves are :mod:`torchsar.sar`.
 """
 
+from torchsar.seeding import image_seed
 from torchsar.simulate.batch import SimBatch
 from torchsar.simulate.chips import chips
 from torchsar.simulate.clutter import CLUTTER_MODELS, DEFAULT_SHAPE_PARAM, clutter
 from torchsar.simulate.scenes import scenes
-from torchsar.simulate.seeding import image_seed
 
 __all__ = [
     "CLUTTER_MODELS",

@@ -10,9 +10,9 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_int, check_positive
+from torchsar.seeding import check_device, check_seed, image_seed, make_generator
 from torchsar.simulate.canvas import Canvas
 from torchsar.simulate.clutter import ClutterSpec, clutter_spec, sample_clutter
-from torchsar.simulate.seeding import check_device, check_seed, image_seed, make_generator
 
 __all__ = ["BatchOptions", "SimBatch", "build_batch", "speckle_canvas"]
 

@@ -10,9 +10,9 @@ import torch
 
 from torchsar._checks import check_int, check_positive, check_range
 from torchsar.errors import OptionError
+from torchsar.seeding import Draws
 from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
-from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import RotatedRect
 from torchsar.simulate.targets import place, random_heading, rasterise
 

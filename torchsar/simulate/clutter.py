@@ -64,7 +64,7 @@ from torch import Tensor
 
 from torchsar._checks import check_choice, check_int, check_positive
 from torchsar.errors import InputTypeError, OptionError
-from torchsar.simulate.seeding import check_device, check_seed, make_generator
+from torchsar.seeding import check_device, check_seed, make_generator
 
 __all__ = [
     "CLUTTER_MODELS",

@@ -11,7 +11,7 @@ import math
 import torch
 from torch import Tensor
 
-from torchsar.simulate.seeding import Draws
+from torchsar.seeding import Draws
 
 __all__ = ["MEAN_DB", "background", "edge_pixels"]
 

@@ -25,10 +25,10 @@ from torch import Tensor
 
 from torchsar._checks import check_int, check_range
 from torchsar.errors import OptionError
+from torchsar.seeding import Draws
 from torchsar.simulate.batch import BatchOptions, SimBatch, build_batch, speckle_canvas
 from torchsar.simulate.canvas import Canvas
 from torchsar.simulate.regions import background, edge_pixels
-from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import RotatedRect
 from torchsar.simulate.targets import place, random_heading, rasterise
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from torchsar.seeding import Draws
 from torchsar.simulate.canvas import Placed
-from torchsar.simulate.seeding import Draws
 from torchsar.simulate.shapes import Box, RotatedRect
 
 __all__ = ["Raster", "building_levels", "place", "random_heading", "rasterise", "vehicle_levels"]
