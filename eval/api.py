@@ -29,10 +29,11 @@ from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import observed_facts
 from torchsar_eval.html_report import DEFAULT_RANK, check_rank_by
-from torchsar_eval.output import claim, file_slugs, result_dir, write_config
+from torchsar_eval.names import file_slugs, slug
+from torchsar_eval.output import claim, result_dir, write_config
 from torchsar_eval.overlays import collect_overlays, overlay_indices, parse_overlay
-from torchsar_eval.plots import slug
 from torchsar_eval.result import Scoring
+from torchsar_eval.results import Results
 from torchsar_eval.resume import check_resumable, fingerprint
 from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
@@ -41,75 +42,6 @@ if TYPE_CHECKING:
     import pandas as pd  # the tables: imported once the scoring is done
 
 __all__ = ["Results", "evaluate"]
-
-
-def _table(name: str, doc: str) -> property:
-    return property(lambda self: self._tables[name], doc=doc)
-
-
-class Results:
-    """What :func:`evaluate` returns: the tables (pandas, the CSV files of a run folder),
-    the merged states and the run statistics. A table is built when it is first read (a
-    run that wants only ``summary`` pays for no other); a run folder holds them all.
-
-    Attributes:
-        summary: one row per dataset x detector (``summary.csv``).
-        froc, pr, pixel_roc, breakdown, timing, per_image: the other tables.
-        coco: ``pycocotools``' 12 stats (with ``Scoring(coco_compatible=True)``).
-        scr: Pd versus signal-to-clutter ratio per SCR bin, with Wilson intervals
-            (``scr.csv``).
-        errors: false alarms per type, misses per size and SCR bin (``errors.csv``).
-        paired: each detector against the dataset's best by F1, paired bootstrap
-            intervals of the differences (``paired.csv``).
-        states: ``{dataset: [DetectorResult]}`` merged states (pixel counts and ROC,
-            :class:`~torchsar.metrics.ObjectState`).
-        stats: per dataset: images, wall time, shards done / resumed / retried / failed.
-        out: the run folder (``None`` when nothing was written).
-        files: the files written into ``out``.
-        sweep: every setting a sweep tried on the calibration split, with its numbers
-            there and the one chosen (``sweep.csv``; empty without a sweep).
-    """
-
-    summary = _table("summary", "One row per dataset x detector (``summary.csv``).")
-    froc = _table("froc", "Pd against false alarms per image (``roc.csv``).")
-    pr = _table("pr", "Precision and recall at every detection score (``pr.csv``).")
-    pixel_roc = _table("pixel_roc", "The pixel ROC (``roc_pixel.csv``).")
-    breakdown = _table("breakdown", "Pd by size, SCR and class (``breakdown.csv``).")
-    timing = _table("timing", "Run time per detector (``timing.csv``).")
-    coco = _table("coco", "pycocotools' 12 stats (``coco.csv``).")
-    scr = _table("scr", "Pd versus SCR bin (``scr.csv``).")
-    errors = _table("errors", "False alarms per type, misses (``errors.csv``).")
-    paired = _table("paired", "Paired differences against the best (``paired.csv``).")
-
-    def __init__(
-        self,
-        tables: Mapping[str, pd.DataFrame],
-        *,
-        per_image: pd.DataFrame,
-        states: dict[str, list],
-        stats: dict[str, dict],
-        out: Path | None = None,
-        files: Iterable[str] = (),
-        sweep: pd.DataFrame | None = None,
-    ) -> None:
-        self._tables = tables
-        self.sweep = sweep_frame({}) if sweep is None else sweep
-        self.per_image = per_image
-        self.states = states
-        self.stats = stats
-        self.out = out
-        self.files = list(files)
-
-    def __repr__(self) -> str:
-        rows = [f"{d} / {r.detector.name}" for d, rs in self.states.items() for r in rs]
-        return f"Results({', '.join(rows)}; out={self.out})"
-
-    def row(self, dataset: str, detector: str) -> pd.Series:
-        """The summary row of one dataset and detector."""
-        sel = self.summary[(self.summary.dataset == dataset) & (self.summary.detector == detector)]
-        if sel.empty:
-            raise KeyError(f"no summary row for dataset {dataset!r} and detector {detector!r}")
-        return sel.iloc[0]
 
 
 @dataclass(frozen=True)
@@ -356,7 +288,8 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
     import pandas as pd
 
-    from torchsar_eval.report import LazyTables, per_image_rows, result_tables, write_run
+    from torchsar_eval.report import per_image_rows, write_run
+    from torchsar_eval.results import LazyTables, result_tables
     from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
     if out is not None:  # a temporary folder is never resumed: nothing to record

@@ -35,6 +35,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from torchsar.catalog import builtin_specs
 from torchsar.detection import Detection
 from torchsar.objects import Objects
 from torchsar_eval.errors import EvalError
@@ -48,6 +49,7 @@ __all__ = [
     "check_options",
     "check_portable",
     "split_options",
+    "use_loader",
 ]
 
 INSTANCES = ("auto", "discriminate")
@@ -184,9 +186,7 @@ class Detector:
                     f"detector {self.name} was built from its options: build it "
                     "again with the new ones"
                 )
-            from torchsar_eval.registry import load
-
-            return load(
+            return _loader()(
                 self.ref,
                 name=self.name,
                 options={**self.options, **passed},
@@ -271,8 +271,6 @@ class Detector:
     def __reduce__(self):
         if self.ref is None:
             return (_rebuild, (self.__dict__,))
-        from torchsar_eval.registry import load
-
         args = {
             "name": self.name,
             "options": dict(self.options),
@@ -280,7 +278,7 @@ class Detector:
             "instances": self.instances,
             "scale": self.scale,
         }
-        return (_load_kw, (load, self.ref, args))
+        return (_load_kw, (_loader(), self.ref, args))
 
 
 def _rebuild(state: dict) -> Detector:
@@ -292,9 +290,24 @@ def _load_kw(load: Callable, ref: str, kwargs: dict) -> Detector:
 
 
 def _is_builtin(ref: str) -> bool:
-    from torchsar_eval.registry import BUILTIN
+    return ref in {s.name for s in builtin_specs()}
 
-    return ref in BUILTIN
+
+_LOADER: list[Callable[..., Detector]] = []
+"""The function that resolves a detector reference (:func:`torchsar_eval.registry.load`,
+which registers itself with :func:`use_loader` on import: every detector with a ``ref``
+was made by it, so it is there whenever one is rebuilt)."""
+
+
+def use_loader(load: Callable[..., Detector]) -> None:
+    """Register the function that builds a detector from its reference and options."""
+    _LOADER[:] = [load]
+
+
+def _loader() -> Callable[..., Detector]:
+    if not _LOADER:
+        raise EvalError("no detector registry is loaded (import torchsar_eval.registry)")
+    return _LOADER[0]
 
 
 def _default_name(obj: object) -> str:

@@ -29,6 +29,7 @@ from torchsar.metrics.matching import GroundTruth, Matching
 from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.metrics.reasons import false_alarm_reasons, miss_reasons
 from torchsar.objects import Objects
+from torchsar_eval.names import file_slugs, slug
 
 __all__ = [
     "CASE_COLUMNS",
@@ -558,8 +559,6 @@ def write_gallery(folder: Path, results: dict, labels: dict[str, str]) -> list[s
     """Each detector's cases as PNGs ``gallery/<dataset>/<detector>/<kind>-NN.png`` and
     their index ``gallery/cases.csv`` (columns :data:`CASE_COLUMNS`); returns
     ``["gallery/"]``, or ``[]`` when no result holds a gallery."""
-    from torchsar_eval.output import file_slugs
-    from torchsar_eval.plots import slug
 
     rows = []
     for name, rs in results.items():

@@ -31,8 +31,7 @@ import stat
 import sys
 import time
 import warnings
-from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +48,6 @@ __all__ = [
     "claim",
     "clean",
     "default_out",
-    "file_slugs",
     "has_saved_work",
     "hidden_folders",
     "not_ours",
@@ -438,32 +436,6 @@ def _publish(tmp: Path, out: Path) -> None:
         if exc.errno in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
             raise EvalError(f"{{opt:out}}{out} was filled by someone else during the run") from None
         raise EvalError(f"cannot publish the run as {out}: {exc.strerror}") from None
-
-
-def file_slugs(names: Iterable[str], slug: Callable[[str], str]) -> dict[str, str]:
-    """File-name parts for ``names`` that are unique within a run.
-
-    ``slug(name)`` is used where it is unique; names whose slugs collide (two folders
-    with the same basename) get their whole name made file-safe instead, then a counter.
-
-    Examples:
-        >>> short = lambda n: n.rsplit("/", 1)[-1]
-        >>> file_slugs(["folder:a/x", "folder:b/x", "sim"], short)
-        {'folder:a/x': 'folder_a_x', 'folder:b/x': 'folder_b_x', 'sim': 'sim'}
-    """
-    short = {n: slug(n) for n in dict.fromkeys(names)}
-    uses = Counter(short.values())
-    taken: set[str] = set()
-    out = {}
-    for n, s in short.items():
-        if uses[s] > 1:
-            s = re.sub(r"[^A-Za-z0-9_.-]+", "_", n)
-        base, i = s, 2
-        while s in taken:
-            s, i = f"{base}-{i}", i + 1
-        taken.add(s)
-        out[n] = s
-    return out
 
 
 def write_config(folder: Path, command: str, options: dict[str, Any]) -> None:

@@ -36,6 +36,7 @@ from torchsar.metrics.truth import GroundTruth
 from torchsar.objects import Objects
 from torchsar_eval.batches import Indexed, as_dict
 from torchsar_eval.errors import EvalError
+from torchsar_eval.names import file_slugs, slug
 
 __all__ = [
     "FALSE_ALARM",
@@ -423,8 +424,6 @@ def write_overlays(
 ) -> list[str]:
     """The overlays as PNGs ``overlays/<dataset>/<detector>/<image>.png`` and their index
     ``overlays/overlays.csv``; returns ``["overlays/"]`` (``[]`` when there are none)."""
-    from torchsar_eval.output import file_slugs
-    from torchsar_eval.plots import slug
 
     rows = []
     for name, items in overlays.items():

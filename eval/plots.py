@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import math
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.labels import plain
+from torchsar_eval.names import slug
 from torchsar_eval.tables import pooled_pr
 
 if TYPE_CHECKING:
@@ -229,14 +229,6 @@ def log_axis(ax: Axes, which: str, values: Iterable[float], least: int = 3) -> N
 
 
 # -- files ------------------------------------------------------------------------------
-
-
-def slug(name: str) -> str:
-    """A file-name-safe form of a dataset name (``folder:../a/b`` -> ``folder_b``)."""
-    if ":" in name:
-        scheme, _, rest = name.partition(":")
-        name = scheme + "_" + Path(rest.split("?")[0].rstrip("/")).name
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
 def save(fig: Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) -> list[str]:

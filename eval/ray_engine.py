@@ -127,17 +127,16 @@ def check_workers(ray, detectors: list) -> None:
             ) from None
 
 
-def _scored_one_thread(job, k: int) -> bytes:
-    from torchsar_eval.shards import _scored
-
+def _scored_one_thread(score, job, k: int) -> bytes:
     torch.set_num_threads(1)  # one Ray CPU per task: never oversubscribe a node
-    return _scored(job, k)
+    return score(job, k)
 
 
-def run_on_ray(job, todo, on_done, fail, address: str | None) -> None:
-    """Run the shards ``todo`` (``(k, path)`` pairs) as Ray tasks; ``on_done(k, path, data)``
-    saves each result, ``fail`` settles failures (a failed shard runs once more). Ray is
-    started here (with this run's packages shipped) unless it already runs."""
+def run_on_ray(job, todo, on_done, fail, address: str | None, score) -> None:
+    """Run the shards ``todo`` (``(k, path)`` pairs) as Ray tasks, each ``score(job, k)``
+    (the engine's shard scorer, shipped by reference); ``on_done(k, path, data)`` saves each
+    result, ``fail`` settles failures (a failed shard runs once more). Ray is started here
+    (with this run's packages shipped) unless it already runs."""
     try:
         import ray
     except ImportError:
@@ -152,7 +151,7 @@ def run_on_ray(job, todo, on_done, fail, address: str | None) -> None:
         )
     check_workers(ray, job.detectors)
     task = ray.remote(num_cpus=1, max_retries=0)(_scored_one_thread)
-    refs = {task.remote(job, k): (k, path) for k, path in todo}  # retried here, counted
+    refs = {task.remote(score, job, k): (k, path) for k, path in todo}  # retried here, counted
     while refs:
         done, _ = ray.wait(list(refs), num_returns=1)
         k, path = refs.pop(done[0])
@@ -160,7 +159,7 @@ def run_on_ray(job, todo, on_done, fail, address: str | None) -> None:
             data = ray.get(done[0])
         except Exception as exc:
             if fail.again(k, exc):
-                refs[task.remote(job, k)] = (k, path)
+                refs[task.remote(score, job, k)] = (k, path)
                 continue
             data = None
         on_done(k, path, data)

@@ -28,7 +28,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from torchsar.catalog import builtin_specs
-from torchsar_eval.detector import Detector, as_detector, split_options
+from torchsar_eval.detector import Detector, as_detector, split_options, use_loader
 from torchsar_eval.errors import EvalError
 
 __all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "available", "load", "registered"]
@@ -159,3 +159,6 @@ def _settings(
         "instances": det.instances if instances == "auto" else instances,
         "scale": det.scale if scale == "auto" else scale,
     }
+
+
+use_loader(load)  # detectors rebuilt from their reference (options, worker processes) use it

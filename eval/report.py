@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from contextlib import ExitStack
 from pathlib import Path
 from typing import IO
@@ -24,27 +24,14 @@ from torchsar_eval.plots import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,
-    breakdown_table,
-    coco_table,
-    errors_table,
-    froc_table,
     headline_table,
     markdown,
-    paired_table,
-    pixel_roc_table,
-    pr_table,
-    scr_table,
-    summary_table,
-    timing_table,
 )
 
 __all__ = [
-    "BUILDERS",
     "TABLE_FILES",
-    "LazyTables",
     "per_image_rows",
     "ranked_summary",
-    "result_tables",
     "throughput",
     "write_run",
 ]
@@ -52,61 +39,7 @@ __all__ = [
 SUMMARY_TEX = "summary.tex"
 """The run's headline tables in LaTeX (:func:`~torchsar_eval.latex.summary_tex`)."""
 TABLE_FILES = {k: f for k, f in RUN_TABLES.items() if k not in ("cases", "sweep", "overlays")}
-"""Each table of :func:`result_tables` and its file in a run folder."""
-
-
-BUILDERS = {
-    "summary": summary_table,
-    "froc": froc_table,
-    "pr": pr_table,
-    "pixel_roc": pixel_roc_table,
-    "breakdown": breakdown_table,
-    "timing": timing_table,
-    "coco": coco_table,
-    "scr": scr_table,
-    "errors": errors_table,
-    "paired": paired_table,
-}
-"""How each table of :data:`TABLE_FILES` is built from ``{dataset: [DetectorResult]}``."""
-
-
-def result_tables(results: dict) -> dict[str, pd.DataFrame]:
-    """Every merged table of a run (``{dataset: [DetectorResult]}``), by the keys of
-    :data:`TABLE_FILES`."""
-    return {key: build(results) for key, build in BUILDERS.items()}
-
-
-class LazyTables(Mapping):
-    """:func:`result_tables` with each table built when it is first read (of final states:
-    the run is over when it is made).
-
-    Examples:
-        >>> tables = LazyTables({})
-        >>> sorted(tables) == sorted(TABLE_FILES), tables.built
-        (True, [])
-        >>> len(tables["summary"]), tables.built
-        (0, ['summary'])
-    """
-
-    def __init__(self, results: dict) -> None:
-        self._results = results
-        self._built: dict[str, pd.DataFrame] = {}
-
-    @property
-    def built(self) -> list[str]:
-        """The tables built so far."""
-        return list(self._built)
-
-    def __getitem__(self, key: str) -> pd.DataFrame:
-        if key not in self._built:
-            self._built[key] = BUILDERS[key](self._results)
-        return self._built[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(BUILDERS)
-
-    def __len__(self) -> int:
-        return len(BUILDERS)
+"""Each table of :func:`~torchsar_eval.results.result_tables` and its file in a run folder."""
 
 
 def per_image_rows(folders: dict[str, Iterable[tuple[str, list]]]) -> Iterator[list]:

@@ -24,13 +24,16 @@ from torchsar.metrics import (
 from torchsar.metrics.assign import measured_as
 from torchsar.metrics.coco_compat import CocoState
 from torchsar.metrics.coco_inputs import coco_images
+from torchsar.metrics.distance import LengthErrors
 from torchsar.metrics.error_types import false_alarm_types
+from torchsar.metrics.records import Records
 from torchsar.metrics.scr import target_scr_db
 from torchsar.objects import ObjectRules, Objects, discriminate
 from torchsar.objects.discriminate import own_regions, single_threshold
+from torchsar_eval import statefile
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
-from torchsar_eval.gallery import Gallery
+from torchsar_eval.gallery import Cases, Gallery
 from torchsar_eval.scoring import BOOTSTRAP_UNITS, image_rows, pixel_areas
 
 __all__ = [
@@ -316,10 +319,11 @@ class Evaluator:
     def compute(self, dataset: str = "dataset"):
         """Every table of :func:`~torchsar_eval.evaluate` for what was added, as
         :class:`~torchsar_eval.Results` (no run folder; per-image rows in image order)."""
+        # the tables need pandas: imported here, so that the worker processes, which
+        # import this module, never load it
         import pandas as pd
 
-        from torchsar_eval.api import Results
-        from torchsar_eval.report import result_tables
+        from torchsar_eval.results import Results, result_tables
         from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
         tables = result_tables({dataset: [self]})
@@ -331,6 +335,12 @@ class Evaluator:
         )
         stats = {dataset: {"images": self.images, "scored": self.images}}
         return Results(tables, per_image=per_image, states={dataset: [self]}, stats=stats)
+
+    @property
+    def saved_predictions(self) -> bool:
+        """Whether the detector is saved predictions (read from a file: no detection time
+        to report)."""
+        return detector_name(self.detector).saved
 
     @property
     def iou_type(self) -> str:
@@ -359,8 +369,6 @@ class Evaluator:
         """The state as data only (plain values and numpy arrays, no pickled object):
         ``{"format", "version", "tree", "arrays"}``; :meth:`load_state_dict` reads it
         back (only the harness's own state classes are rebuilt)."""
-        from torchsar_eval import shard_states, statefile  # noqa: F401  (registers the states)
-
         tree, arrays = statefile.encode(self)
         return {"format": STATE_FORMAT, "version": 1, "tree": tree, "arrays": arrays}
 
@@ -370,8 +378,6 @@ class Evaluator:
         Raises:
             EvalError: not a state dict of an evaluator.
         """
-        from torchsar_eval import shard_states, statefile  # noqa: F401  (registers the states)
-
         if not isinstance(state, Mapping) or state.get("format") != STATE_FORMAT:
             raise EvalError("{opt:state} is not an Evaluator.state_dict()")
         other = statefile.decode(state["tree"], list(state["arrays"]), "evaluator state")
@@ -611,3 +617,21 @@ def _planes(images, ks: list[int]):
     if x.ndim != 3:
         raise EvalError(f"{{opt:images}} must be (B, C, H, W) or (B, H, W), got shape {x.shape}")
     return x[ks].astype(np.float64)
+
+
+for _cls in (
+    DetectorResult,
+    DetectorName,
+    Scoring,
+    ObjectRules,
+    Matching,
+    PixelCounts,
+    ObjectState,
+    Records,
+    LengthErrors,
+    Gallery,
+    Cases,
+    RocAccumulator,
+):  # the classes a state file (a shard, a state_dict) may hold
+    statefile.register(_cls)
+statefile.register(CocoState, transient=("_cache", "_consolidated"))

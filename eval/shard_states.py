@@ -16,16 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from torchsar.metrics import ObjectState, PixelCounts, RocAccumulator
-from torchsar.metrics.coco_compat import CocoState
-from torchsar.metrics.distance import LengthErrors
-from torchsar.metrics.matching import Matching
-from torchsar.metrics.records import Records
-from torchsar.objects import ObjectRules
 from torchsar_eval import statefile
 from torchsar_eval.coco import CocoExport
-from torchsar_eval.gallery import Cases, Gallery
-from torchsar_eval.result import DetectorName, DetectorResult, Scoring
+from torchsar_eval.result import DetectorResult
 
 __all__ = [
     "ROWS_FILE",
@@ -49,24 +42,8 @@ class ShardState:
     coco: CocoExport | None = None
 
 
-for _cls in (
-    ShardState,
-    DetectorResult,
-    DetectorName,
-    Scoring,
-    ObjectRules,
-    Matching,
-    PixelCounts,
-    ObjectState,
-    Records,
-    LengthErrors,
-    CocoExport,
-    Gallery,
-    Cases,
-):
-    statefile.register(_cls)
-statefile.register(RocAccumulator)
-statefile.register(CocoState, transient=("_cache", "_consolidated"))
+statefile.register(ShardState)  # the other state classes: torchsar_eval.result
+statefile.register(CocoExport)
 
 
 def load_shard(path: Path) -> ShardState:

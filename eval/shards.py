@@ -235,7 +235,7 @@ def _ray(job, todo, track: _Track, fail: _Failures, address: str | None) -> None
         else:
             track.saved(k, path, data)
 
-    run_on_ray(job, todo, done, fail, address)
+    run_on_ray(job, todo, done, fail, address, _scored)
 
 
 def run_shards(

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
 
 from torchsar.metrics.error_types import FA_TYPES
 from torchsar.metrics.object_state import ratios
 from torchsar.metrics.paired import PAIRED_METRICS, difference_intervals, side
-from torchsar_eval.result import DetectorResult, detector_name
+
+if TYPE_CHECKING:  # the tables read the states; they never build one
+    from torchsar_eval.result import DetectorResult
 
 __all__ = [
     "BREAKDOWN_COLUMNS",
@@ -259,7 +263,7 @@ def _timing_rows(ds: str, r: DetectorResult) -> list[list]:
     """Saved predictions have no detection time (their ``ms_per_image`` is empty: the time of
     reading a file is not a detector's speed); their images per second are the scoring's."""
     nan = float("nan")
-    saved = detector_name(r.detector).saved
+    saved = r.saved_predictions
     ms = 1e3 * r.seconds / r.images if r.images and not saved else nan
     obj = 1e3 * r.object_seconds / r.images if r.images else nan
     total = obj if saved else ms + obj

@@ -105,7 +105,7 @@ def test_distance_rule_reports_ap_distance_not_ap50():
 
 
 def test_paired_rows_name_the_distance_ap():
-    from torchsar_eval.report import result_tables
+    from torchsar_eval.results import result_tables
 
     rule = te.Matching(kind="distance", max_distance=3.0)
     evs = []

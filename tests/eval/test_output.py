@@ -11,6 +11,7 @@ import sys
 import pytest
 
 from torchsar_eval.errors import EvalError
+from torchsar_eval.names import file_slugs
 from torchsar_eval.output import (
     HOST,
     RUN_MARKER,
@@ -18,7 +19,6 @@ from torchsar_eval.output import (
     check_out,
     claim,
     clean,
-    file_slugs,
     hidden_folders,
     recover,
     result_dir,

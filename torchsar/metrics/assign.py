@@ -23,8 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from torchsar.metrics.batch import BatchMatch, by_plane
 from torchsar.metrics.greedy import assign_pairs
 from torchsar.metrics.matching import COCO_IOUS, Matching, pair_box_iou
+from torchsar.metrics.points import match_points
 from torchsar.metrics.truth import GroundTruth
 from torchsar.objects import Objects
 
@@ -50,41 +52,6 @@ AP_AREAS: dict[str, tuple[float, float]] = {
 }
 """COCO's area ranges of AP (``pycocotools`` ``areaRng``, bounds inclusive), by name."""
 _RANGES = np.array(list(AP_AREAS.values()))
-
-
-@dataclass(frozen=True)
-class BatchMatch:
-    """Assignments of one batch.
-
-    Attributes:
-        ap: int ``(A, T, M)`` per area range of :data:`AP_AREAS` and COCO IoU threshold:
-            matched target index, -1 false, -2 ignored (IoU of :attr:`Matching.iou_kind`).
-        op: int ``(M,)`` the same under the matching rule.
-        op_iou: float ``(M,)`` IoU of each detection with the target it matched under the
-            rule (0 when unmatched).
-        gt_score: float ``(G,)`` score of the detection that matched each target under the
-            rule (``-inf``: missed).
-        overlaps: int ``(G,)`` number of detections touching each target (fragmentation).
-        gt_det: int ``(G,)`` index of that detection (-1: missed).
-        ap_kind: ``"iou"``, ``"distance"`` or ``"none"`` (points under an IoU rule).
-        by_class: whether detections were matched within their class.
-    """
-
-    ap: np.ndarray
-    op: np.ndarray
-    op_iou: np.ndarray
-    gt_score: np.ndarray
-    overlaps: np.ndarray
-    gt_det: np.ndarray
-    ap_kind: str = "iou"
-    by_class: bool = False
-
-
-def by_plane(plane: np.ndarray, n_planes: int) -> list[np.ndarray]:
-    """Indices of the items of each plane (``plane``: each item's plane), in item order."""
-    order = np.argsort(plane, kind="stable")
-    cuts = np.searchsorted(plane[order], np.arange(n_planes + 1))
-    return [order[cuts[p] : cuts[p + 1]] for p in range(n_planes)]
 
 
 def same_plane_pairs(plane_d: np.ndarray, plane_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -478,8 +445,6 @@ def match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
 
 def _match_batch(obj: Objects, gt: GroundTruth, rule: Matching) -> BatchMatch:
     if rule.kind == "distance":
-        from torchsar.metrics.points import match_points
-
         return match_points(obj, gt, rule)
     by_class = _classes(obj, rule)
     pr = _problems(obj, gt, by_class)

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from torchsar.errors import OptionError
-from torchsar.metrics.assign import BatchMatch, by_plane
+from torchsar.metrics.batch import BatchMatch, by_plane
 from torchsar.metrics.distance import (
     dont_care,
     greedy_match_by_score,

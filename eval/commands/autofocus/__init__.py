@@ -244,8 +244,8 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from torchsar_eval.commands.autofocus.experiment import Config, run_error_case
+    from torchsar_eval.names import slug
     from torchsar_eval.output import default_out, result_dir, write_config
-    from torchsar_eval.plots import slug
     from torchsar_eval.tables import markdown
 
     errors = _names(args.errors, AUTOFOCUS_ERRORS, "error types")

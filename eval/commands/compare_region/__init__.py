@@ -187,8 +187,8 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from torchsar_eval.commands.compare_region.panel import detection_panel
-    from torchsar_eval.output import default_out, file_slugs, result_dir, write_config
-    from torchsar_eval.plots import slug
+    from torchsar_eval.names import file_slugs, slug
+    from torchsar_eval.output import default_out, result_dir, write_config
     from torchsar_eval.runner import run_detectors
     from torchsar_eval.tables import markdown, summary_table, timing_table
 

@@ -129,8 +129,8 @@ def evaluate(opts: SpeckleOptions) -> int:
     from torchsar_eval.commands.speckle.scoring import samples, score_dataset
     from torchsar_eval.datasets import make_dataset
     from torchsar_eval.labels import short_labels
+    from torchsar_eval.names import slug
     from torchsar_eval.output import result_dir, write_config
-    from torchsar_eval.plots import slug
     from torchsar_eval.tables import markdown
 
     datasets = {name: make_dataset(name, n=opts.n, seed=opts.seed) for name in opts.datasets}
