@@ -2,7 +2,7 @@
 concept pages and the README, in document order, in a fresh folder (a ``python`` block
 that opens with ``# file: NAME`` is written to that file instead, for the blocks after it
 to import or name). A block right after ``<!-- example: REASON -->`` is skipped (it needs
-the reader's own files). The slow pages (whole scenes, worker pools) run with ``-m slow``."""
+the reader's own files). The slow pages (whole runs, scenes, worker pools) run with ``-m slow`` (CI runs them)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = re.compile(r"(<!-- (?:not run|example):[^>]*-->\s*)?```(python|bash)\n(.*?)```", re.S)
-SLOW = {"docs/tutorials/whole-scenes.md", "docs/tutorials/own-detector.md"}
+SLOW = {
+    "docs/tutorials/whole-scenes.md",
+    "docs/tutorials/own-detector.md",
+    "docs/tutorials/results-file.md",
+    "docs/tutorials/cfars-simulated.md",
+    "README.md",
+}
 PAGES = sorted(
     str(p.relative_to(ROOT))
     for p in [*ROOT.glob("docs/**/*.md"), ROOT / "README.md"]

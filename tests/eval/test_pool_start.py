@@ -8,7 +8,10 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 
+
+@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
 def test_unguarded_script_gets_the_main_guard_message(tmp_path):
     script = tmp_path / "unguarded.py"
     script.write_text(
