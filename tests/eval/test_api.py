@@ -253,3 +253,20 @@ def test_idle_workers_are_named_in_one_line():
         warnings.simplefilter("error")
         _note_idle_workers("d", 600, Execution(workers=2))  # 3 shards: both busy
         _note_idle_workers("d", 100, Execution(workers=1))
+
+
+def test_a_run_leaves_the_callers_garbage_collector_as_it_was():
+    """The run's collections skip the caller's heap (frozen for the run), and the heap is
+    thawed after; a caller that froze objects itself keeps them frozen."""
+    import gc
+
+    assert gc.get_freeze_count() == 0
+    te.evaluate("sim-chips", ["ca"], n=2, scoring=te.Scoring(replicates=0), progress=False)
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+    gc.freeze()
+    try:
+        frozen = gc.get_freeze_count()
+        te.evaluate("sim-chips", ["ca"], n=2, scoring=te.Scoring(replicates=0), progress=False)
+        assert gc.get_freeze_count() > frozen // 2  # not thawed (a few freed meanwhile)
+    finally:
+        gc.unfreeze()
