@@ -44,15 +44,16 @@ browser:
 	DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium
 
 # Installing Chromium may fail (no root, no mirror): then the browser test is skipped, never red.
-# In CI (CI set) a second step runs the slow tests too: the integration tests of the engine
-# (worker pools, Ray, kills), the documentation's long pages, exhaustive and fuzz cases.
+# In CI (CI set) a second step runs the integration tests (worker pools, Ray, kills, the
+# documentation's long pages); `pytest -m slow` runs the long exhaustive and fuzz cases.
 # The suite runs in TEST_WORKERS processes (pytest-xdist; 2: CI's cores): 0.7x the serial
 # wall time on the 2-core VM. TEST_WORKERS=0 runs it in this process.
 TEST_WORKERS ?= 2
 test: setup $(BIN)/.ray
 	$(if $(CI),-timeout 600 $(MAKE) --no-print-directory browser)
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
-	$(if $(CI),$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m slow)
+	$(if $(CI),$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m integration)
+	$(if $(CI),$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST))
 
 test-browser: setup browser
 	$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST)

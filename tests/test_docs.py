@@ -2,7 +2,8 @@
 concept pages and the README, in document order, in a fresh folder (a ``python`` block
 that opens with ``# file: NAME`` is written to that file instead, for the blocks after it
 to import or name). A block right after ``<!-- example: REASON -->`` is skipped (it needs
-the reader's own files). The slow pages (whole runs, scenes, worker pools) run with ``-m slow`` (CI runs them)."""
+the reader's own files). The long pages are integration tests (``-m integration``, run by CI); whole scenes and worker pools
+run with ``-m slow``."""
 
 from __future__ import annotations
 
@@ -16,13 +17,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = re.compile(r"(<!-- (?:not run|example):[^>]*-->\s*)?```(python|bash)\n(.*?)```", re.S)
-SLOW = {
-    "docs/tutorials/whole-scenes.md",
-    "docs/tutorials/own-detector.md",
-    "docs/tutorials/results-file.md",
-    "docs/tutorials/cfars-simulated.md",
-    "README.md",
-}
+SLOW = {"docs/tutorials/whole-scenes.md", "docs/tutorials/own-detector.md"}
+LONG = {"docs/tutorials/results-file.md", "docs/tutorials/cfars-simulated.md", "README.md"}
+"""Pages whose runs take 10-20 s: integration tests (CI runs them)."""
 PAGES = sorted(
     str(p.relative_to(ROOT))
     for p in [*ROOT.glob("docs/**/*.md"), ROOT / "README.md"]
@@ -52,7 +49,15 @@ def _run_bash(code: str, cwd: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    "page", [pytest.param(p, marks=pytest.mark.slow) if p in SLOW else p for p in PAGES]
+    "page",
+    [
+        pytest.param(p, marks=pytest.mark.slow)
+        if p in SLOW
+        else pytest.param(p, marks=pytest.mark.integration)
+        if p in LONG
+        else p
+        for p in PAGES
+    ],
 )
 def test_the_page_code_runs(page, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)

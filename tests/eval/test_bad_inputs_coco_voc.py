@@ -569,7 +569,7 @@ BOMB_SCRIPT = textwrap.dedent(
 )
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS is Linux only")
 def test_coco_bomb_under_a_memory_limit(tmp_path):
     """A 200-byte COCO file with a polygon vertex at 1e300: one error line, no MemoryError,

@@ -82,7 +82,7 @@ def test_console_summary_shows_short_dataset_labels(tmp_path, capsys):
     assert results.summary["dataset"].tolist() == [name]  # the tables keep the full name
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_per_image_csv_is_the_same_for_any_shard_size_and_workers(tmp_path):
     files = {}
     for size, workers in [(2, 1), (256, 1), (3, 2)]:  # shard sizes, one and two workers

@@ -78,7 +78,7 @@ def test_external_detectors_are_scored_beside_a_builtin(one_process):
     assert '"window": 7' in cfg and '"_ref": "mydets:RatioNet"' in cfg
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_two_workers_equal_one_process(one_process, tmp_path):
     out = tmp_path / "w2"
     done = _cli([*ARGS, "--workers", "2", "--out", str(out)])
@@ -86,7 +86,7 @@ def test_two_workers_equal_one_process(one_process, tmp_path):
     assert _tables(out) == _tables(one_process)
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_ray_equals_one_process(one_process, tmp_path):
     pytest.importorskip("ray")
     out = tmp_path / "ray"

@@ -92,7 +92,7 @@ def _kill_cases(tmp_path, cases, seed: int) -> None:
 needs_signals = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 @needs_signals
 def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
     # SIGKILL while replacing an old run (the hardest case: an old run aside, a staging
@@ -101,7 +101,7 @@ def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
     _kill_cases(tmp_path, [(signal.SIGKILL, True), (signal.SIGTERM, False)], seed=14)
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_a_finished_two_worker_run_is_quiet(tmp_path):
     """A run that ends normally lets its worker processes exit by themselves: nothing on
     stderr (no semaphores of killed workers left for the resource tracker)."""

@@ -11,7 +11,7 @@ import textwrap
 import pytest
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_unguarded_script_gets_the_main_guard_message(tmp_path):
     script = tmp_path / "unguarded.py"
     script.write_text(

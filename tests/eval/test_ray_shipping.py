@@ -65,7 +65,7 @@ def bare_python(tmp_path_factory):
     return python
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_workers_without_torchsar_score_with_the_shipped_copy(bare_python, tmp_path):
     src = tmp_path / "src"
     skip = shutil.ignore_patterns("__pycache__")

@@ -54,8 +54,8 @@ def _interrupt_after(out: Path, shards: int, sig: int) -> int:
 
 
 @pytest.mark.parametrize(
-    "sig", [pytest.param(signal.SIGKILL, marks=pytest.mark.slow), signal.SIGINT]
-)  # SIGKILL: an integration case CI runs (make test, CI=1)
+    "sig", [pytest.param(signal.SIGKILL, marks=pytest.mark.integration), signal.SIGINT]
+)
 def test_interrupted_then_resumed_equals_uninterrupted(tmp_path, sig):
     whole = tmp_path / "whole"
     assert main([*ARGS, "--out", str(whole)]) == 0

@@ -83,7 +83,7 @@ def test_an_error_keeps_the_saved_shards(tmp_path, whole, monkeypatch):
     _resumed_equals_whole(out, whole, at_least=2)
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_a_dead_worker_keeps_the_saved_shards(tmp_path, whole, monkeypatch):
     out = tmp_path / "run"
     monkeypatch.setenv(FAULT, "exit")

@@ -143,7 +143,7 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
     _assert_same(first, again)
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
     """The export travels with the shard states: one pass, small shards over two workers,
     and a run resumed after losing a shard all write the same COCO files."""
@@ -217,8 +217,8 @@ _FLAKY_SUM = float(Chips(3)[2]["image"].sum())
 
 @pytest.mark.parametrize(
     "engine,workers",
-    [("local", 1), ("local", 2), pytest.param("ray", 1, marks=pytest.mark.slow)],
-)  # Ray: CI runs it (make test, CI=1); test_ray_engine_equals_local stays in every run
+    [("local", 1), ("local", 2), pytest.param("ray", 1, marks=pytest.mark.integration)],
+)  # test_ray_engine_equals_local stays in the default run
 def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, workers):
     from functools import partial
 
@@ -235,7 +235,7 @@ def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, worke
     assert merged[0].images == 6
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
     """The shard that kills its worker is told apart from those that shared the pool with
     it (run again, each in a fresh process), and fails alone; the others are scored."""

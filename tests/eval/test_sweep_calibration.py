@@ -156,7 +156,7 @@ def test_the_cli_writes_the_sweep_and_the_chosen_settings(tmp_path):
     assert main(["run", "--dataset", "sim-chips", "--n", "4", "--sweep", "pfa=1e-3"]) == 2
 
 
-@pytest.mark.slow  # an integration test of the engine: CI runs it (make test, CI=1)
+@pytest.mark.integration
 def test_the_sweep_on_real_ship_chips(data_dir, tmp_path):
     """On the shared HRSID chips: chosen on one split, reported on the other."""
     torch.manual_seed(0)
