@@ -166,20 +166,27 @@ def test_input_requiring_grad_is_read_not_differentiated():
     assert torch.equal(got, ring_order_statistic(x.detach(), Ring(1, 1), torch.full(x.shape, 2)))
 
 
-def _reference_all(img: np.ndarray, ring: Ring, rank: int) -> np.ndarray:
-    """Every pixel's ``min(rank, count)``-th smallest in-image ring value (sorting)."""
+def _sorted_rings(img: np.ndarray, ring: Ring) -> list[list[np.ndarray]]:
+    """Every pixel's in-image ring values, sorted (``kth_smallest`` of each rank at once)."""
     h, w = img.shape
-    out = np.zeros(img.shape, dtype=np.float64)
-    for i in range(h):
-        for j in range(w):
-            cells = ring_cells(img, i, j, ring.guard, ring.train)
-            if cells.size:
-                out[i, j] = kth_smallest(cells, min(rank, cells.size))
-    return out
+    return [
+        [np.sort(ring_cells(img, i, j, ring.guard, ring.train)) for j in range(w)] for i in range(h)
+    ]
 
 
-def _ranks_for(img: np.ndarray, ring: Ring, rank: int) -> torch.Tensor:
-    return torch.from_numpy(np.minimum(counts(img, ring), rank))[None, None]
+def _reference_all(rings: list[list[np.ndarray]], rank: int) -> np.ndarray:
+    """Every pixel's ``min(rank, count)``-th smallest in-image ring value (sorting)."""
+    return np.asarray(
+        [
+            [cells[min(rank, cells.size) - 1] if cells.size else 0.0 for cells in row]
+            for row in rings
+        ],
+        dtype=np.float64,
+    )
+
+
+def _ranks_for(count: np.ndarray, rank: int) -> torch.Tensor:
+    return torch.from_numpy(np.minimum(count, rank))[None, None]
 
 
 @needs_numba
@@ -194,11 +201,12 @@ class TestCompiled:
         x = torch.from_numpy(img)[None, None]
         fp = np.ones((2 * o + 1,) * 2, bool)
         fp[train : train + 2 * guard + 1, train : train + 2 * guard + 1] = False
+        count, rings = counts(img, ring), _sorted_rings(img, ring)
         for rank in range(1, ring.n + 1):
-            got = ring_order_statistic(x, ring, _ranks_for(img, ring, rank))[0, 0].numpy()
+            got = ring_order_statistic(x, ring, _ranks_for(count, rank))[0, 0].numpy()
             want = ndimage.rank_filter(img, rank - 1, footprint=fp)
             np.testing.assert_array_equal(got[o:-o, o:-o], want[o:-o, o:-o])
-            np.testing.assert_array_equal(got, _reference_all(img, ring, rank))
+            np.testing.assert_array_equal(got, _reference_all(rings, rank))
 
     @settings(max_examples=40, deadline=None)
     @given(
@@ -245,9 +253,10 @@ class TestCompiled:
             with np.errstate(over="ignore"):  # the largest float64 becomes inf in float32
                 a = img.astype(dtype)
             got = ring_order_statistic(
-                torch.from_numpy(a)[None, None], ring, _ranks_for(a, ring, rank)
+                torch.from_numpy(a)[None, None], ring, _ranks_for(counts(a, ring), rank)
             )[0, 0].numpy()
-            np.testing.assert_array_equal(got, _reference_all(a, ring, rank).astype(dtype))
+            want = _reference_all(_sorted_rings(a, ring), rank)
+            np.testing.assert_array_equal(got, want.astype(dtype))
 
     @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float32, torch.float64])
     def test_every_dtype_equals_the_python_path(self, dtype):
@@ -290,5 +299,5 @@ class TestCompiled:
         for b in range(2):
             for c in range(3):
                 img = x[b, c].double().numpy()
-                want = _reference_all(img, ring, int(k[b, c]))
+                want = _reference_all(_sorted_rings(img, ring), int(k[b, c]))
                 np.testing.assert_array_equal(got[b, c].double().numpy(), want)

@@ -137,14 +137,31 @@ _GRID_FLOOR = 1e-12  # smallest block mean on the integration grid
 
 def _log_grid(sizes: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Log-spaced nodes and trapezoid weights (in ``dz``) covering the block-mean laws."""
-    m = min(s for s in sizes if s > 0)
+    return _grid_for(min(s for s in sizes if s > 0))
+
+
+@lru_cache(maxsize=256)
+def _grid_for(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The grid of :func:`_log_grid` for blocks of at least ``m`` cells (read-only)."""
     lo, hi = _GRID_FLOOR, 12.0 + 40.0 / math.sqrt(m)
     u = np.linspace(math.log(lo), math.log(hi), 6001)
     z = np.exp(u)
     w = np.full_like(z, u[1] - u[0]) * z
     w[0] *= 0.5
     w[-1] *= 0.5
+    z.flags.writeable = w.flags.writeable = False
     return z, w
+
+
+@lru_cache(maxsize=512)
+def _block_law(m: int, smallest: int) -> tuple[np.ndarray, np.ndarray]:
+    """CDF and density of a block mean ``S / m``, ``S ~ Gamma(m, 1)``, at the nodes of the
+    grid for blocks of at least ``smallest`` cells (shared by every key with that smallest
+    block: a no-data mask gives thousands of keys over a few dozen block sizes)."""
+    z, _ = _log_grid((smallest,))
+    cdf = special.gammainc(m, m * z)
+    pdf = np.exp(math.log(m) + special.xlogy(m - 1, m * z) - m * z - special.gammaln(m))
+    return cdf, pdf
 
 
 def _block_density(sizes: tuple[int, ...], reduce: str) -> tuple[np.ndarray, np.ndarray]:
@@ -152,17 +169,15 @@ def _block_density(sizes: tuple[int, ...], reduce: str) -> tuple[np.ndarray, np.
     ``S_j / m_j``, ``S_j ~ Gamma(m_j, 1)`` (unit-mean exponential cells)."""
     z, w = _log_grid(sizes)
     ms = [m for m in sizes if m > 0]
-    cdf = [special.gammainc(m, m * z) for m in ms]
-    pdf = [
-        np.exp(math.log(m) + special.xlogy(m - 1, m * z) - m * z - special.gammaln(m)) for m in ms
-    ]
+    laws = [_block_law(m, min(ms)) for m in ms]
+    cdf = [c if reduce == "max" else 1.0 - c for c, _ in laws]
     dens = np.zeros_like(z)
-    for j in range(len(ms)):
+    for j, (_, pdf) in enumerate(laws):
         others = np.ones_like(z)
         for i in range(len(ms)):
             if i != j:
-                others *= cdf[i] if reduce == "max" else 1.0 - cdf[i]
-        dens += pdf[j] * others
+                others *= cdf[i]
+        dens += pdf * others
     return z, w * dens
 
 
