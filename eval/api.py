@@ -60,6 +60,7 @@ class _Plan:
     seed: int
     overlay: int | tuple[str, ...] | None = None
     rank_by: str = DEFAULT_RANK
+    figures: bool = True
 
 
 def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
@@ -139,6 +140,7 @@ def evaluate(
     export_coco: bool = False,
     overlay: int | Sequence[str] | None = None,
     out: str | Path | None = None,
+    figures: bool | None = None,
     overwrite: bool = False,
     resume: bool = False,
     discard: bool = False,
@@ -174,6 +176,12 @@ def evaluate(
             the reported split, or the images named (name, file name or stem).
         out: the run folder to write (tables, plots, ``config.json``); ``None`` writes
             nothing. The folder is published whole or not at all.
+        figures: with ``out``, draw the curves (``roc_<dataset>.png`` / ``.pdf``), the
+            worst-case gallery and ``report.html``; ``False`` writes the tables,
+            ``summary.md``, ``summary.tex`` and ``config.json`` only (``torchsar-eval
+            report RUN`` builds the page later). Default: ``True``, or ``False`` where the
+            environment variable ``TORCHSAR_EVAL_FIGURES`` is ``0`` (a test suite or a
+            pipeline that reads only tables).
         overwrite: replace a previous run in ``out``.
         resume: continue the interrupted run in ``out`` from its saved shards. A run that
             fails or is interrupted keeps its saved shards (in a hidden folder beside
@@ -230,6 +238,7 @@ def evaluate(
         seed=seed,
         rank_by=check_rank_by(rank_by),
         overlay=overlay,
+        figures=default_figures() if figures is None else _flag(figures, "figures"),
     )
     with ExitStack() as stack:
         stack.enter_context(_own_heap())
@@ -243,6 +252,21 @@ def evaluate(
         tmp = stack.enter_context(result_dir(target, resume=resume, keep=True))
         results = _execute(plan, named, tmp, target)
     return results
+
+
+FIGURES_ENV = "TORCHSAR_EVAL_FIGURES"
+"""The environment variable whose value ``0`` turns a run's figures off by default."""
+
+
+def default_figures() -> bool:
+    """Whether a run draws its figures when not told (:data:`FIGURES_ENV` not ``0``)."""
+    return os.environ.get(FIGURES_ENV, "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def _flag(value: object, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise EvalError(f"{{opt:{name}}}{value!r}: expected True or False")
+    return value
 
 
 @contextmanager
@@ -347,6 +371,7 @@ def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Result
             results=results,
             rank_by=plan.rank_by,
             overlays=overlays,
+            figures=plan.figures,
         )
         files += [SWEEP_FILE] if not swept.empty else []
         per_image = pd.read_csv(tmp / "per_image.csv")
@@ -396,6 +421,7 @@ def config(
         "out": str(out),
         "observed": observed or {},
         "rank_by": plan.rank_by,
+        "figures": plan.figures,
     }
 
 

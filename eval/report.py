@@ -149,13 +149,15 @@ def write_run(
     results: dict | None = None,
     rank_by: str = DEFAULT_RANK,
     overlays: dict | None = None,
+    figures: bool = True,
 ) -> list[str]:
     """Every table and plot of a run into ``tmp``; returns the file names. ``per_image``
     is streamed to ``per_image.csv`` (memory independent of the dataset size). With the
     merged ``results`` (``{dataset: [DetectorResult]}``), each detector's worst cases go to
     ``gallery/``; the ``overlays`` (``{dataset: [Overlay]}``) to ``overlays/``; last,
     ``report.html`` is built from the folder's files (and its
-    ``config.json``, when written first), its leaderboards ranked by ``rank_by``."""
+    ``config.json``, when written first), its leaderboards ranked by ``rank_by``. Without
+    ``figures``, no curve, gallery or page (overlays asked for are still drawn)."""
     written = [f for k, f in TABLE_FILES.items() if k != "coco" or not tables[k].empty]
     for key, fname in TABLE_FILES.items():
         if fname in written:
@@ -180,6 +182,10 @@ def write_run(
     }
     (tmp / SUMMARY_TEX).write_text(summary_tex(summary, order))
     files = [*written, "per_image.csv", "summary.md", SUMMARY_TEX]
+    if overlays:
+        files += write_overlays(tmp, overlays, labels)
+    if not figures:
+        return files
     for name, label in labels.items():
         sel = {k: df[df.dataset == name] for k, df in tables.items()}
         files += plot_roc(
@@ -192,7 +198,5 @@ def write_run(
         )
     if results is not None:
         files += write_gallery(tmp, results, labels)
-    if overlays:
-        files += write_overlays(tmp, overlays, labels)
     write_report(tmp, tmp / REPORT_FILE, rank_by=rank_by)
     return [*files, REPORT_FILE]

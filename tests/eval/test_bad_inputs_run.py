@@ -167,6 +167,7 @@ def test_a_detector_that_exits_or_fails_to_build_is_one_line(
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.figures
 def test_names_are_drawn_as_plain_text(tmp_path, monkeypatch):
     """A detector named with matplotlib mathtext (``a$\\x$b``) runs to the end, figures
     and report included (before: a traceback after all the scoring)."""

@@ -39,6 +39,7 @@ def tiny_folder(tmp_path):
     return root
 
 
+@pytest.mark.figures
 def test_run_on_folder_known_answers(tiny_folder, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(
@@ -383,6 +384,7 @@ def test_interrupted_run_leaves_the_previous_one_intact(
     assert signal.getsignal(signal.SIGTERM) is handler
 
 
+@pytest.mark.figures
 def test_datasets_with_the_same_basename_are_never_mixed(tiny_folder, tmp_path, capsys):
     other = tmp_path / "elsewhere" / tiny_folder.name
     shutil.copytree(tiny_folder, other)

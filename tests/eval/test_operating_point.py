@@ -63,6 +63,7 @@ def test_parse_target():
             parse_target(bad)
 
 
+@pytest.mark.figures
 def test_run_with_calibration_and_coco_export(tmp_path):
     out = tmp_path / "out"
     argv = [

@@ -80,6 +80,7 @@ def test_boxes_small_images_doubled_and_large_ones_reduced():
     assert px.shape == (1366, 22)  # 4098 rows over 2048: block-averaged by 3
 
 
+@pytest.mark.figures
 def test_counts_equal_the_run_per_image_rows(tmp_path):
     out = tmp_path / "run"
     assert (

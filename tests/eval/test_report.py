@@ -22,6 +22,8 @@ from torchsar_eval.html_report.page import NO_DETECTION
 from torchsar_eval.registry import BUILTIN
 from torchsar_eval.tables import SCR_COLUMNS
 
+pytestmark = pytest.mark.figures  # every run here is reported
+
 
 class Page(HTMLParser):
     """What the tests read of a page: leaderboards (detector cells in row order), images,

@@ -42,6 +42,7 @@ def _run(tmp_path, name: str, scale: str):
     )
 
 
+@pytest.mark.figures
 def test_probabilities_stay_probabilities_and_no_number_moves(tmp_path):
     own, ratio = _run(tmp_path, "own", "auto"), _run(tmp_path, "ratio", "ratio")
     a, b = own.summary.iloc[0], ratio.summary.iloc[0]

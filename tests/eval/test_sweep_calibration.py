@@ -119,6 +119,7 @@ def test_a_sweep_no_detector_takes_is_refused():
         te.Calibration("f1", 0.5, sweep={"pfa": [1e-3, 1e-3]})
 
 
+@pytest.mark.figures
 def test_the_cli_writes_the_sweep_and_the_chosen_settings(tmp_path):
     out = tmp_path / "run"
     main(

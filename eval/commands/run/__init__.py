@@ -125,6 +125,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "stems)",
     )
     p.add_argument(
+        "--figures",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="draw the curves, the gallery and report.html (default; --no-figures writes the "
+        "tables and summaries only, and `torchsar-eval report RUN` builds the page later; "
+        "TORCHSAR_EVAL_FIGURES=0 makes --no-figures the default)",
+    )
+    p.add_argument(
         "--workers",
         type=int,
         default=1,
@@ -352,6 +360,7 @@ def run(args: argparse.Namespace) -> int:
         window_units=args.window_units,
         export_coco=args.export_coco,
         overlay=args.overlay,
+        figures=args.figures,
         out=args.out,
         overwrite=args.overwrite,
         resume=args.resume,
