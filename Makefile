@@ -1,5 +1,10 @@
 # One-command set-up: `make eval` runs the default evaluation, `make test` runs the tests.
 # torch is installed first and pinned: an unpinned torch pulls a multi-GB CUDA build.
+# Bytecode caches on, whatever the shell says: a machine with PYTHONDONTWRITEBYTECODE set
+# compiles every module from source in each of the test run's processes (collection alone
+# took 18 s instead of 11 s on the 2-core VM).
+unexport PYTHONDONTWRITEBYTECODE
+
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin

@@ -12,7 +12,11 @@ from hypothesis import settings
 
 settings.register_profile("default", max_examples=25, deadline=None, derandomize=True)
 settings.load_profile("default")
-torch.set_num_threads(min(2, torch.get_num_threads()))
+# One torch thread per pytest-xdist worker (the workers already share the cores: two threads
+# each on two cores made torch-heavy tests up to three times slower), else at most two.
+torch.set_num_threads(
+    1 if os.environ.get("PYTEST_XDIST_WORKER") else min(2, torch.get_num_threads())
+)
 
 # A run's curves, gallery and report.html cost about ten times its scoring on a test's few
 # images: runs in tests write tables only (TORCHSAR_EVAL_FIGURES=0, inherited by the command

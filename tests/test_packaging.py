@@ -87,6 +87,7 @@ def test_make_wheel_builds_an_installable_wheel(tmp_path):
     assert "torchsar_eval/ray_engine.py" in names and "torchsar/__init__.py" in names
 
 
+@pytest.mark.integration
 def test_a_worker_loads_without_the_table_and_plot_libraries():
     """A worker process imports torchsar and the harness's scoring modules only: pandas,
     kornia and matplotlib (half a second of start-up per process together) are imported

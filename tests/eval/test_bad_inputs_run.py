@@ -132,10 +132,11 @@ def fine(images):
     ("spec", "message", "extra"),
     [
         ("{mod}:quits", r"detector \S*quits called sys.exit\(0\)", []),
-        (
+        pytest.param(
             "{mod}:quits",
             r"detector \S*quits called sys.exit\(0\)",
             ["--workers", "2", "--shard-size", "1"],
+            marks=pytest.mark.integration,
         ),  # in worker processes
         ("{mod}:Broken", r"detector '\S+:Broken' could not be built: RuntimeError: no weights", []),
     ],

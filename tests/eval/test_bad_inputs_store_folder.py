@@ -569,6 +569,7 @@ write_store(items(), 4, sys.argv[1], shard_size=1)
 """
 
 
+@pytest.mark.integration
 def test_a_killed_make_dataset_leaves_a_partial_store_the_next_one_removes(tmp_path):
     import torchsar_eval.store as store
 

@@ -66,6 +66,7 @@ def one_process(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.integration
 def test_external_detectors_are_scored_beside_a_builtin(one_process):
     summary = pd.read_csv(one_process / "summary.csv").set_index("detector")
     assert list(summary.index) == ["ca", "ratio", "bright_boxes"]
@@ -126,6 +127,7 @@ def test_an_entry_point_detector_is_found_by_name(tmp_path, monkeypatch, capsys)
     assert "ratio-net" in capsys.readouterr().out
 
 
+@pytest.mark.integration
 def test_a_main_only_detector_with_two_workers_gets_one_line(tmp_path):
     script = tmp_path / "script.py"
     script.write_text(

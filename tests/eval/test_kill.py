@@ -149,6 +149,7 @@ def _alive(pid: int) -> bool:
     return fields is not None and fields[0] != "Z"
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
 def test_workers_die_with_their_driver(tmp_path):
     """SIGKILL to the driver of a two-worker run: no worker is alive 5 s later (before,

@@ -92,6 +92,7 @@ def test_workers_without_torchsar_score_with_the_shipped_copy(bare_python, tmp_p
     assert seen["same"] and seen["done"] == 3
 
 
+@pytest.mark.integration
 def test_a_worker_with_another_torchsar_is_refused(monkeypatch):
     ray = pytest.importorskip("ray")
     from torchsar_eval import ray_engine

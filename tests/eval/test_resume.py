@@ -54,7 +54,7 @@ def _interrupt_after(out: Path, shards: int, sig: int) -> int:
 
 
 @pytest.mark.parametrize(
-    "sig", [pytest.param(signal.SIGKILL, marks=pytest.mark.integration), signal.SIGINT]
+    "sig", [pytest.param(s, marks=pytest.mark.integration) for s in (signal.SIGKILL, signal.SIGINT)]
 )
 def test_interrupted_then_resumed_equals_uninterrupted(tmp_path, sig):
     whole = tmp_path / "whole"

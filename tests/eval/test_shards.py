@@ -160,6 +160,7 @@ def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
     assert len(json.loads(one["chips__ca.json"])) > 0
 
 
+@pytest.mark.integration
 def test_two_workers_equal_one(tmp_path):
     one, _ = run_shards(_job(6, 2), tmp_path / "one", progress=False)
     two, _ = run_shards(_job(6, 2), tmp_path / "two", workers=2, progress=False)
@@ -217,8 +218,12 @@ _FLAKY_SUM = float(Chips(3)[2]["image"].sum())
 
 @pytest.mark.parametrize(
     "engine,workers",
-    [("local", 1), ("local", 2), pytest.param("ray", 1, marks=pytest.mark.integration)],
-)  # test_ray_engine_equals_local stays in the default run
+    [
+        ("local", 1),
+        pytest.param("local", 2, marks=pytest.mark.integration),
+        pytest.param("ray", 1, marks=pytest.mark.integration),
+    ],
+)  # worker pools and Ray: integration tests (CI's second step)
 def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, workers):
     from functools import partial
 
@@ -269,6 +274,7 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
         run_shards(alone, tmp_path / "again", workers=2, progress=False)
 
 
+@pytest.mark.integration
 def test_ray_engine_equals_local(tmp_path):
     pytest.importorskip("ray")
     local, _ = run_shards(_job(6, 2), tmp_path / "local", progress=False)

@@ -30,6 +30,7 @@ def _peak(path: Path, detector: str, tile: int) -> tuple[int, int]:
     return int(peak), int(objects)
 
 
+@pytest.mark.integration
 def test_tiled_objects_from_a_memmap_in_a_fresh_process(tmp_path):
     path = tmp_path / "scene.npy"
     _python("write", str(path), "1024")
