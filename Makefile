@@ -10,7 +10,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 TORCH_VERSION ?= 2.13.0
 
-.PHONY: setup eval test test-browser browser lint docs bench wheel clean
+.PHONY: setup eval test test-browser browser coverage lint docs bench wheel clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -59,6 +59,14 @@ test: setup $(BIN)/.ray
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 	$(if $(CI),$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m integration)
 	$(if $(CI),$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST))
+
+# Statement coverage of the library and the harness (in-process code; the command lines the
+# tests start are not traced): `make coverage` for the default run, MARK=integration for CI's
+# second step, MARK="not slow" for both.
+MARK ?= not slow and not integration
+coverage: setup $(BIN)/.ray
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m "$(MARK)" \
+		--cov=torchsar --cov=torchsar_eval --cov-report=term:skip-covered | tail -n 3
 
 test-browser: setup browser
 	$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST)

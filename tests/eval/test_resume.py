@@ -73,6 +73,7 @@ def test_interrupted_then_resumed_equals_uninterrupted(tmp_path, sig):
     assert not list(tmp_path.glob(".run.torchsar-*"))  # the staging folder was adopted
 
 
+@pytest.mark.integration
 def test_resume_with_other_options_is_refused(tmp_path):
     out = tmp_path / "run"
     code, _ = _interrupt_after(out, 1, signal.SIGKILL)
