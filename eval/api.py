@@ -512,24 +512,12 @@ def evaluate_dataset(
             idx,
             dets or detectors,
             plan.scoring,
-            ex.batch_size,
+            ex,
             plan.preprocess,
-            ex.shard_size,
             export_coco=export,
-            device=ex.device,
             default_class=default_class,
-            skip_bad=ex.skip_bad,
         )
-        return run_shards(
-            job,
-            folder,
-            workers=ex.workers,
-            engine=ex.engine,
-            address=ex.address,
-            skip_bad=ex.skip_bad,
-            progress=ex.progress,
-            persist=persist or export,
-        )
+        return run_shards(job, folder, persist=persist or export)
 
     chosen, calib_counts, swept = None, {"scored_images": 0, "reused_images": 0}, None
     if cal is not None:

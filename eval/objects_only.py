@@ -78,7 +78,7 @@ def score_objects(job, indices: list[int], name: str) -> list[DetectorResult]:
     groups = stacked(indices) if stacked is not None else None
     skipped: list = []
     if groups is None:  # item by item (segmentations to decode, bad items to skip)
-        groups, skipped = _truth_by_item(ds, indices, job.skip_bad)
+        groups, skipped = _truth_by_item(ds, indices, job.execution.skip_bad)
     for r in results:
         r.skipped = list(skipped)
     done: list[int] = []

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from torch.utils.data import Dataset
@@ -32,6 +32,7 @@ from torchsar_eval.objects_only import objects_only, score_objects
 from torchsar_eval.pool import DIED, run_in_processes
 from torchsar_eval.result import DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
+from torchsar_eval.settings import Execution
 from torchsar_eval.shard_states import (
     ROWS_FILE,
     ShardMerger,
@@ -61,20 +62,18 @@ __all__ = [
 class ShardJob:
     """Everything a worker needs to score shards of one dataset (picklable: the dataset
     object holds paths and options, never open files; detectors resolved by name or import
-    path travel as that reference)."""
+    path travel as that reference). ``execution`` is the run's, whole: batches, shard size,
+    device and ``skip_bad`` for the worker; workers, engine and progress for the driver."""
 
     name: str
     dataset: Dataset
     indices: Sequence[int]
     detectors: list
     scoring: Scoring
-    batch_size: int = 16
+    execution: Execution = field(default_factory=Execution)
     preprocess: Callable | None = None
-    shard_size: int = 256
     export_coco: bool = False
-    device: str | None = None
     default_class: str = "target"
-    skip_bad: bool = False
 
 
 def shard_ranges(n: int, size: int) -> list[range]:
@@ -84,7 +83,8 @@ def shard_ranges(n: int, size: int) -> list[range]:
 
 def _score_shard(job: ShardJob, k: int) -> ShardState:
     tune_allocator()
-    rng = shard_ranges(len(job.indices), job.shard_size)[k]
+    ex = job.execution
+    rng = shard_ranges(len(job.indices), ex.shard_size)[k]
     if objects_only(job) and not job.export_coco:  # saved boxes from annotations: no pixel
         return ShardState(score_objects(job, [job.indices[i] for i in rng], job.name))
     part = Indexed(job.dataset, [job.indices[i] for i in rng])
@@ -92,15 +92,15 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
     results = run_detectors(
         part,
         job.detectors,
-        batch_size=job.batch_size,
+        batch_size=ex.batch_size,
         preprocess=job.preprocess,
         scoring=job.scoring,
         name=job.name,
         progress=False,
         on_batch=None if coco is None else coco.add,
-        device=job.device,
+        device=ex.device,
         default_class=job.default_class,
-        skip_bad=job.skip_bad,
+        skip_bad=ex.skip_bad,
     )
     release_memory()
     return ShardState(results, coco)
@@ -114,7 +114,7 @@ def _scored(job: ShardJob, k: int) -> bytes:
 def _pending(job: ShardJob, folder: Path) -> list[tuple[int, Path]]:
     """The shards to score: those not saved, and those whose saved state is corrupt
     (scored again, with a warning naming the file)."""
-    n_shards = len(shard_ranges(len(job.indices), job.shard_size))
+    n_shards = len(shard_ranges(len(job.indices), job.execution.shard_size))
     paths = [(k, shard_path(folder, k)) for k in range(n_shards)]
     return [(k, p) for k, p in paths if not _usable(p)]
 
@@ -239,27 +239,17 @@ def _ray(job, todo, track: _Track, fail: _Failures, address: str | None) -> None
 
 
 def run_shards(
-    job: ShardJob,
-    folder: Path,
-    *,
-    workers: int = 1,
-    engine: str = "local",
-    address: str | None = None,
-    skip_bad: bool = False,
-    progress: bool = True,
-    persist: bool = True,
+    job: ShardJob, folder: Path, *, persist: bool = True
 ) -> tuple[list[DetectorResult], dict]:
     """Score every shard not yet saved in ``folder`` and merge all saved shards (in shard
     order, each as soon as the shards before it are saved).
 
     Args:
-        job: the dataset, detectors and scoring.
+        job: the dataset, detectors, scoring and execution: its ``engine`` (``"local"``:
+            this process or ``workers`` processes; ``"ray"``: Ray tasks at ``address``),
+            ``skip_bad`` (record failed shards and merge the rest instead of stopping) and
+            ``progress`` (one bar over images).
         folder: where shard states are saved (and found again on resume).
-        workers: local worker processes (``engine="local"``).
-        engine: ``"local"`` (this process or ``workers`` processes) or ``"ray"``.
-        address: Ray cluster address (default: a local Ray instance).
-        skip_bad: record failed shards and merge the rest instead of stopping.
-        progress: one progress bar over images.
         persist: save every shard's state in ``folder`` (``False``: shards scored in this
             process are merged from memory; for a temporary folder, never resumed).
 
@@ -269,20 +259,23 @@ def run_shards(
         retried = shards that failed once and were run again; failed = list of shards that
         failed twice; the images of the shards scored now and of those found saved).
     """
+    ex = job.execution
     folder.mkdir(parents=True, exist_ok=True)
-    sizes = [len(r) for r in shard_ranges(len(job.indices), job.shard_size)]
+    sizes = [len(r) for r in shard_ranges(len(job.indices), ex.shard_size)]
     todo = _pending(job, folder)
-    bar = tqdm(total=len(job.indices), desc=short_label(job.name), disable=not progress, unit="img")
+    bar = tqdm(
+        total=len(job.indices), desc=short_label(job.name), disable=not ex.progress, unit="img"
+    )
     bar.update(len(job.indices) - sum(sizes[k] for k, _ in todo))
     with ShardMerger(folder, len(sizes), (k for k, _ in todo)) as merger:
-        track, fail = _Track(bar, sizes, merger, persist), _Failures(skip_bad, merger.lost)
+        track, fail = _Track(bar, sizes, merger, persist), _Failures(ex.skip_bad, merger.lost)
         try:
-            if engine == "ray":
-                _ray(job, todo, track, fail, address)
-            elif workers == 1:
+            if ex.engine == "ray":
+                _ray(job, todo, track, fail, ex.address)
+            elif ex.workers == 1:
                 _local(job, todo, track, fail)
             else:
-                _processes(job, todo, track, fail, workers)
+                _processes(job, todo, track, fail, ex.workers)
         finally:
             bar.close()
         merged = merger.finish()

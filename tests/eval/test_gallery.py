@@ -10,6 +10,7 @@ import torch
 from PIL import Image
 
 import torchsar as ts
+import torchsar_eval as te
 from torchsar.metrics import match_batch
 from torchsar_eval import statefile
 from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
@@ -60,11 +61,9 @@ def _galleries(tmp_path, shard_size: int, batch_size: int) -> dict[str, Gallery]
         list(range(N)),
         [BUILTIN[d] for d in DETECTORS],
         SCORING,
-        batch_size,
-        None,
-        shard_size,
+        te.Execution(batch_size=batch_size, shard_size=shard_size, progress=False),
     )
-    merged, _ = run_shards(job, tmp_path / f"s{shard_size}-b{batch_size}", progress=False)
+    merged, _ = run_shards(job, tmp_path / f"s{shard_size}-b{batch_size}")
     return {r.detector.name: r.gallery for r in merged}
 
 

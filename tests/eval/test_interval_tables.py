@@ -11,7 +11,7 @@ from scipy import stats
 
 import torchsar_eval as te
 from tests.eval.test_paired import DETECTORS, SIZE, Squares
-from tests.eval.test_shards import _job
+from tests.eval.test_shards import _job, _on
 from torchsar.detection import detection_from
 from torchsar.metrics.intervals import MIN_UNITS, t_shrink
 from torchsar_eval.shards import run_shards
@@ -136,8 +136,8 @@ def test_summary_and_paired_bytes_do_not_depend_on_the_shard_size(tmp_path):
     """The intervals come from states that add up: the same CSV bytes for one shard and
     for small shards."""
     runs = [
-        run_shards(_job(9, 100), tmp_path / "a", progress=False)[0],
-        run_shards(_job(9, 2), tmp_path / "b", progress=False)[0],
+        run_shards(_job(9, 100), tmp_path / "a")[0],
+        run_shards(_job(9, 2), tmp_path / "b")[0],
     ]
     a, b = _csv(runs)
     assert a == b
@@ -145,7 +145,7 @@ def test_summary_and_paired_bytes_do_not_depend_on_the_shard_size(tmp_path):
 
 @pytest.mark.slow
 def test_summary_and_paired_bytes_do_not_depend_on_the_workers(tmp_path):
-    one = run_shards(_job(9, 2), tmp_path / "a", progress=False)[0]
-    two = run_shards(_job(9, 2), tmp_path / "b", workers=2, progress=False)[0]
+    one = run_shards(_job(9, 2), tmp_path / "a")[0]
+    two = run_shards(_on(_job(9, 2), workers=2), tmp_path / "b")[0]
     a, b = _csv([one, two])
     assert a == b

@@ -35,12 +35,10 @@ def saved(tmp_path_factory):
         list(range(9)),
         [BUILTIN["ca"], BUILTIN["so"]],
         te.Scoring(replicates=5),
-        2,
-        None,
-        2,
+        te.Execution(batch_size=2, shard_size=2, progress=False),
     )
     folder = tmp_path_factory.mktemp("saved")
-    run_shards(job, folder, progress=False)
+    run_shards(job, folder)
     return folder
 
 

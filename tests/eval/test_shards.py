@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -15,6 +16,7 @@ from torchsar_eval.commands.run import DEFAULT_MATCH, DEFAULT_RULES
 from torchsar_eval.errors import EvalError
 from torchsar_eval.registry import BUILTIN
 from torchsar_eval.result import Scoring
+from torchsar_eval.settings import Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
 from torchsar_eval.tables import (
     breakdown_table,
@@ -69,11 +71,22 @@ def _job(n: int, shard_size: int, export_coco: bool = False) -> ShardJob:
         list(range(n)),
         specs,
         scoring,
-        3,
-        None,
-        shard_size,
+        _ex(batch_size=3, shard_size=shard_size),
         export_coco=export_coco,
     )
+
+
+def _ex(**kw) -> Execution:
+    """A quiet execution (no progress bar)."""
+    return Execution(**{"progress": False, **kw})
+
+
+_EX2 = Execution(batch_size=2, shard_size=2, progress=False)
+
+
+def _on(job: ShardJob, **kw) -> ShardJob:
+    """``job`` run with other execution settings (workers, engine, skip_bad)."""
+    return replace(job, execution=replace(job.execution, **kw))
 
 
 def _coco_json(folder) -> dict[str, str]:
@@ -112,8 +125,8 @@ def test_shard_ranges_cover_every_item_once():
 
 @pytest.mark.parametrize("size", [1, 4])
 def test_any_shard_size_gives_the_same_tables(tmp_path, size):
-    whole, counts = run_shards(_job(9, 100), tmp_path / "a", progress=False)
-    parts, counts_p = run_shards(_job(9, size), tmp_path / "b", progress=False)
+    whole, counts = run_shards(_job(9, 100), tmp_path / "a")
+    parts, counts_p = run_shards(_job(9, size), tmp_path / "b")
     assert counts == {
         "shards": 1,
         "done": 1,
@@ -128,9 +141,9 @@ def test_any_shard_size_gives_the_same_tables(tmp_path, size):
 
 
 def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
-    first, _ = run_shards(_job(8, 3), tmp_path, progress=False)
+    first, _ = run_shards(_job(8, 3), tmp_path)
     (tmp_path / "shard-000001.state").unlink()  # as if killed before shard 1 was saved
-    again, counts = run_shards(_job(8, 3), tmp_path, progress=False)
+    again, counts = run_shards(_job(8, 3), tmp_path)
     assert counts == {
         "shards": 3,
         "done": 1,
@@ -147,10 +160,10 @@ def test_resume_skips_saved_shards_and_changes_nothing(tmp_path):
 def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
     """The export travels with the shard states: one pass, small shards over two workers,
     and a run resumed after losing a shard all write the same COCO files."""
-    run_shards(_job(7, 100, True), tmp_path / "one", progress=False)
-    run_shards(_job(7, 2, True), tmp_path / "two", workers=2, progress=False)
+    run_shards(_job(7, 100, True), tmp_path / "one")
+    run_shards(_on(_job(7, 2, True), workers=2), tmp_path / "two")
     (tmp_path / "two" / "shard-000001.state").unlink()  # as if killed before it was saved
-    _, counts = run_shards(_job(7, 2, True), tmp_path / "two", progress=False)
+    _, counts = run_shards(_job(7, 2, True), tmp_path / "two")
     assert counts["done"] == 1 and counts["skipped"] == 3
     one, two = _coco_json(tmp_path / "one"), _coco_json(tmp_path / "two")
     assert one == two and set(one) == {"chips__gt.json", "chips__ca.json", "chips__so.json"}
@@ -162,8 +175,8 @@ def test_coco_export_is_the_same_for_any_sharding_workers_and_resume(tmp_path):
 
 @pytest.mark.integration
 def test_two_workers_equal_one(tmp_path):
-    one, _ = run_shards(_job(6, 2), tmp_path / "one", progress=False)
-    two, _ = run_shards(_job(6, 2), tmp_path / "two", workers=2, progress=False)
+    one, _ = run_shards(_job(6, 2), tmp_path / "one")
+    two, _ = run_shards(_on(_job(6, 2), workers=2), tmp_path / "two")
     _assert_same(one, two, tmp_path / "one", tmp_path / "two")
 
 
@@ -183,19 +196,44 @@ class Poisoned(Chips):
         return item
 
 
-def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
-    from torchsar_eval.detector import Detector
-    from torchsar_eval.errors import EvalError
+class Unreadable(Chips):
+    """Chips whose item 4 cannot be read (an error outside any detector's batch)."""
 
-    job = _job(6, 2)
+    def __getitem__(self, i: int) -> dict:
+        if i == 4:
+            raise RuntimeError("corrupt shard")
+        return super().__getitem__(i)
+
+
+def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
     job = ShardJob(
-        "chips", Poisoned(6), job.indices, [Detector("x", _explode_on_big)], job.scoring, 2, None, 2
+        "chips", Unreadable(6), list(range(6)), [BUILTIN["ca"]], _job(6, 2).scoring, _EX2
     )
     with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
-        run_shards(job, tmp_path / "a", progress=False)
-    merged, counts = run_shards(job, tmp_path / "b", skip_bad=True, progress=False)
+        run_shards(job, tmp_path / "a")
+    merged, counts = run_shards(_on(job, skip_bad=True), tmp_path / "b")
     assert counts["failed"] == [{"shard": 2, "error": "RuntimeError: corrupt shard"}]
     assert merged[0].images == 4  # the other shards, merged
+
+
+def test_with_skip_bad_a_failing_batch_loses_only_its_bad_image(tmp_path):
+    """The same option reaches the batches: the detector's failure on item 4 skips that
+    image alone (its batch scored again image by image), and no shard fails."""
+    from torchsar_eval.detector import Detector
+
+    job = ShardJob(
+        "chips",
+        Poisoned(6),
+        list(range(6)),
+        [Detector("x", _explode_on_big)],
+        _job(6, 2).scoring,
+        _EX2,
+    )
+    with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
+        run_shards(job, tmp_path / "a")
+    merged, counts = run_shards(_on(job, skip_bad=True), tmp_path / "b")
+    assert counts["failed"] == [] and merged[0].images == 5
+    assert len(merged[0].skipped) == 1 and "corrupt shard" in merged[0].skipped[0][1]
 
 
 def _fail_first_time(x, marker):
@@ -232,9 +270,9 @@ def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, worke
     if engine == "ray":
         pytest.importorskip("ray")
     spec = Detector("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
-    job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, 2, None, 2)
+    job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, _EX2)
     run = tmp_path / "run"
-    merged, counts = run_shards(job, run, workers=workers, engine=engine, progress=False)
+    merged, counts = run_shards(_on(job, workers=workers, engine=engine), run)
     assert (tmp_path / "failed-once").exists()
     assert counts["retried"] == 1 and counts["failed"] == [] and counts["done"] == 3
     assert merged[0].images == 6
@@ -252,12 +290,10 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
         list(range(6)),
         [Detector("x", _die_on_big)],
         _job(6, 2).scoring,
-        2,
-        None,
-        2,
+        _EX2,
     )
     with pytest.warns(RuntimeWarning, match="worker process died.*again one at a time"):
-        merged, counts = run_shards(job, tmp_path / "run", workers=2, skip_bad=True, progress=False)
+        merged, counts = run_shards(_on(job, workers=2, skip_bad=True), tmp_path / "run")
     assert [f["shard"] for f in counts["failed"]] == [2]
     assert "worker process died" in counts["failed"][0]["error"]
     assert merged[0].images == 4 and counts["done"] == 2
@@ -266,18 +302,18 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
         "shard-000000.state",
         "shard-000001.state",
     ]
-    alone = ShardJob("chips", Poisoned(6), [4, 5], job.detectors, job.scoring, 2, None, 2)
+    alone = ShardJob("chips", Poisoned(6), [4, 5], job.detectors, job.scoring, _EX2)
     with (  # without skip_bad it stops the run (the poisoned shard alone: fewer processes)
         pytest.raises(EvalError, match="shard 0 failed: a worker process died"),
         pytest.warns(RuntimeWarning),
     ):
-        run_shards(alone, tmp_path / "again", workers=2, progress=False)
+        run_shards(_on(alone, workers=2), tmp_path / "again")
 
 
 @pytest.mark.integration
 def test_ray_engine_equals_local(tmp_path):
     pytest.importorskip("ray")
-    local, _ = run_shards(_job(6, 2), tmp_path / "local", progress=False)
-    remote, counts = run_shards(_job(6, 2), tmp_path / "ray", engine="ray", progress=False)
+    local, _ = run_shards(_job(6, 2), tmp_path / "local")
+    remote, counts = run_shards(_on(_job(6, 2), engine="ray"), tmp_path / "ray")
     assert counts["done"] == 3
     _assert_same(local, remote)

@@ -64,9 +64,7 @@ def test_a_planted_pickle_runs_nothing_and_the_shard_is_scored_again(tmp_path):
         list(range(4)),
         [BUILTIN["ca"]],
         te.Scoring(replicates=0),
-        2,
-        None,
-        2,
+        te.Execution(batch_size=2, shard_size=2, progress=False),
     )
     folder = tmp_path / "shards"
     folder.mkdir()
@@ -74,7 +72,7 @@ def test_a_planted_pickle_runs_nothing_and_the_shard_is_scored_again(tmp_path):
     (folder / "shard-000000.state").write_bytes(payload)  # where a state is looked for
     (folder / "shard-000001.pkl").write_bytes(payload)  # the old name
     with pytest.warns(RuntimeWarning, match="not a readable torchsar state"):
-        merged, counts = run_shards(job, folder, progress=False)
+        merged, counts = run_shards(job, folder)
     assert not marker.exists()
     assert counts["done"] == 2 and merged[0].images == 4
 
@@ -257,12 +255,10 @@ def test_rows_written_while_merging_are_the_saved_shards_rows(tmp_path):
         list(range(7)),
         [BUILTIN["ca"], BUILTIN["so"]],
         te.Scoring(replicates=0),
-        2,
-        None,
-        3,
+        te.Execution(batch_size=2, shard_size=3, progress=False),
     )
     folder = tmp_path / "shards"
-    run_shards(job, folder, progress=False)
+    run_shards(job, folder)
     written = [(d, [tuple(r) for r in rows]) for d, rows in shard_rows(folder)]
     (folder / ROWS_FILE).unlink()
     saved = list(shard_rows(folder))  # read from the states
