@@ -76,7 +76,7 @@ HARNESS = {
     ],
     "engine": ["runner", "pool", "ray_engine", "shard_states", "shards", "resume", "output"],
     "outputs": ["leaderboard", "latex", "plots", "html_report", "overlays", "report", "api"],
-    "cli": ["cli", "commands", ""],
+    "cli": ["cli", "commands", "experiments", ""],
 }  # fmt: skip  (a table: the layers read better on a few lines)
 """The harness's layers, lowest first, with the modules (or subpackages) in each; a module
 imports only modules of its own layer or lower ones."""
@@ -212,3 +212,17 @@ def test_the_harness_imports_downward():
             if dep.startswith("torchsar_eval") and _layer(dep) > _layer(mod):
                 bad.append(f"{mod} ({_layer(mod)}) -> {dep} ({_layer(dep)})")
     assert bad == []
+
+
+def test_the_evaluator_never_imports_the_experiments():
+    """The papers' experiments use the evaluator; the evaluator (its commands included)
+    reaches them only by name, through the command table."""
+    bad = [
+        f"{mod} -> {dep}"
+        for mod, deps in graph().items()
+        if mod.startswith("torchsar_eval") and not mod.startswith("torchsar_eval.experiments")
+        for dep in deps
+        if dep.startswith("torchsar_eval.experiments")
+    ]
+    assert bad == []
+    assert any(m.startswith("torchsar_eval.experiments.") for m in graph())

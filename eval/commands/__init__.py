@@ -1,11 +1,12 @@
 """Sub-commands of ``torchsar-eval``: each module has ``add_parser(subparsers)`` and
-``run(args) -> int``; :data:`COMMANDS` lists them in help order."""
+``run(args) -> int``; :data:`COMMANDS` lists them in help order. The evaluator's commands
+live here; the source papers' experiments in :mod:`torchsar_eval.experiments`."""
 
 from __future__ import annotations
 
 import importlib
 
-__all__ = ["COMMANDS", "load"]
+__all__ = ["COMMANDS", "EXPERIMENTS", "load"]
 
 COMMANDS = [
     "run",
@@ -21,6 +22,11 @@ COMMANDS = [
 ]
 
 
+EXPERIMENTS = frozenset({"pfa", "speckle", "autofocus", "movers", "compare-region"})
+"""The sub-commands that are experiments of the source papers (:mod:`torchsar_eval.experiments`)."""
+
+
 def load(name: str):
     """Import the module of sub-command ``name``."""
-    return importlib.import_module(f"torchsar_eval.commands.{name.replace('-', '_')}")
+    package = "experiments" if name in EXPERIMENTS else "commands"
+    return importlib.import_module(f"torchsar_eval.{package}.{name.replace('-', '_')}")

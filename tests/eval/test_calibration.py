@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from torchsar_eval.cli import main
-from torchsar_eval.commands.pfa.calibration import (
+from torchsar_eval.experiments.pfa.calibration import (
     CLUTTER,
     PFA_COLUMNS,
     ClutterCase,

@@ -104,13 +104,13 @@ def test_help_of_every_command_imports_nothing_heavy(command):
 
 def test_light_constants_equal_the_live_ones():
     from torchsar.speckle import FILTERS
-    from torchsar_eval.commands.autofocus.experiment import (
+    from torchsar_eval.datasets import DATASETS
+    from torchsar_eval.experiments.autofocus.experiment import (
         DEFAULT_METHODS,
         ERROR_CASES,
         METHODS,
         Config,
     )
-    from torchsar_eval.datasets import DATASETS
     from torchsar_eval.registry import BUILTIN, available
     from torchsar_eval.result import DEFAULT_MATCH, DEFAULT_RULES
 
@@ -130,7 +130,7 @@ def test_light_constants_equal_the_live_ones():
 
 def test_parser_defaults_equal_the_library_defaults(parser):
     """What the command line passes by default is what the Python API uses by default."""
-    from torchsar_eval.commands.autofocus.experiment import Config
+    from torchsar_eval.experiments.autofocus.experiment import Config
     from torchsar_eval.settings import Calibration, Execution
 
     run = parser.parse_args(["run"])

@@ -182,7 +182,7 @@ def test_not_shown_groups_reasons():
 def test_chips_are_shown_in_db_over_a_robust_range():
     """A display-scaled chip with black pixels: the old full-range dB mapping crushed
     the clutter into a few grey levels near white; the robust range spreads it."""
-    from torchsar_eval.commands.compare_region.panel import db_display
+    from torchsar_eval.experiments.compare_region.panel import db_display
 
     g = torch.Generator().manual_seed(0)
     chip = (torch.empty(96, 96).exponential_(generator=g) * 0.15).clamp(max=1)
@@ -196,7 +196,7 @@ def test_chips_are_shown_in_db_over_a_robust_range():
 
 
 def test_gotcha_figure_is_a_grid(tmp_path):
-    from torchsar_eval.commands.autofocus import gotcha_figure
+    from torchsar_eval.experiments.autofocus import gotcha_figure
 
     g = torch.Generator().manual_seed(0)
     panel = {"reference": torch.rand(21, 21, generator=g)}
@@ -217,8 +217,8 @@ def test_autofocus_panel_puts_a_point_target_where_the_truth_is():
     aligned to the true scene, so a point target's peak lands on the truth."""
     import torchsar.imaging as ti
     import torchsar.sar as sar
-    from torchsar_eval.commands.autofocus import panel_images
-    from torchsar_eval.commands.autofocus.experiment import Formed
+    from torchsar_eval.experiments.autofocus import panel_images
+    from torchsar_eval.experiments.autofocus.experiment import Formed
 
     n, where = 32, (10, 20)
     f = torch.zeros(1, 1, n, n, dtype=torch.complex64)

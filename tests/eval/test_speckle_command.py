@@ -1,4 +1,4 @@
-"""``torchsar-eval speckle`` (:mod:`torchsar_eval.commands.speckle`) on tiny datasets."""
+"""``torchsar-eval speckle`` (:mod:`torchsar_eval.experiments.speckle`) on tiny datasets."""
 
 from __future__ import annotations
 
@@ -15,14 +15,14 @@ from skimage import io
 from torchsar.errors import OptionError
 from torchsar_eval.cli import main
 from torchsar_eval.commands import load
-from torchsar_eval.commands import speckle as command
-from torchsar_eval.commands.speckle.scoring import (
+from torchsar_eval.errors import EvalError
+from torchsar_eval.experiments import speckle as command
+from torchsar_eval.experiments.speckle.scoring import (
     COLUMNS,
     homogeneous_tiles,
     samples,
     score_dataset,
 )
-from torchsar_eval.errors import EvalError
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

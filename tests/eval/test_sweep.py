@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
 from torchsar_eval.detector import Detector
+from torchsar_eval.experiments.compare_region.sweep import best_setting, window_grid
 from torchsar_eval.registry import BUILTIN
 from torchsar_eval.runner import run_detectors
 

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from torchsar_eval.cli import main
-from torchsar_eval.commands.movers.experiment import SHOWN
+from torchsar_eval.experiments.movers.experiment import SHOWN
 
 TINY = ["--size", "256", "--azimuth-resolution", "1.0", "--clutter-points", "60", "--no-progress"]
 

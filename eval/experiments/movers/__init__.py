@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from torchsar_eval.errors import EvalError
 
 if TYPE_CHECKING:
-    from torchsar_eval.commands.movers.experiment import LadderConfig
+    from torchsar_eval.experiments.movers.experiment import LadderConfig
 
 __all__ = ["SPEEDS", "add_parser", "run"]
 
@@ -100,7 +100,7 @@ def floats(text: str, name: str, *, allow_empty: bool = False) -> tuple[float, .
 
 def config(args: argparse.Namespace) -> LadderConfig:
     """Validate the options (one-line errors) and freeze them."""
-    from torchsar_eval.commands.movers.experiment import LadderConfig
+    from torchsar_eval.experiments.movers.experiment import LadderConfig
 
     speeds = floats(args.speeds, "--speeds")
     if min(speeds) <= 0:
@@ -148,7 +148,7 @@ def config(args: argparse.Namespace) -> LadderConfig:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from torchsar_eval.commands.movers.experiment import run_ladder
+    from torchsar_eval.experiments.movers.experiment import run_ladder
     from torchsar_eval.output import default_out
 
     cfg = config(args)

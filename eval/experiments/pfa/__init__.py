@@ -51,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
     from tqdm import tqdm
 
-    from torchsar_eval.commands.pfa.calibration import CLUTTER, measure, measure_dataset
     from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.experiments.pfa.calibration import CLUTTER, measure, measure_dataset
     from torchsar_eval.labels import short_labels
     from torchsar_eval.options import at_least, floats, names
     from torchsar_eval.output import default_out, result_dir, write_config

@@ -1,8 +1,8 @@
 """``torchsar-eval speckle``: despeckling quality of every speckle filter on datasets.
 
 Writes ``speckle.csv`` / ``speckle.md`` (one row per dataset, filter and window; see
-:mod:`torchsar_eval.commands.speckle.scoring` for the metrics), ``speckle_<dataset>.png``
-(before/after crops, :mod:`torchsar_eval.commands.speckle.panel`) and ``config.json``. Simulated
+:mod:`torchsar_eval.experiments.speckle.scoring` for the metrics), ``speckle_<dataset>.png``
+(before/after crops, :mod:`torchsar_eval.experiments.speckle.panel`) and ``config.json``. Simulated
 datasets have a clean reflectivity, so every metric is reported; on ``folder:`` datasets the
 clean-image metrics (EPI, PSNR, SSIM) are empty.
 
@@ -125,9 +125,9 @@ def evaluate(opts: SpeckleOptions) -> int:
     import pandas as pd
     import torch
 
-    from torchsar_eval.commands.speckle.panel import despeckling_panel
-    from torchsar_eval.commands.speckle.scoring import samples, score_dataset
     from torchsar_eval.datasets import make_dataset
+    from torchsar_eval.experiments.speckle.panel import despeckling_panel
+    from torchsar_eval.experiments.speckle.scoring import samples, score_dataset
     from torchsar_eval.labels import short_labels
     from torchsar_eval.names import slug
     from torchsar_eval.output import result_dir, write_config

@@ -130,7 +130,7 @@ def panel_images(name: str, data: dict, formed: dict) -> list[tuple[str, torch.T
     flipped image), as the table scores it.
     """
     import torchsar.imaging as ti
-    from torchsar_eval.commands.autofocus.experiment import ERROR_CASES
+    from torchsar_eval.experiments.autofocus.experiment import ERROR_CASES
 
     truth = data["f"][:1].abs()
     flip = ERROR_CASES[name].kind == "2d"
@@ -196,7 +196,7 @@ def gotcha_table(data: GotchaPass, tmp: Path, *, trials: int, seed: int) -> None
     """The GOTCHA injected-error experiment: gotcha.csv, gotcha_trials.csv, gotcha.png."""
     import pandas as pd
 
-    from torchsar_eval.commands.autofocus.gotcha import run_gotcha
+    from torchsar_eval.experiments.autofocus.gotcha import run_gotcha
 
     rows, panel = run_gotcha(data, trials=trials, seed=seed)
     trials = pd.DataFrame(rows)
@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
     from tqdm import tqdm
 
-    from torchsar_eval.commands.autofocus.experiment import Config, run_error_case
+    from torchsar_eval.experiments.autofocus.experiment import Config, run_error_case
     from torchsar_eval.names import slug
     from torchsar_eval.output import default_out, result_dir, write_config
     from torchsar_eval.tables import markdown

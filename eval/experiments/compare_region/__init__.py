@@ -165,8 +165,8 @@ def _region_specs() -> list[Detector]:
 def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detector], list]:
     """Each requested window CFAR at its best grid point on the tuning set."""
     from torchsar_eval.batches import batches
-    from torchsar_eval.commands.compare_region.sweep import best_setting, window_grid
     from torchsar_eval.detector import Detector
+    from torchsar_eval.experiments.compare_region.sweep import best_setting, window_grid
     from torchsar_eval.registry import BUILTIN
 
     tb = list(batches(tune, sweep.batch_size))
@@ -186,7 +186,7 @@ def _tuned(tune, sweep: Sweep, notes: list[str], name: str) -> tuple[list[Detect
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from torchsar_eval.commands.compare_region.panel import detection_panel
+    from torchsar_eval.experiments.compare_region.panel import detection_panel
     from torchsar_eval.names import file_slugs, slug
     from torchsar_eval.output import default_out, result_dir, write_config
     from torchsar_eval.runner import run_detectors

@@ -22,7 +22,7 @@ from torch import Tensor
 import torchsar.imaging as ti
 from torchsar.imaging.backprojection import BackprojectionOperator
 from torchsar.io.gotcha import GotchaPass
-from torchsar_eval.commands.autofocus.experiment import draw_seed
+from torchsar_eval.experiments.autofocus.experiment import draw_seed
 
 __all__ = ["GOTCHA_ERRORS", "run_gotcha"]
 

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from torchsar_eval.commands.speckle.scoring import Sample, apply_filter
+from torchsar_eval.experiments.speckle.scoring import Sample, apply_filter
 from torchsar_eval.plots import save
 
 __all__ = ["despeckling_panel"]

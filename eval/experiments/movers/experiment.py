@@ -11,8 +11,8 @@ import torch
 from tqdm import tqdm
 
 from torchsar.motion import SpotlightParams, find_movers
-from torchsar_eval.commands.movers.ladder import scene_row
-from torchsar_eval.commands.movers.scenes import LAYOUT, MOVER, make_clutter, simulate_scenes
+from torchsar_eval.experiments.movers.ladder import scene_row
+from torchsar_eval.experiments.movers.scenes import LAYOUT, MOVER, make_clutter, simulate_scenes
 from torchsar_eval.output import result_dir, write_config
 from torchsar_eval.tables import markdown
 
@@ -214,7 +214,7 @@ def _summary(table: pd.DataFrame, sens: pd.DataFrame) -> str:
 
 
 def _write(out: Path, table, sens, params: SpotlightParams, cfg: LadderConfig) -> None:
-    from torchsar_eval.commands.movers.plots import plot_displacement
+    from torchsar_eval.experiments.movers.plots import plot_displacement
 
     with result_dir(out) as tmp:
         table.to_csv(tmp / "movers.csv", index=False)

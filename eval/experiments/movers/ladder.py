@@ -16,7 +16,7 @@ from torchsar.motion import (
     walk_rate,
 )
 from torchsar.motion import wrap as fold
-from torchsar_eval.commands.movers.scenes import MOVER
+from torchsar_eval.experiments.movers.scenes import MOVER
 
 __all__ = ["TESTS", "scene_row"]
 
