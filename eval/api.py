@@ -20,12 +20,16 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import pandas as pd
 from torch.utils.data import Dataset
 
 from torchsar_eval.batches import SkipBad, TruthOnly, as_dict
 from torchsar_eval.calibrate import choose_threshold, parse_target, split_indices
+from torchsar_eval.datasets import make_dataset
+from torchsar_eval.datasets.files import warn_shared_files
+from torchsar_eval.datasets.make import MAX_N
 from torchsar_eval.detector import Detector, as_detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import observed_facts
@@ -33,14 +37,15 @@ from torchsar_eval.html_report import DEFAULT_RANK, check_rank_by
 from torchsar_eval.names import file_slugs, slug
 from torchsar_eval.output import claim, result_dir, write_config
 from torchsar_eval.overlays import collect_overlays, overlay_indices, parse_overlay
+from torchsar_eval.registry import BUILTIN, load
+from torchsar_eval.report import per_image_rows, write_run
 from torchsar_eval.result import Scoring
-from torchsar_eval.results import Results
+from torchsar_eval.results import LazyTables, Results, result_tables
 from torchsar_eval.resume import check_resumable, fingerprint
 from torchsar_eval.settings import Calibration, Execution
 from torchsar_eval.shards import ShardJob, run_shards, shard_coco, shard_ranges, shard_rows
-
-if TYPE_CHECKING:
-    import pandas as pd  # the tables: imported once the scoring is done
+from torchsar_eval.sweep import as_frame, choose, sweep_table, variants
+from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
 __all__ = ["Results", "evaluate"]
 
@@ -65,9 +70,6 @@ class _Plan:
 
 def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
     """``{name: dataset}`` from a name, a dataset, a list of them or a dict."""
-    from torchsar_eval.datasets import make_dataset
-    from torchsar_eval.datasets.files import warn_shared_files
-    from torchsar_eval.datasets.make import MAX_N
 
     if isinstance(datasets, str | Dataset):
         datasets = [datasets]
@@ -96,7 +98,6 @@ def _datasets(datasets: object, n: int | None, seed: int) -> dict[str, Dataset]:
 
 def _detectors(detectors: object) -> list[Detector]:
     """Detectors from names / import paths, detector objects, or a list or dict of them."""
-    from torchsar_eval.registry import load
 
     if isinstance(detectors, str) or callable(detectors):
         detectors = [detectors]
@@ -201,7 +202,6 @@ def evaluate(
     Raises:
         EvalError: a bad option, dataset or detector, named by its parameter.
     """
-    from torchsar_eval.registry import BUILTIN
 
     _check_type(scoring, Scoring, "scoring")
     _check_type(execution, Execution, "execution")
@@ -307,7 +307,6 @@ SWEEP_FILE = "sweep.csv"
 
 def sweep_frame(stats: dict) -> pd.DataFrame:
     """Every dataset's sweep rows (``sweep.csv``)."""
-    from torchsar_eval.sweep import as_frame
 
     return as_frame([row for st in stats.values() for row in st.get("sweep", {}).get("rows", [])])
 
@@ -329,11 +328,6 @@ def _note_idle_workers(name: str, images: int, ex: Execution) -> None:
 def _execute(plan: _Plan, datasets: dict, tmp: Path, out: Path | None) -> Results:
     """Score every dataset into the folder ``tmp`` (a run's staging folder, or a temporary
     one); with ``out``, write the tables, plots and ``config.json`` there too."""
-    import pandas as pd
-
-    from torchsar_eval.report import per_image_rows, write_run
-    from torchsar_eval.results import LazyTables, result_tables
-    from torchsar_eval.tables import PER_IMAGE_COLUMNS
 
     if out is not None:  # a temporary folder is never resumed: nothing to record
         check_resumable(tmp / "resume.json", fingerprint(plan, datasets))
@@ -592,7 +586,6 @@ def _swept(
     each detector's best variant, the calibrated thresholds of the detectors without a
     swept option, and the sweep's record: ``{"rows": sweep.csv rows, "chosen": {detector:
     options}, "counts"}``."""
-    from torchsar_eval.sweep import choose, sweep_table, variants
 
     tried = [variants(d, cal.sweep) for d in detectors]
     if not any(tried):

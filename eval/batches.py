@@ -9,6 +9,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from torchsar_eval.datasets.base import BadItemError
+from torchsar_eval.items import Item
 
 __all__ = ["Indexed", "SkipBad", "TruthOnly", "as_dict", "batches"]
 
@@ -16,7 +17,6 @@ __all__ = ["Indexed", "SkipBad", "TruthOnly", "as_dict", "batches"]
 def as_dict(item):
     """A dataset item as the harness's dict (a typed :class:`~torchsar_eval.items.Item` is
     converted; a dict is itself)."""
-    from torchsar_eval.items import Item
 
     return item.as_dict() if isinstance(item, Item) else item
 

@@ -107,6 +107,7 @@ AUTOFOCUS_DEFAULTS = {
 def detector_names() -> list[str]:
     """Every detector name: the built-ins, then the names installed packages register in
     the ``torchsar.detectors`` entry-point group (sorted), as ``registry.available()``."""
+    # installed packages' entry points read only when asked (this module stays light for --help)
     from importlib.metadata import entry_points
 
     registered = {ep.name for ep in entry_points(group="torchsar.detectors")}

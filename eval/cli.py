@@ -223,6 +223,7 @@ def _one_line_warnings() -> Iterator[None]:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    # heavy modules inside main only: --help stays instant (see the module's docstring)
     from torchsar_eval.output import claim, default_out
 
     out = args.out if getattr(args, "out", None) is not None else default_out(args.command)

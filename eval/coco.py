@@ -25,6 +25,7 @@ __all__ = ["CocoExport", "encode"]
 
 def encode(mask: np.ndarray) -> dict:
     """COCO run-length encoding of a 2-D bool mask (JSON-ready)."""
+    # pycocotools only when a mask is encoded (a worker without --export-coco never loads it)
     from pycocotools import mask as mask_utils
 
     rle = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))

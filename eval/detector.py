@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import inspect
+import io
 import math
 import pickle
 import types
@@ -350,7 +351,6 @@ class _MainFinder(pickle.Pickler):
     """Pickles into nothing, noting functions and classes that live in ``__main__``."""
 
     def __init__(self) -> None:
-        import io
 
         super().__init__(io.BytesIO(), protocol=pickle.HIGHEST_PROTOCOL)
         self.main: list[str] = []

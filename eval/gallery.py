@@ -548,6 +548,7 @@ def render_case(
 
 
 def _png(indices: np.ndarray, path: Path) -> None:
+    # Pillow only when a picture is written (workers never load it)
     from PIL import Image
 
     im = Image.fromarray(indices, "P")

@@ -208,6 +208,7 @@ class Item:
         """The harness's item: the image (zeros when ``None``), the targets painted into the
         ``mask``, ``instances`` and ``ignore`` planes (for pixel metrics and pictures; the
         scoring reads ``targets``, as given) and the meta."""
+        # torch and the library only to paint planes: the typed items are read without them
         import torch
 
         from torchsar.metrics.truth import box_pixels

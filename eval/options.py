@@ -188,6 +188,7 @@ def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
     """Call ``fn(image, **options)`` once on a small clutter image, so a bad option value
     (out of range, wrong type, a threshold that cannot be computed) fails before any
     work, as an :class:`EvalError` naming ``what`` and the options."""
+    # the library only when an option is tried: the command parsers import this module
     from torchsar.simulate import clutter
 
     try:
@@ -207,6 +208,7 @@ def dry_run(fn: Callable, options: Mapping[str, Any], what: str) -> None:
 def despeckler(name: str | None, items: list[str]) -> tuple[Callable | None, dict[str, Any]]:
     """The optional speckle-filter stage of ``--despeckle NAME --despeckle-param K=V`` and its
     resolved options, checked against the filter and tried once."""
+    # the library only when a filter is named: the command parsers import this module
     from torchsar.speckle import FILTERS
     from torchsar_eval.detector import check_options
 

@@ -440,6 +440,7 @@ def _publish(tmp: Path, out: Path) -> None:
 
 def write_config(folder: Path, command: str, options: dict[str, Any]) -> None:
     """Write ``config.json``: every resolved option plus versions and the command line."""
+    # versions recorded when a folder is written: `clean` imports this module without torch
     import torch
 
     import torchsar

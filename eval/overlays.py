@@ -37,6 +37,8 @@ from torchsar.objects import Objects
 from torchsar_eval.batches import Indexed, as_dict
 from torchsar_eval.errors import EvalError
 from torchsar_eval.names import file_slugs, slug
+from torchsar_eval.runner import run_detectors
+from torchsar_eval.scoring import batch_truth
 
 __all__ = [
     "FALSE_ALARM",
@@ -211,8 +213,6 @@ def collect_overlays(
 ) -> list[Overlay]:
     """Every detector of ``results`` (merged results, each with its reported operating
     threshold) on the images ``indices`` of ``ds``, matched and drawn."""
-    from torchsar_eval.runner import run_detectors
-    from torchsar_eval.scoring import batch_truth
 
     if not indices or not results:
         return []
@@ -412,6 +412,7 @@ def _file_name(image: str) -> str:
 
 
 def _png(pixels: np.ndarray, path: Path) -> None:
+    # Pillow only when a picture is written (workers never load it)
     from PIL import Image
 
     im = Image.fromarray(pixels, "P")

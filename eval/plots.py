@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import math
+import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from torchsar_eval.colours import detector_colour, detector_dash
-from torchsar_eval.labels import plain
+from torchsar_eval.labels import plain, short_label
 from torchsar_eval.names import slug
 from torchsar_eval.tables import pooled_pr
 
@@ -97,10 +98,11 @@ def detector_style(name: str) -> dict:
 
 def pyplot():
     """``matplotlib.pyplot`` on the headless Agg backend (imported on first use)."""
+    # matplotlib on the first figure (see the module's docstring)
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after the backend is chosen
 
     return plt
 
@@ -108,6 +110,7 @@ def pyplot():
 def legend_handles(names: Iterable[str], notes: dict[str, str] | None = None) -> list:
     """One legend entry per detector in its style (whether or not a panel shows it), with its
     ``notes`` entry in brackets (e.g. its AP50)."""
+    # matplotlib on the first figure (see the module's docstring)
     from matplotlib.lines import Line2D
 
     notes = notes or {}
@@ -136,7 +139,6 @@ def not_shown(left_out: Mapping[str, str]) -> str:
 
 def titled(ax: Axes, title: str, left_out: Mapping[str, str], width: int = 64) -> None:
     """Set a panel's title, with the :func:`not_shown` note below it (wrapped)."""
-    import textwrap
 
     note = textwrap.fill(not_shown(left_out), width, break_long_words=False)
     ax.set_title(plain(title if not note else f"{title}\n{note}"), fontsize=10 if not note else 9)
@@ -205,6 +207,7 @@ def log_axis(ax: Axes, which: str, values: Iterable[float], least: int = 3) -> N
     """Make the ``x`` or ``y`` axis of ``ax`` logarithmic with readable ticks for
     ``values``: a log axis labelled by :func:`log_ticks`, or a symmetric-log axis (linear
     near 0) when 0 is among the values, so no point is dropped."""
+    # matplotlib on the first figure (see the module's docstring)
     from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
 
     vals = [float(v) for v in values if v == v and math.isfinite(float(v))]
@@ -262,7 +265,6 @@ def roc_figure(
     title: str,
 ) -> Figure:
     """The three panels of :func:`plot_roc` as a figure."""
-    from torchsar_eval.labels import short_label
 
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
@@ -323,6 +325,7 @@ def roc_figure(
         ax.set_ylim(0, 1.02)
         ax.grid(True, which="major", alpha=0.3)
         titled(ax, panel, out)
+    # matplotlib on the first figure (see the module's docstring)
     from matplotlib.lines import Line2D
 
     handles = legend_handles(names, aps)  # every curve's AP50 in the figure's legend

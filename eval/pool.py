@@ -58,6 +58,7 @@ def _init_worker(threads: int, started, driver: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
     with started.get_lock():  # this worker got past its start (the main script's import)
         started.value += 1
+    # torch after the worker has started: its thread count is set before first use
     import torch
 
     torch.set_num_threads(threads)

@@ -67,6 +67,7 @@ def _runtime_env(address: str | None) -> dict:
 
 def _worker_identity() -> dict:
     """In a Ray worker: the torchsar it imports (version, digest, place)."""
+    # runs in a Ray worker: its own torchsar, imported there
     import torchsar
 
     return {
@@ -96,6 +97,7 @@ def last_line(exc: BaseException) -> str:
 def check_workers(ray, detectors: list) -> None:
     """Refuse up front, in one line, a worker whose torchsar differs from the driver's, and
     detectors that a worker cannot rebuild (a module the nodes cannot import)."""
+    # the driver's torchsar, compared with the workers' (Ray is an optional extra)
     import torchsar
 
     probe = ray.remote(num_cpus=1, max_retries=0)
@@ -138,6 +140,7 @@ def run_on_ray(job, todo, on_done, fail, address: str | None, score) -> None:
     result, ``fail`` settles failures (a failed shard runs once more). Ray is started here
     (with this run's packages shipped) unless it already runs."""
     try:
+        # Ray is an optional extra: imported only for engine='ray'
         import ray
     except ImportError:
         raise EvalError("{opt:engine}ray needs Ray: pip install 'ray>=2.9'") from None

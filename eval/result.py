@@ -34,7 +34,14 @@ from torchsar_eval import statefile
 from torchsar_eval.detector import Detector
 from torchsar_eval.errors import EvalError
 from torchsar_eval.gallery import Cases, Gallery
-from torchsar_eval.scoring import BOOTSTRAP_UNITS, image_rows, pixel_areas
+from torchsar_eval.inputs import objects_from, seen_shape, truth_from
+from torchsar_eval.scoring import (
+    BOOTSTRAP_UNITS,
+    image_infos,
+    image_rows,
+    pixel_areas,
+    truth_from_targets,
+)
 
 __all__ = [
     "DEFAULT_MATCH",
@@ -273,7 +280,6 @@ class Evaluator:
         Raises:
             EvalError: not one prediction per target, a malformed box, mask or label.
         """
-        from torchsar_eval.inputs import objects_from, seen_shape, truth_from
 
         predictions, targets = list(predictions), list(targets)
         if len(predictions) != len(targets):
@@ -305,7 +311,6 @@ class Evaluator:
 
     def _update_group(self, truths: list, obj: Objects, shape, image) -> None:
         """Add the images of one size (``image``: their ``(N, H, W)`` pixels, or ``None``)."""
-        from torchsar_eval.scoring import image_infos, truth_from_targets
 
         metas = [m.as_meta() for _, m in truths]
         spacing = np.array([m["pixel_spacing"] or (np.nan, np.nan) for m in metas], np.float64)

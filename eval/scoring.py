@@ -11,6 +11,7 @@ from torchsar.metrics.assign import BatchMatch
 from torchsar.metrics.matching import GroundTruth, ground_truth
 from torchsar.metrics.object_state import ImageInfo, above
 from torchsar.metrics.scr import target_scr_db
+from torchsar.metrics.truth import Regions
 from torchsar.objects import Objects
 
 __all__ = [
@@ -142,7 +143,6 @@ def truth_from_targets(
 ) -> GroundTruth:
     """:class:`~torchsar.metrics.GroundTruth` of a stack of planes of ``shape`` from each
     plane's :class:`~torchsar_eval.items.Targets` (as given: nothing painted)."""
-    from torchsar.metrics.truth import Regions
 
     h, w = shape
     n = [len(t) for t in targets]

@@ -62,6 +62,7 @@ class Execution:
         if self.engine not in ENGINES:
             raise EvalError(f"{{opt:engine}}{self.engine!r}: expected one of {', '.join(ENGINES)}")
         if self.device is not None:
+            # the library only when a device is named: the command parsers import this module
             from torchsar._checks import check_device
             from torchsar.errors import TorchSARError
 

@@ -30,6 +30,7 @@ from torchsar_eval.labels import short_label
 from torchsar_eval.memory import release_memory, tune_allocator
 from torchsar_eval.objects_only import objects_only, score_objects
 from torchsar_eval.pool import DIED, run_in_processes
+from torchsar_eval.ray_engine import run_on_ray
 from torchsar_eval.result import DetectorResult, Scoring
 from torchsar_eval.runner import run_detectors
 from torchsar_eval.settings import Execution
@@ -227,7 +228,6 @@ def _processes(job, todo, track: _Track, fail: _Failures, workers: int) -> None:
 
 
 def _ray(job, todo, track: _Track, fail: _Failures, address: str | None) -> None:
-    from torchsar_eval.ray_engine import run_on_ray
 
     def done(k: int, path: Path, data: bytes | None) -> None:
         if data is None:  # failed (and settled by ``fail``)

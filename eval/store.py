@@ -41,6 +41,7 @@ live writer); by hand, delete ``.<name>.store-partial`` when no make-dataset run
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import numbers
@@ -186,7 +187,6 @@ _DROP = object()
 
 
 def _npy(a: np.ndarray) -> bytes:
-    import io
 
     buf = io.BytesIO()
     np.save(buf, a, allow_pickle=False)

@@ -23,13 +23,14 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from torchsar_eval.calibrate import Target
 from torchsar_eval.detector import HARNESS_OPTIONS, Detector
 from torchsar_eval.errors import EvalError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "SWEEP_COLUMNS",
@@ -184,4 +185,6 @@ def sweep_table(dataset: str, settings: list[Setting], chosen: int, target: Targ
 
 def as_frame(rows: list[list]) -> pd.DataFrame:
     """``sweep.csv`` as a table."""
+    import pandas as pd  # the table only: the workers import this module (settings) without pandas
+
     return pd.DataFrame(rows, columns=SWEEP_COLUMNS)

@@ -226,3 +226,47 @@ def test_the_evaluator_never_imports_the_experiments():
     ]
     assert bad == []
     assert any(m.startswith("torchsar_eval.experiments.") for m in graph())
+
+
+def _inner_imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, function)`` of every import inside a function of ``path``."""
+    tree = ast.parse(path.read_text(), str(path))
+    return [
+        (child.lineno, node.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        for child in ast.walk(node)
+        if isinstance(child, ast.Import | ast.ImportFrom)
+    ]
+
+
+def _said(lines: list[str], lineno: int) -> bool:
+    """A comment on the import's line, or on the line above its block of imports."""
+    i = lineno - 1
+    if "#" in lines[i]:
+        return True
+    while i > 0 and (
+        not lines[i - 1].strip() or lines[i - 1].strip().startswith(("import ", "from "))
+    ):
+        i -= 1
+    return i > 0 and lines[i - 1].strip().startswith("#")
+
+
+def test_every_import_inside_a_function_says_why():
+    """An import inside a function keeps a start-up light (``--help``, a worker process
+    without pandas or matplotlib) or an optional dependency optional: the sub-commands'
+    packages say so once (``--help`` imports every command's parser), every other one on
+    its line or above its block."""
+    for package in ("commands", "experiments"):
+        assert "--help" in (ROOT / "eval" / package / "__init__.py").read_text()
+    bad = []
+    for path in sorted((ROOT / "eval").rglob("*.py")):
+        if {"commands", "experiments"} & set(path.relative_to(ROOT / "eval").parts):
+            continue
+        lines = path.read_text().splitlines()
+        bad += [
+            f"{path.relative_to(ROOT)}:{n} ({fn})"
+            for n, fn in _inner_imports(path)
+            if not _said(lines, n)
+        ]
+    assert bad == []

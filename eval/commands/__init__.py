@@ -1,6 +1,10 @@
 """Sub-commands of ``torchsar-eval``: each module has ``add_parser(subparsers)`` and
 ``run(args) -> int``; :data:`COMMANDS` lists them in help order. The evaluator's commands
-live here; the source papers' experiments in :mod:`torchsar_eval.experiments`."""
+live here; the source papers' experiments in :mod:`torchsar_eval.experiments`.
+
+A command's heavy imports (torch, the library, the evaluator's engine and outputs) are inside
+its functions: ``torchsar-eval --help`` imports every command's module for its parser and
+stays instant, and a command's helper modules are imported by its ``run``."""
 
 from __future__ import annotations
 

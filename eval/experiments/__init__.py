@@ -6,5 +6,6 @@ ladder) and ``compare-region`` (the region-growing CFAR against the window CFARs
 
 Each module has ``add_parser(subparsers)`` and ``run(args) -> int`` like the evaluator's own
 commands; they use the evaluator (datasets, output folders, tables, plots), and nothing in the
-evaluator imports them (``tests/test_imports.py``).
+evaluator imports them (``tests/test_imports.py``). As there, their heavy imports are inside
+their functions: ``torchsar-eval --help`` imports every command's module for its parser.
 """

@@ -90,6 +90,7 @@ def _digest(path: Path, fmt: str) -> str:
 def compressed_counts(seg: object, h: int, w: int) -> bytes:
     """A COCO segmentation (polygons, RLE or compressed RLE) as the compressed RLE string of
     an ``(h, w)`` mask."""
+    # pycocotools only for COCO segmentations (boxes never load it)
     from pycocotools import mask as mask_utils
 
     if isinstance(seg, list):

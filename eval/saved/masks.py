@@ -73,6 +73,7 @@ class MaskFolder:
                 raise EvalError(f"predictions {path}: a {arr.shape} mask for an image of {shape}")
             arr = np.array(arr)
         else:
+            # the raster readers only for masks saved as image files
             from torchsar.io import read_raster
 
             arr = np.asarray(read_raster(path))
