@@ -286,6 +286,7 @@ def test_run_user_errors_before_any_work(tiny_folder, tmp_path, capsys, monkeypa
         raise AssertionError("a dataset was built before the options were checked")
 
     monkeypatch.setattr("torchsar_eval.datasets.make_dataset", no_dataset)
+    monkeypatch.setattr("torchsar_eval.api.make_dataset", no_dataset)
     out = tmp_path / "never"
     base = ["run", "--dataset", f"folder:{tiny_folder}", "--out", str(out), "--no-progress"]
     assert main(base + args) == 2

@@ -98,7 +98,7 @@ def test_a_dead_worker_keeps_the_saved_shards(tmp_path, whole, monkeypatch):
 
 @pytest.mark.parametrize("where", ["shard", "final"])
 def test_a_full_disk_keeps_the_saved_shards(tmp_path, whole, monkeypatch, where):
-    import torchsar_eval.report
+    import torchsar_eval.api
     import torchsar_eval.statefile
 
     out = tmp_path / "run"
@@ -115,7 +115,7 @@ def test_a_full_disk_keeps_the_saved_shards(tmp_path, whole, monkeypatch, where)
         monkeypatch.setattr(torchsar_eval.statefile.os, "fsync", fsync)
     else:
         monkeypatch.setattr(
-            torchsar_eval.report, "write_run", lambda *a, **k: (_ for _ in ()).throw(full)
+            torchsar_eval.api, "write_run", lambda *a, **k: (_ for _ in ()).throw(full)
         )
     message = "cannot save shard-000002.state" if where == "shard" else "cannot write the run"
     with pytest.raises(EvalError, match=f"{message} .*No space left.*kept in"):
