@@ -92,6 +92,7 @@ def _kill_cases(tmp_path, cases, seed: int) -> None:
 needs_signals = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
 
+@pytest.mark.figures  # a complete folder holds its figures
 @pytest.mark.integration
 @needs_signals
 def test_kill_at_random_points_leaves_no_folder_or_a_complete_one(tmp_path):
