@@ -54,6 +54,7 @@ def test_plots_and_the_report_draw_a_detector_alike():
     assert len({STYLES[n][2] for n in BUILTIN}) == len(BUILTIN)
 
 
+@pytest.mark.integration  # a fresh process
 def test_unknown_names_get_a_stable_style_unlike_any_builtin():
     names = ["my-cnn", "yolo-sar", "a", "mine=pkg.mod:Det", "ünïcode"]
     code = (

@@ -272,6 +272,7 @@ def _bad(counts: Counter) -> dict:
     return {k: v for k, v in counts.items() if k not in ("same", "valid", "error")}
 
 
+@pytest.mark.integration  # fuzz
 def test_mutated_stores_read_back_the_same_items_or_name_the_file():
     counts = fuzz(800, seed=1)
     assert not _bad(counts), counts

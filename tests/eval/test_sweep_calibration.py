@@ -57,6 +57,7 @@ def _run(ds):
     )
 
 
+@pytest.mark.integration  # exhaustive: every permutation run
 def test_the_choice_never_looks_at_the_test_split():
     base = make_dataset("sim-chips", n=N, seed=3)
     calib, test = split_indices(N, "chips", 0.5)

@@ -114,6 +114,7 @@ class TestOwnRange:
 
 
 class TestControlsAndEdgeCases:
+    @pytest.mark.integration  # exhaustive: 20 scenes
     def test_no_false_mover_on_20_control_scenes_with_clutter(self, small):
         """Stationary targets plus 150 weak clutter scatterers and noise, 20 seeds."""
         gen = torch.Generator().manual_seed(7)
