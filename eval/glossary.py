@@ -6,9 +6,9 @@ import pandas as pd
 
 from torchsar.metrics.scr import SCR_GUARD, SCR_WIDTH
 
-__all__ = ["glossary"]
+__all__ = ["MATCHING_RULES", "TERMS", "glossary"]
 
-_RULES = {
+MATCHING_RULES = {
     "centroid": "prescreening rule: a detection hits a target when its centroid lies in the "
     "target box grown by {margin:g} x its larger side and its box is at most "
     "{max_size_ratio:g}x the target box",
@@ -18,7 +18,7 @@ _RULES = {
     "than {max_distance:g} {distance_units}, assigned {assign} at the operating point",
 }
 
-_TERMS = [
+TERMS = [
     ("images, targets", "images scored; ground-truth instances (ignore regions excluded)"),
     (
         "pd_pixel, pfa_pixel",
@@ -153,7 +153,7 @@ _FILES = [
 def glossary(summary: pd.DataFrame, scoring) -> str:
     """Markdown glossary for a run's summary (the matching rule and the N targets)."""
     m = scoring.matching
-    rule = _RULES[m.kind].format(**m.as_dict())
+    rule = MATCHING_RULES[m.kind].format(**m.as_dict())
     r = scoring.rules
     cut = "the design threshold" if r.floor == 1 else f"{r.floor:g} x the design threshold"
     top = "∞" if r.max_area is None else f"{r.max_area:g}"
@@ -178,7 +178,7 @@ def glossary(summary: pd.DataFrame, scoring) -> str:
         )
     lines += ["", "| column | meaning |", "|---|---|"]
     unit = getattr(scoring, "bootstrap_unit", "image")
-    for k, v in _TERMS:
+    for k, v in TERMS:
         if unit == "group" and k == "X_lo, X_hi":
             v = v.replace("over images", "over groups of images (meta group)")
             v = v.replace(

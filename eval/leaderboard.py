@@ -114,10 +114,7 @@ class Board:
     def options(self, run: int, detector: str) -> dict:
         """A row's detector options as its run applied them: the options ``config.json``
         records, the settings a sweep chose over them, the operating threshold."""
-        opts = self.runs[run].options
-        out = dict((opts.get("detectors") or {}).get(detector) or {})
-        out.update(((opts.get("sweep") or {}).get(self.dataset) or {}).get(detector) or {})
-        return out
+        return self.runs[run].record.detector_options(self.dataset, detector)
 
     def _settings(self) -> list[str]:
         """Per row, the options in which its detector differs from the same detector in
@@ -190,25 +187,23 @@ def short_value(v: object) -> str:
 
 def caveats(run: RunFiles, dataset: str, board: Board) -> list[str]:
     """What a reader must know before comparing ``dataset``'s numbers, one line each."""
-    opts = run.options
-    ds_opts = (opts.get("datasets") or {}).get(dataset) or {}
-    thr = (opts.get("throughput") or {}).get(dataset) or {}
+    ds = run.record.dataset(dataset)
     summary = run.table("summary", dataset)
     first = summary.iloc[0] if not summary.empty else pd.Series(dtype=object)
     out = []
-    if ds_opts.get("sample_type") == "display":
+    if ds.sample_type == "display":
         out.append(
             "display data (8/16-bit renderings of unknown transfer): the detectors' "
             "design Pfa is not meaningful on it"
         )
-    if ds_opts.get("gt") == "box":
+    if ds.gt == "box":
         out.append("box ground truth: no pixel metrics, AP at box IoU")
     n_targets = number(first.get("targets"))
     if not math.isnan(n_targets) and n_targets < FEW_TARGETS:
         out.append(f"only {n_targets:.0f} targets: intervals are wide")
-    if isinstance(opts.get("calibration"), dict):
+    if run.record.calibration is not None:
         out.append("the worst cases in the gallery are at the design operating point")
-    failed, skipped = thr.get("failed") or [], thr.get("skipped_items") or []
+    failed, skipped = ds.failed, ds.skipped_items
     if failed or skipped:
         out.append(f"{len(failed)} failed shard(s) and {len(skipped)} unreadable file(s) left out")
     if any(n.startswith("identical") for n in board.notes):

@@ -52,9 +52,8 @@ def _rank_of(runs: list[RunFiles], rank_by: str | None) -> str:
     if rank_by is not None:
         return rank_by
     for run in runs:
-        recorded = run.options.get("rank_by")
-        if isinstance(recorded, str) and recorded:
-            return recorded
+        if run.record.rank_by:
+            return run.record.rank_by
     return DEFAULT_RANK
 
 

@@ -13,7 +13,7 @@ import pandas as pd
 
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
-from torchsar_eval.glossary import _RULES, _TERMS
+from torchsar_eval.glossary import MATCHING_RULES, TERMS
 from torchsar_eval.html_report.figures import (
     FIGURES,
     Series,
@@ -21,6 +21,7 @@ from torchsar_eval.html_report.figures import (
     first_column,
     pr_label,
 )
+from torchsar_eval.html_report.records import Calibration, Matching
 from torchsar_eval.html_report.runfiles import RunFiles, read_png
 from torchsar_eval.labels import short_labels
 from torchsar_eval.leaderboard import (
@@ -342,25 +343,46 @@ def _measured_by(row: pd.Series) -> str:
     return text if isinstance(text, str) and text else "–"
 
 
+def _rule_text(match: Matching) -> str:
+    """The matching rule in words (its kind and distance when the rule is not a known one)."""
+    rule = MATCHING_RULES.get(match.kind)
+    try:
+        text = rule.format(**match.fields) if rule else None
+    except (KeyError, ValueError):
+        text = None
+    if text is None:
+        text = f"{match.kind}" + (
+            f", within {match.max_distance:g} {match.distance_units}" if match.max_distance else ""
+        )
+    return text
+
+
+def _operating_point(cal: Calibration | None) -> str:
+    """How the reported operating point was chosen."""
+    if cal is None:
+        return "each detector's design threshold"
+    if cal.sweep:
+        swept = ", ".join(f"{k} in {{{', '.join(map(str, v))}}}" for k, v in cal.sweep.items())
+        return (
+            f"settings chosen on {cal.fraction} of the images for {cal.target} ({swept}), "
+            "each at its design threshold; reported on the rest (see Tuned settings)"
+        )
+    return f"calibrated on {cal.fraction} of the images for {cal.target}, reported on the rest"
+
+
 def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
-    opts = run.options
-    ds_opts = (opts.get("datasets") or {}).get(dataset) or {}
-    manifest = (opts.get("manifests") or {}).get(dataset) or {}
-    observed = (opts.get("observed") or {}).get(dataset) or {}
+    rec, ds = run.record, run.record.dataset(dataset)
     summary = run.table("summary", dataset)
     first = summary.iloc[0] if not summary.empty else pd.Series(dtype=object)
     facts: list[tuple[str, str]] = []
     if label:
         facts.append(("run", label))
-    source = manifest.get("generator") or ds_opts.get("root") or ""
-    if source:
-        scheme = ds_opts.get("scheme")
-        files = manifest.get("files")
+    if ds.source:
         facts.append(
             (
                 "source",
-                f"{scheme + ': ' if scheme else ''}{source}"
-                + (f" ({files} files)" if files is not None else ""),
+                f"{ds.scheme + ': ' if ds.scheme else ''}{ds.source}"
+                + (f" ({ds.files} files)" if ds.files is not None else ""),
             )
         )
     facts.append(("images", _fmt("images", first.get("images"))))
@@ -371,14 +393,11 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
         if not one.empty:
             pairs = zip(one["key"], one["targets"], strict=True)
             facts.append(("classes", ", ".join(f"{k} ({_fmt('targets', t)})" for k, t in pairs)))
-    sizes = observed.get("image_size") or []
-    if sizes:
-        facts.append(("image size", ", ".join(f"{h} × {w} px" for h, w in sizes)))
-    sample = ds_opts.get("sample_type")
-    if sample:
-        facts.append(("samples", _SAMPLE_TYPES.get(sample, str(sample))))
-    declared = ds_opts.get("pixel_spacing")
-    spacing = observed.get("pixel_spacing") or ([declared] if declared else [])
+    if ds.image_sizes:
+        facts.append(("image size", ", ".join(f"{h} × {w} px" for h, w in ds.image_sizes)))
+    if ds.sample_type:
+        facts.append(("samples", _SAMPLE_TYPES.get(ds.sample_type, ds.sample_type)))
+    spacing = ds.spacings or ([ds.pixel_spacing] if ds.pixel_spacing else [])
     facts.append(
         (
             "pixel spacing",
@@ -392,72 +411,36 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
             else "unknown (no false alarms per km², no sizes in m)",
         )
     )
-    if ds_opts.get("gt") or ds_opts.get("instances"):
-        facts.append(
-            (
-                "ground truth",
-                " · ".join(str(ds_opts[k]) for k in ("gt", "instances") if ds_opts.get(k)),
-            )
-        )
-    scoring = opts.get("scoring") or {}
-    match = scoring.get("matching") or {}
-    if match:
-        rule = _RULES.get(match.get("kind"))
-        try:
-            text = rule.format(**match) if rule else None
-        except (KeyError, ValueError):
-            text = None
-        if text is None:
-            text = f"{match.get('kind')}" + (
-                f", within {match.get('max_distance')} {match.get('distance_units', '')}"
-                if match.get("max_distance")
-                else ""
-            )
-        facts.append(("matching rule", text))
-    rules = scoring.get("objects") or {}
-    if rules:
+    if ds.gt or ds.instances:
+        facts.append(("ground truth", " · ".join(v for v in (ds.gt, ds.instances) if v)))
+    if rec.matching is not None:
+        facts.append(("matching rule", _rule_text(rec.matching)))
+    if rec.objects is not None:
+        rules = rec.objects
+        area = float("nan") if rules.min_area is None else rules.min_area
         facts.append(
             (
                 "objects",
-                f"closing {rules.get('closing')} px, components over "
-                f"{_floor_text(_num(rules.get('floor', 1)))}, area ≥ "
-                f"{_num(rules.get('min_area')):g} {rules.get('units', 'px')}",
+                f"closing {rules.closing} px, components over "
+                f"{_floor_text(rules.floor)}, area ≥ {area:g} {rules.units}",
             )
         )
-    boot = scoring.get("bootstrap") or {}
-    if boot:
+    if rec.bootstrap is not None:
         facts.append(
             (
                 "intervals",
                 f"95 %, effective-count Jeffreys / Poisson from a Poisson "
-                f"bootstrap over images, {boot.get('replicates')} replicates"
-                if boot.get("replicates")
+                f"bootstrap over images, {rec.bootstrap.replicates} replicates"
+                if rec.bootstrap.replicates
                 else "none (bootstrap off)",
             )
         )
-    cal = opts.get("calibration")
-    if isinstance(cal, dict) and cal.get("sweep"):
-        swept = ", ".join(f"{k} in {{{', '.join(map(str, v))}}}" for k, v in cal["sweep"].items())
-        point = (
-            f"settings chosen on {cal.get('fraction')} of the images for "
-            f"{cal.get('target')} ({swept}), each at its design threshold; reported on "
-            "the rest (see Tuned settings)"
-        )
-    elif isinstance(cal, dict):
-        point = (
-            f"calibrated on {cal.get('fraction')} of the images for {cal.get('target')}, "
-            "reported on the rest"
-        )
-    else:
-        point = "each detector's design threshold"
-    facts.append(("operating point", point))
-    if opts.get("despeckle"):
-        facts.append(("despeckling", ", ".join(f"{k}={v}" for k, v in opts["despeckle"].items())))
-    thr = (opts.get("throughput") or {}).get(dataset) or {}
-    if thr.get("wall_s") is not None:
-        facts.append(
-            ("time", f"{_num(thr['wall_s']):.1f} s ({_num(thr.get('images_per_s')):.3g} images/s)")
-        )
+    facts.append(("operating point", _operating_point(rec.calibration)))
+    if rec.despeckle:
+        facts.append(("despeckling", ", ".join(f"{k}={v}" for k, v in rec.despeckle.items())))
+    if ds.wall_s is not None:
+        speed = float("nan") if ds.images_per_s is None else ds.images_per_s
+        facts.append(("time", f"{ds.wall_s:.1f} s ({speed:.3g} images/s)"))
     notes = caveats(run, dataset, board)
     out = ['<dl class="card">']
     out += [f"<div><dt>{_e(k)}</dt><dd>{_e(v)}</dd></div>" for k, v in facts]
@@ -905,21 +888,19 @@ def _floor_text(floor: float) -> str:
 
 def _header(runs: list[RunFiles], rank_by: str) -> tuple[str, str]:
     if len(runs) == 1:
-        run = runs[0]
-        cfg = run.config
+        run, rec = runs[0], runs[0].record
         title = f"Evaluation report: {run.name}"
         sub = [f"run {run.name}"]
-        if cfg.get("time"):
-            sub.append(f"created {cfg['time']}")
-        if cfg.get("torchsar_version"):
-            sub.append(f"torchsar {cfg['torchsar_version']}, torch {cfg.get('torch_version')}")
+        if rec.time:
+            sub.append(f"created {rec.time}")
+        if rec.torchsar_version:
+            sub.append(f"torchsar {rec.torchsar_version}, torch {rec.torch_version}")
     else:
         title = "Evaluation report: " + " vs ".join(r.name for r in runs)
         sub = [
             f"{len(runs)} runs: "
             + ", ".join(
-                f"{r.name}" + (f" ({r.config['time']})" if r.config.get("time") else "")
-                for r in runs
+                f"{r.name}" + (f" ({r.record.time})" if r.record.time else "") for r in runs
             )
         ]
     sub.append(f"ranked by {LABELS.get(rank_by, rank_by)}")
@@ -947,7 +928,7 @@ def _others(runs: list[RunFiles]) -> str:
 def _glossary() -> str:
     rows = "".join(
         f'<tr><td class="l">{_e(k)}</td><td class="l" style="white-space:normal">{_e(v)}</td></tr>'
-        for k, v in _TERMS
+        for k, v in TERMS
     )
     return (
         '<section><h2>Glossary</h2><div class="wrap"><table><tbody>'

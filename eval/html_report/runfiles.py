@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from torchsar_eval.errors import EvalError
+from torchsar_eval.html_report.records import RunRecord, run_record
 
 __all__ = ["MAX_PNG_BYTES", "RUN_TABLES", "RunFiles", "read_png", "read_run"]
 
@@ -50,6 +51,7 @@ class RunFiles:
         folder: the run folder.
         name: the run's name (its ``--out`` folder name as recorded, else the folder's).
         config: ``config.json`` (``{}`` when missing or unreadable).
+        record: ``config.json`` as typed records (what pages read of it).
         tables: the tables of :data:`RUN_TABLES` (empty DataFrames when missing).
         figures: the folder's other PNG figures (those the report does not redraw).
     """
@@ -59,10 +61,7 @@ class RunFiles:
     config: dict = field(default_factory=dict)
     tables: dict[str, pd.DataFrame] = field(default_factory=dict)
     figures: list[Path] = field(default_factory=list)
-
-    @property
-    def options(self) -> dict:
-        return self.config.get("options") or {}
+    record: RunRecord = field(default_factory=RunRecord)
 
     def table(self, key: str, dataset: str | None = None) -> pd.DataFrame:
         """Table ``key``, only the rows of ``dataset`` when given (and it has the column)."""
@@ -157,10 +156,9 @@ def read_run(folder: str | Path) -> RunFiles:
             config = {}
         if not isinstance(config, dict):
             config = {}
-    options = config.get("options")
-    out = options.get("out") if isinstance(options, dict) else None
-    name = Path(str(out)).name if out else folder.resolve().name
+    record = run_record(config)
+    name = Path(record.out).name if record.out else folder.resolve().name
     figures = sorted(
         p for p in folder.glob("*.png") if not p.name.startswith(REDRAWN) and not p.is_symlink()
     )
-    return RunFiles(folder, name, config, tables, figures)
+    return RunFiles(folder, name, config, tables, figures, record)
