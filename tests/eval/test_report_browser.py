@@ -22,7 +22,7 @@ import torchsar_eval as te
 from torchsar_eval.colours import detector_colour
 from torchsar_eval.html_report.figures import FIGURES
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.figures]  # pages in a browser
 
 NAMES = ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome"]
 WIDTH, HEIGHT = 1366, 2600
