@@ -210,6 +210,8 @@ def evaluate(
     if progress is not None:
         execution = replace(execution, progress=progress)
     execution = _cap_workers(execution)
+    if figures is not None and not isinstance(figures, bool):
+        raise EvalError(f"{{opt:figures}}{figures!r}: expected True or False")
     if window_units not in ("px", "m"):
         raise EvalError(f"{{opt:window_units}}{window_units!r}: expected 'px' or 'm'")
     overlay = parse_overlay(overlay)
@@ -238,7 +240,7 @@ def evaluate(
         seed=seed,
         rank_by=check_rank_by(rank_by),
         overlay=overlay,
-        figures=default_figures() if figures is None else _flag(figures, "figures"),
+        figures=default_figures() if figures is None else figures,
     )
     with ExitStack() as stack:
         stack.enter_context(_own_heap())
@@ -261,12 +263,6 @@ FIGURES_ENV = "TORCHSAR_EVAL_FIGURES"
 def default_figures() -> bool:
     """Whether a run draws its figures when not told (:data:`FIGURES_ENV` not ``0``)."""
     return os.environ.get(FIGURES_ENV, "1").strip().lower() not in ("0", "false", "no", "off")
-
-
-def _flag(value: object, name: str) -> bool:
-    if not isinstance(value, bool):
-        raise EvalError(f"{{opt:{name}}}{value!r}: expected True or False")
-    return value
 
 
 @contextmanager

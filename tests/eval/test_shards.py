@@ -84,6 +84,13 @@ def _ex(**kw) -> Execution:
 _EX2 = Execution(batch_size=2, shard_size=2, progress=False)
 
 
+def _one(dataset, detector) -> ShardJob:
+    """One detector on all of ``dataset``, batches and shards of 2."""
+    return ShardJob(
+        "chips", dataset, list(range(len(dataset))), [detector], _job(6, 2).scoring, _EX2
+    )
+
+
 def _on(job: ShardJob, **kw) -> ShardJob:
     """``job`` run with other execution settings (workers, engine, skip_bad)."""
     return replace(job, execution=replace(job.execution, **kw))
@@ -206,9 +213,7 @@ class Unreadable(Chips):
 
 
 def test_failed_shard_stops_the_run_or_is_skipped_and_named(tmp_path):
-    job = ShardJob(
-        "chips", Unreadable(6), list(range(6)), [BUILTIN["ca"]], _job(6, 2).scoring, _EX2
-    )
+    job = _one(Unreadable(6), BUILTIN["ca"])
     with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
         run_shards(job, tmp_path / "a")
     merged, counts = run_shards(_on(job, skip_bad=True), tmp_path / "b")
@@ -221,14 +226,7 @@ def test_with_skip_bad_a_failing_batch_loses_only_its_bad_image(tmp_path):
     image alone (its batch scored again image by image), and no shard fails."""
     from torchsar_eval.detector import Detector
 
-    job = ShardJob(
-        "chips",
-        Poisoned(6),
-        list(range(6)),
-        [Detector("x", _explode_on_big)],
-        _job(6, 2).scoring,
-        _EX2,
-    )
+    job = _one(Poisoned(6), Detector("x", _explode_on_big))
     with pytest.raises(EvalError, match="shard 2 failed: corrupt shard"):
         run_shards(job, tmp_path / "a")
     merged, counts = run_shards(_on(job, skip_bad=True), tmp_path / "b")
@@ -270,7 +268,7 @@ def test_a_transient_failure_is_retried_once_and_counted(tmp_path, engine, worke
     if engine == "ray":
         pytest.importorskip("ray")
     spec = Detector("ca", partial(_fail_first_time, marker=tmp_path / "failed-once"))
-    job = ShardJob("chips", Chips(6), list(range(6)), [spec], _job(6, 2).scoring, _EX2)
+    job = _one(Chips(6), spec)
     run = tmp_path / "run"
     merged, counts = run_shards(_on(job, workers=workers, engine=engine), run)
     assert (tmp_path / "failed-once").exists()
@@ -284,14 +282,7 @@ def test_a_dead_worker_fails_its_own_shard_only(tmp_path):
     it (run again, each in a fresh process), and fails alone; the others are scored."""
     from torchsar_eval.detector import Detector
 
-    job = ShardJob(
-        "chips",
-        Poisoned(6),
-        list(range(6)),
-        [Detector("x", _die_on_big)],
-        _job(6, 2).scoring,
-        _EX2,
-    )
+    job = _one(Poisoned(6), Detector("x", _die_on_big))
     with pytest.warns(RuntimeWarning, match="worker process died.*again one at a time"):
         merged, counts = run_shards(_on(job, workers=2, skip_bad=True), tmp_path / "run")
     assert [f["shard"] for f in counts["failed"]] == [2]

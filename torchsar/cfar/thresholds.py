@@ -158,7 +158,7 @@ def _block_law(m: int, smallest: int) -> tuple[np.ndarray, np.ndarray]:
     """CDF and density of a block mean ``S / m``, ``S ~ Gamma(m, 1)``, at the nodes of the
     grid for blocks of at least ``smallest`` cells (shared by every key with that smallest
     block: a no-data mask gives thousands of keys over a few dozen block sizes)."""
-    z, _ = _log_grid((smallest,))
+    z, _ = _grid_for(smallest)
     cdf = special.gammainc(m, m * z)
     pdf = np.exp(math.log(m) + special.xlogy(m - 1, m * z) - m * z - special.gammaln(m))
     return cdf, pdf
@@ -167,8 +167,8 @@ def _block_law(m: int, smallest: int) -> tuple[np.ndarray, np.ndarray]:
 def _block_density(sizes: tuple[int, ...], reduce: str) -> tuple[np.ndarray, np.ndarray]:
     """Nodes ``z``, weights times the density of ``max`` / ``min`` of independent block means
     ``S_j / m_j``, ``S_j ~ Gamma(m_j, 1)`` (unit-mean exponential cells)."""
-    z, w = _log_grid(sizes)
     ms = [m for m in sizes if m > 0]
+    z, w = _grid_for(min(ms))
     laws = [_block_law(m, min(ms)) for m in ms]
     cdf = [c if reduce == "max" else 1.0 - c for c, _ in laws]
     dens = np.zeros_like(z)
