@@ -1,4 +1,6 @@
-"""Plots (matplotlib, headless) in one style, fit for a paper.
+"""Plots (matplotlib, headless) in one style, fit for a paper: the styles, axes and files
+every figure of the harness uses (the run's curves are drawn by
+:mod:`torchsar_eval.panels`, on paper and page alike).
 
 - Every detector keeps its colour, line style and marker in every figure, whatever the other
   detectors of the run (:func:`detector_style`, keyed by name: the report's colours, and a
@@ -21,18 +23,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from torchsar_eval.colours import detector_colour, detector_dash
-from torchsar_eval.labels import plain, short_label
+from torchsar_eval.labels import plain
 from torchsar_eval.names import slug
-from torchsar_eval.tables import pooled_pr
 
 if TYPE_CHECKING:
-    import pandas as pd
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
-
-LEGEND_MAX = 6
-"""Most PR curves listed with their AP in the PR panel's own legend (the figure's legend
-gives every detector's AP50 as well)."""
 
 __all__ = [
     "STYLES",
@@ -41,9 +37,7 @@ __all__ = [
     "log_axis",
     "log_ticks",
     "not_shown",
-    "plot_roc",
     "pyplot",
-    "roc_figure",
     "save",
     "slug",
     "titled",
@@ -243,121 +237,3 @@ def save(fig: Figure, path: Path, rect: tuple[float, ...] = (0, 0, 1, 1)) -> lis
     fig.savefig(path.with_suffix(".pdf"))
     plt.close(fig)
     return [path.name, path.with_suffix(".pdf").name]
-
-
-# -- the run's ROC figure ---------------------------------------------------------------
-
-LEGEND_COLUMNS = 7
-
-
-def _ap50(summary: pd.DataFrame, name: str) -> float:
-    if "ap50" not in summary:
-        return float("nan")
-    values = summary.loc[summary["detector"] == name, "ap50"]
-    return float(values.iloc[0]) if len(values) else float("nan")
-
-
-def roc_figure(
-    pixel: pd.DataFrame,
-    froc: pd.DataFrame,
-    pr: pd.DataFrame,
-    summary: pd.DataFrame,
-    title: str,
-) -> Figure:
-    """The three panels of :func:`plot_roc` as a figure."""
-
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
-    names = list(dict.fromkeys(summary["detector"]))
-    left: list[dict[str, str]] = [{}, {}, {}]
-    aps: dict[str, str] = {}
-    marks = {"markevery": 0.1, "markersize": 5}
-    for name in names:
-        st = detector_style(name)
-        op = summary[summary["detector"] == name]
-        point = {
-            "color": st["color"],
-            "marker": st["marker"],
-            "markersize": 9,
-            "markeredgecolor": "black",
-            "linestyle": "none",
-            "zorder": 3,
-        }
-        px_all = pixel[pixel["detector"] == name]
-        px = px_all[px_all["pfa_pixel"] > 0]
-        if px.empty:
-            left[0][name] = "no pixel mask" if px_all.empty else "Pfa = 0 at every threshold"
-        else:
-            axes[0].plot(px["pfa_pixel"], px["pd_pixel"], label=plain(name), **st, **marks)
-            shown_op = op[op["pfa_pixel"] > 0]
-            axes[0].plot(shown_op["pfa_pixel"], shown_op["pd_pixel"], **point)
-        fr = froc[froc["detector"] == name]
-        if fr.empty:
-            left[1][name] = "no object scored"
-        else:
-            axes[1].step(
-                fr["false_alarms_per_image"],
-                fr["pd_object"],
-                where="post",
-                label=plain(name),
-                **st,
-                **marks,
-            )
-            axes[1].plot(op["false_alarms_per_image"], op["pd_object"], **point)
-        p = pooled_pr(pr[pr["detector"] == name])
-        ap = _ap50(summary, name)
-        if p.empty or not ap > 0:
-            left[2][name] = "AP50 = 0" if ap == 0 else "no AP50"
-        else:
-            axes[2].plot(
-                p["recall"], p["precision"], label=f"{plain(name)} (AP50 {ap:.3f})", **st, **marks
-            )
-            aps[name] = f"AP50 {ap:.3f}"
-    log_axis(axes[0], "x", pixel.loc[pixel["pfa_pixel"] > 0, "pfa_pixel"])
-    log_axis(axes[1], "x", [*froc["false_alarms_per_image"], *summary["false_alarms_per_image"]])
-    axes[0].set(xlabel="Pfa (pixel)", ylabel="Pd (pixel)")
-    axes[1].set(xlabel="false alarms per image", ylabel="Pd (object)")
-    axes[2].set(xlabel="recall", ylabel="precision", xlim=(0, 1.02))
-    if 0 < len(axes[2].lines) <= LEGEND_MAX:  # a few curves: each one's AP beside it
-        axes[2].legend(loc="lower left", fontsize=7, framealpha=0.8)
-    panel_titles = ["pixel ROC", "FROC (matching rule)", "precision-recall, IoU 0.5"]
-    for ax, panel, out in zip(axes, panel_titles, left, strict=True):
-        ax.set_ylim(0, 1.02)
-        ax.grid(True, which="major", alpha=0.3)
-        titled(ax, panel, out)
-    # matplotlib on the first figure (see the module's docstring)
-    from matplotlib.lines import Line2D
-
-    handles = legend_handles(names, aps)  # every curve's AP50 in the figure's legend
-    handles.append(
-        Line2D(
-            [],
-            [],
-            color="grey",
-            marker="o",
-            markeredgecolor="black",
-            linestyle="none",
-            label="design operating point",
-        )
-    )
-    fig.legend(handles=handles, loc="lower center", ncol=LEGEND_COLUMNS, fontsize=8)
-    fig.suptitle(plain(short_label(title)))
-    return fig
-
-
-def plot_roc(
-    pixel: pd.DataFrame,
-    froc: pd.DataFrame,
-    pr: pd.DataFrame,
-    summary: pd.DataFrame,
-    path: Path,
-    title: str,
-) -> list[str]:
-    """Three panels for one dataset: pixel ROC (Pd vs Pfa), FROC (Pd vs false alarms per
-    image, matching rule) and precision-recall at IoU 0.5 (detectors with AP50 > 0); a
-    large marker on each curve is the detector's design operating point. Each panel names
-    the detectors it leaves out and why."""
-    fig = roc_figure(pixel, froc, pr, summary, title)
-    entries = len(dict.fromkeys(summary["detector"])) + 1
-    rows = -(-entries // LEGEND_COLUMNS)
-    return save(fig, path, rect=(0, 0.05 * rows + 0.02, 1, 1))

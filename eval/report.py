@@ -20,7 +20,7 @@ from torchsar_eval.html_report.runfiles import RUN_TABLES, read_run
 from torchsar_eval.latex import summary_tex
 from torchsar_eval.leaderboard import LOWER_IS_BETTER, Board, caveats
 from torchsar_eval.overlays import write_overlays
-from torchsar_eval.plots import plot_roc
+from torchsar_eval.panels import plot_roc
 from torchsar_eval.result import Scoring
 from torchsar_eval.tables import (
     PER_IMAGE_COLUMNS,

@@ -39,7 +39,7 @@ LIBRARY = {
     "tiling": 5,
     "_warm": 6,
     "": 7,
-}  # fmt: skip  (a table: the layers read better on a few lines)
+}
 """Each unit of ``torchsar`` (a subpackage or top-level module; ``""``: the package root) and
 its layer: a unit imports only units of lower layers."""
 
@@ -75,9 +75,18 @@ HARNESS = {
         "objects_only",
     ],
     "engine": ["runner", "pool", "ray_engine", "shard_states", "shards", "resume", "output"],
-    "outputs": ["leaderboard", "latex", "plots", "html_report", "overlays", "report", "api"],
+    "outputs": [
+        "leaderboard",
+        "latex",
+        "plots",
+        "panels",
+        "html_report",
+        "overlays",
+        "report",
+        "api",
+    ],
     "cli": ["cli", "commands", "experiments", ""],
-}  # fmt: skip  (a table: the layers read better on a few lines)
+}
 """The harness's layers, lowest first, with the modules (or subpackages) in each; a module
 imports only modules of its own layer or lower ones."""
 

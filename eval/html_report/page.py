@@ -7,6 +7,7 @@ import base64
 import html
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -14,13 +15,7 @@ import pandas as pd
 from torchsar_eval.colours import detector_colour, detector_dash
 from torchsar_eval.errors import EvalError
 from torchsar_eval.glossary import MATCHING_RULES, TERMS
-from torchsar_eval.html_report.figures import (
-    FIGURES,
-    Series,
-    figure_svg,
-    first_column,
-    pr_label,
-)
+from torchsar_eval.html_report.figures import FIGURES, figure_svg
 from torchsar_eval.html_report.records import Calibration, Matching
 from torchsar_eval.html_report.runfiles import RunFiles, read_png
 from torchsar_eval.labels import short_labels
@@ -35,6 +30,9 @@ from torchsar_eval.leaderboard import (
     short_value,
 )
 from torchsar_eval.leaderboard import number as _num
+from torchsar_eval.panels import Curve, ap_note
+from torchsar_eval.plots import detector_style
+from torchsar_eval.tables import PAIRED_COLUMNS
 
 __all__ = ["DEFAULT_RANK", "LOWER_IS_BETTER", "RANK_METRICS", "build_page", "check_rank_by"]
 
@@ -133,7 +131,8 @@ td.best{background:var(--best);font-weight:700}
 td.rule{font-size:12px}table.leaderboard th{white-space:normal;vertical-align:bottom}
 td.runcell{white-space:normal;max-width:120px}
 .sw{display:inline-block;width:22px;height:0;border-top:3px solid;vertical-align:middle;
-margin-right:6px}
+margin-right:6px;position:relative}
+.sw .mk{position:absolute;left:6px;top:-9px;font-size:11px;line-height:1}
 .ci{display:inline-flex;align-items:center;gap:6px}
 .bar{position:relative;display:inline-block;width:120px;height:10px;background:var(--band);
 border:1px solid var(--line);border-radius:2px}
@@ -199,7 +198,7 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "x"
 
 
-def _series(board: Board) -> list[Series]:
+def _series(board: Board) -> list[Curve]:
     """One curve per row of ``board``, coloured by detector name (dashed by run when the
     board compares runs)."""
     out = []
@@ -209,15 +208,40 @@ def _series(board: Board) -> list[Series]:
             if len(board.runs) == 1
             else (["-", "--", ":", "-."][int(r["_run"]) % 4])
         )
-        out.append(Series(r["label"], r["detector"], detector_colour(r["detector"]), dash, r))
+        colour, marker = detector_colour(r["detector"]), detector_style(r["detector"])["marker"]
+        out.append(Curve(r["label"], r["detector"], colour, dash, r, marker))
     return out
 
 
-def _swatch(detector: str, dash: str = "-") -> str:
+_GLYPHS = {
+    "o": "\u25cf",
+    "s": "\u25a0",
+    "^": "\u25b2",
+    "v": "\u25bc",
+    "D": "\u25c6",
+    "P": "\u271a",
+    "X": "\u2716",
+    "<": "\u25c0",
+    ">": "\u25b6",
+    "h": "\u2b22",
+    "p": "\u2b1f",
+    "*": "\u2605",
+    "d": "\u2666",
+    "H": "\u2b23",
+    "8": "\u2bc3",
+}
+"""The figures' markers as characters, for the legends in the page's text."""
+
+
+def _swatch(detector: str, dash: str = "-", marker: bool = False) -> str:
+    """A detector's line (colour, dash) as an inline swatch; with its figure marker on it
+    when ``marker``."""
     style = {"-": "solid", "--": "dashed", ":": "dotted", "-.": "dashed"}[dash]
+    colour = detector_colour(detector)
+    glyph = _GLYPHS.get(detector_style(detector)["marker"], "") if marker else ""
+    mark = f'<span class="mk" style="color:{colour}">{glyph}</span>' if glyph else ""
     return (
-        f'<span class="sw" style="border-top-color:{detector_colour(detector)};'
-        f'border-top-style:{style}"></span>'
+        f'<span class="sw" style="border-top-color:{colour};border-top-style:{style}">{mark}</span>'
     )
 
 
@@ -450,9 +474,17 @@ def _card(run: RunFiles, dataset: str, board: Board, label: str | None) -> str:
     return "".join(out)
 
 
-def _legend(series: list[Series]) -> str:
-    """The figures' shared legend: each line's style and label, with its AP50."""
-    items = [f"<span>{_swatch(s.detector, s.dash)}{_e(pr_label(s))}</span>" for s in series]
+def _with_ap(c: Curve) -> str:
+    """A curve's label with its AP in brackets (when its summary has one)."""
+    note = ap_note(c)
+    return c.label + (f" ({note})" if note else "")
+
+
+def _legend(series: list[Curve]) -> str:
+    """The figures' shared legend: each line's style, marker and label, with its AP."""
+    items = [
+        f"<span>{_swatch(s.detector, s.dash, marker=True)}{_e(_with_ap(s))}</span>" for s in series
+    ]
     return '<div class="legend">' + "".join(items) + "</div>"
 
 
@@ -494,11 +526,11 @@ def _tuned(board: Board) -> str:
 def _figures(board: Board, salt: str) -> str:
     series = _series(board)
     figs = []
-    for kind, (_, _, _, table, _) in FIGURES.items():
-        frames = [run.table(table, board.dataset) for run in board.runs]
+    for kind, panel in FIGURES.items():
+        frames = [run.table(panel.table, board.dataset) for run in board.runs]
         if len(board.runs) > 1:
             frames = [_relabel(f, run.name) for f, run in zip(frames, board.runs, strict=True)]
-            ser = [Series(s.label, s.label, s.colour, s.dash, s.summary) for s in series]
+            ser = [replace(s, detector=s.label) for s in series]
         else:
             ser = series
         frames = [f for f in frames if not f.empty]
@@ -510,7 +542,8 @@ def _figures(board: Board, salt: str) -> str:
     if not figs:
         return '<p class="muted">No curves in this run.</p>'
     note = (
-        '<p class="note">Filled dots: each detector\'s operating point. Colours are '
+        '<p class="note">Large markers with a black edge: each detector\'s operating point. '
+        "Colours, line styles and markers are "
         "fixed per detector name.</p>"
     )
     return _legend(series) + '<div class="figs">' + "".join(figs) + "</div>" + note
@@ -716,10 +749,8 @@ def _paired(board: Board) -> str:
         df = run.table("paired", board.dataset)
         if df.empty:
             continue
-        diff = first_column(df, ["difference", "diff", "delta", "mean_difference"])
-        lo = first_column(df, ["lo", "difference_lo", "diff_lo", "ci_lo", "lower"])
-        hi = first_column(df, ["hi", "difference_hi", "diff_hi", "ci_hi", "upper"])
-        sig = first_column(df, ["significant", "sig"])
+        cols = set(df.columns)  # paired.csv's own columns (PAIRED_COLUMNS), where present
+        diff, lo, hi, sig = (c if c in cols else None for c in PAIRED_COLUMNS[4:8])
         names = [c for c in ("detector", "reference", "metric") if c in df.columns]
         if diff is None:
             out.append(_table(df.drop(columns=[c for c in ("dataset",) if c in df.columns])))

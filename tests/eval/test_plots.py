@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from torchsar_eval.colours import detector_colour, detector_dash
+from torchsar_eval.panels import curves_of, panel_figure, roc_figure
 from torchsar_eval.plots import (
     STYLES,
     detector_style,
@@ -23,7 +24,6 @@ from torchsar_eval.plots import (
     log_ticks,
     not_shown,
     pyplot,
-    roc_figure,
 )
 from torchsar_eval.registry import BUILTIN
 
@@ -173,6 +173,48 @@ def test_the_pr_panel_names_the_detectors_it_leaves_out():
     with_ap = {t.get_text() for t in fig.legends[0].get_texts()}
     assert {"ca (AP50 0.600)", "region (AP50 0.600)"} <= with_ap  # and each drawn curve's AP
     plt.close(fig)
+
+
+def _drawn(ax) -> list[tuple]:
+    return [
+        (
+            ln.get_label(),
+            *(list(map(float, v)) for v in ln.get_data()),
+            ln.get_color(),
+            ln.get_linestyle(),
+            ln.get_marker(),
+            ln.get_markeredgecolor(),
+        )
+        for ln in ax.lines
+    ]
+
+
+def test_the_page_and_the_paper_figure_draw_the_same_curves():
+    """One plotting stack: each panel of report.html shows the same lines (points, colour,
+    line style, marker, operating point), axis scale and left-out note as the PNG/PDF."""
+    pixel, froc, pr, summary = _tables(["ca", "go", "lognormal", "mine"], ap50={"lognormal": 0})
+    paper = roc_figure(pixel, froc, pr, summary, "run")
+    curves = curves_of(summary)
+    for ax, kind, table in zip(
+        paper.axes, ["pixel_roc", "froc", "pr"], [pixel, froc, pr], strict=True
+    ):
+        page = panel_figure(kind, table, curves)
+        (pax,) = page.axes
+        assert _drawn(pax) == _drawn(ax) and len(ax.lines) >= 3, kind
+        assert pax.get_xscale() == ax.get_xscale()
+        assert list(pax.get_xticks()) == list(ax.get_xticks())
+        assert " ".join(pax.get_title().split()) == " ".join(ax.get_title().split())
+        plt.close(page)
+    assert "not shown: lognormal (AP50 = 0)" in " ".join(paper.axes[2].get_title().split())
+    plt.close(paper)
+
+
+def test_a_panel_with_nothing_to_draw_is_no_figure():
+    _, froc, pr, summary = _tables(["ca"], ap50={"ca": 0.0})
+    assert panel_figure("pr", pr, curves_of(summary)) is None  # its only curve has AP 0
+    assert panel_figure("froc", froc.iloc[:0], curves_of(summary)) is None
+    assert panel_figure("froc", froc, curves_of(summary)) is not None
+    plt.close("all")
 
 
 def test_not_shown_groups_reasons():

@@ -365,16 +365,16 @@ def test_pd_vs_scr_points_sit_at_their_bins_mean_scr(run):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from torchsar_eval.html_report.figures import FIGURES, Series
+    from torchsar_eval.panels import Curve, draw_panel
 
     scr = run[1].scr
-    series = [Series(d, d, detector_colour(d), "-", None) for d in scr.detector.unique()]
+    series = [Curve(d, d, detector_colour(d), "-") for d in scr.detector.unique()]
     fig, ax = plt.subplots()
-    assert FIGURES["scr"][4](ax, scr, series)
-    dots = [line for line in ax.lines if line.get_marker() == "o"]  # measured SCR
-    assert len(dots) == len(series)
-    for s, line in zip(series, dots, strict=True):
-        assert line.get_color() == s.colour
+    assert not draw_panel(ax, "scr", scr, series)  # no detector left out
+    for s in series:
+        (line,) = [ln for ln in ax.lines if ln.get_gid() == f"scr-line-{s.label}"]
+        assert line.get_color() == s.colour and line.get_marker() == s.style()["marker"]
+        assert line.get_markerfacecolor() != "none"  # filled: the measured SCR
         rows = scr[(scr.detector == s.detector) & (scr.source == "measured") & scr.pd.notna()]
         want = sorted(zip(rows.scr_mean_db, rows.pd, strict=True))
         assert list(zip(line.get_xdata(), line.get_ydata(), strict=True)) == want
@@ -386,7 +386,7 @@ def test_pd_vs_scr_points_sit_at_their_bins_mean_scr(run):
 
 def test_pd_vs_scr_labels_with_negative_looking_bins_are_not_parsed():
     """'5-10' is the bin [5, 10): its point sits at the targets' mean SCR (7.5 here)."""
-    from torchsar_eval.html_report.figures import scr_points
+    from torchsar_eval.panels import scr_points
 
     d = pd.DataFrame(
         {
@@ -435,16 +435,17 @@ def test_every_case_says_why_it_is_one(run):
 def test_the_pr_legend_gives_each_curve_its_ap(run):
     import matplotlib.pyplot as plt
 
-    from torchsar_eval.html_report.figures import FIGURES, Series
+    from torchsar_eval.panels import Curve, draw_panel
 
     _, res = run
     rows = {r.detector: r for _, r in res.summary.iterrows()}
-    series = [Series(d, d, detector_colour(d), "-", rows[d]) for d in rows]
+    series = [Curve(d, d, detector_colour(d), "-", rows[d]) for d in rows]
     fig, ax = plt.subplots()
-    assert FIGURES["pr"][4](ax, res.pr, series)
+    left = draw_panel(ax, "pr", res.pr, series)
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
-    drawn = [d for d in rows if not res.pr[res.pr.detector == d].empty]
+    drawn = [d for d in rows if not res.pr[res.pr.detector == d].empty and rows[d].ap50 > 0]
     assert texts == [f"{d} (AP50 {rows[d].ap50:.3f})" for d in drawn]
+    assert set(left) == set(rows) - set(drawn)  # the rest named in the title
     plt.close(fig)
 
 
