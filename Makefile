@@ -24,9 +24,11 @@ $(BIN)/.ray: $(BIN)/.installed
 	$(BIN)/python -m pip install --quiet -e ".[dev,ray]"
 	touch $@
 
-# numba compiles its kernels on first use (about a minute for all of them): pay it here, once
-# per change of a kernel file, instead of in the first evaluation or test run.
-KERNELS := $(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py)
+# numba compiles its kernels on first use (about a minute for all of them), and the K / G0
+# CFARs calibrate their log-t factors (a few seconds, kept in ~/.cache/torchsar): pay both
+# here, once per change of a kernel file or of the calibration, instead of in the first
+# evaluation or test run.
+KERNELS := $(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py) torchsar/cfar/log_t.py
 $(BIN)/.kernels: $(BIN)/.installed $(KERNELS) torchsar/_warm.py scripts/warm_kernels.py
 	$(BIN)/python scripts/warm_kernels.py
 	touch $@

@@ -7,7 +7,8 @@ setup`` through ``scripts/warm_kernels.py``) pays it once, so the first evaluati
 call or test run does not. It runs every compiled path (the window CFARs, OS-CFAR, the
 region CFAR, object labelling and closing, the pixel ROC) on tiny float32 and float64
 batches (the window CFARs with and without a valid mask). Without numba (or with
-``TORCHSAR_NUMBA=0``) it does nothing.
+``TORCHSAR_NUMBA=0``) it does nothing. :func:`warm_tables` computes the K and G0 CFARs'
+default design tables into their on-disk cache.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import torch
 
 from torchsar import _jit
 
-__all__ = ["warm"]
+__all__ = ["warm", "warm_tables"]
 
 
 def _images(dtype: torch.dtype) -> torch.Tensor:
@@ -59,4 +60,18 @@ def warm() -> float:
         with_inf = det.statistic.clone()
         with_inf[..., 0, 0] = -torch.inf  # the batch's finite range found by the kernel
         acc.update(with_inf, target, ~valid, detected=det.mask)
+    return time.perf_counter() - start
+
+
+def warm_tables() -> float:
+    """Compute the K and G0 CFARs' log-t factors at their default design (``pfa = 1e-3``,
+    one look, every ring size of the default window, borders included) into the on-disk
+    cache (:func:`torchsar.cfar.log_t.log_t_exact`); the seconds it took. Kernels on or
+    off, the first K or G0 detection then costs no calibration."""
+    from torchsar import cfar
+
+    start = time.perf_counter()
+    x = _images(torch.float32)
+    for detector in (cfar.k, cfar.g0):
+        detector(x)
     return time.perf_counter() - start

@@ -40,6 +40,8 @@ from functools import lru_cache
 import numpy as np
 from scipy import optimize, special
 
+from torchsar import _disk_cache
+
 __all__ = ["LOG_T_SHAPES", "log_t_exact", "log_t_table", "trigamma_table"]
 
 LOG_T_SHAPES = (math.log(0.05), math.log(1000.0), 41)
@@ -103,13 +105,32 @@ def log_t_exact(law: str, looks: float, pfa: float, n: int) -> tuple[float, ...]
     """Calibrated log-t factor ``t`` for rings of ``n`` cells at design ``pfa``.
 
     Weibull: one value (the standardised law is shape-free). K / G0: one value per shape of
-    :data:`LOG_T_SHAPES`.
+    :data:`LOG_T_SHAPES`. A deterministic computation of about half a second, kept in
+    memory and on disk (``~/.cache/torchsar``; ``TORCHSAR_CACHE`` sets the folder, ``0``
+    turns it off), so each machine pays it once per ``(law, looks, pfa, n)``.
 
     Examples:
         >>> t = log_t_exact("weibull", 1.0, 1e-3, 10**9)[0]  # n -> inf: the Gumbel quantile
         >>> round(t, 3) == round((math.log(math.log(1e3)) + 0.5772156649) / (math.pi / 6**0.5), 3)
         True
     """
+    if _VERSION is None:
+        return _compute(law, looks, pfa, n)
+    key = f"{law}|{float(looks)!r}|{float(pfa)!r}|{int(n)}|{_VERSION}"
+    hit = _disk_cache.load("log_t", key)
+    if hit is not None:
+        return hit
+    out = _compute(law, looks, pfa, n)
+    _disk_cache.store("log_t", key, out)
+    return out
+
+
+_VERSION = _disk_cache.version_of(__file__)
+"""This module's version tag in the on-disk cache of the factors (code, numpy, scipy)."""
+
+
+def _compute(law: str, looks: float, pfa: float, n: int) -> tuple[float, ...]:
+    """:func:`log_t_exact` without the caches."""
     shapes = 1 if law == "weibull" else LOG_T_SHAPES[2]
     out = []
     for j in range(shapes):
