@@ -16,6 +16,7 @@ LIBRARY = {
     "errors": 0,
     "_scale": 0,
     "_jit": 0,
+    "_disk_cache": 0,
     "_windows_kernels": 0,
     "detection": 0,
     "_checks": 1,
