@@ -17,6 +17,7 @@ LIBRARY = {
     "_scale": 0,
     "_jit": 0,
     "_disk_cache": 0,
+    "_box_kernels": 0,
     "_windows_kernels": 0,
     "detection": 0,
     "_checks": 1,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 import torch
@@ -81,6 +81,8 @@ def ring_mean_ratio(
     :mod:`torchsar.cfar.core` for the factor ``factor(n)``, in ``dtype`` (CA's statistic;
     AC uses it on its censored ring). Without a mask every ring holds cells and the counts
     are geometric: the mean is formed in place and only the frame is rescaled."""
+    if vmask is None and _jit.for_tensor(x) and x.numel():
+        return _compiled_ring_ratio(x, ring, factor, dtype)
     h = x.shape[-2]
     row = torch.arange(h, device=x.device).view(h, 1)  # sliced with the strip: its rows
 
@@ -96,6 +98,45 @@ def ring_mean_ratio(
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)
 
     return windowed(x, [ring.region], statistic, valid=vmask, moments=1, extras=(row,))
+
+
+def _compiled_ring_ratio(
+    x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype
+) -> Tensor:
+    """:func:`ring_mean_ratio` without a mask in one sweep per image plane
+    (:func:`torchsar._box_kernels.ring_ratio`: direct window sums, within a float32 ulp of
+    the integral-image path; the border factors once per ring size that occurs)."""
+    from torchsar import _box_kernels
+
+    h, w = x.shape[-2:]
+    scale = np.ones(ring.n + 1)
+    for c in ring_counts(h, w, ring):
+        if 0 < c != ring.n:
+            scale[c] = (1.0 / factor(c)) * factor(ring.n)  # as the torch code rounds it
+    planes = x.detach().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=dtype)
+    _box_kernels.ring_ratio(planes.numpy(), ring.guard, ring.train, scale, out.numpy())
+    return out.view(x.shape)
+
+
+@lru_cache(maxsize=64)
+def ring_counts(h: int, w: int, ring: Ring) -> frozenset[int]:
+    """Every count of in-image ring cells that occurs in an ``h x w`` image (the interior's
+    ``N`` and the frame's smaller ones), from the per-axis counts of the outer and guard
+    boxes.
+
+    Examples:
+        >>> sorted(ring_counts(9, 9, Ring(1, 2)))[-3:]
+        [27, 33, 40]
+    """
+
+    def axis(n: int) -> set[tuple[int, int]]:
+        i = np.arange(n)
+        outer = np.minimum(i + ring.outer, n - 1) - np.maximum(i - ring.outer, 0) + 1
+        guard = np.minimum(i + ring.guard, n - 1) - np.maximum(i - ring.guard, 0) + 1
+        return set(zip(outer.tolist(), guard.tolist(), strict=True))
+
+    return frozenset(ro * co - rg * cg for ro, rg in axis(h) for co, cg in axis(w))
 
 
 def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]) -> Tensor:

@@ -21,12 +21,14 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_image, check_odd, check_positive, check_window_fits, float_dtype
 from torchsar._scale import power_of_two
 from torchsar.errors import OptionError
 from torchsar.windows import Rect, Sums, windowed
 
 __all__ = [
+    "Compiled",
     "Request",
     "Speckle",
     "decay_map",
@@ -86,7 +88,7 @@ def _plane_scale(x: Tensor) -> Tensor | None:
     if x.numel() == 0:
         return None
     e = 48 if x.dtype == torch.float32 else 384  # 3/8 of the largest exponent (128, 1024)
-    peak = x.detach().abs().amax(dim=(-2, -1), keepdim=True)
+    peak = x.detach().amax(dim=(-2, -1), keepdim=True)  # validated: no negative value
     outside = (peak > 2.0**e) | ((peak > 0) & (peak < 2.0**-e))
     if not bool(outside.any()):
         return None
@@ -165,14 +167,33 @@ def local_moments(s: Sums, dtype: torch.dtype = torch.float64) -> tuple[Tensor, 
 Formula = Callable[[Tensor, Tensor, Tensor], Tensor]
 
 
-def filter_intensity(req: Request, formula: Formula) -> Tensor:
+@dataclass(frozen=True)
+class Compiled:
+    """A box-statistics formula the one-sweep kernel knows
+    (:func:`torchsar._box_kernels.box_filter`): Lee / Kuan (``weight_scale`` 1 or
+    ``1 + Cu^2``) or, ``enhanced``, enhanced Lee; and its constants."""
+
+    enhanced: bool
+    cu2: float
+    weight_scale: float = 1.0
+    damping: float = 0.0
+    cmax2: float = 0.0
+
+
+def filter_intensity(req: Request, formula: Formula, compiled: Compiled | None = None) -> Tensor:
     """Run ``formula(I, mu, Ci^2)`` over the image, strip by strip, in ``req.dtype``.
 
     This is the whole pipeline of the box-statistics filters (Lee, Kuan, enhanced Lee,
     Gamma-MAP): one :func:`~torchsar.windows.windowed` pass computes the window moments from
     float64 integral images (mean and ``Ci^2`` in float64, then cast) and applies the
-    per-pixel formula in the output dtype.
+    per-pixel formula in the output dtype. With ``compiled`` (the same formula in the
+    kernel's terms), CPU tensors without gradients take the one-sweep kernel instead: direct
+    window sums and the formula in float64, cast once (within a float32 ulp or two of this
+    path; tested).
     """
+    x = req.intensity
+    if compiled is not None and _jit.for_tensor(x) and x.numel():
+        return finish(req, _compiled_filter(x, req.radius, compiled))
 
     def apply(xs: Tensor, sums: list[Sums]) -> Tensor:
         mu, ci2 = local_moments(sums[0], req.dtype)
@@ -180,6 +201,19 @@ def filter_intensity(req: Request, formula: Formula) -> Tensor:
 
     out = windowed(req.intensity, [Rect.box(req.radius)], apply, moments=2)
     return finish(req, out)
+
+
+def _compiled_filter(x: Tensor, radius: int, k: Compiled) -> Tensor:
+    """:func:`filter_intensity`'s formula by :func:`torchsar._box_kernels.box_filter`."""
+    from torchsar import _box_kernels
+
+    h, w = x.shape[-2:]
+    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    out = torch.empty(planes.shape, dtype=x.dtype)
+    _box_kernels.box_filter(
+        planes, radius, k.enhanced, k.cu2, k.weight_scale, k.damping, k.cmax2, out.numpy()
+    )
+    return out.view(x.shape)
 
 
 def decay_map(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:

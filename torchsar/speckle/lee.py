@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar.speckle._local import filter_intensity, prepare, scratch
+from torchsar.speckle._local import Compiled, filter_intensity, prepare, scratch
 
 __all__ = ["enhanced_lee", "kuan", "lee"]
 
@@ -30,7 +30,9 @@ def _mmse(x: Tensor, window: int, looks: float, amplitude: bool, *, kuan: bool) 
     cu2 = req.speckle.cu2
     scale = 1.0 + cu2 if kuan else 1.0
     return filter_intensity(
-        req, lambda i, mu, ci2: torch.lerp(mu, i, _mmse_weight(ci2, cu2, scale))
+        req,
+        lambda i, mu, ci2: torch.lerp(mu, i, _mmse_weight(ci2, cu2, scale)),
+        Compiled(False, cu2, weight_scale=scale),
     )
 
 
@@ -148,4 +150,4 @@ def enhanced_lee(
     def formula(i: Tensor, mu: Tensor, ci2: Tensor) -> Tensor:
         return torch.lerp(i, mu, sp.heterogeneity(ci2, k).neg_().exp_())
 
-    return filter_intensity(req, formula)
+    return filter_intensity(req, formula, Compiled(True, sp.cu2, damping=k, cmax2=sp.cmax2))

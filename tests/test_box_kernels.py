@@ -1,0 +1,227 @@
+"""The one-sweep window kernels (CA-CFAR's ring-mean ratio; the Lee, Kuan and enhanced Lee
+filters) against the integral-image tensor code they replace on CPU tensors and against
+slow references: float32 results within an ulp or two, masks equal wherever the statistic
+is not within an ulp of the threshold, exact where the sums are exact (flat images),
+independent of the batch; closer to the exact sums than the tensor code where contrast
+makes integral images cancel."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import torchsar.cfar as cfar
+import torchsar.speckle as speckle
+from torchsar import _jit
+from torchsar.cfar.ca import ring_counts
+from torchsar.windows import Ring, region_count
+from tests.reference.cfar import ring_cells
+from tests.reference.speckle import reference_batch
+
+pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
+
+
+def _scene(seed: int, shape=(3, 2, 37, 45), dtype=torch.float32) -> torch.Tensor:
+    """Exponential clutter with a bright target and a clutter edge."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.empty(shape, dtype=torch.float64).exponential_(generator=g)
+    x[0, 0, 3:6, 4:8] *= 300.0  # a target
+    x[-1, -1, :, shape[-1] // 2 :] *= 9.0  # a clutter edge
+    return x.to(dtype)
+
+
+def _degenerate(seed: int, dtype=torch.float64) -> torch.Tensor:
+    """Planes the integral images get wrong: all zeros (0 / 0), one bright cell among
+    zeros (its ring holds only zeros: inf), a cell of 1e12 among ones."""
+    x = _scene(seed, shape=(1, 4, 11, 14), dtype=torch.float64)
+    x[0, 1] = 0.0
+    x[0, 2] = 0.0
+    x[0, 2, 5, 6] = 50.0
+    x[0, 3] = 1.0
+    x[0, 3, 2, 3] = 1e12
+    return x.to(dtype)
+
+
+def _both(monkeypatch, fn):
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        out.append(fn())
+    return out
+
+
+def _ulps(a: torch.Tensor, b: torch.Tensor) -> float:
+    """Largest difference in units of the last place of ``b`` (finite entries; the
+    non-finite ones must be equal)."""
+    a64, b64 = a.double().numpy(), b.double().numpy()
+    fin = np.isfinite(b64)
+    assert np.array_equal(a64[~fin], b64[~fin])
+    spacing = np.spacing(np.abs(b.numpy()[fin])).astype(np.float64)
+    spacing = np.maximum(spacing, np.finfo(b.numpy().dtype).smallest_subnormal)
+    return float((np.abs(a64[fin] - b64[fin]) / spacing).max(initial=0.0))
+
+
+def _masks_agree(a, b) -> None:
+    """Equal masks, except at pixels whose statistic is within an ulp of the threshold."""
+    differ = a.mask != b.mask
+    if bool(differ.any()):
+        thr = b.threshold.double()
+        near = (b.statistic.double() - thr).abs() <= 2 * np.spacing(np.float32(thr))
+        assert bool(near[differ].all())
+
+
+# float64 results: within the integral images' own error (float64 ulps of the window's sum)
+@pytest.mark.parametrize("dtype, ulps", [(torch.float32, 1.0), (torch.float64, 1e4)])
+@pytest.mark.parametrize("guard, train", [(2, 4), (0, 1), (1, 3), (3, 2)])
+def test_ca_is_the_tensor_code_to_an_ulp(monkeypatch, dtype, ulps, guard, train):
+    x = _scene(1, dtype=dtype)
+    a, b = _both(monkeypatch, lambda: cfar.ca(x, guard=guard, train=train))
+    assert a.statistic.dtype == b.statistic.dtype == dtype
+    assert _ulps(a.statistic, b.statistic) <= ulps
+    _masks_agree(a, b)
+
+
+def test_ac_without_no_data_is_the_tensor_code_to_an_ulp(monkeypatch):
+    x = _scene(2)
+    a, b = _both(monkeypatch, lambda: cfar.ac(x, guard=1, train=3))
+    assert _ulps(a.statistic, b.statistic) <= 1.0
+    _masks_agree(a, b)
+
+
+def _ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarray:
+    """``I / mean_ring`` over the in-image ring cells (summed exactly: ``math.fsum``), times
+    the border factor, pixel by pixel; ``0 / 0 = 0``."""
+    from torchsar.cfar.thresholds import ca_factor
+
+    n = Ring(guard, train).n
+    out = np.empty(x.shape)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                mean = math.fsum(cells) / len(cells)
+                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
+                out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
+    return out
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 3)])
+def test_ca_is_the_exactly_summed_statistic_borders_included(monkeypatch, dtype, guard, train):
+    """At every pixel, borders and degenerate planes included: float32 within an ulp of the
+    exactly summed statistic, float64 within 1e-13 of it."""
+    x = _degenerate(3, dtype)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    got = cfar.ca(x, guard=guard, train=train).statistic.double().numpy()
+    want = _ca_reference(x.double().numpy(), guard, train, 1e-3)
+    assert np.array_equal(np.isinf(got), np.isinf(want))
+    assert np.isinf(want).any() and (want == 0).any()  # the degenerate cases are there
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=0)
+
+
+def test_ca_keeps_its_precision_beside_a_very_bright_target(monkeypatch):
+    """Clutter of 1 beside cells of 1e12: the integral image carries the target into every
+    later sum and cancels it back out; the direct sums never add it where it is not."""
+    x = torch.ones(1, 1, 64, 64, dtype=torch.float64)
+    x[0, 0, 5, 5] = 1e12
+    a, b = _both(monkeypatch, lambda: cfar.ca(x, guard=1, train=2).statistic)
+    far = a[0, 0, 20:-4, 20:-4]
+    assert torch.equal(far, torch.ones_like(far))  # exactly 1 / 1 where the target is not
+    assert (b[0, 0, 20:-4, 20:-4] - 1).abs().max() < 1e-3  # the tensor code: near 1
+
+
+def test_ca_does_not_depend_on_the_batch_or_the_layout():
+    x = _scene(4)
+    whole = cfar.ca(x).statistic
+    for i in range(x.shape[0]):
+        assert torch.equal(cfar.ca(x[i : i + 1]).statistic, whole[i : i + 1])
+    wide = torch.cat([x, x], dim=-1)[..., : x.shape[-1]]  # a non-contiguous view
+    assert torch.equal(cfar.ca(wide).statistic, whole)
+
+
+def test_ring_counts_are_the_counts_that_occur():
+    for h, w, ring in [(9, 9, Ring(1, 2)), (20, 13, Ring(2, 4)), (13, 13, Ring(0, 6))]:
+        want = set(region_count(h, w, ring.region).long().flatten().tolist())
+        assert ring_counts(h, w, ring) == want
+
+
+def test_an_empty_batch_is_valid():
+    x = torch.zeros(0, 1, 16, 16)
+    assert cfar.ca(x).statistic.shape == x.shape
+    assert speckle.lee(x).shape == x.shape
+
+
+FILTERS = ["lee", "kuan", "enhanced_lee"]
+
+
+def _speckle_reference(name: str, x: torch.Tensor, amplitude: bool) -> np.ndarray:
+    """The reference filter of the intensity the filter sees (amplitude squared in the
+    input's dtype), in float64."""
+    img = (x.square() if amplitude else x).double().numpy()
+    want = reference_batch(name, img, 5, 2.0, 1.0)
+    return np.sqrt(np.maximum(want, 0)) if amplitude else want
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("amplitude", [False, True])
+@pytest.mark.parametrize("make", [_scene, _degenerate])
+def test_speckle_filters_are_the_reference(monkeypatch, name, amplitude, make):
+    """float64: within 1e-12 of the pixel-by-pixel reference; float32 input: within an ulp
+    of it (the kernel works in float64 and casts once). Beside a target 300 times brighter
+    than the clutter the integral images of the tensor code are off by ~1e-10."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    fn = getattr(speckle, name)
+    x64 = make(5).double()
+    want = _speckle_reference(name, x64, amplitude)
+    got = fn(x64, window=5, looks=2.0, amplitude=amplitude).numpy()
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)
+    x32 = x64.float()
+    want32 = _speckle_reference(name, x32, amplitude)
+    got32 = fn(x32, window=5, looks=2.0, amplitude=amplitude).double().numpy()
+    ulp = np.spacing(np.abs(want32).astype(np.float32)).astype(np.float64)
+    assert (np.abs(got32 - want32) <= ulp).all()
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_the_tensor_code_is_still_the_reference(monkeypatch, name):
+    """The fallback (other devices, autograd, no numba) within its own integral-image error."""
+    monkeypatch.setattr(_jit, "ENABLED", False)
+    x = _scene(5).double()
+    got = getattr(speckle, name)(x, window=5, looks=2.0).numpy()
+    np.testing.assert_allclose(got, _speckle_reference(name, x, False), rtol=1e-8)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_speckle_filters_keep_flat_images_and_huge_planes(monkeypatch, name):
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    fn = getattr(speckle, name)
+    flat = torch.full((2, 1, 9, 11), 3.25)
+    assert torch.equal(fn(flat, window=3), flat)  # zero variance, exactly
+    x = _scene(7)
+    huge = fn(x * 2.0**100, window=5)  # squares would overflow float32: scaled, exactly
+    assert torch.equal(huge, fn(x, window=5) * 2.0**100)
+    assert torch.isfinite(huge).all()
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_speckle_filters_do_not_depend_on_the_batch(name):
+    x = _scene(8)
+    fn = getattr(speckle, name)
+    whole = fn(x, window=7)
+    for i in range(x.shape[0]):
+        assert torch.equal(fn(x[i : i + 1], window=7), whole[i : i + 1])
+
+
+def test_gradients_still_flow_through_the_tensor_code():
+    x = _scene(9)[:1].requires_grad_(True)
+    speckle.lee(x, window=3).sum().backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all()
