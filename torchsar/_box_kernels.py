@@ -209,10 +209,8 @@ def _moments(c, t1, t2, n):
     var = var if var > 0.0 else 0.0
     mu = c + m1
     mu = mu if mu > 0.0 else 0.0
-    if mu > 0.0:
-        ci2 = var / (mu * mu)
-    else:  # 0 / 0 is 0, var / 0 is inf (clamped below), as the torch code
-        ci2 = 0.0 if var == 0.0 else np.inf
+    # 0 / 0 is 0 and var / 0 is inf (clamped below), as in the torch code
+    ci2 = var / (mu * mu) if mu > 0.0 else (0.0 if var == 0.0 else np.inf)
     return mu, (ci2 if ci2 < n - 1.0 else n - 1.0)
 
 

@@ -78,4 +78,3 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
         )
     )
     return out
-
