@@ -18,8 +18,7 @@ import torchsar.speckle as speckle
 from tests.reference.cfar import ring_cells
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
-from torchsar.cfar.ca import ring_counts
-from torchsar.windows import Ring, region_count
+from torchsar.windows import Ring, region_count, ring_counts
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
 

@@ -45,6 +45,7 @@ __all__ = [
     "pinwheel_rects",
     "rect_sums",
     "region_count",
+    "ring_counts",
     "ring_sums",
     "windowed",
 ]
@@ -232,6 +233,26 @@ def region_count(
         (40.0, 12.0)
     """
     return _region_count(_as_region(shape), h, w, 0, h, device)
+
+
+@functools.lru_cache(maxsize=64)
+def ring_counts(h: int, w: int, ring: Ring) -> frozenset[int]:
+    """Every count of in-image ring cells that occurs in an ``h x w`` image (the interior's
+    ``N`` and the frame's smaller ones), from the per-axis counts of the outer and guard
+    boxes.
+
+    Examples:
+        >>> sorted(ring_counts(9, 9, Ring(1, 2)))[-3:]
+        [27, 33, 40]
+    """
+
+    def axis(n: int) -> set[tuple[int, int]]:
+        i = np.arange(n)
+        outer = np.minimum(i + ring.outer, n - 1) - np.maximum(i - ring.outer, 0) + 1
+        guard = np.minimum(i + ring.guard, n - 1) - np.maximum(i - ring.guard, 0) + 1
+        return set(zip(outer.tolist(), guard.tolist(), strict=True))
+
+    return frozenset(ro * co - rg * cg for ro, rg in axis(h) for co, cg in axis(w))
 
 
 def _as_region(shape: Rect | Region) -> Region:

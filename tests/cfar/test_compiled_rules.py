@@ -1,5 +1,6 @@
-"""The compiled per-pixel rules of GO, SO, VI and of CA over a masked ring (CA with
-no-data, AC) give the tensor code's statistic and mask bit for bit: clutter edges, flat
+"""The compiled per-pixel rules of GO, SO, VI, of CA over a masked ring (CA with no-data,
+AC) and OS-CFAR's ratio and border factors give the tensor code's statistic and mask bit
+for bit: clutter edges, flat
 zero images, bright targets, no-data masks that empty whole halves, both float dtypes."""
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def _both(monkeypatch, fn):
 
 RULES = [
     (name, masked)
-    for name in ("go", "so", "vi", "ca", "ac")
+    for name in ("go", "so", "vi", "ca", "ac", "os")
     for masked in (False, True)
     if (name, masked) != ("ca", False)  # its one-sweep kernel: tests/test_box_kernels.py
 ]

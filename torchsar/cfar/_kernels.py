@@ -17,6 +17,7 @@ from numba import njit
 __all__ = [
     "block_extreme_ratio",
     "counts_present",
+    "os_ratio",
     "ring_mean_ratio_masked",
     "vi_rule_ratio",
 ]
@@ -166,3 +167,20 @@ def ring_mean_ratio_masked(x, count, s1, shift, n, scale):
                         stat = stat * scale[int(np.rint(cnt))]
                     out[b, c, i, j] = stat
     return out
+
+
+@njit(**_JIT)
+def os_ratio(x, est, count, n, scale, out):
+    """OS-CFAR's statistic without no-data (:func:`torchsar.cfar.os_cfar.os`'s tensor code
+    bit for bit): ``I / x_(k)`` in float64 (``0 / 0 = 0``), times ``scale[c]`` where the
+    pixel's ring count ``c`` (``count``, ``(H, W)``, shared by every plane) is not ``n``,
+    cast to ``out``'s dtype; ``x``, ``est`` and ``out`` are ``(P, H, W)``."""
+    p_, h, w = x.shape
+    for p in range(p_):
+        for i in range(h):
+            for j in range(w):
+                stat = _ratio(np.float64(x[p, i, j]), np.float64(est[p, i, j]))
+                c = count[i, j]
+                if c != n:
+                    stat = stat * scale[c]
+                out[p, i, j] = stat

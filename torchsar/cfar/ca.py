@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import lru_cache, partial
+from functools import partial
 
 import numpy as np
 import torch
@@ -22,7 +22,7 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.windows import Ring, Sums, windowed
+from torchsar.windows import Ring, Sums, ring_counts, windowed
 
 __all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
 
@@ -117,26 +117,6 @@ def _compiled_ring_ratio(
     out = torch.empty(planes.shape, dtype=dtype)
     _box_kernels.ring_ratio(planes.numpy(), ring.guard, ring.train, scale, out.numpy())
     return out.view(x.shape)
-
-
-@lru_cache(maxsize=64)
-def ring_counts(h: int, w: int, ring: Ring) -> frozenset[int]:
-    """Every count of in-image ring cells that occurs in an ``h x w`` image (the interior's
-    ``N`` and the frame's smaller ones), from the per-axis counts of the outer and guard
-    boxes.
-
-    Examples:
-        >>> sorted(ring_counts(9, 9, Ring(1, 2)))[-3:]
-        [27, 33, 40]
-    """
-
-    def axis(n: int) -> set[tuple[int, int]]:
-        i = np.arange(n)
-        outer = np.minimum(i + ring.outer, n - 1) - np.maximum(i - ring.outer, 0) + 1
-        guard = np.minimum(i + ring.guard, n - 1) - np.maximum(i - ring.guard, 0) + 1
-        return set(zip(outer.tolist(), guard.tolist(), strict=True))
-
-    return frozenset(ro * co - rg * cg for ro, rg in axis(h) for co, cg in axis(w))
 
 
 def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]) -> Tensor:

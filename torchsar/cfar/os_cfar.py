@@ -3,18 +3,21 @@ would replace the function ``torchsar.cfar.os`` by the module)."""
 
 from __future__ import annotations
 
-from functools import partial
+from collections.abc import Callable
+from functools import lru_cache, partial
 
+import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_int, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, rescale_border_
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.errors import OptionError
 from torchsar.order_statistics import ring_order_statistic
-from torchsar.windows import Ring, Sums, region_count, windowed
+from torchsar.windows import Ring, Sums, region_count, ring_counts, windowed
 
 __all__ = ["os", "os_threshold"]
 
@@ -65,10 +68,12 @@ def os(
     """
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="os")
     r = _check_rank(rank, ring)
+    factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
+    if vmask is None and _jit.for_tensor(x) and x.numel():
+        return conclude(_compiled(x, ring, r, factor), None, factor(ring.n))
     counts = _ring_counts(x, ring, vmask)
     ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=r)).long()
     est = ring_order_statistic(x, ring, ranks, valid=vmask)
-    factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
     stat = ratio(x.to(torch.float64), est.to(torch.float64))
     rescale_border_(stat, counts, ring.n, factor)
     stat = finish(stat, counts, out_dtype(x))
@@ -89,6 +94,35 @@ def _check_rank(rank: int | None, ring: Ring) -> int:
     if r > ring.n:
         raise OptionError(f"rank must be in [1, N={ring.n}] (the ring's cell count), got {rank}")
     return r
+
+
+def _compiled(x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]) -> Tensor:
+    """The statistic without no-data on CPU with the compiled kernels, the same values bit
+    for bit as the tensor code: the ring counts, ranks and border factors depend only on the
+    geometry (remembered per image size), the order statistic by the sliding rank bitset and
+    ``I / x_(k)`` with the border factor by :func:`torchsar.cfar._kernels.os_ratio`."""
+    from torchsar.cfar import _kernels
+
+    h, w = x.shape[-2:]
+    counts, ranks = _geometry(h, w, ring, rank)
+    est = ring_order_statistic(x, ring, ranks)
+    scale = np.ones(ring.n + 1)
+    for c in ring_counts(h, w, ring):
+        if 0 < c != ring.n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
+            scale[c] = (1.0 / factor(c)) * factor(ring.n)
+    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    out = torch.empty(planes.shape, dtype=out_dtype(x))
+    _kernels.os_ratio(planes, est.reshape(-1, h, w).numpy(), counts, ring.n, scale, out.numpy())
+    return out.view(x.shape)
+
+
+@lru_cache(maxsize=16)
+def _geometry(h: int, w: int, ring: Ring, rank: int) -> tuple[np.ndarray, Tensor]:
+    """The in-image ring count (int64 ``(H, W)``) and the rank used at each pixel (``(H,
+    W)``) of an ``h x w`` image without no-data."""
+    counts = region_count(h, w, ring.region)
+    ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=rank)).long()
+    return counts.round().long().numpy(), ranks
 
 
 def _ring_counts(x: Tensor, ring: Ring, vmask: Tensor | None) -> Tensor:
