@@ -1,5 +1,5 @@
-"""The one-sweep window kernels (CA-CFAR's ring-mean ratio; the Lee, Kuan and enhanced Lee
-filters) against the integral-image tensor code they replace on CPU tensors and against
+"""The one-sweep window kernels (CA-CFAR's ring-mean ratio; the Lee, Kuan, enhanced Lee,
+Frost and enhanced Frost filters) against the integral-image tensor code they replace on CPU tensors and against
 slow references: float32 results within an ulp or two, masks equal wherever the statistic
 is not within an ulp of the threshold, exact where the sums are exact (flat images),
 independent of the batch; closer to the exact sums than the tensor code where contrast
@@ -8,6 +8,7 @@ makes integral images cancel."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -159,7 +160,13 @@ def test_an_empty_batch_is_valid():
     assert speckle.lee(x).shape == x.shape
 
 
-FILTERS = ["lee", "kuan", "enhanced_lee"]
+FILTERS = ["lee", "kuan", "enhanced_lee", "frost", "enhanced_frost"]
+
+
+def _filter(name: str):
+    """The filter, with damping 1 where it has one (the reference's)."""
+    fn = getattr(speckle, name)
+    return fn if name in ("lee", "kuan") else partial(fn, damping=1.0)
 
 
 def _speckle_reference(name: str, x: torch.Tensor, amplitude: bool) -> np.ndarray:
@@ -178,7 +185,7 @@ def test_speckle_filters_are_the_reference(monkeypatch, name, amplitude, make):
     of it (the kernel works in float64 and casts once). Beside a target 300 times brighter
     than the clutter the integral images of the tensor code are off by ~1e-10."""
     monkeypatch.setattr(_jit, "ENABLED", True)
-    fn = getattr(speckle, name)
+    fn = _filter(name)
     x64 = make(5).double()
     want = _speckle_reference(name, x64, amplitude)
     got = fn(x64, window=5, looks=2.0, amplitude=amplitude).numpy()
@@ -195,7 +202,7 @@ def test_the_tensor_code_is_still_the_reference(monkeypatch, name):
     """The fallback (other devices, autograd, no numba) within its own integral-image error."""
     monkeypatch.setattr(_jit, "ENABLED", False)
     x = _scene(5).double()
-    got = getattr(speckle, name)(x, window=5, looks=2.0).numpy()
+    got = _filter(name)(x, window=5, looks=2.0).numpy()
     np.testing.assert_allclose(got, _speckle_reference(name, x, False), rtol=1e-8)
 
 
@@ -224,3 +231,12 @@ def test_gradients_still_flow_through_the_tensor_code():
     x = _scene(9)[:1].requires_grad_(True)
     speckle.lee(x, window=3).sum().backward()
     assert x.grad is not None and torch.isfinite(x.grad).all()
+
+
+def test_the_vectorised_exp_is_exp():
+    from torchsar._shell_kernels import exp_neg
+
+    x = -np.concatenate([np.linspace(0, 707.9, 20001), np.geomspace(1e-300, 1, 301)])
+    got = np.array([exp_neg(v) for v in x])
+    np.testing.assert_allclose(got, np.exp(x), rtol=4e-16, atol=0)
+    assert [exp_neg(v) for v in (0.0, -0.0, -708.5, -1e6, -np.inf)] == [1.0, 1.0, 0, 0, 0]

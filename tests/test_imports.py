@@ -18,6 +18,7 @@ LIBRARY = {
     "_jit": 0,
     "_disk_cache": 0,
     "_box_kernels": 0,
+    "_shell_kernels": 1,
     "_windows_kernels": 0,
     "detection": 0,
     "_checks": 1,

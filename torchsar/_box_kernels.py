@@ -27,13 +27,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["box_filter", "ring_ratio"]
+__all__ = ["axis_count", "box_filter", "centred_sums", "load", "moments", "ring_ratio"]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
 
 
 @njit(**_JIT)
-def _axis_count(i, n, lo, hi):
+def axis_count(i, n, lo, hi):
     """How many of the offsets ``lo..hi`` from ``i`` land in ``[0, n)``."""
     a = max(i + lo, 0)
     b = min(i + hi, n - 1)
@@ -77,7 +77,7 @@ def _row_box(v, width, out):
 
 
 @njit(**_JIT)
-def _load(row, dst):
+def load(row, dst):
     """``dst = float64(row)``."""
     for j in range(row.shape[0]):
         dst[j] = np.float64(row[j])
@@ -101,18 +101,18 @@ def ring_ratio(x, guard, train, scale, out):
     acc, part = np.zeros(w), np.zeros(w)
     outer_cols, guard_cols = np.zeros(w, np.int64), np.zeros(w, np.int64)
     for j in range(w):
-        outer_cols[j] = _axis_count(j, w, -o, o)
-        guard_cols[j] = _axis_count(j, w, -g, g)
+        outer_cols[j] = axis_count(j, w, -o, o)
+        guard_cols[j] = axis_count(j, w, -g, g)
     count, factor = np.zeros(w), np.ones(w)
     for pl in range(p_):
         xp = x[pl]
         for r in range(min(o, h)):
-            _load(xp[r], cache[r % size])
+            load(xp[r], cache[r % size])
         last_rows = (-1, -1)
         for i in range(h):
             if i + o < h:
-                _load(xp[i + o], cache[(i + o) % size])
-            rows = (_axis_count(i, h, -o, o), _axis_count(i, h, -g, g))
+                load(xp[i + o], cache[(i + o) % size])
+            rows = (axis_count(i, h, -o, o), axis_count(i, h, -g, g))
             if rows != last_rows:  # the counts and border factors of this row
                 for j in range(w):
                     c = rows[0] * outer_cols[j] - rows[1] * guard_cols[j]
@@ -146,62 +146,74 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     Ci)`` (0 at or below ``Cu``, ``inf`` at or above ``Cmax``). Float64 throughout, cast
     once.
 
-    The variance does not cancel: each column of the window is summed as deviations from
-    its cell in the centre row, and the columns' sums are moved to deviations from the
-    centre pixel (``sum (x - C)^2 = S2 + d (2 S1 + n d)``, ``d`` the column's centre minus
-    ``C``); since ``C`` is a cell of the window, ``(C - mean)^2`` is at most ``count``
-    times the variance, so the final ``T2 - T1^2 / n`` loses at most a factor ``count`` of
-    float64 precision. A window of equal values has variance 0 exactly, wherever it
-    lies."""
+    The variance does not cancel (:func:`centred_sums`): a window of equal values has
+    variance 0 exactly, wherever it lies."""
     p_, h, w = x.shape
     size = 2 * radius + 1
     wp = w + 2 * radius
     cache = np.zeros((size, w))
-    # per column of the padded row: sums of deviations and squared deviations from the
-    # column's centre cell, that cell, and the column's count (zero outside the image)
-    s1, s2, cc, nc = np.zeros(wp), np.zeros(wp), np.zeros(wp), np.zeros(wp)
+    cols_work = np.zeros((4, wp))
     t1, t2, tn = np.zeros(w), np.zeros(w), np.zeros(w)
     cols = np.zeros(w)
     for j in range(w):
-        cols[j] = _axis_count(j, w, -radius, radius)
+        cols[j] = axis_count(j, w, -radius, radius)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     for pl in range(p_):
         xp = x[pl]
         for r in range(min(radius, h)):
-            _load(xp[r], cache[r % size])
+            load(xp[r], cache[r % size])
         for i in range(h):
             if i + radius < h:
-                _load(xp[i + radius], cache[(i + radius) % size])
+                load(xp[i + radius], cache[(i + radius) % size])
             centre = cache[i % size]
-            a1, a2 = s1[radius : radius + w], s2[radius : radius + w]
-            ac, an = cc[radius : radius + w], nc[radius : radius + w]
-            first, last = max(i - radius, 0), min(i + radius, h - 1)
-            nv = np.float64(last - first + 1)
-            for j in range(w):
-                a1[j], a2[j], ac[j], an[j] = 0.0, 0.0, centre[j], nv
-            for r in range(first, last + 1):
-                src = cache[r % size]
-                for j in range(w):
-                    d = src[j] - centre[j]
-                    a1[j] += d
-                    a2[j] += d * d
-            for j in range(w):
-                t1[j], t2[j], tn[j] = 0.0, 0.0, nv * cols[j]
-            for c in range(size):
-                b1, b2, bc, bn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
-                for j in range(w):
-                    d = bc[j] - centre[j]
-                    nd = bn[j] * d
-                    t1[j] += b1[j] + nd
-                    t2[j] += b2[j] + d * (2.0 * b1[j] + nd)
+            centred_sums(cache, i, h, radius, cols, cols_work, t1, t2, tn)
             if enhanced:
                 _enhanced_lee_row(xp[i], centre, t1, t2, tn, cu, cmax, damping, out[pl, i])
             else:
                 _lee_row(xp[i], centre, t1, t2, tn, cu2, weight_scale, out[pl, i])
 
 
+@njit(**_JIT)
+def centred_sums(cache, i, h, radius, cols, work, t1, t2, tn):
+    """Sums of the deviations ``t1`` and squared deviations ``t2`` of the window cells of
+    row ``i`` from each pixel's own value, and the window counts ``tn`` (the window rows
+    are in ``cache``, row ``r`` in slot ``r % (2 radius + 1)``; ``cols`` the in-image
+    columns of each pixel's window; ``work`` ``(4, W + 2 radius)`` scratch).
+
+    Each column of the window is summed as deviations from its cell in row ``i``, then the
+    columns' sums are moved to deviations from the pixel (``sum (x - C)^2 = S2 + d (2 S1 +
+    n d)``, ``d`` the column's cell minus ``C``): since ``C`` is a cell of the window,
+    ``(C - mean)^2`` is at most ``count`` times the variance and the variance ``(t2 - t1^2
+    / n) / n`` loses at most a factor ``count`` of float64 precision."""
+    size = 2 * radius + 1
+    w = t1.shape[0]
+    s1, s2, cc, nc = work[0], work[1], work[2], work[3]  # zero outside the image
+    centre = cache[i % size]
+    a1, a2 = s1[radius : radius + w], s2[radius : radius + w]
+    ac, an = cc[radius : radius + w], nc[radius : radius + w]
+    first, last = max(i - radius, 0), min(i + radius, h - 1)
+    nv = np.float64(last - first + 1)
+    for j in range(w):
+        a1[j], a2[j], ac[j], an[j] = 0.0, 0.0, centre[j], nv
+    for r in range(first, last + 1):
+        src = cache[r % size]
+        for j in range(w):
+            d = src[j] - centre[j]
+            a1[j] += d
+            a2[j] += d * d
+    for j in range(w):
+        t1[j], t2[j], tn[j] = 0.0, 0.0, nv * cols[j]
+    for c in range(size):
+        b1, b2, bc, bn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
+        for j in range(w):
+            d = bc[j] - centre[j]
+            nd = bn[j] * d
+            t1[j] += b1[j] + nd
+            t2[j] += b2[j] + d * (2.0 * b1[j] + nd)
+
+
 @njit(**_JIT, inline="always")
-def _moments(c, t1, t2, n):
+def moments(c, t1, t2, n):
     """Window mean (clamped at 0) and ``Ci^2`` (clamped to ``[0, n - 1]``) from the sums
     of deviations ``t1`` and squared deviations ``t2`` from the centre value ``c``."""
     m1 = t1 / n
@@ -218,7 +230,7 @@ def _moments(c, t1, t2, n):
 def _lee_row(xi, centre, t1, t2, tn, cu2, weight_scale, oi):
     """Lee / Kuan: ``mu + W (I - mu)``, ``W = clip((1 - cu2 / Ci^2) / weight_scale, 0, 1)``."""
     for j in range(oi.shape[0]):
-        mu, ci2 = _moments(centre[j], t1[j], t2[j], tn[j])
+        mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j])
         wgt = (1.0 - cu2 / ci2) / weight_scale if ci2 > 0.0 else 0.0
         wgt = 0.0 if wgt < 0.0 else (1.0 if wgt > 1.0 else wgt)
         oi[j] = mu + wgt * (np.float64(xi[j]) - mu)
@@ -229,7 +241,7 @@ def _enhanced_lee_row(xi, centre, t1, t2, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
     at or below ``Cu`` and 0 at or above ``Cmax``."""
     for j in range(oi.shape[0]):
-        mu, ci2 = _moments(centre[j], t1[j], t2[j], tn[j])
+        mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j])
         ci = np.sqrt(ci2)
         if ci <= cu:
             wgt = 1.0

@@ -4,6 +4,7 @@ the whole detector on many seeded chips and scenes under every option that chang
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
@@ -169,13 +170,30 @@ class TestFinishing:
         np.testing.assert_array_equal(got, ref.merged_labels(mask, merge))
 
 
+class _DespeckleCompiled:
+    """Stands in for ``torchsar._jit`` in the speckle filters: their one-sweep kernels in
+    both runs, so the comparison isolates the region kernels (the kernels' own agreement
+    with the tensor code is in tests/test_box_kernels.py)."""
+
+    @staticmethod
+    def for_tensor(t: torch.Tensor) -> bool:
+        return t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64)
+
+
 def _search(x: torch.Tensor, compiled: bool, **options):
+    _local = importlib.import_module("torchsar.speckle._local")
+    frost = importlib.import_module("torchsar.speckle.frost")  # the module, not the function
     old = _jit.ENABLED
     _jit.ENABLED = compiled
+    pinned = {m: m._jit for m in (_local, frost)}
+    for m in pinned:
+        m._jit = _DespeckleCompiled
     try:
         return region_search(x, **options)
     finally:
         _jit.ENABLED = old
+        for m, j in pinned.items():
+            m._jit = j
 
 
 def _rows_equal(a, b) -> bool:

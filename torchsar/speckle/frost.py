@@ -18,12 +18,15 @@ window mean ``mu`` (``Ci <= Cu``) and ``decay = inf`` gives the centre pixel ``I
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import partial
+from functools import lru_cache, partial
 
+import numpy as np
+import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar.speckle._local import Request, decay_map, finish, prepare, scratch
-from torchsar.windows import exp_distance_mean
+from torchsar.windows import distance_shells, exp_distance_mean
 
 __all__ = ["enhanced_frost", "frost"]
 
@@ -69,9 +72,40 @@ def frost(
     return _distance_weighted(req, lambda ci2: scratch(ci2).mul_(req.damping))
 
 
-def _distance_weighted(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:
-    """The Frost-type mean: window cells weighted by ``exp(-decay(Ci^2) d)``."""
-    return finish(req, exp_distance_mean(req.intensity, req.radius, decay_map(req, decay)))
+def _distance_weighted(
+    req: Request, decay: Callable[[Tensor], Tensor], *, enhanced: bool = False
+) -> Tensor:
+    """The Frost-type mean: window cells weighted by ``exp(-decay(Ci^2) d)``. CPU tensors
+    without gradients take the one-sweep kernel (:mod:`torchsar._shell_kernels`: the same
+    decay, as ``enhanced`` says, and weights in float64, cast once)."""
+    x = req.intensity
+    if _jit.for_tensor(x) and x.numel():
+        return finish(req, _compiled(x, req, enhanced))
+    return finish(req, exp_distance_mean(x, req.radius, decay_map(req, decay)))
+
+
+def _compiled(x: Tensor, req: Request, enhanced: bool) -> Tensor:
+    from torchsar import _shell_kernels
+
+    h, w = x.shape[-2:]
+    shells, dist = _shell_table(req.radius)
+    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    out = torch.empty(planes.shape, dtype=x.dtype)
+    sp = req.speckle
+    _shell_kernels.frost_filter(
+        planes, req.radius, shells, dist, enhanced, req.damping, sp.cu2, sp.cmax2, out.numpy()
+    )
+    return out.view(x.shape)
+
+
+@lru_cache(maxsize=16)
+def _shell_table(radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """The orbits ``(shell, p, q)`` of the non-zero distance shells of the window and the
+    shells' distances (:func:`torchsar.windows.distance_shells`)."""
+    shells = distance_shells(radius)[1:]  # the centre (distance 0) has weight 1
+    rows = [(k, p, q) for k, (_, orbits) in enumerate(shells) for p, q in orbits]
+    dist = np.array([d2**0.5 for d2, _ in shells])
+    return np.array(rows, dtype=np.int64).reshape(-1, 3), dist
 
 
 def enhanced_frost(
@@ -114,4 +148,6 @@ def enhanced_frost(
         100.0
     """
     req = prepare(x, window, looks, amplitude, damping)
-    return _distance_weighted(req, partial(req.speckle.heterogeneity, damping=req.damping))
+    return _distance_weighted(
+        req, partial(req.speckle.heterogeneity, damping=req.damping), enhanced=True
+    )

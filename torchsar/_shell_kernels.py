@@ -1,0 +1,192 @@
+"""numba kernel of the Frost-type filters in one sweep over the image rows: the window's
+coefficient of variation, each pixel's decay, and the mean weighted by ``exp(-decay d)``
+over the distance shells of the window (:func:`torchsar.windows.exp_distance_mean`'s
+definition), with no full-size temporaries.
+
+Per output row: the window moments as in :func:`torchsar._box_kernels.centred_sums`; the
+sums ``S_d`` of every distance shell from vertical pair sums ``x[i - p] + x[i + p]`` and
+their horizontal pairs (the orbits ``(±p, ±q), (±q, ±p)``); the in-image cell counts
+``n_d`` of the shells likewise; then ``(I + sum_d e_d S_d) / (1 + sum_d e_d n_d)`` with
+``e_d = exp(-decay d)``, shells in increasing distance. ``exp`` is evaluated by
+:func:`exp_neg` (vectorisable, with fused multiply-adds; within 3e-16 relative of
+``exp``, 0 below ``-708``). Float64 throughout, cast once.
+
+Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+from numba.extending import intrinsic
+
+from torchsar._box_kernels import axis_count, centred_sums, load, moments
+
+__all__ = ["exp_neg", "frost_filter"]
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+
+_MAGIC = 6755399441055744.0  # 1.5 * 2^52: adding it rounds to an integer in the low bits
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 in two parts (Cody and Waite)
+_LN2_LO = 1.90821492927058770002e-10
+
+
+@intrinsic
+def _bits(typingctx, value):
+    """The IEEE bits of a float64 as an int64."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.int64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _float(typingctx, bits):
+    """The float64 whose IEEE bits are the int64 ``bits``."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return types.float64(types.int64), codegen
+
+
+@njit(**_JIT, inline="always")
+def exp_neg(x):
+    """``exp(x)`` for ``x <= 0`` (``-inf`` included), without a library call so that loops
+    over it vectorise: ``x = k ln 2 + r``, ``|r| <= ln 2 / 2``, the Taylor polynomial of
+    degree 13 in ``r`` (truncation below 1e-17) times ``2^k`` built from its bits. Results
+    below the smallest normal double (``x < -708``) are 0."""
+    xc = x if x > -708.0 else -708.0
+    t = xc * _LOG2E + _MAGIC
+    k = t - _MAGIC
+    r = (xc - k * _LN2_HI) - k * _LN2_LO
+    p = 1.0 / 6227020800.0
+    p = p * r + 1.0 / 479001600.0
+    p = p * r + 1.0 / 39916800.0
+    p = p * r + 1.0 / 3628800.0
+    p = p * r + 1.0 / 362880.0
+    p = p * r + 1.0 / 40320.0
+    p = p * r + 1.0 / 5040.0
+    p = p * r + 1.0 / 720.0
+    p = p * r + 1.0 / 120.0
+    p = p * r + 1.0 / 24.0
+    p = p * r + 1.0 / 6.0
+    p = p * r + 0.5
+    p = p * r + 1.0
+    p = p * r + 1.0
+    v = p * _float((_bits(t) - _bits(_MAGIC) + 1023) << 52)
+    return v if x > -708.0 else 0.0
+
+
+@njit(**_JIT)
+def _pairs(cache, i, h, radius, size, v, vn):
+    """Vertical pair sums of row ``i``: ``v[p] = x[i - p] + x[i + p]`` (``x[i]`` for ``p =
+    0``; rows outside the image count as absent) into the padded rows of ``v``, and ``vn[p]``
+    the number of those rows in the image."""
+    w = cache.shape[1]
+    for p in range(radius + 1):
+        dst = v[p, radius : radius + w]
+        n = 0
+        for j in range(w):
+            dst[j] = 0.0
+        for side in range(2 if p else 1):
+            r = i - p if side == 0 else i + p
+            if 0 <= r < h:
+                src = cache[r % size]
+                for j in range(w):
+                    dst[j] += src[j]
+                n += 1
+        vn[p] = n
+
+
+@njit(**_JIT)
+def _orbit_add(a, b, radius, dst):
+    """``dst[j] += a[j - b] + a[j + b]`` (``a[j]`` for ``b = 0``) over the padded row ``a``."""
+    w = dst.shape[0]
+    if b == 0:
+        src = a[radius : radius + w]
+        for j in range(w):
+            dst[j] += src[j]
+    else:
+        lo, hi = a[radius - b : radius - b + w], a[radius + b : radius + b + w]
+        for j in range(w):
+            dst[j] += lo[j] + hi[j]
+
+
+@njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
+def frost_filter(x, radius, shells, dist, enhanced, damping, cu2, cmax2, out):
+    """A Frost-type filter of every plane of ``x`` ``(P, H, W)`` into ``out``.
+
+    ``shells``: int64 rows ``(shell, p, q)`` of the orbits (``0 <= p <= q <= radius``) of
+    every non-zero distance shell, shells numbered ``0..S-1`` in increasing distance
+    ``dist[s]``. The decay is ``damping Ci^2`` (Frost) or, ``enhanced``, ``damping (Ci -
+    Cu) / (Cmax - Ci)`` between ``Cu`` and ``Cmax``, 0 at or below ``Cu`` (the window
+    mean), ``inf`` at or above ``Cmax`` (the pixel itself)."""
+    p_, h, w = x.shape
+    size = 2 * radius + 1
+    wp = w + 2 * radius
+    n_shells = dist.shape[0]
+    cache = np.zeros((size, w))
+    work = np.zeros((4, wp))
+    t1, t2, tn = np.zeros(w), np.zeros(w), np.zeros(w)
+    cols = np.zeros(w)
+    for j in range(w):
+        cols[j] = axis_count(j, w, -radius, radius)
+    # horizontal pair counts of every offset b: how many of j - b, j + b are in the image
+    hcount = np.zeros((radius + 1, w))
+    for b in range(radius + 1):
+        for j in range(w):
+            hcount[b, j] = 1.0 if b == 0 else (j - b >= 0) + (j + b < w)
+    v = np.zeros((radius + 1, wp))
+    vn = np.zeros(radius + 1, np.int64)
+    s = np.zeros((n_shells, w))
+    n = np.zeros((n_shells, w))
+    decay, num, den = np.zeros(w), np.zeros(w), np.zeros(w)
+    cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
+    for pl in range(p_):
+        xp = x[pl]
+        for r in range(min(radius, h)):
+            load(xp[r], cache[r % size])
+        for i in range(h):
+            if i + radius < h:
+                load(xp[i + radius], cache[(i + radius) % size])
+            centre = cache[i % size]
+            centred_sums(cache, i, h, radius, cols, work, t1, t2, tn)
+            for j in range(w):
+                ci2 = moments(centre[j], t1[j], t2[j], tn[j])[1]
+                if enhanced:
+                    ci = np.sqrt(ci2)
+                    if ci <= cu:
+                        decay[j] = 0.0
+                    elif ci >= cmax:
+                        decay[j] = np.inf
+                    else:
+                        decay[j] = damping * (ci - cu) / (cmax - ci)
+                else:
+                    decay[j] = damping * ci2
+            _pairs(cache, i, h, radius, size, v, vn)
+            s[:, :] = 0.0
+            n[:, :] = 0.0
+            for o in range(shells.shape[0]):
+                sh, p, q = shells[o, 0], shells[o, 1], shells[o, 2]
+                _orbit_add(v[p], q, radius, s[sh])
+                cnt = n[sh]
+                for j in range(w):
+                    cnt[j] += vn[p] * hcount[q, j]
+                if p != q:
+                    _orbit_add(v[q], p, radius, s[sh])
+                    for j in range(w):
+                        cnt[j] += vn[q] * hcount[p, j]
+            for j in range(w):
+                num[j], den[j] = centre[j], 1.0
+            for k in range(n_shells):  # nearest shells first
+                dk, sk, nk = dist[k], s[k], n[k]
+                for j in range(w):
+                    e = exp_neg(-(decay[j] * dk))
+                    num[j] += e * sk[j]
+                    den[j] += e * nk[j]
+            oi = out[pl, i]
+            for j in range(w):
+                oi[j] = num[j] / den[j]
