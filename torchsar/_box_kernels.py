@@ -10,8 +10,9 @@ a fixed sequence of float64 additions, whatever the batch, tile or strip):
 - the column sums of an output row add those rows from the top, four at a time (*direct*
   sums: no running sum, no integral image, so no cancellation: a bright target leaving the
   window leaves no rounding residue behind);
-- the row sums of those column sums add the columns left to right. The speckle filters'
-  variances sum deviations instead of values so that nothing cancels (:func:`box_filter`).
+- the row sums of those column sums add the columns from the left, four at a time. The
+  speckle filters' variances sum deviations instead of values so that nothing cancels
+  (:func:`box_filter`).
 
 Interior sums are exact to a few float64 roundings (relative error below ``1e-14``
 of the sum of the absolute values), where the integral images of
@@ -25,11 +26,74 @@ Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
-__all__ = ["axis_count", "box_filter", "centred_sums", "load", "moments", "ring_ratio"]
+__all__ = [
+    "axis_count",
+    "box_filter",
+    "centred_sums",
+    "exp_neg",
+    "load",
+    "moments",
+    "ring_ratio",
+]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+
+
+_MAGIC = 6755399441055744.0  # 1.5 * 2^52: adding it rounds to an integer in the low bits
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 in two parts (Cody and Waite)
+_LN2_LO = 1.90821492927058770002e-10
+
+
+@intrinsic
+def _bits(typingctx, value):
+    """The IEEE bits of a float64 as an int64."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.int64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _float(typingctx, bits):
+    """The float64 whose IEEE bits are the int64 ``bits``."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return types.float64(types.int64), codegen
+
+
+@njit(**_JIT, inline="always")
+def exp_neg(x):
+    """``exp(x)`` for ``x <= 0`` (``-inf`` included), without a library call so that loops
+    over it vectorise: ``x = k ln 2 + r``, ``|r| <= ln 2 / 2``, the Taylor polynomial of
+    degree 13 in ``r`` (truncation below 1e-17) times ``2^k`` built from its bits. Results
+    below the smallest normal double (``x < -708``) are 0."""
+    xc = x if x > -708.0 else -708.0
+    t = xc * _LOG2E + _MAGIC
+    k = t - _MAGIC
+    r = (xc - k * _LN2_HI) - k * _LN2_LO
+    p = 1.0 / 6227020800.0
+    p = p * r + 1.0 / 479001600.0
+    p = p * r + 1.0 / 39916800.0
+    p = p * r + 1.0 / 3628800.0
+    p = p * r + 1.0 / 362880.0
+    p = p * r + 1.0 / 40320.0
+    p = p * r + 1.0 / 5040.0
+    p = p * r + 1.0 / 720.0
+    p = p * r + 1.0 / 120.0
+    p = p * r + 1.0 / 24.0
+    p = p * r + 1.0 / 6.0
+    p = p * r + 0.5
+    p = p * r + 1.0
+    p = p * r + 1.0
+    v = p * _float((_bits(t) - _bits(_MAGIC) + 1023) << 52)
+    return v if x > -708.0 else 0.0
 
 
 @njit(**_JIT)
@@ -65,15 +129,24 @@ def _add_rows(cache, first, last, h, size, dst):
 
 @njit(**_JIT)
 def _row_box(v, width, out):
-    """``out[j] = v[j] + ... + v[j + width - 1]`` for every ``j < len(out)``, added left to
-    right (one vectorised pass per term)."""
+    """``out[j] = v[j] + ... + v[j + width - 1]`` for every ``j < len(out)``: the terms
+    four at a time from the left (``(a + b) + (c + d)``), then the rest one by one (one
+    vectorised pass per group)."""
     w = out.shape[0]
     for j in range(w):
         out[j] = 0.0
-    for c in range(width):
-        src = v[c : c + w]
+    c = 0
+    while c + 4 <= width:
+        a, b = v[c : c + w], v[c + 1 : c + 1 + w]
+        d, e = v[c + 2 : c + 2 + w], v[c + 3 : c + 3 + w]
         for j in range(w):
-            out[j] += src[j]
+            out[j] += (a[j] + b[j]) + (d[j] + e[j])
+        c += 4
+    while c < width:
+        a = v[c : c + w]
+        for j in range(w):
+            out[j] += a[j]
+        c += 1
 
 
 @njit(**_JIT)
@@ -236,18 +309,14 @@ def _lee_row(xi, centre, t1, t2, tn, cu2, weight_scale, oi):
         oi[j] = mu + wgt * (np.float64(xi[j]) - mu)
 
 
-@njit(**_JIT)
+@njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
 def _enhanced_lee_row(xi, centre, t1, t2, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
     at or below ``Cu`` and 0 at or above ``Cmax``."""
     for j in range(oi.shape[0]):
         mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j])
         ci = np.sqrt(ci2)
-        if ci <= cu:
-            wgt = 1.0
-        elif ci >= cmax:
-            wgt = 0.0
-        else:
-            wgt = np.exp(-(damping * (ci - cu) / (cmax - ci)))
+        h = damping * (ci - cu) / (cmax - ci) if cu < ci < cmax else 0.0
+        h = np.inf if ci >= cmax else h
         obs = np.float64(xi[j])
-        oi[j] = obs + wgt * (mu - obs)
+        oi[j] = obs + exp_neg(-h) * (mu - obs)
