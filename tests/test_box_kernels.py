@@ -186,7 +186,7 @@ def test_speckle_filters_are_the_reference(monkeypatch, name, amplitude, make):
     than the clutter the integral images of the tensor code are off by ~1e-10."""
     monkeypatch.setattr(_jit, "ENABLED", True)
     fn = _filter(name)
-    x64 = make(5).double()
+    x64 = make(5).double()[:1, :, :20, :23]  # small: the reference loops over every pixel
     want = _speckle_reference(name, x64, amplitude)
     got = fn(x64, window=5, looks=2.0, amplitude=amplitude).numpy()
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)

@@ -4,8 +4,8 @@ numba compiles a kernel the first time it is called with new argument types and 
 machine code in its on-disk cache (``__pycache__`` beside the sources). On a fresh install
 that first call costs up to a minute for all kernels together; :func:`warm` (run by ``make
 setup`` through ``scripts/warm_kernels.py``) pays it once, so the first evaluation, detector
-call or test run does not. It runs every compiled path (the window CFARs, OS-CFAR, the
-region CFAR, object labelling and closing, the pixel ROC) on tiny float32 and float64
+call or test run does not. It runs every compiled path (the window CFARs, OS-CFAR, the speckle
+filters, the region CFAR, object labelling and closing, the pixel ROC) on tiny float32 and float64
 batches (the window CFARs with and without a valid mask). Without numba (or with
 ``TORCHSAR_NUMBA=0``) it does nothing. :func:`warm_tables` computes the K and G0 CFARs'
 default design tables into their on-disk cache.
@@ -35,7 +35,7 @@ def warm() -> float:
     kernels are off)."""
     if not _jit.enabled():
         return 0.0
-    from torchsar import cfar
+    from torchsar import cfar, speckle
     from torchsar.metrics import RocAccumulator
     from torchsar.objects import ObjectRules, discriminate
     from torchsar.region import region_cfar
@@ -49,6 +49,8 @@ def warm() -> float:
         for mask in (None, valid):
             for detector in window:
                 detector(x, valid=mask)
+        for name in ("lee", "enhanced_lee", "frost", "enhanced_frost"):
+            speckle.FILTERS[name](x, window=3)
         region_cfar(x)
         det = cfar.ca(x)  # detects the bright spots: objects to label and close
         for closing in (0, 2):
