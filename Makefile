@@ -19,9 +19,11 @@ $(BIN)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@
 
-# The Ray engine is an optional extra; the tests exercise it, so `make test` installs it.
+# The Ray engine is an optional extra; the tests exercise it, so `make test` installs it:
+# the extra's requirements as pyproject.toml lists them (without rebuilding the project).
+RAY_EXTRA = import tomllib; print(*tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["ray"])
 $(BIN)/.ray: $(BIN)/.installed
-	$(BIN)/python -m pip install --quiet -e ".[dev,ray]"
+	$(BIN)/python -m pip install --quiet $$($(BIN)/python -c '$(RAY_EXTRA)')
 	touch $@
 
 # numba compiles its kernels on first use (about a minute for all of them), and the K / G0
