@@ -10,7 +10,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 TORCH_VERSION ?= 2.13.0
 
-.PHONY: setup eval test test-browser browser coverage lint docs bench wheel clean
+.PHONY: setup eval test test-integration test-browser browser coverage lint docs bench wheel clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,8 +19,9 @@ $(BIN)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@
 
-# The Ray engine is an optional extra; the tests exercise it, so `make test` installs it:
-# the extra's requirements as pyproject.toml lists them (without rebuilding the project).
+# The Ray engine is an optional extra; the integration tests exercise it, so CI's `make test`
+# and `make test-integration` install it: the extra's requirements as pyproject.toml lists
+# them (without rebuilding the project). The default test run does not need it.
 RAY_EXTRA = import tomllib; print(*tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["ray"])
 $(BIN)/.ray: $(BIN)/.installed
 	$(BIN)/python -m pip install --quiet $$($(BIN)/python -c '$(RAY_EXTRA)')
@@ -58,11 +59,15 @@ browser:
 # The suite runs in TEST_WORKERS processes (pytest-xdist; 2: CI's cores): 0.7x the serial
 # wall time on the 2-core VM. TEST_WORKERS=0 runs it in this process.
 TEST_WORKERS ?= 2
-test: setup $(BIN)/.ray
+test: setup
 	$(if $(CI),-timeout 600 $(MAKE) --no-print-directory browser)
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
-	$(if $(CI),$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m integration)
+	$(if $(CI),$(MAKE) --no-print-directory test-integration)
 	$(if $(CI),$(BIN)/python -m pytest -q -m slow $(BROWSER_TEST))
+
+# The engine's integration tests (worker pools, Ray, kills, fresh processes): CI's second step.
+test-integration: setup $(BIN)/.ray
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m integration
 
 # Statement coverage of the library and the harness (in-process code; the command lines the
 # tests start are not traced): `make coverage` for the default run, MARK=integration for CI's
