@@ -247,6 +247,23 @@ def _mapped(obj: Objects, f) -> Objects:
     return replace(obj, score=f(obj.score), threshold=float(f(np.float64(obj.threshold))))
 
 
+def _image_under(obj: Objects, mapped: Objects, f):
+    """The map as the mapped objects hold it: a score's own mapped value, else ``f``.
+
+    NumPy's vectorised ``pow``/``log`` may round an array element one ulp away from the same
+    value mapped alone, so a score is looked up rather than mapped again.
+    """
+    table = dict(zip(obj.score.tolist(), mapped.score.tolist(), strict=True))
+    table[float(obj.threshold)] = mapped.threshold
+
+    def image(values):
+        values = np.asarray(values, dtype=np.float64)
+        out = [table.get(v, float(f(np.float64(v)))) for v in values.ravel().tolist()]
+        return np.asarray(out, dtype=np.float64).reshape(values.shape)
+
+    return image
+
+
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 100_000), ties=st.booleans(), name=st.sampled_from(sorted(MAPS)))
 def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, name):
@@ -256,6 +273,7 @@ def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, n
     assert np.array_equal(
         np.argsort(-obj.score, kind="stable"), np.argsort(-mapped.score, kind="stable")
     )
+    image = _image_under(obj, mapped, f)
     a, b = ObjectState(replicates=30), ObjectState(replicates=30)
     a.update(m, obj, gt, info)
     b.update(match_batch(mapped, gt, Matching("centroid")), mapped, gt, info)
@@ -266,12 +284,12 @@ def test_a_strictly_increasing_map_of_the_scores_changes_no_number(seed, ties, n
     for k, v in ia.items():
         assert (v.lo, v.hi) == pytest.approx((ib[k].lo, ib[k].hi), nan_ok=True, abs=1e-12), k
     fa, fb = a.froc(), b.froc()
-    np.testing.assert_array_equal(f(fa["threshold"]), fb["threshold"])
+    np.testing.assert_array_equal(image(fa["threshold"]), fb["threshold"])
     for k in ("tp", "fp", "fa_per_image", "pd"):
         np.testing.assert_array_equal(fa[k], fb[k])
     for kind, level in (("f1", None), ("fa", 0.5), ("fa", 2.0)):
         ta, tb = a.choose_threshold(kind, level), b.choose_threshold(kind, level)
-        assert (ta is None and tb is None) or f(np.float64(ta)) == tb
+        assert (ta is None and tb is None) or image(ta) == tb
         assert a.metrics(ta) == pytest.approx(b.metrics(tb), nan_ok=True, abs=1e-12)
 
 
