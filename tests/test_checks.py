@@ -47,6 +47,23 @@ class TestCheckImage:
         with pytest.raises(E.InputValueError, match="must be finite"):
             C.check_image(x)
 
+    @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float32, torch.float64])
+    @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf"), -1.0, -0.0, 0.0])
+    def test_one_bad_value_among_many_in_any_float_dtype(self, dtype, value):
+        """Non-finite first (a NaN beside negatives is a NaN error), then negative; ``-0.0``
+        is zero."""
+        x = torch.rand(2, 1, 33, 35, generator=torch.Generator().manual_seed(0)).to(dtype)
+        x[1, 0, 20, 7] = value
+        if math.isfinite(value) and value >= 0:
+            assert C.check_image(x) is x
+            return
+        x[0, 0, 3, 3] = -2.0
+        what = "must be finite" if not math.isfinite(value) else "non-negative"
+        with pytest.raises(E.InputValueError, match=what):
+            C.check_image(x)
+        if math.isfinite(value):
+            assert C.check_image(x, nonnegative=False) is x
+
     def test_negative(self):
         x = torch.ones(1, 1, 3, 3)
         x[0, 0, 0, 0] = -0.5

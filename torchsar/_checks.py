@@ -7,6 +7,7 @@ was given.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -143,19 +144,21 @@ def check_image(
         )
     if x.numel() == 0:
         return x
-    if not all_finite(x):
+    low = None
+    if nonnegative and not is_complex:  # one pass: NaN propagates to both, Inf to one
+        low, high = torch.stack(torch.aminmax(_summable(x).reshape(-1))).tolist()
+    finite = all_finite(x) if low is None else math.isfinite(low) and math.isfinite(high)
+    if not finite:
         n_nan = int(torch.isnan(_summable(x)).sum())
         n_inf = int(torch.isinf(_summable(x)).sum())
         raise InputValueError(
             f"{name} must be finite, got {n_nan} NaN and {n_inf} Inf values; "
             f"replace them (e.g. torch.nan_to_num) or mark them invalid with a `valid` mask"
         )
-    if nonnegative and not is_complex:
-        low = float(x.min())
-        if low < 0:
-            raise InputValueError(
-                f"{name} must be non-negative (SAR intensity/amplitude), got minimum {low:g}"
-            )
+    if low is not None and low < 0:
+        raise InputValueError(
+            f"{name} must be non-negative (SAR intensity/amplitude), got minimum {low:g}"
+        )
     return x
 
 
