@@ -19,6 +19,7 @@ import torchsar.speckle as speckle
 from tests.reference.cfar import ring_cells
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
+from torchsar.cfar.ca import ca_threshold
 from torchsar.windows import Ring, region_count, ring_counts
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
@@ -75,13 +76,28 @@ def _masks_agree(a, b) -> None:
 
 # float64 results: within the integral images' own error (float64 ulps of the window's sum)
 @pytest.mark.parametrize("dtype, ulps", [(torch.float32, 1.0), (torch.float64, 1e4)])
-@pytest.mark.parametrize("guard, train", [(2, 4), (0, 1), (1, 3), (3, 2)])
+@pytest.mark.parametrize("guard, train", [(2, 4), (0, 1), (1, 3), (3, 2), (2, 7)])
 def test_ca_is_the_tensor_code_to_an_ulp(monkeypatch, dtype, ulps, guard, train):
     x = _scene(1, dtype=dtype)
     a, b = _both(monkeypatch, lambda: cfar.ca(x, guard=guard, train=train))
     assert a.statistic.dtype == b.statistic.dtype == dtype
     assert _ulps(a.statistic, b.statistic) <= ulps
     _masks_agree(a, b)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_the_compiled_mask_is_the_statistic_over_the_threshold(monkeypatch, dtype):
+    """The kernel decides as it writes the statistic: the same mask as ``statistic >
+    threshold`` on the returned tensors, the threshold a scalar of the statistic's dtype."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    x = _scene(5, dtype=dtype)
+    for pfa in (1e-1, 1e-3):
+        d = cfar.ca(x, guard=1, train=3, pfa=pfa)
+        assert d.threshold.dtype == dtype and d.threshold.dim() == 0
+        want = torch.tensor(ca_threshold(guard=1, train=3, pfa=pfa, looks=1.0), dtype=dtype)
+        assert torch.equal(d.threshold, want)
+        assert d.mask.dtype == torch.bool and d.mask.any()
+        assert torch.equal(d.mask, d.statistic > d.threshold)
 
 
 def test_ac_without_no_data_is_the_tensor_code_to_an_ulp(monkeypatch):

@@ -2,17 +2,20 @@
 box-statistics speckle filters (Lee, Kuan, enhanced Lee) from the image to the result in
 one sweep over its rows, with no full-size temporaries.
 
-How the window sums are formed (the same for every kernel here, so every pixel's sums are
-a fixed sequence of float64 additions, whatever the batch, tile or strip):
+How the window sums are formed (fixed for every pixel by its position alone, so every
+pixel's sums are the same float64 additions whatever the batch, tile or strip; no running
+sum and no integral image, so nothing cancels: a bright target leaving the window leaves
+no rounding residue behind):
 
 - each image row is converted once to float64 and kept in a ring buffer of the window's
   rows;
-- the column sums of an output row add those rows from the top, four at a time (*direct*
-  sums: no running sum, no integral image, so no cancellation: a bright target leaving the
-  window leaves no rounding residue behind);
-- the row sums of those column sums add the columns from the left, four at a time. The
-  speckle filters' variances sum deviations instead of values so that nothing cancels
-  (:func:`box_filter`).
+- CA-CFAR (:func:`ring_ratio`) keeps, per row ``r``, the sums of rows ``r .. r + 2^k - 1``
+  (one addition per level as each row arrives), adds a band of ``L`` rows as the blocks of
+  ``L``'s binary digits, and does the same along the row: about a dozen additions per
+  pixel, every one of non-negative terms;
+- the speckle filters (:func:`box_filter`) sum the deviations of the window cells from each
+  pixel's own value, column by column and then across (:func:`centred_sums`), so that their
+  variances do not cancel either.
 
 Interior sums are exact to a few float64 roundings (relative error below ``1e-14``
 of the sum of the absolute values), where the integral images of
@@ -105,51 +108,6 @@ def axis_count(i, n, lo, hi):
 
 
 @njit(**_JIT)
-def _add_rows(cache, first, last, h, size, dst):
-    """``dst[:] = sum of the cached rows first..last`` (inside ``[0, h)``), in groups of four
-    rows from the top (``(a + b) + (c + d)``, then the rest one by one); the cache holds row
-    ``r`` in slot ``r % size``."""
-    w = dst.shape[0]
-    lo, hi = max(first, 0), min(last, h - 1) + 1
-    for j in range(w):
-        dst[j] = 0.0
-    r = lo
-    while r + 4 <= hi:
-        a, b = cache[r % size], cache[(r + 1) % size]
-        c, d = cache[(r + 2) % size], cache[(r + 3) % size]
-        for j in range(w):
-            dst[j] += (a[j] + b[j]) + (c[j] + d[j])
-        r += 4
-    while r < hi:
-        a = cache[r % size]
-        for j in range(w):
-            dst[j] += a[j]
-        r += 1
-
-
-@njit(**_JIT)
-def _row_box(v, width, out):
-    """``out[j] = v[j] + ... + v[j + width - 1]`` for every ``j < len(out)``: the terms
-    four at a time from the left (``(a + b) + (c + d)``), then the rest one by one (one
-    vectorised pass per group)."""
-    w = out.shape[0]
-    for j in range(w):
-        out[j] = 0.0
-    c = 0
-    while c + 4 <= width:
-        a, b = v[c : c + w], v[c + 1 : c + 1 + w]
-        d, e = v[c + 2 : c + 2 + w], v[c + 3 : c + 3 + w]
-        for j in range(w):
-            out[j] += (a[j] + b[j]) + (d[j] + e[j])
-        c += 4
-    while c < width:
-        a = v[c : c + w]
-        for j in range(w):
-            out[j] += a[j]
-        c += 1
-
-
-@njit(**_JIT)
 def load(row, dst):
     """``dst = float64(row)``."""
     for j in range(row.shape[0]):
@@ -157,56 +115,148 @@ def load(row, dst):
 
 
 @njit(**_JIT)
-def ring_ratio(x, guard, train, scale, out):
+def levels_for(length):
+    """How many block-sum levels a sum of ``length`` terms needs (``2^k <= length``)."""
+    k = 0
+    while (2 << k) <= length:
+        k += 1
+    return k + 1
+
+
+@njit(**_JIT, inline="always")
+def _level_up(lo, out, step, n):
+    """``out[j] = lo[j] + lo[j + step]`` for ``j < n``: one level of block sums."""
+    a, b, o = lo[:n], lo[step : step + n], out[:n]  # slices: j alone indexes (vectorises)
+    for j in range(n):
+        o[j] = a[j] + b[j]
+
+
+@njit(**_JIT, inline="always")
+def _block_sum(levels, length, start, n, out, accumulate):
+    """``out[j] (+)= sum of terms start + j .. start + j + length - 1`` for ``j < n`` from
+    the block sums ``levels[k][j] = terms j .. j + 2^k - 1``: the blocks of ``length``'s set
+    bits, largest first (a fixed association whatever ``j``)."""
+    first = not accumulate
+    pos = start
+    k = levels.shape[0] - 1
+    while k >= 0:
+        if (length >> k) & 1:
+            lv = levels[k][pos : pos + n]
+            if first:
+                for j in range(n):
+                    out[j] = lv[j]
+                first = False
+            else:
+                for j in range(n):
+                    out[j] += lv[j]
+            pos += 1 << k
+        k -= 1
+    if first:
+        for j in range(n):
+            out[j] = 0.0
+
+
+@njit(**_JIT, inline="always")
+def _row_levels(rows, q, size, depth, src, w):
+    """Row ``q`` of the image (``src``, or zeros where ``src`` is empty) into the block-sum
+    ring buffers ``rows[k, slot]`` (row ``r``'s sums of rows ``r .. r + 2^k - 1`` in slot
+    ``r % size``), every level ending at ``q`` updated."""
+    base = rows[0, q % size]
+    if src.shape[0] == 0:
+        for j in range(w):
+            base[j] = 0.0
+    else:
+        for j in range(w):
+            base[j] = np.float64(src[j])
+    for k in range(1, depth):
+        r = q - (1 << k) + 1
+        half = 1 << (k - 1)
+        a, b, dst = rows[k - 1, r % size], rows[k - 1, (r + half) % size], rows[k, r % size]
+        for j in range(w):
+            dst[j] = a[j] + b[j]
+
+
+@njit(**_JIT, inline="always")
+def _rows_sum(rows, size, length, start, w, out, accumulate):
+    """:func:`_block_sum` down the columns: ``out (+)= rows start .. start + length - 1``."""
+    first = not accumulate
+    pos = start
+    k = rows.shape[0] - 1
+    while k >= 0:
+        if (length >> k) & 1:
+            lv = rows[k, pos % size]
+            if first:
+                for j in range(w):
+                    out[j] = lv[j]
+                first = False
+            else:
+                for j in range(w):
+                    out[j] += lv[j]
+            pos += 1 << k
+        k -= 1
+
+
+@njit(**_JIT)
+def ring_ratio(x, guard, train, scale, threshold, out, mask):
     """CA-CFAR's statistic ``x / mean_ring`` of every plane of ``x`` ``(P, H, W)`` into
-    ``out`` (its dtype): the ring is the ``(2o+1)^2`` box minus the ``(2g+1)^2`` guard box
+    ``out`` (its dtype) and the decision ``out > threshold[0]`` (``threshold`` in ``out``'s
+    dtype) into the bool ``mask``: the ring is the ``(2o+1)^2`` box minus the ``(2g+1)^2`` guard box
     (``o = g + t``), summed as its top and bottom bands plus the left and right parts of
     the middle rows (no subtraction), cells outside the image not counted; a pixel whose
     ring holds ``c != N`` cells is multiplied by ``scale[c]`` (the border rule's
-    ``factor(N) / factor(c)``); ``0 / 0 = 0``."""
+    ``factor(N) / factor(c)``); ``0 / 0 = 0``.
+
+    Each part is a sum of power-of-two blocks (rows ``r .. r + 2^k - 1`` kept per row as
+    it arrives, then columns likewise): about a dozen additions per pixel, every one of
+    non-negative terms in an order fixed by the pixel's position alone."""
     p_, h, w = x.shape
     g, o = guard, guard + train
     size = 2 * o + 1
     n_full = size * size - (2 * g + 1) ** 2
-    cache = np.zeros((size, w))
-    band = np.zeros(w + 2 * o)  # rows of the top and bottom bands, o zero columns a side
-    mid = np.zeros(w + 2 * o)  # the 2g+1 middle rows
-    acc, part = np.zeros(w), np.zeros(w)
+    depth = levels_for(max(train, 2 * g + 1))
+    rows = np.zeros((depth, size, w))
+    hdepth, mdepth = levels_for(size), levels_for(train)
+    band = np.zeros((hdepth, w + 2 * o))  # band rows summed, o zero columns a side, levels
+    mid = np.zeros((mdepth, w + 2 * o))
+    acc = np.zeros(w)
+    empty = x[0, 0, :0] if p_ else np.zeros(0, x.dtype)
     outer_cols, guard_cols = np.zeros(w, np.int64), np.zeros(w, np.int64)
     for j in range(w):
         outer_cols[j] = axis_count(j, w, -o, o)
         guard_cols[j] = axis_count(j, w, -g, g)
-    count, factor = np.zeros(w), np.ones(w)
+    cf = np.ones(w)  # count times border factor
+    thr = threshold[0]
     for pl in range(p_):
         xp = x[pl]
-        for r in range(min(o, h)):
-            load(xp[r], cache[r % size])
+        for q in range(-o, min(o, h + o)):
+            _row_levels(rows, q, size, depth, xp[q] if 0 <= q < h else empty, w)
         last_rows = (-1, -1)
         for i in range(h):
-            if i + o < h:
-                load(xp[i + o], cache[(i + o) % size])
-            rows = (axis_count(i, h, -o, o), axis_count(i, h, -g, g))
-            if rows != last_rows:  # the counts and border factors of this row
+            q = i + o
+            _row_levels(rows, q, size, depth, xp[q] if q < h else empty, w)
+            counts = (axis_count(i, h, -o, o), axis_count(i, h, -g, g))
+            if counts != last_rows:  # the counts and border factors of this row
                 for j in range(w):
-                    c = rows[0] * outer_cols[j] - rows[1] * guard_cols[j]
-                    count[j] = c
-                    factor[j] = scale[c] if c != n_full else 1.0
-                last_rows = rows
-            inner = band[o : o + w]
-            _add_rows(cache, i - o, i - g - 1, h, size, inner)
-            _add_rows(cache, i + g + 1, i + o, h, size, part)
+                    c = counts[0] * outer_cols[j] - counts[1] * guard_cols[j]
+                    cf[j] = c * (scale[c] if c != n_full else 1.0)
+                last_rows = counts
+            b0, m0 = band[0, o : o + w], mid[0, o : o + w]
+            _rows_sum(rows, size, train, i - o, w, b0, False)
+            _rows_sum(rows, size, train, i + g + 1, w, b0, True)
+            _rows_sum(rows, size, 2 * g + 1, i - g, w, m0, False)
+            for k in range(1, hdepth):
+                n = w + 2 * o - (1 << k) + 1
+                _level_up(band[k - 1], band[k], 1 << (k - 1), n)
+                if k < mdepth:
+                    _level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
+            _block_sum(band, size, 0, w, acc, False)
+            _block_sum(mid, train, 0, w, acc, True)
+            _block_sum(mid, train, o + g + 1, w, acc, True)
+            xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             for j in range(w):
-                inner[j] += part[j]
-            _add_rows(cache, i - g, i + g, h, size, mid[o : o + w])
-            _row_box(band, size, acc)
-            _row_box(mid, train, part)
-            for j in range(w):
-                acc[j] += part[j]
-            _row_box(mid[o + g + 1 :], train, part)
-            xi, oi = xp[i], out[pl, i]
-            for j in range(w):
-                v = np.float64(xi[j]) / ((acc[j] + part[j]) / count[j]) * factor[j]
+                v = np.float64(xi[j]) * cf[j] / acc[j]
                 oi[j] = v if v == v else 0.0
+                mi[j] = oi[j] > thr
 
 
 @njit(**_JIT)

@@ -70,8 +70,12 @@ def ca(
     """
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ca")
     factor = partial(ca_factor, pfa=pfa, looks=check_positive(looks, "looks"))
+    threshold = ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks)
+    if vmask is None and _jit.for_tensor(x) and x.numel():
+        stat, mask = _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
+        return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
     stat = ring_mean_ratio(x, ring, factor, vmask, out_dtype(x))
-    return conclude(stat, vmask, ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks))
+    return conclude(stat, vmask, threshold)
 
 
 def ring_mean_ratio(
@@ -82,7 +86,7 @@ def ring_mean_ratio(
     AC uses it on its censored ring). Without a mask every ring holds cells and the counts
     are geometric: the mean is formed in place and only the frame is rescaled."""
     if vmask is None and _jit.for_tensor(x) and x.numel():
-        return _compiled_ring_ratio(x, ring, factor, dtype)
+        return _compiled_ring_ratio(x, ring, factor, dtype, torch.inf)[0]
     h = x.shape[-2]
     row = torch.arange(h, device=x.device).view(h, 1)  # sliced with the strip: its rows
 
@@ -101,11 +105,12 @@ def ring_mean_ratio(
 
 
 def _compiled_ring_ratio(
-    x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype
-) -> Tensor:
-    """:func:`ring_mean_ratio` without a mask in one sweep per image plane
-    (:func:`torchsar._box_kernels.ring_ratio`: direct window sums, within a float32 ulp of
-    the integral-image path; the border factors once per ring size that occurs)."""
+    x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype, threshold: float
+) -> tuple[Tensor, Tensor]:
+    """:func:`ring_mean_ratio` without a mask and the decision ``statistic > threshold`` in
+    one sweep per image plane (:func:`torchsar._box_kernels.ring_ratio`: block sums of
+    non-negative terms, within a float32 ulp of the exact mean; the border factors once per
+    ring size that occurs)."""
     from torchsar import _box_kernels
 
     h, w = x.shape[-2:]
@@ -115,8 +120,18 @@ def _compiled_ring_ratio(
             scale[c] = (1.0 / factor(c)) * factor(ring.n)  # as the torch code rounds it
     planes = x.detach().reshape(-1, h, w).contiguous()
     out = torch.empty(planes.shape, dtype=dtype)
-    _box_kernels.ring_ratio(planes.numpy(), ring.guard, ring.train, scale, out.numpy())
-    return out.view(x.shape)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    thr = _threshold(threshold, out).reshape(1).numpy()
+    _box_kernels.ring_ratio(
+        planes.numpy(), ring.guard, ring.train, scale, thr, out.numpy(), mask.numpy()
+    )
+    return out.view(x.shape), mask.view(x.shape)
+
+
+def _threshold(threshold: float, statistic: Tensor) -> Tensor:
+    """The threshold as :func:`~torchsar.detection.detection_from` holds it: a scalar
+    tensor of the statistic's dtype."""
+    return torch.as_tensor(threshold, dtype=statistic.dtype, device=statistic.device)
 
 
 def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]) -> Tensor:
