@@ -36,6 +36,7 @@ __all__ = [
     "axis_count",
     "box_filter",
     "centred_sums",
+    "count_inverses",
     "exp_neg",
     "load",
     "moments",
@@ -280,20 +281,24 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     cols = np.zeros(w)
     for j in range(w):
         cols[j] = axis_count(j, w, -radius, radius)
+    inv, cu2_over = np.zeros(w), np.zeros(w)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     for pl in range(p_):
         xp = x[pl]
         for r in range(min(radius, h)):
             load(xp[r], cache[r % size])
+        last = -1
         for i in range(h):
             if i + radius < h:
                 load(xp[i + radius], cache[(i + radius) % size])
             centre = cache[i % size]
             centred_sums(cache, i, h, radius, cols, cols_work, t1, t2, tn)
+            last = count_inverses(i, h, radius, cols, cu2, last, inv, cu2_over)
+            oi = out[pl, i]
             if enhanced:
-                _enhanced_lee_row(xp[i], centre, t1, t2, tn, cu, cmax, damping, out[pl, i])
+                _enhanced_lee_row(xp[i], centre, t1, t2, tn, inv, cu, cmax, damping, oi)
             else:
-                _lee_row(xp[i], centre, t1, t2, tn, cu2, weight_scale, out[pl, i])
+                _lee_row(xp[i], centre, t1, t2, inv, cu2_over, cu2, weight_scale, oi)
 
 
 @njit(**_JIT)
@@ -318,15 +323,41 @@ def centred_sums(cache, i, h, radius, cols, work, t1, t2, tn):
     nv = np.float64(last - first + 1)
     for j in range(w):
         a1[j], a2[j], ac[j], an[j] = 0.0, 0.0, centre[j], nv
-    for r in range(first, last + 1):
+    r = first
+    while r + 4 <= last + 1:  # four window rows per pass: (a + b) + (c + d)
+        ra, rb = cache[r % size], cache[(r + 1) % size]
+        rc, rd = cache[(r + 2) % size], cache[(r + 3) % size]
+        for j in range(w):
+            da, db = ra[j] - centre[j], rb[j] - centre[j]
+            dc, dd = rc[j] - centre[j], rd[j] - centre[j]
+            a1[j] += (da + db) + (dc + dd)
+            a2[j] += (da * da + db * db) + (dc * dc + dd * dd)
+        r += 4
+    while r <= last:
         src = cache[r % size]
         for j in range(w):
             d = src[j] - centre[j]
             a1[j] += d
             a2[j] += d * d
+        r += 1
     for j in range(w):
         t1[j], t2[j], tn[j] = 0.0, 0.0, nv * cols[j]
-    for c in range(size):
+    c = 0
+    while c + 2 <= size:  # two window columns per pass
+        p1, p2, pc, pn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
+        q1, q2, qc, qn = (
+            s1[c + 1 : c + 1 + w],
+            s2[c + 1 : c + 1 + w],
+            cc[c + 1 : c + 1 + w],
+            nc[c + 1 : c + 1 + w],
+        )
+        for j in range(w):
+            dp, dq = pc[j] - centre[j], qc[j] - centre[j]
+            ndp, ndq = pn[j] * dp, qn[j] * dq
+            t1[j] += (p1[j] + ndp) + (q1[j] + ndq)
+            t2[j] += (p2[j] + dp * (2.0 * p1[j] + ndp)) + (q2[j] + dq * (2.0 * q1[j] + ndq))
+        c += 2
+    if c < size:
         b1, b2, bc, bn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
         for j in range(w):
             d = bc[j] - centre[j]
@@ -336,11 +367,12 @@ def centred_sums(cache, i, h, radius, cols, work, t1, t2, tn):
 
 
 @njit(**_JIT, inline="always")
-def moments(c, t1, t2, n):
+def moments(c, t1, t2, n, inv):
     """Window mean (clamped at 0) and ``Ci^2`` (clamped to ``[0, n - 1]``) from the sums
-    of deviations ``t1`` and squared deviations ``t2`` from the centre value ``c``."""
-    m1 = t1 / n
-    var = (t2 - t1 * m1) / n
+    of deviations ``t1`` and squared deviations ``t2`` from the centre value ``c`` over
+    ``n`` cells (``inv = 1 / n``)."""
+    m1 = t1 * inv
+    var = (t2 - t1 * m1) * inv
     var = var if var > 0.0 else 0.0
     mu = c + m1
     mu = mu if mu > 0.0 else 0.0
@@ -350,21 +382,45 @@ def moments(c, t1, t2, n):
 
 
 @njit(**_JIT)
-def _lee_row(xi, centre, t1, t2, tn, cu2, weight_scale, oi):
-    """Lee / Kuan: ``mu + W (I - mu)``, ``W = clip((1 - cu2 / Ci^2) / weight_scale, 0, 1)``."""
+def count_inverses(i, h, radius, cols, cu2, last, inv, cu2_over):
+    """``inv = 1 / n`` and ``cu2_over = cu2 / (n - 1)`` of every window count ``n`` of row
+    ``i`` (``cols``: each column's in-image window width), recomputed only when the
+    window's in-image rows differ from ``last`` (they do only near the top and bottom);
+    returns the row count."""
+    nv = axis_count(i, h, -radius, radius)
+    if nv != last:
+        for j in range(inv.shape[0]):
+            n = nv * cols[j]
+            inv[j] = 1.0 / n
+            cu2_over[j] = cu2 / (n - 1.0)
+    return nv
+
+
+@njit(**_JIT)
+def _lee_row(xi, centre, t1, t2, inv, cu2_over, cu2, weight_scale, oi):
+    """Lee / Kuan: ``mu + W (I - mu)``, ``W = clip((1 - cu2 / Ci^2) / weight_scale, 0, 1)``
+    with ``Ci^2 = var / mu^2`` clamped to ``[0, n - 1]``: one division per pixel
+    (``cu2 / Ci^2 = cu2 mu^2 / var``, at least ``cu2 / (n - 1)``; ``W = 0`` where the
+    variance is 0)."""
+    inv_ws = 1.0 / weight_scale
     for j in range(oi.shape[0]):
-        mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j])
-        wgt = (1.0 - cu2 / ci2) / weight_scale if ci2 > 0.0 else 0.0
+        m1 = t1[j] * inv[j]
+        var = (t2[j] - t1[j] * m1) * inv[j]
+        mu = centre[j] + m1
+        mu = mu if mu > 0.0 else 0.0
+        r = cu2 * (mu * mu) / var
+        r = r if r > cu2_over[j] else cu2_over[j]
+        wgt = (1.0 - r) * inv_ws if var > 0.0 else 0.0
         wgt = 0.0 if wgt < 0.0 else (1.0 if wgt > 1.0 else wgt)
         oi[j] = mu + wgt * (np.float64(xi[j]) - mu)
 
 
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
-def _enhanced_lee_row(xi, centre, t1, t2, tn, cu, cmax, damping, oi):
+def _enhanced_lee_row(xi, centre, t1, t2, tn, inv, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
     at or below ``Cu`` and 0 at or above ``Cmax``."""
     for j in range(oi.shape[0]):
-        mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j])
+        mu, ci2 = moments(centre[j], t1[j], t2[j], tn[j], inv[j])
         ci = np.sqrt(ci2)
         h = damping * (ci - cu) / (cmax - ci) if cu < ci < cmax else 0.0
         h = np.inf if ci >= cmax else h

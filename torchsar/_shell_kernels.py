@@ -19,7 +19,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._box_kernels import axis_count, centred_sums, exp_neg, load, moments
+from torchsar._box_kernels import (
+    axis_count,
+    centred_sums,
+    count_inverses,
+    exp_neg,
+    load,
+    moments,
+)
 
 __all__ = ["frost_filter"]
 
@@ -91,17 +98,20 @@ def frost_filter(x, radius, shells, dist, enhanced, damping, cu2, cmax2, out):
     n = np.zeros((n_shells, w))
     decay, num, den = np.zeros(w), np.zeros(w), np.zeros(w)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
+    inv, cu2_over = np.zeros(w), np.zeros(w)
     for pl in range(p_):
         xp = x[pl]
         for r in range(min(radius, h)):
             load(xp[r], cache[r % size])
+        last = -1
         for i in range(h):
             if i + radius < h:
                 load(xp[i + radius], cache[(i + radius) % size])
             centre = cache[i % size]
             centred_sums(cache, i, h, radius, cols, work, t1, t2, tn)
+            last = count_inverses(i, h, radius, cols, cu2, last, inv, cu2_over)
             for j in range(w):
-                ci2 = moments(centre[j], t1[j], t2[j], tn[j])[1]
+                ci2 = moments(centre[j], t1[j], t2[j], tn[j], inv[j])[1]
                 if enhanced:
                     ci = np.sqrt(ci2)
                     if ci <= cu:
