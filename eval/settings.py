@@ -38,6 +38,8 @@ class Execution:
         progress: progress bars on stderr.
         device: where detectors run (``"cpu"``, ``"cuda"``, ``"cuda:1"``); batches move
             there and back for scoring, which stays on the CPU.
+        overlap: each worker runs the detectors on its next batch while it scores this one
+            (one more batch in memory; the same numbers either way).
     """
 
     batch_size: int = 16
@@ -49,12 +51,15 @@ class Execution:
     progress: bool = True
     device: str | None = None
     max_bad: float | None = None
+    overlap: bool = True
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "shard_size", "workers"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise EvalError(f"{{opt:{name}}}{v!r}: must be an integer >= 1")
+        if not isinstance(self.overlap, bool):
+            raise EvalError(f"{{opt:overlap}}{self.overlap!r}: must be True or False")
         if self.max_bad is not None and not (
             isinstance(self.max_bad, int | float) and 0 <= self.max_bad <= 1
         ):

@@ -102,6 +102,7 @@ def _score_shard(job: ShardJob, k: int) -> ShardState:
         device=ex.device,
         default_class=job.default_class,
         skip_bad=ex.skip_bad,
+        overlap=ex.overlap,
     )
     release_memory()
     return ShardState(results, coco)

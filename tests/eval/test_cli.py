@@ -448,3 +448,26 @@ def test_every_command_has_out_and_overwrite():
             continue
         args = parser.parse_args([name, *required.get(name, []), "--out", "x", "--overwrite"])
         assert (str(args.out), args.overwrite) == ("x", True), name
+
+
+def test_no_overlap_writes_the_same_tables(tmp_path):
+    """``--no-overlap`` (detect, then score, batch after batch) against the default (the
+    next batch detected while this one is scored): every table byte for byte."""
+    outs = []
+    for flag in ([], ["--no-overlap"]):
+        out = tmp_path / ("plain" if flag else "overlap")
+        args = ["run", "--dataset", "sim-chips", "--n", "6", "--batch-size", "2", "--out"]
+        assert main([*args, str(out), "--no-figures", "--no-progress", *flag]) == 0
+        outs.append(out)
+    tables = sorted(p.name for p in outs[0].glob("*.csv") if p.name != "timing.csv")
+    assert "summary.csv" in tables and "per_image.csv" in tables
+    for name in tables:
+        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
+
+
+def test_overlap_must_be_a_bool():
+    from torchsar_eval.errors import EvalError
+    from torchsar_eval.settings import Execution
+
+    with pytest.raises(EvalError, match="overlap"):
+        Execution(overlap="no")

@@ -89,3 +89,96 @@ def test_a_detector_that_writes_into_its_input_corrupts_nothing_after_it():
     rows = both[both.detector == "ca"].drop(columns=["detector"]).reset_index(drop=True)
     pd.testing.assert_frame_equal(rows, alone.drop(columns=["detector"]).reset_index(drop=True))
     assert int(alone.tp.iloc[0]) > 0
+
+
+class _Mixed(ListDataset):
+    """Images of two sizes, one that cannot be read (index 3)."""
+
+    def __getitem__(self, i):
+        if i == 3:
+            return {"bad": "item 3", "error": "OSError: unreadable"}
+        item = super().__getitem__(i)
+        item["mask"][0, 11:14, 11:14] = True  # the planted target (see _mixed_images)
+        item["instances"][0, 11:14, 11:14] = 1
+        return item
+
+
+def _picky(images, meta):
+    """CA, but failing on any batch holding the image named "5"."""
+    from torchsar.cfar import ca
+
+    if any(m["name"] == "5" for m in meta):
+        raise ValueError("image 5 is not for me")
+    return ca(images)
+
+
+def _mixed_images() -> list[torch.Tensor]:
+    g = torch.Generator().manual_seed(3)
+    sizes = [40, 40, 30, 40, 40, 40, 30, 30, 40]
+    imgs = [torch.empty(1, s, s).exponential_(generator=g) for s in sizes]
+    for img in imgs:
+        img[0, 11:14, 11:14] = 80.0  # a target for the object stage
+    return imgs
+
+
+def _run(overlap: bool, detectors, order: list | None = None, **kw):
+    def record(part, found):
+        order.append(([m["name"] for m in part["meta"]], sorted(found)))
+
+    return run_detectors(
+        _Mixed(_mixed_images()),
+        detectors,
+        batch_size=2,
+        progress=False,
+        overlap=overlap,
+        on_batch=None if order is None else record,
+        **kw,
+    )
+
+
+def test_overlapping_detection_with_scoring_changes_nothing():
+    """Detection one batch ahead on a second thread: the same states, the same skipped
+    images in the same order, the same batches given to ``on_batch`` in the same order (a
+    failing batch scored image by image, an unreadable image, size changes)."""
+    import torchsar_eval as te
+
+    dets = [BUILTIN["ca"], te.Detector("picky", _picky), BUILTIN["os"]]
+    orders: dict[bool, list] = {True: [], False: []}
+    runs = {ov: _run(ov, dets, orders[ov], skip_bad=True) for ov in (True, False)}
+    assert orders[True] == orders[False] and len(orders[True]) > 4
+    for a, b in zip(runs[True], runs[False], strict=True):
+        assert a.pixels == b.pixels and a.objects == b.objects and a.images == b.images
+        assert torch.equal(a.roc.clutter_hits, b.roc.clutter_hits)
+        assert a.objects.metrics() == pytest.approx(b.objects.metrics(), nan_ok=True)
+        assert a.skipped == b.skipped
+    assert [name for name, _ in runs[True][0].skipped] == ["item 3", "5"]
+    assert runs[True][0].objects.metrics()["tp"] > 0
+
+
+def test_a_failing_batch_stops_the_run_after_the_batches_before_it_are_scored():
+    import torchsar_eval as te
+
+    for ov in (True, False):
+        order: list = []
+        with pytest.raises(ValueError, match="image 5"):
+            _run(ov, [te.Detector("picky", _picky)], order)
+        assert [names for names, _ in order] == [["0", "1"], ["2"]]
+
+
+def test_the_detectors_run_on_a_second_thread_only_when_overlapping():
+    import threading
+
+    import torchsar_eval as te
+
+    threads: dict[bool, set] = {True: set(), False: set()}
+    for ov in (True, False):
+
+        def where(images, ov=ov):
+            from torchsar.cfar import ca
+
+            threads[ov].add(threading.current_thread().name)
+            return ca(images)
+
+        _run(ov, [te.Detector("where", where)])
+    assert all(t.startswith("torchsar-detect") for t in threads[True])
+    assert threads[False] == {threading.current_thread().name}

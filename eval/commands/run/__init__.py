@@ -186,6 +186,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="with --skip-bad: the largest share (0-1) of a dataset's images that may be "
         "skipped before the run fails (default: any share short of all)",
     )
+    p.add_argument(
+        "--no-overlap",
+        action="store_true",
+        help="score each batch before detecting on the next (default: a worker runs the "
+        "detectors on its next batch while it scores this one; one more batch in memory)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run, claims_out=True)
 
@@ -336,6 +342,7 @@ def run(args: argparse.Namespace) -> int:
         max_bad=args.max_bad,
         progress=not args.no_progress,
         device=args.device,
+        overlap=not args.no_overlap,
     )
     calibration = None
     sweep = options.parse_sweep(args.sweep)
