@@ -125,3 +125,45 @@ def test_any_tiling_of_any_scene(seed, h, w, th, tw, name):
     else:
         np.testing.assert_array_equal(got["mask"], full.mask[0, 0].numpy())
         np.testing.assert_allclose(got["statistic"], full.statistic[0, 0].numpy(), rtol=1e-6)
+
+
+class _Recorded:
+    """A scene that records the thread of every read."""
+
+    def __init__(self, data: np.ndarray) -> None:
+        self.data, self.shape, self.dtype = data, data.shape, data.dtype
+        self.threads: list[str] = []
+
+    def __getitem__(self, key):
+        import threading
+
+        self.threads.append(threading.current_thread().name)
+        return self.data[key]
+
+
+def test_windows_are_read_ahead_on_a_second_thread_and_change_nothing():
+    x = scene(150, 170, seed=11)
+    rec = _Recorded(x)
+    got = list(iter_tiles(rec, "ca", tile=48, batch=2))
+    want = list(iter_tiles(x, "ca", tile=48, batch=2))
+    assert len(got) == len(want) > 4
+    for (ta, a), (tb, b) in zip(got, want, strict=True):
+        assert ta == tb and a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+    assert rec.threads and all(t.startswith("torchsar-read") for t in rec.threads)
+
+
+def test_a_bad_window_read_ahead_fails_when_its_turn_comes():
+    """A window that fails to read raises its own error from the iteration, after the
+    tiles before it were yielded, whichever thread read it."""
+    from torchsar.errors import InputValueError
+
+    x = scene(150, 150, seed=12)
+    order = [t.index for t, _ in iter_tiles(x, "ca", tile=48, batch=1)]
+    x[75, 75] = np.nan  # in the middle tile's window only (and the halos beside it)
+    seen = []
+    with pytest.raises(InputValueError, match="finite"):
+        for t, _ in iter_tiles(_Recorded(x), "ca", tile=48, batch=1):  # read lazily
+            seen.append(t.index)
+    assert seen == order[: len(seen)] and 0 < len(seen) < len(order)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Iterator
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import torch
@@ -121,7 +122,9 @@ def iter_tiles(
     Tiles sharing a window shape run together, ``batch`` per call, on ``device`` (default:
     the CPU); the yield order is by window shape, then raster order. Every core equals the
     same pixels of the operator run on the whole scene (masks bit for bit, statistics to
-    float rounding: the window sums are accumulated from a different origin).
+    float rounding: the window sums are accumulated from a different origin). The next
+    batch of windows is read on a second thread while this one runs (one more batch of
+    windows in memory).
 
     Args:
         scene: 2-D intensity scene (see :func:`~torchsar.tiling.source.as_scene`).
@@ -152,8 +155,18 @@ def iter_tiles(
     if only is not None:
         keep = {tuple(int(v) for v in i) for i in only}
         tiles = [t for t in tiles if t.index in keep]
-    for group in batches(tiles, batch):
-        x = to_batch([sc.read(*t.window) for t in group], dev)
-        out = op.apply(x)
-        for i, t in enumerate(group):
-            yield t, {k: v[i, 0][t.inner].cpu().numpy() for k, v in out.items()}
+    groups = list(batches(tiles, batch))
+
+    def read(k: int) -> torch.Tensor:
+        return to_batch([sc.read(*t.window) for t in groups[k]], dev)
+
+    # the next batch of windows is read (and moved to the device) on a second thread while
+    # this one is processed and its outputs used: reading and decoding leave the critical path
+    with ThreadPoolExecutor(1, thread_name_prefix="torchsar-read") as ahead:
+        pending = ahead.submit(read, 0) if groups else None
+        for k, group in enumerate(groups):
+            x = pending.result()
+            pending = ahead.submit(read, k + 1) if k + 1 < len(groups) else None
+            out = op.apply(x)
+            for i, t in enumerate(group):
+                yield t, {name: v[i, 0][t.inner].cpu().numpy() for name, v in out.items()}
