@@ -93,14 +93,18 @@ def run_detectors(
     def detect(batch: dict) -> tuple:
         return _outputs(results, batch, preprocess, device)
 
-    def score(batch: dict, detected: Future, unread_before: list) -> None:
+    def score(ahead, batch: dict, detected: Future, unread_before: list) -> None:
         skipped.extend(unread_before)  # those skipped while this batch was gathered
         try:
             parts = [(batch, detected.result())]
         except Exception:
             if not skip_bad or len(batch["meta"]) == 0:
                 raise
-            parts = list(_one_by_one(results, batch, preprocess, device, skipped))
+
+            def alone(one: dict) -> tuple:  # on the detectors' thread: never two at once
+                return ahead.submit(detect, one).result()
+
+            parts = list(_one_by_one(batch, alone, skipped))
         for part, (outs, seconds) in parts:
             _add(results, part, outs, seconds, name or desc, scoring, on_batch)
 
@@ -119,10 +123,10 @@ def run_detectors(
         ):
             detected = ahead.submit(detect, batch)
             if pending is not None:
-                score(*pending)
+                score(ahead, *pending)
             pending, seen = (batch, detected, unread[seen:]), len(unread)
         if pending is not None:
-            score(*pending)
+            score(ahead, *pending)
         skipped.extend(unread[seen:])
     for res in results:
         res.skipped = list(skipped)
@@ -176,16 +180,17 @@ def _outputs(results: list[DetectorResult], batch: dict, preprocess, device) -> 
     return outs, seconds
 
 
-def _one_by_one(results, batch: dict, preprocess, device, skipped: list):
-    """A failed batch image by image: the images that fail alone are skipped (named in
-    ``skipped`` with the error), the others scored as in any batch."""
+def _one_by_one(batch: dict, detect: Callable[[dict], tuple], skipped: list):
+    """A failed batch image by image (``detect``: one image's outputs and seconds): the
+    images that fail alone are skipped (named in ``skipped`` with the error), the others
+    scored as in any batch."""
     for i, meta in enumerate(batch["meta"]):
         one = {k: v[i : i + 1] for k, v in batch.items() if k not in ("meta", "truth_only")}
         one["meta"] = [meta]
         if batch.get("truth_only"):
             one["truth_only"] = True
         try:
-            yield one, _outputs(results, one, preprocess, device)
+            yield one, detect(one)
         except Exception as exc:
             where = meta.get("path") or meta.get("name") or f"item {meta.get('index')}"
             message = " ".join(f"{type(exc).__name__}: {exc}".split())

@@ -182,3 +182,29 @@ def test_the_detectors_run_on_a_second_thread_only_when_overlapping():
         _run(ov, [te.Detector("where", where)])
     assert all(t.startswith("torchsar-detect") for t in threads[True])
     assert threads[False] == {threading.current_thread().name}
+
+
+def test_a_detector_is_never_called_twice_at_once():
+    """With overlap, a batch that fails is rerun image by image on the detectors' thread,
+    queued behind the next batch: a detector never runs on two threads at once."""
+    import threading
+    import time
+
+    import torchsar_eval as te
+
+    lock, active, most = threading.Lock(), [0], [0]
+
+    def exclusive(images, meta):
+        with lock:
+            active[0] += 1
+            most[0] = max(most[0], active[0])
+        time.sleep(0.01)  # long enough for a second caller to overlap, were there one
+        try:
+            return _picky(images, meta)
+        finally:
+            with lock:
+                active[0] -= 1
+
+    (res,) = _run(True, [te.Detector("exclusive", exclusive)], skip_bad=True)
+    assert most[0] == 1
+    assert [name for name, _ in res.skipped] == ["item 3", "5"]
