@@ -213,6 +213,31 @@ def test_speckle_filters_are_the_reference(monkeypatch, name, amplitude, make):
     assert (np.abs(got32 - want32) <= ulp).all()
 
 
+@pytest.mark.parametrize("name", ["frost", "enhanced_frost"])
+@pytest.mark.parametrize("window", [7, 17])
+def test_frost_weights_as_powers_are_the_reference(monkeypatch, name, window):
+    """One ``exp`` per square-free base and powers for its multiples (window 7: 5 of 9
+    shells' ``exp``); window 17 has a multiple that skips one (distance 10 = (6, 8) without
+    9 = (0, 9)), which takes an ``exp`` of its own. Within 1e-12 of the reference."""
+    from torchsar.speckle.frost import _power_table
+
+    bases, base_of, multiple = _power_table(window // 2)
+    if window == 7:
+        assert len(bases) == 5 and len(base_of) == 9
+    else:
+        chained = [
+            m == 1 or m - 1 in multiple[:k][base_of[:k] == b]
+            for k, (b, m) in enumerate(zip(base_of, multiple, strict=True))
+        ]
+        assert not all(chained)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    x = _scene(6, dtype=torch.float64)[:1, :1, :20, :23]
+    x[0, 0, 9, 11] = 40.0  # a bright cell: large decays beside it
+    want = reference_batch(name, x.numpy(), window, 2.0, 1.0)
+    got = _filter(name)(x, window=window, looks=2.0).numpy()
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)
+
+
 @pytest.mark.parametrize("name", FILTERS)
 def test_the_tensor_code_is_still_the_reference(monkeypatch, name):
     """The fallback (other devices, autograd, no numba) within its own integral-image error."""

@@ -69,14 +69,17 @@ def _orbit_add(a, b, radius, dst):
 
 
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
-def frost_filter(x, radius, shells, dist, enhanced, damping, cu2, cmax2, out):
+def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2, out):
     """A Frost-type filter of every plane of ``x`` ``(P, H, W)`` into ``out``.
 
     ``shells``: int64 rows ``(shell, p, q)`` of the orbits (``0 <= p <= q <= radius``) of
     every non-zero distance shell, shells numbered ``0..S-1`` in increasing distance
-    ``dist[s]``. The decay is ``damping Ci^2`` (Frost) or, ``enhanced``, ``damping (Ci -
-    Cu) / (Cmax - Ci)`` between ``Cu`` and ``Cmax``, 0 at or below ``Cu`` (the window
-    mean), ``inf`` at or above ``Cmax`` (the pixel itself)."""
+    ``dist[s]``. ``powers``: ``(bases, base_of, multiple)``, each distance as ``multiple
+    * bases[base_of]``: one ``exp`` per base, the weight of the ``m``-th multiple as the
+    ``m``-th power of the base's (within a few ulps of its own ``exp``; an ``exp`` of its
+    own where the multiples skip one). The decay is ``damping Ci^2`` (Frost) or,
+    ``enhanced``, ``damping (Ci - Cu) / (Cmax - Ci)`` between ``Cu`` and ``Cmax``, 0 at or
+    below ``Cu`` (the window mean), ``inf`` at or above ``Cmax`` (the pixel itself)."""
     p_, h, w = x.shape
     size = 2 * radius + 1
     wp = w + 2 * radius
@@ -97,6 +100,10 @@ def frost_filter(x, radius, shells, dist, enhanced, damping, cu2, cmax2, out):
     s = np.zeros((n_shells, w))
     n = np.zeros((n_shells, w))
     decay, num, den = np.zeros(w), np.zeros(w), np.zeros(w)
+    bases, base_of, multiple = powers
+    e_base = np.zeros((bases.shape[0], w))  # exp(-decay * base) of each base
+    e_pow = np.zeros((bases.shape[0], w))  # its power at the base's last shell
+    last_m = np.zeros(bases.shape[0], np.int64)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     inv, cu2_over = np.zeros(w), np.zeros(w)
     for pl in range(p_):
@@ -137,12 +144,28 @@ def frost_filter(x, radius, shells, dist, enhanced, damping, cu2, cmax2, out):
                         cnt[j] += vn[q] * hcount[p, j]
             for j in range(w):
                 num[j], den[j] = centre[j], 1.0
-            for k in range(n_shells):  # nearest shells first
-                dk, sk, nk = dist[k], s[k], n[k]
+            for b in range(bases.shape[0]):
+                db, eb = bases[b], e_base[b]
                 for j in range(w):
-                    e = exp_neg(-(decay[j] * dk))
-                    num[j] += e * sk[j]
-                    den[j] += e * nk[j]
+                    eb[j] = exp_neg(-(decay[j] * db))
+                last_m[b] = 0
+            for k in range(n_shells):  # nearest shells first
+                b, m = base_of[k], multiple[k]
+                sk, nk, e, eb = s[k], n[k], e_pow[b], e_base[b]
+                if m == 1:
+                    for j in range(w):
+                        e[j] = eb[j]
+                elif m == last_m[b] + 1:
+                    for j in range(w):
+                        e[j] *= eb[j]
+                else:
+                    dk = dist[k]
+                    for j in range(w):
+                        e[j] = exp_neg(-(decay[j] * dk))
+                last_m[b] = m
+                for j in range(w):
+                    num[j] += e[j] * sk[j]
+                    den[j] += e[j] * nk[j]
             oi = out[pl, i]
             for j in range(w):
                 oi[j] = num[j] / den[j]

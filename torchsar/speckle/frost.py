@@ -17,6 +17,7 @@ window mean ``mu`` (``Ci <= Cu``) and ``decay = inf`` gives the centre pixel ``I
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from functools import lru_cache, partial
 
@@ -89,11 +90,21 @@ def _compiled(x: Tensor, req: Request, enhanced: bool) -> Tensor:
 
     h, w = x.shape[-2:]
     shells, dist = _shell_table(req.radius)
+    bases, base_of, multiple = _power_table(req.radius)
     planes = x.detach().reshape(-1, h, w).contiguous().numpy()
     out = torch.empty(planes.shape, dtype=x.dtype)
     sp = req.speckle
     _shell_kernels.frost_filter(
-        planes, req.radius, shells, dist, enhanced, req.damping, sp.cu2, sp.cmax2, out.numpy()
+        planes,
+        req.radius,
+        shells,
+        dist,
+        (bases, base_of, multiple),
+        enhanced,
+        req.damping,
+        sp.cu2,
+        sp.cmax2,
+        out.numpy(),
     )
     return out.view(x.shape)
 
@@ -106,6 +117,23 @@ def _shell_table(radius: int) -> tuple[np.ndarray, np.ndarray]:
     rows = [(k, p, q) for k, (_, orbits) in enumerate(shells) for p, q in orbits]
     dist = np.array([d2**0.5 for d2, _ in shells])
     return np.array(rows, dtype=np.int64).reshape(-1, 3), dist
+
+
+@lru_cache(maxsize=16)
+def _power_table(radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each shell's distance as ``m sqrt(s)``, ``s`` square-free: the distinct ``sqrt(s)``
+    (``bases``), and per shell the index of its base and its ``m``. The kernel evaluates
+    one ``exp`` per base and forms the weight of ``m sqrt(s)`` as the ``m``-th power (the
+    shells of a base come in increasing ``m``)."""
+    shells = distance_shells(radius)[1:]
+    roots: dict[int, int] = {}
+    base_of, multiple = [], []
+    for d2, _ in shells:
+        m = max(k for k in range(1, math.isqrt(d2) + 1) if d2 % (k * k) == 0)
+        base_of.append(roots.setdefault(d2 // (m * m), len(roots)))
+        multiple.append(m)
+    bases = np.array([s**0.5 for s in roots])
+    return bases, np.array(base_of, dtype=np.int64), np.array(multiple, dtype=np.int64)
 
 
 def enhanced_frost(
