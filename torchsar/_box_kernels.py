@@ -412,7 +412,8 @@ def _lee_row(xi, centre, t1, t2, inv, cu2_over, cu2, weight_scale, oi):
         r = r if r > cu2_over[j] else cu2_over[j]
         wgt = (1.0 - r) * inv_ws if var > 0.0 else 0.0
         wgt = 0.0 if wgt < 0.0 else (1.0 if wgt > 1.0 else wgt)
-        oi[j] = mu + wgt * (np.float64(xi[j]) - mu)
+        v = mu + wgt * (np.float64(xi[j]) - mu)
+        oi[j] = v if v > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding
 
 
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
@@ -425,4 +426,5 @@ def _enhanced_lee_row(xi, centre, t1, t2, tn, inv, cu, cmax, damping, oi):
         h = damping * (ci - cu) / (cmax - ci) if cu < ci < cmax else 0.0
         h = np.inf if ci >= cmax else h
         obs = np.float64(xi[j])
-        oi[j] = obs + exp_neg(-h) * (mu - obs)
+        v = obs + exp_neg(-h) * (mu - obs)
+        oi[j] = v if v > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding

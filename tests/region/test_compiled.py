@@ -181,19 +181,15 @@ class _DespeckleCompiled:
 
 
 def _search(x: torch.Tensor, compiled: bool, **options):
-    _local = importlib.import_module("torchsar.speckle._local")
-    frost = importlib.import_module("torchsar.speckle.frost")  # the module, not the function
-    old = _jit.ENABLED
+    _local = importlib.import_module("torchsar.speckle._local")  # decides for every filter
+    old, pinned = _jit.ENABLED, _local._jit
     _jit.ENABLED = compiled
-    pinned = {m: m._jit for m in (_local, frost)}
-    for m in pinned:
-        m._jit = _DespeckleCompiled
+    _local._jit = _DespeckleCompiled
     try:
         return region_search(x, **options)
     finally:
         _jit.ENABLED = old
-        for m, j in pinned.items():
-            m._jit = j
+        _local._jit = pinned
 
 
 def _rows_equal(a, b) -> bool:

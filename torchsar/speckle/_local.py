@@ -96,10 +96,17 @@ def _plane_scale(x: Tensor) -> Tensor | None:
 
 
 def prepare(
-    x: Tensor, window: int, looks: float, amplitude: bool, damping: float | None = None
+    x: Tensor,
+    window: int,
+    looks: float,
+    amplitude: bool,
+    damping: float | None = None,
+    *,
+    kernel: bool = False,
 ) -> Request:
     """Validate the filter arguments (``damping`` only when given) and convert amplitude to
-    intensity."""
+    intensity. ``kernel``: the filter has a one-sweep kernel, which works in float64, so a
+    float32 intensity it will take needs no rescaling against overflow."""
     check_image(x.detach() if isinstance(x, Tensor) else x, "x")
     window = check_odd(window, "window", minimum=3)
     check_window_fits(x, window, "speckle filter")
@@ -110,17 +117,24 @@ def prepare(
         damping = check_positive(damping, "damping", allow_zero=True)
     dtype = float_dtype(x.dtype)
     xi = x.to(dtype)
-    scale = _plane_scale(xi)
+    in_float64 = kernel and not amplitude and xi.dtype == torch.float32 and takes_kernel(xi)
+    scale = None if in_float64 else _plane_scale(xi)
     if scale is not None:
         xi = xi / scale  # exact: a power of two
     intensity = xi.square() if amplitude else xi
     return Request(intensity, window // 2, Speckle(looks), amplitude, dtype, damping, scale)
 
 
-def finish(req: Request, intensity: Tensor) -> Tensor:
+def takes_kernel(x: Tensor) -> bool:
+    """Whether a filter with a one-sweep kernel runs it on ``x``."""
+    return _jit.for_tensor(x) and x.numel() > 0
+
+
+def finish(req: Request, intensity: Tensor, *, nonnegative: bool = False) -> Tensor:
     """The filtered image in the caller's form (square root back to amplitude if asked,
-    times the scale the input was divided by)."""
-    out = intensity.clamp_min_(0)
+    times the scale the input was divided by); ``nonnegative``: ``intensity`` is known to
+    be (the kernels'), so it is not clamped at 0 again."""
+    out = intensity if nonnegative else intensity.clamp_min_(0)
     out = sqrt(out) if req.amplitude else out
     if req.scale is None:
         return out
@@ -192,8 +206,8 @@ def filter_intensity(req: Request, formula: Formula, compiled: Compiled | None =
     path; tested).
     """
     x = req.intensity
-    if compiled is not None and _jit.for_tensor(x) and x.numel():
-        return finish(req, _compiled_filter(x, req.radius, compiled))
+    if compiled is not None and takes_kernel(x):
+        return finish(req, _compiled_filter(x, req.radius, compiled), nonnegative=True)
 
     def apply(xs: Tensor, sums: list[Sums]) -> Tensor:
         mu, ci2 = local_moments(sums[0], req.dtype)

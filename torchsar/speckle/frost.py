@@ -25,8 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
-from torchsar.speckle._local import Request, decay_map, finish, prepare, scratch
+from torchsar.speckle._local import Request, decay_map, finish, prepare, scratch, takes_kernel
 from torchsar.windows import distance_shells, exp_distance_mean
 
 __all__ = ["enhanced_frost", "frost"]
@@ -69,7 +68,7 @@ def frost(
         >>> frost(x, window=3).unique().tolist()
         [5.0]
     """
-    req = prepare(x, window, looks, amplitude, damping)
+    req = prepare(x, window, looks, amplitude, damping, kernel=True)
     return _distance_weighted(req, lambda ci2: scratch(ci2).mul_(req.damping))
 
 
@@ -80,8 +79,8 @@ def _distance_weighted(
     without gradients take the one-sweep kernel (:mod:`torchsar._shell_kernels`: the same
     decay, as ``enhanced`` says, and weights in float64, cast once)."""
     x = req.intensity
-    if _jit.for_tensor(x) and x.numel():
-        return finish(req, _compiled(x, req, enhanced))
+    if takes_kernel(x):
+        return finish(req, _compiled(x, req, enhanced), nonnegative=True)
     return finish(req, exp_distance_mean(x, req.radius, decay_map(req, decay)))
 
 
@@ -175,7 +174,7 @@ def enhanced_frost(
         >>> enhanced_frost(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0
     """
-    req = prepare(x, window, looks, amplitude, damping)
+    req = prepare(x, window, looks, amplitude, damping, kernel=True)
     return _distance_weighted(
         req, partial(req.speckle.heterogeneity, damping=req.damping), enhanced=True
     )

@@ -26,7 +26,7 @@ def _mmse_weight(ci2: Tensor, cu2: float, scale: float) -> Tensor:
 
 def _mmse(x: Tensor, window: int, looks: float, amplitude: bool, *, kuan: bool) -> Tensor:
     """``R = mu + W (I - mu)`` with the Lee weight, or Kuan's (divided by ``1 + Cu^2``)."""
-    req = prepare(x, window, looks, amplitude)
+    req = prepare(x, window, looks, amplitude, kernel=True)
     cu2 = req.speckle.cu2
     scale = 1.0 + cu2 if kuan else 1.0
     return filter_intensity(
@@ -144,7 +144,7 @@ def enhanced_lee(
         >>> enhanced_lee(x, window=3)[0, 0, 4, 4].item()  # a point target is kept
         100.0
     """
-    req = prepare(x, window, looks, amplitude, damping)
+    req = prepare(x, window, looks, amplitude, damping, kernel=True)
     sp, k = req.speckle, req.damping
 
     def formula(i: Tensor, mu: Tensor, ci2: Tensor) -> Tensor:
