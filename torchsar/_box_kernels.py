@@ -322,48 +322,91 @@ def centred_sums(cache, i, h, radius, cols, work, t1, t2, tn):
     first, last = max(i - radius, 0), min(i + radius, h - 1)
     nv = np.float64(last - first + 1)
     for j in range(w):
-        a1[j], a2[j], ac[j], an[j] = 0.0, 0.0, centre[j], nv
-    r = first
-    while r + 4 <= last + 1:  # four window rows per pass: (a + b) + (c + d)
-        ra, rb = cache[r % size], cache[(r + 1) % size]
-        rc, rd = cache[(r + 2) % size], cache[(r + 3) % size]
-        for j in range(w):
-            da, db = ra[j] - centre[j], rb[j] - centre[j]
-            dc, dd = rc[j] - centre[j], rd[j] - centre[j]
-            a1[j] += (da + db) + (dc + dd)
-            a2[j] += (da * da + db * db) + (dc * dc + dd * dd)
-        r += 4
-    while r <= last:
-        src = cache[r % size]
-        for j in range(w):
-            d = src[j] - centre[j]
-            a1[j] += d
-            a2[j] += d * d
-        r += 1
+        ac[j], an[j] = centre[j], nv
+    r, init = first, True
+    while r <= last:  # up to four window rows per pass
+        k = min(4, last + 1 - r)
+        _add_deviations(cache, size, r, k, centre, a1, a2, init)
+        r, init = r + k, False
+    c, init = 0, True
+    while c < size:  # up to four window columns per pass
+        k = min(4, size - c)
+        _move_columns(s1, s2, cc, nc, c, k, centre, t1, t2, init)
+        c, init = c + k, False
     for j in range(w):
-        t1[j], t2[j], tn[j] = 0.0, 0.0, nv * cols[j]
-    c = 0
-    while c + 2 <= size:  # two window columns per pass
-        p1, p2, pc, pn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
-        q1, q2, qc, qn = (
-            s1[c + 1 : c + 1 + w],
-            s2[c + 1 : c + 1 + w],
-            cc[c + 1 : c + 1 + w],
-            nc[c + 1 : c + 1 + w],
-        )
-        for j in range(w):
-            dp, dq = pc[j] - centre[j], qc[j] - centre[j]
-            ndp, ndq = pn[j] * dp, qn[j] * dq
-            t1[j] += (p1[j] + ndp) + (q1[j] + ndq)
-            t2[j] += (p2[j] + dp * (2.0 * p1[j] + ndp)) + (q2[j] + dq * (2.0 * q1[j] + ndq))
-        c += 2
-    if c < size:
-        b1, b2, bc, bn = s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
-        for j in range(w):
-            d = bc[j] - centre[j]
-            nd = bn[j] * d
-            t1[j] += b1[j] + nd
-            t2[j] += b2[j] + d * (2.0 * b1[j] + nd)
+        tn[j] = nv * cols[j]
+
+
+@njit(**_JIT, inline="always")
+def _add_deviations(cache, size, r, k, centre, a1, a2, init):
+    """``a1 (+)= sum of (row - centre)``, ``a2 (+)= sum of (row - centre)^2`` over the
+    ``k <= 4`` cached rows ``r .. r + k - 1`` (pairs added first: ``(a + b) + (c + d)``);
+    ``init``: assign instead of add."""
+    w = a1.shape[0]
+    ra, rb = cache[r % size], cache[(r + min(k - 1, 1)) % size]
+    rc, rd = cache[(r + min(k - 1, 2)) % size], cache[(r + min(k - 1, 3)) % size]
+    for j in range(w):
+        c = centre[j]
+        da = ra[j] - c
+        db = rb[j] - c if k > 1 else 0.0
+        dc = rc[j] - c if k > 2 else 0.0
+        dd = rd[j] - c if k > 3 else 0.0
+        s1 = (da + db) + (dc + dd)
+        s2 = (da * da + db * db) + (dc * dc + dd * dd)
+        a1[j] = s1 if init else a1[j] + s1
+        a2[j] = s2 if init else a2[j] + s2
+
+
+@njit(**_JIT, inline="always")
+def _move_columns(s1, s2, cc, nc, c, k, centre, t1, t2, init):
+    """``t1``, ``t2`` (+)= the ``k <= 4`` column sums from column ``c`` of the padded rows
+    (``s1``, ``s2``: deviations from each column's cell ``cc`` in the pixel's row, ``nc``
+    cells), moved to deviations from the pixel's value (``sum (x - C)^2 = S2 + d (2 S1 +
+    n d)``, ``d = cc - C``); ``init``: assign instead of add."""
+    w = t1.shape[0]
+    o = (c, c + min(k - 1, 1), c + min(k - 1, 2), c + min(k - 1, 3))
+    p1, p2, pc, pn = (
+        s1[o[0] : o[0] + w],
+        s2[o[0] : o[0] + w],
+        cc[o[0] : o[0] + w],
+        nc[o[0] : o[0] + w],
+    )
+    q1, q2, qc, qn = (
+        s1[o[1] : o[1] + w],
+        s2[o[1] : o[1] + w],
+        cc[o[1] : o[1] + w],
+        nc[o[1] : o[1] + w],
+    )
+    u1, u2, uc, un = (
+        s1[o[2] : o[2] + w],
+        s2[o[2] : o[2] + w],
+        cc[o[2] : o[2] + w],
+        nc[o[2] : o[2] + w],
+    )
+    v1, v2, vc, vn = (
+        s1[o[3] : o[3] + w],
+        s2[o[3] : o[3] + w],
+        cc[o[3] : o[3] + w],
+        nc[o[3] : o[3] + w],
+    )
+    for j in range(w):
+        ce = centre[j]
+        dp = pc[j] - ce
+        dq = qc[j] - ce
+        du = uc[j] - ce
+        dv = vc[j] - ce
+        np_, nq, nu, nv_ = pn[j] * dp, qn[j] * dq, un[j] * du, vn[j] * dv
+        x1p, x2p = p1[j] + np_, p2[j] + dp * (2.0 * p1[j] + np_)
+        x1q = q1[j] + nq if k > 1 else 0.0
+        x2q = q2[j] + dq * (2.0 * q1[j] + nq) if k > 1 else 0.0
+        x1u = u1[j] + nu if k > 2 else 0.0
+        x2u = u2[j] + du * (2.0 * u1[j] + nu) if k > 2 else 0.0
+        x1v = v1[j] + nv_ if k > 3 else 0.0
+        x2v = v2[j] + dv * (2.0 * v1[j] + nv_) if k > 3 else 0.0
+        a = (x1p + x1q) + (x1u + x1v)
+        b = (x2p + x2q) + (x2u + x2v)
+        t1[j] = a if init else t1[j] + a
+        t2[j] = b if init else t2[j] + b
 
 
 @njit(**_JIT, inline="always")
