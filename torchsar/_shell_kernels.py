@@ -41,31 +41,54 @@ def _pairs(cache, i, h, radius, size, v, vn):
     w = cache.shape[1]
     for p in range(radius + 1):
         dst = v[p, radius : radius + w]
-        n = 0
-        for j in range(w):
-            dst[j] = 0.0
-        for side in range(2 if p else 1):
-            r = i - p if side == 0 else i + p
-            if 0 <= r < h:
-                src = cache[r % size]
-                for j in range(w):
-                    dst[j] += src[j]
-                n += 1
-        vn[p] = n
+        up, down = i - p, i + p
+        has_up, has_down = 0 <= up < h, p > 0 and 0 <= down < h
+        a, b = cache[up % size], cache[down % size]
+        if has_up and has_down:
+            for j in range(w):
+                dst[j] = a[j] + b[j]
+        elif has_up or has_down:
+            src = a if has_up else b
+            for j in range(w):
+                dst[j] = src[j]
+        else:
+            for j in range(w):
+                dst[j] = 0.0
+        vn[p] = has_up + has_down
 
 
 @njit(**_JIT)
-def _orbit_add(a, b, radius, dst):
-    """``dst[j] += a[j - b] + a[j + b]`` (``a[j]`` for ``b = 0``) over the padded row ``a``."""
+def _shell_counts(shells, vn, hcount, n):
+    """``n[shell, j]``: the in-image cells of each distance shell around pixel ``j`` of a
+    row whose vertical pairs hold ``vn[p]`` rows, ``hcount[q, j]`` the columns ``j +- q``
+    in the image."""
+    n[:, :] = 0.0
+    w = n.shape[1]
+    for o in range(shells.shape[0]):
+        sh, p, q = shells[o, 0], shells[o, 1], shells[o, 2]
+        cnt = n[sh]
+        for j in range(w):
+            cnt[j] += vn[p] * hcount[q, j]
+        if p != q:
+            for j in range(w):
+                cnt[j] += vn[q] * hcount[p, j]
+
+
+@njit(**_JIT)
+def _orbit_sum(v, p, q, radius, dst, init):
+    """``dst (+)=`` the sum over the orbit ``(±p, ±q), (±q, ±p)`` of each pixel from the
+    padded vertical pair sums ``v`` (``v[p]`` at columns ``j ± q``, and ``v[q]`` at ``j ±
+    p`` unless ``p == q``; an offset of 0 counted once); ``init``: assign instead of add."""
     w = dst.shape[0]
-    if b == 0:
-        src = a[radius : radius + w]
-        for j in range(w):
-            dst[j] += src[j]
-    else:
-        lo, hi = a[radius - b : radius - b + w], a[radius + b : radius + b + w]
-        for j in range(w):
-            dst[j] += lo[j] + hi[j]
+    a, b = v[p], v[q]
+    a_lo, a_hi = a[radius - q : radius - q + w], a[radius + q : radius + q + w]
+    b_lo, b_hi = b[radius - p : radius - p + w], b[radius + p : radius + p + w]
+    one_a, one_b, same = q == 0, p == 0, p == q
+    for j in range(w):
+        t = a_lo[j] if one_a else a_lo[j] + a_hi[j]
+        if not same:
+            t = t + (b_lo[j] if one_b else b_lo[j] + b_hi[j])
+        dst[j] = t if init else dst[j] + t
 
 
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
@@ -97,6 +120,7 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
             hcount[b, j] = 1.0 if b == 0 else (j - b >= 0) + (j + b < w)
     v = np.zeros((radius + 1, wp))
     vn = np.zeros(radius + 1, np.int64)
+    last_vn = np.full(radius + 1, -1, np.int64)  # the vn the shells' counts n were made for
     s = np.zeros((n_shells, w))
     n = np.zeros((n_shells, w))
     decay, num, den = np.zeros(w), np.zeros(w), np.zeros(w)
@@ -130,18 +154,12 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
                 else:
                     decay[j] = damping * ci2
             _pairs(cache, i, h, radius, size, v, vn)
-            s[:, :] = 0.0
-            n[:, :] = 0.0
-            for o in range(shells.shape[0]):
+            for o in range(shells.shape[0]):  # a shell's orbits are consecutive rows
                 sh, p, q = shells[o, 0], shells[o, 1], shells[o, 2]
-                _orbit_add(v[p], q, radius, s[sh])
-                cnt = n[sh]
-                for j in range(w):
-                    cnt[j] += vn[p] * hcount[q, j]
-                if p != q:
-                    _orbit_add(v[q], p, radius, s[sh])
-                    for j in range(w):
-                        cnt[j] += vn[q] * hcount[p, j]
+                _orbit_sum(v, p, q, radius, s[sh], o == 0 or shells[o - 1, 0] != sh)
+            if not np.array_equal(vn, last_vn):  # the shells' counts: only near top, bottom
+                _shell_counts(shells, vn, hcount, n)
+                last_vn[:] = vn
             for j in range(w):
                 num[j], den[j] = centre[j], 1.0
             for b in range(bases.shape[0]):
