@@ -133,26 +133,47 @@ def _level_up(lo, out, step, n):
 
 
 @njit(**_JIT, inline="always")
+def _put(a, b, n, out, first, pair):
+    """``out[:n] (+)= a (+ b)``: assign when ``first``, add otherwise; ``b`` only when
+    ``pair`` (two terms in one pass)."""
+    o = out[:n]
+    if pair:
+        if first:
+            for j in range(n):
+                o[j] = a[j] + b[j]
+        else:
+            for j in range(n):
+                o[j] += a[j] + b[j]
+    elif first:
+        for j in range(n):
+            o[j] = a[j]
+    else:
+        for j in range(n):
+            o[j] += a[j]
+
+
+@njit(**_JIT, inline="always")
 def _block_sum(levels, length, start, n, out, accumulate):
     """``out[j] (+)= sum of terms start + j .. start + j + length - 1`` for ``j < n`` from
     the block sums ``levels[k][j] = terms j .. j + 2^k - 1``: the blocks of ``length``'s set
-    bits, largest first (a fixed association whatever ``j``)."""
+    bits, largest first, two per pass (a fixed association whatever ``j``)."""
     first = not accumulate
-    pos = start
+    pos, held, held_pos = start, -1, 0
     k = levels.shape[0] - 1
     while k >= 0:
         if (length >> k) & 1:
-            lv = levels[k][pos : pos + n]
-            if first:
-                for j in range(n):
-                    out[j] = lv[j]
-                first = False
+            if held < 0:
+                held, held_pos = k, pos
             else:
-                for j in range(n):
-                    out[j] += lv[j]
+                a = levels[held][held_pos : held_pos + n]
+                _put(a, levels[k][pos : pos + n], n, out, first, True)
+                first, held = False, -1
             pos += 1 << k
         k -= 1
-    if first:
+    if held >= 0:
+        a = levels[held][held_pos : held_pos + n]
+        _put(a, a, n, out, first, False)
+    elif first:
         for j in range(n):
             out[j] = 0.0
 
@@ -181,20 +202,20 @@ def _row_levels(rows, q, size, depth, src, w):
 def _rows_sum(rows, size, length, start, w, out, accumulate):
     """:func:`_block_sum` down the columns: ``out (+)= rows start .. start + length - 1``."""
     first = not accumulate
-    pos = start
+    pos, held, held_pos = start, -1, 0
     k = rows.shape[0] - 1
     while k >= 0:
         if (length >> k) & 1:
-            lv = rows[k, pos % size]
-            if first:
-                for j in range(w):
-                    out[j] = lv[j]
-                first = False
+            if held < 0:
+                held, held_pos = k, pos
             else:
-                for j in range(w):
-                    out[j] += lv[j]
+                _put(rows[held, held_pos % size], rows[k, pos % size], w, out, first, True)
+                first, held = False, -1
             pos += 1 << k
         k -= 1
+    if held >= 0:
+        a = rows[held, held_pos % size]
+        _put(a, a, w, out, first, False)
 
 
 @njit(**_JIT)
@@ -217,6 +238,8 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
     depth = levels_for(max(train, 2 * g + 1))
     rows = np.zeros((depth, size, w))
     hdepth, mdepth = levels_for(size), levels_for(train)
+    one_block = train & (train - 1) == 0  # t a power of two: each band one block
+    depth_t = mdepth - 1
     band = np.zeros((hdepth, w + 2 * o))  # band rows summed, o zero columns a side, levels
     mid = np.zeros((mdepth, w + 2 * o))
     acc = np.zeros(w)
@@ -242,8 +265,12 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                     cf[j] = c * (scale[c] if c != n_full else 1.0)
                 last_rows = counts
             b0, m0 = band[0, o : o + w], mid[0, o : o + w]
-            _rows_sum(rows, size, train, i - o, w, b0, False)
-            _rows_sum(rows, size, train, i + g + 1, w, b0, True)
+            if one_block:  # the top and bottom bands in one pass
+                top, bottom = rows[depth_t, (i - o) % size], rows[depth_t, (i + g + 1) % size]
+                _put(top, bottom, w, b0, True, True)
+            else:
+                _rows_sum(rows, size, train, i - o, w, b0, False)
+                _rows_sum(rows, size, train, i + g + 1, w, b0, True)
             _rows_sum(rows, size, 2 * g + 1, i - g, w, m0, False)
             for k in range(1, hdepth):
                 n = w + 2 * o - (1 << k) + 1
@@ -251,8 +278,11 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                 if k < mdepth:
                     _level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
             _block_sum(band, size, 0, w, acc, False)
-            _block_sum(mid, train, 0, w, acc, True)
-            _block_sum(mid, train, o + g + 1, w, acc, True)
+            if one_block:  # the left and right middle parts in one pass
+                _put(mid[depth_t, :w], mid[depth_t, o + g + 1 : o + g + 1 + w], w, acc, False, True)
+            else:
+                _block_sum(mid, train, 0, w, acc, True)
+                _block_sum(mid, train, o + g + 1, w, acc, True)
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             for j in range(w):
                 v = np.float64(xi[j]) * cf[j] / acc[j]
