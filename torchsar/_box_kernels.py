@@ -153,25 +153,31 @@ def _put(a, b, n, out, first, pair):
 
 
 @njit(**_JIT, inline="always")
-def _block_sum(levels, length, start, n, out, accumulate):
-    """``out[j] (+)= sum of terms start + j .. start + j + length - 1`` for ``j < n`` from
-    the block sums ``levels[k][j] = terms j .. j + 2^k - 1``: the blocks of ``length``'s set
-    bits, largest first, two per pass (a fixed association whatever ``j``)."""
+def _block_sums(src, size, length, starts, n, out, accumulate):
+    """``out[j] (+)=`` the sums of ``length`` terms from each of ``starts`` (a tuple), from
+    block sums of ``2^k`` terms: the blocks of ``length``'s set bits, largest first, start
+    after start, two blocks per pass (a fixed association whatever ``j``). ``size == 0``:
+    ``src[k, p + j]`` is the block of level ``k`` at ``p + j`` (along a row); else ``src``
+    is a ring of ``size`` rows per level, the block starting at row ``p`` in row ``k size
+    + p % size``."""
     first = not accumulate
-    pos, held, held_pos = start, -1, 0
-    k = levels.shape[0] - 1
-    while k >= 0:
-        if (length >> k) & 1:
-            if held < 0:
-                held, held_pos = k, pos
-            else:
-                a = levels[held][held_pos : held_pos + n]
-                _put(a, levels[k][pos : pos + n], n, out, first, True)
-                first, held = False, -1
-            pos += 1 << k
-        k -= 1
+    held, held_off = -1, 0
+    for start in starts:
+        pos = start
+        k = levels_for(length) - 1
+        while k >= 0:
+            if (length >> k) & 1:
+                row, off = (k * size + pos % size, 0) if size else (k, pos)
+                if held < 0:
+                    held, held_off = row, off
+                else:
+                    a = src[held, held_off : held_off + n]
+                    _put(a, src[row, off : off + n], n, out, first, True)
+                    first, held = False, -1
+                pos += 1 << k
+            k -= 1
     if held >= 0:
-        a = levels[held][held_pos : held_pos + n]
+        a = src[held, held_off : held_off + n]
         _put(a, a, n, out, first, False)
     elif first:
         for j in range(n):
@@ -198,26 +204,6 @@ def _row_levels(rows, q, size, depth, src, w):
             dst[j] = a[j] + b[j]
 
 
-@njit(**_JIT, inline="always")
-def _rows_sum(rows, size, length, start, w, out, accumulate):
-    """:func:`_block_sum` down the columns: ``out (+)= rows start .. start + length - 1``."""
-    first = not accumulate
-    pos, held, held_pos = start, -1, 0
-    k = rows.shape[0] - 1
-    while k >= 0:
-        if (length >> k) & 1:
-            if held < 0:
-                held, held_pos = k, pos
-            else:
-                _put(rows[held, held_pos % size], rows[k, pos % size], w, out, first, True)
-                first, held = False, -1
-            pos += 1 << k
-        k -= 1
-    if held >= 0:
-        a = rows[held, held_pos % size]
-        _put(a, a, w, out, first, False)
-
-
 @njit(**_JIT)
 def ring_ratio(x, guard, train, scale, threshold, out, mask):
     """CA-CFAR's statistic ``x / mean_ring`` of every plane of ``x`` ``(P, H, W)`` into
@@ -237,9 +223,8 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
     n_full = size * size - (2 * g + 1) ** 2
     depth = levels_for(max(train, 2 * g + 1))
     rows = np.zeros((depth, size, w))
+    ring = rows.reshape(depth * size, w)  # level k, row r in row k size + r % size
     hdepth, mdepth = levels_for(size), levels_for(train)
-    one_block = train & (train - 1) == 0  # t a power of two: each band one block
-    depth_t = mdepth - 1
     band = np.zeros((hdepth, w + 2 * o))  # band rows summed, o zero columns a side, levels
     mid = np.zeros((mdepth, w + 2 * o))
     acc = np.zeros(w)
@@ -265,24 +250,15 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                     cf[j] = c * (scale[c] if c != n_full else 1.0)
                 last_rows = counts
             b0, m0 = band[0, o : o + w], mid[0, o : o + w]
-            if one_block:  # the top and bottom bands in one pass
-                top, bottom = rows[depth_t, (i - o) % size], rows[depth_t, (i + g + 1) % size]
-                _put(top, bottom, w, b0, True, True)
-            else:
-                _rows_sum(rows, size, train, i - o, w, b0, False)
-                _rows_sum(rows, size, train, i + g + 1, w, b0, True)
-            _rows_sum(rows, size, 2 * g + 1, i - g, w, m0, False)
+            _block_sums(ring, size, train, (i - o, i + g + 1), w, b0, False)  # top, bottom
+            _block_sums(ring, size, 2 * g + 1, (i - g,), w, m0, False)
             for k in range(1, hdepth):
                 n = w + 2 * o - (1 << k) + 1
                 _level_up(band[k - 1], band[k], 1 << (k - 1), n)
                 if k < mdepth:
                     _level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
-            _block_sum(band, size, 0, w, acc, False)
-            if one_block:  # the left and right middle parts in one pass
-                _put(mid[depth_t, :w], mid[depth_t, o + g + 1 : o + g + 1 + w], w, acc, False, True)
-            else:
-                _block_sum(mid, train, 0, w, acc, True)
-                _block_sum(mid, train, o + g + 1, w, acc, True)
+            _block_sums(band, 0, size, (0,), w, acc, False)
+            _block_sums(mid, 0, train, (0, o + g + 1), w, acc, True)  # left, right
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             for j in range(w):
                 v = np.float64(xi[j]) * cf[j] / acc[j]
@@ -388,37 +364,23 @@ def _add_deviations(cache, size, r, k, centre, a1, a2, init):
 
 
 @njit(**_JIT, inline="always")
+def _column(s1, s2, cc, nc, c, w):
+    """The four padded rows of :func:`centred_sums` from column ``c``, ``w`` long."""
+    return s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
+
+
+@njit(**_JIT, inline="always")
 def _move_columns(s1, s2, cc, nc, c, k, centre, t1, t2, init):
     """``t1``, ``t2`` (+)= the ``k <= 4`` column sums from column ``c`` of the padded rows
     (``s1``, ``s2``: deviations from each column's cell ``cc`` in the pixel's row, ``nc``
     cells), moved to deviations from the pixel's value (``sum (x - C)^2 = S2 + d (2 S1 +
     n d)``, ``d = cc - C``); ``init``: assign instead of add."""
     w = t1.shape[0]
-    o = (c, c + min(k - 1, 1), c + min(k - 1, 2), c + min(k - 1, 3))
-    p1, p2, pc, pn = (
-        s1[o[0] : o[0] + w],
-        s2[o[0] : o[0] + w],
-        cc[o[0] : o[0] + w],
-        nc[o[0] : o[0] + w],
-    )
-    q1, q2, qc, qn = (
-        s1[o[1] : o[1] + w],
-        s2[o[1] : o[1] + w],
-        cc[o[1] : o[1] + w],
-        nc[o[1] : o[1] + w],
-    )
-    u1, u2, uc, un = (
-        s1[o[2] : o[2] + w],
-        s2[o[2] : o[2] + w],
-        cc[o[2] : o[2] + w],
-        nc[o[2] : o[2] + w],
-    )
-    v1, v2, vc, vn = (
-        s1[o[3] : o[3] + w],
-        s2[o[3] : o[3] + w],
-        cc[o[3] : o[3] + w],
-        nc[o[3] : o[3] + w],
-    )
+    last = k - 1  # columns past the k-th repeat it (their terms are dropped below)
+    p1, p2, pc, pn = _column(s1, s2, cc, nc, c, w)
+    q1, q2, qc, qn = _column(s1, s2, cc, nc, c + min(last, 1), w)
+    u1, u2, uc, un = _column(s1, s2, cc, nc, c + min(last, 2), w)
+    v1, v2, vc, vn = _column(s1, s2, cc, nc, c + min(last, 3), w)
     for j in range(w):
         ce = centre[j]
         dp = pc[j] - ce
