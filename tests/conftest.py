@@ -10,6 +10,11 @@ import pytest
 import torch
 from hypothesis import settings
 
+# Without a GPU, the Triton kernels run in Triton's interpreter, which must be chosen before
+# anything imports Triton (torchsar's kernels module chooses it too, when it comes first).
+if not torch.cuda.is_available():
+    os.environ.setdefault("TRITON_INTERPRET", "1")
+
 settings.register_profile("default", max_examples=25, deadline=None, derandomize=True)
 settings.load_profile("default")
 # One torch thread per pytest-xdist worker (the workers already share the cores: two threads

@@ -7,7 +7,6 @@ makes integral images cancel."""
 
 from __future__ import annotations
 
-import math
 from functools import partial
 
 import numpy as np
@@ -16,7 +15,7 @@ import torch
 
 import torchsar.cfar as cfar
 import torchsar.speckle as speckle
-from tests.reference.cfar import ring_cells
+from tests.reference.cfar import ca_reference
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
 from torchsar.cfar.ca import ca_threshold
@@ -107,24 +106,6 @@ def test_ac_without_no_data_is_the_tensor_code_to_an_ulp(monkeypatch):
     _masks_agree(a, b)
 
 
-def _ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarray:
-    """``I / mean_ring`` over the in-image ring cells (summed exactly: ``math.fsum``), times
-    the border factor, pixel by pixel; ``0 / 0 = 0``."""
-    from torchsar.cfar.thresholds import ca_factor
-
-    n = Ring(guard, train).n
-    out = np.empty(x.shape)
-    for idx in np.ndindex(*x.shape[:2]):
-        img = x[idx]
-        for i in range(img.shape[0]):
-            for j in range(img.shape[1]):
-                cells = ring_cells(img, i, j, guard, train)
-                mean = math.fsum(cells) / len(cells)
-                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
-                out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
-    return out
-
-
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("guard, train", [(1, 2), (0, 3)])
 def test_ca_is_the_exactly_summed_statistic_borders_included(monkeypatch, dtype, guard, train):
@@ -133,7 +114,7 @@ def test_ca_is_the_exactly_summed_statistic_borders_included(monkeypatch, dtype,
     x = _degenerate(3, dtype)
     monkeypatch.setattr(_jit, "ENABLED", True)
     got = cfar.ca(x, guard=guard, train=train).statistic.double().numpy()
-    want = _ca_reference(x.double().numpy(), guard, train, 1e-3)
+    want = ca_reference(x.double().numpy(), guard, train, 1e-3)
     assert np.array_equal(np.isinf(got), np.isinf(want))
     assert np.isinf(want).any() and (want == 0).any()  # the degenerate cases are there
     fin = np.isfinite(want)

@@ -42,6 +42,51 @@ def block_cells(img: np.ndarray, i: int, j: int, guard: int, train: int) -> list
     ]
 
 
+def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarray:
+    """CA-CFAR's ``I / mean_ring`` over the in-image ring cells (summed exactly:
+    ``math.fsum``), times the border factor, pixel by pixel, of ``x`` ``(B, C, H, W)``;
+    ``0 / 0 = 0``."""
+    from torchsar.cfar.thresholds import ca_factor
+
+    n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
+    out = np.empty(x.shape)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                mean = math.fsum(cells) / len(cells)
+                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
+                out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
+    return out
+
+
+def os_reference(
+    x: np.ndarray, guard: int, train: int, rank: int, factor, dtype=np.float32
+) -> np.ndarray:
+    """OS-CFAR's statistic pixel by pixel of ``x`` ``(B, C, H, W)``: the ``r_n``-th smallest
+    in-image ring value by sorting (``r_n = round(rank n / N)``, at least 1), ``I / x_(r_n)``
+    in float64 (``0 / 0 = 0``), times ``(1 / factor(n)) * factor(N)`` where ``n != N``, cast
+    to ``dtype``."""
+    n_full = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
+    out = np.empty(x.shape, dtype=dtype)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx].astype(np.float64)
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                n = len(cells)
+                r = min(n, max(1, round(rank * n / n_full)))
+                est = kth_smallest(cells, r)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    v = np.float64(img[i, j]) / np.float64(est)
+                v = 0.0 if v != v else v
+                if n != n_full:
+                    v = v * ((1.0 / factor(n)) * factor(n_full))
+                out[idx][i, j] = v
+    return out
+
+
 def kth_smallest(cells: np.ndarray, k: int) -> float:
     return float(np.sort(cells)[k - 1])
 

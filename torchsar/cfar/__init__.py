@@ -12,7 +12,7 @@ from torchsar.cfar.gamma import gamma
 from torchsar.cfar.go import go
 from torchsar.cfar.k import k
 from torchsar.cfar.lognormal import lognormal
-from torchsar.cfar.os_cfar import os
+from torchsar.cfar.os_cfar import os, os_mask
 from torchsar.cfar.so import so
 from torchsar.cfar.two_parameter import two_parameter
 from torchsar.cfar.vi import vi
@@ -30,6 +30,7 @@ __all__ = [
     "k",
     "lognormal",
     "os",
+    "os_mask",
     "so",
     "threshold",
     "two_parameter",

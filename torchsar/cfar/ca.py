@@ -9,11 +9,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
+from torchsar import _jit, _triton
 from torchsar._checks import check_positive, check_probability
 from torchsar.cfar.core import (
+    border_scale,
     conclude,
     finish,
+    geometric_scale,
     out_dtype,
     prepare,
     ratio,
@@ -22,7 +24,7 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.windows import Ring, Sums, ring_counts, windowed
+from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
 
@@ -71,6 +73,9 @@ def ca(
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ca")
     factor = partial(ca_factor, pfa=pfa, looks=check_positive(looks, "looks"))
     threshold = ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks)
+    if vmask is None and _triton.for_tensor(x):
+        stat, mask = _gpu_ring_ratio(x, ring, factor, threshold)
+        return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
     if vmask is None and _jit.for_tensor(x) and x.numel():
         stat, mask = _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
         return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
@@ -85,6 +90,8 @@ def ring_mean_ratio(
     :mod:`torchsar.cfar.core` for the factor ``factor(n)``, in ``dtype`` (CA's statistic;
     AC uses it on its censored ring). Without a mask every ring holds cells and the counts
     are geometric: the mean is formed in place and only the frame is rescaled."""
+    if vmask is None and dtype == torch.float32 and _triton.for_tensor(x):
+        return _gpu_ring_ratio(x, ring, factor, torch.inf)[0]
     if vmask is None and _jit.for_tensor(x) and x.numel():
         return _compiled_ring_ratio(x, ring, factor, dtype, torch.inf)[0]
     h = x.shape[-2]
@@ -114,10 +121,7 @@ def _compiled_ring_ratio(
     from torchsar import _box_kernels
 
     h, w = x.shape[-2:]
-    scale = np.ones(ring.n + 1)
-    for c in ring_counts(h, w, ring):
-        if 0 < c != ring.n:
-            scale[c] = (1.0 / factor(c)) * factor(ring.n)  # as the torch code rounds it
+    scale = geometric_scale(h, w, ring, factor)
     planes = x.detach().reshape(-1, h, w).contiguous()
     out = torch.empty(planes.shape, dtype=dtype)
     mask = torch.empty(planes.shape, dtype=torch.bool)
@@ -126,6 +130,17 @@ def _compiled_ring_ratio(
         planes.numpy(), ring.guard, ring.train, scale, thr, out.numpy(), mask.numpy()
     )
     return out.view(x.shape), mask.view(x.shape)
+
+
+def _gpu_ring_ratio(
+    x: Tensor, ring: Ring, factor: Callable[[int], float], threshold: float
+) -> tuple[Tensor, Tensor]:
+    """:func:`_compiled_ring_ratio` on a GPU: the fused Triton kernel
+    (:func:`torchsar._gpu_kernels.ring_ratio`, float32, every ring summed directly in
+    float64: within a float32 ulp of the CPU's statistic)."""
+    scale = geometric_scale(*x.shape[-2:], ring, factor)
+    thr = _threshold(threshold, x)
+    return _triton.kernels().ring_ratio(x, ring.guard, ring.train, scale, thr)
 
 
 def _threshold(threshold: float, statistic: Tensor) -> Tensor:
@@ -142,11 +157,7 @@ def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]
     from torchsar.cfar import _kernels
 
     count = s.count.expand_as(s.s1).contiguous().numpy()
-    seen = _kernels.counts_present(count, n + 1)
-    scale = np.ones(n + 1)
-    for c in np.flatnonzero(seen):
-        if 0 < c != n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
-            scale[c] = (1.0 / factor(int(c))) * factor(n)
+    scale = border_scale(np.flatnonzero(_kernels.counts_present(count, n + 1)), n, factor)
     shift = s.shift.reshape(xs.shape[:2]).numpy()
     out = _kernels.ring_mean_ratio_masked(
         xs.contiguous().numpy(), count, s.s1.numpy(), shift, n, scale

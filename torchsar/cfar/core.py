@@ -18,17 +18,20 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Callable
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar._checks import check_image, check_mask, check_probability, float_dtype
 from torchsar.cfar.thresholds import factor_map
 from torchsar.detection import Detection, detection_from
-from torchsar.windows import Ring
+from torchsar.windows import Ring, ring_counts
 
 __all__ = [
+    "border_scale",
     "conclude",
     "finish",
+    "geometric_scale",
     "out_dtype",
     "prepare",
     "ratio",
@@ -151,6 +154,23 @@ def rescale_frame_(
     for rows, cols in pieces:
         rescale_border_(stat[..., rows, cols], count[rows, cols], ring.n, factor)
     return stat
+
+
+def border_scale(counts, n: int, factor: Callable[[int], float]) -> np.ndarray:
+    """The border rule's factors as the compiled kernels read them: ``scale[c] = factor(n) /
+    factor(c)`` (float64, rounded as :func:`rescale_border_` rounds it) for every count ``c``
+    in ``counts`` other than ``0`` and ``n``, ``1`` elsewhere; length ``n + 1``."""
+    scale = np.ones(n + 1)
+    for c in counts:
+        c = int(c)
+        if 0 < c != n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
+            scale[c] = (1.0 / factor(c)) * factor(n)
+    return scale
+
+
+def geometric_scale(h: int, w: int, ring: Ring, factor: Callable[[int], float]) -> np.ndarray:
+    """:func:`border_scale` for the ring counts of an ``h x w`` image without no-data."""
+    return border_scale(ring_counts(h, w, ring), ring.n, factor)
 
 
 def finish(statistic: Tensor, count: Tensor, dtype: torch.dtype) -> Tensor:

@@ -10,16 +10,24 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
+from torchsar import _jit, _triton
 from torchsar._checks import check_int, check_probability
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, rescale_border_
+from torchsar.cfar.core import (
+    conclude,
+    finish,
+    geometric_scale,
+    out_dtype,
+    prepare,
+    ratio,
+    rescale_border_,
+)
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.errors import OptionError
 from torchsar.order_statistics import ring_order_statistic
-from torchsar.windows import Ring, Sums, region_count, ring_counts, windowed
+from torchsar.windows import Ring, Sums, region_count, windowed
 
-__all__ = ["os", "os_threshold"]
+__all__ = ["os", "os_mask", "os_threshold"]
 
 
 def os(
@@ -69,6 +77,10 @@ def os(
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="os")
     r = _check_rank(rank, ring)
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
+    if vmask is None and _triton.for_tensor(x):
+        thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
+        stat, mask = _triton.kernels().os_ratio(x, *_gpu_tables(x, ring, r, factor), thr)
+        return Detection(mask=mask, statistic=stat, threshold=thr)
     if vmask is None and _jit.for_tensor(x) and x.numel():
         return conclude(_compiled(x, ring, r, factor), None, factor(ring.n))
     counts = _ring_counts(x, ring, vmask)
@@ -78,6 +90,53 @@ def os(
     rescale_border_(stat, counts, ring.n, factor)
     stat = finish(stat, counts, out_dtype(x))
     return conclude(stat, vmask, factor(ring.n))
+
+
+def os_mask(
+    x: Tensor,
+    *,
+    guard: int = 2,
+    train: int = 4,
+    pfa: float = 1e-3,
+    rank: int | None = None,
+    valid: Tensor | None = None,
+) -> Tensor:
+    """The mask of :func:`os` alone (the same pixels exactly), for a scan that needs no
+    statistic.
+
+    On a GPU (float32, no ``valid`` mask, Triton installed) no order statistic is formed: a
+    pixel is detected iff at least ``r`` of its ring values lie at or below the largest
+    value ``c`` whose statistic would pass the threshold (the passing values are a prefix of
+    the sorted ring), with ``c`` found by bisection on the bit patterns of the float32
+    values. Elsewhere it is ``os(...).mask``.
+
+    Args:
+        x, guard, train, pfa, rank, valid: as for :func:`os`.
+
+    Returns:
+        bool ``(B, C, H, W)``.
+
+    Examples:
+        >>> x = torch.ones(1, 1, 16, 16); x[0, 0, 8, 8] = 100.0
+        >>> os_mask(x, guard=1, train=2).sum().item()
+        1
+    """
+    ring, checked, vmask = prepare(x, guard, train, pfa, valid, detector="os_mask")
+    r = _check_rank(rank, ring)
+    if vmask is None and _triton.for_tensor(x):
+        factor = partial(_factor, n_full=ring.n, rank=r, pfa=checked)
+        thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
+        return _triton.kernels().os_decision(x, *_gpu_tables(x, ring, r, factor), thr)
+    return os(x, guard=guard, train=train, pfa=pfa, rank=rank, valid=valid).mask
+
+
+def _gpu_tables(
+    x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]
+) -> tuple[Tensor, np.ndarray, np.ndarray]:
+    """The ring's cells ``(N, 2)``, and the rank and border factor of each ring count
+    (length ``N + 1``) of the Triton kernels."""
+    ranks = np.array([os_rank(n, ring.n, rank) for n in range(ring.n + 1)], dtype=np.int32)
+    return ring.offsets(), ranks, geometric_scale(*x.shape[-2:], ring, factor)
 
 
 def os_threshold(*, guard: int, train: int, pfa: float, rank: int | None) -> float:
@@ -106,10 +165,7 @@ def _compiled(x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]) 
     h, w = x.shape[-2:]
     counts, ranks = _geometry(h, w, ring, rank)
     est = ring_order_statistic(x, ring, ranks)
-    scale = np.ones(ring.n + 1)
-    for c in ring_counts(h, w, ring):
-        if 0 < c != ring.n:  # ``float / tensor`` is ``reciprocal(tensor) * float`` in torch
-            scale[c] = (1.0 / factor(c)) * factor(ring.n)
+    scale = geometric_scale(h, w, ring, factor)
     planes = x.detach().reshape(-1, h, w).contiguous().numpy()
     out = torch.empty(planes.shape, dtype=out_dtype(x))
     _kernels.os_ratio(planes, est.reshape(-1, h, w).numpy(), counts, ring.n, scale, out.numpy())

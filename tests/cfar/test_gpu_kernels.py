@@ -1,0 +1,243 @@
+"""The Triton kernels of CA-CFAR and OS-CFAR against slow references and the CPU code.
+
+On a machine with CUDA they run on the GPU; without one, in Triton's interpreter on CPU
+tensors (the same kernel code, executed step by step with numpy): the default test run
+checks them there.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+import pytest
+import torch
+
+import torchsar as ts
+from tests.reference.cfar import ca_reference, os_reference
+from torchsar import _triton
+from torchsar.cfar.os_cfar import _factor, _gpu_tables
+from torchsar.cfar.thresholds import ca_factor
+from torchsar.windows import Ring
+
+pytestmark = [
+    pytest.mark.skipif(not _triton.enabled(), reason="triton not installed"),
+    # the interpreter evaluates masked-off lanes too (x / 0 where no pixel is)
+    pytest.mark.filterwarnings("ignore::RuntimeWarning:triton.*"),
+]
+
+DEVICE = "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def _kernels():
+    return _triton.kernels()
+
+
+def _scene(seed: int, shape=(2, 2, 29, 70)) -> torch.Tensor:
+    """Exponential clutter with a bright target, a clutter edge and a dark patch (float32)."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.empty(shape, dtype=torch.float64).exponential_(generator=g)
+    x[0, 0, 3:6, 4:8] *= 300.0
+    x[-1, -1, :, shape[-1] // 2 :] *= 9.0
+    if shape[-2] >= 27 and shape[-1] >= 40:
+        x[0, -1, 5:26, 10:40] = 0.0  # whole rings of zeros: x / 0 = inf, 0 / 0 = 0
+        x[0, -1, 15, 25] = 5.0
+    return x.float()
+
+
+def _ties(seed: int, shape=(1, 2, 19, 23)) -> torch.Tensor:
+    """Small integers, zeros included: many equal ring values and exact ratio ties."""
+    g = torch.Generator().manual_seed(seed)
+    return torch.randint(0, 5, shape, generator=g).float()
+
+
+def _ulps(got: np.ndarray, want: np.ndarray) -> float:
+    """Largest difference in float32 ulps of ``want`` (non-finite entries must be equal)."""
+    fin = np.isfinite(want)
+    assert np.array_equal(got[~fin], want[~fin])
+    spacing = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+    return float((np.abs(got[fin] - want[fin]) / spacing).max(initial=0.0))
+
+
+def _ca(x: torch.Tensor, guard: int, train: int, pfa: float = 1e-3):
+    ring = Ring(guard, train)
+    thr = torch.tensor(ca_factor(ring.n, pfa), dtype=torch.float32)
+    from torchsar.cfar.core import geometric_scale
+
+    scale = geometric_scale(*x.shape[-2:], ring, partial(ca_factor, pfa=pfa))
+    stat, mask = _kernels().ring_ratio(x.to(DEVICE), guard, train, scale, thr.to(DEVICE))
+    return stat.cpu(), mask.cpu(), thr
+
+
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 1), (2, 3), (0, 4)])
+def test_ca_kernel_is_the_exactly_summed_statistic(guard, train):
+    """At every pixel, borders, zero rings and 0 / 0 included: within a float32 ulp of the
+    statistic summed exactly (``math.fsum``), and the mask is the statistic over the
+    threshold, exactly."""
+    x = _scene(1, shape=(1, 2, 27, 42))
+    stat, mask, thr = _ca(x, guard, train)
+    want = ca_reference(x.double().numpy(), guard, train, 1e-3)
+    assert np.isinf(want).any() and (want == 0).any()
+    assert _ulps(stat.double().numpy(), want) <= 1.0
+    assert torch.equal(mask, stat > thr) and mask.any()
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 11, 11), (2, 1, 17, 130), (1, 2, 40, 9)])
+def test_ca_kernel_is_the_cpu_kernel_to_an_ulp(shape):
+    """Images as small as the window, wider and taller than a tile, and narrow: the CPU's
+    statistic to a float32 ulp; masks equal but at pixels that close to the threshold."""
+    g = torch.Generator().manual_seed(sum(shape))
+    x = torch.empty(shape).exponential_(generator=g)
+    x[..., shape[-2] // 2, shape[-1] // 2] = 40.0
+    guard, train = (2, 3) if min(shape[-2:]) >= 11 else (1, 2)
+    stat, mask, thr = _ca(x, guard, train)
+    cpu = ts.cfar.ca(x, guard=guard, train=train)
+    assert _ulps(stat.double().numpy(), cpu.statistic.double().numpy()) <= 1.0
+    near = (cpu.statistic.double() - float(thr)).abs() <= 2 * np.spacing(np.float32(thr))
+    assert not ((mask != cpu.mask) & ~near).any()
+
+
+def test_ca_kernel_keeps_its_precision_beside_a_very_bright_target():
+    """Clutter of 1 beside a cell of 1e12: every ring without it is exactly 1 / 1."""
+    x = torch.ones(1, 1, 48, 48)
+    x[0, 0, 5, 5] = 1e12
+    stat = _ca(x, 1, 2)[0]
+    far = stat[0, 0, 12:-4, 12:-4]
+    assert torch.equal(far, torch.ones_like(far))
+
+
+def test_ca_kernel_does_not_depend_on_the_batch():
+    x = _scene(2, shape=(3, 2, 27, 42))
+    whole = _ca(x, 2, 3)[0]
+    one_by_one = torch.cat([_ca(x[i : i + 1], 2, 3)[0] for i in range(x.shape[0])])
+    assert torch.equal(whole, one_by_one)
+
+
+def _os(x: torch.Tensor, guard: int, train: int, rank: int, pfa: float = 1e-3):
+    ring = Ring(guard, train)
+    factor = partial(_factor, n_full=ring.n, rank=rank, pfa=pfa)
+    thr = torch.tensor(factor(ring.n), dtype=torch.float32)
+    tables = _gpu_tables(x, ring, rank, factor)
+    return factor, thr, tables
+
+
+@pytest.mark.parametrize(
+    "guard, train, rank", [(1, 2, None), (1, 2, 1), (1, 2, 40), (0, 3, 20), (2, 1, 7)]
+)
+@pytest.mark.parametrize("make", [_scene, _ties])
+def test_os_kernels_are_the_sorted_reference(guard, train, rank, make):
+    """The statistic bit for bit as sorting each ring gives it (border ranks and factors
+    included); the mask by counting alone is exactly the statistic over the threshold."""
+    x = make(3, shape=(1, 2, 27, 42))
+    ring = Ring(guard, train)
+    r = rank or max(1, round(3 * ring.n / 4))
+    factor, thr, tables = _os(x, guard, train, r)
+    xd = x.to(DEVICE)
+    stat, mask = _kernels().os_ratio(xd, *tables, thr.to(DEVICE))
+    decision = _kernels().os_decision(xd, *tables, thr.to(DEVICE))
+    want = os_reference(x.numpy(), guard, train, r, factor)
+    assert np.array_equal(stat.cpu().numpy(), want)
+    assert torch.equal(mask.cpu(), torch.from_numpy(want) > thr)
+    assert torch.equal(decision.cpu(), mask.cpu())
+
+
+@pytest.mark.parametrize("thr", [0.0, 0.5, 1.0, 2.0, 1.5, 3.0, float("inf"), -1.0])
+def test_os_decision_at_exact_ties(thr):
+    """Integer images and thresholds that many statistics equal exactly (``>`` is strict),
+    zero order statistics (``inf``) and zero cells (``0 / 0 = 0``), an infinite and a
+    negative threshold: the count decides as the statistic does, pixel for pixel."""
+    x = _ties(4, shape=(2, 1, 16, 21))
+    guard, train, r = 1, 1, 4
+    factor, _, tables = _os(x, guard, train, r)
+    t = torch.tensor(thr, dtype=torch.float32)
+    stat, _ = _kernels().os_ratio(x.to(DEVICE), *tables, t.to(DEVICE))
+    decision = _kernels().os_decision(x.to(DEVICE), *tables, t.to(DEVICE))
+    want = torch.from_numpy(os_reference(x.numpy(), guard, train, r, factor))
+    assert torch.equal(stat.cpu(), want)
+    assert torch.equal(decision.cpu(), want > t)
+    if 0 < thr < 4:
+        assert bool((want == t).any())  # the ties are there
+
+
+def test_os_kernels_with_a_border_scale():
+    """A frame of border factors far from 1 (a strict pfa): still exact."""
+    x = _scene(5, shape=(1, 1, 20, 20))
+    factor, thr, tables = _os(x, 2, 2, 20, pfa=1e-6)
+    stat, mask = _kernels().os_ratio(x.to(DEVICE), *tables, thr.to(DEVICE))
+    want = os_reference(x.numpy(), 2, 2, 20, factor)
+    assert (tables[2] != 1).sum() > 5
+    assert np.array_equal(stat.cpu().numpy(), want)
+    assert torch.equal(
+        _kernels().os_decision(x.to(DEVICE), *tables, thr.to(DEVICE)).cpu(), mask.cpu()
+    )
+
+
+def test_empty_batches():
+    x = torch.empty(0, 1, 16, 16)
+    stat, mask, _ = _ca(x, 1, 2)
+    assert stat.shape == mask.shape == x.shape
+    _, thr, tables = _os(x, 1, 2, 10)
+    assert _kernels().os_decision(x.to(DEVICE), *tables, thr.to(DEVICE)).shape == x.shape
+
+
+@pytest.fixture
+def through_triton(monkeypatch):
+    """The public detectors routed to the Triton kernels on this machine's device (the
+    interpreter on CPU tensors without a GPU); the kernels' calls are counted."""
+    calls = []
+    kernels = _kernels()
+    for name in ("ring_ratio", "os_ratio", "os_decision"):
+        fn = getattr(kernels, name)
+
+        def spy(*args, _fn=fn, _name=name, **kwargs):
+            calls.append(_name)
+            return _fn(*args, **kwargs)
+
+        monkeypatch.setattr(kernels, name, spy)
+    monkeypatch.setattr(
+        _triton, "for_tensor", lambda t: t.dtype == torch.float32 and not t.requires_grad
+    )
+    return calls
+
+
+def test_the_public_detectors_take_the_kernels(through_triton, monkeypatch):
+    """``ca``, ``os``, ``os_mask`` and AC's ring mean go through the kernels on a float32
+    image without no-data, and give the CPU code's results (OS bit for bit, CA to an ulp);
+    with a ``valid`` mask or float64 they take the tensor code."""
+    x = _scene(6, shape=(1, 2, 27, 42))
+    with_kernels = {
+        "ca": ts.cfar.ca(x.to(DEVICE), guard=1, train=3),
+        "os": ts.cfar.os(x.to(DEVICE), guard=1, train=3),
+        "ac": ts.cfar.ac(x.to(DEVICE), guard=1, train=3),
+    }
+    mask = ts.cfar.os_mask(x.to(DEVICE), guard=1, train=3)
+    assert sorted(set(through_triton)) == ["os_decision", "os_ratio", "ring_ratio"]
+    monkeypatch.setattr(_triton, "for_tensor", lambda t: False)
+    for name, got in with_kernels.items():
+        want = getattr(ts.cfar, name)(x, guard=1, train=3)
+        assert got.threshold.dtype == want.threshold.dtype and torch.equal(
+            got.threshold.cpu(), want.threshold
+        )
+        if name == "os":
+            assert torch.equal(got.statistic.cpu(), want.statistic)
+            assert torch.equal(got.mask.cpu(), want.mask)
+        else:
+            assert _ulps(got.statistic.cpu().double().numpy(), want.statistic.double().numpy()) <= 1
+    assert torch.equal(mask.cpu(), with_kernels["os"].mask.cpu())
+
+
+def test_no_data_and_float64_take_the_tensor_code(through_triton):
+    x = _scene(7)
+    valid = torch.ones_like(x, dtype=torch.bool)
+    valid[..., :3, :] = False
+    ts.cfar.ca(x.to(DEVICE), valid=valid.to(DEVICE))
+    ts.cfar.os_mask(x.to(DEVICE), valid=valid.to(DEVICE))
+    ts.cfar.os(x.double().to(DEVICE))
+    assert through_triton == []
+
+
+def test_the_kernels_are_used_on_cuda_float32_only(monkeypatch):
+    cpu = torch.ones(1, 1, 8, 8)
+    assert not _triton.for_tensor(cpu)
+    monkeypatch.setattr(_triton, "ENABLED", False)
+    assert _triton.kernels() is None and not _triton.enabled()

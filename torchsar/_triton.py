@@ -1,0 +1,72 @@
+"""Whether the Triton GPU kernels are used.
+
+On a CUDA device, CA-CFAR and OS-CFAR without no-data run as fused Triton kernels
+(:mod:`torchsar._gpu_kernels`): one pass over the image that sums each ring directly
+(CA) or counts it (OS) and writes the statistic and the mask, instead of the integral images
+and the per-pixel sort of the tensor code. Other devices, dtypes and inputs (no-data masks,
+autograd) take the tensor code, which stays the reference the tests compare against.
+
+The kernels are imported (and compiled by Triton, or loaded from its cache) on first use
+only, so ``import torchsar`` does not import Triton. Set ``TORCHSAR_TRITON=0`` to never use
+them. Without a GPU the same kernels run in Triton's interpreter (``TRITON_INTERPRET=1`` set
+before they are first imported): the default test run compares them there with the CPU code.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import warnings
+
+__all__ = ["ENABLED", "enabled", "for_tensor", "kernels"]
+
+
+def _triton_installed() -> bool:
+    try:
+        return importlib.util.find_spec("triton") is not None
+    except (ImportError, ValueError):  # a broken or blocked install counts as absent
+        return False
+
+
+ENABLED: bool = os.environ.get("TORCHSAR_TRITON", "1") != "0" and _triton_installed()
+
+_KERNELS: object | None = None
+_FAILED = False
+
+
+def kernels():
+    """The module of Triton kernels (imported once), or ``None`` when Triton is switched off,
+    absent or fails to import (one warning; the tensor code is used instead)."""
+    global _KERNELS, _FAILED
+    if not ENABLED or _FAILED:
+        return None
+    if _KERNELS is None:
+        try:
+            from torchsar import _gpu_kernels
+        except Exception as exc:  # any failure of a third-party import: fall back
+            warnings.warn(
+                f"triton is installed but its kernels cannot be loaded ({type(exc).__name__}: "
+                f"{exc}); torchsar uses its tensor code on the GPU instead (the same masks "
+                "up to near-ties, slower)",
+                UserWarning,
+                stacklevel=3,
+            )
+            _FAILED = True
+            return None
+        _KERNELS = _gpu_kernels
+    return _KERNELS
+
+
+def enabled() -> bool:
+    """Whether the Triton kernels are to be used (installed, importable, not switched off)."""
+    return kernels() is not None
+
+
+def for_tensor(t) -> bool:
+    """Whether the Triton kernels are to be used on ``t``: a float32 CUDA tensor that needs
+    no gradient, with :func:`enabled`."""
+    import torch
+
+    return (
+        t.device.type == "cuda" and t.dtype == torch.float32 and not t.requires_grad and enabled()
+    )
