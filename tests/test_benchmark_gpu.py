@@ -17,10 +17,13 @@ def gpu():
 
 def test_dry_run_rows_are_consistent(gpu):
     rows = gpu.report(
-        n=3, device="cpu", cpu_images=2, repeat=1, size=48, detectors=("ca", "os", "g0")
+        n=3, device="cpu", cpu_images=2, repeat=1, size=48, detectors=("ca", "os", "os_mask", "g0")
     )
-    assert [r["detector"] for r in rows] == ["ca", "os", "g0"]
-    for r in rows:
+    names = [r["detector"] for r in rows]
+    assert names == ["copy", "naive_ca", "ca", "os", "os_mask", "g0"]
+    for r in rows[:2]:  # the baselines: device columns only
+        assert r["error"] is None and r["device_ms"] > 0 and r["cpu_ms_per_mp"] is None
+    for r in rows[2:]:
         assert r["error"] is None and r["images"] == 3 and r["cpu_images"] == 2
         mp = 48 * 48 / 1e6
         assert r["device_mp_per_s"] == pytest.approx(3 * mp / (r["device_ms"] / 1e3))
@@ -28,7 +31,21 @@ def test_dry_run_rows_are_consistent(gpu):
         assert r["speedup"] == pytest.approx(r["cpu_ms_per_mp"] / r["device_ms_per_mp"])
         assert r["mask_pixels_differ"] == 0  # the same device: the same masks
     table = gpu.format_rows(rows)
-    assert table.count("\n") == 3 and "MP/s" in table
+    assert table.count("\n") == 6 and "MP/s" in table
+
+
+def test_the_naive_baseline_is_ca_cfar_in_the_interior(gpu):
+    """The five-line torch CA the targets are stated against detects as CA-CFAR does away
+    from the border (float32 box sums: up to near-threshold ties)."""
+    import torchsar as ts
+
+    x = gpu.speckle(2, 64)
+    x[0, 0, 30, 30] = 60.0
+    naive = gpu.naive_ca(x)[..., 6:-6, 6:-6]
+    ours = ts.cfar.ca(x)
+    inner = ours.statistic[..., 6:-6, 6:-6]
+    near = (inner - ours.threshold).abs() <= 1e-4 * ours.threshold
+    assert not ((naive != ours.mask[..., 6:-6, 6:-6]) & ~near).any() and naive.any()
 
 
 def test_a_failing_detector_is_reported_in_its_row(gpu, monkeypatch):
@@ -42,7 +59,9 @@ def test_a_failing_detector_is_reported_in_its_row(gpu, monkeypatch):
         return ca(x)
 
     monkeypatch.setattr(ts.cfar, "ca", broken)
-    (row,) = gpu.report(n=2, device="cpu", cpu_images=1, repeat=1, size=32, detectors=("ca",))
+    (row,) = gpu.report(
+        n=2, device="cpu", cpu_images=1, repeat=1, size=32, detectors=("ca",), baselines=False
+    )
     assert row["error"].startswith("RuntimeError: CUDA out of memory")
     assert row["device_ms"] is None and row["cpu_ms_per_mp"] > 0
     assert "error: RuntimeError" in gpu.format_rows([row])

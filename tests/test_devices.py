@@ -72,6 +72,32 @@ def test_window_cfars(name, device, chips):
     _same_detection(got, want, RTOL.get(name, 1e-5))
 
 
+@pytest.mark.parametrize("device", DEVICES)
+def test_os_is_exact_on_every_device(device, chips):
+    """OS-CFAR's order statistic is exact everywhere (on CUDA: the Triton kernels' bisection
+    over counts), so its statistic is the CPU's bit for bit, and ``os_mask`` (on CUDA: the
+    counting decision alone) is its mask."""
+    want = ts.cfar.os(chips)
+    got = ts.cfar.os(chips.to(device))
+    assert torch.equal(got.statistic.cpu(), want.statistic)
+    assert torch.equal(got.mask.cpu(), want.mask)
+    assert torch.equal(ts.cfar.os_mask(chips.to(device)).cpu(), want.mask)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA only")
+def test_cuda_takes_the_triton_kernels(chips):
+    """On CUDA, float32 CA and OS without no-data run as the fused Triton kernels (when
+    Triton is installed, as it is with CUDA builds of torch)."""
+    from torchsar import _triton
+
+    if not _triton.ENABLED:
+        pytest.skip("triton is not installed")
+    assert _triton.for_tensor(chips.cuda())
+    ca = ts.cfar.ca(chips.cuda(), guard=1, train=3)
+    want = ts.cfar.ca(chips, guard=1, train=3)
+    _same_detection(ca, want, 1.2e-7)  # a float32 ulp: every ring summed directly
+
+
 @pytest.mark.parametrize("name", sorted(RTOL))
 def test_tolerance_covers_one_ulp_of_input(name, chips):
     """The CPU against itself with every input value moved by about one float32 ulp

@@ -11,6 +11,12 @@ the CPU's results on the images both ran (near-ties of float64 sums summed in an
 order; the device tests bound them). A detector that fails on the device (out of memory,
 say) gets its error in the ``error`` column instead of stopping the report.
 
+Beside them, the baselines the issue's targets are stated against, measured in the same
+run on the same batch: ``copy`` (a device-to-device copy of the batch: the memory limit)
+and ``naive_ca`` (CA-CFAR as two float32 ``avg_pool2d`` box sums, ring = big - small, one
+compare: what a PyTorch user writes in five lines), and ``os_mask`` (OS-CFAR's mask alone:
+on a GPU the counting decision, no order statistic). Baseline rows have no CPU columns.
+
 Run: ``python scripts/benchmark.py --topic gpu [--n 64] [--device cuda]`` (needs a CUDA
 device; ``--device cpu`` runs the same code on the CPU against itself, a dry run).
 """
@@ -37,6 +43,7 @@ CFARS = (
     "k",
     "g0",
 )
+BASELINES = ("copy", "naive_ca")
 DEFAULT_N = 64
 SIZE = 1024
 COLUMNS = (
@@ -87,11 +94,59 @@ def _on_device(fn, xd: torch.Tensor, cpu_images: int, sync, repeat: int):
     return seconds, fn(xd[:cpu_images]).mask.cpu()
 
 
-def measure(name: str, x: torch.Tensor, dev: torch.device, cpu_images: int, repeat: int) -> dict:
-    """One row of :data:`COLUMNS` for the CFAR ``name`` on the batch ``x`` (on the CPU)."""
+class _Mask:
+    """A mask-only result, read as a detection's ``mask`` is."""
+
+    def __init__(self, mask: torch.Tensor) -> None:
+        self.mask = mask
+
+
+def _detector(name: str) -> Callable[[torch.Tensor], object]:
     import torchsar as ts
 
-    fn = getattr(ts.cfar, name)
+    if name == "os_mask":
+        return lambda x: _Mask(ts.cfar.os_mask(x))
+    return lambda x: getattr(ts.cfar, name)(x)  # looked up per call: tests replace them
+
+
+def naive_ca(x: torch.Tensor, guard: int = 2, train: int = 4, pfa: float = 1e-3) -> torch.Tensor:
+    """CA-CFAR as a PyTorch user writes it: float32 box means by ``avg_pool2d`` (zero
+    padding), ring mean from the outer and guard boxes, ``I > alpha * mean``."""
+    from torchsar.cfar.thresholds import ca_factor
+
+    pool = torch.nn.functional.avg_pool2d
+
+    o, g = guard + train, guard
+    big, small = (2 * o + 1) ** 2, (2 * g + 1) ** 2
+    outer = pool(x, 2 * o + 1, stride=1, padding=o) * big
+    inner = pool(x, 2 * g + 1, stride=1, padding=g) * small
+    alpha = ca_factor(big - small, pfa)
+    return x > alpha * (outer - inner) / (big - small)
+
+
+def measure_baseline(name: str, xd: torch.Tensor, dev: torch.device, repeat: int) -> dict:
+    """One row of :data:`COLUMNS` for a baseline (``copy`` or ``naive_ca``) on the device
+    batch ``xd``."""
+    fn = (lambda x: x.clone()) if name == "copy" else naive_ca
+    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
+    mp = xd[0, 0].numel() / 1e6
+    row = dict.fromkeys(COLUMNS)
+    row.update(detector=name, device=str(dev), images=xd.shape[0])
+    try:
+        seconds = _median_seconds(lambda: fn(xd), sync, repeat)
+    except (RuntimeError, MemoryError) as err:
+        row["error"] = f"{type(err).__name__}: {str(err).splitlines()[0][:160]}"
+        return row
+    row["device_ms"] = seconds * 1e3
+    row["device_mp_per_s"] = xd.shape[0] * mp / seconds
+    row["device_ms_per_mp"] = seconds * 1e3 / (xd.shape[0] * mp)
+    return row
+
+
+def measure(name: str, x: torch.Tensor, dev: torch.device, cpu_images: int, repeat: int) -> dict:
+    """One row of :data:`COLUMNS` for the CFAR ``name`` (or ``os_mask``) on the batch ``x``
+    (on the CPU)."""
+    fn = _detector(name)
     mp = x[0, 0].numel() / 1e6
     row = dict.fromkeys(COLUMNS)
     row.update(detector=name, device=str(dev), images=x.shape[0], cpu_images=cpu_images)
@@ -122,13 +177,20 @@ def report(
     cpu_images: int = 2,
     repeat: int = 3,
     size: int = SIZE,
-    detectors: tuple[str, ...] = CFARS,
+    detectors: tuple[str, ...] = (*CFARS, "os_mask"),
+    baselines: bool = True,
 ) -> list[dict]:
-    """Rows of :data:`COLUMNS`, one per detector (``workers`` is not used: one process)."""
+    """Rows of :data:`COLUMNS`: the baselines (unless ``baselines`` is false), then one per
+    detector (``workers`` is not used: one process)."""
     dev = _device(device)
     torch.set_num_threads(1)
     x = speckle(n, size)
-    return [measure(name, x, dev, min(cpu_images, n), repeat) for name in detectors]
+    rows = []
+    if baselines:
+        xd = x.to(dev)
+        rows += [measure_baseline(name, xd, dev, repeat) for name in BASELINES]
+        del xd
+    return rows + [measure(name, x, dev, min(cpu_images, n), repeat) for name in detectors]
 
 
 def format_rows(rows: list[dict]) -> str:
@@ -140,9 +202,15 @@ def format_rows(rows: list[dict]) -> str:
     ]
     for r in rows:
         head = f"{r['detector']:<14s} {r['device']:<7s} {r['images']:6d} "
+        if r["cpu_ms_per_mp"] is None and not r["error"]:  # a baseline: the device only
+            lines.append(
+                head + f"{r['device_ms']:10.2f} {r['device_mp_per_s']:9.1f} "
+                f"{r['device_ms_per_mp']:10.4f}"
+            )
+            continue
         if r["error"]:
             lines.append(
-                head + f"{'':>10s} {'':>9s} {'':>10s} {r['cpu_ms_per_mp']:10.3f}   "
+                head + f"{'':>10s} {'':>9s} {'':>10s} {r['cpu_ms_per_mp'] or 0:10.3f}   "
                 f"error: {r['error']}"
             )
             continue
