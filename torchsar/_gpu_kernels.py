@@ -41,7 +41,7 @@ if not torch.cuda.is_available() and "triton" not in sys.modules:
 import triton
 import triton.language as tl
 
-__all__ = ["os_decision", "os_ratio", "ring_ratio"]
+__all__ = ["os_decision", "os_ratio", "region_sums", "ring_ratio"]
 
 
 _CA_TILE = (16, 64)  # rows x columns of pixels per program
@@ -62,14 +62,41 @@ def _ring_count(i, j, h, w, G, R):
 
 
 @triton.jit
-def _add_cells(acc, ptr, ii, rows, j, w, b0, b1, radius):
-    """``acc`` plus the in-image cells of row ``ii`` at column offsets ``b0 - radius .. b1 -
-    1 - radius``, left to right, in float64."""
+def _add_cells(acc, ptr, ii, rows, j, w, b0, b1, radius, MASKED: tl.constexpr):
+    """``acc`` plus the cells of row ``ii`` at column offsets ``b0 - radius .. b1 - 1 -
+    radius``, left to right, in float64: the in-image ones (``MASKED``), or all of them
+    (a tile whose windows lie inside the image: no masks to form)."""
     for b in range(b0, b1):
         jj = j + (b - radius)
-        v = tl.load(ptr + ii * w + jj, mask=rows & (jj >= 0) & (jj < w), other=0.0)
+        if MASKED:
+            v = tl.load(ptr + ii * w + jj, mask=rows & (jj >= 0) & (jj < w), other=0.0)
+        else:
+            v = tl.load(ptr + ii * w + jj)
         acc += v.to(tl.float64)
     return acc
+
+
+@triton.jit
+def _ring_sum(ptr, i, j, h, w, G, R, BH: tl.constexpr, BW: tl.constexpr, MASKED: tl.constexpr):
+    """The ring's cells around every pixel of the tile, rows top to bottom, each row left
+    to right, in float64."""
+    acc = tl.zeros([BH, BW], dtype=tl.float64)
+    for a in range(0, 2 * R + 1):  # loops, not unrolled: one compiled kernel for every ring
+        ii = i + (a - R)
+        rows = (ii >= 0) & (ii < h)
+        if (a < R - G) | (a > R + G):  # above or below the guard box: the window's whole row
+            acc = _add_cells(acc, ptr, ii, rows, j, w, 0, 2 * R + 1, R, MASKED)
+        else:  # beside it: left, then right
+            acc = _add_cells(acc, ptr, ii, rows, j, w, 0, R - G, R, MASKED)
+            acc = _add_cells(acc, ptr, ii, rows, j, w, R + G + 1, 2 * R + 1, R, MASKED)
+    return acc
+
+
+@triton.jit
+def _interior(row0, col0, h, w, R, BH: tl.constexpr, BW: tl.constexpr):
+    """Whether every window of radius ``R`` around the tile at ``(row0, col0)`` lies in the
+    image."""
+    return (row0 >= R) & (row0 + BH - 1 + R < h) & (col0 >= R) & (col0 + BW - 1 + R < w)
 
 
 @triton.jit
@@ -91,18 +118,15 @@ def _ring_ratio_kernel(
     nbw = tl.cdiv(w, BW)
     plane = pid // (nbh * nbw)
     tile = pid % (nbh * nbw)
-    i = (tile // nbw) * BH + tl.arange(0, BH)[:, None]
-    j = (tile % nbw) * BW + tl.arange(0, BW)[None, :]
+    row0 = (tile // nbw) * BH
+    col0 = (tile % nbw) * BW
+    i = row0 + tl.arange(0, BH)[:, None]
+    j = col0 + tl.arange(0, BW)[None, :]
     base = plane.to(tl.int64) * h * w
-    acc = tl.zeros([BH, BW], dtype=tl.float64)
-    for a in range(0, 2 * R + 1):  # loops, not unrolled: one compiled kernel for every ring
-        ii = i + (a - R)
-        rows = (ii >= 0) & (ii < h)
-        if (a < R - G) | (a > R + G):  # above or below the guard box: the window's whole row
-            acc = _add_cells(acc, x_ptr + base, ii, rows, j, w, 0, 2 * R + 1, R)
-        else:  # beside it: left, then right
-            acc = _add_cells(acc, x_ptr + base, ii, rows, j, w, 0, R - G, R)
-            acc = _add_cells(acc, x_ptr + base, ii, rows, j, w, R + G + 1, 2 * R + 1, R)
+    if _interior(row0, col0, h, w, R, BH, BW):
+        acc = _ring_sum(x_ptr + base, i, j, h, w, G, R, BH, BW, False)
+    else:
+        acc = _ring_sum(x_ptr + base, i, j, h, w, G, R, BH, BW, True)
     inside = (i < h) & (j < w)
     c = tl.where(inside, _ring_count(i, j, h, w, G, R), 0)
     cf = c.to(tl.float64) * tl.load(scale_ptr + c, mask=inside, other=1.0)
@@ -185,6 +209,101 @@ def _os_kernel(
         cut = tl.where(at_inf, float("inf"), lo.to(tl.float32, bitcast=True))
         count = tl.sum((cell & (ring <= cut[:, None])).to(tl.int32), axis=1)
         tl.store(mask_ptr + q, (at_zero & (count >= rank)).to(tl.int8), mask=live)
+
+
+@triton.jit
+def _deviation_sums(
+    ptr,
+    i,
+    j,
+    h,
+    w,
+    shift,
+    rect_ptr,
+    t0,
+    t1,
+    BH: tl.constexpr,
+    BW: tl.constexpr,
+    MOMENTS: tl.constexpr,
+    MASKED: tl.constexpr,
+):
+    """``sum(x - shift)`` and ``sum((x - shift)^2)`` over the rectangles ``t0 .. t1 - 1`` of
+    the table around every pixel of the tile, cell by cell in float64 (only in-image cells
+    where ``MASKED``)."""
+    s1 = tl.zeros([BH, BW], dtype=tl.float64)
+    s2 = tl.zeros([BH, BW], dtype=tl.float64)
+    for t in range(t0, t1):
+        a0 = tl.load(rect_ptr + 4 * t)
+        a1 = tl.load(rect_ptr + 4 * t + 1)
+        b0 = tl.load(rect_ptr + 4 * t + 2)
+        b1 = tl.load(rect_ptr + 4 * t + 3)
+        for a in range(a0, a1 + 1):
+            ii = i + a
+            rows = (ii >= 0) & (ii < h)
+            for b in range(b0, b1 + 1):
+                jj = j + b
+                if MASKED:
+                    m = rows & (jj >= 0) & (jj < w)
+                    v = tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
+                    d = tl.where(m, v - shift, 0.0)
+                else:
+                    d = tl.load(ptr + ii * w + jj).to(tl.float64) - shift
+                s1 += d
+                if MOMENTS >= 2:
+                    s2 += d * d
+    return s1, s2
+
+
+@triton.jit
+def _region_sums_kernel(
+    x_ptr,
+    shift_ptr,
+    rect_ptr,
+    start_ptr,
+    s1_ptr,
+    s2_ptr,
+    planes,
+    h,
+    w,
+    r0,
+    rr,
+    regions,
+    pad,
+    MOMENTS: tl.constexpr,
+    BH: tl.constexpr,
+    BW: tl.constexpr,
+):
+    pid = tl.program_id(0)
+    nbh = tl.cdiv(rr, BH)
+    nbw = tl.cdiv(w, BW)
+    plane = pid // (nbh * nbw)
+    tile = pid % (nbh * nbw)
+    k0 = (tile // nbw) * BH
+    i0 = r0 + k0
+    col0 = (tile % nbw) * BW
+    k = k0 + tl.arange(0, BH)[:, None]  # rows within the strip
+    i = r0 + k
+    j = col0 + tl.arange(0, BW)[None, :]
+    inside = (k < rr) & (j < w)
+    ptr = x_ptr + plane.to(tl.int64) * h * w
+    shift = tl.load(shift_ptr + plane)
+    # every window inside the image and the tile inside the strip: no masks to form
+    full = _interior(i0, col0, h, w, pad, BH, BW) & (k0 + BH <= rr)
+    for q in range(0, regions):
+        t0 = tl.load(start_ptr + q)
+        t1 = tl.load(start_ptr + q + 1)
+        if full:
+            s1, s2 = _deviation_sums(
+                ptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, False
+            )
+        else:
+            s1, s2 = _deviation_sums(
+                ptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, True
+            )
+        out = ((q * planes + plane).to(tl.int64) * rr + k) * w + j
+        tl.store(s1_ptr + out, s1, mask=inside)
+        if MOMENTS >= 2:
+            tl.store(s2_ptr + out, s2, mask=inside)
 
 
 def _planes(x: Tensor) -> Tensor:
@@ -289,3 +408,49 @@ def os_decision(
 ) -> Tensor:
     """OS-CFAR's mask alone, by counting (the arguments of :func:`os_ratio`)."""
     return _os_launch(x, offsets, ranks, scale, threshold, statistic=False)[1]
+
+
+def region_sums(
+    x: Tensor,
+    regions: list[list[tuple[int, int, int, int]]],
+    r: int,
+    rr: int,
+    shift: Tensor,
+    moments: int,
+) -> tuple[Tensor, Tensor | None]:
+    """Window sums of the float32 image ``x`` ``(B, C, H, W)`` for output rows ``r .. r + rr
+    - 1``: for each region (a list of disjoint rectangles ``(r0, r1, c0, c1)`` of offsets,
+    inclusive), ``s1 = sum(x - shift)`` and (``moments >= 2``) ``s2 = sum((x - shift)^2)``
+    over its in-image cells, each cell added directly in float64 in a fixed order (no
+    integral image, no subtraction of overlapping windows); ``shift`` is float64 ``(B, C, 1,
+    1)``. Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without)."""
+    b, c, h, w = x.shape
+    planes = x.detach().reshape(-1, h, w).contiguous()
+    shape = (len(regions), b, c, rr, w)
+    s1 = torch.empty(shape, dtype=torch.float64, device=x.device)
+    s2 = torch.empty(shape, dtype=torch.float64, device=x.device) if moments >= 2 else None
+    rects = [rect for region in regions for rect in region]
+    starts = np.cumsum([0] + [len(region) for region in regions])
+    if s1.numel():
+        bh, bw = _CA_TILE
+        grid = (planes.shape[0] * triton.cdiv(rr, bh) * triton.cdiv(w, bw),)
+        _region_sums_kernel[grid](
+            planes,
+            shift.reshape(-1).to(torch.float64).contiguous(),
+            _table(np.asarray(rects).reshape(-1), torch.int32, x.device),
+            _table(starts, torch.int32, x.device),
+            s1,
+            s1 if s2 is None else s2,  # not written with one moment
+            planes.shape[0],
+            h,
+            w,
+            r,
+            rr,
+            len(regions),
+            max(max(abs(v) for v in rect) for rect in rects),
+            MOMENTS=moments,
+            BH=bh,
+            BW=bw,
+            enable_fp_fusion=False,
+        )
+    return s1, s2

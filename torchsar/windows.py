@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
+from torchsar import _jit, _triton
 from torchsar._checks import check_int, check_window_fits
 
 __all__ = [
@@ -310,6 +310,10 @@ def _strip_sums(
 ) -> list[Sums]:
     """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
     h, w = x.shape[-2:]
+    if vmask is None and _triton.for_tensor(x):
+        sums = _gpu_strip_sums(x, rects, r, rr, shift, moments)
+        if sums is not None:
+            return sums
     if _jit.for_tensor(x):
         return _compiled_strip_sums(x, rects, r, rr, pad, shift, vmask, moments)
     buf = _strip_buffer(x, r, rr, pad, shift)
@@ -378,6 +382,49 @@ def _compiled_strip_sums(
         count = _region_count(rect, h, w, r, rr, x.device) if vmask is None else cnt[q]
         out.append(Sums(count, s1[q], s2[q] if moments >= 2 else None, shift))
     return out
+
+
+def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
+    """The region as disjoint rectangles ``(r0, r1, c0, c1)`` to add cell by cell: a single
+    rectangle as it is, one rectangle minus one inside it (a ring) as the up to four bands
+    around the hole (above, below, left, right); ``None`` for other regions.
+
+    Examples:
+        >>> disjoint_rects(Ring(1, 2).region)
+        [(-3, -2, -3, 3), (2, 3, -3, 3), (-1, 1, -3, -2), (-1, 1, 2, 3)]
+    """
+    if len(region.plus) != 1 or len(region.minus) > 1:
+        return None
+    (p,) = region.plus
+    if not region.minus:
+        return [(p.r0, p.r1, p.c0, p.c1)]
+    (m,) = region.minus
+    if not (p.r0 <= m.r0 <= m.r1 <= p.r1 and p.c0 <= m.c0 <= m.c1 <= p.c1):
+        return None
+    bands = [
+        (p.r0, m.r0 - 1, p.c0, p.c1),
+        (m.r1 + 1, p.r1, p.c0, p.c1),
+        (m.r0, m.r1, p.c0, m.c0 - 1),
+        (m.r0, m.r1, m.c1 + 1, p.c1),
+    ]
+    return [b for b in bands if b[0] <= b[1] and b[2] <= b[3]]
+
+
+def _gpu_strip_sums(
+    x: Tensor, rects: tuple[Region, ...], r: int, rr: int, shift: Tensor, moments: int
+) -> list[Sums] | None:
+    """:func:`_strip_sums` without no-data by the Triton kernel
+    (:func:`torchsar._gpu_kernels.region_sums`: every window cell added directly in
+    float64), or ``None`` when a region is not a rectangle or a ring."""
+    parts = [disjoint_rects(reg) for reg in rects]
+    if any(p is None for p in parts):
+        return None
+    h, w = x.shape[-2:]
+    s1, s2 = _triton.kernels().region_sums(x, parts, r, rr, shift, moments)
+    return [
+        Sums(_region_count(reg, h, w, r, rr, x.device), s1[q], None if s2 is None else s2[q], shift)
+        for q, reg in enumerate(rects)
+    ]
 
 
 _STRIP_ELEMENTS = 1 << 17  # float64 strip rows of ~1 MB per image stay cache-resident

@@ -29,6 +29,24 @@ RING_RATIO = {
     "BH": "constexpr",
     "BW": "constexpr",
 }
+REGION_SUMS = {
+    "x_ptr": "*fp32",
+    "shift_ptr": "*fp64",
+    "rect_ptr": "*i32",
+    "start_ptr": "*i32",
+    "s1_ptr": "*fp64",
+    "s2_ptr": "*fp64",
+    "planes": "i32",
+    "h": "i32",
+    "w": "i32",
+    "r0": "i32",
+    "rr": "i32",
+    "regions": "i32",
+    "pad": "i32",
+    "MOMENTS": "constexpr",
+    "BH": "constexpr",
+    "BW": "constexpr",
+}
 OS = {
     "x_ptr": "*fp32",
     "dr_ptr": "*i32",
@@ -51,6 +69,11 @@ OS = {
 def main() -> None:
     bh, bw = gk._CA_TILE
     variants = [("ring_ratio", gk._ring_ratio_kernel, RING_RATIO, {"BH": bh, "BW": bw})]
+    for moments in (1, 2):
+        consts = {"MOMENTS": moments, "BH": bh, "BW": bw}
+        variants.append(
+            (f"region_sums MOMENTS={moments}", gk._region_sums_kernel, REGION_SUMS, consts)
+        )
     for npad in (64, 256):
         for stat in (True, False):
             block = max(1, gk._OS_CELLS // npad)

@@ -86,7 +86,9 @@ def test_ca_kernel_is_the_exactly_summed_statistic(guard, train):
     assert torch.equal(mask, stat > thr) and mask.any()
 
 
-@pytest.mark.parametrize("shape", [(1, 1, 11, 11), (2, 1, 17, 130), (1, 2, 40, 9)])
+# (1, 1, 40, 150): tiles of 16 x 64 whose windows lie inside (the unmasked loads) beside
+# border tiles
+@pytest.mark.parametrize("shape", [(1, 1, 11, 11), (1, 1, 40, 150), (1, 2, 40, 9)])
 def test_ca_kernel_is_the_cpu_kernel_to_an_ulp(shape):
     """Images as small as the window, wider and taller than a tile, and narrow: the CPU's
     statistic to a float32 ulp; masks equal but at pixels that close to the threshold."""
@@ -265,4 +267,121 @@ def test_the_kernels_compile_for_a_hopper_gpu(tmp_path):
         pytest.skip("this triton ships no ptxas")
     assert run.returncode == 0, run.stderr[-2000:]
     lines = run.stdout.splitlines()
-    assert len(lines) == 5 and all(" ok " in line for line in lines), run.stdout
+    assert len(lines) == 7 and all(" ok " in line for line in lines), run.stdout
+
+
+def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
+    """``sum(x - shift)`` and ``sum((x - shift)^2)`` over the in-image cells of the union of
+    ``rects`` around every pixel of ``x`` ``(P, H, W)``, summed exactly (``math.fsum``)."""
+    import math
+
+    p_, h, w = x.shape
+    s1, s2 = np.zeros(x.shape), np.zeros(x.shape)
+    for p in range(p_):
+        for i in range(h):
+            for j in range(w):
+                d = [
+                    float(x[p, i + a, j + b]) - shift[p]
+                    for r0, r1, c0, c1 in rects
+                    for a in range(r0, r1 + 1)
+                    for b in range(c0, c1 + 1)
+                    if 0 <= i + a < h and 0 <= j + b < w
+                ]
+                s1[p, i, j] = math.fsum(d)
+                s2[p, i, j] = math.fsum(v * v for v in d)
+    return s1, s2
+
+
+@pytest.mark.parametrize(
+    "shape, r, rr",
+    [((2, 1, 23, 31), 0, 23), ((2, 1, 23, 31), 5, 7), ((2, 1, 23, 31), 20, 3)]
+    + [((1, 1, 40, 140), 0, 40)],  # interior tiles (unmasked loads) beside border ones
+)
+def test_region_sums_are_the_exactly_summed_windows(shape, r, rr):
+    """A ring, a box and a pinwheel block, for a strip of rows: every cell added directly in
+    float64, so within a few float64 ulps of the sums of the window (relative to the sum of
+    absolute deviations)."""
+    from torchsar.windows import Rect, Region, disjoint_rects, pinwheel_rects
+
+    x = _scene(8, shape=shape)
+    h, w = shape[-2:]
+    shift = x.double().mean(dim=(-2, -1), keepdim=True)
+    regions = [Ring(1, 2).region, Region((Rect.box(2),)), Region((pinwheel_rects(1, 2)[1],))]
+    parts = [disjoint_rects(reg) for reg in regions]
+    s1, s2 = _kernels().region_sums(x.to(DEVICE), parts, r, rr, shift.to(DEVICE), moments=2)
+    assert s1.shape == s2.shape == (3, shape[0], 1, rr, w)
+    flat = x.reshape(-1, h, w).double().numpy()
+    for q, rects in enumerate(parts):
+        want1, want2 = _exact_sums(flat, rects, shift.reshape(-1).numpy())
+        got1 = s1[q].cpu().reshape(-1, rr, w).numpy()
+        got2 = s2[q].cpu().reshape(-1, rr, w).numpy()
+        scale = np.abs(want1[:, r : r + rr]).max() + want2[:, r : r + rr].max()
+        np.testing.assert_allclose(got1, want1[:, r : r + rr], rtol=0, atol=1e-13 * scale)
+        np.testing.assert_allclose(got2, want2[:, r : r + rr], rtol=1e-13, atol=1e-13 * scale)
+
+
+@pytest.mark.parametrize("guard, train", [(0, 1), (2, 4), (1, 3)])
+def test_disjoint_rects_cover_the_ring_once(guard, train):
+    from torchsar.windows import Rect, Region, disjoint_rects
+
+    ring = Ring(guard, train)
+    cells = [
+        (a, b)
+        for r0, r1, c0, c1 in disjoint_rects(ring.region)
+        for a in range(r0, r1 + 1)
+        for b in range(c0, c1 + 1)
+    ]
+    assert len(cells) == len(set(cells)) == ring.n
+    assert set(cells) == {tuple(o) for o in ring.offsets().tolist()}
+    assert disjoint_rects(Region((Rect.box(2),))) == [(-2, 2, -2, 2)]
+    two = Region((Rect.box(1), Rect(3, 4, 0, 0)))
+    outside = Region((Rect.box(1),), (Rect(1, 2, 0, 0),))
+    assert disjoint_rects(two) is None and disjoint_rects(outside) is None
+
+
+WINDOW_CFARS = ["ca", "two_parameter", "go", "so", "vi", "lognormal", "weibull", "gamma", "k"]
+
+
+@pytest.fixture
+def sums_through_triton(monkeypatch):
+    """Every window sum through the Triton kernel (the numba kernels off, so the speckle
+    filters and CFARs take the tensor code's windows, as on a GPU)."""
+    from torchsar import _jit
+
+    monkeypatch.setattr(_jit, "ENABLED", False)
+    calls = []
+    kernels = _kernels()
+    fn = kernels.region_sums
+
+    def spy(*args, **kwargs):
+        calls.append(1)
+        return fn(*args, **kwargs)
+
+    monkeypatch.setattr(kernels, "region_sums", spy)
+    monkeypatch.setattr(
+        _triton, "for_tensor", lambda t: t.dtype == torch.float32 and not t.requires_grad
+    )
+    return calls
+
+
+def test_window_statistics_through_the_kernel(sums_through_triton, monkeypatch):
+    """The window CFARs and speckle filters on the kernel's sums: the CPU's results to the
+    device tests' tolerances (statistics 1e-5 relative, K 2e-3; masks up to near-ties;
+    speckle filters 1e-4)."""
+    x = _scene(9, shape=(1, 2, 24, 30))
+    got = {n: getattr(ts.cfar, n)(x.to(DEVICE)) for n in WINDOW_CFARS}
+    filtered = {n: f(x.to(DEVICE)) for n, f in ts.speckle.FILTERS.items()}
+    assert len(sums_through_triton) >= len(WINDOW_CFARS) + len(filtered) - 2  # Frost: shells
+    monkeypatch.setattr(_triton, "for_tensor", lambda t: False)
+    for name, d in got.items():
+        want = getattr(ts.cfar, name)(x)
+        rtol = 2e-3 if name == "k" else 1e-5
+        ws, gs = want.statistic.double(), d.statistic.cpu().double()
+        fin = torch.isfinite(ws)
+        assert torch.equal(torch.isfinite(gs), fin), name
+        assert torch.allclose(gs[fin], ws[fin], rtol=rtol, atol=1e-8), name
+        near = (ws - want.threshold.double()).abs() <= rtol * want.threshold.double().abs()
+        assert not ((d.mask.cpu() != want.mask) & ~near).any(), name
+    for name, out in filtered.items():
+        want = ts.speckle.FILTERS[name](x)
+        assert torch.allclose(out.cpu(), want, rtol=1e-4, atol=1e-6 * float(want.max())), name
