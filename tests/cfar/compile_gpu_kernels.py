@@ -1,21 +1,13 @@
 """Compile torchsar's Triton kernels to machine code for a Hopper GPU (sm_90: H100, H200)
 without one: Triton's own compiler and the ptxas it ships, no driver. Run as a script by
 ``test_gpu_kernels.py`` (its own process: the test process runs the kernels in Triton's
-interpreter, which must not be on here); prints one line per kernel and variant."""
+interpreter, which must not be on here); prints one line per kernel and variant. Importing
+this file does nothing (the test run's doctest collection imports it)."""
 
 from __future__ import annotations
 
 import os
 
-os.environ.pop("TRITON_INTERPRET", None)
-
-import triton  # before the kernels: they then stay compiled
-from triton.backends.compiler import GPUTarget
-from triton.compiler import ASTSource
-
-from torchsar import _gpu_kernels as gk
-
-TARGET = GPUTarget("cuda", 90, 32)
 RING_RATIO = {
     "x_ptr": "*fp32",
     "scale_ptr": "*fp64",
@@ -67,6 +59,14 @@ OS = {
 
 
 def main() -> None:
+    os.environ.pop("TRITON_INTERPRET", None)
+    import triton  # before the kernels: they then stay compiled
+    from triton.backends.compiler import GPUTarget
+    from triton.compiler import ASTSource
+
+    from torchsar import _gpu_kernels as gk
+
+    target = GPUTarget("cuda", 90, 32)
     bh, bw = gk._CA_TILE
     variants = [("ring_ratio", gk._ring_ratio_kernel, RING_RATIO, {"BH": bh, "BW": bw})]
     for moments in (1, 2):
@@ -80,7 +80,7 @@ def main() -> None:
             consts = {"NP": npad, "BLOCK": block, "STAT": stat}
             variants.append((f"os NP={npad} STAT={stat}", gk._os_kernel, OS, consts))
     for name, fn, signature, constexprs in variants:
-        kernel = triton.compile(ASTSource(fn, signature, constexprs), target=TARGET)
+        kernel = triton.compile(ASTSource(fn, signature, constexprs), target=target)
         print(name, "ok", len(kernel.asm["cubin"]), "bytes of sm_90 code")
 
 

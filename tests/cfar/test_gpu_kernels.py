@@ -294,8 +294,12 @@ def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
 
 @pytest.mark.parametrize(
     "shape, r, rr",
-    [((2, 1, 23, 31), 0, 23), ((2, 1, 23, 31), 5, 7), ((2, 1, 23, 31), 20, 3)]
-    + [((1, 1, 40, 140), 0, 40)],  # interior tiles (unmasked loads) beside border ones
+    [
+        ((2, 1, 23, 31), 0, 23),
+        ((2, 1, 23, 31), 5, 7),
+        ((2, 1, 23, 31), 20, 3),
+        ((1, 1, 40, 140), 0, 40),  # interior tiles (unmasked loads) beside border ones
+    ],
 )
 def test_region_sums_are_the_exactly_summed_windows(shape, r, rr):
     """A ring, a box and a pinwheel block, for a strip of rows: every cell added directly in
