@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import sys
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -310,8 +311,20 @@ def _planes(x: Tensor) -> Tensor:
     return x.detach().reshape(-1, *x.shape[-2:]).contiguous()
 
 
-def _table(values: np.ndarray, dtype: torch.dtype, device: torch.device) -> Tensor:
-    return torch.as_tensor(values, dtype=dtype).to(device)
+def _table(values, dtype: torch.dtype, device: torch.device) -> Tensor:
+    """A small lookup table on the device, copied there once per content (the tables
+    depend only on the window geometry, the image size and the options)."""
+    flat = np.ascontiguousarray(np.asarray(values).reshape(-1), dtype=_NUMPY[dtype])
+    return _device_table(flat.tobytes(), dtype, str(device))
+
+
+_NUMPY = {torch.int32: np.int32, torch.float64: np.float64}
+
+
+@lru_cache(maxsize=256)
+def _device_table(data: bytes, dtype: torch.dtype, device: str) -> Tensor:
+    host = torch.from_numpy(np.frombuffer(data, dtype=_NUMPY[dtype]).copy())
+    return host.to(device)
 
 
 def ring_ratio(
@@ -356,17 +369,17 @@ def _os_launch(
     h, w = planes.shape[-2:]
     n = offsets.shape[0]
     npad = triton.next_power_of_2(n)
-    dr = torch.zeros(npad, dtype=torch.int32)
-    dc = torch.zeros(npad, dtype=torch.int32)
-    dr[:n], dc[:n] = offsets[:, 0].to(torch.int32), offsets[:, 1].to(torch.int32)
+    dr = np.zeros(npad, dtype=np.int32)
+    dc = np.zeros(npad, dtype=np.int32)
+    dr[:n], dc[:n] = offsets[:, 0].numpy(), offsets[:, 1].numpy()
     out = torch.empty_like(planes) if statistic else None
     mask = torch.empty(planes.shape, dtype=torch.bool, device=planes.device)
     if planes.numel():
         block = max(1, _OS_CELLS // npad)
         _os_kernel[(triton.cdiv(planes.numel(), block),)](
             planes,
-            dr.to(x.device),
-            dc.to(x.device),
+            _table(dr, torch.int32, x.device),
+            _table(dc, torch.int32, x.device),
             _table(ranks, torch.int32, x.device),
             _table(scale, torch.float64, x.device),
             threshold.reshape(1).to(torch.float32),
@@ -437,7 +450,7 @@ def region_sums(
         _region_sums_kernel[grid](
             planes,
             shift.reshape(-1).to(torch.float64).contiguous(),
-            _table(np.asarray(rects).reshape(-1), torch.int32, x.device),
+            _table(rects, torch.int32, x.device),
             _table(starts, torch.int32, x.device),
             s1,
             s1 if s2 is None else s2,  # not written with one moment
