@@ -261,7 +261,7 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
             _block_sums(mid, 0, train, (0, o + g + 1), w, acc, True)  # left, right
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             for j in range(w):
-                v = np.float64(xi[j]) * cf[j] / acc[j]
+                v = np.float64(xi[j]) * cf[j] / (acc[j] + 0.0)  # a ring of -0.0 is 0
                 oi[j] = v if v == v else 0.0
                 mi[j] = oi[j] > thr
 

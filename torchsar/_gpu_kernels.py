@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import sys
+from contextlib import contextmanager
 from functools import lru_cache
 
 import numpy as np
@@ -46,7 +47,6 @@ __all__ = ["os_decision", "os_ratio", "region_sums", "ring_ratio"]
 
 
 _CA_TILE = (16, 64)  # rows x columns of pixels per program
-_OS_CELLS = 8192  # pixels x padded ring cells held per program
 
 
 @triton.jit
@@ -147,7 +147,94 @@ def _os_statistic(i_val, x, scale):
 
 
 @triton.jit
-def _os_kernel(
+def _os_cutoff(i_val, scale, thr, BH: tl.constexpr, BW: tl.constexpr):
+    """The largest float32 ``c >= 0`` whose statistic passes (``+inf`` when every value's
+    does), by bisection on the bit patterns of non-negative float32 values (``g(lo)`` true,
+    ``g(hi)`` false); and whether ``g(0)`` passes (if not, no value does)."""
+    at_zero = _os_statistic(i_val, tl.zeros([BH, BW], tl.float32), scale) > thr
+    at_inf = _os_statistic(i_val, tl.full([BH, BW], float("inf"), tl.float32), scale) > thr
+    lo = tl.zeros([BH, BW], tl.int32)
+    hi = tl.full([BH, BW], 0x7F800000, tl.int32)
+    for _ in range(31):
+        mid = lo + (hi - lo) // 2
+        g = _os_statistic(i_val, mid.to(tl.float32, bitcast=True), scale) > thr
+        lo = tl.where(g, mid, lo)
+        hi = tl.where(g, hi, mid)
+    return tl.where(at_inf, float("inf"), lo.to(tl.float32, bitcast=True)), at_zero
+
+
+@triton.jit
+def _count_cells(count, ptr, ii, rows, j, w, b0, b1, radius, cut, MASKED: tl.constexpr):
+    """``count`` plus the number of in-image cells of row ``ii`` at column offsets ``b0 -
+    radius .. b1 - 1 - radius`` at or below ``cut``."""
+    for b in range(b0, b1):
+        jj = j + (b - radius)
+        if MASKED:
+            m = rows & (jj >= 0) & (jj < w)
+            v = tl.load(ptr + ii * w + jj, mask=m, other=0.0)
+            count += (m & (v <= cut)).to(tl.int32)
+        else:
+            count += (tl.load(ptr + ii * w + jj) <= cut).to(tl.int32)
+    return count
+
+
+@triton.jit
+def _ring_count_below(
+    ptr, i, j, h, w, G, R, cut, BH: tl.constexpr, BW: tl.constexpr, MASKED: tl.constexpr
+):
+    """How many in-image ring cells around each pixel of the tile lie at or below ``cut``."""
+    count = tl.zeros([BH, BW], dtype=tl.int32)
+    for a in range(0, 2 * R + 1):
+        ii = i + (a - R)
+        rows = (ii >= 0) & (ii < h)
+        if (a < R - G) | (a > R + G):  # above or below the guard box: the window's whole row
+            count = _count_cells(count, ptr, ii, rows, j, w, 0, 2 * R + 1, R, cut, MASKED)
+        else:  # beside it: left, then right
+            count = _count_cells(count, ptr, ii, rows, j, w, 0, R - G, R, cut, MASKED)
+            count = _count_cells(count, ptr, ii, rows, j, w, R + G + 1, 2 * R + 1, R, cut, MASKED)
+    return count
+
+
+@triton.jit
+def _os_decision_kernel(
+    x_ptr,
+    ranks_ptr,
+    scale_ptr,
+    thr_ptr,
+    mask_ptr,
+    h,
+    w,
+    G,
+    R,
+    BH: tl.constexpr,
+    BW: tl.constexpr,
+):
+    pid = tl.program_id(0)
+    nbh = tl.cdiv(h, BH)
+    nbw = tl.cdiv(w, BW)
+    plane = pid // (nbh * nbw)
+    tile = pid % (nbh * nbw)
+    row0 = (tile // nbw) * BH
+    col0 = (tile % nbw) * BW
+    i = row0 + tl.arange(0, BH)[:, None]
+    j = col0 + tl.arange(0, BW)[None, :]
+    inside = (i < h) & (j < w)
+    ptr = x_ptr + plane.to(tl.int64) * h * w
+    n = tl.where(inside, _ring_count(i, j, h, w, G, R), 0)
+    rank = tl.load(ranks_ptr + n, mask=inside, other=1)
+    scale = tl.load(scale_ptr + n, mask=inside, other=1.0)
+    i_val = tl.load(ptr + i * w + j, mask=inside, other=0.0).to(tl.float64)
+    cut, at_zero = _os_cutoff(i_val, scale, tl.load(thr_ptr), BH, BW)
+    if _interior(row0, col0, h, w, R, BH, BW):
+        count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, False)
+    else:
+        count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, True)
+    detected = (at_zero & (count >= rank)).to(tl.int8)
+    tl.store(mask_ptr + plane.to(tl.int64) * h * w + i * w + j, detected, mask=inside)
+
+
+@triton.jit
+def _os_ratio_kernel(
     x_ptr,
     dr_ptr,
     dc_ptr,
@@ -158,58 +245,48 @@ def _os_kernel(
     mask_ptr,
     h,
     w,
-    total,
-    N,
+    G,
+    R,
     NP: tl.constexpr,
-    BLOCK: tl.constexpr,
-    STAT: tl.constexpr,
+    BH: tl.constexpr,
+    BW: tl.constexpr,
 ):
-    q = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
-    live = q < total
-    plane = q // (h * w)
-    rem = q % (h * w)
-    i = (rem // w).to(tl.int32)
-    j = (rem % w).to(tl.int32)
+    # a tile of BH x BW pixels as one vector of BLOCK pixels, row by row
+    BLOCK: tl.constexpr = BH * BW
+    pid = tl.program_id(0)
+    nbh = tl.cdiv(h, BH)
+    nbw = tl.cdiv(w, BW)
+    plane = pid // (nbh * nbw)
+    tile = pid % (nbh * nbw)
+    p = tl.arange(0, BLOCK)
+    i = (tile // nbw) * BH + p // BW
+    j = (tile % nbw) * BW + p % BW
+    live = (i < h) & (j < w)
+    ptr = x_ptr + plane.to(tl.int64) * h * w
+    # the ring held ring-major (cells x pixels: loads run along the row), NaN where a cell
+    # is outside the image or padding (NaN is at or below nothing: never counted)
     k = tl.arange(0, NP)
-    dr = tl.load(dr_ptr + k)
-    dc = tl.load(dc_ptr + k)
-    ii = i[:, None] + dr[None, :]
-    jj = j[:, None] + dc[None, :]
-    cell = live[:, None] & (k < N)[None, :] & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
-    ring = tl.load(x_ptr + (plane * h * w)[:, None] + ii * w + jj, mask=cell, other=0.0)
-    ring = ring + 0.0  # -0.0 as +0.0: the bit patterns below order non-negative values
-    n = tl.sum(cell.to(tl.int32), axis=1)
+    ii = i[None, :] + tl.load(dr_ptr + k)[:, None]
+    jj = j[None, :] + tl.load(dc_ptr + k)[:, None]
+    cell = (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w) & live[None, :]
+    ring = tl.load(ptr + ii * w + jj, mask=cell, other=float("nan"))
+    n = tl.where(live, _ring_count(i, j, h, w, G, R), 0)
     rank = tl.load(ranks_ptr + n, mask=live, other=1)
+    # the smallest float32 v with count(ring <= v) >= rank: count(hi) >= rank > count(lo)
+    lo = tl.full([BLOCK], -1, tl.int32)
+    hi = tl.full([BLOCK], 0x7F7FFFFF, tl.int32)  # the largest finite float32
+    for _ in range(31):
+        mid = lo + (hi - lo) // 2
+        below = ring <= mid.to(tl.float32, bitcast=True)[None, :]
+        enough = tl.sum(below.to(tl.int32), axis=0) >= rank
+        hi = tl.where(enough, mid, hi)
+        lo = tl.where(enough, lo, mid)
     scale = tl.load(scale_ptr + n, mask=live, other=1.0)
-    thr = tl.load(thr_ptr)
-    i_val = tl.load(x_ptr + q, mask=live, other=0.0).to(tl.float64)
-    if STAT:
-        # smallest float32 v with count(ring <= v) >= rank: count(hi) >= rank > count(lo)
-        lo = tl.full([BLOCK], -1, tl.int32)
-        hi = tl.full([BLOCK], 0x7F7FFFFF, tl.int32)  # the largest finite float32
-        for _ in range(31):
-            mid = lo + (hi - lo) // 2
-            below = cell & (ring <= mid.to(tl.float32, bitcast=True)[:, None])
-            enough = tl.sum(below.to(tl.int32), axis=1) >= rank
-            hi = tl.where(enough, mid, hi)
-            lo = tl.where(enough, lo, mid)
-        stat = _os_statistic(i_val, hi.to(tl.float32, bitcast=True), scale)
-        tl.store(out_ptr + q, stat, mask=live)
-        tl.store(mask_ptr + q, (stat > thr).to(tl.int8), mask=live)
-    else:
-        # largest float32 c with g(c) true: g(lo) true, g(hi) false (+inf: checked apart)
-        at_zero = _os_statistic(i_val, tl.zeros([BLOCK], tl.float32), scale) > thr
-        at_inf = _os_statistic(i_val, tl.full([BLOCK], float("inf"), tl.float32), scale) > thr
-        lo = tl.zeros([BLOCK], tl.int32)
-        hi = tl.full([BLOCK], 0x7F800000, tl.int32)
-        for _ in range(31):
-            mid = lo + (hi - lo) // 2
-            g = _os_statistic(i_val, mid.to(tl.float32, bitcast=True), scale) > thr
-            lo = tl.where(g, mid, lo)
-            hi = tl.where(g, hi, mid)
-        cut = tl.where(at_inf, float("inf"), lo.to(tl.float32, bitcast=True))
-        count = tl.sum((cell & (ring <= cut[:, None])).to(tl.int32), axis=1)
-        tl.store(mask_ptr + q, (at_zero & (count >= rank)).to(tl.int8), mask=live)
+    i_val = tl.load(ptr + i * w + j, mask=live, other=0.0).to(tl.float64)
+    stat = _os_statistic(i_val, hi.to(tl.float32, bitcast=True), scale)
+    at = plane.to(tl.int64) * h * w + i * w + j
+    tl.store(out_ptr + at, stat, mask=live)
+    tl.store(mask_ptr + at, (stat > tl.load(thr_ptr)).to(tl.int8), mask=live)
 
 
 @triton.jit
@@ -340,87 +417,129 @@ def ring_ratio(
     if planes.numel():
         bh, bw = _CA_TILE
         grid = (p * triton.cdiv(h, bh) * triton.cdiv(w, bw),)
-        _ring_ratio_kernel[grid](
-            planes,
-            _table(scale, torch.float64, x.device),
-            threshold.reshape(1).to(torch.float32),
-            out,
-            mask.view(torch.int8),
-            h,
-            w,
-            G=guard,
-            R=guard + train,
-            BH=bh,
-            BW=bw,
-            enable_fp_fusion=False,  # no fused multiply-adds: IEEE operations as written
-        )
+        with _on(x):
+            _ring_ratio_kernel[grid](
+                planes,
+                _table(scale, torch.float64, x.device),
+                threshold.reshape(1).to(torch.float32),
+                out,
+                mask.view(torch.int8),
+                h,
+                w,
+                G=guard,
+                R=guard + train,
+                BH=bh,
+                BW=bw,
+                enable_fp_fusion=False,  # no fused multiply-adds: IEEE operations as written
+            )
     return out.view(x.shape), mask.view(x.shape)
 
 
-def _os_launch(
-    x: Tensor,
-    offsets: Tensor,
-    ranks: np.ndarray,
-    scale: np.ndarray,
-    threshold: Tensor,
-    statistic: bool,
-) -> tuple[Tensor | None, Tensor]:
-    planes = _planes(x)
-    h, w = planes.shape[-2:]
-    n = offsets.shape[0]
-    npad = triton.next_power_of_2(n)
-    dr = np.zeros(npad, dtype=np.int32)
-    dc = np.zeros(npad, dtype=np.int32)
-    dr[:n], dc[:n] = offsets[:, 0].numpy(), offsets[:, 1].numpy()
-    out = torch.empty_like(planes) if statistic else None
-    mask = torch.empty(planes.shape, dtype=torch.bool, device=planes.device)
-    if planes.numel():
-        block = max(1, _OS_CELLS // npad)
-        _os_kernel[(triton.cdiv(planes.numel(), block),)](
-            planes,
-            _table(dr, torch.int32, x.device),
-            _table(dc, torch.int32, x.device),
-            _table(ranks, torch.int32, x.device),
-            _table(scale, torch.float64, x.device),
-            threshold.reshape(1).to(torch.float32),
-            out if statistic else mask,  # not written without the statistic
-            mask.view(torch.int8),
-            h,
-            w,
-            planes.numel(),
-            N=n,
-            NP=npad,
-            BLOCK=block,
-            STAT=statistic,
-            enable_fp_fusion=False,
-        )
-    return (None if out is None else out.view(x.shape)), mask.view(x.shape)
+_REGION_WARPS = 8
+_OS_TILE = (8, 64)  # rows x columns of pixels per program of the decision
+_OS_DECISION_WARPS = 8
+_OS_TILE_CELLS = 8192  # ring cells x pixels held per program of the statistic
+
+
+def os_ratio_launch(npad: int) -> tuple[int, int, int]:
+    """Tile rows, tile columns and warps of :func:`os_ratio` for a ring padded to ``npad``
+    cells: on a GPU at most 32 pixels of a row (one warp across them) and
+    ``_OS_TILE_CELLS`` cells, about 32 ring values per thread; in Triton's interpreter
+    (whose cost is per program, not per lane) tiles of 8 x 64 pixels."""
+    if not torch.cuda.is_available():
+        return 8, 64, 1
+    bw = max(1, min(32, _OS_TILE_CELLS // npad))
+    return 1, bw, max(1, min(8, npad * bw // 1024))
+
+
+@contextmanager
+def _on(x: Tensor):
+    """Launch on ``x``'s GPU (Triton launches on the current device)."""
+    if x.is_cuda:
+        with torch.cuda.device(x.device):
+            yield
+    else:
+        yield
 
 
 def os_ratio(
     x: Tensor,
+    ring: tuple[int, int],
     offsets: Tensor,
     ranks: np.ndarray,
     scale: np.ndarray,
     threshold: Tensor,
 ) -> tuple[Tensor, Tensor]:
     """OS-CFAR's statistic ``I / x_(r)`` (exact order statistic, border rule) and mask of
-    the float32 image ``x``: ``offsets`` ``(N, 2)`` are the ring's cells, ``ranks`` and
-    ``scale`` (length ``N + 1``) the rank and border factor of each ring count."""
-    out, mask = _os_launch(x, offsets, ranks, scale, threshold, statistic=True)
-    assert out is not None
-    return out, mask
+    the float32 image ``x``: ``ring`` is ``(guard, train)``, ``offsets`` ``(N, 2)`` its
+    cells, ``ranks`` and ``scale`` (length ``N + 1``) the rank and border factor of each
+    ring count."""
+    planes = _planes(x)
+    p, h, w = planes.shape
+    out = torch.empty_like(planes)
+    mask = torch.empty(planes.shape, dtype=torch.bool, device=planes.device)
+    n = offsets.shape[0]
+    npad = triton.next_power_of_2(n)
+    dr = np.zeros(npad, dtype=np.int32)
+    dc = np.full(npad, -(1 << 30), dtype=np.int32)  # padding: far outside every image
+    dr[:n], dc[:n] = offsets[:, 0].numpy(), offsets[:, 1].numpy()
+    if planes.numel():
+        bh, bw, warps = os_ratio_launch(npad)
+        with _on(x):
+            _os_ratio_kernel[(p * triton.cdiv(h, bh) * triton.cdiv(w, bw),)](
+                planes,
+                _table(dr, torch.int32, x.device),
+                _table(dc, torch.int32, x.device),
+                _table(ranks, torch.int32, x.device),
+                _table(scale, torch.float64, x.device),
+                threshold.reshape(1).to(torch.float32),
+                out,
+                mask.view(torch.int8),
+                h,
+                w,
+                ring[0],
+                ring[0] + ring[1],
+                NP=npad,
+                BH=bh,
+                BW=bw,
+                num_warps=warps,
+                enable_fp_fusion=False,
+            )
+    return out.view(x.shape), mask.view(x.shape)
 
 
 def os_decision(
     x: Tensor,
+    ring: tuple[int, int],
     offsets: Tensor,
     ranks: np.ndarray,
     scale: np.ndarray,
     threshold: Tensor,
 ) -> Tensor:
-    """OS-CFAR's mask alone, by counting (the arguments of :func:`os_ratio`)."""
-    return _os_launch(x, offsets, ranks, scale, threshold, statistic=False)[1]
+    """OS-CFAR's mask alone, by counting (the arguments of :func:`os_ratio`; ``offsets``
+    is not needed: the ring is walked row by row)."""
+    planes = _planes(x)
+    p, h, w = planes.shape
+    mask = torch.empty(planes.shape, dtype=torch.bool, device=planes.device)
+    if planes.numel():
+        bh, bw = _OS_TILE
+        with _on(x):
+            _os_decision_kernel[(p * triton.cdiv(h, bh) * triton.cdiv(w, bw),)](
+                planes,
+                _table(ranks, torch.int32, x.device),
+                _table(scale, torch.float64, x.device),
+                threshold.reshape(1).to(torch.float32),
+                mask.view(torch.int8),
+                h,
+                w,
+                ring[0],
+                ring[0] + ring[1],
+                BH=bh,
+                BW=bw,
+                num_warps=_OS_DECISION_WARPS,
+                enable_fp_fusion=False,
+            )
+    return mask.view(x.shape)
 
 
 def region_sums(
@@ -447,23 +566,24 @@ def region_sums(
     if s1.numel():
         bh, bw = _CA_TILE
         grid = (planes.shape[0] * triton.cdiv(rr, bh) * triton.cdiv(w, bw),)
-        _region_sums_kernel[grid](
-            planes,
-            shift.reshape(-1).to(torch.float64).contiguous(),
-            _table(rects, torch.int32, x.device),
-            _table(starts, torch.int32, x.device),
-            s1,
-            s1 if s2 is None else s2,  # not written with one moment
-            planes.shape[0],
-            h,
-            w,
-            r,
-            rr,
-            len(regions),
-            max(max(abs(v) for v in rect) for rect in rects),
-            MOMENTS=moments,
-            BH=bh,
-            BW=bw,
-            enable_fp_fusion=False,
-        )
+        with _on(x):
+            _region_sums_kernel[grid](
+                planes,
+                shift.reshape(-1).to(torch.float64).contiguous(),
+                _table(rects, torch.int32, x.device),
+                _table(starts, torch.int32, x.device),
+                s1,
+                s1 if s2 is None else s2,  # not written with one moment
+                planes.shape[0],
+                h,
+                w,
+                r,
+                rr,
+                len(regions),
+                max(max(abs(v) for v in rect) for rect in rects),
+                MOMENTS=moments,
+                BH=bh,
+                BW=bw,
+                enable_fp_fusion=False,
+            )
     return s1, s2

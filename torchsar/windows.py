@@ -439,6 +439,18 @@ def _strip_rows(x: Tensor, pad: int, strip: int | None) -> int:
     return max(1, min(h, max(16, _STRIP_ELEMENTS // (w + 2 * pad + 1))))
 
 
+_GPU_STRIP_ELEMENTS = 1 << 24  # float64 sums per region and moment per strip: 128 MB
+
+
+def _gpu_strip_rows(x: Tensor) -> int:
+    """Rows per strip where the Triton kernel sums the windows: as many as keep each float64
+    sum plane of the strip within ``_GPU_STRIP_ELEMENTS`` (a whole 1024^2 image, a quarter
+    of a batch of 64 of them): fewer launches. The kernel sums every pixel's window on its
+    own, so the strips do not change a value."""
+    b, c, h, w = x.shape
+    return max(16, min(h, _GPU_STRIP_ELEMENTS // max(1, b * c * w)))
+
+
 def windowed(
     x: Tensor,
     rects: Sequence[Rect | Region],
@@ -480,6 +492,8 @@ def windowed(
     shift = _image_mean(x, vmask)
     pad = _pad_for(regions)
     rows = _strip_rows(x, pad, strip)
+    if strip is None and vmask is None and _triton.for_tensor(x):
+        rows = _gpu_strip_rows(x)
     outs: list[Tensor] = []
     single = False
     for r in range(0, max(h, 1), rows):

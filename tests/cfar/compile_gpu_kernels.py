@@ -7,6 +7,10 @@ this file does nothing (the test run's doctest collection imports it)."""
 from __future__ import annotations
 
 import os
+import re
+import subprocess
+import tempfile
+from pathlib import Path
 
 RING_RATIO = {
     "x_ptr": "*fp32",
@@ -39,7 +43,7 @@ REGION_SUMS = {
     "BH": "constexpr",
     "BW": "constexpr",
 }
-OS = {
+OS_RATIO = {
     "x_ptr": "*fp32",
     "dr_ptr": "*i32",
     "dc_ptr": "*i32",
@@ -50,12 +54,57 @@ OS = {
     "mask_ptr": "*i8",
     "h": "i32",
     "w": "i32",
-    "total": "i64",
-    "N": "i32",
+    "G": "i32",
+    "R": "i32",
     "NP": "constexpr",
-    "BLOCK": "constexpr",
-    "STAT": "constexpr",
+    "BH": "constexpr",
+    "BW": "constexpr",
 }
+OS_DECISION = {
+    "x_ptr": "*fp32",
+    "ranks_ptr": "*i32",
+    "scale_ptr": "*fp64",
+    "thr_ptr": "*fp32",
+    "mask_ptr": "*i8",
+    "h": "i32",
+    "w": "i32",
+    "G": "i32",
+    "R": "i32",
+    "BH": "constexpr",
+    "BW": "constexpr",
+}
+
+
+def _ptxas() -> Path | None:
+    """A ptxas that reads the PTX this Triton writes (its bundled newest one), for the
+    register and spill counts."""
+    import triton
+
+    folder = Path(triton.__file__).parent / "backends" / "nvidia" / "bin"
+    for name in ("ptxas-blackwell", "ptxas"):
+        if (folder / name).is_file():
+            return folder / name
+    return None
+
+
+def _resources(ptx: str) -> str:
+    """``registers=R spills=S`` of the sm_90a build of ``ptx`` (empty when no ptxas can)."""
+    ptxas = _ptxas()
+    if ptxas is None:
+        return ""
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "kernel.ptx"
+        src.write_text(ptx)
+        run = subprocess.run(
+            [str(ptxas), "-arch=sm_90a", "-v", str(src), "-o", str(Path(tmp) / "kernel.cubin")],
+            capture_output=True,
+            text=True,
+        )
+    regs = re.search(r"Used (\d+) registers", run.stderr)
+    spills = re.findall(r"(\d+) bytes spill stores", run.stderr)
+    if run.returncode or regs is None:
+        return ""
+    return f"registers={regs.group(1)} spills={sum(int(v) for v in spills)}"
 
 
 def main() -> None:
@@ -68,20 +117,28 @@ def main() -> None:
 
     target = GPUTarget("cuda", 90, 32)
     bh, bw = gk._CA_TILE
-    variants = [("ring_ratio", gk._ring_ratio_kernel, RING_RATIO, {"BH": bh, "BW": bw})]
+    variants = [("ring_ratio", gk._ring_ratio_kernel, RING_RATIO, {"BH": bh, "BW": bw}, 4)]
     for moments in (1, 2):
         consts = {"MOMENTS": moments, "BH": bh, "BW": bw}
-        variants.append(
-            (f"region_sums MOMENTS={moments}", gk._region_sums_kernel, REGION_SUMS, consts)
+        name = f"region_sums MOMENTS={moments}"
+        variants.append((name, gk._region_sums_kernel, REGION_SUMS, consts, gk._REGION_WARPS))
+    decision = dict(zip(("BH", "BW"), gk._OS_TILE, strict=True))
+    warps = gk._OS_DECISION_WARPS
+    variants.append(("os_decision", gk._os_decision_kernel, OS_DECISION, decision, warps))
+    for npad in (16, 64, 256):
+        bw = max(1, min(32, gk._OS_TILE_CELLS // npad))  # as os_ratio_launch on a GPU
+        warps = max(1, min(8, npad * bw // 1024))
+        consts = {"NP": npad, "BH": 1, "BW": bw}
+        variants.append((f"os_ratio NP={npad}", gk._os_ratio_kernel, OS_RATIO, consts, warps))
+    for name, fn, signature, constexprs, warps in variants:
+        options = {"num_warps": warps, "enable_fp_fusion": False}  # as the launches
+        kernel = triton.compile(
+            ASTSource(fn, signature, constexprs), target=target, options=options
         )
-    for npad in (64, 256):
-        for stat in (True, False):
-            block = max(1, gk._OS_CELLS // npad)
-            consts = {"NP": npad, "BLOCK": block, "STAT": stat}
-            variants.append((f"os NP={npad} STAT={stat}", gk._os_kernel, OS, consts))
-    for name, fn, signature, constexprs in variants:
-        kernel = triton.compile(ASTSource(fn, signature, constexprs), target=target)
-        print(name, "ok", len(kernel.asm["cubin"]), "bytes of sm_90 code")
+        fma = len(re.findall(r"\bfma\.", kernel.asm["ptx"]))
+        print(
+            name, "ok", len(kernel.asm["cubin"]), f"bytes fma={fma}", _resources(kernel.asm["ptx"])
+        )
 
 
 if __name__ == "__main__":

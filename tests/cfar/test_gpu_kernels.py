@@ -8,6 +8,7 @@ checks them there.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from functools import partial
@@ -128,7 +129,8 @@ def _os(x: torch.Tensor, guard: int, train: int, rank: int, pfa: float = 1e-3):
 
 
 @pytest.mark.parametrize(
-    "guard, train, rank", [(1, 2, None), (1, 2, 1), (1, 2, 40), (0, 3, 20), (2, 1, 7)]
+    "guard, train, rank",
+    [(1, 2, None), (1, 2, 1), (1, 2, 40), (0, 3, 20), (2, 1, 7), (2, 4, None)],  # N = 144
 )
 @pytest.mark.parametrize("make", [_scene, _ties])
 def test_os_kernels_are_the_sorted_reference(guard, train, rank, make):
@@ -171,7 +173,7 @@ def test_os_kernels_with_a_border_scale():
     factor, thr, tables = _os(x, 2, 2, 20, pfa=1e-6)
     stat, mask = _kernels().os_ratio(x.to(DEVICE), *tables, thr.to(DEVICE))
     want = os_reference(x.numpy(), 2, 2, 20, factor)
-    assert (tables[2] != 1).sum() > 5
+    assert (tables[3] != 1).sum() > 5
     assert np.array_equal(stat.cpu().numpy(), want)
     assert torch.equal(
         _kernels().os_decision(x.to(DEVICE), *tables, thr.to(DEVICE)).cpu(), mask.cpu()
@@ -252,7 +254,8 @@ def test_the_kernels_are_used_on_cuda_float32_only(monkeypatch):
 def test_the_kernels_compile_for_a_hopper_gpu(tmp_path):
     """Triton compiles every kernel variant to sm_90 machine code (H100, H200) on this
     machine, GPU or not (its compiler and bundled ptxas; no driver): what the interpreter
-    cannot check (types, constructs the compiler refuses) is checked here."""
+    cannot check (types, constructs the compiler refuses, register spills) is checked
+    here."""
     repo = Path(__file__).resolve().parents[2]
     env = {k: v for k, v in os.environ.items() if k != "TRITON_INTERPRET"}
     env |= {"TRITON_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(repo)}
@@ -268,6 +271,11 @@ def test_the_kernels_compile_for_a_hopper_gpu(tmp_path):
     assert run.returncode == 0, run.stderr[-2000:]
     lines = run.stdout.splitlines()
     assert len(lines) == 7 and all(" ok " in line for line in lines), run.stdout
+    # compiled as launched: no fused multiply-adds (IEEE operations as written), and where
+    # ptxas reports them, at most a few bytes spilled (the float64 division's call frame)
+    assert all(" fma=0 " in line for line in lines), run.stdout
+    spills = [int(v) for v in re.findall(r"spills=(\d+)", run.stdout)]
+    assert all(v <= 32 for v in spills), run.stdout
 
 
 def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
@@ -389,3 +397,51 @@ def test_window_statistics_through_the_kernel(sums_through_triton, monkeypatch):
     for name, out in filtered.items():
         want = ts.speckle.FILTERS[name](x)
         assert torch.allclose(out.cpu(), want, rtol=1e-4, atol=1e-6 * float(want.max())), name
+
+
+def test_negative_zero_is_zero_on_every_path(monkeypatch):
+    """``-0.0`` passes the input checks; a ring of ``-0.0`` around a bright cell is a ring of
+    zeros on every path (compiled CPU kernels, tensor code, Triton kernels): ``+inf``, the
+    same statistic and mask, not ``-inf`` from dividing by a signed zero."""
+    from torchsar import _jit
+
+    x = torch.ones(1, 1, 12, 12)
+    x[..., 2:10, 2:10] = -0.0
+    x[..., 6, 6] = 5.0
+    opts = {"guard": 1, "train": 1}
+    runs = {}
+    for name, numba, gpu in [
+        ("numba", True, False),
+        ("tensor", False, False),
+        ("triton", True, True),
+    ]:
+        monkeypatch.setattr(_jit, "ENABLED", numba)
+        monkeypatch.setattr(
+            _triton, "for_tensor", lambda t, on=gpu: on and t.dtype == torch.float32
+        )
+        xd = x.to(DEVICE) if gpu else x
+        runs[name] = {
+            "ca": ts.cfar.ca(xd, **opts),
+            "os": ts.cfar.os(xd, rank=4, **opts),
+            "os_mask": ts.cfar.os_mask(xd, rank=4, **opts),
+        }
+    for name, run in runs.items():
+        for det in ("ca", "os"):
+            stat = run[det].statistic.cpu()
+            assert stat[0, 0, 6, 6] == float("inf"), (name, det)
+            assert torch.equal(stat, runs["numba"][det].statistic), (name, det)
+            assert torch.equal(run[det].mask.cpu(), runs["numba"][det].mask), (name, det)
+        assert torch.equal(run["os_mask"].cpu(), runs["numba"]["os"].mask), name
+
+
+def test_strips_of_any_height_give_the_same_values(sums_through_triton, monkeypatch):
+    """Where the kernel sums the windows, the strips are sized by the batch (few launches);
+    each window is summed on its own, so any strip height gives the same statistic."""
+    from torchsar import windows
+
+    x = _scene(10, shape=(2, 1, 40, 33))
+    whole = ts.cfar.vi(x.to(DEVICE)).statistic.cpu()
+    assert windows._gpu_strip_rows(x) == 40
+    monkeypatch.setattr(windows, "_GPU_STRIP_ELEMENTS", 7 * 33)  # strips of 16 rows
+    assert windows._gpu_strip_rows(x) == 16
+    assert torch.equal(ts.cfar.vi(x.to(DEVICE)).statistic.cpu(), whole)

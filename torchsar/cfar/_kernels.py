@@ -37,8 +37,9 @@ def _mean(s1, count, shift):
 
 @njit(**_JIT, inline="always")
 def _ratio(num, den):
-    """:func:`torchsar.cfar.core.ratio` of one cell (``0 / 0 = 0``, never NaN)."""
-    q = num / den
+    """:func:`torchsar.cfar.core.ratio` of one cell (``0 / 0 = 0``, never NaN; a ``-0.0``
+    denominator is zero: ``den + 0.0`` is ``+0.0``)."""
+    q = num / (den + 0.0)
     return 0.0 if q != q else q
 
 

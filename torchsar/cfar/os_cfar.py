@@ -86,7 +86,8 @@ def os(
     counts = _ring_counts(x, ring, vmask)
     ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=r)).long()
     est = ring_order_statistic(x, ring, ranks, valid=vmask)
-    stat = ratio(x.to(torch.float64), est.to(torch.float64))
+    # ``+ 0.0``: an order statistic of -0.0 is zero (``I / 0 = +inf``, as on every path)
+    stat = ratio(x.to(torch.float64), est.to(torch.float64).add_(0.0))
     rescale_border_(stat, counts, ring.n, factor)
     stat = finish(stat, counts, out_dtype(x))
     return conclude(stat, vmask, factor(ring.n))
@@ -132,11 +133,12 @@ def os_mask(
 
 def _gpu_tables(
     x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]
-) -> tuple[Tensor, np.ndarray, np.ndarray]:
-    """The ring's cells ``(N, 2)``, and the rank and border factor of each ring count
-    (length ``N + 1``) of the Triton kernels."""
+) -> tuple[tuple[int, int], Tensor, np.ndarray, np.ndarray]:
+    """The Triton kernels' description of the ring: ``(guard, train)``, its cells ``(N,
+    2)``, and the rank and border factor of each ring count (length ``N + 1``)."""
     ranks = np.array([os_rank(n, ring.n, rank) for n in range(ring.n + 1)], dtype=np.int32)
-    return ring.offsets(), ranks, geometric_scale(*x.shape[-2:], ring, factor)
+    scale = geometric_scale(*x.shape[-2:], ring, factor)
+    return (ring.guard, ring.train), ring.offsets(), ranks, scale
 
 
 def os_threshold(*, guard: int, train: int, pfa: float, rank: int | None) -> float:
