@@ -49,6 +49,7 @@ def warm() -> float:
         for mask in (None, valid):
             for detector in window:
                 detector(x, valid=mask)
+        cfar.os_mask(x)  # the counting decision (float32)
         for name in ("lee", "enhanced_lee", "frost", "enhanced_frost"):
             speckle.FILTERS[name](x, window=3)
         region_cfar(x)

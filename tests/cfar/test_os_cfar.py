@@ -4,6 +4,7 @@ factor, the border rank rule."""
 from __future__ import annotations
 
 import importlib.util
+from functools import partial
 
 import numpy as np
 import pytest
@@ -153,3 +154,72 @@ def test_compiled_path_equals_the_torch_path(guard, train, rank):
             _jit.ENABLED = old
         assert torch.equal(a.statistic, b.statistic) and torch.equal(a.mask, b.mask)
         assert torch.equal(a.threshold, b.threshold)
+
+
+def _adversarial(seed: int, shape=(2, 2, 33, 47)) -> torch.Tensor:
+    """Exponential clutter, a bright target, zero patches (with ``-0.0``), subnormal and
+    huge values, and small integers (many equal values and exact ratio ties)."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.empty(shape).exponential_(generator=g)
+    x[0, 0, 5:9, 5:9] *= 80.0
+    x[0, 1, 8:20, 8:20] = -0.0
+    x[0, 1, 14, 14] = 2.0
+    x[1, 0] = torch.randint(0, 4, shape[-2:], generator=g).float()
+    x[1, 1, :10] = 1e-44  # subnormal
+    x[1, 1, -10:] = 3e38
+    return x
+
+
+@pytest.mark.parametrize(
+    ("guard", "train", "rank"), [(2, 4, None), (1, 2, 1), (1, 2, 24), (0, 3, 9)]
+)
+@pytest.mark.parametrize("pfa", [1e-1, 1e-3, 1e-6])
+def test_os_mask_by_counting_is_the_mask_of_os(guard, train, rank, pfa):
+    """``os_mask`` counts the ring below the largest passing value instead of forming the
+    order statistic: exactly ``os(...).mask``, borders, ties, zeros and extremes included."""
+    x = _adversarial(guard * 10 + train)
+    want = ts.cfar.os(x, guard=guard, train=train, rank=rank, pfa=pfa).mask
+    got = ts.cfar.os_mask(x, guard=guard, train=train, rank=rank, pfa=pfa)
+    assert got.dtype == torch.bool and torch.equal(got, want) and want.any()
+
+
+@pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed")
+@pytest.mark.parametrize("thr", [0.0, -0.0, -1.0, 1e-45, 0.5, 2.0, 3.0, 1e38, float("inf")])
+def test_the_counting_kernel_decides_as_the_statistic_at_any_threshold(thr):
+    """The compiled counting decision against the compiled statistic over the same float32
+    threshold: zero, negative, tiny, exact-tie, huge and infinite thresholds (the bisection
+    and the guess's neighbourhood both)."""
+    from torchsar.cfar import _kernels
+    from torchsar.cfar.core import geometric_scale
+    from torchsar.cfar.os_cfar import _factor, _geometry
+    from torchsar.order_statistics import ring_order_statistic
+    from torchsar.windows import Ring
+
+    x = _adversarial(7, shape=(2, 2, 21, 26))
+    ring, rank = Ring(1, 2), 12
+    h, w = x.shape[-2:]
+    counts, ranks = _geometry(h, w, ring, rank)
+    scale = geometric_scale(h, w, ring, partial(_factor, n_full=ring.n, rank=rank, pfa=1e-3))
+    planes = x.reshape(-1, h, w).contiguous()
+    est = ring_order_statistic(x, ring, ranks).reshape(-1, h, w)
+    stat = np.empty(planes.shape, dtype=np.float32)
+    _kernels.os_ratio(planes.numpy(), est.numpy(), counts, ring.n, scale, stat)
+    got = np.empty(planes.shape, dtype=np.bool_)
+    t = np.float32(thr)
+    _kernels.os_decision(
+        planes.numpy(), ring.outer, ring.guard, counts, ranks.numpy(), scale, t, got
+    )
+    assert np.array_equal(got, stat > t)
+    if thr in (2.0, 3.0):
+        assert (stat == t).any()  # exact ties are there
+
+
+def test_os_mask_keeps_the_other_paths():
+    """float64 images and a ``valid`` mask take ``os(...).mask``; bad input is refused with
+    os_mask's name."""
+    x = _adversarial(3)
+    valid = torch.ones_like(x, dtype=torch.bool)
+    valid[..., :5, :] = False
+    assert torch.equal(ts.cfar.os_mask(x, valid=valid), ts.cfar.os(x, valid=valid).mask)
+    assert torch.equal(ts.cfar.os_mask(x.double()), ts.cfar.os(x.double()).mask)
+    assert ts.cfar.os_mask(torch.empty(0, 1, 16, 16)).shape == (0, 1, 16, 16)

@@ -17,6 +17,7 @@ from numba import njit
 __all__ = [
     "block_extreme_ratio",
     "counts_present",
+    "os_decision",
     "os_ratio",
     "ring_mean_ratio_masked",
     "vi_rule_ratio",
@@ -185,3 +186,103 @@ def os_ratio(x, est, count, n, scale, out):
                 if c != n:
                     stat = stat * scale[c]
                 out[p, i, j] = stat
+
+
+@njit(**_JIT, inline="always")
+def _os_passes(i_val, c, s, thr):
+    """Whether a ring order statistic ``c`` (float32) makes the pixel ``i_val`` a
+    detection: :func:`os_ratio`'s statistic ``f32((I / c) * s) > thr``."""
+    q = _ratio(i_val, np.float64(c))
+    return np.float32(q * s) > thr
+
+
+@njit(**_JIT)
+def _os_cutoff_search(i_val, s, thr, cell):
+    """The largest float32 ``c >= 0`` with :func:`_os_passes` (``+inf`` if every value
+    passes) and whether any does, by bisection on the bit patterns of non-negative float32
+    values (``cell``: a float32 array of one element, ``cell.view(int32)`` its bits)."""
+    bits = cell.view(np.int32)
+    cell[0] = np.float32(0.0)
+    if not _os_passes(i_val, cell[0], s, thr):
+        return np.float32(0.0), False
+    cell[0] = np.float32(np.inf)
+    if _os_passes(i_val, cell[0], s, thr):
+        return cell[0], True
+    lo, hi = 0, 0x7F800000  # passes at lo, not at hi
+    while hi - lo > 1:
+        mid = lo + (hi - lo) // 2
+        bits[0] = mid
+        if _os_passes(i_val, cell[0], s, thr):
+            lo = mid
+        else:
+            hi = mid
+    bits[0] = lo
+    return cell[0], True
+
+
+@njit(**_JIT, inline="always")
+def _os_cutoff_near(i_val, s, thr, guess, cell):
+    """:func:`_os_cutoff_search` from a positive finite ``guess`` (the rounded ``I s /
+    thr``, within an ulp or two of the answer): the boundary found among the two float32
+    values on each side of it, else by the bisection."""
+    bits = cell.view(np.int32)
+    cell[0] = guess
+    start = bits[0]
+    bits[0] = start - 2
+    passes = _os_passes(i_val, cell[0], s, thr)
+    if passes:  # passes two below the guess: look up to two above
+        for k in range(-1, 3):
+            bits[0] = start + k
+            if not _os_passes(i_val, cell[0], s, thr):
+                bits[0] = start + k - 1
+                return cell[0], True
+    return _os_cutoff_search(i_val, s, thr, cell)
+
+
+@njit(**_JIT)
+def os_decision(x, radius, guard, count, rank, scale, thr, out):
+    """OS-CFAR's mask without no-data and without the order statistic (float32 ``x`` ``(P,
+    H, W)`` into bool ``out``): the statistic is non-increasing in the ring's order
+    statistic, so the values that would pass are a prefix of the sorted ring, and the pixel
+    is a detection iff at least ``rank[i, j]`` ring values lie at or below the largest
+    float32 ``c`` that passes. ``c`` is the rounded ``I s / thr`` where it and the next
+    float32 bracket the boundary (checked: two evaluations), else found by bisection; then
+    the ring is counted in vectorised passes along the row. The same mask as
+    :func:`os_ratio`'s statistic over ``thr``, exactly. ``count``, ``rank``: the pixel's
+    in-image ring cells and its rank ``(H, W)``; ``scale[c]`` the border factor (1 at the
+    interior count)."""
+    p_, h, w = x.shape
+    size = 2 * radius + 1
+    pad = np.full((h + 2 * radius, w + 2 * radius), np.inf, dtype=np.float32)
+    cut = np.empty(w, dtype=np.float32)
+    anyone = np.empty(w, dtype=np.bool_)
+    every = np.empty(w, dtype=np.bool_)
+    below = np.empty(w, dtype=np.int32)
+    cell = np.empty(1, dtype=np.float32)
+    bits = cell.view(np.int32)
+    t64 = np.float64(thr)
+    fast = thr > 0.0 and thr < np.inf
+    for p in range(p_):
+        pad[radius : radius + h, radius : radius + w] = x[p]
+        for i in range(h):
+            for j in range(w):
+                iv = np.float64(x[p, i, j])
+                s = scale[count[i, j]]
+                c = np.float32(iv * s / t64) if fast else np.float32(0.0)
+                if fast and 0.0 < c < np.inf:
+                    cut[j], anyone[j] = _os_cutoff_near(iv, s, thr, c, cell)
+                else:
+                    cut[j], anyone[j] = _os_cutoff_search(iv, s, thr, cell)
+                every[j] = cut[j] == np.inf  # every value passes, the padding too
+            below[:] = 0
+            for a in range(size):
+                row = pad[i + a]
+                band = a < radius - guard or a > radius + guard
+                for b in range(size):
+                    if band or b < radius - guard or b > radius + guard:
+                        seg = row[b : b + w]
+                        for j in range(w):
+                            below[j] += seg[j] <= cut[j]
+            for j in range(w):
+                got = count[i, j] if every[j] else below[j]
+                out[p, i, j] = anyone[j] and got >= rank[i, j]

@@ -105,11 +105,12 @@ def os_mask(
     """The mask of :func:`os` alone (the same pixels exactly), for a scan that needs no
     statistic.
 
-    On a GPU (float32, no ``valid`` mask, Triton installed) no order statistic is formed: a
-    pixel is detected iff at least ``r`` of its ring values lie at or below the largest
-    value ``c`` whose statistic would pass the threshold (the passing values are a prefix of
-    the sorted ring), with ``c`` found by bisection on the bit patterns of the float32
-    values. Elsewhere it is ``os(...).mask``.
+    For float32 images without a ``valid`` mask no order statistic is formed: a pixel is
+    detected iff at least ``r`` of its ring values lie at or below the largest value ``c``
+    whose statistic would pass the threshold (the passing values are a prefix of the sorted
+    ring), and the ring is only counted (on a GPU by the Triton kernels, on the CPU by a
+    compiled kernel: about three times faster than :func:`os`). Elsewhere it is
+    ``os(...).mask``.
 
     Args:
         x, guard, train, pfa, rank, valid: as for :func:`os`.
@@ -124,11 +125,30 @@ def os_mask(
     """
     ring, checked, vmask = prepare(x, guard, train, pfa, valid, detector="os_mask")
     r = _check_rank(rank, ring)
+    factor = partial(_factor, n_full=ring.n, rank=r, pfa=checked)
     if vmask is None and _triton.for_tensor(x):
-        factor = partial(_factor, n_full=ring.n, rank=r, pfa=checked)
         thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
         return _triton.kernels().os_decision(x, *_gpu_tables(x, ring, r, factor), thr)
+    if vmask is None and x.dtype == torch.float32 and _jit.for_tensor(x) and x.numel():
+        return _compiled_decision(x, ring, r, factor)
     return os(x, guard=guard, train=train, pfa=pfa, rank=rank, valid=valid).mask
+
+
+def _compiled_decision(x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]) -> Tensor:
+    """:func:`os_mask` on the CPU by :func:`torchsar.cfar._kernels.os_decision` (counting,
+    no order statistic; float32 without no-data)."""
+    from torchsar.cfar import _kernels
+
+    h, w = x.shape[-2:]
+    counts, ranks = _geometry(h, w, ring, rank)
+    scale = geometric_scale(h, w, ring, factor)
+    planes = x.detach().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=torch.bool)
+    thr = np.float32(factor(ring.n))  # the threshold as the float32 statistic meets it
+    _kernels.os_decision(
+        planes.numpy(), ring.outer, ring.guard, counts, ranks.numpy(), scale, thr, out.numpy()
+    )
+    return out.view(x.shape)
 
 
 def _gpu_tables(
