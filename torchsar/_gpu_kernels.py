@@ -149,18 +149,40 @@ def _os_statistic(i_val, x, scale):
 @triton.jit
 def _os_cutoff(i_val, scale, thr, BH: tl.constexpr, BW: tl.constexpr):
     """The largest float32 ``c >= 0`` whose statistic passes (``+inf`` when every value's
-    does), by bisection on the bit patterns of non-negative float32 values (``g(lo)`` true,
-    ``g(hi)`` false); and whether ``g(0)`` passes (if not, no value does)."""
+    does), and whether ``g(0)`` passes (if not, no value does). The rounded ``I s / thr``
+    is within an ulp or two of ``c``: where it and its neighbours bracket the boundary
+    (``g`` true two below, false two above) ``c`` is the largest of them that passes
+    (seven evaluations of ``g``); the other pixels (zero or infinite guesses, thresholds at
+    or below zero) take a bisection on the bit patterns of non-negative float32 values,
+    run only in the tiles that have such a pixel."""
     at_zero = _os_statistic(i_val, tl.zeros([BH, BW], tl.float32), scale) > thr
     at_inf = _os_statistic(i_val, tl.full([BH, BW], float("inf"), tl.float32), scale) > thr
-    lo = tl.zeros([BH, BW], tl.int32)
-    hi = tl.full([BH, BW], 0x7F800000, tl.int32)
-    for _ in range(31):
-        mid = lo + (hi - lo) // 2
-        g = _os_statistic(i_val, mid.to(tl.float32, bitcast=True), scale) > thr
-        lo = tl.where(g, mid, lo)
-        hi = tl.where(g, hi, mid)
+    guess = (i_val * scale / thr.to(tl.float64)).to(tl.float32)
+    start = guess.to(tl.int32, bitcast=True)
+    # (the threshold as a tile: Triton's interpreter turns ``scalar bool & tile`` into ints)
+    ok = ((thr + tl.zeros_like(guess)) > 0) & (guess > 0) & (guess < float("inf")) & (start >= 2)
+    start = tl.where(ok, start, 2)
+    near = ok & _os_passes(i_val, start - 2, scale, thr)
+    near = near & (_os_passes(i_val, start + 2, scale, thr) == 0)
+    lo = start - 2
+    for k in range(-1, 2):  # the largest passing of start - 1 .. start + 1 (g is monotone)
+        lo = tl.where(near & _os_passes(i_val, start + k, scale, thr), start + k, lo)
+    if tl.sum((near == 0).to(tl.int32)) > 0:
+        slow_lo = tl.zeros([BH, BW], tl.int32)
+        slow_hi = tl.full([BH, BW], 0x7F800000, tl.int32)
+        for _ in range(31):
+            mid = slow_lo + (slow_hi - slow_lo) // 2
+            g = _os_passes(i_val, mid, scale, thr)
+            slow_lo = tl.where(g, mid, slow_lo)
+            slow_hi = tl.where(g, slow_hi, mid)
+        lo = tl.where(near, lo, slow_lo)
     return tl.where(at_inf, float("inf"), lo.to(tl.float32, bitcast=True)), at_zero
+
+
+@triton.jit
+def _os_passes(i_val, bits, scale, thr):
+    """Whether the ring value with the float32 bit pattern ``bits`` would pass."""
+    return _os_statistic(i_val, bits.to(tl.float32, bitcast=True), scale) > thr
 
 
 @triton.jit

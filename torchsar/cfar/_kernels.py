@@ -259,7 +259,6 @@ def os_decision(x, radius, guard, count, rank, scale, thr, out):
     every = np.empty(w, dtype=np.bool_)
     below = np.empty(w, dtype=np.int32)
     cell = np.empty(1, dtype=np.float32)
-    bits = cell.view(np.int32)
     t64 = np.float64(thr)
     fast = thr > 0.0 and thr < np.inf
     for p in range(p_):
