@@ -11,12 +11,20 @@ Triton runs on; the interpreter without a GPU).
   ``g(x_(r)) = f32((I / x_(r)) * scale) > threshold``, and ``g`` is non-increasing in the
   ring value ``x``, so the ring values ``x`` with ``g(x)`` true are a prefix of the sorted
   ring: the pixel is detected iff at least ``r`` ring values lie at or below the largest
-  float32 ``c`` with ``g(c)`` true. ``c`` is found by bisection on the order-preserving
-  bit patterns of non-negative float32 values (31 evaluations of ``g``), then the ring is
-  counted once: the same mask as the CPU's, exactly, by construction. Where the statistic is
-  needed, the exact ``x_(r)`` is the smallest float32 ``v`` with ``count(x <= v) >= r``,
-  found by the same bisection over the counts (31 counting passes over the ring held in
-  registers), and the statistic is then formed as on the CPU, bit for bit.
+  float32 ``c`` with ``g(c)`` true. ``c`` is the rounded ``I scale / threshold`` moved by
+  an ulp or two (checked on both sides), or, where that guess does not settle it, found by
+  bisection on the order-preserving bit patterns of non-negative float32 values; then the
+  ring is counted once, row by row: the same mask as the CPU's, exactly, by construction.
+  Where the statistic is needed, the exact ``x_(r)`` is the smallest float32 ``v`` with
+  ``count(x <= v) >= r``, found by bisection over the counts (31 counting passes over the
+  ring held in registers, cells x pixels), and the statistic is then formed as on the CPU,
+  bit for bit.
+- :func:`region_sums`: every other window statistic's sums (GO, SO, two-parameter, VI, the
+  distribution CFARs, the speckle filters' window moments): ``sum(x - shift)`` and its
+  squares over disjoint rectangles, cell by cell in float64, instead of integral images.
+
+Tiles whose windows lie inside the image load without masks. Launches run on the input's
+own GPU, with fused multiply-adds off (every operation rounded as written).
 
 The border rule of :mod:`torchsar.cfar.core` is applied as the CPU kernels apply it: the
 pixel's in-image ring count ``n`` (from its distances to the edges) selects ``scale[n]``

@@ -40,6 +40,7 @@ __all__ = [
     "Ring",
     "Sums",
     "box_sums",
+    "disjoint_rects",
     "distance_shells",
     "exp_distance_mean",
     "pinwheel_rects",
