@@ -18,7 +18,7 @@ import importlib.util
 import os
 import warnings
 
-__all__ = ["ENABLED", "enabled", "for_tensor", "kernels"]
+__all__ = ["ENABLED", "enabled", "for_tensor", "kernels", "works_on"]
 
 
 def _triton_installed() -> bool:
@@ -62,11 +62,49 @@ def enabled() -> bool:
     return kernels() is not None
 
 
+_PLANE_LIMIT = 1 << 31  # pixels of one image plane: the kernels index a plane in int32
+_WORKS: dict[str, bool] = {}
+
+
+def works_on(device) -> bool:
+    """Whether the kernels compile and run on ``device`` (tried once per device on a tiny
+    image): Triton needs a C compiler for its launcher and a driver it supports, which a
+    machine may lack; then one warning, and the tensor code from there on."""
+    key = str(device)
+    if key not in _WORKS:
+        import numpy as np
+        import torch
+
+        try:
+            x = torch.ones(1, 1, 8, 8, device=device)
+            thr = torch.tensor(1.0, device=device)
+            kernels().ring_ratio(x, 1, 1, np.ones(9), thr)[1].cpu()
+            _WORKS[key] = True
+        except Exception as exc:  # a missing compiler or driver: any failure, fall back
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            warnings.warn(
+                f"torchsar's Triton kernels do not run on {key} ({type(exc).__name__}: "
+                f"{first}); the tensor code is used there instead (the same masks up to "
+                "near-ties, slower)",
+                UserWarning,
+                stacklevel=3,
+            )
+            _WORKS[key] = False
+    return _WORKS[key]
+
+
 def for_tensor(t) -> bool:
     """Whether the Triton kernels are to be used on ``t``: a float32 CUDA tensor that needs
-    no gradient, with :func:`enabled`."""
+    no gradient, whose image planes have fewer than 2^31 pixels, with :func:`enabled` and
+    :func:`works_on` its device."""
     import torch
 
     return (
-        t.device.type == "cuda" and t.dtype == torch.float32 and not t.requires_grad and enabled()
+        t.device.type == "cuda"
+        and t.dtype == torch.float32
+        and not t.requires_grad
+        and t.dim() >= 2
+        and t.shape[-2] * t.shape[-1] < _PLANE_LIMIT
+        and enabled()
+        and works_on(t.device)
     )

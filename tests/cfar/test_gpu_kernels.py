@@ -247,6 +247,15 @@ def test_no_data_and_float64_take_the_tensor_code(through_triton):
 def test_the_kernels_are_used_on_cuda_float32_only(monkeypatch):
     cpu = torch.ones(1, 1, 8, 8)
     assert not _triton.for_tensor(cpu)
+    monkeypatch.setattr(_triton, "works_on", lambda device: True)
+    fake = torch.empty(1, 1, 8, 8, device="meta")  # device checks aside: what else decides
+    monkeypatch.setattr(torch.Tensor, "device", property(lambda t: torch.device("cuda")))
+    assert _triton.for_tensor(fake)
+    assert not _triton.for_tensor(fake.double())
+    assert not _triton.for_tensor(fake.requires_grad_())
+    huge = torch.empty(1, 1, 1 << 16, 1 << 15, device="meta")  # 2^31 pixels in a plane
+    assert not _triton.for_tensor(huge)
+    monkeypatch.undo()
     monkeypatch.setattr(_triton, "ENABLED", False)
     assert _triton.kernels() is None and not _triton.enabled()
 
@@ -445,3 +454,20 @@ def test_strips_of_any_height_give_the_same_values(sums_through_triton, monkeypa
     monkeypatch.setattr(windows, "_GPU_STRIP_ELEMENTS", 7 * 33)  # strips of 16 rows
     assert windows._gpu_strip_rows(x) == 16
     assert torch.equal(ts.cfar.vi(x.to(DEVICE)).statistic.cpu(), whole)
+
+
+def test_a_device_the_kernels_fail_on_falls_back_with_one_warning(monkeypatch):
+    """The first use on a device runs the kernels on a tiny image: where they cannot run
+    (no C compiler for Triton's launcher, an unsupported driver), one warning and the tensor
+    code from there on."""
+    monkeypatch.setattr(_triton, "_WORKS", {})
+    assert _triton.works_on(DEVICE)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("Failed to find C compiler. Please specify via CC environment")
+
+    monkeypatch.setattr(_triton, "_WORKS", {})
+    monkeypatch.setattr(_kernels(), "ring_ratio", broken)
+    with pytest.warns(UserWarning, match="do not run on .*Failed to find C compiler"):
+        assert not _triton.works_on(DEVICE)
+    assert not _triton.works_on(DEVICE)  # remembered: no second warning
