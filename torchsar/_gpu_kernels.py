@@ -614,6 +614,7 @@ def region_sums(
                 MOMENTS=moments,
                 BH=bh,
                 BW=bw,
+                num_warps=_REGION_WARPS,  # two float64 tiles: 16 values per thread
                 enable_fp_fusion=False,
             )
     return s1, s2
