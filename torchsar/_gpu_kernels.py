@@ -155,7 +155,7 @@ def _os_statistic(i_val, x, scale):
 
 
 @triton.jit
-def _os_cutoff(i_val, scale, thr, BH: tl.constexpr, BW: tl.constexpr):
+def _os_cutoff(i_val, scale, thr, inside, BH: tl.constexpr, BW: tl.constexpr):
     """The largest float32 ``c >= 0`` whose statistic passes (``+inf`` when every value's
     does), and whether ``g(0)`` passes (if not, no value does). The rounded ``I s / thr``
     is within an ulp or two of ``c``: where it and its neighbours bracket the boundary
@@ -175,7 +175,10 @@ def _os_cutoff(i_val, scale, thr, BH: tl.constexpr, BW: tl.constexpr):
     lo = start - 2
     for k in range(-1, 2):  # the largest passing of start - 1 .. start + 1 (g is monotone)
         lo = tl.where(near & _os_passes(i_val, start + k, scale, thr), start + k, lo)
-    if tl.sum((near == 0).to(tl.int32)) > 0:
+    # only pixels in the image whose answer is neither "none" (g(0) false) nor "all"
+    # (g(inf) true) and that the guess did not settle
+    unsettled = inside & at_zero & (at_inf == 0) & (near == 0)
+    if tl.sum(unsettled.to(tl.int32)) > 0:
         slow_lo = tl.zeros([BH, BW], tl.int32)
         slow_hi = tl.full([BH, BW], 0x7F800000, tl.int32)
         for _ in range(31):
@@ -254,12 +257,12 @@ def _os_decision_kernel(
     rank = tl.load(ranks_ptr + n, mask=inside, other=1)
     scale = tl.load(scale_ptr + n, mask=inside, other=1.0)
     i_val = tl.load(ptr + i * w + j, mask=inside, other=0.0).to(tl.float64)
-    cut, at_zero = _os_cutoff(i_val, scale, tl.load(thr_ptr), BH, BW)
+    cut, at_zero = _os_cutoff(i_val, scale, tl.load(thr_ptr), inside, BH, BW)
     if _interior(row0, col0, h, w, R, BH, BW):
         count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, False)
     else:
         count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, True)
-    detected = (at_zero & (count >= rank)).to(tl.int8)
+    detected = (at_zero & (rank > 0) & (count >= rank)).to(tl.int8)  # rank 0: no ring
     tl.store(mask_ptr + plane.to(tl.int64) * h * w + i * w + j, detected, mask=inside)
 
 

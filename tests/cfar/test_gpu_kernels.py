@@ -471,3 +471,14 @@ def test_a_device_the_kernels_fail_on_falls_back_with_one_warning(monkeypatch):
     with pytest.warns(UserWarning, match="do not run on .*Failed to find C compiler"):
         assert not _triton.works_on(DEVICE)
     assert not _triton.works_on(DEVICE)  # remembered: no second warning
+
+
+def test_a_pixel_without_ring_cells_is_never_detected():
+    """Called directly (the detectors refuse images smaller than the ring first): the
+    centre of a 3 x 3 image has no ring cell inside it for guard 1 (rank 0), and neither the
+    decision nor the statistic's mask detects it."""
+    x = torch.ones(1, 1, 3, 3)
+    _, _, tables = _os(x, 1, 2, 10)
+    assert tables[2][0] == 0
+    t = torch.tensor(0.5).to(DEVICE)
+    assert not _kernels().os_decision(x.to(DEVICE), *tables, t)[0, 0, 1, 1]

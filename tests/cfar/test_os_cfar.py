@@ -223,3 +223,27 @@ def test_os_mask_keeps_the_other_paths():
     assert torch.equal(ts.cfar.os_mask(x, valid=valid), ts.cfar.os(x, valid=valid).mask)
     assert torch.equal(ts.cfar.os_mask(x.double()), ts.cfar.os(x.double()).mask)
     assert ts.cfar.os_mask(torch.empty(0, 1, 16, 16)).shape == (0, 1, 16, 16)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed")
+def test_the_counting_kernel_without_ring_cells_and_with_a_float64_threshold():
+    """Called directly (``os_mask`` refuses images smaller than the ring first): a pixel
+    whose ring has no cell in the image (rank 0) is never detected, and a float64 threshold
+    is met as its float32 rounding, as the statistic meets it."""
+    from torchsar.cfar import _kernels
+
+    x = np.ones((1, 2, 2), dtype=np.float32)
+    out = np.empty(x.shape, dtype=np.bool_)
+    zeros = np.zeros((2, 2), dtype=np.int64)
+    _kernels.os_decision(x, 2, 1, zeros, zeros, np.ones(17), np.float32(0.5), out)
+    assert not out.any()
+    x = np.full((1, 5, 5), 0.1, dtype=np.float32)
+    counts = np.full((5, 5), 8, dtype=np.int64)
+    ones = np.ones((5, 5), dtype=np.int64)
+    x[0, 2, 2] = np.float32(0.1) * np.float32(0.1)  # I / x = 0.1f exactly where all are 0.1f
+    _kernels.os_decision(
+        x, 1, 0, counts, ones, np.ones(9), np.float64(0.1), out := np.empty(x.shape, np.bool_)
+    )
+    want = np.empty(x.shape, dtype=np.bool_)
+    _kernels.os_decision(x, 1, 0, counts, ones, np.ones(9), np.float32(0.1), want)
+    assert np.array_equal(out, want)

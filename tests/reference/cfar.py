@@ -79,7 +79,7 @@ def os_reference(
                 r = min(n, max(1, round(rank * n / n_full)))
                 est = kth_smallest(cells, r)
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    v = np.float64(img[i, j]) / np.float64(est)
+                    v = np.float64(img[i, j]) / (np.float64(est) + 0.0)  # -0.0 is zero
                 v = 0.0 if v != v else v
                 if n != n_full:
                     v = v * ((1.0 / factor(n)) * factor(n_full))

@@ -245,13 +245,15 @@ def os_decision(x, radius, guard, count, rank, scale, thr, out):
     H, W)`` into bool ``out``): the statistic is non-increasing in the ring's order
     statistic, so the values that would pass are a prefix of the sorted ring, and the pixel
     is a detection iff at least ``rank[i, j]`` ring values lie at or below the largest
-    float32 ``c`` that passes. ``c`` is the rounded ``I s / thr`` where it and the next
-    float32 bracket the boundary (checked: two evaluations), else found by bisection; then
-    the ring is counted in vectorised passes along the row. The same mask as
+    float32 ``c`` that passes. ``c`` is found among the two float32 values on each side of
+    the rounded ``I s / thr`` (up to five evaluations), else by bisection; then the ring is
+    counted in vectorised passes along the row (a pixel without ring cells, rank 0, is
+    never detected). The same mask as
     :func:`os_ratio`'s statistic over ``thr``, exactly. ``count``, ``rank``: the pixel's
     in-image ring cells and its rank ``(H, W)``; ``scale[c]`` the border factor (1 at the
     interior count)."""
     p_, h, w = x.shape
+    thr = np.float32(thr)  # the threshold as the float32 statistic meets it
     size = 2 * radius + 1
     pad = np.full((h + 2 * radius, w + 2 * radius), np.inf, dtype=np.float32)
     cut = np.empty(w, dtype=np.float32)
@@ -284,4 +286,4 @@ def os_decision(x, radius, guard, count, rank, scale, thr, out):
                             below[j] += seg[j] <= cut[j]
             for j in range(w):
                 got = count[i, j] if every[j] else below[j]
-                out[p, i, j] = anyone[j] and got >= rank[i, j]
+                out[p, i, j] = anyone[j] and rank[i, j] > 0 and got >= rank[i, j]
