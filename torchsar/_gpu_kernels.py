@@ -317,6 +317,7 @@ def _os_ratio_kernel(
     scale = tl.load(scale_ptr + n, mask=live, other=1.0)
     i_val = tl.load(ptr + i * w + j, mask=live, other=0.0).to(tl.float64)
     stat = _os_statistic(i_val, hi.to(tl.float32, bitcast=True), scale)
+    stat = tl.where(n > 0, stat, float("-inf"))  # no ring cell: untestable, as on the CPU
     at = plane.to(tl.int64) * h * w + i * w + j
     tl.store(out_ptr + at, stat, mask=live)
     tl.store(mask_ptr + at, (stat > tl.load(thr_ptr)).to(tl.int8), mask=live)

@@ -482,3 +482,5 @@ def test_a_pixel_without_ring_cells_is_never_detected():
     assert tables[2][0] == 0
     t = torch.tensor(0.5).to(DEVICE)
     assert not _kernels().os_decision(x.to(DEVICE), *tables, t)[0, 0, 1, 1]
+    stat, mask = _kernels().os_ratio(x.to(DEVICE), *tables, t)
+    assert stat[0, 0, 1, 1] == float("-inf") and not mask[0, 0, 1, 1]
