@@ -247,3 +247,10 @@ def test_the_counting_kernel_without_ring_cells_and_with_a_float64_threshold():
     want = np.empty(x.shape, dtype=np.bool_)
     _kernels.os_decision(x, 1, 0, counts, ones, np.ones(9), np.float32(0.1), want)
     assert np.array_equal(out, want)
+
+
+def test_a_pfa_beyond_the_float_range_is_refused_by_name():
+    """rank 1 of 144 cells at pfa 1e-320 needs alpha ~ 1.4e322: not a float64 threshold."""
+    x = torch.ones(1, 1, 16, 16)
+    with pytest.raises(OptionError, match=r"pfa=1e-320 is too small for OS-CFAR"):
+        ts.cfar.os(x, rank=1, pfa=1e-320)

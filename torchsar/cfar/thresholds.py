@@ -129,6 +129,11 @@ def os_factor(n: int, rank: int, pfa: float) -> float:
     hi = 1.0
     while log_pfa(hi) > 0:
         hi *= 2.0
+        if hi > 1e300:  # alpha(pfa) beyond what a float64 threshold can hold
+            raise OptionError(
+                f"pfa={pfa!r} is too small for OS-CFAR with rank {rank} of {n} cells: its "
+                "threshold factor exceeds the float64 range; use a larger pfa or rank"
+            )
     return float(optimize.bisect(log_pfa, 0.0, hi, xtol=1e-14 * hi, rtol=1e-15, maxiter=400))
 
 
