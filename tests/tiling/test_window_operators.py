@@ -167,3 +167,17 @@ def test_a_bad_window_read_ahead_fails_when_its_turn_comes():
         for t, _ in iter_tiles(_Recorded(x), "ca", tile=48, batch=1):  # read lazily
             seen.append(t.index)
     assert seen == order[: len(seen)] and 0 < len(seen) < len(order)
+
+
+def test_windows_are_staged_as_the_batch_they_make():
+    """On CUDA the batch is copied once, straight into page-locked memory
+    (``stack_into``): the same tensor ``to_batch`` stacks, for every dtype a scene has."""
+    from torchsar.tiling.footprint import to_batch
+    from torchsar.tiling.run import stack_into
+
+    gen = np.random.default_rng(5)
+    for dtype in (np.float32, np.float64, np.uint16):
+        windows = [(gen.random((6, 7)) * 100).astype(dtype) for _ in range(3)]
+        want = to_batch(windows, None)
+        got = stack_into(windows, torch.empty(want.shape, dtype=want.dtype))
+        assert torch.equal(got, want)

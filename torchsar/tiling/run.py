@@ -175,6 +175,15 @@ def iter_tiles(
                 yield t, {name: v[i, 0][t.inner].cpu().numpy() for name, v in out.items()}
 
 
+def stack_into(windows: list[np.ndarray], out: torch.Tensor) -> torch.Tensor:
+    """The same-shape windows copied into ``out`` ``(B, 1, H, W)`` (what
+    :func:`~torchsar.tiling.footprint.to_batch` builds, without allocating); returns
+    ``out``."""
+    for k, w in enumerate(windows):
+        out[k, 0].copy_(torch.from_numpy(w))
+    return out
+
+
 class _Staging:
     """How a batch of windows reaches the device. On the CPU (or any device but CUDA): a
     stacked tensor, moved. On CUDA: stacked into page-locked host memory and copied on a
@@ -191,7 +200,9 @@ class _Staging:
         """The batch on the device, and the event its copy records (``None``: ready)."""
         if not self.cuda:
             return to_batch(windows, self.device), None
-        host = to_batch(windows, None).pin_memory()
+        first = torch.from_numpy(windows[0])
+        host = torch.empty((len(windows), 1, *first.shape), dtype=first.dtype, pin_memory=True)
+        stack_into(windows, host)  # one host copy, straight into page-locked memory
         with torch.cuda.stream(self.stream):
             x = host.to(self.device, non_blocking=True)
             done = torch.cuda.Event()
