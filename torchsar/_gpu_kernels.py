@@ -71,34 +71,55 @@ def _ring_count(i, j, h, w, G, R):
 
 
 @triton.jit
-def _add_cells(acc, ptr, ii, rows, j, w, b0, b1, radius, MASKED: tl.constexpr):
+def _row_cells(
+    acc, ptr, ii, rows, j, w, b0, b1, radius, cut, COUNT: tl.constexpr, MASKED: tl.constexpr
+):
     """``acc`` plus the cells of row ``ii`` at column offsets ``b0 - radius .. b1 - 1 -
-    radius``, left to right, in float64: the in-image ones (``MASKED``), or all of them
-    (a tile whose windows lie inside the image: no masks to form)."""
+    radius``, left to right: their values in float64, or (``COUNT``) how many lie at or
+    below ``cut``; the in-image ones (``MASKED``), or all of them (a tile whose windows lie
+    inside the image: no masks to form)."""
     for b in range(b0, b1):
         jj = j + (b - radius)
         if MASKED:
-            v = tl.load(ptr + ii * w + jj, mask=rows & (jj >= 0) & (jj < w), other=0.0)
+            m = rows & (jj >= 0) & (jj < w)
+            v = tl.load(ptr + ii * w + jj, mask=m, other=0.0)
+            if COUNT:
+                acc += (m & (v <= cut)).to(tl.int32)
+            else:
+                acc += v.to(tl.float64)
         else:
             v = tl.load(ptr + ii * w + jj)
-        acc += v.to(tl.float64)
+            if COUNT:
+                acc += (v <= cut).to(tl.int32)
+            else:
+                acc += v.to(tl.float64)
     return acc
 
 
 @triton.jit
-def _ring_sum(ptr, i, j, h, w, G, R, BH: tl.constexpr, BW: tl.constexpr, MASKED: tl.constexpr):
-    """The ring's cells around every pixel of the tile, rows top to bottom, each row left
-    to right, in float64."""
-    acc = tl.zeros([BH, BW], dtype=tl.float64)
+def _ring_cells(acc, ptr, i, j, h, w, G, R, cut, COUNT: tl.constexpr, MASKED: tl.constexpr):
+    """:func:`_row_cells` over the ring around every pixel of the tile (``acc``: its zero
+    tile), rows top to bottom, each row left to right."""
     for a in range(0, 2 * R + 1):  # loops, not unrolled: one compiled kernel for every ring
         ii = i + (a - R)
         rows = (ii >= 0) & (ii < h)
         if (a < R - G) | (a > R + G):  # above or below the guard box: the window's whole row
-            acc = _add_cells(acc, ptr, ii, rows, j, w, 0, 2 * R + 1, R, MASKED)
+            acc = _row_cells(acc, ptr, ii, rows, j, w, 0, 2 * R + 1, R, cut, COUNT, MASKED)
         else:  # beside it: left, then right
-            acc = _add_cells(acc, ptr, ii, rows, j, w, 0, R - G, R, MASKED)
-            acc = _add_cells(acc, ptr, ii, rows, j, w, R + G + 1, 2 * R + 1, R, MASKED)
+            acc = _row_cells(acc, ptr, ii, rows, j, w, 0, R - G, R, cut, COUNT, MASKED)
+            acc = _row_cells(acc, ptr, ii, rows, j, w, R + G + 1, 2 * R + 1, R, cut, COUNT, MASKED)
     return acc
+
+
+@triton.jit
+def _tile(rows, w, BH: tl.constexpr, BW: tl.constexpr):
+    """The plane, first row and first column of this program's tile of ``BH x BW`` pixels
+    (the programs run over planes of ``rows x w`` pixels tile by tile, row-major)."""
+    pid = tl.program_id(0)
+    nbh = tl.cdiv(rows, BH)
+    nbw = tl.cdiv(w, BW)
+    tile = pid % (nbh * nbw)
+    return pid // (nbh * nbw), (tile // nbw) * BH, (tile % nbw) * BW
 
 
 @triton.jit
@@ -122,20 +143,15 @@ def _ring_ratio_kernel(
     BH: tl.constexpr,
     BW: tl.constexpr,
 ):
-    pid = tl.program_id(0)
-    nbh = tl.cdiv(h, BH)
-    nbw = tl.cdiv(w, BW)
-    plane = pid // (nbh * nbw)
-    tile = pid % (nbh * nbw)
-    row0 = (tile // nbw) * BH
-    col0 = (tile % nbw) * BW
+    plane, row0, col0 = _tile(h, w, BH, BW)
     i = row0 + tl.arange(0, BH)[:, None]
     j = col0 + tl.arange(0, BW)[None, :]
     base = plane.to(tl.int64) * h * w
+    zero = tl.zeros([BH, BW], dtype=tl.float64)
     if _interior(row0, col0, h, w, R, BH, BW):
-        acc = _ring_sum(x_ptr + base, i, j, h, w, G, R, BH, BW, False)
+        acc = _ring_cells(zero, x_ptr + base, i, j, h, w, G, R, 0.0, False, False)
     else:
-        acc = _ring_sum(x_ptr + base, i, j, h, w, G, R, BH, BW, True)
+        acc = _ring_cells(zero, x_ptr + base, i, j, h, w, G, R, 0.0, False, True)
     inside = (i < h) & (j < w)
     c = tl.where(inside, _ring_count(i, j, h, w, G, R), 0)
     cf = c.to(tl.float64) * tl.load(scale_ptr + c, mask=inside, other=1.0)
@@ -197,38 +213,6 @@ def _os_passes(i_val, bits, scale, thr):
 
 
 @triton.jit
-def _count_cells(count, ptr, ii, rows, j, w, b0, b1, radius, cut, MASKED: tl.constexpr):
-    """``count`` plus the number of in-image cells of row ``ii`` at column offsets ``b0 -
-    radius .. b1 - 1 - radius`` at or below ``cut``."""
-    for b in range(b0, b1):
-        jj = j + (b - radius)
-        if MASKED:
-            m = rows & (jj >= 0) & (jj < w)
-            v = tl.load(ptr + ii * w + jj, mask=m, other=0.0)
-            count += (m & (v <= cut)).to(tl.int32)
-        else:
-            count += (tl.load(ptr + ii * w + jj) <= cut).to(tl.int32)
-    return count
-
-
-@triton.jit
-def _ring_count_below(
-    ptr, i, j, h, w, G, R, cut, BH: tl.constexpr, BW: tl.constexpr, MASKED: tl.constexpr
-):
-    """How many in-image ring cells around each pixel of the tile lie at or below ``cut``."""
-    count = tl.zeros([BH, BW], dtype=tl.int32)
-    for a in range(0, 2 * R + 1):
-        ii = i + (a - R)
-        rows = (ii >= 0) & (ii < h)
-        if (a < R - G) | (a > R + G):  # above or below the guard box: the window's whole row
-            count = _count_cells(count, ptr, ii, rows, j, w, 0, 2 * R + 1, R, cut, MASKED)
-        else:  # beside it: left, then right
-            count = _count_cells(count, ptr, ii, rows, j, w, 0, R - G, R, cut, MASKED)
-            count = _count_cells(count, ptr, ii, rows, j, w, R + G + 1, 2 * R + 1, R, cut, MASKED)
-    return count
-
-
-@triton.jit
 def _os_decision_kernel(
     x_ptr,
     ranks_ptr,
@@ -242,13 +226,7 @@ def _os_decision_kernel(
     BH: tl.constexpr,
     BW: tl.constexpr,
 ):
-    pid = tl.program_id(0)
-    nbh = tl.cdiv(h, BH)
-    nbw = tl.cdiv(w, BW)
-    plane = pid // (nbh * nbw)
-    tile = pid % (nbh * nbw)
-    row0 = (tile // nbw) * BH
-    col0 = (tile % nbw) * BW
+    plane, row0, col0 = _tile(h, w, BH, BW)
     i = row0 + tl.arange(0, BH)[:, None]
     j = col0 + tl.arange(0, BW)[None, :]
     inside = (i < h) & (j < w)
@@ -258,10 +236,11 @@ def _os_decision_kernel(
     scale = tl.load(scale_ptr + n, mask=inside, other=1.0)
     i_val = tl.load(ptr + i * w + j, mask=inside, other=0.0).to(tl.float64)
     cut, at_zero = _os_cutoff(i_val, scale, tl.load(thr_ptr), inside, BH, BW)
+    zero = tl.zeros([BH, BW], dtype=tl.int32)
     if _interior(row0, col0, h, w, R, BH, BW):
-        count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, False)
+        count = _ring_cells(zero, ptr, i, j, h, w, G, R, cut, True, False)
     else:
-        count = _ring_count_below(ptr, i, j, h, w, G, R, cut, BH, BW, True)
+        count = _ring_cells(zero, ptr, i, j, h, w, G, R, cut, True, True)
     detected = (at_zero & (rank > 0) & (count >= rank)).to(tl.int8)  # rank 0: no ring
     tl.store(mask_ptr + plane.to(tl.int64) * h * w + i * w + j, detected, mask=inside)
 
@@ -286,14 +265,10 @@ def _os_ratio_kernel(
 ):
     # a tile of BH x BW pixels as one vector of BLOCK pixels, row by row
     BLOCK: tl.constexpr = BH * BW
-    pid = tl.program_id(0)
-    nbh = tl.cdiv(h, BH)
-    nbw = tl.cdiv(w, BW)
-    plane = pid // (nbh * nbw)
-    tile = pid % (nbh * nbw)
+    plane, row0, col0 = _tile(h, w, BH, BW)
     p = tl.arange(0, BLOCK)
-    i = (tile // nbw) * BH + p // BW
-    j = (tile % nbw) * BW + p % BW
+    i = row0 + p // BW
+    j = col0 + p % BW
     live = (i < h) & (j < w)
     ptr = x_ptr + plane.to(tl.int64) * h * w
     # the ring held ring-major (cells x pixels: loads run along the row), NaN where a cell
@@ -385,14 +360,8 @@ def _region_sums_kernel(
     BH: tl.constexpr,
     BW: tl.constexpr,
 ):
-    pid = tl.program_id(0)
-    nbh = tl.cdiv(rr, BH)
-    nbw = tl.cdiv(w, BW)
-    plane = pid // (nbh * nbw)
-    tile = pid % (nbh * nbw)
-    k0 = (tile // nbw) * BH
+    plane, k0, col0 = _tile(rr, w, BH, BW)
     i0 = r0 + k0
-    col0 = (tile % nbw) * BW
     k = k0 + tl.arange(0, BH)[:, None]  # rows within the strip
     i = r0 + k
     j = col0 + tl.arange(0, BW)[None, :]
@@ -475,12 +444,13 @@ _OS_DECISION_WARPS = 8
 _OS_TILE_CELLS = 8192  # ring cells x pixels held per program of the statistic
 
 
-def os_ratio_launch(npad: int) -> tuple[int, int, int]:
+def os_ratio_launch(npad: int, gpu: bool | None = None) -> tuple[int, int, int]:
     """Tile rows, tile columns and warps of :func:`os_ratio` for a ring padded to ``npad``
     cells: on a GPU at most 32 pixels of a row (one warp across them) and
     ``_OS_TILE_CELLS`` cells, about 32 ring values per thread; in Triton's interpreter
-    (whose cost is per program, not per lane) tiles of 8 x 64 pixels."""
-    if not torch.cuda.is_available():
+    (whose cost is per program, not per lane) tiles of 8 x 64 pixels. ``gpu``: which of
+    the two (default: whether CUDA is available)."""
+    if not (torch.cuda.is_available() if gpu is None else gpu):
         return 8, 64, 1
     bw = max(1, min(32, _OS_TILE_CELLS // npad))
     return 1, bw, max(1, min(8, npad * bw // 1024))
@@ -591,7 +561,7 @@ def region_sums(
     integral image, no subtraction of overlapping windows); ``shift`` is float64 ``(B, C, 1,
     1)``. Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without)."""
     b, c, h, w = x.shape
-    planes = x.detach().reshape(-1, h, w).contiguous()
+    planes = _planes(x)
     shape = (len(regions), b, c, rr, w)
     s1 = torch.empty(shape, dtype=torch.float64, device=x.device)
     s2 = torch.empty(shape, dtype=torch.float64, device=x.device) if moments >= 2 else None

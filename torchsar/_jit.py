@@ -26,14 +26,15 @@ import warnings
 __all__ = ["ENABLED", "enabled", "for_tensor"]
 
 
-def _numba_installed() -> bool:
+def installed(module: str) -> bool:
+    """Whether the optional package ``module`` is installed (without importing it)."""
     try:
-        return importlib.util.find_spec("numba") is not None
-    except (ImportError, ValueError):  # a broken or blocked numba counts as absent
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):  # a broken or blocked install counts as absent
         return False
 
 
-ENABLED: bool = os.environ.get("TORCHSAR_NUMBA", "1") != "0" and _numba_installed()
+ENABLED: bool = os.environ.get("TORCHSAR_NUMBA", "1") != "0" and installed("numba")
 
 
 _IMPORTS: bool | None = None

@@ -14,21 +14,15 @@ before they are first imported): the default test run compares them there with t
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import warnings
+
+from torchsar._jit import installed
 
 __all__ = ["ENABLED", "enabled", "for_tensor", "kernels", "works_on"]
 
 
-def _triton_installed() -> bool:
-    try:
-        return importlib.util.find_spec("triton") is not None
-    except (ImportError, ValueError):  # a broken or blocked install counts as absent
-        return False
-
-
-ENABLED: bool = os.environ.get("TORCHSAR_TRITON", "1") != "0" and _triton_installed()
+ENABLED: bool = os.environ.get("TORCHSAR_TRITON", "1") != "0" and installed("triton")
 
 _KERNELS: object | None = None
 _FAILED = False

@@ -12,67 +12,31 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-RING_RATIO = {
+# the kernels' pointer arguments by name; compile-time constants aside, the others are
+# 32-bit integers
+POINTERS = {
     "x_ptr": "*fp32",
-    "scale_ptr": "*fp64",
     "thr_ptr": "*fp32",
     "out_ptr": "*fp32",
     "mask_ptr": "*i8",
-    "h": "i32",
-    "w": "i32",
-    "G": "i32",
-    "R": "i32",
-    "BH": "constexpr",
-    "BW": "constexpr",
-}
-REGION_SUMS = {
-    "x_ptr": "*fp32",
+    "scale_ptr": "*fp64",
     "shift_ptr": "*fp64",
-    "rect_ptr": "*i32",
-    "start_ptr": "*i32",
     "s1_ptr": "*fp64",
     "s2_ptr": "*fp64",
-    "planes": "i32",
-    "h": "i32",
-    "w": "i32",
-    "r0": "i32",
-    "rr": "i32",
-    "regions": "i32",
-    "pad": "i32",
-    "MOMENTS": "constexpr",
-    "BH": "constexpr",
-    "BW": "constexpr",
-}
-OS_RATIO = {
-    "x_ptr": "*fp32",
+    "ranks_ptr": "*i32",
+    "rect_ptr": "*i32",
+    "start_ptr": "*i32",
     "dr_ptr": "*i32",
     "dc_ptr": "*i32",
-    "ranks_ptr": "*i32",
-    "scale_ptr": "*fp64",
-    "thr_ptr": "*fp32",
-    "out_ptr": "*fp32",
-    "mask_ptr": "*i8",
-    "h": "i32",
-    "w": "i32",
-    "G": "i32",
-    "R": "i32",
-    "NP": "constexpr",
-    "BH": "constexpr",
-    "BW": "constexpr",
 }
-OS_DECISION = {
-    "x_ptr": "*fp32",
-    "ranks_ptr": "*i32",
-    "scale_ptr": "*fp64",
-    "thr_ptr": "*fp32",
-    "mask_ptr": "*i8",
-    "h": "i32",
-    "w": "i32",
-    "G": "i32",
-    "R": "i32",
-    "BH": "constexpr",
-    "BW": "constexpr",
-}
+
+
+def _signature(kernel) -> dict[str, str]:
+    """The argument types of a Triton kernel, from its argument names."""
+    return {
+        p.name: "constexpr" if p.is_constexpr else POINTERS.get(p.name, "i32")
+        for p in kernel.params
+    }
 
 
 def _ptxas() -> Path | None:
@@ -117,23 +81,22 @@ def main() -> None:
 
     target = GPUTarget("cuda", 90, 32)
     bh, bw = gk._CA_TILE
-    variants = [("ring_ratio", gk._ring_ratio_kernel, RING_RATIO, {"BH": bh, "BW": bw}, 4)]
+    variants = [("ring_ratio", gk._ring_ratio_kernel, {"BH": bh, "BW": bw}, 4)]
     for moments in (1, 2):
         consts = {"MOMENTS": moments, "BH": bh, "BW": bw}
         name = f"region_sums MOMENTS={moments}"
-        variants.append((name, gk._region_sums_kernel, REGION_SUMS, consts, gk._REGION_WARPS))
+        variants.append((name, gk._region_sums_kernel, consts, gk._REGION_WARPS))
     decision = dict(zip(("BH", "BW"), gk._OS_TILE, strict=True))
     warps = gk._OS_DECISION_WARPS
-    variants.append(("os_decision", gk._os_decision_kernel, OS_DECISION, decision, warps))
+    variants.append(("os_decision", gk._os_decision_kernel, decision, warps))
     for npad in (16, 64, 256):
-        bw = max(1, min(32, gk._OS_TILE_CELLS // npad))  # as os_ratio_launch on a GPU
-        warps = max(1, min(8, npad * bw // 1024))
-        consts = {"NP": npad, "BH": 1, "BW": bw}
-        variants.append((f"os_ratio NP={npad}", gk._os_ratio_kernel, OS_RATIO, consts, warps))
-    for name, fn, signature, constexprs, warps in variants:
+        bh, bw, warps = gk.os_ratio_launch(npad, gpu=True)
+        consts = {"NP": npad, "BH": bh, "BW": bw}
+        variants.append((f"os_ratio NP={npad}", gk._os_ratio_kernel, consts, warps))
+    for name, fn, constexprs, warps in variants:
         options = {"num_warps": warps, "enable_fp_fusion": False}  # as the launches
         kernel = triton.compile(
-            ASTSource(fn, signature, constexprs), target=target, options=options
+            ASTSource(fn, _signature(fn), constexprs), target=target, options=options
         )
         fma = len(re.findall(r"\bfma\.", kernel.asm["ptx"]))
         print(

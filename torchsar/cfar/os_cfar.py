@@ -78,8 +78,8 @@ def os(
     r = _check_rank(rank, ring)
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
     if vmask is None and _triton.for_tensor(x):
-        thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
-        stat, mask = _triton.kernels().os_ratio(x, *_gpu_tables(x, ring, r, factor), thr)
+        *tables, thr = _gpu_args(x, ring, r, factor)
+        stat, mask = _triton.kernels().os_ratio(x, *tables, thr)
         return Detection(mask=mask, statistic=stat, threshold=thr)
     if vmask is None and _jit.for_tensor(x) and x.numel():
         return conclude(_compiled(x, ring, r, factor), None, factor(ring.n))
@@ -127,8 +127,7 @@ def os_mask(
     r = _check_rank(rank, ring)
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=checked)
     if vmask is None and _triton.for_tensor(x):
-        thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
-        return _triton.kernels().os_decision(x, *_gpu_tables(x, ring, r, factor), thr)
+        return _triton.kernels().os_decision(x, *_gpu_args(x, ring, r, factor))
     if vmask is None and x.dtype == torch.float32 and _jit.for_tensor(x) and x.numel():
         return _compiled_decision(x, ring, r, factor)
     return os(x, guard=guard, train=train, pfa=pfa, rank=rank, valid=valid).mask
@@ -159,6 +158,13 @@ def _gpu_tables(
     ranks = np.array([os_rank(n, ring.n, rank) for n in range(ring.n + 1)], dtype=np.int32)
     scale = geometric_scale(*x.shape[-2:], ring, factor)
     return (ring.guard, ring.train), ring.offsets(), ranks, scale
+
+
+def _gpu_args(x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]) -> tuple:
+    """:func:`_gpu_tables` and the threshold ``alpha(N, r)`` as the statistic's dtype on
+    ``x``'s device: the Triton kernels' arguments after the image."""
+    thr = torch.tensor(factor(ring.n), dtype=x.dtype, device=x.device)
+    return (*_gpu_tables(x, ring, rank, factor), thr)
 
 
 def os_threshold(*, guard: int, train: int, pfa: float, rank: int | None) -> float:
