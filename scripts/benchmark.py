@@ -5,8 +5,11 @@ or is a report that measures one thing at several settings and defines ``report(
 device) -> [row, ...]`` and ``format_rows(rows) -> str`` instead (``throughput``: images per
 second of the evaluator; run it by ``--topic``, with ``--n``, ``--workers`` and
 ``--device``). Each pair is timed on 1 thread, A/B interleaved (one warm-up each, then
-``--repeat`` rounds of ours, reference, ours, ...), so both see the same machine load; the
-medians of wall and CPU (thread) time are printed with the ratio ``reference / ours`` of the
+``--repeat`` rounds of ours, reference, ours, ...), so both see the same machine load; a
+call shorter than 5 ms is repeated within its round until the round lasts about 5 ms and
+timed per call, on both sides alike, so short calls are timed as a loop over many images
+runs them and not by a timer's resolution and cold caches. The medians of wall and CPU
+(thread) time are printed with the ratio ``reference / ours`` of the
 medians (> 1 means torchsar is faster). CPU time is the fairer figure on a busy host. A
 reference may be an older implementation of ours (e.g. ``region`` and ``cfar_family`` time
 the compiled numba path against the numpy/torch path it replaces, see :mod:`torchsar._jit`).
@@ -33,22 +36,35 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 
-def _timed(fn: Callable[[], object]) -> tuple[float, float]:
+ROUND_S = 0.005  # a call shorter than this is repeated within a round to about this long
+
+
+def _timed(fn: Callable[[], object], calls: int = 1) -> tuple[float, float]:
+    """Wall and CPU seconds per call of ``calls`` calls of ``fn`` in a row."""
     t0, c0 = time.perf_counter(), time.thread_time()
-    fn()
-    return time.perf_counter() - t0, time.thread_time() - c0
+    for _ in range(calls):
+        fn()
+    return (time.perf_counter() - t0) / calls, (time.thread_time() - c0) / calls
+
+
+def calls_per_round(seconds: float) -> int:
+    """How many calls of a function that took ``seconds`` make a round of about
+    :data:`ROUND_S` (at least one, at most 1000)."""
+    return max(1, min(1000, int(ROUND_S / max(seconds, 1e-9))))
 
 
 def interleaved(
     ours: Callable[[], object], ref: Callable[[], object], repeat: int
 ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Median (wall, CPU) seconds of ``ours`` and of ``ref``, run alternately ``repeat``
-    times each after one warm-up run of each."""
-    ours(), ref()
+    """Median (wall, CPU) seconds per call of ``ours`` and of ``ref``, timed alternately in
+    ``repeat`` rounds each after two warm-up runs of each (a round of a short call repeats
+    it, :func:`calls_per_round`)."""
+    ours(), ref()  # the first call may compile or load a kernel: not a measure of a call
+    calls = {"ours": calls_per_round(_timed(ours)[0]), "ref": calls_per_round(_timed(ref)[0])}
     runs: dict[str, list[tuple[float, float]]] = {"ours": [], "ref": []}
     for _ in range(repeat):
-        runs["ours"].append(_timed(ours))
-        runs["ref"].append(_timed(ref))
+        runs["ours"].append(_timed(ours, calls["ours"]))
+        runs["ref"].append(_timed(ref, calls["ref"]))
 
     def median(key: str) -> tuple[float, float]:
         return (
