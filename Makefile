@@ -31,7 +31,7 @@ $(BIN)/.ray: $(BIN)/.installed
 # CFARs calibrate their log-t factors (a few seconds, kept in ~/.cache/torchsar): pay both
 # here, once per change of a kernel file or of the calibration, instead of in the first
 # evaluation or test run.
-KERNELS := $(filter-out torchsar/_gpu_kernels.py,$(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py)) torchsar/cfar/log_t.py
+KERNELS := $(filter-out torchsar/_gpu_kernels.py,$(wildcard torchsar/*_kernels.py torchsar/*/_kernels.py)) torchsar/_block_sums.py torchsar/_vector_exp.py torchsar/cfar/log_t.py
 $(BIN)/.kernels: $(BIN)/.installed $(KERNELS) torchsar/_warm.py scripts/warm_kernels.py
 	$(BIN)/python scripts/warm_kernels.py
 	touch $@

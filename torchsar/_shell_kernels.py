@@ -3,12 +3,12 @@ coefficient of variation, each pixel's decay, and the mean weighted by ``exp(-de
 over the distance shells of the window (:func:`torchsar.windows.exp_distance_mean`'s
 definition), with no full-size temporaries.
 
-Per output row: the window moments as in :func:`torchsar._box_kernels.centred_sums`; the
+Per output row: the window moments of :func:`torchsar._moment_kernels.row_moments`; the
 sums ``S_d`` of every distance shell from vertical pair sums ``x[i - p] + x[i + p]`` and
 their horizontal pairs (the orbits ``(±p, ±q), (±q, ±p)``); the in-image cell counts
 ``n_d`` of the shells likewise; then ``(I + sum_d e_d S_d) / (1 + sum_d e_d n_d)`` with
 ``e_d = exp(-decay d)``, shells in increasing distance. ``exp`` is evaluated by
-:func:`torchsar._box_kernels.exp_neg` (vectorisable, with fused multiply-adds). Float64
+:func:`torchsar._vector_exp.exp_neg` (vectorisable, with fused multiply-adds). Float64
 throughout, cast once.
 
 Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
@@ -19,14 +19,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._box_kernels import (
-    axis_count,
-    centred_sums,
-    count_inverses,
-    exp_neg,
-    load,
-    moments,
+from torchsar._block_sums import axis_count
+from torchsar._moment_kernels import (
+    ci2_of,
+    heterogeneity,
+    moment_buffers,
+    next_row,
+    prime,
+    row_moments,
+    window_counts,
 )
+from torchsar._vector_exp import exp_neg
 
 __all__ = ["frost_filter"]
 
@@ -107,9 +110,8 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     size = 2 * radius + 1
     wp = w + 2 * radius
     n_shells = dist.shape[0]
-    cache = np.zeros((size, w))
-    work = np.zeros((4, wp))
-    t1, t2, tn = np.zeros(w), np.zeros(w), np.zeros(w)
+    cache, pad, sums = moment_buffers(radius, w)  # cache: row r in slot r % size
+    mu, var = np.zeros(w), np.zeros(w)
     cols = np.zeros(w)
     for j in range(w):
         cols[j] = axis_count(j, w, -radius, radius)
@@ -129,30 +131,22 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     e_pow = np.zeros((bases.shape[0], w))  # its power at the base's last shell
     last_m = np.zeros(bases.shape[0], np.int64)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
-    inv, cu2_over = np.zeros(w), np.zeros(w)
+    counts = np.zeros((4, w))
     for pl in range(p_):
         xp = x[pl]
-        for r in range(min(radius, h)):
-            load(xp[r], cache[r % size])
+        prime(cache, xp, radius)
         last = -1
         for i in range(h):
-            if i + radius < h:
-                load(xp[i + radius], cache[(i + radius) % size])
+            next_row(cache, xp, i, radius)
             centre = cache[i % size]
-            centred_sums(cache, i, h, radius, cols, work, t1, t2, tn)
-            last = count_inverses(i, h, radius, cols, cu2, last, inv, cu2_over)
-            for j in range(w):
-                ci2 = moments(centre[j], t1[j], t2[j], tn[j], inv[j])[1]
-                if enhanced:
-                    ci = np.sqrt(ci2)
-                    if ci <= cu:
-                        decay[j] = 0.0
-                    elif ci >= cmax:
-                        decay[j] = np.inf
-                    else:
-                        decay[j] = damping * (ci - cu) / (cmax - ci)
-                else:
-                    decay[j] = damping * ci2
+            last = window_counts(i, h, radius, cols, cu2, last, counts)
+            row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
+            if enhanced:
+                for j in range(w):
+                    decay[j] = heterogeneity(mu[j], var[j], counts[3, j], cu, cmax, damping)
+            else:
+                for j in range(w):
+                    decay[j] = damping * ci2_of(mu[j], var[j], counts[0, j])
             _pairs(cache, i, h, radius, size, v, vn)
             for o in range(shells.shape[0]):  # a shell's orbits are consecutive rows
                 sh, p, q = shells[o, 0], shells[o, 1], shells[o, 2]

@@ -1,0 +1,107 @@
+"""numba primitives of the window sums of the one-sweep kernels: sums of ``L`` consecutive
+terms as the power-of-two blocks of ``L``'s binary digits, from block sums of ``2^k``
+terms kept per level (down the rows in ring buffers as each row arrives, along a row in
+padded arrays). Every sum is of non-negative terms (or the terms as given) in an order
+fixed by the pixel's position alone: no running sum and no integral image, so nothing
+cancels and no value depends on the batch, tile or strip.
+
+Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+__all__ = ["axis_count", "block_sums", "level_up", "levels_for", "ring_levels"]
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+
+
+@njit(**_JIT)
+def axis_count(i, n, lo, hi):
+    """How many of the offsets ``lo..hi`` from ``i`` land in ``[0, n)``."""
+    a = max(i + lo, 0)
+    b = min(i + hi, n - 1)
+    return max(b - a + 1, 0)
+
+
+@njit(**_JIT)
+def levels_for(length):
+    """How many block-sum levels a sum of ``length`` terms needs (``2^k <= length``)."""
+    k = 0
+    while (2 << k) <= length:
+        k += 1
+    return k + 1
+
+
+@njit(**_JIT, inline="always")
+def level_up(lo, out, step, n):
+    """``out[j] = lo[j] + lo[j + step]`` for ``j < n``: one level of block sums."""
+    a, b, o = lo[:n], lo[step : step + n], out[:n]  # slices: j alone indexes (vectorises)
+    for j in range(n):
+        o[j] = a[j] + b[j]
+
+
+@njit(**_JIT, inline="always")
+def ring_levels(ring, q, size, depth, w):
+    """Every block sum ending at row ``q`` of the ring ``ring[k, slot]`` (row ``r``'s sum
+    of rows ``r .. r + 2^k - 1`` in slot ``r % size``), from the level below; level 0 of
+    row ``q`` must be in."""
+    for k in range(1, depth):
+        r = q - (1 << k) + 1
+        half = 1 << (k - 1)
+        a, b, dst = ring[k - 1, r % size], ring[k - 1, (r + half) % size], ring[k, r % size]
+        for j in range(w):
+            dst[j] = a[j] + b[j]
+
+
+@njit(**_JIT, inline="always")
+def _put(a, b, n, out, first, pair):
+    """``out[:n] (+)= a (+ b)``: assign when ``first``, add otherwise; ``b`` only when
+    ``pair`` (two terms in one pass)."""
+    o = out[:n]
+    if pair:
+        if first:
+            for j in range(n):
+                o[j] = a[j] + b[j]
+        else:
+            for j in range(n):
+                o[j] += a[j] + b[j]
+    elif first:
+        for j in range(n):
+            o[j] = a[j]
+    else:
+        for j in range(n):
+            o[j] += a[j]
+
+
+@njit(**_JIT, inline="always")
+def block_sums(src, size, length, starts, n, out, accumulate):
+    """``out[j] (+)=`` the sums of ``length`` terms from each of ``starts`` (a tuple), from
+    block sums of ``2^k`` terms: the blocks of ``length``'s set bits, largest first, start
+    after start, two blocks per pass (a fixed association whatever ``j``). ``size == 0``:
+    ``src[k, p + j]`` is the block of level ``k`` at ``p + j`` (along a row); else ``src``
+    is a ring of ``size`` rows per level, the block starting at row ``p`` in row ``k size
+    + p % size``."""
+    first = not accumulate
+    held, held_off = -1, 0
+    for start in starts:
+        pos = start
+        k = levels_for(length) - 1
+        while k >= 0:
+            if (length >> k) & 1:
+                row, off = (k * size + pos % size, 0) if size else (k, pos)
+                if held < 0:
+                    held, held_off = row, off
+                else:
+                    a = src[held, held_off : held_off + n]
+                    _put(a, src[row, off : off + n], n, out, first, True)
+                    first, held = False, -1
+                pos += 1 << k
+            k -= 1
+    if held >= 0:
+        a = src[held, held_off : held_off + n]
+        _put(a, a, n, out, first, False)
+    elif first:
+        for j in range(n):
+            out[j] = 0.0

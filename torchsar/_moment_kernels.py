@@ -1,0 +1,243 @@
+"""numba kernels of the window mean and variance of every pixel of an image row, for the
+one-sweep speckle filters (:func:`torchsar._box_kernels.box_filter`,
+:func:`torchsar._shell_kernels.frost_filter`).
+
+How they are formed:
+
+- each image row is converted once to float64 and kept in a ring buffer of the window's
+  rows (rows outside the image are zeros);
+- the column sums ``sum x`` and ``sum x^2`` down the window's rows, then the window sums
+  ``S1``, ``S2`` along the row, each as groups of four terms ``(a + b) + (c + d)`` added in
+  turn: all terms non-negative, in an order fixed by the pixel's position alone (no running
+  sum and no integral image: a bright target leaving the window leaves no rounding
+  residue behind, and the result does not depend on the batch, tile or strip), and the
+  working rows small enough to stay in the first-level cache;
+- the variance is ``(S2 - S1^2 / n) / n``. With ``L = 2 (ceil(size / 4) + 2)`` additions
+  at most on any term's way into a sum, its error is at most ``(3 L + 4) u S2 / n`` (``u =
+  2^-53``). Where that could matter, the window is *near-flat*, ``n var < 2^-8 S2`` (a
+  coefficient of variation under about 1/16), and it is summed again directly as
+  deviations from the pixel's own value (as exact as float64 allows: a window of equal
+  values has variance 0 exactly). Everywhere else the variance is within ``(3 L + 4)
+  2^-45`` of its value, relative: below ``2^-40`` for a 7 x 7 window, ``2^-38`` up to 63 x
+  63 (tested against ``math.fsum``).
+
+Cells outside the image count as absent (zero, and not in the count), as everywhere in
+torchsar. Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from torchsar._block_sums import axis_count
+
+__all__ = [
+    "FLAT",
+    "ci2_of",
+    "heterogeneity",
+    "moment_buffers",
+    "next_row",
+    "prime",
+    "row_moments",
+    "window_counts",
+]
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+
+FLAT = 2.0**-8  # n var below FLAT * sum x^2: near-flat, summed again as deviations
+
+
+@njit(**_JIT)
+def moment_buffers(radius, w):
+    """The working arrays of a ``(2 radius + 1)^2`` window over rows ``w`` long: the rows
+    ring ``(size, w)`` (row ``r`` in slot ``r % size``), the column sums of ``x`` and
+    ``x^2`` padded with ``radius`` zeros a side ``(2, w + 2 radius)``, and the window sums
+    ``(2, w)``."""
+    size = 2 * radius + 1
+    return np.zeros((size, w)), np.zeros((2, w + 2 * radius)), np.zeros((2, w))
+
+
+@njit(**_JIT)
+def _take(cache, q, row, present):
+    """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64."""
+    dst = cache[q % cache.shape[0]]
+    if present:
+        for j in range(dst.shape[0]):
+            dst[j] = np.float64(row[j])
+    else:
+        dst[:] = 0.0
+
+
+@njit(**_JIT)
+def prime(cache, xp, radius):
+    """Rows ``-radius .. radius - 1`` of the plane ``xp`` into the ring (before row 0)."""
+    h = xp.shape[0]
+    for q in range(-radius, radius):
+        _take(cache, q, xp[max(min(q, h - 1), 0)], 0 <= q < h)
+
+
+@njit(**_JIT)
+def next_row(cache, xp, i, radius):
+    """Row ``i + radius`` into the ring (zeros past the bottom): row ``i``'s window is then
+    complete."""
+    h = xp.shape[0]
+    q = i + radius
+    _take(cache, q, xp[min(q, h - 1)], q < h)
+
+
+@njit(**_JIT, inline="always")
+def _four(a, b, c, d, k):
+    """``(a + b) + (c + d)`` and the same of squares, of the first ``k`` of the four."""
+    b = b if k > 1 else 0.0
+    c = c if k > 2 else 0.0
+    d = d if k > 3 else 0.0
+    return (a + b) + (c + d), (a * a + b * b) + (c * c + d * d)
+
+
+@njit(**_JIT)
+def _down(cache, first, size, k, o1, o2, init):
+    """``o1 (+)= sum x``, ``o2 (+)= sum x^2`` over the ``k <= 4`` ring rows from row
+    ``first``; ``init``: assign instead of add."""
+    ra, rb = cache[first % size], cache[(first + min(k - 1, 1)) % size]
+    rc, rd = cache[(first + min(k - 1, 2)) % size], cache[(first + min(k - 1, 3)) % size]
+    for j in range(o1.shape[0]):
+        s1, s2 = _four(ra[j], rb[j], rc[j], rd[j], k)
+        o1[j] = s1 if init else o1[j] + s1
+        o2[j] = s2 if init else o2[j] + s2
+
+
+@njit(**_JIT, inline="always")
+def _at(c, start, k, m, w):
+    """The ``m``-th of ``k`` consecutive ``w``-long windows of ``c`` from ``start`` (the
+    last one again past ``k``)."""
+    o = start + min(k - 1, m)
+    return c[o : o + w]
+
+
+@njit(**_JIT)
+def _across(c1, c2, start, k, t1, t2, init):
+    """``t1 (+)=`` the sums of the ``k <= 4`` padded column sums ``c1`` from ``j + start``
+    (and ``t2`` of ``c2``); ``init``: assign instead of add."""
+    w = t1.shape[0]
+    a1, b1, e1, d1 = (
+        _at(c1, start, k, 0, w),
+        _at(c1, start, k, 1, w),
+        _at(c1, start, k, 2, w),
+        _at(c1, start, k, 3, w),
+    )
+    a2, b2, e2, d2 = (
+        _at(c2, start, k, 0, w),
+        _at(c2, start, k, 1, w),
+        _at(c2, start, k, 2, w),
+        _at(c2, start, k, 3, w),
+    )
+    for j in range(w):
+        x1 = (a1[j] + (b1[j] if k > 1 else 0.0)) + (
+            (e1[j] if k > 2 else 0.0) + (d1[j] if k > 3 else 0.0)
+        )
+        x2 = (a2[j] + (b2[j] if k > 1 else 0.0)) + (
+            (e2[j] if k > 2 else 0.0) + (d2[j] if k > 3 else 0.0)
+        )
+        t1[j] = x1 if init else t1[j] + x1
+        t2[j] = x2 if init else t2[j] + x2
+
+
+@njit(**_JIT)
+def row_moments(cache, pad, sums, i, h, radius, cols, inv, mu, var):
+    """The window mean ``mu`` (at least 0) and population variance ``var`` (at least 0) of
+    every pixel of row ``i`` (of ``h``), its window's rows in the ring ``cache``; ``cols``
+    the in-image width of each pixel's window, ``inv = 1 / n``. Near-flat windows are
+    summed again as deviations from the pixel (:func:`_centred`)."""
+    size = 2 * radius + 1
+    w = mu.shape[0]
+    c1, c2 = pad[0, radius : radius + w], pad[1, radius : radius + w]
+    r = 0
+    while r < size:  # rows i - radius .. i + radius, four per pass (zeros outside)
+        k = min(4, size - r)
+        _down(cache, i - radius + r, size, k, c1, c2, r == 0)
+        r += k
+    s1, s2 = sums[0], sums[1]
+    c = 0
+    while c < size:  # then the columns, four per pass
+        k = min(4, size - c)
+        _across(pad[0], pad[1], c, k, s1, s2, c == 0)
+        c += k
+    flat = 0
+    for j in range(w):
+        m1 = s1[j] * inv[j]
+        q = s2[j] - s1[j] * m1
+        fine = q >= FLAT * s2[j] and s2[j] < np.inf
+        v = q * inv[j]
+        mu[j] = m1 if m1 > 0.0 else 0.0  # -0.0 cells sum to -0.0
+        var[j] = v if fine else -1.0
+        flat += not fine
+    if flat:
+        first, last = max(i - radius, 0), min(i + radius, h - 1)
+        for j in range(w):
+            if var[j] < 0.0:
+                mu[j], var[j] = _centred(cache, i, j, first, last, radius, cols[j])
+
+
+@njit(**_JIT)
+def _centred(cache, i, j, first, last, radius, width):
+    """Window mean and variance of pixel ``(i, j)`` summed as deviations ``x - C`` from
+    its own value ``C`` (the window's rows ``first .. last`` in ``cache``, row ``r`` in
+    slot ``r % size``): ``C`` is a cell of the window, so ``(C - mean)^2`` is at most
+    ``n`` times the variance and the variance loses at most a factor ``n`` of float64
+    precision; equal cells give 0 exactly."""
+    size, w = cache.shape[0], cache.shape[1]
+    c = cache[i % size, j]
+    lo, hi = max(j - radius, 0), min(j + radius, w - 1)
+    t1, t2 = 0.0, 0.0
+    for r in range(first, last + 1):
+        row = cache[r % size]
+        for k in range(lo, hi + 1):
+            d = row[k] - c
+            t1 += d
+            t2 += d * d
+    n = np.float64((last - first + 1) * width)
+    m1 = t1 / n
+    v = (t2 - t1 * m1) / n
+    mu = c + m1
+    return (mu if mu > 0.0 else 0.0), (v if v > 0.0 else 0.0)
+
+
+@njit(**_JIT, inline="always")
+def ci2_of(mu, var, n):
+    """``Ci^2 = var / mu^2``, clamped to ``[0, n - 1]`` (its bound for non-negative data);
+    ``0 / 0 = 0``, ``var / 0 = inf`` (clamped)."""
+    ci2 = var / (mu * mu) if mu > 0.0 else (0.0 if var == 0.0 else np.inf)
+    return ci2 if ci2 < n - 1.0 else n - 1.0
+
+
+@njit(**_JIT, inline="always")
+def heterogeneity(mu, var, root, cu, cmax, damping):
+    """The enhanced filters' ``h = damping (Ci - Cu) / (Cmax - Ci)`` from the window mean
+    and variance (``Ci = sqrt(var) / mu``, at most ``root = sqrt(n - 1)``, its bound for
+    non-negative data): 0 at or below ``Cu`` (homogeneous), ``inf`` at or above ``Cmax``
+    (a point target). One square root and one division: ``h = damping (sqrt(var) - Cu
+    mu) / (Cmax mu - sqrt(var))``."""
+    sv = np.sqrt(var)
+    capped = sv > root * mu  # Ci above its bound (rounding), or var > 0 = mu
+    num = root - cu if capped else sv - cu * mu
+    den = cmax - root if capped else cmax * mu - sv
+    h = damping * num / den if num > 0.0 and den > 0.0 else 0.0
+    return np.inf if num > 0.0 and den <= 0.0 else h
+
+
+@njit(**_JIT)
+def window_counts(i, h, radius, cols, cu2, last, counts):
+    """Per pixel of row ``i`` (of ``h``), into the rows of ``counts``: the window's cell
+    count ``n``, ``1 / n``, ``cu2 / (n - 1)`` and ``sqrt(n - 1)`` (``cols``: each column's
+    in-image window width), recomputed only when the window's in-image rows differ from
+    ``last`` (they do only near the top and bottom); returns the row count."""
+    nv = axis_count(i, h, -radius, radius)
+    if nv != last:
+        for j in range(counts.shape[1]):
+            n = nv * cols[j]
+            counts[0, j] = n
+            counts[1, j] = 1.0 / n
+            counts[2, j] = cu2 / (n - 1.0)
+            counts[3, j] = np.sqrt(n - 1.0)
+    return nv
