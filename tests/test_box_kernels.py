@@ -262,3 +262,41 @@ def test_the_vectorised_exp_is_exp():
     got = np.array([exp_neg(v) for v in x])
     np.testing.assert_allclose(got, np.exp(x), rtol=4e-16, atol=0)
     assert [exp_neg(v) for v in (0.0, -0.0, -708.5, -1e6, -np.inf)] == [1.0, 1.0, 0, 0, 0]
+
+
+BAD = {"nan": float("nan"), "inf": float("inf"), "-inf": float("-inf"), "negative": -1e-30}
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("bad", list(BAD))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_the_kernels_check_the_values_as_they_read_them(monkeypatch, name, bad, dtype):
+    """The kernels check every value as they read it instead of a scan beforehand: a bad
+    value in the first rows, the last row or the last plane is refused with the same
+    typed error and words as the tensor code gives."""
+    from torchsar.errors import InputValueError
+
+    fn = getattr(speckle, name)
+    for where in [(0, 0, 0, 0), (0, 0, 1, 5), (1, 1, 15, 13), (1, 0, 15, 0)]:
+        x = _scene(11, shape=(2, 2, 16, 14), dtype=dtype)
+        x[where] = BAD[bad]
+        messages = []
+        for on in (True, False):
+            monkeypatch.setattr(_jit, "ENABLED", on)
+            with pytest.raises(InputValueError) as err:
+                fn(x, window=5)
+            messages.append(str(err.value))
+        assert messages[0] == messages[1]
+
+
+def test_an_infinite_peak_is_reported_as_given_not_as_rescaled(monkeypatch):
+    """float64 planes are rescaled by a power of two before the kernel (against overflow of
+    the squares); the error names the input's own counts of NaN and Inf."""
+    from torchsar.errors import InputValueError
+
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    x = _scene(12, shape=(1, 1, 12, 12), dtype=torch.float64)
+    x[0, 0, 3, 3] = float("inf")
+    x[0, 0, 5, 5] = 1.7e308  # doubled by a rescale it would be inf too
+    with pytest.raises(InputValueError, match="0 NaN and 1 Inf"):
+        speckle.lee(x, window=3)

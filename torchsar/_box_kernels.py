@@ -134,7 +134,10 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     enhanced Lee ``I + W (mu - I)`` with ``W = exp(-h)``, ``h = damping (Ci - Cu) / (Cmax -
     Ci)`` (0 at or below ``Cu``, ``inf`` at or above ``Cmax``). Float64 throughout, cast
     once; the moments are :func:`torchsar._moment_kernels.row_moments`' (a window of equal
-    values has variance 0 exactly)."""
+    values has variance 0 exactly).
+
+    Returns how many values of ``x`` are not a finite number ``>= 0`` (the input check,
+    made as the values are read; ``out`` means nothing unless 0)."""
     p_, h, w = x.shape
     cache, pad, sums = moment_buffers(radius, w)
     mu, var = np.zeros(w), np.zeros(w)
@@ -143,12 +146,13 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
         cols[j] = axis_count(j, w, -radius, radius)
     counts = np.zeros((4, w))
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
+    bad = 0
     for pl in range(p_):
         xp = x[pl]
-        prime(cache, xp, radius)
+        bad += prime(cache, xp, radius)
         last = -1
         for i in range(h):
-            next_row(cache, xp, i, radius)
+            bad += next_row(cache, xp, i, radius)
             last = window_counts(i, h, radius, cols, cu2, last, counts)
             row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
             oi = out[pl, i]
@@ -156,6 +160,7 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
                 _enhanced_lee_row(xp[i], mu, var, counts[3], cu, cmax, damping, oi)
             else:
                 _lee_row(xp[i], mu, var, counts[2], cu2, weight_scale, oi)
+    return bad
 
 
 @njit(**_JIT)

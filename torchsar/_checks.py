@@ -87,6 +87,7 @@ def check_image(
     real_ok: bool = True,
     nonnegative: bool = True,
     not_differentiable: str | None = None,
+    values: bool = True,
 ) -> Tensor:
     """Validate an image batch and return it unchanged.
 
@@ -104,6 +105,9 @@ def check_image(
         nonnegative: require every value >= 0 (intensity/amplitude). Ignored for complex.
         not_differentiable: the calling function's name if it does not support autograd:
             then ``x.requires_grad`` is an error.
+        values: check the values (finite, and non-negative where asked); ``False`` leaves
+            them to the caller, a kernel that reads every value anyway and then calls this
+            again to raise the error.
 
     Returns:
         ``x`` itself (no copy).
@@ -142,7 +146,7 @@ def check_image(
             f"{name} requires grad; {not_differentiable} is not differentiable: "
             f"pass {name}.detach()"
         )
-    if x.numel() == 0:
+    if x.numel() == 0 or not values:
         return x
     low = None
     if nonnegative and not is_complex:  # one pass: NaN propagates to both, Inf to one

@@ -58,32 +58,44 @@ def moment_buffers(radius, w):
     return np.zeros((size, w)), np.zeros((2, w + 2 * radius)), np.zeros((2, w))
 
 
+_MAX = np.finfo(np.float64).max
+
+
 @njit(**_JIT)
 def _take(cache, q, row, present):
-    """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64."""
+    """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64; how
+    many of its values are not a finite number ``>= 0`` (the filters' input check, made as
+    the values are read)."""
     dst = cache[q % cache.shape[0]]
+    bad = 0
     if present:
         for j in range(dst.shape[0]):
-            dst[j] = np.float64(row[j])
+            v = np.float64(row[j])
+            dst[j] = v
+            bad += not (v >= 0.0 and v <= _MAX)  # NaN fails both
     else:
         dst[:] = 0.0
+    return bad
 
 
 @njit(**_JIT)
 def prime(cache, xp, radius):
-    """Rows ``-radius .. radius - 1`` of the plane ``xp`` into the ring (before row 0)."""
+    """Rows ``-radius .. radius - 1`` of the plane ``xp`` into the ring (before row 0); the
+    count of values that are not a finite number ``>= 0``."""
     h = xp.shape[0]
+    bad = 0
     for q in range(-radius, radius):
-        _take(cache, q, xp[max(min(q, h - 1), 0)], 0 <= q < h)
+        bad += _take(cache, q, xp[max(min(q, h - 1), 0)], 0 <= q < h)
+    return bad
 
 
 @njit(**_JIT)
 def next_row(cache, xp, i, radius):
     """Row ``i + radius`` into the ring (zeros past the bottom): row ``i``'s window is then
-    complete."""
+    complete. The count of its values that are not a finite number ``>= 0``."""
     h = xp.shape[0]
     q = i + radius
-    _take(cache, q, xp[min(q, h - 1)], q < h)
+    return _take(cache, q, xp[min(q, h - 1)], q < h)
 
 
 @njit(**_JIT, inline="always")

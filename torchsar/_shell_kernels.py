@@ -105,7 +105,10 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     ``m``-th power of the base's (within a few ulps of its own ``exp``; an ``exp`` of its
     own where the multiples skip one). The decay is ``damping Ci^2`` (Frost) or,
     ``enhanced``, ``damping (Ci - Cu) / (Cmax - Ci)`` between ``Cu`` and ``Cmax``, 0 at or
-    below ``Cu`` (the window mean), ``inf`` at or above ``Cmax`` (the pixel itself)."""
+    below ``Cu`` (the window mean), ``inf`` at or above ``Cmax`` (the pixel itself).
+
+    Returns how many values of ``x`` are not a finite number ``>= 0`` (the input check,
+    made as the values are read; ``out`` means nothing unless 0)."""
     p_, h, w = x.shape
     size = 2 * radius + 1
     wp = w + 2 * radius
@@ -132,12 +135,13 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     last_m = np.zeros(bases.shape[0], np.int64)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     counts = np.zeros((4, w))
+    bad = 0
     for pl in range(p_):
         xp = x[pl]
-        prime(cache, xp, radius)
+        bad += prime(cache, xp, radius)
         last = -1
         for i in range(h):
-            next_row(cache, xp, i, radius)
+            bad += next_row(cache, xp, i, radius)
             centre = cache[i % size]
             last = window_counts(i, h, radius, cols, cu2, last, counts)
             row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
@@ -181,3 +185,4 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
             oi = out[pl, i]
             for j in range(w):
                 oi[j] = num[j] / den[j]
+    return bad

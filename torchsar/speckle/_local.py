@@ -18,13 +18,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar import _jit
 from torchsar._checks import check_image, check_odd, check_positive, check_window_fits, float_dtype
 from torchsar._scale import power_of_two
-from torchsar.errors import OptionError
+from torchsar.errors import InputValueError, OptionError
 from torchsar.windows import Rect, Sums, windowed
 
 __all__ = [
@@ -79,6 +80,7 @@ class Request:
     dtype: torch.dtype
     damping: float | None = None
     scale: Tensor | None = None  # (B, C, 1, 1) powers of two the input was divided by
+    unchecked: Tensor | None = None  # the input, when its values are left to the kernel
 
 
 def _plane_scale(x: Tensor) -> Tensor | None:
@@ -106,8 +108,10 @@ def prepare(
 ) -> Request:
     """Validate the filter arguments (``damping`` only when given) and convert amplitude to
     intensity. ``kernel``: the filter has a one-sweep kernel, which works in float64, so a
-    float32 intensity it will take needs no rescaling against overflow."""
-    check_image(x.detach() if isinstance(x, Tensor) else x, "x")
+    float32 intensity it will take needs no rescaling against overflow, and which checks
+    the values of an intensity as it reads them (:func:`run_kernel`)."""
+    in_kernel = kernel and not amplitude and isinstance(x, Tensor) and takes_kernel(x)
+    check_image(x.detach() if isinstance(x, Tensor) else x, "x", values=not in_kernel)
     window = check_odd(window, "window", minimum=3)
     check_window_fits(x, window, "speckle filter")
     looks = check_positive(looks, "looks")
@@ -117,17 +121,35 @@ def prepare(
         damping = check_positive(damping, "damping", allow_zero=True)
     dtype = float_dtype(x.dtype)
     xi = x.to(dtype)
-    in_float64 = kernel and not amplitude and xi.dtype == torch.float32 and takes_kernel(xi)
-    scale = None if in_float64 else _plane_scale(xi)
+    scale = None if in_kernel and xi.dtype == torch.float32 else _plane_scale(xi)
     if scale is not None:
         xi = xi / scale  # exact: a power of two
     intensity = xi.square() if amplitude else xi
-    return Request(intensity, window // 2, Speckle(looks), amplitude, dtype, damping, scale)
+    unchecked = x if in_kernel else None
+    return Request(
+        intensity, window // 2, Speckle(looks), amplitude, dtype, damping, scale, unchecked
+    )
 
 
 def takes_kernel(x: Tensor) -> bool:
     """Whether a filter with a one-sweep kernel runs it on ``x``."""
     return _jit.for_tensor(x) and x.numel() > 0
+
+
+def run_kernel(req: Request, kernel: Callable[[np.ndarray, np.ndarray], int]) -> Tensor:
+    """``kernel(planes, out)`` on the ``(P, H, W)`` planes of ``req.intensity`` into a new
+    tensor of its shape and dtype. The kernel returns how many input values are not a
+    finite number ``>= 0`` (it checks them as it reads them, for :func:`prepare`): any, and
+    the error about the caller's input is raised as
+    :func:`~torchsar._checks.check_image` words it."""
+    x = req.intensity
+    h, w = x.shape[-2:]
+    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    out = torch.empty(x.shape, dtype=x.dtype)
+    if kernel(planes, out.numpy().reshape(planes.shape)):
+        check_image(x.detach() if req.unchecked is None else req.unchecked.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return out
 
 
 def finish(req: Request, intensity: Tensor, *, nonnegative: bool = False) -> Tensor:
@@ -207,7 +229,7 @@ def filter_intensity(req: Request, formula: Formula, compiled: Compiled | None =
     """
     x = req.intensity
     if compiled is not None and takes_kernel(x):
-        return finish(req, _compiled_filter(x, req.radius, compiled), nonnegative=True)
+        return finish(req, _compiled_filter(req, compiled), nonnegative=True)
 
     def apply(xs: Tensor, sums: list[Sums]) -> Tensor:
         mu, ci2 = local_moments(sums[0], req.dtype)
@@ -217,17 +239,17 @@ def filter_intensity(req: Request, formula: Formula, compiled: Compiled | None =
     return finish(req, out)
 
 
-def _compiled_filter(x: Tensor, radius: int, k: Compiled) -> Tensor:
+def _compiled_filter(req: Request, k: Compiled) -> Tensor:
     """:func:`filter_intensity`'s formula by :func:`torchsar._box_kernels.box_filter`."""
     from torchsar import _box_kernels
 
-    h, w = x.shape[-2:]
-    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
-    out = torch.empty(planes.shape, dtype=x.dtype)
-    _box_kernels.box_filter(
-        planes, radius, k.enhanced, k.cu2, k.weight_scale, k.damping, k.cmax2, out.numpy()
+    r = req.radius
+    return run_kernel(
+        req,
+        lambda planes, out: _box_kernels.box_filter(
+            planes, r, k.enhanced, k.cu2, k.weight_scale, k.damping, k.cmax2, out
+        ),
     )
-    return out.view(x.shape)
 
 
 def decay_map(req: Request, decay: Callable[[Tensor], Tensor]) -> Tensor:

@@ -22,10 +22,17 @@ from collections.abc import Callable
 from functools import lru_cache, partial
 
 import numpy as np
-import torch
 from torch import Tensor
 
-from torchsar.speckle._local import Request, decay_map, finish, prepare, scratch, takes_kernel
+from torchsar.speckle._local import (
+    Request,
+    decay_map,
+    finish,
+    prepare,
+    run_kernel,
+    scratch,
+    takes_kernel,
+)
 from torchsar.windows import distance_shells, exp_distance_mean
 
 __all__ = ["enhanced_frost", "frost"]
@@ -80,32 +87,31 @@ def _distance_weighted(
     decay, as ``enhanced`` says, and weights in float64, cast once)."""
     x = req.intensity
     if takes_kernel(x):
-        return finish(req, _compiled(x, req, enhanced), nonnegative=True)
+        return finish(req, _compiled(req, enhanced), nonnegative=True)
     return finish(req, exp_distance_mean(x, req.radius, decay_map(req, decay)))
 
 
-def _compiled(x: Tensor, req: Request, enhanced: bool) -> Tensor:
+def _compiled(req: Request, enhanced: bool) -> Tensor:
     from torchsar import _shell_kernels
 
-    h, w = x.shape[-2:]
     shells, dist = _shell_table(req.radius)
-    bases, base_of, multiple = _power_table(req.radius)
-    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
-    out = torch.empty(planes.shape, dtype=x.dtype)
+    powers = _power_table(req.radius)
     sp = req.speckle
-    _shell_kernels.frost_filter(
-        planes,
-        req.radius,
-        shells,
-        dist,
-        (bases, base_of, multiple),
-        enhanced,
-        req.damping,
-        sp.cu2,
-        sp.cmax2,
-        out.numpy(),
+    return run_kernel(
+        req,
+        lambda planes, out: _shell_kernels.frost_filter(
+            planes,
+            req.radius,
+            shells,
+            dist,
+            powers,
+            enhanced,
+            req.damping,
+            sp.cu2,
+            sp.cmax2,
+            out,
+        ),
     )
-    return out.view(x.shape)
 
 
 @lru_cache(maxsize=16)
