@@ -300,3 +300,17 @@ def test_an_infinite_peak_is_reported_as_given_not_as_rescaled(monkeypatch):
     x[0, 0, 5, 5] = 1.7e308  # doubled by a rescale it would be inf too
     with pytest.raises(InputValueError, match="0 NaN and 1 Inf"):
         speckle.lee(x, window=3)
+
+
+@pytest.mark.parametrize("name", ["enhanced_lee", "enhanced_frost"])
+def test_the_enhanced_classes_are_the_tensor_codes_on_their_borders(monkeypatch, name):
+    """A corner pixel's window of four cells, one bright among zeros, has ``Ci^2 = 3``:
+    exactly ``Cmax^2`` at one look, a point target (the observation kept) on every path,
+    with damping 0 too (no weight to blur a misplaced class)."""
+    fn = getattr(speckle, name)
+    rng = np.random.default_rng(13)
+    for bright in [12.437085151672363, *rng.uniform(0.1, 100.0, size=40).tolist()]:
+        x = torch.zeros(1, 1, 4, 4)
+        x[0, 0, 0, 0] = bright
+        a, b = _both(monkeypatch, lambda x=x: fn(x, window=3, looks=1.0, damping=0.0))
+        assert a[0, 0, 0, 0] == b[0, 0, 0, 0] == x[0, 0, 0, 0]

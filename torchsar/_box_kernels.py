@@ -144,7 +144,7 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     cols = np.zeros(w)
     for j in range(w):
         cols[j] = axis_count(j, w, -radius, radius)
-    counts = np.zeros((4, w))
+    counts = np.zeros((3, w))
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     bad = 0
     for pl in range(p_):
@@ -157,7 +157,7 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
             row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
             oi = out[pl, i]
             if enhanced:
-                _enhanced_lee_row(xp[i], mu, var, counts[3], cu, cmax, damping, oi)
+                _enhanced_lee_row(xp[i], mu, var, counts[0], cu, cmax, damping, oi)
             else:
                 _lee_row(xp[i], mu, var, counts[2], cu2, weight_scale, oi)
     return bad
@@ -181,12 +181,11 @@ def _lee_row(xi, mu, var, cu2_over, cu2, weight_scale, oi):
 
 
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
-def _enhanced_lee_row(xi, mu, var, root, cu, cmax, damping, oi):
+def _enhanced_lee_row(xi, mu, var, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
-    at or below ``Cu`` and 0 at or above ``Cmax`` (``root``: ``sqrt(n - 1)``, the bound of
-    ``Ci``)."""
+    at or below ``Cu`` and 0 at or above ``Cmax`` (``tn``: the window counts)."""
     for j in range(oi.shape[0]):
-        h = heterogeneity(mu[j], var[j], root[j], cu, cmax, damping)
+        h = heterogeneity(mu[j], var[j], tn[j], cu, cmax, damping)
         obs = np.float64(xi[j])
         o = obs + exp_neg(-(h)) * (mu[j] - obs)
         oi[j] = o if o > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding

@@ -15,11 +15,11 @@ How they are formed:
 - the variance is ``(S2 - S1^2 / n) / n``. With ``L = 2 (ceil(size / 4) + 2)`` additions
   at most on any term's way into a sum, its error is at most ``(3 L + 4) u S2 / n`` (``u =
   2^-53``). Where that could matter, the window is *near-flat*, ``n var < 2^-8 S2`` (a
-  coefficient of variation under about 1/16), and it is summed again directly as
-  deviations from the pixel's own value (as exact as float64 allows: a window of equal
-  values has variance 0 exactly). Everywhere else the variance is within ``(3 L + 4)
-  2^-45`` of its value, relative: below ``2^-40`` for a 7 x 7 window, ``2^-38`` up to 63 x
-  63 (tested against ``math.fsum``).
+  coefficient of variation under about 1/16), and it is summed again directly, in two
+  passes over the deviations from the pixel's own value (:func:`_centred`: within about
+  ``(n + 3) u``; a window of equal values has variance 0 exactly). Everywhere the variance
+  is then within ``(3 L + 4) 2^-45`` or ``(n + 3) u`` of its value, relative: below
+  ``2^-40`` for a 7 x 7 window, ``2^-38`` up to 63 x 63 (tested against exact sums).
 
 Cells outside the image count as absent (zero, and not in the count), as everywhere in
 torchsar. Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
@@ -193,55 +193,61 @@ def row_moments(cache, pad, sums, i, h, radius, cols, inv, mu, var):
 
 @njit(**_JIT)
 def _centred(cache, i, j, first, last, radius, width):
-    """Window mean and variance of pixel ``(i, j)`` summed as deviations ``x - C`` from
-    its own value ``C`` (the window's rows ``first .. last`` in ``cache``, row ``r`` in
-    slot ``r % size``): ``C`` is a cell of the window, so ``(C - mean)^2`` is at most
-    ``n`` times the variance and the variance loses at most a factor ``n`` of float64
-    precision; equal cells give 0 exactly."""
+    """Window mean and variance of pixel ``(i, j)`` from the deviations ``d = x - C`` of
+    its cells from its own value ``C`` (the window's rows ``first .. last`` in ``cache``,
+    row ``r`` in slot ``r % size``), in two passes: their mean ``m`` first, then the
+    squares of ``d - m`` (less the square of their sum, which rounding leaves). Nothing
+    cancels but that small correction: the variance is within about ``(n + 3) u`` of its
+    value, relative (``u = 2^-53``), whatever the window's mean; equal cells give 0
+    exactly; squares beyond float64's range give ``inf``."""
     size, w = cache.shape[0], cache.shape[1]
     c = cache[i % size, j]
     lo, hi = max(j - radius, 0), min(j + radius, w - 1)
-    t1, t2 = 0.0, 0.0
+    t1 = 0.0
     for r in range(first, last + 1):
         row = cache[r % size]
         for k in range(lo, hi + 1):
-            d = row[k] - c
-            t1 += d
-            t2 += d * d
+            t1 += row[k] - c
     n = np.float64((last - first + 1) * width)
-    m1 = t1 / n
-    v = (t2 - t1 * m1) / n
-    mu = c + m1
+    m = t1 / n
+    e1, e2 = 0.0, 0.0
+    for r in range(first, last + 1):
+        row = cache[r % size]
+        for k in range(lo, hi + 1):
+            e = (row[k] - c) - m
+            e1 += e
+            e2 += e * e
+    v = (e2 - e1 * (e1 / n)) / n
+    mu = c + m
     return (mu if mu > 0.0 else 0.0), (v if v > 0.0 else 0.0)
 
 
 @njit(**_JIT, inline="always")
 def ci2_of(mu, var, n):
     """``Ci^2 = var / mu^2``, clamped to ``[0, n - 1]`` (its bound for non-negative data);
-    ``0 / 0 = 0``, ``var / 0 = inf`` (clamped)."""
+    ``0 / 0 = 0``, ``var / 0 = inf`` (clamped). A mean whose square underflows (cells
+    below about 1e-154) divides by 0 too and gives ``n - 1``, as in the tensor code."""
     ci2 = var / (mu * mu) if mu > 0.0 else (0.0 if var == 0.0 else np.inf)
     return ci2 if ci2 < n - 1.0 else n - 1.0
 
 
 @njit(**_JIT, inline="always")
-def heterogeneity(mu, var, root, cu, cmax, damping):
+def heterogeneity(mu, var, n, cu, cmax, damping):
     """The enhanced filters' ``h = damping (Ci - Cu) / (Cmax - Ci)`` from the window mean
-    and variance (``Ci = sqrt(var) / mu``, at most ``root = sqrt(n - 1)``, its bound for
-    non-negative data): 0 at or below ``Cu`` (homogeneous), ``inf`` at or above ``Cmax``
-    (a point target). One square root and one division: ``h = damping (sqrt(var) - Cu
-    mu) / (Cmax mu - sqrt(var))``."""
-    sv = np.sqrt(var)
-    capped = sv > root * mu  # Ci above its bound (rounding), or var > 0 = mu
-    num = root - cu if capped else sv - cu * mu
-    den = cmax - root if capped else cmax * mu - sv
-    h = damping * num / den if num > 0.0 and den > 0.0 else 0.0
-    return np.inf if num > 0.0 and den <= 0.0 else h
+    and variance: 0 at or below ``Cu`` (homogeneous), ``inf`` at or above ``Cmax`` (a
+    point target), ``Ci = sqrt(Ci^2)`` with ``Ci^2`` as :func:`ci2_of` gives it over ``n``
+    cells. ``Ci`` is formed by the same operations as in the tensor code, so both
+    put a pixel in the same class even where ``Ci`` is exactly ``Cu`` or ``Cmax`` (a corner
+    pixel's four cells, one bright among zeros, have ``Ci^2 = 3 = Cmax^2`` at one look)."""
+    ci = np.sqrt(ci2_of(mu, var, n))
+    h = damping * (ci - cu) / (cmax - ci) if cu < ci < cmax else 0.0
+    return np.inf if ci >= cmax else h
 
 
 @njit(**_JIT)
 def window_counts(i, h, radius, cols, cu2, last, counts):
     """Per pixel of row ``i`` (of ``h``), into the rows of ``counts``: the window's cell
-    count ``n``, ``1 / n``, ``cu2 / (n - 1)`` and ``sqrt(n - 1)`` (``cols``: each column's
+    count ``n``, ``1 / n`` and ``cu2 / (n - 1)`` (``cols``: each column's
     in-image window width), recomputed only when the window's in-image rows differ from
     ``last`` (they do only near the top and bottom); returns the row count."""
     nv = axis_count(i, h, -radius, radius)
@@ -251,5 +257,4 @@ def window_counts(i, h, radius, cols, cu2, last, counts):
             counts[0, j] = n
             counts[1, j] = 1.0 / n
             counts[2, j] = cu2 / (n - 1.0)
-            counts[3, j] = np.sqrt(n - 1.0)
     return nv

@@ -134,7 +134,7 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     e_pow = np.zeros((bases.shape[0], w))  # its power at the base's last shell
     last_m = np.zeros(bases.shape[0], np.int64)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
-    counts = np.zeros((4, w))
+    counts = np.zeros((3, w))
     bad = 0
     for pl in range(p_):
         xp = x[pl]
@@ -147,7 +147,7 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
             row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
             if enhanced:
                 for j in range(w):
-                    decay[j] = heterogeneity(mu[j], var[j], counts[3, j], cu, cmax, damping)
+                    decay[j] = heterogeneity(mu[j], var[j], counts[0, j], cu, cmax, damping)
             else:
                 for j in range(w):
                     decay[j] = damping * ci2_of(mu[j], var[j], counts[0, j])
