@@ -94,6 +94,27 @@ def _orbit_sum(v, p, q, radius, dst, init):
         dst[j] = t if init else dst[j] + t
 
 
+@njit(**_JIT, inline="always")
+def _power(prev, base, out):
+    """``out = prev * base`` (the next power of a shell's weight)."""
+    for j in range(out.shape[0]):
+        out[j] = prev[j] * base[j]
+
+
+@njit(**_JIT, fastmath={"contract"}, inline="always")
+def _accumulate(e, sk, nk, centre, num, den, first):
+    """``num += e sk``, ``den += e nk`` (one FMA each), from ``num = centre``, ``den = 1``
+    when ``first``."""
+    if first:
+        for j in range(num.shape[0]):
+            num[j] = centre[j] + e[j] * sk[j]
+            den[j] = 1.0 + e[j] * nk[j]
+    else:
+        for j in range(num.shape[0]):
+            num[j] += e[j] * sk[j]
+            den[j] += e[j] * nk[j]
+
+
 @njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
 def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2, out):
     """A Frost-type filter of every plane of ``x`` ``(P, H, W)`` into ``out``.
@@ -158,8 +179,6 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
             if not np.array_equal(vn, last_vn):  # the shells' counts: only near top, bottom
                 _shell_counts(shells, vn, hcount, n)
                 last_vn[:] = vn
-            for j in range(w):
-                num[j], den[j] = centre[j], 1.0
             for b in range(bases.shape[0]):
                 db, eb = bases[b], e_base[b]
                 for j in range(w):
@@ -167,21 +186,18 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
                 last_m[b] = 0
             for k in range(n_shells):  # nearest shells first
                 b, m = base_of[k], multiple[k]
-                sk, nk, e, eb = s[k], n[k], e_pow[b], e_base[b]
-                if m == 1:
-                    for j in range(w):
-                        e[j] = eb[j]
-                elif m == last_m[b] + 1:
-                    for j in range(w):
-                        e[j] *= eb[j]
-                else:
-                    dk = dist[k]
+                if m == 1:  # the base's own weight
+                    _accumulate(e_base[b], s[k], n[k], centre, num, den, k == 0)
+                elif m == last_m[b] + 1:  # the next power of it
+                    prev = e_base[b] if last_m[b] == 1 else e_pow[b]
+                    _power(prev, e_base[b], e_pow[b])
+                    _accumulate(e_pow[b], s[k], n[k], centre, num, den, k == 0)
+                else:  # a multiple after a gap: its own exp
+                    dk, e = dist[k], e_pow[b]
                     for j in range(w):
                         e[j] = exp_neg(-(decay[j] * dk))
+                    _accumulate(e, s[k], n[k], centre, num, den, k == 0)
                 last_m[b] = m
-                for j in range(w):
-                    num[j] += e[j] * sk[j]
-                    den[j] += e[j] * nk[j]
             oi = out[pl, i]
             for j in range(w):
                 oi[j] = num[j] / den[j]
