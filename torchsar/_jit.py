@@ -13,17 +13,30 @@ images: their float32 results are within an ulp or two of the torch code's (test
 closer to the exact sums.
 
 The kernels are imported (and compiled, or loaded from numba's on-disk cache) on first use
-only, so ``import torchsar`` does not import numba. Set the environment variable
+only, so ``import torchsar`` does not import numba.
+
+numba reuses a cached kernel while *its own* source file is unchanged, but a kernel that
+calls a kernel of another module carries its own compiled copy of the callee, which that
+check does not see (after an edit of ``torchsar/_moment_kernels.py`` the speckle filters
+of ``torchsar/_box_kernels.py`` would go on running the old moments). So the first
+compiled call of a process also compares the sources of every module of the package that
+uses numba with a stamp kept beside the cache and, when any of them changed, removes the
+package's cached kernels (:func:`refresh_cache`): they compile again on first use (``make
+setup`` does it ahead). An installed package, whose sources never change, keeps its
+cache. Set the environment variable
 ``TORCHSAR_NUMBA=0`` to never use them; tests switch them with :data:`ENABLED`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import importlib.util
 import os
 import warnings
+from pathlib import Path
 
-__all__ = ["ENABLED", "enabled", "for_tensor"]
+__all__ = ["ENABLED", "cache_dirs", "enabled", "for_tensor", "refresh_cache", "sources_stamp"]
 
 
 def installed(module: str) -> bool:
@@ -59,6 +72,8 @@ def _numba_imports() -> bool:
             _IMPORTS = False
         else:
             _IMPORTS = True
+            with contextlib.suppress(OSError):  # a cache it cannot clean: numba's own checks
+                refresh_cache()
     return _IMPORTS
 
 
@@ -80,3 +95,70 @@ def for_tensor(t) -> bool:
         and not t.requires_grad
         and enabled()
     )
+
+
+PACKAGE = Path(__file__).resolve().parent
+STAMP_NAME = "numba-sources.stamp"
+
+
+def _kernel_sources(package: Path) -> list[Path]:
+    """The package's modules that use numba (their text names it), sorted."""
+    out = []
+    for path in sorted(package.rglob("*.py")):
+        try:
+            if b"numba" in path.read_bytes():
+                out.append(path)
+        except OSError:
+            continue
+    return out
+
+
+def sources_stamp(package: Path = PACKAGE) -> str:
+    """Path, modification time and size of every module of ``package`` that uses numba,
+    one per line (what numba itself compares for a module's own kernels)."""
+    lines = []
+    for path in _kernel_sources(package):
+        st = path.stat()
+        lines.append(f"{path.relative_to(package)} {st.st_mtime_ns} {st.st_size}")
+    return "\n".join(lines)
+
+
+def cache_dirs(package: Path = PACKAGE, cache_dir: str | None = None) -> list[Path]:
+    """Where numba caches the kernels of every folder of ``package``: ``__pycache__``
+    beside the sources, or, with ``NUMBA_CACHE_DIR`` (``cache_dir``), numba's folder for
+    that source folder in it (its last name and the SHA-1 of its absolute path)."""
+    folders = sorted({p.parent for p in package.rglob("*.py")})
+    if cache_dir:
+        root = Path(cache_dir)
+        return [
+            root / f"{f.name}_{hashlib.sha1(str(f.resolve()).encode()).hexdigest()}"
+            for f in folders
+        ]
+    return [f / "__pycache__" for f in folders]
+
+
+def refresh_cache(package: Path = PACKAGE, cache_dir: str | None = None) -> bool:
+    """Remove ``package``'s cached kernels if any of its numba modules changed since the
+    last call (or none was made); returns whether it removed them. Does nothing where the
+    stamp cannot be written (a read-only install)."""
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR") if cache_dir is None else cache_dir
+    stamp_dir = Path(cache_dir) if cache_dir else package / "__pycache__"
+    stamp = stamp_dir / f"{package.name}-{STAMP_NAME}"
+    now = sources_stamp(package)
+    try:
+        if stamp.read_text() == now:
+            return False
+    except OSError:
+        pass
+    for folder in cache_dirs(package, cache_dir):
+        for pattern in ("*.nbi", "*.nbc"):
+            for f in folder.glob(pattern):
+                f.unlink(missing_ok=True)  # another process may remove it first
+    try:
+        stamp_dir.mkdir(parents=True, exist_ok=True)
+        tmp = stamp.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(now)
+        tmp.replace(stamp)
+    except OSError:
+        return False
+    return True
