@@ -314,3 +314,75 @@ def test_the_enhanced_classes_are_the_tensor_codes_on_their_borders(monkeypatch,
         x[0, 0, 0, 0] = bright
         a, b = _both(monkeypatch, lambda x=x: fn(x, window=3, looks=1.0, damping=0.0))
         assert a[0, 0, 0, 0] == b[0, 0, 0, 0] == x[0, 0, 0, 0]
+
+
+def _errors(monkeypatch, call) -> list[tuple[type, str]]:
+    """The error ``call`` raises with the kernels on, then off (type and words)."""
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        with pytest.raises(Exception) as err:
+            call()
+        out.append((type(err.value), str(err.value)))
+    return out
+
+
+def test_a_bad_option_and_a_bad_value_give_one_error_on_both_paths(monkeypatch):
+    """The values are checked after the options whether or not a kernel reads them."""
+    from torchsar.errors import OptionError, WindowSizeError
+
+    x = _scene(14, shape=(1, 1, 9, 9))
+    x[0, 0, 4, 4] = float("nan")
+    small = _scene(14, shape=(1, 1, 4, 4))
+    small[0, 0, 0, 0] = -1.0
+    cases = [
+        (lambda: speckle.lee(x, window=4), OptionError),
+        (lambda: speckle.frost(x, looks=0), OptionError),
+        (lambda: speckle.enhanced_frost(x, damping=-1.0), OptionError),
+        (lambda: speckle.kuan(small, window=5), WindowSizeError),
+    ]
+    for call, kind in cases:
+        on, off = _errors(monkeypatch, call)
+        assert on == off and on[0] is kind
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_a_tiny_negative_beside_a_huge_peak_is_refused(monkeypatch, name):
+    """float64 planes whose peak exceeds 2^384 are divided by a power of two before the
+    kernel; a negative value that this would underflow to -0.0 is refused as given."""
+    from torchsar.errors import InputValueError
+
+    x = _scene(15, shape=(1, 1, 9, 9), dtype=torch.float64)
+    x[0, 0, 0, 0] = 1e300
+    x[0, 0, 8, 8] = -1e-300
+    on, off = _errors(monkeypatch, lambda: getattr(speckle, name)(x, window=3))
+    assert on == off and on[0] is InputValueError and "-1e-300" in on[1]
+
+
+def test_a_lazily_negated_view_is_read_as_its_values(monkeypatch):
+    """``conj().imag`` of a complex tensor is a view with torch's negation bit set."""
+    b = _scene(16, shape=(1, 1, 10, 12))
+    view = torch.complex(torch.zeros_like(b), -b).conj().imag
+    assert view.is_neg() and torch.equal(view, b)
+    on_view, off_view = _both(monkeypatch, lambda: speckle.lee(view, window=3))
+    on, off = _both(monkeypatch, lambda: speckle.lee(b, window=3))
+    assert torch.equal(on_view, on) and torch.equal(off_view, off)
+
+
+def test_every_kernel_sets_its_own_fastmath():
+    """numba compiles a helper that sets no fastmath with its first caller's flags: the
+    moments would take FMAs when the Frost kernel compiled them first and none when a Lee
+    filter did, and the results would depend on which filter ran first."""
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    names = ["_block_sums", "_moment_kernels", "_box_kernels", "_shell_kernels", "_vector_exp"]
+    seen = 0
+    for name in names:
+        mod = importlib.import_module(f"torchsar.{name}")
+        for value in vars(mod).values():
+            if isinstance(value, CPUDispatcher) and value.__module__ == mod.__name__:
+                assert "fastmath" in value.targetoptions, f"{name}.{value.__name__}"
+                seen += 1
+    assert seen > 20

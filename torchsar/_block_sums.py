@@ -14,7 +14,15 @@ from numba import njit
 
 __all__ = ["axis_count", "block_sums", "level_up", "levels_for", "ring_levels"]
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
+# first caller, so its results would depend on which kernel happened to compile it
+_JIT = {
+    "cache": True,
+    "nogil": True,
+    "error_model": "numpy",
+    "boundscheck": False,
+    "fastmath": False,
+}
 
 
 @njit(**_JIT)

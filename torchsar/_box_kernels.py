@@ -45,7 +45,16 @@ from torchsar._vector_exp import exp_neg
 
 __all__ = ["box_filter", "ring_ratio"]
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
+# first caller, so its results would depend on which kernel happened to compile it
+_JIT = {
+    "cache": True,
+    "nogil": True,
+    "error_model": "numpy",
+    "boundscheck": False,
+    "fastmath": False,
+}
+_FMA = {**_JIT, "fastmath": {"contract"}}  # a * b + c as one FMA
 
 
 @njit(**_JIT, inline="always")
@@ -180,7 +189,7 @@ def _lee_row(xi, mu, var, cu2_over, cu2, weight_scale, oi):
         oi[j] = o if o > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding
 
 
-@njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
+@njit(**_FMA)  # exp_neg's polynomial with FMAs
 def _enhanced_lee_row(xi, mu, var, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
     at or below ``Cu`` and 0 at or above ``Cmax`` (``tn``: the window counts)."""

@@ -45,7 +45,15 @@ __all__ = [
     "window_counts",
 ]
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
+# first caller, so its results would depend on which kernel happened to compile it
+_JIT = {
+    "cache": True,
+    "nogil": True,
+    "error_model": "numpy",
+    "boundscheck": False,
+    "fastmath": False,
+}
 
 FLAT = 2.0**-8  # n var below FLAT * sum x^2: near-flat, summed again as deviations
 _SPREAD = 2.0**13  # centred sums taken where (1 + (C - mean)^2 / var) n <= 2^13

@@ -33,7 +33,16 @@ from torchsar._vector_exp import exp_neg
 
 __all__ = ["frost_filter"]
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
+# first caller, so its results would depend on which kernel happened to compile it
+_JIT = {
+    "cache": True,
+    "nogil": True,
+    "error_model": "numpy",
+    "boundscheck": False,
+    "fastmath": False,
+}
+_FMA = {**_JIT, "fastmath": {"contract"}}  # a * b + c as one FMA
 
 
 @njit(**_JIT)
@@ -101,7 +110,7 @@ def _power(prev, base, out):
         out[j] = prev[j] * base[j]
 
 
-@njit(**_JIT, fastmath={"contract"}, inline="always")
+@njit(**_FMA, inline="always")
 def _accumulate(e, sk, nk, centre, num, den, first):
     """``num += e sk``, ``den += e nk`` (one FMA each), from ``num = centre``, ``den = 1``
     when ``first``."""
@@ -115,7 +124,7 @@ def _accumulate(e, sk, nk, centre, num, den, first):
             den[j] += e[j] * nk[j]
 
 
-@njit(**_JIT, fastmath={"contract"})  # a * b + c as one FMA (exp_neg's polynomial)
+@njit(**_FMA)  # exp_neg's polynomial with FMAs
 def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2, out):
     """A Frost-type filter of every plane of ``x`` ``(P, H, W)`` into ``out``.
 

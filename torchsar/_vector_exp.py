@@ -11,7 +11,15 @@ from numba.extending import intrinsic
 
 __all__ = ["exp_neg"]
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "boundscheck": False}
+# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
+# first caller, so its results would depend on which kernel happened to compile it
+_JIT = {
+    "cache": True,
+    "nogil": True,
+    "error_model": "numpy",
+    "boundscheck": False,
+    "fastmath": False,
+}
 
 
 _MAGIC = 6755399441055744.0  # 1.5 * 2^52: adding it rounds to an integer in the low bits

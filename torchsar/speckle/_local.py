@@ -109,9 +109,11 @@ def prepare(
     """Validate the filter arguments (``damping`` only when given) and convert amplitude to
     intensity. ``kernel``: the filter has a one-sweep kernel, which works in float64, so a
     float32 intensity it will take needs no rescaling against overflow, and which checks
-    the values of an intensity as it reads them (:func:`run_kernel`)."""
-    in_kernel = kernel and not amplitude and isinstance(x, Tensor) and takes_kernel(x)
-    check_image(x.detach() if isinstance(x, Tensor) else x, "x", values=not in_kernel)
+    the values of an intensity as it reads them (:func:`run_kernel`). The values are
+    checked after the options on every path, so a call with a bad option and a bad value
+    gets the same error with or without the kernels."""
+    x_ = x.detach() if isinstance(x, Tensor) else x
+    check_image(x_, "x", values=False)  # the values last, after the cheap checks
     window = check_odd(window, "window", minimum=3)
     check_window_fits(x, window, "speckle filter")
     looks = check_positive(looks, "looks")
@@ -119,9 +121,15 @@ def prepare(
         raise OptionError(f"amplitude must be a bool, got {amplitude!r}")
     if damping is not None:
         damping = check_positive(damping, "damping", allow_zero=True)
+    in_kernel = kernel and not amplitude and takes_kernel(x)
+    if not in_kernel:
+        check_image(x_, "x")
     dtype = float_dtype(x.dtype)
     xi = x.to(dtype)
     scale = None if in_kernel and xi.dtype == torch.float32 else _plane_scale(xi)
+    if in_kernel and scale is not None:  # rescaled, a tiny negative would read as -0.0
+        check_image(x_, "x")
+        in_kernel = False
     if scale is not None:
         xi = xi / scale  # exact: a power of two
     intensity = xi.square() if amplitude else xi
@@ -144,7 +152,7 @@ def run_kernel(req: Request, kernel: Callable[[np.ndarray, np.ndarray], int]) ->
     :func:`~torchsar._checks.check_image` words it."""
     x = req.intensity
     h, w = x.shape[-2:]
-    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous().numpy()
     out = torch.empty(x.shape, dtype=x.dtype)
     if kernel(planes, out.numpy().reshape(planes.shape)):
         check_image(x.detach() if req.unchecked is None else req.unchecked.detach(), "x")
