@@ -17,11 +17,12 @@ How they are formed:
   2^-53``). Where that could matter, the window is *near-flat*, ``n var < 2^-8 S2`` (a
   coefficient of variation under about 1/16), and its row is summed again as deviations
   from each pixel's own value ``C``, column by column (vectorised: a near-flat image costs
-  two to three times a speckled one); where ``C`` lies far from the window's mean (``(1 + (C -
-  mean)^2 / var) n > 2^13``) the pixel's cells are summed once more, in two passes
-  (:func:`_centred`). A window of equal values has variance 0 exactly. Everywhere the
-  variance is then within ``(3 L + 4) 2^-45``, about ``2^-40`` or ``(n + 3) u`` of its
-  value, relative: below ``2^-38`` up to 63 x 63 windows (tested against exact sums).
+  two to three times a speckled one); where ``C`` lies far from the window's mean
+  (``(1 + (C - mean)^2 / var) n > 2^13``) the pixel's cells are summed once more, in two
+  passes (:func:`_centred`). A window of equal values has variance 0 exactly. Everywhere
+  the variance is then within ``(3 L + 4) 2^-45``, about ``2^-40`` or ``(n + 3) u`` of its
+  value, relative: below ``2^-38`` for windows up to 63 x 63 (tested against exact sums
+  up to 31 x 31).
 
 Cells outside the image count as absent (zero, and not in the count), as everywhere in
 torchsar. Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
