@@ -19,7 +19,7 @@ LIBRARY = {
     "_triton": 1,
     "_disk_cache": 0,
     "_block_sums": 0,
-    "_vector_exp": 0,
+    "_vector_exp": 1,
     "_moment_kernels": 1,
     "_box_kernels": 2,
     "_gpu_kernels": 0,

@@ -12,20 +12,22 @@ from __future__ import annotations
 
 from numba import njit
 
-__all__ = ["axis_count", "block_sums", "level_up", "levels_for", "ring_levels"]
+__all__ = ["FMA", "JIT", "axis_count", "block_sums", "level_up", "levels_for", "ring_levels"]
 
-# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
-# first caller, so its results would depend on which kernel happened to compile it
-_JIT = {
+# The numba options of every kernel of the one-sweep filters. fastmath is always set: numba
+# compiles a helper that sets none with the fastmath flags of its first caller, so its
+# results would depend on which kernel happened to compile it.
+JIT = {
     "cache": True,
     "nogil": True,
     "error_model": "numpy",
     "boundscheck": False,
     "fastmath": False,
 }
+FMA = {**JIT, "fastmath": {"contract"}}  # a * b + c as one fused multiply-add
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def axis_count(i, n, lo, hi):
     """How many of the offsets ``lo..hi`` from ``i`` land in ``[0, n)``."""
     a = max(i + lo, 0)
@@ -33,7 +35,7 @@ def axis_count(i, n, lo, hi):
     return max(b - a + 1, 0)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def levels_for(length):
     """How many block-sum levels a sum of ``length`` terms needs (``2^k <= length``)."""
     k = 0
@@ -42,7 +44,7 @@ def levels_for(length):
     return k + 1
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def level_up(lo, out, step, n):
     """``out[j] = lo[j] + lo[j + step]`` for ``j < n``: one level of block sums."""
     a, b, o = lo[:n], lo[step : step + n], out[:n]  # slices: j alone indexes (vectorises)
@@ -50,7 +52,7 @@ def level_up(lo, out, step, n):
         o[j] = a[j] + b[j]
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def ring_levels(ring, q, size, depth, w):
     """Every block sum ending at row ``q`` of the ring ``ring[k, slot]`` (row ``r``'s sum
     of rows ``r .. r + 2^k - 1`` in slot ``r % size``), from the level below; level 0 of
@@ -63,7 +65,7 @@ def ring_levels(ring, q, size, depth, w):
             dst[j] = a[j] + b[j]
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _put(a, b, n, out, first, pair):
     """``out[:n] (+)= a (+ b)``: assign when ``first``, add otherwise; ``b`` only when
     ``pair`` (two terms in one pass)."""
@@ -83,7 +85,7 @@ def _put(a, b, n, out, first, pair):
             o[j] += a[j]
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def block_sums(src, size, length, starts, n, out, accumulate):
     """``out[j] (+)=`` the sums of ``length`` terms from each of ``starts`` (a tuple), from
     block sums of ``2^k`` terms: the blocks of ``length``'s set bits, largest first, start

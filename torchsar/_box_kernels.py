@@ -32,32 +32,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._block_sums import axis_count, block_sums, level_up, levels_for, ring_levels
-from torchsar._moment_kernels import (
-    heterogeneity,
-    moment_buffers,
-    next_row,
-    prime,
-    row_moments,
-    window_counts,
+from torchsar._block_sums import (
+    FMA,
+    JIT,
+    axis_count,
+    block_sums,
+    level_up,
+    levels_for,
+    ring_levels,
 )
+from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
 
 __all__ = ["box_filter", "ring_ratio"]
 
-# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
-# first caller, so its results would depend on which kernel happened to compile it
-_JIT = {
-    "cache": True,
-    "nogil": True,
-    "error_model": "numpy",
-    "boundscheck": False,
-    "fastmath": False,
-}
-_FMA = {**_JIT, "fastmath": {"contract"}}  # a * b + c as one FMA
 
-
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _row_levels(rows, q, size, depth, src, w):
     """Row ``q`` of the image (``src``, or zeros where ``src`` is empty) into the block-sum
     ring buffers ``rows[k, slot]`` (row ``r``'s sums of rows ``r .. r + 2^k - 1`` in slot
@@ -72,7 +62,7 @@ def _row_levels(rows, q, size, depth, src, w):
     ring_levels(rows, q, size, depth, w)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def ring_ratio(x, guard, train, scale, threshold, out, mask):
     """CA-CFAR's statistic ``x / mean_ring`` of every plane of ``x`` ``(P, H, W)`` into
     ``out`` (its dtype) and the decision ``out > threshold[0]`` (``threshold`` in ``out``'s
@@ -134,7 +124,7 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                 mi[j] = oi[j] > thr
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     """A box-statistics speckle filter of every plane of ``x`` ``(P, H, W)`` into ``out``:
     the window mean ``mu`` and ``Ci^2 = var / mu^2`` (population variance over the
@@ -148,12 +138,8 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     Returns how many values of ``x`` are not a finite number ``>= 0`` (the input check,
     made as the values are read; ``out`` means nothing unless 0)."""
     p_, h, w = x.shape
-    cache, pad, sums = moment_buffers(radius, w)
-    mu, var = np.zeros(w), np.zeros(w)
-    cols = np.zeros(w)
-    for j in range(w):
-        cols[j] = axis_count(j, w, -radius, radius)
-    counts = np.zeros((3, w))
+    state = moment_state(radius, w)
+    cache, counts, mu, var = state[0], state[4], state[5], state[6]
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
     bad = 0
     for pl in range(p_):
@@ -161,9 +147,8 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
         bad += prime(cache, xp, radius)
         last = -1
         for i in range(h):
-            bad += next_row(cache, xp, i, radius)
-            last = window_counts(i, h, radius, cols, cu2, last, counts)
-            row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
+            b, last = next_moments(state, xp, i, radius, cu2, last)
+            bad += b
             oi = out[pl, i]
             if enhanced:
                 _enhanced_lee_row(xp[i], mu, var, counts[0], cu, cmax, damping, oi)
@@ -172,7 +157,7 @@ def box_filter(x, radius, enhanced, cu2, weight_scale, damping, cmax2, out):
     return bad
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _lee_row(xi, mu, var, cu2_over, cu2, weight_scale, oi):
     """Lee / Kuan: ``mu + W (I - mu)``, ``W = clip((1 - cu2 / Ci^2) / weight_scale, 0, 1)``
     with ``Ci^2 = var / mu^2`` clamped to ``[0, n - 1]``: one division per pixel
@@ -189,7 +174,7 @@ def _lee_row(xi, mu, var, cu2_over, cu2, weight_scale, oi):
         oi[j] = o if o > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding
 
 
-@njit(**_FMA)  # exp_neg's polynomial with FMAs
+@njit(**FMA)  # exp_neg's polynomial with FMAs
 def _enhanced_lee_row(xi, mu, var, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
     at or below ``Cu`` and 0 at or above ``Cmax`` (``tn``: the window counts)."""

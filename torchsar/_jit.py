@@ -139,8 +139,9 @@ def cache_dirs(package: Path = PACKAGE, cache_dir: str | None = None) -> list[Pa
 
 def refresh_cache(package: Path = PACKAGE, cache_dir: str | None = None) -> bool:
     """Remove ``package``'s cached kernels if any of its numba modules changed since the
-    last call (or none was made); returns whether it removed them. Does nothing where the
-    stamp cannot be written (a read-only install)."""
+    last call (or none was made); returns whether it removed them and wrote the new stamp
+    (False where the stamp cannot be written; a read-only install's sources never change,
+    and there the caller ignores the error of removing a cache file)."""
     cache_dir = os.environ.get("NUMBA_CACHE_DIR") if cache_dir is None else cache_dir
     stamp_dir = Path(cache_dir) if cache_dir else package / "__pycache__"
     stamp = stamp_dir / f"{package.name}-{STAMP_NAME}"

@@ -33,34 +33,27 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._block_sums import axis_count
+from torchsar._block_sums import JIT, axis_count
 
 __all__ = [
     "FLAT",
     "ci2_of",
     "heterogeneity",
     "moment_buffers",
+    "moment_state",
+    "next_moments",
     "next_row",
     "prime",
     "row_moments",
     "window_counts",
 ]
 
-# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
-# first caller, so its results would depend on which kernel happened to compile it
-_JIT = {
-    "cache": True,
-    "nogil": True,
-    "error_model": "numpy",
-    "boundscheck": False,
-    "fastmath": False,
-}
 
 FLAT = 2.0**-8  # n var below FLAT * sum x^2: near-flat, summed again as deviations
 _SPREAD = 2.0**13  # centred sums taken where (1 + (C - mean)^2 / var) n <= 2^13
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def moment_buffers(radius, w):
     """The working arrays of a ``(2 radius + 1)^2`` window over rows ``w`` long: the rows
     ring ``(size, w)`` (row ``r`` in slot ``r % size``), the column sums of ``x`` and
@@ -74,7 +67,7 @@ def moment_buffers(radius, w):
 _MAX = np.finfo(np.float64).max
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _take(cache, q, row, present):
     """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64; how
     many of its values are not a finite number ``>= 0`` (the filters' input check, made as
@@ -91,7 +84,7 @@ def _take(cache, q, row, present):
     return bad
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def prime(cache, xp, radius):
     """Rows ``-radius .. radius - 1`` of the plane ``xp`` into the ring (before row 0); the
     count of values that are not a finite number ``>= 0``."""
@@ -102,7 +95,7 @@ def prime(cache, xp, radius):
     return bad
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def next_row(cache, xp, i, radius):
     """Row ``i + radius`` into the ring (zeros past the bottom): row ``i``'s window is then
     complete. The count of its values that are not a finite number ``>= 0``."""
@@ -111,16 +104,22 @@ def next_row(cache, xp, i, radius):
     return _take(cache, q, xp[min(q, h - 1)], q < h)
 
 
-@njit(**_JIT, inline="always")
-def _four(a, b, c, d, k):
-    """``(a + b) + (c + d)`` and the same of squares, of the first ``k`` of the four."""
+@njit(**JIT, inline="always")
+def _sum4(a, b, c, d, k):
+    """``(a + b) + (c + d)`` of the first ``k`` of the four (the others as 0)."""
     b = b if k > 1 else 0.0
     c = c if k > 2 else 0.0
     d = d if k > 3 else 0.0
-    return (a + b) + (c + d), (a * a + b * b) + (c * c + d * d)
+    return (a + b) + (c + d)
 
 
-@njit(**_JIT)
+@njit(**JIT, inline="always")
+def _four(a, b, c, d, k):
+    """:func:`_sum4` of the four and of their squares."""
+    return _sum4(a, b, c, d, k), _sum4(a * a, b * b, c * c, d * d, k)
+
+
+@njit(**JIT)
 def _down(cache, first, size, k, o1, o2, init):
     """``o1 (+)= sum x``, ``o2 (+)= sum x^2`` over the ``k <= 4`` ring rows from row
     ``first``; ``init``: assign instead of add."""
@@ -132,7 +131,7 @@ def _down(cache, first, size, k, o1, o2, init):
         o2[j] = s2 if init else o2[j] + s2
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _at(c, start, k, m, w):
     """The ``m``-th of ``k`` consecutive ``w``-long windows of ``c`` from ``start`` (the
     last one again past ``k``)."""
@@ -140,7 +139,7 @@ def _at(c, start, k, m, w):
     return c[o : o + w]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _across(c1, c2, start, k, t1, t2, init):
     """``t1 (+)=`` the sums of the ``k <= 4`` padded column sums ``c1`` from ``j + start``
     (and ``t2`` of ``c2``); ``init``: assign instead of add."""
@@ -158,17 +157,39 @@ def _across(c1, c2, start, k, t1, t2, init):
         _at(c2, start, k, 3, w),
     )
     for j in range(w):
-        x1 = (a1[j] + (b1[j] if k > 1 else 0.0)) + (
-            (e1[j] if k > 2 else 0.0) + (d1[j] if k > 3 else 0.0)
-        )
-        x2 = (a2[j] + (b2[j] if k > 1 else 0.0)) + (
-            (e2[j] if k > 2 else 0.0) + (d2[j] if k > 3 else 0.0)
-        )
+        x1 = _sum4(a1[j], b1[j], e1[j], d1[j], k)
+        x2 = _sum4(a2[j], b2[j], e2[j], d2[j], k)
         t1[j] = x1 if init else t1[j] + x1
         t2[j] = x2 if init else t2[j] + x2
 
 
-@njit(**_JIT)
+@njit(**JIT)
+def moment_state(radius, w):
+    """What :func:`next_moments` keeps for rows ``w`` long: the buffers of
+    :func:`moment_buffers` (the rows ring first), each column's in-image window width, the
+    rows of :func:`window_counts`, and the row's window means and variances."""
+    cache, pad, sums = moment_buffers(radius, w)
+    cols = np.zeros(w)
+    for j in range(w):
+        cols[j] = axis_count(j, w, -radius, radius)
+    return cache, pad, sums, cols, np.zeros((3, w)), np.zeros(w), np.zeros(w)
+
+
+@njit(**JIT)
+def next_moments(state, xp, i, radius, cu2, last):
+    """Row ``i + radius`` of the plane ``xp`` into the ring, then row ``i``'s window counts
+    (``last``: the row count :func:`window_counts` returned for row ``i - 1``, -1 at row
+    0) and moments into ``state`` (:func:`moment_state`). Returns the count of values read
+    that are not a finite number ``>= 0`` and the new row count."""
+    cache, pad, sums, cols, counts, mu, var = state
+    h = xp.shape[0]
+    bad = next_row(cache, xp, i, radius)
+    last = window_counts(i, h, radius, cols, cu2, last, counts)
+    row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
+    return bad, last
+
+
+@njit(**JIT)
 def row_moments(cache, pad, sums, i, h, radius, cols, inv, mu, var):
     """The window mean ``mu`` (at least 0) and population variance ``var`` (at least 0) of
     every pixel of row ``i`` (of ``h``), its window's rows in the ring ``cache``; ``cols``
@@ -201,7 +222,7 @@ def row_moments(cache, pad, sums, i, h, radius, cols, inv, mu, var):
         _near_flat(cache, pad, sums, i, h, radius, cols, mu, var)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _near_flat(cache, pad, sums, i, h, radius, cols, mu, var):
     """The moments of row ``i``'s near-flat windows (``var < 0`` on entry): the row's sums
     of deviations from each pixel's own value ``C`` (:func:`centred_sums`, vectorised),
@@ -227,7 +248,7 @@ def _near_flat(cache, pad, sums, i, h, radius, cols, mu, var):
             mu[j], var[j] = _centred(cache, i, j, first, last, radius, cols[j])
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _centred(cache, i, j, first, last, radius, width):
     """Window mean and variance of pixel ``(i, j)`` from the deviations ``d = x - C`` of
     its cells from its own value ``C`` (the window's rows ``first .. last`` in ``cache``,
@@ -258,7 +279,7 @@ def _centred(cache, i, j, first, last, radius, width):
     return (mu if mu > 0.0 else 0.0), (v if v > 0.0 else 0.0)
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def ci2_of(mu, var, n):
     """``Ci^2 = var / mu^2``, clamped to ``[0, n - 1]`` (its bound for non-negative data);
     ``0 / 0 = 0``, ``var / 0 = inf`` (clamped). A mean whose square underflows (cells
@@ -267,7 +288,7 @@ def ci2_of(mu, var, n):
     return ci2 if ci2 < n - 1.0 else n - 1.0
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def heterogeneity(mu, var, n, cu, cmax, damping):
     """The enhanced filters' ``h = damping (Ci - Cu) / (Cmax - Ci)`` from the window mean
     and variance: 0 at or below ``Cu`` (homogeneous), ``inf`` at or above ``Cmax`` (a
@@ -280,7 +301,7 @@ def heterogeneity(mu, var, n, cu, cmax, damping):
     return np.inf if ci >= cmax else h
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def window_counts(i, h, radius, cols, cu2, last, counts):
     """Per pixel of row ``i`` (of ``h``), into the rows of ``counts``: the window's cell
     count ``n``, ``1 / n`` and ``cu2 / (n - 1)`` (``cols``: each column's
@@ -296,7 +317,7 @@ def window_counts(i, h, radius, cols, cu2, last, counts):
     return nv
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def centred_sums(cache, i, h, radius, work, t1, t2):
     """Sums of the deviations ``t1`` and squared deviations ``t2`` of the window cells of
     every pixel of row ``i`` from the pixel's own value (the window rows are in ``cache``,
@@ -331,7 +352,7 @@ def centred_sums(cache, i, h, radius, work, t1, t2):
         c, init = c + k, False
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _add_deviations(cache, size, r, k, centre, a1, a2, init):
     """``a1 (+)= sum of (row - centre)``, ``a2 (+)= sum of (row - centre)^2`` over the
     ``k <= 4`` cached rows ``r .. r + k - 1`` (pairs added first: ``(a + b) + (c + d)``);
@@ -351,13 +372,13 @@ def _add_deviations(cache, size, r, k, centre, a1, a2, init):
         a2[j] = s2 if init else a2[j] + s2
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _column(s1, s2, cc, nc, c, w):
     """The four padded rows of :func:`centred_sums` from column ``c``, ``w`` long."""
     return s1[c : c + w], s2[c : c + w], cc[c : c + w], nc[c : c + w]
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _move_columns(s1, s2, cc, nc, c, k, centre, t1, t2, init):
     """``t1``, ``t2`` (+)= the ``k <= 4`` column sums from column ``c`` of the padded rows
     (``s1``, ``s2``: deviations from each column's cell ``cc`` in the pixel's row, ``nc``

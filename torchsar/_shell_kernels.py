@@ -19,33 +19,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._block_sums import axis_count
-from torchsar._moment_kernels import (
-    ci2_of,
-    heterogeneity,
-    moment_buffers,
-    next_row,
-    prime,
-    row_moments,
-    window_counts,
-)
+from torchsar._block_sums import FMA, JIT
+from torchsar._moment_kernels import ci2_of, heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
 
 __all__ = ["frost_filter"]
 
-# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
-# first caller, so its results would depend on which kernel happened to compile it
-_JIT = {
-    "cache": True,
-    "nogil": True,
-    "error_model": "numpy",
-    "boundscheck": False,
-    "fastmath": False,
-}
-_FMA = {**_JIT, "fastmath": {"contract"}}  # a * b + c as one FMA
 
-
-@njit(**_JIT)
+@njit(**JIT)
 def _pairs(cache, i, h, radius, size, v, vn):
     """Vertical pair sums of row ``i``: ``v[p] = x[i - p] + x[i + p]`` (``x[i]`` for ``p =
     0``; rows outside the image count as absent) into the padded rows of ``v``, and ``vn[p]``
@@ -69,7 +50,7 @@ def _pairs(cache, i, h, radius, size, v, vn):
         vn[p] = has_up + has_down
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _shell_counts(shells, vn, hcount, n):
     """``n[shell, j]``: the in-image cells of each distance shell around pixel ``j`` of a
     row whose vertical pairs hold ``vn[p]`` rows, ``hcount[q, j]`` the columns ``j +- q``
@@ -86,7 +67,7 @@ def _shell_counts(shells, vn, hcount, n):
                 cnt[j] += vn[q] * hcount[p, j]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _orbit_sum(v, p, q, radius, dst, init):
     """``dst (+)=`` the sum over the orbit ``(±p, ±q), (±q, ±p)`` of each pixel from the
     padded vertical pair sums ``v`` (``v[p]`` at columns ``j ± q``, and ``v[q]`` at ``j ±
@@ -103,14 +84,14 @@ def _orbit_sum(v, p, q, radius, dst, init):
         dst[j] = t if init else dst[j] + t
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def _power(prev, base, out):
     """``out = prev * base`` (the next power of a shell's weight)."""
     for j in range(out.shape[0]):
         out[j] = prev[j] * base[j]
 
 
-@njit(**_FMA, inline="always")
+@njit(**FMA, inline="always")
 def _accumulate(e, sk, nk, centre, num, den, first):
     """``num += e sk``, ``den += e nk`` (one FMA each), from ``num = centre``, ``den = 1``
     when ``first``."""
@@ -124,7 +105,7 @@ def _accumulate(e, sk, nk, centre, num, den, first):
             den[j] += e[j] * nk[j]
 
 
-@njit(**_FMA)  # exp_neg's polynomial with FMAs
+@njit(**FMA)  # exp_neg's polynomial with FMAs
 def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2, out):
     """A Frost-type filter of every plane of ``x`` ``(P, H, W)`` into ``out``.
 
@@ -143,11 +124,8 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     size = 2 * radius + 1
     wp = w + 2 * radius
     n_shells = dist.shape[0]
-    cache, pad, sums = moment_buffers(radius, w)  # cache: row r in slot r % size
-    mu, var = np.zeros(w), np.zeros(w)
-    cols = np.zeros(w)
-    for j in range(w):
-        cols[j] = axis_count(j, w, -radius, radius)
+    state = moment_state(radius, w)
+    cache, counts, mu, var = state[0], state[4], state[5], state[6]  # cache: row r in r % size
     # horizontal pair counts of every offset b: how many of j - b, j + b are in the image
     hcount = np.zeros((radius + 1, w))
     for b in range(radius + 1):
@@ -164,17 +142,15 @@ def frost_filter(x, radius, shells, dist, powers, enhanced, damping, cu2, cmax2,
     e_pow = np.zeros((bases.shape[0], w))  # its power at the base's last shell
     last_m = np.zeros(bases.shape[0], np.int64)
     cu, cmax = np.sqrt(cu2), np.sqrt(cmax2)
-    counts = np.zeros((3, w))
     bad = 0
     for pl in range(p_):
         xp = x[pl]
         bad += prime(cache, xp, radius)
         last = -1
         for i in range(h):
-            bad += next_row(cache, xp, i, radius)
+            b, last = next_moments(state, xp, i, radius, cu2, last)
+            bad += b
             centre = cache[i % size]
-            last = window_counts(i, h, radius, cols, cu2, last, counts)
-            row_moments(cache, pad, sums, i, h, radius, cols, counts[1], mu, var)
             if enhanced:
                 for j in range(w):
                     decay[j] = heterogeneity(mu[j], var[j], counts[0, j], cu, cmax, damping)

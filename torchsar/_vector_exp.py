@@ -9,17 +9,9 @@ from __future__ import annotations
 from numba import njit, types
 from numba.extending import intrinsic
 
-__all__ = ["exp_neg"]
+from torchsar._block_sums import JIT
 
-# fastmath always set: numba compiles a helper that sets none with the fastmath flags of its
-# first caller, so its results would depend on which kernel happened to compile it
-_JIT = {
-    "cache": True,
-    "nogil": True,
-    "error_model": "numpy",
-    "boundscheck": False,
-    "fastmath": False,
-}
+__all__ = ["exp_neg"]
 
 
 _MAGIC = 6755399441055744.0  # 1.5 * 2^52: adding it rounds to an integer in the low bits
@@ -48,7 +40,7 @@ def _float(typingctx, bits):
     return types.float64(types.int64), codegen
 
 
-@njit(**_JIT, inline="always")
+@njit(**JIT, inline="always")
 def exp_neg(x):
     """``exp(x)`` for ``x <= 0`` (``-inf`` included), without a library call so that loops
     over it vectorise: ``x = k ln 2 + r``, ``|r| <= ln 2 / 2``, the Taylor polynomial of
