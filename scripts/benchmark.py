@@ -8,14 +8,19 @@ second of the evaluator; run it by ``--topic``, with ``--n``, ``--workers`` and
 ``--repeat`` rounds of ours, reference, ours, ...), so both see the same machine load; a
 call shorter than 5 ms is repeated within its round until the round lasts about 5 ms and
 timed per call, on both sides alike, so short calls are timed as a loop over many images
-runs them and not by a timer's resolution and cold caches. The medians of wall and CPU
+runs them and not by a timer's resolution and cold caches. Each round starts with one
+untimed call of the same function (a lead-in; ``--cold`` leaves it out), so each side is
+timed in its steady state and not in the switch from the other side's code: on the 2-core
+VMs here the first ~10 ms of vectorised work after a different workload (or an idle
+pause) runs up to 3x slower, which doubled a 9 ms kernel timed right after a 380 ms
+scalar reference. The medians of wall and CPU
 (thread) time are printed with the ratio ``reference / ours`` of the
 medians (> 1 means torchsar is faster). CPU time is the fairer figure on a busy host. A
 reference may be an older implementation of ours (e.g. ``region`` and ``cfar_family`` time
 the compiled numba path against the numpy/torch path it replaces, see :mod:`torchsar._jit`).
 
 Usage: ``python scripts/benchmark.py [--topic FILE_STEM] [--only SUBSTRING] [--repeat N]
-[--csv PATH] [--n N] [--workers W ...] [--device DEVICE]``
+[--csv PATH] [--n N] [--workers W ...] [--device DEVICE] [--cold]``
 """
 
 from __future__ import annotations
@@ -54,17 +59,19 @@ def calls_per_round(seconds: float) -> int:
 
 
 def interleaved(
-    ours: Callable[[], object], ref: Callable[[], object], repeat: int
+    ours: Callable[[], object], ref: Callable[[], object], repeat: int, lead_in: bool = True
 ) -> tuple[tuple[float, float], tuple[float, float]]:
     """Median (wall, CPU) seconds per call of ``ours`` and of ``ref``, timed alternately in
     ``repeat`` rounds each after two warm-up runs of each (a round of a short call repeats
-    it, :func:`calls_per_round`)."""
+    it, :func:`calls_per_round`); ``lead_in``: each round starts with one untimed call."""
     ours(), ref()  # the first call may compile or load a kernel: not a measure of a call
     calls = {"ours": calls_per_round(_timed(ours)[0]), "ref": calls_per_round(_timed(ref)[0])}
     runs: dict[str, list[tuple[float, float]]] = {"ours": [], "ref": []}
     for _ in range(repeat):
-        runs["ours"].append(_timed(ours, calls["ours"]))
-        runs["ref"].append(_timed(ref, calls["ref"]))
+        for key, fn in (("ours", ours), ("ref", ref)):
+            if lead_in:
+                fn()
+            runs[key].append(_timed(fn, calls[key]))
 
     def median(key: str) -> tuple[float, float]:
         return (
@@ -127,6 +134,11 @@ def main(argv: list[str] | None = None) -> int:
         help="worker counts of a report topic (throughput: default 1 2)",
     )
     p.add_argument("--device", help="where a report topic's detectors run (cpu, cuda, ...)")
+    p.add_argument(
+        "--cold",
+        action="store_true",
+        help="no untimed lead-in call before each round (time each side right after the other's)",
+    )
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     path = HERE / "benchmarks" / f"{args.topic}.py"
@@ -134,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         return run_report(mod, args.n, args.workers, args.device, args.csv)
     rows = []
     for name, ours, ref in load_cases(args.only, args.topic):
-        (t_ours, c_ours), (t_ref, c_ref) = interleaved(ours, ref, args.repeat)
+        (t_ours, c_ours), (t_ref, c_ref) = interleaved(ours, ref, args.repeat, not args.cold)
         rows.append(
             (
                 name,
