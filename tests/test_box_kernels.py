@@ -369,6 +369,49 @@ def test_a_lazily_negated_view_is_read_as_its_values(monkeypatch):
     assert torch.equal(on_view, on) and torch.equal(off_view, off)
 
 
+@pytest.mark.parametrize("bad", list(BAD))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_ca_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
+    """CA's kernel checks every value as it reads it instead of a scan beforehand: a bad
+    value in the first rows (read before the first output row), inside, in the last row
+    or in the last plane is refused with the tensor code's error, type and words."""
+    from torchsar.errors import InputValueError
+
+    for where in [(0, 0, 0, 0), (0, 0, 1, 5), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
+        x = _scene(17, shape=(2, 2, 16, 14), dtype=dtype)
+        x[where] = BAD[bad]
+        on, off = _errors(monkeypatch, lambda x=x: cfar.ca(x, guard=1, train=2))
+        assert on == off and on[0] is InputValueError
+
+
+def test_ca_checks_its_options_before_the_values_on_both_paths(monkeypatch):
+    """A call with a bad option and a bad value gets the option's error with or without
+    the kernel."""
+    from torchsar.errors import OptionError, WindowSizeError
+
+    x = _scene(18, shape=(1, 1, 12, 12))
+    x[0, 0, 6, 6] = float("nan")
+    cases = [
+        (lambda: cfar.ca(x, guard=1, train=2, pfa=2.0), OptionError),
+        (lambda: cfar.ca(x, guard=1, train=2, looks=0.0), OptionError),
+        (lambda: cfar.ca(x, guard=4, train=4), WindowSizeError),
+    ]
+    for call, kind in cases:
+        on, off = _errors(monkeypatch, call)
+        assert on == off and on[0] is kind
+
+
+def test_ca_reads_a_lazily_negated_view_as_its_values(monkeypatch):
+    """``conj().imag`` of a complex tensor is a view with torch's negation bit set."""
+    b = _scene(19, shape=(1, 1, 14, 12))
+    view = torch.complex(torch.zeros_like(b), -b).conj().imag
+    assert view.is_neg() and torch.equal(view, b)
+    on_view, off_view = _both(monkeypatch, lambda: cfar.ca(view, guard=1, train=2))
+    on, off = _both(monkeypatch, lambda: cfar.ca(b, guard=1, train=2))
+    for got, want in [(on_view, on), (off_view, off)]:
+        assert torch.equal(got.statistic, want.statistic) and torch.equal(got.mask, want.mask)
+
+
 def test_every_kernel_sets_its_own_fastmath():
     """numba compiles a helper that sets no fastmath with its first caller's flags: the
     moments would take FMAs when the Frost kernel compiled them first and none when a Lee

@@ -10,9 +10,19 @@ Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
-__all__ = ["FMA", "JIT", "axis_count", "block_sums", "level_up", "levels_for", "ring_levels"]
+__all__ = [
+    "FMA",
+    "JIT",
+    "axis_count",
+    "block_sums",
+    "level_up",
+    "levels_for",
+    "ring_levels",
+    "take_row",
+]
 
 # The numba options of every kernel of the one-sweep filters. fastmath is always set: numba
 # compiles a helper that sets none with the fastmath flags of its first caller, so its
@@ -25,6 +35,8 @@ JIT = {
     "fastmath": False,
 }
 FMA = {**JIT, "fastmath": {"contract"}}  # a * b + c as one fused multiply-add
+
+_FINITE_MAX = np.finfo(np.float64).max
 
 
 @njit(**JIT)
@@ -115,3 +127,20 @@ def block_sums(src, size, length, starts, n, out, accumulate):
     elif first:
         for j in range(n):
             out[j] = 0.0
+
+
+@njit(**JIT, inline="always")
+def take_row(cache, q, row, present):
+    """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64; how
+    many of its values are not a finite number ``>= 0`` (the kernels' input check, made as
+    the values are read)."""
+    dst = cache[q % cache.shape[0]]
+    bad = 0
+    if present:
+        for j in range(dst.shape[0]):
+            v = np.float64(row[j])
+            dst[j] = v
+            bad += not (v >= 0.0 and v <= _FINITE_MAX)  # NaN fails both
+    else:
+        dst[:] = 0.0
+    return bad

@@ -40,6 +40,7 @@ from torchsar._block_sums import (
     level_up,
     levels_for,
     ring_levels,
+    take_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
@@ -48,18 +49,14 @@ __all__ = ["box_filter", "ring_ratio"]
 
 
 @njit(**JIT, inline="always")
-def _row_levels(rows, q, size, depth, src, w):
-    """Row ``q`` of the image (``src``, or zeros where ``src`` is empty) into the block-sum
+def _row_levels(rows, q, size, depth, src, present, w):
+    """Row ``q`` of the image (``src``, or zeros where not ``present``) into the block-sum
     ring buffers ``rows[k, slot]`` (row ``r``'s sums of rows ``r .. r + 2^k - 1`` in slot
-    ``r % size``), every level ending at ``q`` updated."""
-    base = rows[0, q % size]
-    if src.shape[0] == 0:
-        for j in range(w):
-            base[j] = 0.0
-    else:
-        for j in range(w):
-            base[j] = np.float64(src[j])
+    ``r % size``), every level ending at ``q`` updated. Returns how many of its values are
+    not a finite number ``>= 0`` (the input check, made as the values are read)."""
+    bad = take_row(rows[0], q, src, present)
     ring_levels(rows, q, size, depth, w)
+    return bad
 
 
 @njit(**JIT)
@@ -74,7 +71,10 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
 
     Each part is a sum of power-of-two blocks (rows ``r .. r + 2^k - 1`` kept per row as
     it arrives, then columns likewise): about a dozen additions per pixel, every one of
-    non-negative terms in an order fixed by the pixel's position alone."""
+    non-negative terms in an order fixed by the pixel's position alone.
+
+    Returns how many values of ``x`` are not a finite number ``>= 0`` (the input check,
+    made as the values are read; ``out`` and ``mask`` mean nothing unless 0)."""
     p_, h, w = x.shape
     g, o = guard, guard + train
     size = 2 * o + 1
@@ -86,21 +86,23 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
     band = np.zeros((hdepth, w + 2 * o))  # band rows summed, o zero columns a side, levels
     mid = np.zeros((mdepth, w + 2 * o))
     acc = np.zeros(w)
-    empty = x[0, 0, :0] if p_ else np.zeros(0, x.dtype)
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     outer_cols, guard_cols = np.zeros(w, np.int64), np.zeros(w, np.int64)
     for j in range(w):
         outer_cols[j] = axis_count(j, w, -o, o)
         guard_cols[j] = axis_count(j, w, -g, g)
     cf = np.ones(w)  # count times border factor
     thr = threshold[0]
+    bad = 0
     for pl in range(p_):
         xp = x[pl]
         for q in range(-o, min(o, h + o)):
-            _row_levels(rows, q, size, depth, xp[q] if 0 <= q < h else empty, w)
+            inside = 0 <= q < h
+            bad += _row_levels(rows, q, size, depth, xp[q] if inside else empty, inside, w)
         last_rows = (-1, -1)
         for i in range(h):
             q = i + o
-            _row_levels(rows, q, size, depth, xp[q] if q < h else empty, w)
+            bad += _row_levels(rows, q, size, depth, xp[min(q, h - 1)], q < h, w)
             counts = (axis_count(i, h, -o, o), axis_count(i, h, -g, g))
             if counts != last_rows:  # the counts and border factors of this row
                 for j in range(w):
@@ -122,6 +124,7 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                 v = np.float64(xi[j]) * cf[j] / (acc[j] + 0.0)  # a ring of -0.0 is 0
                 oi[j] = v if v == v else 0.0
                 mi[j] = oi[j] > thr
+    return bad
 
 
 @njit(**JIT)

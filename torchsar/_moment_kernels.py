@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._block_sums import JIT, axis_count
+from torchsar._block_sums import JIT, axis_count, take_row
 
 __all__ = [
     "FLAT",
@@ -64,26 +64,6 @@ def moment_buffers(radius, w):
     return np.zeros((size, w)), np.zeros((4, w + 2 * radius)), np.zeros((4, w))
 
 
-_MAX = np.finfo(np.float64).max
-
-
-@njit(**JIT)
-def _take(cache, q, row, present):
-    """Row ``q`` (``row``, or zeros where not ``present``) into the ring, in float64; how
-    many of its values are not a finite number ``>= 0`` (the filters' input check, made as
-    the values are read)."""
-    dst = cache[q % cache.shape[0]]
-    bad = 0
-    if present:
-        for j in range(dst.shape[0]):
-            v = np.float64(row[j])
-            dst[j] = v
-            bad += not (v >= 0.0 and v <= _MAX)  # NaN fails both
-    else:
-        dst[:] = 0.0
-    return bad
-
-
 @njit(**JIT)
 def prime(cache, xp, radius):
     """Rows ``-radius .. radius - 1`` of the plane ``xp`` into the ring (before row 0); the
@@ -91,7 +71,7 @@ def prime(cache, xp, radius):
     h = xp.shape[0]
     bad = 0
     for q in range(-radius, radius):
-        bad += _take(cache, q, xp[max(min(q, h - 1), 0)], 0 <= q < h)
+        bad += take_row(cache, q, xp[max(min(q, h - 1), 0)], 0 <= q < h)
     return bad
 
 
@@ -101,7 +81,7 @@ def next_row(cache, xp, i, radius):
     complete. The count of its values that are not a finite number ``>= 0``."""
     h = xp.shape[0]
     q = i + radius
-    return _take(cache, q, xp[min(q, h - 1)], q < h)
+    return take_row(cache, q, xp[min(q, h - 1)], q < h)
 
 
 @njit(**JIT, inline="always")

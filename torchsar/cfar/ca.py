@@ -10,7 +10,7 @@ import torch
 from torch import Tensor
 
 from torchsar import _jit, _triton
-from torchsar._checks import check_positive, check_probability
+from torchsar._checks import check_image, check_positive, check_probability
 from torchsar.cfar.core import (
     border_scale,
     conclude,
@@ -24,6 +24,7 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
+from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
@@ -70,13 +71,17 @@ def ca(
         >>> ca(x, guard=1, train=2, pfa=1e-3).mask.sum().item()
         1
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ca")
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ca", values=False)
     factor = partial(ca_factor, pfa=pfa, looks=check_positive(looks, "looks"))
     threshold = ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks)
-    if vmask is None and _triton.for_tensor(x):
+    gpu = vmask is None and _triton.for_tensor(x)
+    compiled = vmask is None and not gpu and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernel checks the values as it reads them
+        check_image(x, "x")
+    if gpu:
         stat, mask = _gpu_ring_ratio(x, ring, factor, threshold)
         return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
-    if vmask is None and _jit.for_tensor(x) and x.numel():
+    if compiled:
         stat, mask = _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
         return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
     stat = ring_mean_ratio(x, ring, factor, vmask, out_dtype(x))
@@ -122,13 +127,16 @@ def _compiled_ring_ratio(
 
     h, w = x.shape[-2:]
     scale = geometric_scale(h, w, ring, factor)
-    planes = x.detach().reshape(-1, h, w).contiguous()
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
     out = torch.empty(planes.shape, dtype=dtype)
     mask = torch.empty(planes.shape, dtype=torch.bool)
     thr = _threshold(threshold, out).reshape(1).numpy()
-    _box_kernels.ring_ratio(
+    bad = _box_kernels.ring_ratio(
         planes.numpy(), ring.guard, ring.train, scale, thr, out.numpy(), mask.numpy()
     )
+    if bad:  # the error of the tensor code's check, on the caller's tensor
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
     return out.view(x.shape), mask.view(x.shape)
 
 

@@ -42,11 +42,19 @@ __all__ = [
 
 
 def prepare(
-    x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None, *, detector: str
+    x: Tensor,
+    guard: int,
+    train: int,
+    pfa: float,
+    valid: Tensor | None,
+    *,
+    detector: str,
+    values: bool = True,
 ) -> tuple[Ring, float, Tensor | None]:
     """Validate the common CFAR arguments of ``detector`` (its name, for messages); return
-    the ring, ``pfa`` and the bool mask."""
-    check_image(x, "x", not_differentiable=detector)
+    the ring, ``pfa`` and the bool mask. ``values=False`` leaves the image's values to the
+    caller (a kernel that checks them as it reads them, after the detector's own options)."""
+    check_image(x, "x", not_differentiable=detector, values=values)
     ring = Ring(guard, train)
     ring.check_fits(x)
     pfa = check_probability(pfa, "pfa")
