@@ -421,6 +421,7 @@ def test_every_kernel_sets_its_own_fastmath():
     from numba.core.registry import CPUDispatcher
 
     names = ["_block_sums", "_moment_kernels", "_box_kernels", "_shell_kernels", "_vector_exp"]
+    names.append("_pinwheel_kernels")
     seen = 0
     for name in names:
         mod = importlib.import_module(f"torchsar.{name}")

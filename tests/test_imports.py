@@ -22,6 +22,7 @@ LIBRARY = {
     "_vector_exp": 1,
     "_moment_kernels": 1,
     "_box_kernels": 2,
+    "_pinwheel_kernels": 1,
     "_gpu_kernels": 0,
     "_shell_kernels": 2,
     "_windows_kernels": 0,

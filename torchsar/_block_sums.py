@@ -21,6 +21,7 @@ __all__ = [
     "level_up",
     "levels_for",
     "ring_levels",
+    "ring_row",
     "take_row",
 ]
 
@@ -143,4 +144,15 @@ def take_row(cache, q, row, present):
             bad += not (v >= 0.0 and v <= _FINITE_MAX)  # NaN fails both
     else:
         dst[:] = 0.0
+    return bad
+
+
+@njit(**JIT, inline="always")
+def ring_row(rows, q, size, depth, src, present, w):
+    """Row ``q`` of an image (``src``, or zeros where not ``present``) into the block-sum
+    ring buffers ``rows[k, slot]`` (row ``r``'s sums of rows ``r .. r + 2^k - 1`` in slot
+    ``r % size``), every level ending at ``q`` updated. Returns how many of its values are
+    not a finite number ``>= 0`` (the input check, made as the values are read)."""
+    bad = take_row(rows[0], q, src, present)
+    ring_levels(rows, q, size, depth, w)
     return bad

@@ -39,24 +39,12 @@ from torchsar._block_sums import (
     block_sums,
     level_up,
     levels_for,
-    ring_levels,
-    take_row,
+    ring_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
 
 __all__ = ["box_filter", "ring_ratio"]
-
-
-@njit(**JIT, inline="always")
-def _row_levels(rows, q, size, depth, src, present, w):
-    """Row ``q`` of the image (``src``, or zeros where not ``present``) into the block-sum
-    ring buffers ``rows[k, slot]`` (row ``r``'s sums of rows ``r .. r + 2^k - 1`` in slot
-    ``r % size``), every level ending at ``q`` updated. Returns how many of its values are
-    not a finite number ``>= 0`` (the input check, made as the values are read)."""
-    bad = take_row(rows[0], q, src, present)
-    ring_levels(rows, q, size, depth, w)
-    return bad
 
 
 @njit(**JIT)
@@ -98,11 +86,11 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
         xp = x[pl]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += _row_levels(rows, q, size, depth, xp[q] if inside else empty, inside, w)
+            bad += ring_row(rows, q, size, depth, xp[q] if inside else empty, inside, w)
         last_rows = (-1, -1)
         for i in range(h):
             q = i + o
-            bad += _row_levels(rows, q, size, depth, xp[min(q, h - 1)], q < h, w)
+            bad += ring_row(rows, q, size, depth, xp[min(q, h - 1)], q < h, w)
             counts = (axis_count(i, h, -o, o), axis_count(i, h, -g, g))
             if counts != last_rows:  # the counts and border factors of this row
                 for j in range(w):

@@ -61,6 +61,35 @@ def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarra
     return out
 
 
+def block_reference(x: np.ndarray, guard: int, train: int, pfa: float, reduce: str) -> np.ndarray:
+    """GO's (``reduce="max"``) or SO's ``I / extreme block mean`` over the in-image cells
+    of the four pinwheel blocks (each mean summed exactly: ``math.fsum``; GO's estimate at
+    least 0, SO's 0 where no block has cells; ``0 / 0 = 0``), times ``factor(interior) /
+    factor(sizes)`` where a pixel's block sizes are not the interior's, ``-inf`` where no
+    block has a cell, pixel by pixel, of ``x`` ``(B, C, H, W)``."""
+    from torchsar.cfar.thresholds import block_factor
+
+    size = train * (2 * guard + train + 1)
+    interior = block_factor((size,) * 4, pfa, reduce)
+    out = np.empty(x.shape)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                blocks = block_cells(img, i, j, guard, train)
+                sizes = tuple(len(b) for b in blocks)
+                if sum(sizes) == 0:
+                    out[idx][i, j] = -math.inf
+                    continue
+                means = [math.fsum(b) / len(b) for b in blocks if len(b)]
+                est = max(max(means), 0.0) if reduce == "max" else min(means)
+                v = img[i, j] / est if est > 0 else (0.0 if img[i, j] == 0 else math.inf)
+                if sizes != (size,) * 4:
+                    v = v * (interior / block_factor(tuple(sorted(sizes)), pfa, reduce))
+                out[idx][i, j] = v
+    return out
+
+
 def os_reference(
     x: np.ndarray, guard: int, train: int, rank: int, factor, dtype=np.float32
 ) -> np.ndarray:

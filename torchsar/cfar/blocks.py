@@ -3,13 +3,15 @@ the exact threshold factor for each pixel's block sizes."""
 
 from __future__ import annotations
 
+import functools
 from functools import partial
 
+import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
-from torchsar._checks import check_probability
+from torchsar import _jit, _triton
+from torchsar._checks import check_image, check_probability
 from torchsar.cfar.core import (
     conclude,
     finish,
@@ -21,9 +23,10 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
 from torchsar.detection import Detection
+from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
-__all__ = ["block_cfar", "block_scale", "block_threshold", "extreme_mean"]
+__all__ = ["block_cfar", "block_scale", "block_threshold", "border_states", "extreme_mean"]
 
 _NAMES = {"max": "go", "min": "so"}
 
@@ -54,11 +57,16 @@ def block_cfar(
     x: Tensor, guard: int, train: int, pfa: float, valid: Tensor | None, reduce: str
 ) -> Detection:
     """GO (``reduce="max"``) or SO (``"min"``) CFAR on the 4 pinwheel blocks."""
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=_NAMES[reduce])
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=_NAMES[reduce], values=False)
+    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernel checks the values as it reads them
+        check_image(x, "x")
     rects = pinwheel_rects(ring.guard, ring.train)
     interior = tuple(r.area for r in rects)
     factor = partial(_factor, pfa=pfa, reduce=reduce)
     dtype = out_dtype(x)
+    if compiled:
+        return _compiled_block_cfar(x, ring, pfa, reduce, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         if _jit.for_tensor(xs):
@@ -90,6 +98,72 @@ def _compiled_extreme_ratio(xs: Tensor, sums: list[Sums], reduce: str) -> Tensor
         xs.contiguous().numpy(), count.numpy(), s1.numpy(), shift.numpy(), reduce == "max"
     )
     return torch.from_numpy(out)
+
+
+def _compiled_block_cfar(
+    x: Tensor, ring: Ring, pfa: float, reduce: str, dtype: torch.dtype
+) -> Detection:
+    """:func:`block_cfar` without no-data on the CPU in one sweep per image plane
+    (:func:`torchsar._pinwheel_kernels.block_ratio`: the blocks summed directly, within a
+    float32 ulp of the exact means; the border factors from :func:`border_states`)."""
+    from torchsar import _pinwheel_kernels
+
+    h, w = x.shape[-2:]
+    rows, cols, table = border_states(h, w, ring.guard, ring.train, pfa, reduce)
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=dtype)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    rects = pinwheel_rects(ring.guard, ring.train)
+    thr = torch.as_tensor(_factor(tuple(r.area for r in rects), pfa, reduce), dtype=dtype)
+    bad = _pinwheel_kernels.block_ratio(
+        planes.numpy(),
+        ring.guard,
+        ring.train,
+        reduce == "max",
+        rows,
+        cols,
+        table,
+        thr.reshape(1).numpy(),
+        out.numpy(),
+        mask.numpy(),
+    )
+    if bad:  # the error of the tensor code's check, on the caller's tensor
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+
+
+@functools.lru_cache(maxsize=32)
+def border_states(
+    h: int, w: int, guard: int, train: int, pfa: float, reduce: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The border factors of GO / SO in an ``h x w`` image without no-data, as a table:
+    ``table[rows[i], cols[j]]`` is pixel ``(i, j)``'s ``factor(interior) / factor(its
+    block sizes)`` (as :func:`block_scale` gives it; 1 where the sizes are the interior's,
+    ``-inf`` where no block has a cell). A block's size is its in-image rows times its
+    in-image columns, so a pixel's sizes depend on its row's and its column's states."""
+    rects = pinwheel_rects(guard, train)
+    interior = tuple(r.area for r in rects)
+
+    def states(n: int, spans: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+        i = np.arange(n)[:, None]
+        lo, hi = np.array(spans).T
+        inside = np.clip(np.minimum(i + hi, n - 1) - np.maximum(i + lo, 0) + 1, 0, None)
+        uniq, index = np.unique(inside, axis=0, return_inverse=True)
+        return uniq, index.reshape(-1).astype(np.int64)
+
+    row_states, rows = states(h, [(r.r0, r.r1) for r in rects])
+    col_states, cols = states(w, [(r.c0, r.c1) for r in rects])
+    table = np.ones((len(row_states), len(col_states)))
+    for a, rs in enumerate(row_states):
+        for b, cs in enumerate(col_states):
+            sizes = tuple(int(v) for v in rs * cs)
+            if sum(sizes) == 0:
+                table[a, b] = -np.inf
+            elif sizes != interior:
+                # as block_scale's float / tensor: torch takes the reciprocal, then multiplies
+                table[a, b] = _factor(interior, pfa, reduce) * (1.0 / _factor(sizes, pfa, reduce))
+    return rows, cols, table
 
 
 def block_threshold(guard: int, train: int, pfa: float, reduce: str) -> float:
