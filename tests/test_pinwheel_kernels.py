@@ -1,9 +1,9 @@
-"""The one-sweep kernel of GO- and SO-CFAR without no-data against the integral-image
-tensor code it replaces on CPU tensors and against a slow reference that sums each block
-exactly: float32 statistics within an ulp, float64 within 1e-13 of the exact sums
-(borders, empty blocks and degenerate planes included), masks equal wherever the statistic
-is not within an ulp of the threshold, independent of the batch; the border factors are
-the tensor code's; the values are checked as they are read."""
+"""The one-sweep kernels of GO-, SO- and VI-CFAR without no-data against the
+integral-image tensor code they replace on CPU tensors and against slow references that
+sum each block cell by cell: float32 statistics within an ulp, float64 within 1e-13 of the
+exact sums (borders and degenerate planes included), masks equal wherever the statistic
+is not within an ulp of the threshold, independent of the batch; the border and rule
+factors are the tensor code's; the values are checked as they are read."""
 
 from __future__ import annotations
 
@@ -14,15 +14,17 @@ import pytest
 import torch
 
 import torchsar.cfar as cfar
-from tests.reference.cfar import block_reference
+from tests.reference.cfar import block_reference, vi_statistic
 from torchsar import _jit
 from torchsar.cfar.blocks import block_scale, border_states
 from torchsar.cfar.thresholds import block_factor
+from torchsar.cfar.vi import rule_states
 from torchsar.windows import pinwheel_rects, region_count
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
 
-DETECTORS = {"go": "max", "so": "min"}
+DETECTORS = {"go": "max", "so": "min"}  # and the reduction of each
+NAMES = [*DETECTORS, "vi"]
 
 
 def _scene(seed: int, shape=(3, 2, 37, 45), dtype=torch.float32) -> torch.Tensor:
@@ -55,7 +57,7 @@ def _ulps(a: torch.Tensor, b: torch.Tensor) -> float:
     return float((np.abs(a64[fin] - b64[fin]) / spacing).max(initial=0.0))
 
 
-@pytest.mark.parametrize("name", list(DETECTORS))
+@pytest.mark.parametrize("name", NAMES)
 @pytest.mark.parametrize("dtype, ulps", [(torch.float32, 1.0), (torch.float64, 1e6)])
 @pytest.mark.parametrize("guard, train", [(1, 3), (2, 4), (0, 1), (3, 2)])
 def test_the_kernel_is_the_tensor_code_to_an_ulp(monkeypatch, name, dtype, ulps, guard, train):
@@ -99,6 +101,56 @@ def test_the_kernel_is_the_exactly_summed_statistic(monkeypatch, name, dtype, gu
         np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=0)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_vi_is_its_written_out_rule_at_every_pixel(monkeypatch, dtype):
+    """Each pixel's rule, estimate and factor, borders included, on clutter with a bright
+    patch (variable halves) and a clutter edge (differing means)."""
+    rng = np.random.default_rng(8)
+    img = rng.exponential(size=(2, 17, 19))
+    img[0, 4:8, 5:9] *= 20.0
+    img[1, :, 10:] *= 6.0
+    x = torch.from_numpy(img)[:, None].to(dtype)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    got = cfar.vi(x, guard=1, train=2, k_vi=2.0, k_mr=1.5).statistic[:, 0].double().numpy()
+    ones = np.ones(img.shape[1:], bool)
+    want = np.array(
+        [
+            [
+                [vi_statistic(a, ones, i, j, 1, 2, 1e-3, 2.0, 1.5) for j in range(19)]
+                for i in range(17)
+            ]
+            for a in x[:, 0].double().numpy()
+        ]
+    )
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got - want) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("h, w, guard, train", [(9, 12, 1, 2), (20, 13, 2, 4), (14, 14, 0, 6)])
+def test_the_rule_tables_are_the_tensor_codes_factors(h, w, guard, train):
+    """``table[rule, rows[i], cols[j]]`` is :func:`torchsar.cfar.vi._rule_scale`'s factor of
+    each pixel under each rule."""
+    import importlib
+
+    from torchsar.windows import Ring
+
+    vimod = importlib.import_module("torchsar.cfar.vi")  # the module, not the function
+
+    ring = Ring(guard, train)
+    full = vimod.vi_threshold(guard=guard, train=train, pfa=1e-3, k_vi=4.76, k_mr=1.806)
+    rows, cols, table = rule_states(h, w, guard, train, 1e-3, full)
+    counts = [region_count(h, w, r) for r in pinwheel_rects(guard, train)]
+    count_a, count_b = counts[0] + counts[1], counts[2] + counts[3]
+    factor = partial(vimod._rule_factor, pfa=1e-3)
+    for rule in range(5):
+        want = vimod._one_rule(rule, count_a, count_b, ring.n, full, factor)
+        got = torch.from_numpy(table[rule][rows[:, None], cols[None, :]])
+        assert torch.equal(got, want)
+
+
 def test_the_kernel_keeps_its_precision_beside_a_very_bright_target(monkeypatch):
     """Clutter of 1 beside a cell of 1e12: exactly 1 / 1 where the target is not in a
     block (the integral image carries it into every later sum and cancels it out)."""
@@ -113,7 +165,7 @@ def test_the_kernel_keeps_its_precision_beside_a_very_bright_target(monkeypatch)
 
 def test_the_mask_is_the_statistic_over_the_threshold():
     x = _scene(5)
-    for name in DETECTORS:
+    for name in NAMES:
         for pfa in (1e-1, 1e-3):
             d = getattr(cfar, name)(x, guard=1, train=3, pfa=pfa)
             assert d.threshold.dtype == x.dtype and d.threshold.dim() == 0
@@ -122,7 +174,7 @@ def test_the_mask_is_the_statistic_over_the_threshold():
 
 def test_the_kernel_does_not_depend_on_the_batch_or_the_layout():
     x = _scene(4)
-    for name in DETECTORS:
+    for name in NAMES:
         fn = getattr(cfar, name)
         whole = fn(x).statistic
         for i in range(x.shape[0]):
@@ -159,7 +211,7 @@ def test_the_kernel_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
     refused with the tensor code's error, type and words."""
     from torchsar.errors import InputValueError
 
-    for name in DETECTORS:
+    for name in NAMES:
         for where in [(0, 0, 0, 0), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
             x = _scene(6, shape=(2, 2, 16, 14), dtype=dtype)
             x[where] = BAD[bad]
@@ -177,7 +229,7 @@ def test_options_are_checked_before_the_values_on_both_paths(monkeypatch):
 
     x = _scene(7, shape=(1, 1, 12, 12))
     x[0, 0, 6, 6] = float("nan")
-    for name in DETECTORS:
+    for name in NAMES:
         fn = getattr(cfar, name)
         for call, kind in [
             (lambda fn=fn: fn(x, guard=1, train=2, pfa=2.0), OptionError),
@@ -194,5 +246,5 @@ def test_options_are_checked_before_the_values_on_both_paths(monkeypatch):
 
 def test_an_empty_batch_is_valid():
     x = torch.zeros(0, 1, 16, 16)
-    for name in DETECTORS:
+    for name in NAMES:
         assert getattr(cfar, name)(x).statistic.shape == x.shape

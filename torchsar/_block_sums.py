@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "FINITE_MAX",
     "FMA",
     "JIT",
     "axis_count",
@@ -37,7 +38,7 @@ JIT = {
 }
 FMA = {**JIT, "fastmath": {"contract"}}  # a * b + c as one fused multiply-add
 
-_FINITE_MAX = np.finfo(np.float64).max
+FINITE_MAX = np.finfo(np.float64).max
 
 
 @njit(**JIT)
@@ -141,7 +142,7 @@ def take_row(cache, q, row, present):
         for j in range(dst.shape[0]):
             v = np.float64(row[j])
             dst[j] = v
-            bad += not (v >= 0.0 and v <= _FINITE_MAX)  # NaN fails both
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
     else:
         dst[:] = 0.0
     return bad

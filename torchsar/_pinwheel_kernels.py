@@ -18,9 +18,29 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._block_sums import JIT, axis_count, block_sums, level_up, levels_for, ring_row
+from torchsar._block_sums import (
+    FINITE_MAX,
+    JIT,
+    axis_count,
+    block_sums,
+    level_up,
+    levels_for,
+    ring_levels,
+    ring_row,
+)
 
-__all__ = ["block_ratio"]
+__all__ = [
+    "block_ratio",
+    "block_rows",
+    "mean_of",
+    "pinwheel_buffers",
+    "pinwheel_sums",
+    "ratio_of",
+    "vi_ratio",
+    "vi_rule",
+]
+
+CA, GO, SO, CA_A, CA_B = range(5)  # VI's rules, in the order of its factor planes
 
 
 @njit(**JIT, inline="always")
@@ -56,6 +76,53 @@ def _extreme(s0, s1, s2, s3, n0, n1, n2, n3, is_max):
 
 
 @njit(**JIT)
+def pinwheel_buffers(guard, train, w):
+    """The working arrays of :func:`pinwheel_sums` for rows ``w`` long: the four blocks'
+    column sums padded with ``o`` zeros a side and their levels ``(4, levels, w + 2o)``,
+    and each block's in-image columns at each pixel ``(4, w)``."""
+    g, o = guard, guard + train
+    blocks = np.zeros((4, levels_for(o + g + 1), w + 2 * o))
+    cols = np.zeros((4, w))
+    for j in range(w):
+        cols[0, j] = axis_count(j, w, -o, g)
+        cols[1, j] = axis_count(j, w, g + 1, o)
+        cols[2, j] = axis_count(j, w, -g, o)
+        cols[3, j] = axis_count(j, w, -o, -g - 1)
+    return blocks, cols
+
+
+@njit(**JIT)
+def pinwheel_sums(ring, size, i, guard, train, blocks, sums):
+    """The sums of the four blocks (top, right, bottom, left) at every pixel of row ``i``
+    into ``sums`` ``(4, w)``, from the row-block ring ``ring`` (level ``k``, row ``r`` in
+    row ``k size + r % size``): down each column, then along the row."""
+    g, t, o = guard, train, guard + train
+    side, w = o + g + 1, sums.shape[1]
+    padded = blocks.shape[2]
+    top, right, bottom, left = blocks[0], blocks[1], blocks[2], blocks[3]
+    block_sums(ring, size, t, (i - o,), w, top[0, o : o + w], False)
+    block_sums(ring, size, side, (i - o,), w, right[0, o : o + w], False)
+    block_sums(ring, size, t, (i + g + 1,), w, bottom[0, o : o + w], False)
+    block_sums(ring, size, side, (i - g,), w, left[0, o : o + w], False)
+    _levels(top, levels_for(side), padded)
+    _levels(bottom, levels_for(side), padded)
+    _levels(right, levels_for(t), padded)
+    _levels(left, levels_for(t), padded)
+    block_sums(top, 0, side, (0,), w, sums[0], False)  # columns j - o .. j + g
+    block_sums(right, 0, t, (o + g + 1,), w, sums[1], False)  # j + g + 1 .. j + o
+    block_sums(bottom, 0, side, (o - g,), w, sums[2], False)  # j - g .. j + o
+    block_sums(left, 0, t, (0,), w, sums[3], False)  # j - o .. j - g - 1
+
+
+@njit(**JIT, inline="always")
+def block_rows(i, h, guard, train):
+    """Each block's in-image rows at row ``i`` of ``h``."""
+    g, o = guard, guard + train
+    top, right = axis_count(i, h, -o, -g - 1), axis_count(i, h, -o, g)
+    return top, right, axis_count(i, h, g + 1, o), axis_count(i, h, -g, o)
+
+
+@njit(**JIT)
 def block_ratio(x, guard, train, is_max, row_state, col_state, scale, threshold, out, mask):
     """GO's (``is_max``) or SO's statistic ``x / extreme block mean`` of every plane of
     ``x`` ``(P, H, W)`` into ``out`` (its dtype) and the decision ``out > threshold[0]``
@@ -73,17 +140,8 @@ def block_ratio(x, guard, train, is_max, row_state, col_state, scale, threshold,
     depth = levels_for(side)
     rows = np.zeros((depth, size, w))
     ring = rows.reshape(depth * size, w)  # level k, row r in row k size + r % size
-    padded = w + 2 * o  # o zero columns a side
-    ldepth, sdepth = levels_for(side), levels_for(t)
-    top, bottom = np.zeros((ldepth, padded)), np.zeros((ldepth, padded))
-    right, left = np.zeros((sdepth, padded)), np.zeros((sdepth, padded))
+    blocks, cols = pinwheel_buffers(g, t, w)
     sums = np.zeros((4, w))
-    cols = np.zeros((4, w))  # each block's in-image columns at each pixel
-    for j in range(w):
-        cols[0, j] = axis_count(j, w, -o, g)
-        cols[1, j] = axis_count(j, w, g + 1, o)
-        cols[2, j] = axis_count(j, w, -g, o)
-        cols[3, j] = axis_count(j, w, -o, -g - 1)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     thr = threshold[0]
     bad = 0
@@ -95,20 +153,8 @@ def block_ratio(x, guard, train, is_max, row_state, col_state, scale, threshold,
         for i in range(h):
             q = i + o
             bad += ring_row(rows, q, size, depth, xp[min(q, h - 1)], q < h, w)
-            block_sums(ring, size, t, (i - o,), w, top[0, o : o + w], False)
-            block_sums(ring, size, side, (i - o,), w, right[0, o : o + w], False)
-            block_sums(ring, size, t, (i + g + 1,), w, bottom[0, o : o + w], False)
-            block_sums(ring, size, side, (i - g,), w, left[0, o : o + w], False)
-            _levels(top, ldepth, padded)
-            _levels(bottom, ldepth, padded)
-            _levels(right, sdepth, padded)
-            _levels(left, sdepth, padded)
-            block_sums(top, 0, side, (0,), w, sums[0], False)  # columns j - o .. j + g
-            block_sums(right, 0, t, (o + g + 1,), w, sums[1], False)  # j + g + 1 .. j + o
-            block_sums(bottom, 0, side, (o - g,), w, sums[2], False)  # j - g .. j + o
-            block_sums(left, 0, t, (0,), w, sums[3], False)  # j - o .. j - g - 1
-            nr0, nr1 = axis_count(i, h, -o, -g - 1), axis_count(i, h, -o, g)
-            nr2, nr3 = axis_count(i, h, g + 1, o), axis_count(i, h, -g, o)
+            pinwheel_sums(ring, size, i, g, t, blocks, sums)
+            nr0, nr1, nr2, nr3 = block_rows(i, h, g, t)
             xi, oi, mi, sc = xp[i], out[pl, i], mask[pl, i], scale[row_state[i]]
             cs = col_state
             c0, c1, c2, c3 = cols[0], cols[1], cols[2], cols[3]
@@ -138,3 +184,157 @@ def block_ratio(x, guard, train, is_max, row_state, col_state, scale, threshold,
             for j in range(w):
                 mi[j] = oi[j] > thr
     return bad
+
+
+@njit(**JIT, inline="always")
+def mean_of(s1, count, shift):
+    """:meth:`torchsar.windows.Sums.mean` of one cell."""
+    if count > 0:
+        return s1 / max(count, 1.0) + shift
+    return 0.0
+
+
+@njit(**JIT, inline="always")
+def ratio_of(num, den):
+    """:func:`torchsar.cfar.core.ratio` of one cell (``0 / 0 = 0``, never NaN; a ``-0.0``
+    denominator is zero: ``den + 0.0`` is ``+0.0``)."""
+    q = num / (den + 0.0)
+    return 0.0 if q != q else q
+
+
+@njit(**JIT, inline="always")
+def _variable(n, s1, s2, mean, k_vi):
+    """:func:`torchsar.cfar.vi._variable` of one half (``n`` cells, sums ``s1``, ``s2``)."""
+    dof = n - 1.0
+    m = s1 / max(n, 1.0)
+    v = (s2 - m * s1) / max(dof, 1.0)
+    var = (v if v > 0.0 else 0.0) if dof > 0 else 0.0
+    vi = 1.0 + ratio_of(var, mean * mean)
+    return vi > k_vi or n <= 1
+
+
+@njit(**JIT, inline="always")
+def vi_rule(x, halves, ring_s1, ring_n, shift, k_vi, k_mr):
+    """VI-CFAR's rule (Smith & Varshney's decision table, as :func:`torchsar.cfar.vi`'s
+    tensor code decides it) and statistic ``x / estimate`` (before the rule's factor) of
+    one pixel: ``halves = (na, nb, a1, b1, a2, b2)``, half ``A``'s ``na`` cells and its
+    sums ``a1``, ``a2`` of ``x - shift`` and its square, then ``B``'s; the ring's ``ring_n``
+    cells sum to ``ring_s1``."""
+    na, nb, a1, b1, a2, b2 = halves
+    ma, mb = mean_of(a1, na, shift), mean_of(b1, nb, shift)
+    var_a = _variable(na, a1, a2, ma, k_vi)
+    var_b = _variable(nb, b1, b2, mb, k_vi)
+    rule = GO if (ma > k_mr * mb) or (mb > k_mr * ma) else CA
+    if var_a and not var_b:
+        rule = CA_B
+    if var_b and not var_a:
+        rule = CA_A
+    if var_a and var_b:
+        rule = SO
+    if na == 0 and nb > 0:
+        rule = CA_B
+    if nb == 0 and na > 0:
+        rule = CA_A
+    if rule == CA:
+        est = mean_of(ring_s1, ring_n, shift)
+    elif rule == GO:
+        est = ma if ma >= mb else mb
+    elif rule == SO:
+        est = ma if ma <= mb else mb
+    elif rule == CA_A:
+        est = ma
+    else:
+        est = mb
+    return rule, ratio_of(x, est)
+
+
+@njit(**JIT, inline="always")
+def _take_shifted(ring1, ring2, q, row, present, shift):
+    """Row ``q`` of ``x - shift`` and of its square into level 0 of the two rings (zeros
+    where not ``present``); how many values of ``row`` are not a finite number ``>= 0``."""
+    size = ring1.shape[0]
+    d1, d2 = ring1[q % size], ring2[q % size]
+    bad = 0
+    if present:
+        for j in range(d1.shape[0]):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
+            d = v - shift
+            d1[j] = d
+            d2[j] = d * d
+    else:
+        d1[:] = 0.0
+        d2[:] = 0.0
+    return bad
+
+
+@njit(**JIT)
+def vi_ratio(
+    x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask
+):
+    """VI-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
+    and the decision ``out > threshold[0]`` into ``mask``: the halves are the top and right
+    blocks (``A``) and the bottom and left ones (``B``), the ring all four; sums of ``x -
+    shift[p]`` (the plane's mean, as the tensor code sums) and of its square, summed as
+    :func:`block_ratio` sums; :func:`vi_rule`, then the rule's factor ``scale[rule,
+    row_state[i], col_state[j]]`` (``-inf`` where no block has a cell).
+
+    Returns how many values of ``x`` are not a finite number ``>= 0``."""
+    p_, h, w = x.shape
+    g, t, o = guard, train, guard + train
+    size = 2 * o + 1
+    depth = levels_for(o + g + 1)
+    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
+    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    blocks, cols = pinwheel_buffers(g, t, w)
+    s1, s2 = np.zeros((4, w)), np.zeros((4, w))
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    work = (ring1, ring2, size, blocks, cols, s1, s2)
+    rule, states = (k_vi, k_mr, threshold[0]), (row_state, col_state, scale)
+    bad = 0
+    for pl in range(p_):
+        xp, sh = x[pl], shift[pl]
+        for q in range(-o, min(o, h + o)):
+            inside = 0 <= q < h
+            bad += _shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
+        for i in range(h):
+            q = i + o
+            bad += _shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
+            _vi_row(xp, i, g, t, work, sh, rule, states, out[pl], mask[pl])
+    return bad
+
+
+@njit(**JIT, inline="always")
+def _shifted_row(rows1, rows2, q, depth, row, present, shift):
+    """Row ``q`` of ``x - shift`` and of its square into the two rings of row blocks, every
+    level ending at ``q`` updated; the count of bad values read."""
+    size, w = rows1.shape[1], rows1.shape[2]
+    bad = _take_shifted(rows1[0], rows2[0], q, row, present, shift)
+    ring_levels(rows1, q, size, depth, w)
+    ring_levels(rows2, q, size, depth, w)
+    return bad
+
+
+@njit(**JIT)
+def _vi_row(xp, i, g, t, work, shift, rule, states, out, mask):
+    """Row ``i`` of :func:`vi_ratio` (its window's rows in the rings; ``rule``: ``k_vi``,
+    ``k_mr`` and the threshold; ``states``: the factor table and its row and column
+    states)."""
+    ring1, ring2, size, blocks, cols, s1, s2 = work
+    k_vi, k_mr, thr = rule
+    row_state, col_state, scale = states
+    pinwheel_sums(ring1, size, i, g, t, blocks, s1)
+    pinwheel_sums(ring2, size, i, g, t, blocks, s2)
+    nr0, nr1, nr2, nr3 = block_rows(i, xp.shape[0], g, t)
+    xi, oi, mi, rs = xp[i], out[i], mask[i], row_state[i]
+    for j in range(xi.shape[0]):
+        na = nr0 * cols[0, j] + nr1 * cols[1, j]
+        nb = nr2 * cols[2, j] + nr3 * cols[3, j]
+        a1, b1 = s1[0, j] + s1[1, j], s1[2, j] + s1[3, j]
+        a2, b2 = s2[0, j] + s2[1, j], s2[2, j] + s2[3, j]
+        halves = (na, nb, a1, b1, a2, b2)
+        code, v = vi_rule(np.float64(xi[j]), halves, a1 + b1, na + nb, shift, k_vi, k_mr)
+        f = scale[code, rs, col_state[j]]
+        oi[j] = -np.inf if f == -np.inf else v * f
+    for j in range(xi.shape[0]):
+        mi[j] = oi[j] > thr

@@ -1,7 +1,7 @@
-"""The compiled per-pixel rules of GO, SO, VI, of CA over a masked ring (CA with no-data,
-AC) and OS-CFAR's ratio and border factors give the tensor code's statistic and mask bit
-for bit: clutter edges, flat
-zero images, bright targets, no-data masks that empty whole halves, both float dtypes."""
+"""The compiled per-pixel rules of GO, SO and VI over windowed sums (with no-data), of CA
+over a masked ring (CA with no-data, AC) and OS-CFAR's ratio and border factors give the
+tensor code's statistic and mask bit for bit: clutter edges, flat zero images, bright
+targets, no-data masks that empty whole halves, both float dtypes."""
 
 from __future__ import annotations
 
@@ -32,12 +32,15 @@ def _both(monkeypatch, fn):
     return out
 
 
+ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False)}
+"""Their one-sweep kernels sum the windows directly (within an ulp of the tensor code):
+tests/test_box_kernels.py, tests/test_pinwheel_kernels.py."""
+
 RULES = [
     (name, masked)
     for name in ("go", "so", "vi", "ca", "ac", "os")
     for masked in (False, True)
-    if (name, masked) not in {("ca", False), ("go", False), ("so", False)}  # one-sweep kernels:
-    # tests/test_box_kernels.py, tests/test_pinwheel_kernels.py
+    if (name, masked) not in ONE_SWEEP
 ]
 
 

@@ -14,6 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from torchsar._pinwheel_kernels import mean_of as _mean
+from torchsar._pinwheel_kernels import ratio_of as _ratio
+from torchsar._pinwheel_kernels import vi_rule
+
 __all__ = [
     "block_extreme_ratio",
     "counts_present",
@@ -24,24 +28,6 @@ __all__ = [
 ]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # x / 0: inf or NaN, as torch
-
-_CA, _GO, _SO, _CA_A, _CA_B = range(5)
-
-
-@njit(**_JIT, inline="always")
-def _mean(s1, count, shift):
-    """:meth:`torchsar.windows.Sums.mean` of one cell."""
-    if count > 0:
-        return s1 / max(count, 1.0) + shift
-    return 0.0
-
-
-@njit(**_JIT, inline="always")
-def _ratio(num, den):
-    """:func:`torchsar.cfar.core.ratio` of one cell (``0 / 0 = 0``, never NaN; a ``-0.0``
-    denominator is zero: ``den + 0.0`` is ``+0.0``)."""
-    q = num / (den + 0.0)
-    return 0.0 if q != q else q
 
 
 @njit(**_JIT)
@@ -73,17 +59,6 @@ def block_extreme_ratio(x, count, s1, shift, is_max):
     return out
 
 
-@njit(**_JIT, inline="always")
-def _variable(n, s1, s2, mean, k_vi):
-    """:func:`torchsar.cfar.vi._variable` of one half (``n`` cells, sums ``s1``, ``s2``)."""
-    dof = n - 1.0
-    m = s1 / max(n, 1.0)
-    v = (s2 - m * s1) / max(dof, 1.0)
-    var = (v if v > 0.0 else 0.0) if dof > 0 else 0.0
-    vi = 1.0 + _ratio(var, mean * mean)
-    return vi > k_vi or n <= 1
-
-
 @njit(**_JIT)
 def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scale):
     """The VI rule and statistic of every pixel (:func:`torchsar.cfar.vi.vi`'s
@@ -109,31 +84,10 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
                     b1 = s1[2, b, c, i, j] + s1[3, b, c, i, j]
                     a2 = s2[0, b, c, i, j] + s2[1, b, c, i, j]
                     b2 = s2[2, b, c, i, j] + s2[3, b, c, i, j]
-                    ma, mb = _mean(a1, na, sh), _mean(b1, nb, sh)
-                    var_a = _variable(na, a1, a2, ma, k_vi)
-                    var_b = _variable(nb, b1, b2, mb, k_vi)
-                    rule = _GO if (ma > k_mr * mb) or (mb > k_mr * ma) else _CA
-                    if var_a and not var_b:
-                        rule = _CA_B
-                    if var_b and not var_a:
-                        rule = _CA_A
-                    if var_a and var_b:
-                        rule = _SO
-                    if na == 0 and nb > 0:
-                        rule = _CA_B
-                    if nb == 0 and na > 0:
-                        rule = _CA_A
-                    if rule == _CA:
-                        est = _mean(ring_s1[b, c, i, j], ring_count[rb, rc, i, j], sh)
-                    elif rule == _GO:
-                        est = ma if ma >= mb else mb
-                    elif rule == _SO:
-                        est = ma if ma <= mb else mb
-                    elif rule == _CA_A:
-                        est = ma
-                    else:
-                        est = mb
-                    stat = _ratio(np.float64(x[b, c, i, j]), est)
+                    halves = (na, nb, a1, b1, a2, b2)
+                    ring_n = ring_count[rb, rc, i, j]
+                    v = np.float64(x[b, c, i, j])
+                    rule, stat = vi_rule(v, halves, ring_s1[b, c, i, j], ring_n, sh, k_vi, k_mr)
                     out[b, c, i, j] = stat * scale[rule, sb, sc, i, j]
     return out
 

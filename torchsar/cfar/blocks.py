@@ -26,7 +26,14 @@ from torchsar.detection import Detection
 from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
-__all__ = ["block_cfar", "block_scale", "block_threshold", "border_states", "extreme_mean"]
+__all__ = [
+    "block_cfar",
+    "block_scale",
+    "block_threshold",
+    "border_states",
+    "extreme_mean",
+    "pinwheel_states",
+]
 
 _NAMES = {"max": "go", "min": "so"}
 
@@ -133,17 +140,14 @@ def _compiled_block_cfar(
     return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
 
 
-@functools.lru_cache(maxsize=32)
-def border_states(
-    h: int, w: int, guard: int, train: int, pfa: float, reduce: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The border factors of GO / SO in an ``h x w`` image without no-data, as a table:
-    ``table[rows[i], cols[j]]`` is pixel ``(i, j)``'s ``factor(interior) / factor(its
-    block sizes)`` (as :func:`block_scale` gives it; 1 where the sizes are the interior's,
-    ``-inf`` where no block has a cell). A block's size is its in-image rows times its
-    in-image columns, so a pixel's sizes depend on its row's and its column's states."""
+def pinwheel_states(
+    h: int, w: int, guard: int, train: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The four pinwheel blocks' in-image rows at each row of an ``h x w`` image without
+    no-data and their in-image columns at each column, as states: ``(row_states, rows,
+    col_states, cols)``, row ``i``'s four row counts ``row_states[rows[i]]`` (``(R, 4)``
+    int64), likewise the columns. A block's size at ``(i, j)`` is the product of the two."""
     rects = pinwheel_rects(guard, train)
-    interior = tuple(r.area for r in rects)
 
     def states(n: int, spans: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
         i = np.arange(n)[:, None]
@@ -154,6 +158,19 @@ def border_states(
 
     row_states, rows = states(h, [(r.r0, r.r1) for r in rects])
     col_states, cols = states(w, [(r.c0, r.c1) for r in rects])
+    return row_states, rows, col_states, cols
+
+
+@functools.lru_cache(maxsize=32)
+def border_states(
+    h: int, w: int, guard: int, train: int, pfa: float, reduce: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The border factors of GO / SO in an ``h x w`` image without no-data, as a table:
+    ``table[rows[i], cols[j]]`` is pixel ``(i, j)``'s ``factor(interior) / factor(its
+    block sizes)`` (as :func:`block_scale` gives it; 1 where the sizes are the interior's,
+    ``-inf`` where no block has a cell), from :func:`pinwheel_states`."""
+    interior = tuple(r.area for r in pinwheel_rects(guard, train))
+    row_states, rows, col_states, cols = pinwheel_states(h, w, guard, train)
     table = np.ones((len(row_states), len(col_states)))
     for a, rs in enumerate(row_states):
         for b, cs in enumerate(col_states):

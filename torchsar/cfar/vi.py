@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from functools import partial
 
+import numpy as np
 import torch
 from torch import Tensor
 
-from torchsar import _jit
-from torchsar._checks import check_positive
+from torchsar import _jit, _triton
+from torchsar._checks import check_image, check_positive
+from torchsar.cfar.blocks import pinwheel_states
 from torchsar.cfar.ca import ca_threshold
 from torchsar.cfar.core import (
     conclude,
@@ -22,9 +25,10 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.windows import Sums, pinwheel_rects, windowed
+from torchsar.errors import InputValueError
+from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
-__all__ = ["vi", "vi_threshold"]
+__all__ = ["rule_states", "vi", "vi_threshold"]
 
 # the clutter estimate each decision uses (codes of the per-pixel rule)
 _CA, _GO, _SO, _CA_A, _CA_B = range(5)
@@ -84,12 +88,17 @@ def vi(
         >>> vi(x, guard=1, train=2).mask.sum().item()
         1
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="vi")
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="vi", values=False)
     k_vi = check_positive(k_vi, "k_vi")
     k_mr = check_positive(k_mr, "k_mr")
+    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernel checks the values as it reads them
+        check_image(x, "x")
     factor = partial(_rule_factor, pfa=pfa)
     full = vi_threshold(guard=guard, train=train, pfa=pfa, k_vi=k_vi, k_mr=k_mr)
     dtype = out_dtype(x)
+    if compiled:
+        return _one_sweep(x, ring, pfa, (k_vi, k_mr), full, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         if _jit.for_tensor(xs):
@@ -143,6 +152,67 @@ def _compiled(
         scale.contiguous().numpy(),
     )
     return finish(torch.from_numpy(out), count_a + count_b, dtype)
+
+
+def _one_sweep(
+    x: Tensor, ring: Ring, pfa: float, ks: tuple[float, float], full: float, dtype: torch.dtype
+) -> Detection:
+    """:func:`vi` without no-data on the CPU in one sweep per image plane
+    (:func:`torchsar._pinwheel_kernels.vi_ratio`: the blocks of ``x - shift`` and its square
+    summed directly, ``shift`` the plane's mean as the tensor code takes it; the rules'
+    factors from :func:`rule_states`)."""
+    from torchsar import _pinwheel_kernels
+
+    h, w = x.shape[-2:]
+    rows, cols, table = rule_states(h, w, ring.guard, ring.train, pfa, full)
+    shift = x.detach().mean(dim=(-2, -1), dtype=torch.float64).reshape(-1)  # windowed's
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=dtype)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    thr = torch.as_tensor(full, dtype=dtype)
+    bad = _pinwheel_kernels.vi_ratio(
+        planes.numpy(),
+        shift.numpy(),
+        ring.guard,
+        ring.train,
+        *ks,
+        rows,
+        cols,
+        table,
+        thr.reshape(1).numpy(),
+        out.numpy(),
+        mask.numpy(),
+    )
+    if bad:  # the error of the tensor code's check, on the caller's tensor
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+
+
+@functools.lru_cache(maxsize=32)
+def rule_states(
+    h: int, w: int, guard: int, train: int, pfa: float, full: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rules' factors ``full / alpha_rule`` in an ``h x w`` image without no-data, as
+    tables: ``table[rule, rows[i], cols[j]]`` is pixel ``(i, j)``'s (as
+    :func:`_rule_scale` gives it; ``-inf`` where no block has a cell), from the blocks'
+    row and column states (:func:`torchsar.cfar.blocks.pinwheel_states`)."""
+    n = Ring(guard, train).n
+    factor = partial(_rule_factor, pfa=pfa)
+    row_states, rows, col_states, cols = pinwheel_states(h, w, guard, train)
+    table = np.ones((5, len(row_states), len(col_states)))
+    for a, rs in enumerate(row_states):
+        for b, cs in enumerate(col_states):
+            size = rs * cs
+            na, nb = int(size[0] + size[1]), int(size[2] + size[3])
+            for rule in range(5):
+                if na + nb == 0:
+                    table[rule, a, b] = -np.inf
+                elif na != n // 2 or nb != n // 2:  # as _one_rule's float / tensor
+                    table[rule, a, b] = full * (1.0 / factor((rule, na, nb)))
+                else:
+                    table[rule, a, b] = _inner(rule, n, full, factor)
+    return rows, cols, table
 
 
 def vi_threshold(*, guard: int, train: int, pfa: float, k_vi: float, k_mr: float) -> float:
