@@ -15,7 +15,7 @@ import torch
 
 import torchsar.cfar as cfar
 import torchsar.speckle as speckle
-from tests.reference.cfar import ca_reference
+from tests.reference.cfar import ca_reference, two_parameter_reference
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
 from torchsar.cfar.ca import ca_threshold
@@ -410,6 +410,95 @@ def test_ca_reads_a_lazily_negated_view_as_its_values(monkeypatch):
     on, off = _both(monkeypatch, lambda: cfar.ca(b, guard=1, train=2))
     for got, want in [(on_view, on), (off_view, off)]:
         assert torch.equal(got.statistic, want.statistic) and torch.equal(got.mask, want.mask)
+
+
+@pytest.mark.parametrize("dtype, ulps", [(torch.float32, 1.0), (torch.float64, 1e7)])
+@pytest.mark.parametrize("guard, train", [(1, 3), (2, 4), (0, 1), (3, 2)])
+def test_two_parameter_is_the_tensor_code_to_an_ulp(monkeypatch, dtype, ulps, guard, train):
+    """float32 within an ulp; float64 within the integral images' own error."""
+    x = _scene(20, dtype=dtype)
+    a, b = _both(monkeypatch, lambda: cfar.two_parameter(x, guard=guard, train=train))
+    assert a.statistic.dtype == b.statistic.dtype == dtype
+    assert torch.equal(a.threshold, b.threshold)
+    assert _ulps(a.statistic, b.statistic) <= ulps
+    _masks_agree(a, b)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 3), (2, 1)])
+def test_two_parameter_is_the_exactly_summed_statistic(monkeypatch, dtype, guard, train):
+    """At every pixel, borders and degenerate planes included (all zeros, one bright cell
+    among zeros, a cell of 1e12 among ones: rings without variance give +inf, -inf or 0)."""
+    x = _degenerate(21, dtype)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    got = cfar.two_parameter(x, guard=guard, train=train).statistic.double().numpy()
+    want = two_parameter_reference(x.double().numpy(), guard, train)
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    assert np.isinf(want).any() and (want == 0).any()  # the degenerate cases are there
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-12, atol=1e-300)
+
+
+def test_two_parameter_rings_without_variance_are_exact(monkeypatch):
+    """A flat patch of any value in clutter: its rings have no variance, so a pixel above
+    the patch's value is +inf, one below -inf, one at it 0 (sums of deviations from the
+    plane's mean leave a rounding residue; the kernel sums those rings again from their
+    own cells)."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    rng = np.random.default_rng(22)
+    for trial, c in enumerate(rng.uniform(0.01, 100.0, size=40)):
+        dtype = torch.float64 if trial % 2 else torch.float32
+        x = torch.rand(1, 1, 32, 32, generator=torch.Generator().manual_seed(trial)) * 10
+        x = x.to(dtype)
+        x[0, 0, 5:20, 5:20] = float(c)
+        x[0, 0, 12, 12] = float(c) * 2
+        x[0, 0, 16, 12] = float(c) / 2
+        s = cfar.two_parameter(x, guard=1, train=2).statistic[0, 0]
+        assert s[12, 12] == torch.inf and s[16, 12] == -torch.inf and s[8, 16] == 0
+
+
+@pytest.mark.parametrize("bad", list(BAD))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_two_parameter_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
+    from torchsar.errors import InputValueError
+
+    for where in [(0, 0, 0, 0), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
+        x = _scene(23, shape=(2, 2, 16, 14), dtype=dtype)
+        x[where] = BAD[bad]
+        on, off = _errors(monkeypatch, lambda x=x: cfar.two_parameter(x, guard=1, train=2))
+        assert on == off and on[0] is InputValueError
+
+
+def test_two_parameter_checks_its_options_before_the_values_on_both_paths(monkeypatch):
+    from torchsar.errors import OptionError, WindowSizeError
+
+    x = _scene(24, shape=(1, 1, 12, 12))
+    x[0, 0, 6, 6] = float("nan")
+    cases = [
+        (lambda: cfar.two_parameter(x, guard=1, train=2, pfa=2.0), OptionError),
+        (lambda: cfar.two_parameter(x, guard=1, train=2, k=-1.0), OptionError),
+        (lambda: cfar.two_parameter(x, guard=4, train=4), WindowSizeError),
+    ]
+    for call, kind in cases:
+        on, off = _errors(monkeypatch, call)
+        assert on == off and on[0] is kind
+
+
+def test_two_parameter_does_not_depend_on_the_batch_or_the_layout():
+    x = _scene(25)
+    d = cfar.two_parameter(x, guard=1, train=3, pfa=1e-2)
+    assert d.mask.any() and torch.equal(d.mask, d.statistic > d.threshold)
+    for i in range(x.shape[0]):
+        assert torch.equal(
+            cfar.two_parameter(x[i : i + 1], guard=1, train=3).statistic, d.statistic[i : i + 1]
+        )
+    wide = torch.cat([x, x], dim=-1)[..., : x.shape[-1]]  # a non-contiguous view
+    assert torch.equal(cfar.two_parameter(wide, guard=1, train=3).statistic, d.statistic)
+    assert cfar.two_parameter(torch.zeros(0, 1, 16, 16)).statistic.shape == (0, 1, 16, 16)
 
 
 def test_every_kernel_sets_its_own_fastmath():

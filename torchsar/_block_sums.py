@@ -23,6 +23,7 @@ __all__ = [
     "levels_for",
     "ring_levels",
     "ring_row",
+    "shifted_row",
     "take_row",
 ]
 
@@ -156,4 +157,35 @@ def ring_row(rows, q, size, depth, src, present, w):
     not a finite number ``>= 0`` (the input check, made as the values are read)."""
     bad = take_row(rows[0], q, src, present)
     ring_levels(rows, q, size, depth, w)
+    return bad
+
+
+@njit(**JIT, inline="always")
+def _take_shifted(ring1, ring2, q, row, present, shift):
+    """Row ``q`` of ``x - shift`` and of its square into level 0 of the two rings (zeros
+    where not ``present``); how many values of ``row`` are not a finite number ``>= 0``."""
+    size = ring1.shape[0]
+    d1, d2 = ring1[q % size], ring2[q % size]
+    bad = 0
+    if present:
+        for j in range(d1.shape[0]):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
+            d = v - shift
+            d1[j] = d
+            d2[j] = d * d
+    else:
+        d1[:] = 0.0
+        d2[:] = 0.0
+    return bad
+
+
+@njit(**JIT, inline="always")
+def shifted_row(rows1, rows2, q, depth, row, present, shift):
+    """Row ``q`` of ``x - shift`` and of its square into the two rings of row blocks, every
+    level ending at ``q`` updated; the count of bad values read."""
+    size, w = rows1.shape[1], rows1.shape[2]
+    bad = _take_shifted(rows1[0], rows2[0], q, row, present, shift)
+    ring_levels(rows1, q, size, depth, w)
+    ring_levels(rows2, q, size, depth, w)
     return bad

@@ -1,6 +1,7 @@
-"""numba kernels of the one-pass window statistics: CA-CFAR's ring-mean ratio and the
-box-statistics speckle filters (Lee, Kuan, enhanced Lee) from the image to the result in
-one sweep over its rows, with no full-size temporaries.
+"""numba kernels of the one-pass window statistics: CA-CFAR's ring-mean ratio, the
+two-parameter CFAR's deviation ratio and the box-statistics speckle filters (Lee, Kuan,
+enhanced Lee) from the image to the result in one sweep over its rows, with no full-size
+temporaries.
 
 How the window sums are formed (fixed for every pixel by its position alone, so every
 pixel's sums are the same float64 additions whatever the batch, tile or strip; no running
@@ -16,6 +17,11 @@ ring buffer of the window's rows, with, per row ``r``, the sums of rows ``r .. r
   ``1e-14``), where the integral images of :func:`torchsar.windows.windowed` lose up to
   the integral's magnitude in cancellation; the two paths agree to well within a float32
   ulp (the tests bound the difference).
+- the two-parameter CFAR (:func:`deviation_ratio`) sums its ring likewise, of ``x -
+  shift`` and its square (``shift`` the plane's mean, as the tensor code sums), for the
+  ring's mean and population variance; a near-flat ring (``n var < 2^-8 S2``, where that
+  difference could cancel) is summed again from its cells, so a ring of equal cells has a
+  variance of exactly 0 (the documented ``+inf`` / ``-inf`` / 0).
 - the speckle filters (:func:`box_filter`) take the window mean and variance from the
   block sums of ``x`` and ``x^2``, near-flat windows summed again as deviations from the
   pixel (:mod:`torchsar._moment_kernels`: the variance within ``2^-38`` of its value, 0
@@ -40,11 +46,12 @@ from torchsar._block_sums import (
     level_up,
     levels_for,
     ring_row,
+    shifted_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
 
-__all__ = ["box_filter", "ring_ratio"]
+__all__ = ["box_filter", "deviation_ratio", "ring_buffers", "ring_ratio", "ring_sums"]
 
 
 @njit(**JIT)
@@ -70,9 +77,7 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
     depth = levels_for(max(train, 2 * g + 1))
     rows = np.zeros((depth, size, w))
     ring = rows.reshape(depth * size, w)  # level k, row r in row k size + r % size
-    hdepth, mdepth = levels_for(size), levels_for(train)
-    band = np.zeros((hdepth, w + 2 * o))  # band rows summed, o zero columns a side, levels
-    mid = np.zeros((mdepth, w + 2 * o))
+    band, mid = ring_buffers(guard, train, w)
     acc = np.zeros(w)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     outer_cols, guard_cols = np.zeros(w, np.int64), np.zeros(w, np.int64)
@@ -97,22 +102,136 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                     c = counts[0] * outer_cols[j] - counts[1] * guard_cols[j]
                     cf[j] = c * (scale[c] if c != n_full else 1.0)
                 last_rows = counts
-            b0, m0 = band[0, o : o + w], mid[0, o : o + w]
-            block_sums(ring, size, train, (i - o, i + g + 1), w, b0, False)  # top, bottom
-            block_sums(ring, size, 2 * g + 1, (i - g,), w, m0, False)
-            for k in range(1, hdepth):
-                n = w + 2 * o - (1 << k) + 1
-                level_up(band[k - 1], band[k], 1 << (k - 1), n)
-                if k < mdepth:
-                    level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
-            block_sums(band, 0, size, (0,), w, acc, False)
-            block_sums(mid, 0, train, (0, o + g + 1), w, acc, True)  # left, right
+            ring_sums(ring, size, i, g, train, band, mid, acc)
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             for j in range(w):
                 v = np.float64(xi[j]) * cf[j] / (acc[j] + 0.0)  # a ring of -0.0 is 0
                 oi[j] = v if v == v else 0.0
                 mi[j] = oi[j] > thr
     return bad
+
+
+@njit(**JIT)
+def ring_buffers(guard, train, w):
+    """The working rows of :func:`ring_sums` for rows ``w`` long: the top and bottom bands'
+    column sums and the middle rows' (``o`` zero columns a side), with their levels."""
+    o = guard + train
+    band = np.zeros((levels_for(2 * o + 1), w + 2 * o))
+    mid = np.zeros((levels_for(train), w + 2 * o))
+    return band, mid
+
+
+@njit(**JIT)
+def ring_sums(ring, size, i, guard, train, band, mid, acc):
+    """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
+    ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``): the top and bottom bands
+    and the left and right parts of the middle rows (no subtraction)."""
+    g, o, w = guard, guard + train, acc.shape[0]
+    b0, m0 = band[0, o : o + w], mid[0, o : o + w]
+    block_sums(ring, size, train, (i - o, i + g + 1), w, b0, False)  # top, bottom
+    block_sums(ring, size, 2 * g + 1, (i - g,), w, m0, False)
+    for k in range(1, band.shape[0]):
+        n = band.shape[1] - (1 << k) + 1
+        level_up(band[k - 1], band[k], 1 << (k - 1), n)
+        if k < mid.shape[0]:
+            level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
+    block_sums(band, 0, 2 * o + 1, (0,), w, acc, False)
+    block_sums(mid, 0, train, (0, o + g + 1), w, acc, True)  # left, right
+
+
+@njit(**JIT)
+def deviation_ratio(x, shift, guard, train, threshold, out, mask):
+    """The two-parameter CFAR's statistic ``(x - mean_ring) / sigma_ring`` (population
+    standard deviation) of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype) and
+    the decision ``out > threshold[0]`` into ``mask``: the ring sums of ``x - shift[p]``
+    (the plane's mean, as the tensor code sums) and of its square, summed as
+    :func:`ring_ratio` sums its ring; a ring of zero variance gives ``+inf`` above its mean,
+    ``-inf`` below and 0 at it.
+
+    Returns how many values of ``x`` are not a finite number ``>= 0``."""
+    p_, h, w = x.shape
+    g, o = guard, guard + train
+    size = 2 * o + 1
+    depth = levels_for(max(train, 2 * g + 1))
+    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
+    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    band, mid = ring_buffers(g, train, w)
+    s1, s2 = np.zeros(w), np.zeros(w)
+    outer_cols, guard_cols = np.zeros(w), np.zeros(w)
+    for j in range(w):
+        outer_cols[j] = axis_count(j, w, -o, o)
+        guard_cols[j] = axis_count(j, w, -g, g)
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    thr = threshold[0]
+    bad = 0
+    for pl in range(p_):
+        xp, sh = x[pl], shift[pl]
+        for q in range(-o, min(o, h + o)):
+            inside = 0 <= q < h
+            bad += shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
+        for i in range(h):
+            q = i + o
+            bad += shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
+            ring_sums(ring1, size, i, g, train, band, mid, s1)
+            ring_sums(ring2, size, i, g, train, band, mid, s2)
+            ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
+            xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
+            flat = 0
+            for j in range(w):
+                c = max(ro * outer_cols[j] - rg * guard_cols[j], 1.0)
+                m = s1[j] / c
+                var = s2[j] / c - m * m
+                flat += c * var < _FLAT * s2[j]
+                sigma = np.sqrt(var if var > 0.0 else 0.0)
+                v = ((np.float64(xi[j]) - sh) - m) / sigma
+                oi[j] = 0.0 if v != v else v
+            if flat:
+                _near_flat_rings(rows1[0], i, h, g, o, s1, s2, xi, sh, oi)
+            for j in range(w):
+                mi[j] = oi[j] > thr
+    return bad
+
+
+_FLAT = 2.0**-8
+"""A ring is near-flat where ``n var < 2^-8 S2`` (``S2`` its sum of squared deviations from
+the plane's mean): only there can ``S2 / n - mean^2`` lose more than 8 bits."""
+
+
+@njit(**JIT)
+def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, shift, oi):
+    """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from two passes
+    over the ring's in-image cells (``cache``: the rows of ``x - shift``, row ``r`` in slot
+    ``r % size``): their deviations from the ring's first cell, then from the mean of
+    those. Equal cells give a variance of exactly 0: ``+inf`` above their value, ``-inf``
+    below, 0 at it."""
+    size, w = cache.shape[0], cache.shape[1]
+    r0, r1 = max(i - o, 0), min(i + o, h - 1)
+    for j in range(w):
+        c0, c1 = max(j - o, 0), min(j + o, w - 1)
+        n = (r1 - r0 + 1) * (c1 - c0 + 1)
+        n -= (min(i + g, h - 1) - max(i - g, 0) + 1) * (min(j + g, w - 1) - max(j - g, 0) + 1)
+        if n <= 0 or n * (s2[j] / n - (s1[j] / n) ** 2) >= _FLAT * s2[j]:
+            continue
+        base = cache[r0 % size, c0]  # the first ring cell: (r0, c0) is never in the guard box
+        t1 = 0.0
+        for r in range(r0, r1 + 1):
+            row = cache[r % size]
+            for k in range(c0, c1 + 1):
+                if abs(r - i) > g or abs(k - j) > g:
+                    t1 += row[k] - base
+        m = t1 / n
+        e1, e2 = 0.0, 0.0
+        for r in range(r0, r1 + 1):
+            row = cache[r % size]
+            for k in range(c0, c1 + 1):
+                if abs(r - i) > g or abs(k - j) > g:
+                    e = (row[k] - base) - m
+                    e1 += e
+                    e2 += e * e
+        var = (e2 - e1 * (e1 / n)) / n
+        sigma = np.sqrt(var if var > 0.0 else 0.0)
+        v = ((np.float64(xi[j]) - shift) - (base + m)) / sigma
+        oi[j] = 0.0 if v != v else v
 
 
 @njit(**JIT)

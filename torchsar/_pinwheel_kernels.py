@@ -19,14 +19,13 @@ import numpy as np
 from numba import njit
 
 from torchsar._block_sums import (
-    FINITE_MAX,
     JIT,
     axis_count,
     block_sums,
     level_up,
     levels_for,
-    ring_levels,
     ring_row,
+    shifted_row,
 )
 
 __all__ = [
@@ -168,6 +167,8 @@ def block_ratio(x, guard, train, is_max, row_state, col_state, scale, threshold,
                 else:
                     m = min(min(t0[j], t1[j]), min(t2[j], t3[j]))
                 est = m / (t * side)
+                if not is_max and est == np.inf:  # as _extreme: SO's inf (an overflow) is 0
+                    est = 0.0
                 v = np.float64(xi[j]) / (est + 0.0)  # an estimate of -0.0 is 0
                 oi[j] = 0.0 if v != v else v
             for j in range(w):
@@ -248,26 +249,6 @@ def vi_rule(x, halves, ring_s1, ring_n, shift, k_vi, k_mr):
     return rule, ratio_of(x, est)
 
 
-@njit(**JIT, inline="always")
-def _take_shifted(ring1, ring2, q, row, present, shift):
-    """Row ``q`` of ``x - shift`` and of its square into level 0 of the two rings (zeros
-    where not ``present``); how many values of ``row`` are not a finite number ``>= 0``."""
-    size = ring1.shape[0]
-    d1, d2 = ring1[q % size], ring2[q % size]
-    bad = 0
-    if present:
-        for j in range(d1.shape[0]):
-            v = np.float64(row[j])
-            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
-            d = v - shift
-            d1[j] = d
-            d2[j] = d * d
-    else:
-        d1[:] = 0.0
-        d2[:] = 0.0
-    return bad
-
-
 @njit(**JIT)
 def vi_ratio(
     x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask
@@ -296,22 +277,11 @@ def vi_ratio(
         xp, sh = x[pl], shift[pl]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += _shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
+            bad += shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
         for i in range(h):
             q = i + o
-            bad += _shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
+            bad += shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
             _vi_row(xp, i, g, t, work, sh, rule, states, out[pl], mask[pl])
-    return bad
-
-
-@njit(**JIT, inline="always")
-def _shifted_row(rows1, rows2, q, depth, row, present, shift):
-    """Row ``q`` of ``x - shift`` and of its square into the two rings of row blocks, every
-    level ending at ``q`` updated; the count of bad values read."""
-    size, w = rows1.shape[1], rows1.shape[2]
-    bad = _take_shifted(rows1[0], rows2[0], q, row, present, shift)
-    ring_levels(rows1, q, size, depth, w)
-    ring_levels(rows2, q, size, depth, w)
     return bad
 
 

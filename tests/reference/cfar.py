@@ -61,6 +61,27 @@ def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarra
     return out
 
 
+def two_parameter_reference(x: np.ndarray, guard: int, train: int) -> np.ndarray:
+    """The two-parameter CFAR's ``(I - mean) / sigma`` over the in-image ring cells (mean
+    and population variance summed exactly: ``math.fsum``), ``+inf`` / ``-inf`` / 0 above,
+    below or at the mean of a ring without variance, pixel by pixel, of ``x`` ``(B, C, H,
+    W)``."""
+    out = np.empty(x.shape)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                mean = math.fsum(cells) / len(cells)
+                sigma = math.sqrt(math.fsum((cells - mean) ** 2) / len(cells))
+                dev = img[i, j] - mean
+                if sigma > 0:
+                    out[idx][i, j] = dev / sigma
+                else:
+                    out[idx][i, j] = math.copysign(math.inf, dev) if dev else 0.0
+    return out
+
+
 def block_reference(x: np.ndarray, guard: int, train: int, pfa: float, reduce: str) -> np.ndarray:
     """GO's (``reduce="max"``) or SO's ``I / extreme block mean`` over the in-image cells
     of the four pinwheel blocks (each mean summed exactly: ``math.fsum``; GO's estimate at

@@ -5,10 +5,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_positive, check_probability
+from torchsar import _jit, _triton
+from torchsar._checks import check_image, check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_
 from torchsar.cfar.thresholds import gaussian_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
+from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["two_parameter", "two_parameter_threshold"]
@@ -55,9 +57,14 @@ def two_parameter(
         >>> two_parameter(x, guard=1, train=2, k=3.0).mask[0, 0, 8, 8].item()
         True
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="two_parameter")
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="two_parameter", values=False)
     thr = two_parameter_threshold(guard=guard, train=train, pfa=pfa, k=k)
+    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernel checks the values as it reads them
+        check_image(x, "x")
     dtype = out_dtype(x)
+    if compiled:
+        return _one_sweep(x, ring, thr, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         s = sums[0]  # float64 strip sums of (x - shift), consumed in place below
@@ -69,6 +76,33 @@ def two_parameter(
 
     stat = windowed(x, [ring.region], statistic, valid=vmask, moments=2)
     return conclude(stat, vmask, thr)
+
+
+def _one_sweep(x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype) -> Detection:
+    """:func:`two_parameter` without no-data on the CPU in one sweep per image plane
+    (:func:`torchsar._box_kernels.deviation_ratio`: the ring sums of ``x - shift`` and its
+    square summed directly, ``shift`` the plane's mean as the tensor code takes it)."""
+    from torchsar import _box_kernels
+
+    h, w = x.shape[-2:]
+    shift = x.detach().mean(dim=(-2, -1), dtype=torch.float64).reshape(-1)  # windowed's
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=dtype)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    thr = torch.as_tensor(threshold, dtype=dtype)
+    bad = _box_kernels.deviation_ratio(
+        planes.numpy(),
+        shift.numpy(),
+        ring.guard,
+        ring.train,
+        thr.reshape(1).numpy(),
+        out.numpy(),
+        mask.numpy(),
+    )
+    if bad:  # the error of the tensor code's check, on the caller's tensor
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
 
 
 def two_parameter_threshold(*, guard: int, train: int, pfa: float, k: float | None) -> float:
