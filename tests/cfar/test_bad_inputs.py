@@ -79,3 +79,22 @@ def test_low_precision_input_computes_in_float32(name, dtype):
     ref = fn(_image(dtype).float())
     assert low.statistic.dtype == torch.float32
     assert torch.equal(low.statistic, ref.statistic)
+
+
+@pytest.mark.parametrize("name", DETECTORS)
+@pytest.mark.parametrize("compiled", [True, False])
+def test_options_are_checked_before_the_values(monkeypatch, name, compiled):
+    """Every CFAR detector, with or without its compiled kernels: a bad option beside a bad
+    value gives the option's error (the values are checked last, where a kernel reads
+    them or before the sums)."""
+    from torchsar import _jit
+    from torchsar.errors import WindowSizeError
+
+    monkeypatch.setattr(_jit, "ENABLED", compiled)
+    fn = getattr(ts.cfar, name)
+    x = _image()
+    x[0, 0, 12, 12] = float("nan")
+    with pytest.raises(OptionError, match="pfa"):
+        fn(x, pfa=2.0)
+    with pytest.raises(WindowSizeError):
+        fn(x, guard=8, train=8)

@@ -8,7 +8,7 @@ from functools import partial
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_int, check_positive, check_probability
+from torchsar._checks import check_image, check_int, check_positive, check_probability
 from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
 from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import ca_factor
@@ -84,9 +84,12 @@ def ac(
         >>> ts.cfar.ca(x, guard=1, train=2).mask[0, 0, 8, 8].item()  # CA is masked by it
         False
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ac")
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="ac", values=False)
     p_c = pfa if censor_pfa is None else check_probability(censor_pfa, "censor_pfa")
     iterations = check_int(iterations, "iterations", minimum=0)
+    if clutter_mean is not None:
+        check_positive(clutter_mean, "clutter_mean", allow_zero=True)
+    check_image(x, "x")  # the values last, after every option
     if clutter_mean is None:
         mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
     else:

@@ -29,7 +29,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from torchsar._checks import check_positive, check_probability
+from torchsar._checks import check_image, check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
 from torchsar.detection import Detection
@@ -58,7 +58,8 @@ def distribution_cfar(
     """Run the distribution CFAR ``detector`` (its name, for messages): ring sums of
     ``ln I`` (``log_domain``) or ``I``, the fitted quantile per pixel, statistic ``I / q``,
     threshold 1. Rings with fewer than 2 cells cannot be fitted and give ``-inf``."""
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=detector)
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=detector, values=False)
+    check_image(x, "x")  # the values last, after every option (the law's own come first)
     dtype = out_dtype(x)
     src = _safe_log(x) if log_domain else x
     fit = _positive_cells(x, vmask) if log_domain else vmask

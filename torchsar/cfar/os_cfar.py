@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from torchsar import _jit, _triton
-from torchsar._checks import check_int, check_probability
+from torchsar._checks import check_image, check_int, check_probability
 from torchsar.cfar.core import (
     conclude,
     finish,
@@ -74,8 +74,9 @@ def os(
         >>> os(x, guard=1, train=2).mask.sum().item()
         1
     """
-    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="os")
+    ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="os", values=False)
     r = _check_rank(rank, ring)
+    check_image(x, "x")  # the values last, after every option
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=pfa)
     if vmask is None and _triton.for_tensor(x):
         *tables, thr = _gpu_args(x, ring, r, factor)
@@ -123,8 +124,9 @@ def os_mask(
         >>> os_mask(x, guard=1, train=2).sum().item()
         1
     """
-    ring, checked, vmask = prepare(x, guard, train, pfa, valid, detector="os_mask")
+    ring, checked, vmask = prepare(x, guard, train, pfa, valid, detector="os_mask", values=False)
     r = _check_rank(rank, ring)
+    check_image(x, "x")  # the values last, after every option
     factor = partial(_factor, n_full=ring.n, rank=r, pfa=checked)
     if vmask is None and _triton.for_tensor(x):
         return _triton.kernels().os_decision(x, *_gpu_args(x, ring, r, factor))
