@@ -24,7 +24,7 @@ Examples:
     >>> import torch
     >>> from torchsar.cfar import ca
     >>> try:
-    ...     ca(torch.full((1, 1, 8, 8), float("nan")))
+    ...     ca(torch.full((1, 1, 16, 16), float("nan")))
     ... except InputValueError as exc:
     ...     print(type(exc).__name__, isinstance(exc, ValueError))
     InputValueError True
