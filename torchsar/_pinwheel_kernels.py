@@ -250,9 +250,7 @@ def vi_rule(x, halves, ring_s1, ring_n, shift, k_vi, k_mr):
 
 
 @njit(**JIT)
-def vi_ratio(
-    x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask
-):
+def vi_ratio(x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask):
     """VI-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
     and the decision ``out > threshold[0]`` into ``mask``: the halves are the top and right
     blocks (``A``) and the bottom and left ones (``B``), the ring all four; sums of ``x -
