@@ -121,7 +121,7 @@ def ring_buffers(guard, train, w):
     return band, mid
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def ring_sums(ring, size, i, guard, train, band, mid, acc):
     """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
     ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``): the top and bottom bands
