@@ -15,7 +15,7 @@ import torch
 
 import torchsar.cfar as cfar
 import torchsar.speckle as speckle
-from tests.reference.cfar import ca_reference, two_parameter_reference
+from tests.reference.cfar import ac_reference, ca_reference, two_parameter_reference
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
 from torchsar.cfar.ca import ca_threshold
@@ -499,6 +499,83 @@ def test_two_parameter_does_not_depend_on_the_batch_or_the_layout():
     wide = torch.cat([x, x], dim=-1)[..., : x.shape[-1]]  # a non-contiguous view
     assert torch.equal(cfar.two_parameter(wide, guard=1, train=3).statistic, d.statistic)
     assert cfar.two_parameter(torch.zeros(0, 1, 16, 16)).statistic.shape == (0, 1, 16, 16)
+
+
+def _censored(seed: int, dtype=torch.float32) -> torch.Tensor:
+    """Clutter with bright rows and targets that the global pre-threshold censors, a
+    patch where whole rings are censored, and a plane of zeros."""
+    x = _scene(seed, shape=(2, 2, 30, 33), dtype=torch.float64)
+    x[0, 0, 5, 3:20] *= 500.0  # a bright row: censored out of the rings it crosses
+    x[0, 1, 10:25, 10:25] = 1e4  # rings wholly censored: the global ratio
+    x[1, 0] = 0.0
+    return x.to(dtype)
+
+
+# float64: within the integral images' own error (1e6 ulps, 2e-10: their sums carry the
+# 1e4 patch and the bright row; the exactly summed reference below bounds the kernel)
+@pytest.mark.parametrize("dtype, ulps", [(torch.float32, 1.0), (torch.float64, 1e6)])
+@pytest.mark.parametrize("guard, train", [(1, 3), (2, 4), (0, 1)])
+def test_ac_is_the_tensor_code_to_an_ulp(monkeypatch, dtype, ulps, guard, train):
+    x = _censored(30, dtype)
+    a, b = _both(monkeypatch, lambda: cfar.ac(x, guard=guard, train=train))
+    assert a.statistic.dtype == b.statistic.dtype == dtype
+    assert torch.equal(a.threshold, b.threshold)
+    assert _ulps(a.statistic, b.statistic) <= ulps
+    _masks_agree(a, b)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train, clutter_mean", [(1, 2, None), (0, 3, None), (2, 1, 0.7)])
+def test_ac_is_the_exactly_summed_statistic(monkeypatch, dtype, guard, train, clutter_mean):
+    """At every pixel, borders, censored rows, wholly censored rings and a plane of zeros
+    included; the pre-threshold as :func:`torchsar.cfar.ac.global_censor_threshold` (or
+    the given clutter mean) sets it."""
+    import math
+
+    from torchsar.cfar.ac import global_censor_threshold
+
+    x = _censored(31, dtype)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    d = cfar.ac(x, guard=guard, train=train, clutter_mean=clutter_mean)
+    if clutter_mean is None:
+        mu, limit = global_censor_threshold(x, 1e-3)
+        mu, limit = mu[..., 0, 0].numpy(), limit[..., 0, 0].numpy()
+    else:
+        mu = np.full(x.shape[:2], clutter_mean)
+        limit = mu * math.log(1.0 / 1e-3)
+    want = ac_reference(x.double().numpy(), guard, train, 1e-3, limit, mu)
+    got = d.statistic.double().numpy()
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=1e-300)
+
+
+@pytest.mark.parametrize("bad", list(BAD))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_ac_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
+    from torchsar.errors import InputValueError
+
+    for where in [(0, 0, 0, 0), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
+        x = _scene(32, shape=(2, 2, 16, 14), dtype=dtype)
+        x[where] = BAD[bad]
+        on, off = _errors(monkeypatch, lambda x=x: cfar.ac(x, guard=1, train=2))
+        assert on == off and on[0] is InputValueError
+
+
+def test_ac_does_not_depend_on_the_batch_or_the_layout():
+    x = _censored(33)
+    d = cfar.ac(x, guard=1, train=3, pfa=1e-2)
+    assert d.mask.any() and torch.equal(d.mask, d.statistic > d.threshold)
+    for i in range(x.shape[0]):
+        one = cfar.ac(x[i : i + 1], guard=1, train=3, pfa=1e-2).statistic
+        assert torch.equal(one, d.statistic[i : i + 1])
+    wide = torch.cat([x, x], dim=-1)[..., : x.shape[-1]]  # a non-contiguous view
+    assert torch.equal(cfar.ac(wide, guard=1, train=3, pfa=1e-2).statistic, d.statistic)
+    assert cfar.ac(torch.zeros(0, 1, 16, 16)).statistic.shape == (0, 1, 16, 16)
 
 
 def test_every_kernel_sets_its_own_fastmath():

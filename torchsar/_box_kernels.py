@@ -39,19 +39,28 @@ import numpy as np
 from numba import njit
 
 from torchsar._block_sums import (
+    FINITE_MAX,
     FMA,
     JIT,
     axis_count,
     block_sums,
     level_up,
     levels_for,
+    ring_levels,
     ring_row,
     shifted_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
 
-__all__ = ["box_filter", "deviation_ratio", "ring_buffers", "ring_ratio", "ring_sums"]
+__all__ = [
+    "box_filter",
+    "censored_ratio",
+    "deviation_ratio",
+    "ring_buffers",
+    "ring_ratio",
+    "ring_sums",
+]
 
 
 @njit(**JIT)
@@ -187,6 +196,86 @@ def deviation_ratio(x, shift, guard, train, threshold, out, mask):
                 oi[j] = 0.0 if v != v else v
             if flat:
                 _near_flat_rings(rows1[0], i, h, g, o, s1, s2, xi, sh, oi)
+            for j in range(w):
+                mi[j] = oi[j] > thr
+    return bad
+
+
+@njit(**JIT, inline="always")
+def _take_kept(values, counts, q, row, present, limit):
+    """Row ``q`` of the cells at or below ``limit`` (their values, zeros elsewhere) and of
+    their count (1 or 0) into level 0 of the two rings; how many values of ``row`` are
+    not a finite number ``>= 0``."""
+    size = values.shape[0]
+    v1, c1 = values[q % size], counts[q % size]
+    bad = 0
+    if present:
+        for j in range(v1.shape[0]):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
+            kept = v <= limit
+            v1[j] = v if kept else 0.0
+            c1[j] = 1.0 if kept else 0.0
+    else:
+        v1[:] = 0.0
+        c1[:] = 0.0
+    return bad
+
+
+@njit(**JIT, inline="always")
+def _kept_row(rows1, rows2, q, depth, row, present, limit):
+    """:func:`_take_kept` and every level of the two rings ending at row ``q``."""
+    size, w = rows1.shape[1], rows1.shape[2]
+    bad = _take_kept(rows1[0], rows2[0], q, row, present, limit)
+    ring_levels(rows1, q, size, depth, w)
+    ring_levels(rows2, q, size, depth, w)
+    return bad
+
+
+@njit(**JIT)
+def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, out, mask):
+    """AC-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
+    and the decision ``out > threshold[0]`` into ``mask``: ``x / mean`` over the ring's
+    cells at or below the plane's ``limit[p]`` (the censored ring, summed as
+    :func:`ring_ratio` sums its ring, its cells counted alike), times ``scale[c]`` for a
+    ring of ``c`` such cells (the border rule's ``factor(N) / factor(c)``); a ring with
+    none takes the global ratio ``(x / mu[p]) * global_factor``.
+
+    Returns how many values of ``x`` are not a finite number ``>= 0``."""
+    p_, h, w = x.shape
+    g, o = guard, guard + train
+    size = 2 * o + 1
+    depth = levels_for(max(train, 2 * g + 1))
+    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
+    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    band, mid = ring_buffers(g, train, w)
+    s1, cnt = np.zeros(w), np.zeros(w)
+    n_full = scale.shape[0] - 1
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    thr = threshold[0]
+    bad = 0
+    for pl in range(p_):
+        xp, lim, m = x[pl], limit[pl], mu[pl]
+        for q in range(-o, min(o, h + o)):
+            inside = 0 <= q < h
+            bad += _kept_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, lim)
+        for i in range(h):
+            q = i + o
+            bad += _kept_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, lim)
+            ring_sums(ring1, size, i, g, train, band, mid, s1)
+            ring_sums(ring2, size, i, g, train, band, mid, cnt)
+            xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
+            for j in range(w):
+                c = cnt[j]
+                v = np.float64(xi[j])
+                if c > 0:
+                    r = v / (s1[j] / c + 0.0)  # a mean of -0.0 is 0
+                    r = 0.0 if r != r else r
+                    k = int(c)
+                    oi[j] = r * scale[k] if k != n_full else r
+                else:  # every ring cell censored: the global ratio
+                    r = v / m
+                    oi[j] = (0.0 if r != r else r) * global_factor
             for j in range(w):
                 mi[j] = oi[j] > thr
     return bad

@@ -32,7 +32,7 @@ def _both(monkeypatch, fn):
     return out
 
 
-ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False)}
+ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False), ("ac", False)}
 """Their one-sweep kernels sum the windows directly (within an ulp of the tensor code):
 tests/test_box_kernels.py, tests/test_pinwheel_kernels.py."""
 

@@ -82,6 +82,33 @@ def two_parameter_reference(x: np.ndarray, guard: int, train: int) -> np.ndarray
     return out
 
 
+def ac_reference(
+    x: np.ndarray, guard: int, train: int, pfa: float, limit: np.ndarray, mu: np.ndarray
+) -> np.ndarray:
+    """AC-CFAR's ``I / mean`` over the ring cells at or below each plane's ``limit`` (summed
+    exactly: ``math.fsum``), times ``factor(N) / factor(c)`` for ``c`` such cells, or
+    ``I / mu * alpha / ln(1 / pfa)`` where every ring cell is censored, pixel by pixel, of
+    ``x`` ``(B, C, H, W)`` (``limit``, ``mu``: ``(B, C)``)."""
+    from torchsar.cfar.thresholds import ca_factor
+
+    n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
+    alpha = ca_factor(n, pfa)
+    out = np.empty(x.shape)
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                kept = cells[cells <= limit[idx]]
+                if kept.size == 0:
+                    out[idx][i, j] = img[i, j] / mu[idx] * (alpha / math.log(1.0 / pfa))
+                    continue
+                mean = math.fsum(kept) / kept.size
+                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
+                out[idx][i, j] = v * (alpha / ca_factor(kept.size, pfa))
+    return out
+
+
 def block_reference(x: np.ndarray, guard: int, train: int, pfa: float, reduce: str) -> np.ndarray:
     """GO's (``reduce="max"``) or SO's ``I / extreme block mean`` over the in-image cells
     of the four pinwheel blocks (each mean summed exactly: ``math.fsum``; GO's estimate at

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from functools import partial
 
+import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_int, check_positive, check_probability
 from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
-from torchsar.cfar.core import conclude, out_dtype, prepare, ratio
+from torchsar.cfar.core import border_scale, conclude, out_dtype, prepare, ratio
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
+from torchsar.errors import InputValueError
+from torchsar.windows import Ring
 
 __all__ = ["ac", "ac_threshold", "global_censor_threshold"]
 
@@ -89,22 +94,71 @@ def ac(
     iterations = check_int(iterations, "iterations", minimum=0)
     if clutter_mean is not None:
         check_positive(clutter_mean, "clutter_mean", allow_zero=True)
-    check_image(x, "x")  # the values last, after every option
+    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the values last, after every option (the compiled kernel reads them)
+        check_image(x, "x")
     if clutter_mean is None:
         mu, thr = global_censor_threshold(x, p_c, iterations=iterations, valid=vmask)
     else:
         given = check_positive(clutter_mean, "clutter_mean", allow_zero=True)
         mu = x.new_full((*x.shape[:2], 1, 1), given, dtype=torch.float64)
         thr = mu * math.log(1.0 / p_c)
-    keep = x <= thr if vmask is None else vmask & (x <= thr)
     alpha = ac_threshold(
         guard=guard, train=train, pfa=pfa, censor_pfa=censor_pfa, iterations=iterations
     )
     dtype = out_dtype(x)
+    if compiled:
+        return _one_sweep(x, ring, pfa, (thr, mu), alpha, dtype)
+    keep = x <= thr if vmask is None else vmask & (x <= thr)
     stat = ring_mean_ratio(x, ring, partial(ca_factor, pfa=pfa), keep, dtype)
     glob = ratio(x.to(torch.float64), mu) * (alpha / math.log(1.0 / pfa))
     stat = torch.where(stat == -torch.inf, glob.to(dtype), stat)  # fully censored rings
     return conclude(stat, vmask, alpha)
+
+
+def _one_sweep(
+    x: Tensor,
+    ring: Ring,
+    pfa: float,
+    censor: tuple[Tensor, Tensor],
+    alpha: float,
+    dtype: torch.dtype,
+) -> Detection:
+    """:func:`ac` without no-data on the CPU in one sweep per image plane
+    (:func:`torchsar._box_kernels.censored_ratio`: the censored ring's cells and their count
+    summed directly, as CA sums its ring); ``censor``: each plane's pre-threshold and
+    clutter mean ``(B, C, 1, 1)``."""
+    from torchsar import _box_kernels
+
+    h, w = x.shape[-2:]
+    limit, mu = (t.to(torch.float64).reshape(-1).contiguous() for t in censor)
+    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    out = torch.empty(planes.shape, dtype=dtype)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    thr = torch.as_tensor(alpha, dtype=dtype)
+    bad = _box_kernels.censored_ratio(
+        planes.numpy(),
+        limit.numpy(),
+        mu.numpy(),
+        ring.guard,
+        ring.train,
+        _count_scale(ring.n, pfa),
+        alpha / math.log(1.0 / pfa),
+        thr.reshape(1).numpy(),
+        out.numpy(),
+        mask.numpy(),
+    )
+    if bad:  # the error of the tensor code's check, on the caller's tensor
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+
+
+@functools.lru_cache(maxsize=32)
+def _count_scale(n: int, pfa: float) -> np.ndarray:
+    """The border rule's factors of a censored ring of every count ``0 .. n`` (as
+    :func:`torchsar.cfar.core.border_scale` rounds them)."""
+    return border_scale(range(n + 1), n, partial(ca_factor, pfa=pfa))
 
 
 def ac_threshold(
