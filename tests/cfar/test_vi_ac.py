@@ -146,3 +146,22 @@ def test_vi_every_pixel_equals_reference(masked):
                 if valid[b, i, j]:
                     want = vi_statistic(img[b], valid[b], i, j, 1, 2, 1e-3, 2.0, 1.5)
                     assert got[b, i, j] == pytest.approx(want, rel=1e-9), (b, i, j)
+
+
+@pytest.mark.parametrize("iterations", [0, 1, 3])
+def test_the_compiled_clutter_mean_is_the_tensor_codes(monkeypatch, iterations):
+    """The compiled global pre-threshold (one pass per re-estimation, eight running sums)
+    and the tensor code's masked means agree to summation rounding."""
+    from torchsar import _jit
+
+    g = torch.Generator().manual_seed(4)
+    x = torch.empty(3, 2, 37, 41).exponential_(generator=g)
+    x[0, 0, 5:15, 5:15] *= 300.0
+    x[2, 1] = 0.0
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        out.append(global_censor_threshold(x, 1e-3, iterations=iterations))
+    for a, b in zip(*out, strict=True):
+        assert a.shape == b.shape == (3, 2, 1, 1) and a.dtype == b.dtype == torch.float64
+        torch.testing.assert_close(a, b, rtol=1e-13, atol=0)

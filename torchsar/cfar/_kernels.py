@@ -20,6 +20,7 @@ from torchsar._pinwheel_kernels import vi_rule
 
 __all__ = [
     "block_extreme_ratio",
+    "censor_mean",
     "counts_present",
     "os_decision",
     "os_ratio",
@@ -241,3 +242,44 @@ def os_decision(x, radius, guard, count, rank, scale, thr, out):
             for j in range(w):
                 got = count[i, j] if every[j] else below[j]
                 out[p, i, j] = anyone[j] and rank[i, j] > 0 and got >= rank[i, j]
+
+
+@njit(**_JIT, inline="always")
+def _kept_sum(flat, limit):
+    """The sum and count of the values of ``flat`` at or below ``limit``: eight running
+    sums (each over every eighth value, then added pairwise), so the loop is not one
+    chain of dependent additions; the order is fixed by the positions alone."""
+    acc = np.zeros(8)
+    cnt = np.zeros(8, np.int64)
+    n = flat.size - flat.size % 8
+    for i in range(0, n, 8):
+        for k in range(8):
+            v = np.float64(flat[i + k])
+            kept = v <= limit
+            acc[k] += v if kept else 0.0
+            cnt[k] += kept
+    for i in range(n, flat.size):
+        v = np.float64(flat[i])
+        kept = v <= limit
+        acc[i - n] += v if kept else 0.0
+        cnt[i - n] += kept
+    total = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
+    return total, cnt.sum()
+
+
+@njit(**_JIT)
+def censor_mean(planes, q, ratio_kept, iterations):
+    """AC-CFAR's global clutter mean of every plane of ``planes`` ``(P, N)``: the mean, then
+    ``iterations`` times the mean of the values at or below ``mu q`` divided by
+    ``ratio_kept`` (:func:`torchsar.cfar.ac.global_censor_threshold`'s rule), one pass
+    each. Returns float64 ``(P,)``."""
+    out = np.empty(planes.shape[0])
+    for p in range(planes.shape[0]):
+        flat = planes[p]
+        total, count = _kept_sum(flat, np.inf)
+        mu = total / max(count, 1)
+        for _ in range(iterations):
+            total, count = _kept_sum(flat, mu * q)
+            mu = total / max(count, 1) / ratio_kept
+        out[p] = mu
+    return out

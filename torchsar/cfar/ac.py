@@ -179,7 +179,9 @@ def global_censor_threshold(
 
     ``mu`` starts as the image mean; each iteration takes the mean of the (valid) pixels at or
     below ``T`` and divides it by ``E[X | X <= T] / E[X] = 1 - p ln(1/p) / (1 - p)``, the
-    truncated-exponential ratio, so homogeneous clutter gives an unbiased ``mu``.
+    truncated-exponential ratio, so homogeneous clutter gives an unbiased ``mu``. Without
+    ``valid``, a CPU tensor takes one compiled pass per estimate
+    (:func:`torchsar.cfar._kernels.censor_mean`; the same rule, summed in another order).
 
     Examples:
         >>> x = torch.empty(1, 1, 256, 256).exponential_(generator=torch.Generator().manual_seed(0))
@@ -187,10 +189,22 @@ def global_censor_threshold(
         >>> abs(mu.item() - 1.0) < 0.02
         True
     """
-    m = torch.ones_like(x, dtype=torch.bool) if valid is None else valid.expand_as(x)
-    xd = x.to(torch.float64)
     q = math.log(1.0 / censor_pfa)
     ratio_kept = 1.0 - censor_pfa * q / (1.0 - censor_pfa)
+    if valid is None and _jit.for_tensor(x) and x.numel():
+        from torchsar.cfar import _kernels
+
+        planes = (
+            x.detach()
+            .resolve_neg()
+            .reshape(*x.shape[:2], -1)
+            .reshape(-1, x.shape[-2] * x.shape[-1])
+        )
+        mu = _kernels.censor_mean(planes.contiguous().numpy(), q, ratio_kept, iterations)
+        mu = torch.from_numpy(mu).reshape(*x.shape[:2], 1, 1)
+        return mu, mu * q
+    m = torch.ones_like(x, dtype=torch.bool) if valid is None else valid.expand_as(x)
+    xd = x.to(torch.float64)
     mu = _masked_mean(xd, m)
     for _ in range(iterations):
         mu = _masked_mean(xd, m & (xd <= mu * q)) / ratio_kept
