@@ -130,11 +130,12 @@ def ring_buffers(guard, train, w):
     return band, mid
 
 
-@njit(**JIT, inline="always")
+@njit(**JIT)
 def ring_sums(ring, size, i, guard, train, band, mid, acc):
     """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
     ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``): the top and bottom bands
-    and the left and right parts of the middle rows (no subtraction)."""
+    and the left and right parts of the middle rows (no subtraction). Not inlined: inlined
+    twice into a kernel it made numba compile it for 16 s instead of 3."""
     g, o, w = guard, guard + train, acc.shape[0]
     b0, m0 = band[0, o : o + w], mid[0, o : o + w]
     block_sums(ring, size, train, (i - o, i + g + 1), w, b0, False)  # top, bottom

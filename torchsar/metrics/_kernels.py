@@ -29,6 +29,7 @@ MANTISSA_BITS = 5
 here, not imported from there: numba's cache freezes a global at compile time and is only
 invalidated when this file changes)."""
 _LOW63 = (1 << 63) - 1  # every bit but the sign
+_CHUNK = 4096  # pixels whose slots are formed before they are counted
 _SHIFT = 64 - 12 - MANTISSA_BITS  # the key: the sign, 11 exponent bits, MANTISSA_BITS more
 
 
@@ -78,14 +79,20 @@ def roc_pass(values, lo, hi, target, ignore, has_ignore, detected, has_detected)
     if lo <= hi:
         kmin = _key(lo)
         n = _key(hi) - kmin + 1
-    table = np.zeros(2 * n + 4, np.int64)
-    for i in range(values.size):
-        if has_ignore and ignore[i]:
-            continue
-        row = min(_key(values[i]) - kmin, n)  # only +inf is above the last finite key
-        if row < 0:  # only -inf is below the first
-            row = n + 1
-        table[2 * row + 1 - np.int64(target[i])] += 1
+    table = np.zeros(2 * n + 5, np.int64)  # the last slot: ignored pixels, dropped below
+    slot = np.empty(min(values.size, _CHUNK), np.int64)
+    t8, i8 = target.view(np.uint8), ignore.view(np.uint8)
+    for s0 in range(0, values.size, _CHUNK):  # each pixel's slot in a loop that vectorises,
+        m = min(_CHUNK, values.size - s0)  # then the counts (a scatter: one at a time)
+        v, tg, ig = values[s0 : s0 + m], t8[s0 : s0 + m], i8[s0 : s0 + m]
+        for i in range(m):
+            row = min(_key(v[i]) - kmin, n)  # only +inf is above the last finite key
+            row = n + 1 if row < 0 else row  # only -inf is below the first
+            k = 2 * row + 1 - np.int64(tg[i])
+            slot[i] = 2 * n + 4 if has_ignore and ig[i] else k
+        for i in range(m):
+            table[slot[i]] += 1
+    table = table[: 2 * n + 4]
     tp, nd = _detected(target, ignore, has_ignore, detected) if has_detected else (0, 0)
     return kmin, table.reshape(n + 2, 2), tp, nd
 
