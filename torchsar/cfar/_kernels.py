@@ -1,7 +1,10 @@
-"""numba kernels of the pinwheel-block CFARs' per-pixel rules (GO, SO and VI): from the
-window sums to the statistic in one pass, with the values of the tensor code in
+"""numba kernels of the window CFARs' per-pixel rules over :func:`torchsar.windows.windowed`'s
+sums (GO, SO and VI, CA over a masked ring, OS-CFAR's ratio and decision): from the window
+sums to the statistic in one pass, with the values of the tensor code in
 :mod:`torchsar.cfar.blocks` and :mod:`torchsar.cfar.vi` bit for bit (the same float64
-operations in the same order, elementwise), without its full-size temporaries.
+operations in the same order, elementwise), without its full-size temporaries. Without
+no-data the CPU takes the one-sweep kernels instead (:mod:`torchsar._box_kernels`,
+:mod:`torchsar._pinwheel_kernels`); :func:`censor_mean` is AC's global pre-threshold.
 
 Counts may be geometric ``(1, 1, rr, W)`` planes shared by the batch or ``(B, C, rr, W)``
 (with a no-data mask); sums are ``(B, C, rr, W)``; ``shift`` is ``(B, C)``.
