@@ -596,3 +596,18 @@ def test_every_kernel_sets_its_own_fastmath():
                 assert "fastmath" in value.targetoptions, f"{name}.{value.__name__}"
                 seen += 1
     assert seen > 20
+
+
+def test_two_parameter_flat_rings_in_the_corners_are_exact(monkeypatch):
+    """A near-flat ring is summed again from its own cells, never from the cell under test
+    or another guard cell (in a corner the window's first cell is one): pixels equal to
+    their constant ring give 0, as the written-out statistic does."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    for value, corner, dtype in [(0.1, 0.7, torch.float64), (1 / 3, 5.0, torch.float32)]:
+        x = torch.full((1, 1, 9, 9), value, dtype=dtype)
+        x[0, 0, 0, 0] = corner
+        got = cfar.two_parameter(x, guard=2, train=2, k=3.0).statistic.double().numpy()
+        want = two_parameter_reference(x.double().numpy(), 2, 2)
+        exact = (want == 0) | np.isinf(want)  # the flat rings: 0 at their value
+        assert exact.sum() > 40 and np.array_equal(got[exact], want[exact])
+        np.testing.assert_allclose(got[~exact], want[~exact], rtol=1e-6)

@@ -248,3 +248,36 @@ def test_an_empty_batch_is_valid():
     x = torch.zeros(0, 1, 16, 16)
     for name in NAMES:
         assert getattr(cfar, name)(x).statistic.shape == x.shape
+
+
+@pytest.mark.parametrize("name", ["vi", "two_parameter"])
+def test_a_bright_target_far_away_changes_nothing(name):
+    """The kernels sum ``x`` and ``x^2`` as they are: a pixel whose windows do not reach a
+    block of 1e12 gets the statistic it gets without it, bit for bit (sums of deviations
+    from the plane's mean, which the block moves to 1e10, lost up to half the value)."""
+    fn = getattr(cfar, name)
+    x = torch.empty(1, 1, 40, 40, dtype=torch.float64).exponential_(
+        generator=torch.Generator().manual_seed(26)
+    )
+    lit = x.clone()
+    lit[0, 0, 34:39, 34:39] = 1e12
+    far = (slice(None), slice(None), slice(0, 24), slice(0, 24))
+    assert torch.equal(
+        fn(lit, guard=1, train=2).statistic[far], fn(x, guard=1, train=2).statistic[far]
+    )
+
+
+@pytest.mark.parametrize("name", ["vi", "two_parameter"])
+@pytest.mark.parametrize("factor", [2.0**600, 1e300, 1e-300])
+def test_huge_and_tiny_float64_planes_give_the_scaled_statistic(name, factor):
+    """Their statistics are ratios: a float64 plane scaled far up or down (its squares
+    beyond float64's range) gives the statistic of the plane as it was, within rounding
+    (the kernel divides such a plane by a power of two first)."""
+    fn = getattr(cfar, name)
+    x = torch.empty(2, 1, 12, 13, dtype=torch.float64).exponential_(
+        generator=torch.Generator().manual_seed(27)
+    )
+    want = fn(x, guard=1, train=2)
+    got = fn(x * factor, guard=1, train=2)
+    torch.testing.assert_close(got.statistic, want.statistic, rtol=1e-12, atol=1e-12)
+    assert torch.equal(got.mask, want.mask)

@@ -17,9 +17,9 @@ ring buffer of the window's rows, with, per row ``r``, the sums of rows ``r .. r
   ``1e-14``), where the integral images of :func:`torchsar.windows.windowed` lose up to
   the integral's magnitude in cancellation; the two paths agree to well within a float32
   ulp (the tests bound the difference).
-- the two-parameter CFAR (:func:`deviation_ratio`) sums its ring likewise, of ``x -
-  shift`` and its square (``shift`` the plane's mean, as the tensor code sums), for the
-  ring's mean and population variance; a near-flat ring (``n var < 2^-8 S2``, where that
+- the two-parameter CFAR (:func:`deviation_ratio`) sums its ring likewise, of ``x`` and
+  its square (not shifted by the plane's mean, which bright targets far away would move),
+  for the ring's mean and population variance; a near-flat ring (``n var < 2^-8 S2``, where that
   difference could cancel) is summed again from its cells, so a ring of equal cells has a
   variance of exactly 0 (the documented ``+inf`` / ``-inf`` / 0).
 - the speckle filters (:func:`box_filter`) take the window mean and variance from the
@@ -154,7 +154,7 @@ def deviation_ratio(x, shift, guard, train, threshold, out, mask):
     """The two-parameter CFAR's statistic ``(x - mean_ring) / sigma_ring`` (population
     standard deviation) of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype) and
     the decision ``out > threshold[0]`` into ``mask``: the ring sums of ``x - shift[p]``
-    (the plane's mean, as the tensor code sums) and of its square, summed as
+    and of its square (the detector passes 0: the sums as they are), summed as
     :func:`ring_ratio` sums its ring; a ring of zero variance gives ``+inf`` above its mean,
     ``-inf`` below and 0 at it.
 
@@ -287,6 +287,18 @@ _FLAT = 2.0**-8
 the plane's mean): only there can ``S2 / n - mean^2`` lose more than 8 bits."""
 
 
+@njit(**JIT, inline="always")
+def _first_ring_cell(cache, i, j, g, r0, r1, c0, c1):
+    """The first in-image cell of pixel ``(i, j)``'s ring in row order (rows ``r0 .. r1``,
+    columns ``c0 .. c1``, the guard box ``g`` around the pixel left out)."""
+    size = cache.shape[0]
+    for r in range(r0, r1 + 1):
+        for k in range(c0, c1 + 1):
+            if abs(r - i) > g or abs(k - j) > g:
+                return cache[r % size, k]
+    return 0.0
+
+
 @njit(**JIT)
 def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, shift, oi):
     """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from two passes
@@ -302,7 +314,7 @@ def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, shift, oi):
         n -= (min(i + g, h - 1) - max(i - g, 0) + 1) * (min(j + g, w - 1) - max(j - g, 0) + 1)
         if n <= 0 or n * (s2[j] / n - (s1[j] / n) ** 2) >= _FLAT * s2[j]:
             continue
-        base = cache[r0 % size, c0]  # the first ring cell: (r0, c0) is never in the guard box
+        base = _first_ring_cell(cache, i, j, g, r0, r1, c0, c1)
         t1 = 0.0
         for r in range(r0, r1 + 1):
             row = cache[r % size]

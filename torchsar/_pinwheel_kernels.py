@@ -254,7 +254,7 @@ def vi_ratio(x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, th
     """VI-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
     and the decision ``out > threshold[0]`` into ``mask``: the halves are the top and right
     blocks (``A``) and the bottom and left ones (``B``), the ring all four; sums of ``x -
-    shift[p]`` (the plane's mean, as the tensor code sums) and of its square, summed as
+    shift[p]`` and of its square (the detector passes 0: the sums as they are), summed as
     :func:`block_ratio` sums; :func:`vi_rule`, then the rule's factor ``scale[rule,
     row_state[i], col_state[j]]`` (``-inf`` where no block has a cell).
 

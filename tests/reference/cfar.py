@@ -72,8 +72,11 @@ def two_parameter_reference(x: np.ndarray, guard: int, train: int) -> np.ndarray
         for i in range(img.shape[0]):
             for j in range(img.shape[1]):
                 cells = ring_cells(img, i, j, guard, train)
-                mean = math.fsum(cells) / len(cells)
-                sigma = math.sqrt(math.fsum((cells - mean) ** 2) / len(cells))
+                if (cells == cells[0]).all():  # exactly: fsum / n need not give the value back
+                    mean, sigma = float(cells[0]), 0.0
+                else:
+                    mean = math.fsum(cells) / len(cells)
+                    sigma = math.sqrt(math.fsum((cells - mean) ** 2) / len(cells))
                 dev = img[i, j] - mean
                 if sigma > 0:
                     out[idx][i, j] = dev / sigma

@@ -23,6 +23,7 @@ import torch
 from torch import Tensor
 
 from torchsar._checks import check_image, check_mask, check_probability, float_dtype
+from torchsar._scale import power_of_two
 from torchsar.cfar.thresholds import factor_map
 from torchsar.detection import Detection, detection_from
 from torchsar.windows import Ring, ring_counts
@@ -38,6 +39,7 @@ __all__ = [
     "ratio_",
     "rescale_border_",
     "rescale_frame_",
+    "square_safe_planes",
 ]
 
 
@@ -60,6 +62,24 @@ def prepare(
     pfa = check_probability(pfa, "pfa")
     vmask = None if valid is None else check_mask(valid, x, "valid")
     return ring, pfa, vmask
+
+
+def square_safe_planes(x: Tensor) -> tuple[Tensor, bool]:
+    """The ``(P, H, W)`` planes of ``x`` for a compiled kernel that sums squares in float64:
+    a float64 plane whose peak lies outside ``[2^-384, 2^384]`` is divided by the power of
+    two that brings its peak into ``[1, 2)`` (exact; the statistics that sum squares are
+    ratios, free of the scale), so its squares neither overflow nor underflow. Also whether
+    any plane was divided (a tiny negative value could then read as ``-0.0``: the caller
+    checks the values before)."""
+    h, w = x.shape[-2:]
+    planes = x.detach().resolve_neg().reshape(-1, h, w)
+    if x.dtype != torch.float64 or planes.numel() == 0:
+        return planes.contiguous(), False
+    peak = planes.abs().amax(dim=(-2, -1), keepdim=True)
+    outside = (peak > 2.0**384) | ((peak > 0) & (peak < 2.0**-384))
+    if not bool(outside.any()):
+        return planes.contiguous(), False
+    return (planes / torch.where(outside, power_of_two(peak), 1.0)).contiguous(), True
 
 
 def stack_planes(planes: list[Tensor]) -> Tensor:

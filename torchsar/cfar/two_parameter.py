@@ -7,7 +7,7 @@ from torch import Tensor
 
 from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_positive, check_probability
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_, square_safe_planes
 from torchsar.cfar.thresholds import gaussian_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.errors import InputValueError
@@ -80,13 +80,15 @@ def two_parameter(
 
 def _one_sweep(x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype) -> Detection:
     """:func:`two_parameter` without no-data on the CPU in one sweep per image plane
-    (:func:`torchsar._box_kernels.deviation_ratio`: the ring sums of ``x - shift`` and its
-    square summed directly, ``shift`` the plane's mean as the tensor code takes it)."""
+    (:func:`torchsar._box_kernels.deviation_ratio`: the ring sums of ``x`` and its square
+    summed directly, near-flat rings again from their cells; not shifted by the plane's mean
+    as the tensor code's sums are, which a few bright targets far away would move)."""
     from torchsar import _box_kernels
 
-    h, w = x.shape[-2:]
-    shift = x.detach().mean(dim=(-2, -1), dtype=torch.float64).reshape(-1)  # windowed's
-    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    planes, rescaled = square_safe_planes(x)
+    if rescaled:  # a tiny negative value divided could read as -0.0
+        check_image(x.detach(), "x")
+    shift = torch.zeros(planes.shape[0], dtype=torch.float64)  # sums of x and x^2 as they are
     out = torch.empty(planes.shape, dtype=dtype)
     mask = torch.empty(planes.shape, dtype=torch.bool)
     thr = torch.as_tensor(threshold, dtype=dtype)

@@ -21,6 +21,7 @@ from torchsar.cfar.core import (
     out_dtype,
     prepare,
     ratio,
+    square_safe_planes,
     stack_planes,
 )
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
@@ -158,15 +159,17 @@ def _one_sweep(
     x: Tensor, ring: Ring, pfa: float, ks: tuple[float, float], full: float, dtype: torch.dtype
 ) -> Detection:
     """:func:`vi` without no-data on the CPU in one sweep per image plane
-    (:func:`torchsar._pinwheel_kernels.vi_ratio`: the blocks of ``x - shift`` and its square
-    summed directly, ``shift`` the plane's mean as the tensor code takes it; the rules'
-    factors from :func:`rule_states`)."""
+    (:func:`torchsar._pinwheel_kernels.vi_ratio`: the blocks of ``x`` and its square summed
+    directly, not shifted by the plane's mean as the tensor code's sums are, which a few
+    bright targets far away would move; the rules' factors from :func:`rule_states`)."""
     from torchsar import _pinwheel_kernels
 
     h, w = x.shape[-2:]
     rows, cols, table = rule_states(h, w, ring.guard, ring.train, pfa, full)
-    shift = x.detach().mean(dim=(-2, -1), dtype=torch.float64).reshape(-1)  # windowed's
-    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
+    planes, rescaled = square_safe_planes(x)
+    if rescaled:  # a tiny negative value divided could read as -0.0
+        check_image(x.detach(), "x")
+    shift = torch.zeros(planes.shape[0], dtype=torch.float64)  # sums of x and x^2 as they are
     out = torch.empty(planes.shape, dtype=dtype)
     mask = torch.empty(planes.shape, dtype=torch.bool)
     thr = torch.as_tensor(full, dtype=dtype)
