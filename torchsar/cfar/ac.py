@@ -13,10 +13,17 @@ from torch import Tensor
 from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_int, check_positive, check_probability
 from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
-from torchsar.cfar.core import border_scale, conclude, out_dtype, prepare, ratio
+from torchsar.cfar.core import (
+    border_scale,
+    conclude,
+    kernel_planes,
+    one_sweep,
+    out_dtype,
+    prepare,
+    ratio,
+)
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.errors import InputValueError
 from torchsar.windows import Ring
 
 __all__ = ["ac", "ac_threshold", "global_censor_threshold"]
@@ -130,28 +137,16 @@ def _one_sweep(
     clutter mean ``(B, C, 1, 1)``."""
     from torchsar import _box_kernels
 
-    h, w = x.shape[-2:]
-    limit, mu = (t.to(torch.float64).reshape(-1).contiguous() for t in censor)
-    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
-    out = torch.empty(planes.shape, dtype=dtype)
-    mask = torch.empty(planes.shape, dtype=torch.bool)
-    thr = torch.as_tensor(alpha, dtype=dtype)
-    bad = _box_kernels.censored_ratio(
-        planes.numpy(),
-        limit.numpy(),
-        mu.numpy(),
-        ring.guard,
-        ring.train,
-        _count_scale(ring.n, pfa),
-        alpha / math.log(1.0 / pfa),
-        thr.reshape(1).numpy(),
-        out.numpy(),
-        mask.numpy(),
-    )
-    if bad:  # the error of the tensor code's check, on the caller's tensor
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
-    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+    limit, mu = (c.to(torch.float64).reshape(-1).contiguous().numpy() for c in censor)
+    g, t, scale = ring.guard, ring.train, _count_scale(ring.n, pfa)
+    global_factor = alpha / math.log(1.0 / pfa)
+
+    def kernel(planes, thr, out, mask):
+        return _box_kernels.censored_ratio(
+            planes, limit, mu, g, t, scale, global_factor, thr, out, mask
+        )
+
+    return one_sweep(x, kernel_planes(x), dtype, alpha, kernel)
 
 
 @functools.lru_cache(maxsize=32)

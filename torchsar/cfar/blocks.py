@@ -16,6 +16,8 @@ from torchsar.cfar.core import (
     conclude,
     finish,
     geometric_cached,
+    kernel_planes,
+    one_sweep,
     out_dtype,
     prepare,
     ratio,
@@ -23,7 +25,6 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
 from torchsar.detection import Detection
-from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
 __all__ = [
@@ -115,29 +116,17 @@ def _compiled_block_cfar(
     float32 ulp of the exact means; the border factors from :func:`border_states`)."""
     from torchsar import _pinwheel_kernels
 
-    h, w = x.shape[-2:]
-    rows, cols, table = border_states(h, w, ring.guard, ring.train, pfa, reduce)
-    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
-    out = torch.empty(planes.shape, dtype=dtype)
-    mask = torch.empty(planes.shape, dtype=torch.bool)
-    rects = pinwheel_rects(ring.guard, ring.train)
-    thr = torch.as_tensor(_factor(tuple(r.area for r in rects), pfa, reduce), dtype=dtype)
-    bad = _pinwheel_kernels.block_ratio(
-        planes.numpy(),
-        ring.guard,
-        ring.train,
-        reduce == "max",
-        rows,
-        cols,
-        table,
-        thr.reshape(1).numpy(),
-        out.numpy(),
-        mask.numpy(),
-    )
-    if bad:  # the error of the tensor code's check, on the caller's tensor
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
-    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+    g, t = ring.guard, ring.train
+    rows, cols, table = border_states(*x.shape[-2:], g, t, pfa, reduce)
+    interior = tuple(r.area for r in pinwheel_rects(g, t))
+
+    def kernel(planes, thr, out, mask):
+        is_max = reduce == "max"
+        return _pinwheel_kernels.block_ratio(
+            planes, g, t, is_max, rows, cols, table, thr, out, mask
+        )
+
+    return one_sweep(x, kernel_planes(x), dtype, _factor(interior, pfa, reduce), kernel)
 
 
 def pinwheel_states(

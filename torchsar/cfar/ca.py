@@ -16,6 +16,8 @@ from torchsar.cfar.core import (
     conclude,
     finish,
     geometric_scale,
+    kernel_planes,
+    one_sweep,
     out_dtype,
     prepare,
     ratio,
@@ -24,7 +26,6 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
@@ -82,8 +83,7 @@ def ca(
         stat, mask = _gpu_ring_ratio(x, ring, factor, threshold)
         return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
     if compiled:
-        stat, mask = _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
-        return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
+        return _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
     stat = ring_mean_ratio(x, ring, factor, vmask, out_dtype(x))
     return conclude(stat, vmask, threshold)
 
@@ -98,7 +98,7 @@ def ring_mean_ratio(
     if vmask is None and dtype == torch.float32 and _triton.for_tensor(x):
         return _gpu_ring_ratio(x, ring, factor, torch.inf)[0]
     if vmask is None and _jit.for_tensor(x) and x.numel():
-        return _compiled_ring_ratio(x, ring, factor, dtype, torch.inf)[0]
+        return _compiled_ring_ratio(x, ring, factor, dtype, torch.inf).statistic
     h = x.shape[-2]
     row = torch.arange(h, device=x.device).view(h, 1)  # sliced with the strip: its rows
 
@@ -118,26 +118,21 @@ def ring_mean_ratio(
 
 def _compiled_ring_ratio(
     x: Tensor, ring: Ring, factor: Callable[[int], float], dtype: torch.dtype, threshold: float
-) -> tuple[Tensor, Tensor]:
+) -> Detection:
     """:func:`ring_mean_ratio` without a mask and the decision ``statistic > threshold`` in
     one sweep per image plane (:func:`torchsar._box_kernels.ring_ratio`: block sums of
     non-negative terms, within a float32 ulp of the exact mean; the border factors once per
     ring size that occurs)."""
     from torchsar import _box_kernels
 
-    h, w = x.shape[-2:]
-    scale = geometric_scale(h, w, ring, factor)
-    planes = x.detach().resolve_neg().reshape(-1, h, w).contiguous()
-    out = torch.empty(planes.shape, dtype=dtype)
-    mask = torch.empty(planes.shape, dtype=torch.bool)
-    thr = _threshold(threshold, out).reshape(1).numpy()
-    bad = _box_kernels.ring_ratio(
-        planes.numpy(), ring.guard, ring.train, scale, thr, out.numpy(), mask.numpy()
+    g, t, scale = ring.guard, ring.train, geometric_scale(*x.shape[-2:], ring, factor)
+    return one_sweep(
+        x,
+        kernel_planes(x),
+        dtype,
+        threshold,
+        lambda planes, thr, out, mask: _box_kernels.ring_ratio(planes, g, t, scale, thr, out, mask),
     )
-    if bad:  # the error of the tensor code's check, on the caller's tensor
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
-    return out.view(x.shape), mask.view(x.shape)
 
 
 def _gpu_ring_ratio(

@@ -26,6 +26,7 @@ from torchsar._checks import check_image, check_mask, check_probability, float_d
 from torchsar._scale import power_of_two
 from torchsar.cfar.thresholds import factor_map
 from torchsar.detection import Detection, detection_from
+from torchsar.errors import InputValueError
 from torchsar.windows import Ring, ring_counts
 
 __all__ = [
@@ -33,6 +34,8 @@ __all__ = [
     "conclude",
     "finish",
     "geometric_scale",
+    "kernel_planes",
+    "one_sweep",
     "out_dtype",
     "prepare",
     "ratio",
@@ -64,6 +67,33 @@ def prepare(
     return ring, pfa, vmask
 
 
+def kernel_planes(x: Tensor) -> Tensor:
+    """The ``(P, H, W)`` planes of ``x`` as a compiled kernel reads them: detached, a lazily
+    negated view resolved, contiguous."""
+    return x.detach().resolve_neg().reshape(-1, *x.shape[-2:]).contiguous()
+
+
+def one_sweep(
+    x: Tensor,
+    planes: Tensor,
+    dtype: torch.dtype,
+    threshold: float,
+    kernel: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], int],
+) -> Detection:
+    """A one-sweep CPU kernel's detection: ``kernel(planes, threshold, out, mask)`` writes
+    the statistic (``dtype``) and the mask ``statistic > threshold`` (the threshold an array
+    of one value of ``dtype``) of the ``(P, H, W)`` ``planes`` of ``x``, and returns how many
+    values it read that are not a finite number ``>= 0``: any, and the tensor code's check
+    raises its error on the caller's tensor."""
+    out = torch.empty(planes.shape, dtype=dtype)
+    mask = torch.empty(planes.shape, dtype=torch.bool)
+    thr = torch.as_tensor(threshold, dtype=dtype)
+    if kernel(planes.numpy(), thr.reshape(1).numpy(), out.numpy(), mask.numpy()):
+        check_image(x.detach(), "x")
+        raise InputValueError("x must be finite and non-negative")  # not reached
+    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+
+
 def square_safe_planes(x: Tensor) -> tuple[Tensor, bool]:
     """The ``(P, H, W)`` planes of ``x`` for a compiled kernel that sums squares in float64:
     a float64 plane whose peak lies outside ``[2^-384, 2^384]`` is divided by the power of
@@ -71,15 +101,14 @@ def square_safe_planes(x: Tensor) -> tuple[Tensor, bool]:
     ratios, free of the scale), so its squares neither overflow nor underflow. Also whether
     any plane was divided (a tiny negative value could then read as ``-0.0``: the caller
     checks the values before)."""
-    h, w = x.shape[-2:]
-    planes = x.detach().resolve_neg().reshape(-1, h, w)
+    planes = kernel_planes(x)
     if x.dtype != torch.float64 or planes.numel() == 0:
-        return planes.contiguous(), False
+        return planes, False
     peak = planes.abs().amax(dim=(-2, -1), keepdim=True)
     outside = (peak > 2.0**384) | ((peak > 0) & (peak < 2.0**-384))
     if not bool(outside.any()):
-        return planes.contiguous(), False
-    return (planes / torch.where(outside, power_of_two(peak), 1.0)).contiguous(), True
+        return planes, False
+    return planes / torch.where(outside, power_of_two(peak), 1.0), True
 
 
 def stack_planes(planes: list[Tensor]) -> Tensor:

@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_positive, check_probability
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio_, square_safe_planes
+from torchsar.cfar.core import (
+    conclude,
+    finish,
+    one_sweep,
+    out_dtype,
+    prepare,
+    ratio_,
+    square_safe_planes,
+)
 from torchsar.cfar.thresholds import gaussian_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, windowed
 
 __all__ = ["two_parameter", "two_parameter_threshold"]
@@ -88,23 +96,13 @@ def _one_sweep(x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype) -> D
     planes, rescaled = square_safe_planes(x)
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
-    shift = torch.zeros(planes.shape[0], dtype=torch.float64)  # sums of x and x^2 as they are
-    out = torch.empty(planes.shape, dtype=dtype)
-    mask = torch.empty(planes.shape, dtype=torch.bool)
-    thr = torch.as_tensor(threshold, dtype=dtype)
-    bad = _box_kernels.deviation_ratio(
-        planes.numpy(),
-        shift.numpy(),
-        ring.guard,
-        ring.train,
-        thr.reshape(1).numpy(),
-        out.numpy(),
-        mask.numpy(),
-    )
-    if bad:  # the error of the tensor code's check, on the caller's tensor
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
-    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+    shift = np.zeros(planes.shape[0])  # sums of x and x^2 as they are
+    g, t = ring.guard, ring.train
+
+    def kernel(planes, thr, out, mask):
+        return _box_kernels.deviation_ratio(planes, shift, g, t, thr, out, mask)
+
+    return one_sweep(x, planes, dtype, threshold, kernel)
 
 
 def two_parameter_threshold(*, guard: int, train: int, pfa: float, k: float | None) -> float:

@@ -18,6 +18,7 @@ from torchsar.cfar.core import (
     conclude,
     finish,
     geometric_cached,
+    one_sweep,
     out_dtype,
     prepare,
     ratio,
@@ -26,7 +27,6 @@ from torchsar.cfar.core import (
 )
 from torchsar.cfar.thresholds import block_factor, ca_factor, keyed_factor_map
 from torchsar.detection import WINDOW, Detection, DetectorSpec
-from torchsar.errors import InputValueError
 from torchsar.windows import Ring, Sums, pinwheel_rects, windowed
 
 __all__ = ["rule_states", "vi", "vi_threshold"]
@@ -164,32 +164,19 @@ def _one_sweep(
     bright targets far away would move; the rules' factors from :func:`rule_states`)."""
     from torchsar import _pinwheel_kernels
 
-    h, w = x.shape[-2:]
-    rows, cols, table = rule_states(h, w, ring.guard, ring.train, pfa, full)
+    g, t = ring.guard, ring.train
+    rows, cols, table = rule_states(*x.shape[-2:], g, t, pfa, full)
     planes, rescaled = square_safe_planes(x)
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
-    shift = torch.zeros(planes.shape[0], dtype=torch.float64)  # sums of x and x^2 as they are
-    out = torch.empty(planes.shape, dtype=dtype)
-    mask = torch.empty(planes.shape, dtype=torch.bool)
-    thr = torch.as_tensor(full, dtype=dtype)
-    bad = _pinwheel_kernels.vi_ratio(
-        planes.numpy(),
-        shift.numpy(),
-        ring.guard,
-        ring.train,
-        *ks,
-        rows,
-        cols,
-        table,
-        thr.reshape(1).numpy(),
-        out.numpy(),
-        mask.numpy(),
-    )
-    if bad:  # the error of the tensor code's check, on the caller's tensor
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
-    return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+    shift = np.zeros(planes.shape[0])  # sums of x and x^2 as they are
+
+    def kernel(planes, thr, out, mask):
+        return _pinwheel_kernels.vi_ratio(
+            planes, shift, g, t, *ks, rows, cols, table, thr, out, mask
+        )
+
+    return one_sweep(x, planes, dtype, full, kernel)
 
 
 @functools.lru_cache(maxsize=32)
