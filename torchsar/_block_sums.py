@@ -21,9 +21,10 @@ __all__ = [
     "block_sums",
     "level_up",
     "levels_for",
+    "pair_rings",
+    "pair_row",
     "ring_levels",
     "ring_row",
-    "shifted_row",
     "take_row",
 ]
 
@@ -160,10 +161,19 @@ def ring_row(rows, q, size, depth, src, present, w):
     return bad
 
 
+@njit(**JIT)
+def pair_rings(depth, size, w):
+    """Two rings of row blocks ``(depth, size, w)`` (level ``k``, row ``r`` in slot ``r %
+    size``) and their flat views ``(depth size, w)``, as :func:`block_sums` reads them."""
+    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
+    return rows1, rows2, rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+
+
 @njit(**JIT, inline="always")
-def _take_shifted(ring1, ring2, q, row, present, shift):
-    """Row ``q`` of ``x - shift`` and of its square into level 0 of the two rings (zeros
-    where not ``present``); how many values of ``row`` are not a finite number ``>= 0``."""
+def _take_pair(ring1, ring2, q, row, present, limit, counts):
+    """Row ``q`` into level 0 of the two rings (zeros where not ``present``): the values and
+    their squares, or (``counts``) the values at or below ``limit`` (0 elsewhere) and their
+    count (1 or 0). Returns how many values of ``row`` are not a finite number ``>= 0``."""
     size = ring1.shape[0]
     d1, d2 = ring1[q % size], ring2[q % size]
     bad = 0
@@ -171,9 +181,9 @@ def _take_shifted(ring1, ring2, q, row, present, shift):
         for j in range(d1.shape[0]):
             v = np.float64(row[j])
             bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
-            d = v - shift
-            d1[j] = d
-            d2[j] = d * d
+            kept = v <= limit
+            d1[j] = v if kept or not counts else 0.0
+            d2[j] = (1.0 if kept else 0.0) if counts else v * v
     else:
         d1[:] = 0.0
         d2[:] = 0.0
@@ -181,11 +191,11 @@ def _take_shifted(ring1, ring2, q, row, present, shift):
 
 
 @njit(**JIT, inline="always")
-def shifted_row(rows1, rows2, q, depth, row, present, shift):
-    """Row ``q`` of ``x - shift`` and of its square into the two rings of row blocks, every
-    level ending at ``q`` updated; the count of bad values read."""
+def pair_row(rows1, rows2, q, depth, row, present, limit, counts):
+    """Row ``q`` into the two rings of row blocks (:func:`_take_pair`), every level ending
+    at ``q`` updated; the count of bad values read."""
     size, w = rows1.shape[1], rows1.shape[2]
-    bad = _take_shifted(rows1[0], rows2[0], q, row, present, shift)
+    bad = _take_pair(rows1[0], rows2[0], q, row, present, limit, counts)
     ring_levels(rows1, q, size, depth, w)
     ring_levels(rows2, q, size, depth, w)
     return bad

@@ -39,16 +39,15 @@ import numpy as np
 from numba import njit
 
 from torchsar._block_sums import (
-    FINITE_MAX,
     FMA,
     JIT,
     axis_count,
     block_sums,
     level_up,
     levels_for,
-    ring_levels,
+    pair_rings,
+    pair_row,
     ring_row,
-    shifted_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
@@ -150,21 +149,19 @@ def ring_sums(ring, size, i, guard, train, band, mid, acc):
 
 
 @njit(**JIT)
-def deviation_ratio(x, shift, guard, train, threshold, out, mask):
+def deviation_ratio(x, guard, train, threshold, out, mask):
     """The two-parameter CFAR's statistic ``(x - mean_ring) / sigma_ring`` (population
     standard deviation) of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype) and
-    the decision ``out > threshold[0]`` into ``mask``: the ring sums of ``x - shift[p]``
-    and of its square (the detector passes 0: the sums as they are), summed as
-    :func:`ring_ratio` sums its ring; a ring of zero variance gives ``+inf`` above its mean,
-    ``-inf`` below and 0 at it.
+    the decision ``out > threshold[0]`` into ``mask``: the ring sums of ``x`` and of its
+    square, summed as :func:`ring_ratio` sums its ring; a ring of zero variance gives
+    ``+inf`` above its mean, ``-inf`` below and 0 at it.
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g, o = guard, guard + train
     size = 2 * o + 1
     depth = levels_for(max(train, 2 * g + 1))
-    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
-    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
     band, mid = ring_buffers(g, train, w)
     s1, s2 = np.zeros(w), np.zeros(w)
     outer_cols, guard_cols = np.zeros(w), np.zeros(w)
@@ -175,13 +172,14 @@ def deviation_ratio(x, shift, guard, train, threshold, out, mask):
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
-        xp, sh = x[pl], shift[pl]
+        xp = x[pl]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
+            row = xp[q] if inside else empty
+            bad += pair_row(rows1, rows2, q, depth, row, inside, np.inf, False)
         for i in range(h):
             q = i + o
-            bad += shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
+            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, np.inf, False)
             ring_sums(ring1, size, i, g, train, band, mid, s1)
             ring_sums(ring2, size, i, g, train, band, mid, s2)
             ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
@@ -193,43 +191,12 @@ def deviation_ratio(x, shift, guard, train, threshold, out, mask):
                 var = s2[j] / c - m * m
                 flat += c * var < _FLAT * s2[j]
                 sigma = np.sqrt(var if var > 0.0 else 0.0)
-                v = ((np.float64(xi[j]) - sh) - m) / sigma
+                v = (np.float64(xi[j]) - m) / sigma
                 oi[j] = 0.0 if v != v else v
             if flat:
-                _near_flat_rings(rows1[0], i, h, g, o, s1, s2, xi, sh, oi)
+                _near_flat_rings(rows1[0], i, h, g, o, s1, s2, xi, oi)
             for j in range(w):
                 mi[j] = oi[j] > thr
-    return bad
-
-
-@njit(**JIT, inline="always")
-def _take_kept(values, counts, q, row, present, limit):
-    """Row ``q`` of the cells at or below ``limit`` (their values, zeros elsewhere) and of
-    their count (1 or 0) into level 0 of the two rings; how many values of ``row`` are
-    not a finite number ``>= 0``."""
-    size = values.shape[0]
-    v1, c1 = values[q % size], counts[q % size]
-    bad = 0
-    if present:
-        for j in range(v1.shape[0]):
-            v = np.float64(row[j])
-            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
-            kept = v <= limit
-            v1[j] = v if kept else 0.0
-            c1[j] = 1.0 if kept else 0.0
-    else:
-        v1[:] = 0.0
-        c1[:] = 0.0
-    return bad
-
-
-@njit(**JIT, inline="always")
-def _kept_row(rows1, rows2, q, depth, row, present, limit):
-    """:func:`_take_kept` and every level of the two rings ending at row ``q``."""
-    size, w = rows1.shape[1], rows1.shape[2]
-    bad = _take_kept(rows1[0], rows2[0], q, row, present, limit)
-    ring_levels(rows1, q, size, depth, w)
-    ring_levels(rows2, q, size, depth, w)
     return bad
 
 
@@ -247,8 +214,7 @@ def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, 
     g, o = guard, guard + train
     size = 2 * o + 1
     depth = levels_for(max(train, 2 * g + 1))
-    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
-    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
     band, mid = ring_buffers(g, train, w)
     s1, cnt = np.zeros(w), np.zeros(w)
     n_full = scale.shape[0] - 1
@@ -259,10 +225,10 @@ def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, 
         xp, lim, m = x[pl], limit[pl], mu[pl]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += _kept_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, lim)
+            bad += pair_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, lim, True)
         for i in range(h):
             q = i + o
-            bad += _kept_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, lim)
+            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, lim, True)
             ring_sums(ring1, size, i, g, train, band, mid, s1)
             ring_sums(ring2, size, i, g, train, band, mid, cnt)
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
@@ -300,9 +266,9 @@ def _first_ring_cell(cache, i, j, g, r0, r1, c0, c1):
 
 
 @njit(**JIT)
-def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, shift, oi):
+def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, oi):
     """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from two passes
-    over the ring's in-image cells (``cache``: the rows of ``x - shift``, row ``r`` in slot
+    over the ring's in-image cells (``cache``: the rows of ``x``, row ``r`` in slot
     ``r % size``): their deviations from the ring's first cell, then from the mean of
     those. Equal cells give a variance of exactly 0: ``+inf`` above their value, ``-inf``
     below, 0 at it."""
@@ -332,7 +298,7 @@ def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, shift, oi):
                     e2 += e * e
         var = (e2 - e1 * (e1 / n)) / n
         sigma = np.sqrt(var if var > 0.0 else 0.0)
-        v = ((np.float64(xi[j]) - shift) - (base + m)) / sigma
+        v = (np.float64(xi[j]) - (base + m)) / sigma
         oi[j] = 0.0 if v != v else v
 
 

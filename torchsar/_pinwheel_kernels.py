@@ -24,8 +24,9 @@ from torchsar._block_sums import (
     block_sums,
     level_up,
     levels_for,
+    pair_rings,
+    pair_row,
     ring_row,
-    shifted_row,
 )
 
 __all__ = [
@@ -250,21 +251,20 @@ def vi_rule(x, halves, ring_s1, ring_n, shift, k_vi, k_mr):
 
 
 @njit(**JIT)
-def vi_ratio(x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask):
+def vi_ratio(x, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold, out, mask):
     """VI-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
     and the decision ``out > threshold[0]`` into ``mask``: the halves are the top and right
-    blocks (``A``) and the bottom and left ones (``B``), the ring all four; sums of ``x -
-    shift[p]`` and of its square (the detector passes 0: the sums as they are), summed as
-    :func:`block_ratio` sums; :func:`vi_rule`, then the rule's factor ``scale[rule,
-    row_state[i], col_state[j]]`` (``-inf`` where no block has a cell).
+    blocks (``A``) and the bottom and left ones (``B``), the ring all four; sums of ``x``
+    and of its square, summed as :func:`block_ratio` sums; :func:`vi_rule`, then the rule's
+    factor ``scale[rule, row_state[i], col_state[j]]`` (``-inf`` where no block has a
+    cell).
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g, t, o = guard, train, guard + train
     size = 2 * o + 1
     depth = levels_for(o + g + 1)
-    rows1, rows2 = np.zeros((depth, size, w)), np.zeros((depth, size, w))
-    ring1, ring2 = rows1.reshape(depth * size, w), rows2.reshape(depth * size, w)
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
     blocks, cols = pinwheel_buffers(g, t, w)
     s1, s2 = np.zeros((4, w)), np.zeros((4, w))
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
@@ -272,19 +272,20 @@ def vi_ratio(x, shift, guard, train, k_vi, k_mr, row_state, col_state, scale, th
     rule, states = (k_vi, k_mr, threshold[0]), (row_state, col_state, scale)
     bad = 0
     for pl in range(p_):
-        xp, sh = x[pl], shift[pl]
+        xp = x[pl]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += shifted_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, sh)
+            row = xp[q] if inside else empty
+            bad += pair_row(rows1, rows2, q, depth, row, inside, np.inf, False)
         for i in range(h):
             q = i + o
-            bad += shifted_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, sh)
-            _vi_row(xp, i, g, t, work, sh, rule, states, out[pl], mask[pl])
+            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, np.inf, False)
+            _vi_row(xp, i, g, t, work, rule, states, out[pl], mask[pl])
     return bad
 
 
 @njit(**JIT)
-def _vi_row(xp, i, g, t, work, shift, rule, states, out, mask):
+def _vi_row(xp, i, g, t, work, rule, states, out, mask):
     """Row ``i`` of :func:`vi_ratio` (its window's rows in the rings; ``rule``: ``k_vi``,
     ``k_mr`` and the threshold; ``states``: the factor table and its row and column
     states)."""
@@ -301,7 +302,7 @@ def _vi_row(xp, i, g, t, work, shift, rule, states, out, mask):
         a1, b1 = s1[0, j] + s1[1, j], s1[2, j] + s1[3, j]
         a2, b2 = s2[0, j] + s2[1, j], s2[2, j] + s2[3, j]
         halves = (na, nb, a1, b1, a2, b2)
-        code, v = vi_rule(np.float64(xi[j]), halves, a1 + b1, na + nb, shift, k_vi, k_mr)
+        code, v = vi_rule(np.float64(xi[j]), halves, a1 + b1, na + nb, 0.0, k_vi, k_mr)
         f = scale[code, rs, col_state[j]]
         oi[j] = -np.inf if f == -np.inf else v * f
     for j in range(xi.shape[0]):

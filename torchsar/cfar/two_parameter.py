@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -96,11 +95,10 @@ def _one_sweep(x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype) -> D
     planes, rescaled = square_safe_planes(x)
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
-    shift = np.zeros(planes.shape[0])  # sums of x and x^2 as they are
     g, t = ring.guard, ring.train
 
     def kernel(planes, thr, out, mask):
-        return _box_kernels.deviation_ratio(planes, shift, g, t, thr, out, mask)
+        return _box_kernels.deviation_ratio(planes, g, t, thr, out, mask)
 
     return one_sweep(x, planes, dtype, threshold, kernel)
 

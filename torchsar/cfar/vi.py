@@ -169,12 +169,9 @@ def _one_sweep(
     planes, rescaled = square_safe_planes(x)
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
-    shift = np.zeros(planes.shape[0])  # sums of x and x^2 as they are
 
     def kernel(planes, thr, out, mask):
-        return _pinwheel_kernels.vi_ratio(
-            planes, shift, g, t, *ks, rows, cols, table, thr, out, mask
-        )
+        return _pinwheel_kernels.vi_ratio(planes, g, t, *ks, rows, cols, table, thr, out, mask)
 
     return one_sweep(x, planes, dtype, full, kernel)
 
