@@ -15,6 +15,9 @@ import torch
 
 import torchsar.cfar as cfar
 import torchsar.speckle as speckle
+from tests.kernel_paths import both as _both
+from tests.kernel_paths import errors as _errors
+from tests.kernel_paths import ulps as _ulps
 from tests.reference.cfar import ac_reference, ca_reference, two_parameter_reference
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
@@ -43,25 +46,6 @@ def _degenerate(seed: int, dtype=torch.float64) -> torch.Tensor:
     x[0, 3] = 1.0
     x[0, 3, 2, 3] = 1e12
     return x.to(dtype)
-
-
-def _both(monkeypatch, fn):
-    out = []
-    for on in (True, False):
-        monkeypatch.setattr(_jit, "ENABLED", on)
-        out.append(fn())
-    return out
-
-
-def _ulps(a: torch.Tensor, b: torch.Tensor) -> float:
-    """Largest difference in units of the last place of ``b`` (finite entries; the
-    non-finite ones must be equal)."""
-    a64, b64 = a.double().numpy(), b.double().numpy()
-    fin = np.isfinite(b64)
-    assert np.array_equal(a64[~fin], b64[~fin])
-    spacing = np.spacing(np.abs(b.numpy()[fin])).astype(np.float64)
-    spacing = np.maximum(spacing, np.finfo(b.numpy().dtype).smallest_subnormal)
-    return float((np.abs(a64[fin] - b64[fin]) / spacing).max(initial=0.0))
 
 
 def _masks_agree(a, b) -> None:
@@ -316,17 +300,6 @@ def test_the_enhanced_classes_are_the_tensor_codes_on_their_borders(monkeypatch,
         assert a[0, 0, 0, 0] == b[0, 0, 0, 0] == x[0, 0, 0, 0]
 
 
-def _errors(monkeypatch, call) -> list[tuple[type, str]]:
-    """The error ``call`` raises with the kernels on, then off (type and words)."""
-    out = []
-    for on in (True, False):
-        monkeypatch.setattr(_jit, "ENABLED", on)
-        with pytest.raises(Exception) as err:
-            call()
-        out.append((type(err.value), str(err.value)))
-    return out
-
-
 def test_a_bad_option_and_a_bad_value_give_one_error_on_both_paths(monkeypatch):
     """The values are checked after the options whether or not a kernel reads them."""
     from torchsar.errors import OptionError, WindowSizeError
@@ -369,18 +342,20 @@ def test_a_lazily_negated_view_is_read_as_its_values(monkeypatch):
     assert torch.equal(on_view, on) and torch.equal(off_view, off)
 
 
+@pytest.mark.parametrize("name", ["ca", "two_parameter", "ac"])
 @pytest.mark.parametrize("bad", list(BAD))
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_ca_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
-    """CA's kernel checks every value as it reads it instead of a scan beforehand: a bad
+def test_the_ring_kernels_check_the_values_as_they_read_them(monkeypatch, name, bad, dtype):
+    """The kernels check every value as they read it instead of a scan beforehand: a bad
     value in the first rows (read before the first output row), inside, in the last row
     or in the last plane is refused with the tensor code's error, type and words."""
     from torchsar.errors import InputValueError
 
+    fn = getattr(cfar, name)
     for where in [(0, 0, 0, 0), (0, 0, 1, 5), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
         x = _scene(17, shape=(2, 2, 16, 14), dtype=dtype)
         x[where] = BAD[bad]
-        on, off = _errors(monkeypatch, lambda x=x: cfar.ca(x, guard=1, train=2))
+        on, off = _errors(monkeypatch, lambda x=x: fn(x, guard=1, train=2))
         assert on == off and on[0] is InputValueError
 
 
@@ -459,18 +434,6 @@ def test_two_parameter_rings_without_variance_are_exact(monkeypatch):
         x[0, 0, 16, 12] = float(c) / 2
         s = cfar.two_parameter(x, guard=1, train=2).statistic[0, 0]
         assert s[12, 12] == torch.inf and s[16, 12] == -torch.inf and s[8, 16] == 0
-
-
-@pytest.mark.parametrize("bad", list(BAD))
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_two_parameter_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
-    from torchsar.errors import InputValueError
-
-    for where in [(0, 0, 0, 0), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
-        x = _scene(23, shape=(2, 2, 16, 14), dtype=dtype)
-        x[where] = BAD[bad]
-        on, off = _errors(monkeypatch, lambda x=x: cfar.two_parameter(x, guard=1, train=2))
-        assert on == off and on[0] is InputValueError
 
 
 def test_two_parameter_checks_its_options_before_the_values_on_both_paths(monkeypatch):
@@ -552,18 +515,6 @@ def test_ac_is_the_exactly_summed_statistic(monkeypatch, dtype, guard, train, cl
         assert (np.abs(got[fin] - want[fin]) <= ulp).all()
     else:
         np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=1e-300)
-
-
-@pytest.mark.parametrize("bad", list(BAD))
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_ac_checks_the_values_as_it_reads_them(monkeypatch, bad, dtype):
-    from torchsar.errors import InputValueError
-
-    for where in [(0, 0, 0, 0), (0, 1, 8, 7), (1, 1, 15, 13), (1, 0, 15, 0)]:
-        x = _scene(32, shape=(2, 2, 16, 14), dtype=dtype)
-        x[where] = BAD[bad]
-        on, off = _errors(monkeypatch, lambda x=x: cfar.ac(x, guard=1, train=2))
-        assert on == off and on[0] is InputValueError
 
 
 def test_ac_does_not_depend_on_the_batch_or_the_layout():

@@ -14,6 +14,8 @@ import pytest
 import torch
 
 import torchsar.cfar as cfar
+from tests.kernel_paths import both as _both
+from tests.kernel_paths import ulps as _ulps
 from tests.reference.cfar import block_reference, vi_statistic
 from torchsar import _jit
 from torchsar.cfar.blocks import block_scale, border_states
@@ -36,25 +38,6 @@ def _scene(seed: int, shape=(3, 2, 37, 45), dtype=torch.float32) -> torch.Tensor
     if shape[0] > 1:
         x[1, 0] = 0.0  # 0 / 0 everywhere
     return x.to(dtype)
-
-
-def _both(monkeypatch, fn):
-    out = []
-    for on in (True, False):
-        monkeypatch.setattr(_jit, "ENABLED", on)
-        out.append(fn())
-    return out
-
-
-def _ulps(a: torch.Tensor, b: torch.Tensor) -> float:
-    """Largest difference in units of the last place of ``b`` (the non-finite entries must
-    be equal)."""
-    a64, b64 = a.double().numpy(), b.double().numpy()
-    fin = np.isfinite(b64)
-    assert np.array_equal(a64[~fin], b64[~fin])
-    spacing = np.spacing(np.abs(b.numpy()[fin])).astype(np.float64)
-    spacing = np.maximum(spacing, np.finfo(b.numpy().dtype).smallest_subnormal)
-    return float((np.abs(a64[fin] - b64[fin]) / spacing).max(initial=0.0))
 
 
 @pytest.mark.parametrize("name", NAMES)

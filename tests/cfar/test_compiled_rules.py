@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import torchsar.cfar as cfar
+from tests.kernel_paths import both as _both
 from torchsar import _jit
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
@@ -22,14 +23,6 @@ def _scene(seed: int) -> torch.Tensor:
     x[2] = 0.0  # nothing at all: 0 / 0 everywhere
     x[3, 0, ::3, :] *= 30.0  # striped, variable halves
     return x
-
-
-def _both(monkeypatch, fn):
-    out = []
-    for on in (True, False):
-        monkeypatch.setattr(_jit, "ENABLED", on)
-        out.append(fn())
-    return out
 
 
 ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False), ("ac", False)}

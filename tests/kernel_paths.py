@@ -1,0 +1,41 @@
+"""Running a call with the compiled kernels and without them (``torchsar._jit.ENABLED``),
+and comparing what the two paths give."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from torchsar import _jit
+
+
+def both(monkeypatch, fn) -> list:
+    """``fn()`` with the kernels on, then off."""
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        out.append(fn())
+    return out
+
+
+def errors(monkeypatch, call) -> list[tuple[type, str]]:
+    """The error ``call`` raises with the kernels on, then off (type and words)."""
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(_jit, "ENABLED", on)
+        with pytest.raises(Exception) as err:
+            call()
+        out.append((type(err.value), str(err.value)))
+    return out
+
+
+def ulps(a: torch.Tensor, b: torch.Tensor) -> float:
+    """Largest difference in units of the last place of ``b`` (finite entries; the
+    non-finite ones must be equal)."""
+    a64, b64 = a.double().numpy(), b.double().numpy()
+    fin = np.isfinite(b64)
+    assert np.array_equal(a64[~fin], b64[~fin])
+    spacing = np.spacing(np.abs(b.numpy()[fin])).astype(np.float64)
+    spacing = np.maximum(spacing, np.finfo(b.numpy().dtype).smallest_subnormal)
+    return float((np.abs(a64[fin] - b64[fin]) / spacing).max(initial=0.0))
