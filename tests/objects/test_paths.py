@@ -135,3 +135,54 @@ def test_own_regions_equal_labels_scored_on_the_whole_map(threshold):
     for a, b in zip(_fields(want), _fields(got), strict=True):
         assert a.dtype == b.dtype and np.array_equal(a, b)
     assert np.array_equal(got.pixel_lists()[1], np.flatnonzero(got.labels))
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("ordered", [True, False])
+def test_measurements_same_on_both_paths(monkeypatch, seed, ordered):
+    """One pass of the kernel against numpy's reductions: unsorted ids, pixels owned twice,
+    ids without pixels, ties of 0.0 and -0.0, scores of -inf; bit for bit."""
+    from tests.kernel_paths import both
+    from torchsar.objects.properties import measure_pixels
+
+    rng = np.random.default_rng(seed)
+    shape, n = (3, 17, 23), 9
+    m = int(rng.integers(0, 300))
+    idx = np.sort(rng.integers(0, np.prod(shape), m))
+    lab = rng.integers(1, n, m)  # id n has no pixel
+    if ordered:
+        lab = np.sort(lab)
+    values = rng.choice([0.0, -0.0, -np.inf, 2.5, 7.0], m) * rng.choice([1.0, 0.5], m)
+    fast, slow = both(monkeypatch, lambda: measure_pixels(lab, idx, shape[1:], n, values))
+    assert fast.keys() == slow.keys()
+    for key in fast:
+        a, b = fast[key], slow[key]
+        assert a.dtype == b.dtype and a.shape == b.shape, key
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b)), key
+    for k in range(1, n + 1):  # against the pixels themselves
+        own = idx[lab == k]
+        rows, cols = (own // shape[2]) % shape[1], own % shape[2]
+        assert fast["area"][k - 1] == own.size
+        if own.size:
+            assert fast["plane"][k - 1] == (own // (shape[1] * shape[2])).min()
+            box = [rows.min(), cols.min(), rows.max() + 1, cols.max() + 1]
+            assert fast["box"][k - 1].tolist() == box
+            assert np.allclose(fast["centroid"][k - 1], [rows.mean(), cols.mean()])
+            assert fast["score"][k - 1] == values[lab == k].max()
+
+
+@pytest.mark.skipif(not PATHS[1:], reason="numba is not installed")
+@pytest.mark.parametrize("seed", range(4))
+def test_coordinates_walked_equal_divided(seed):
+    """The kernels' plane / row / column of flat indices, walked along ascending runs,
+    against division: runs, steps back, jumps across planes, one-pixel rows and columns."""
+    from torchsar.objects._kernels import _coords
+
+    rng = np.random.default_rng(seed)
+    for shape in [(4, 9, 11), (3, 1, 7), (2, 6, 1), (5, 2, 2)]:
+        size = int(np.prod(shape))
+        parts = [np.sort(rng.integers(0, size, 40)), rng.integers(0, size, 15), np.arange(size)]
+        idx = np.concatenate(parts).astype(np.int64)
+        got = _coords(idx, shape[1], shape[2])
+        want = np.stack(np.unravel_index(idx, shape))
+        assert np.array_equal(got, want)

@@ -13,6 +13,11 @@ of connected components, with the results of the numpy / scikit-image code in
   :func:`~torchsar.objects.components.label_components`. The second pass also lists the
   labelled pixels (flat index into the stack, ascending, and label), which the measurement
   reads instead of searching the label map again.
+- Measurements: one pass over the labelled pixels gathers each object's area, plane, box
+  and the sums of its rows, columns and their squares and products, as int64, with its
+  peak score: :func:`~torchsar.objects.properties.measure_pixels`' reductions. The sums
+  are exact integers (as numpy's float64 sums of the same integers are, below ``2^53``,
+  in any order), so the moments formed from them are the same floats, bit for bit.
 
 Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 """
@@ -22,9 +27,32 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["close_disk", "label_planes"]
+__all__ = ["close_disk", "label_planes", "measure_sums"]
 
 _JIT = {"cache": True, "nogil": True}
+
+
+@njit(**_JIT)
+def _coords(idx, h, w):
+    """Plane, row and column ``(3, m)`` of each flat index ``idx`` (``>= 0``) into an
+    ``(N, H, W)`` stack: an ascending list is walked row by row without a division (which
+    costs more than the rest of a pixel's work); a step back or a jump of many rows
+    divides."""
+    out = np.empty((3, idx.size), np.int64)
+    p, i, start = 0, 0, 0  # plane, row and flat index of the current row's first pixel
+    for k in range(idx.size):
+        q = idx[k]
+        if q < start or q - start >= 8 * w:
+            p, rest = divmod(q, h * w)
+            i = rest // w
+            start = q - rest % w
+        while q - start >= w:
+            start += w
+            i += 1
+            if i == h:
+                p, i = p + 1, 0
+        out[0, k], out[1, k], out[2, k] = p, i, q - start
+    return out
 
 
 @njit(**_JIT)
@@ -32,9 +60,9 @@ def _close(idx, n_planes, h, w, dy, dx, r):
     hp, wp = h + 2 * r, w + 2 * r
     grown = np.zeros(n_planes * hp * wp, np.uint8)  # bit 1: in the dilation, bit 2: tested
     base = np.empty(idx.size, np.int64)
+    at_ = _coords(idx, h, w)
     for k in range(idx.size):
-        p, rest = divmod(idx[k], h * w)
-        i, j = divmod(rest, w)
+        p, i, j = at_[0, k], at_[1, k], at_[2, k]
         base[k] = (p * hp + i + r) * wp + j + r
         for o in range(dy.size):
             grown[base[k] + dy[o] * wp + dx[o]] |= 1
@@ -43,8 +71,7 @@ def _close(idx, n_planes, h, w, dy, dx, r):
     added = np.empty(idx.size * dy.size, np.int64)
     n_added = 0
     for k in range(idx.size):
-        rest = idx[k] % (h * w)
-        i, j = divmod(rest, w)
+        i, j = at_[1, k], at_[2, k]
         for o in range(dy.size):  # the closing lies in the dilation: near a mask pixel
             i2, j2 = i + dy[o], j + dx[o]
             at = base[k] + dy[o] * wp + dx[o]
@@ -57,10 +84,24 @@ def _close(idx, n_planes, h, w, dy, dx, r):
                     full = False
                     break
             if full:
-                added[n_added] = idx[k] - rest + i2 * w + j2
+                added[n_added] = idx[k] + dy[o] * w + dx[o]
                 n_added += 1
-    out = np.concatenate((idx, added[:n_added]))
-    out.sort()
+    extra = np.sort(added[:n_added])  # few, next to the mask's: merged, not sorted again
+    return _merge(idx, extra)
+
+
+@njit(**_JIT)
+def _merge(a, b):
+    """The ascending union of the disjoint ascending arrays ``a`` and ``b``."""
+    out = np.empty(a.size + b.size, np.int64)
+    i = j = 0
+    for k in range(out.size):
+        if j == b.size or (i < a.size and a[i] < b[j]):
+            out[k] = a[i]
+            i += 1
+        else:
+            out[k] = b[j]
+            j += 1
     return out
 
 
@@ -109,9 +150,10 @@ def _label(idx, n_planes, h, w, eight):
     labels = np.zeros(n_planes * h * w, np.int32)
     parent = np.zeros(idx.size + 1, np.int32)
     n_prov = 0
+    at_ = _coords(idx, h, w)
     for k in range(idx.size):
         q = idx[k]
-        i, j = divmod(q % (h * w), w)
+        i, j = at_[1, k], at_[2, k]
         best = 0
         for di, dj in ((0, -1), (-1, -1), (-1, 0), (-1, 1)):
             if (not eight and di != 0 and dj != 0) or i + di < 0 or not 0 <= j + dj < w:
@@ -149,3 +191,48 @@ def label_planes(
         np.ascontiguousarray(idx, dtype=np.int64), n_planes, h, w, connectivity == 2
     )
     return labels.reshape(shape), int(n), lab
+
+
+@njit(**_JIT)
+def _measure(lab, idx, h, w, n, values):
+    plane = np.full(n, np.iinfo(np.int64).max, np.int64)
+    lo = np.full((2, n), np.iinfo(np.int64).max, np.int64)  # first row, column
+    hi = np.full((2, n), -1, np.int64)  # last row, column
+    sums = np.zeros((6, n), np.int64)  # area, rows, columns, rows^2, columns^2, products
+    peak = np.full(n, -np.inf)
+    at_ = _coords(idx, h, w)
+    for k in range(lab.size):
+        o = lab[k] - 1
+        p, i, j = at_[0, k], at_[1, k], at_[2, k]
+        plane[o] = min(plane[o], p)
+        lo[0, o], hi[0, o] = min(lo[0, o], i), max(hi[0, o], i)
+        lo[1, o], hi[1, o] = min(lo[1, o], j), max(hi[1, o], j)
+        sums[0, o] += 1
+        sums[1, o] += i
+        sums[2, o] += j
+        sums[3, o] += i * i
+        sums[4, o] += j * j
+        sums[5, o] += i * j
+        v = values[k]
+        if v >= peak[o]:  # the last of equal values, as numpy's maximum keeps
+            peak[o] = v
+    return plane, lo, hi, sums, peak
+
+
+def measure_sums(
+    lab: np.ndarray, idx: np.ndarray, hw: tuple[int, int], n: int, values: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Per object ``1..n`` of the pixels ``idx`` (flat into an ``(N, H, W)`` stack, object
+    ``lab``, score ``values``): its plane (lowest), first and last row and column
+    (``(2, n)`` each; ``int64`` max and -1 for an object without pixels), the int64 sums
+    ``(6, n)`` of 1, row, column, row^2, column^2 and row x column, and its peak score
+    (``-inf`` without pixels)."""
+    h, w = hw
+    return _measure(
+        np.ascontiguousarray(lab, dtype=np.int64),
+        np.ascontiguousarray(idx, dtype=np.int64),
+        int(h),
+        int(w),
+        int(n),
+        np.ascontiguousarray(values, dtype=np.float64),
+    )

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from torchsar import _jit
+
 __all__ = ["label_boxes", "measure", "measure_pixels"]
 
 
@@ -45,17 +47,14 @@ def _extent(groups: _Groups, values: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return groups.min(values, np.iinfo(np.int64).max), groups.max(values, -1)
 
 
-def _moments(groups: _Groups, rows: np.ndarray, cols: np.ndarray, area: np.ndarray):
+def _moments(sums: np.ndarray, area: np.ndarray):
     """Centroids ``(n, 2)`` and major / minor axis lengths (``4 sqrt(eigenvalue)`` of the
-    central second moments, the convention of ``skimage.measure.regionprops``)."""
-
-    def mean(w: np.ndarray) -> np.ndarray:
-        return groups.sum(w) / area
-
-    r, c = mean(rows), mean(cols)
-    mrr = mean(rows * rows) - r * r
-    mcc = mean(cols * cols) - c * c
-    mrc = mean(rows * cols) - r * c
+    central second moments, the convention of ``skimage.measure.regionprops``) from the
+    float64 sums ``(5, n)`` of row, column, row^2, column^2 and row x column."""
+    r, c, rr, cc, rc = sums / area
+    mrr = rr - r * r
+    mcc = cc - c * c
+    mrc = rc - r * c
     half = 0.5 * (mrr + mcc)
     root = np.sqrt(np.maximum(0.25 * (mrr - mcc) ** 2 + mrc**2, 0.0))
     length = 4 * np.sqrt(np.maximum(half + root, 0.0))
@@ -98,19 +97,36 @@ def measure_pixels(
 ) -> dict[str, np.ndarray]:
     """:func:`measure` from pixel lists: object id ``lab`` (``1..n``) of every pixel, its
     flat index ``idx`` into the ``(N, H, W)`` stack and its score ``values`` (a pixel may
-    appear once per object that owns it, so objects may overlap)."""
+    appear once per object that owns it, so objects may overlap).
+
+    With the compiled kernels (:func:`torchsar._jit.enabled`) one pass over the pixels
+    gathers every reduction (:func:`torchsar.objects._kernels.measure_sums`); its integer
+    sums are exact, so the result is the numpy path's bit for bit. Beyond ``2^53`` (a
+    sum of squared coordinates that float64 could not hold exactly) numpy's path is
+    taken."""
     h, w = hw
-    r, c = (idx // w) % h, idx % w
-    rows, cols = r.astype(np.float64), c.astype(np.float64)
-    area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
-    groups = _Groups(lab, n)
-    plane, box = _plane_and_box(groups, idx, (h, w), n)
-    centroid, length, width = _moments(groups, rows, cols, np.maximum(area, 1))
-    peak = groups.max(np.asarray(values, dtype=np.float64), -np.inf)
+    if _jit.enabled() and lab.size * max(h, w) ** 2 < 2**53:
+        from torchsar.objects import _kernels
+
+        plane, lo, hi, sums, peak = _kernels.measure_sums(lab, idx, hw, n, values)
+        area = sums[0]
+        box = np.stack([lo[0], lo[1], hi[0] + 1, hi[1] + 1], axis=1).astype(np.float64)
+        moments = sums[1:].astype(np.float64)
+    else:
+        r, c = (idx // w) % h, idx % w
+        rows, cols = r.astype(np.float64), c.astype(np.float64)
+        area = np.bincount(lab, minlength=n + 1)[1:].astype(np.int64)
+        groups = _Groups(lab, n)
+        plane, box = _plane_and_box(groups, idx, (h, w), n)
+        moments = np.stack(
+            [groups.sum(v) for v in (rows, cols, rows * rows, cols * cols, rows * cols)]
+        ).reshape(5, n)
+        peak = groups.max(np.asarray(values, dtype=np.float64), -np.inf)
+    centroid, length, width = _moments(moments, np.maximum(area, 1))
     return {
         "plane": plane,
         "area": area,
-        "box": box,
+        "box": box.reshape(n, 4),
         "centroid": centroid,
         "length": length,
         "width": width,
