@@ -5,6 +5,7 @@ values, tiny images, every rank and every dtype."""
 from __future__ import annotations
 
 import importlib.util
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -30,9 +31,30 @@ def compiled_select(planes: torch.Tensor, ring: Ring, kk: torch.Tensor, vm) -> t
     return _compiled(planes, ring, kk, vm)
 
 
+@contextmanager
+def sweeping(how: str):
+    """Every ring through the compiled kernel's column-bitset sweep (``"columns"``) or its
+    bit-flip sweep (``"flips"``)."""
+    from torchsar.order_statistics import _kernels
+
+    old = _kernels.COLUMNS_MAX_OUTER
+    _kernels.COLUMNS_MAX_OUTER = 10**6 if how == "columns" else -1
+    try:
+        yield
+    finally:
+        _kernels.COLUMNS_MAX_OUTER = old
+
+
+def flips_select(planes: torch.Tensor, ring: Ring, kk: torch.Tensor, vm) -> torch.Tensor:
+    """:func:`compiled_select` by the bit-flip sweep, whatever the ring."""
+    with sweeping("flips"):
+        return compiled_select(planes, ring, kk, vm)
+
+
 ALGORITHMS = {"bisection": bisection.bisection_select, "histogram": histogram_select}
 if HAVE_NUMBA:
     ALGORITHMS["compiled"] = compiled_select
+    ALGORITHMS["compiled-flips"] = flips_select
 
 
 def reference(img: np.ndarray, ring: Ring, k: np.ndarray, valid: np.ndarray | None = None):
@@ -78,6 +100,7 @@ def test_matches_sorting_with_varying_ranks_masks_and_tiles(monkeypatch, algorit
             from torchsar.order_statistics import _kernels
 
             monkeypatch.setattr(_kernels, "TILE_CELLS", budget)
+            monkeypatch.setattr(_kernels, "COLUMN_TILE_CELLS", budget)
     rng = np.random.default_rng(7)
     imgs = rng.exponential(size=(3, 19, 23))
     valid = rng.random(imgs.shape) > 0.2
@@ -189,9 +212,18 @@ def _ranks_for(count: np.ndarray, rank: int) -> torch.Tensor:
     return torch.from_numpy(np.minimum(count, rank))[None, None]
 
 
+@pytest.fixture(scope="class", params=["columns", "flips"])
+def sweep(request):
+    """The class's tests once through each sweep of the compiled kernel."""
+    with sweeping(request.param):
+        yield request.param
+
+
 @needs_numba
+@pytest.mark.usefixtures("sweep")
 class TestCompiled:
-    """The compiled path of :func:`ring_order_statistic` (CPU, numba)."""
+    """The compiled path of :func:`ring_order_statistic` (CPU, numba), through both of its
+    sweeps (column bitsets and bit flips) whatever the ring."""
 
     @pytest.mark.parametrize(("guard", "train"), [(0, 1), (1, 1), (2, 4), (1, 3)])
     def test_every_rank_equals_rank_filter_and_sorting(self, guard, train):
@@ -287,6 +319,7 @@ class TestCompiled:
         k = torch.full((45, 52), 20)
         whole = ring_order_statistic(x, ring, k)
         monkeypatch.setattr(_kernels, "TILE_CELLS", cells)
+        monkeypatch.setattr(_kernels, "COLUMN_TILE_CELLS", cells)
         assert _kernels.tile_side(45, 52, ring.outer) < 45
         assert torch.equal(ring_order_statistic(x, ring, k), whole)
 
@@ -301,3 +334,30 @@ class TestCompiled:
                 img = x[b, c].double().numpy()
                 want = _reference_all(_sorted_rings(img, ring), int(k[b, c]))
                 np.testing.assert_array_equal(got[b, c].double().numpy(), want)
+
+
+@needs_numba
+@pytest.mark.parametrize(("guard", "train"), [(2, 4), (3, 6), (4, 12), (8, 12)])
+def test_both_sweeps_agree_on_wide_rings_with_masks_and_tiles(guard, train):
+    """The column-bitset sweep and the bit-flip sweep on rings from the default OS-CFAR's
+    to wider than the column sweep takes by default, tiled, with no-data and per-pixel
+    ranks; the first ring also against sorting."""
+    from torchsar.order_statistics import _kernels
+
+    ring = Ring(guard, train)
+    rng = np.random.default_rng(ring.n)
+    img = rng.exponential(size=(2, 1, 61, 70)).astype(np.float32)
+    img[0, 0, 20:24, 30:33] = 0.0  # ties
+    valid = rng.random(img.shape) > 0.05
+    cnt = np.stack([counts(img[p, 0], ring, valid[p, 0]) for p in range(2)])[:, None]
+    k = torch.from_numpy(np.minimum(cnt, rng.integers(0, ring.n + 1, cnt.shape)))
+    x, vm = torch.from_numpy(img), torch.from_numpy(valid)
+    got = {}
+    for how in ("columns", "flips"):
+        with sweeping(how):
+            got[how] = ring_order_statistic(x, ring, k, valid=vm)
+    assert torch.equal(got["columns"], got["flips"])
+    assert _kernels.by_columns(Ring(2, 4).outer) and not _kernels.by_columns(Ring(8, 12).outer)
+    if ring.outer == 6:
+        want = reference(img[1, 0], ring, k[1, 0].numpy(), valid[1, 0])
+        np.testing.assert_array_equal(got["columns"][1, 0].numpy(), want)

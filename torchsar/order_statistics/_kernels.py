@@ -1,24 +1,32 @@
-"""numba kernel of the exact ring order statistic: a sliding rank bitset (CPU).
+"""numba kernel of the exact ring order statistic: a rank bitset per pixel (CPU).
 
-Per plane, the image is cut into tiles (one tile for a chip) whose cells, with the ring's
-halo, are **ranked**: the values become order-preserving integer keys (the float bits with
-the sign handled, 32 bits for float32 and 64 for float64; ``-0.0`` as ``+0.0``; cells
-outside the image or not valid are ``+inf``), sorted by a stable LSD radix sort (8-bit
-digits; a digit equal over the whole tile is skipped), so every cell has a distinct rank in
-``[0, M)``. The ring of the current pixel is a set of ranks held as a bitset of ``M`` bits.
+Per plane, the image is cut into tiles whose cells, with the ring's halo, are **ranked**:
+the values become order-preserving integer keys (the float bits with the sign handled, 32
+bits for float32 and 64 for float64; ``-0.0`` as ``+0.0``; cells outside the image or not
+valid are ``+inf``), sorted by a stable LSD radix sort (8-bit digits; a digit equal over
+the whole tile is skipped), so every cell has a distinct rank in ``[0, M)``. The ring of
+the current pixel is a set of ranks held as a bitset of ``M`` bits; the ``k``-th smallest
+rank indexes the tile's sorted values: the result is an input value, exact. Missing cells
+rank after every counted cell, so they are never selected for ``k`` up to the pixel's count
+of counted cells. Two sweeps keep the bitset up to date, with the same results:
 
-The pixels of a tile are visited in serpentine order; each step to a neighbouring pixel
-changes the ring by two outer lines and two guard lines: ``2 (2o + 1) + 2 (2g + 1)`` bit
-flips (``o = g + t``), each also updating the count of set bits below a **pointer word**.
-The ``k``-th smallest rank is found by moving the pointer (popcounts) until the count below
-it is ``< k <=`` the count through it (the answer moves little between neighbouring
-pixels), then picking the right set bit of that word. The rank indexes the tile's sorted
-values: the result is an input value, exact. Missing cells rank after every counted cell,
-so they are never selected for ``k`` up to the pixel's count of counted cells.
+- **column bitsets** (:func:`_sweep_columns`, rings reaching at most
+  :data:`COLUMNS_MAX_OUTER` cells from the pixel): small tiles (about
+  :data:`COLUMN_TILE_CELLS` cells with the halo, a bitset of 16 words), and per column of
+  the tile the bitsets of its cells in the outer window's rows and in the guard window's
+  rows. A step right XORs four column bitsets into the ring (whole words, a loop that
+  vectorises), a row down flips four bits per column, and the ``k``-th set bit is found
+  by counting the words' bits from the first. The work per pixel grows with the tile's
+  area in words, not with the ring.
+- **bit flips** (:func:`_sweep`, wider rings): tiles of up to :data:`TILE_CELLS` cells
+  visited in serpentine order; each step to a neighbouring pixel changes the ring by two
+  outer lines and two guard lines, ``2 (2o + 1) + 2 (2g + 1)`` bit flips (``o = g + t``),
+  each also updating the count of set bits below a **pointer word**; the ``k``-th smallest
+  rank is found by moving the pointer (popcounts) until the count below it is ``< k <=``
+  the count through it (the answer moves little between neighbouring pixels), then
+  picking the right set bit of that word. Work per pixel grows with the ring's side.
 
-Work per pixel is proportional to the ring's side, not its area, plus the ranking
-(``O(M)`` per tile); memory is a few arrays of the tile's size (at most
-:data:`TILE_CELLS` cells, or ``(4o + 1)^2`` for rings wider than that allows).
+Both add the ranking (``O(M)`` per tile); memory is a few arrays of the tile's size.
 
 Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 """
@@ -34,6 +42,8 @@ __all__ = ["ring_select"]
 _JIT = {"cache": True, "nogil": True}
 
 TILE_CELLS = 1 << 16  # cells of a tile with its halo (ranks, bitset and sort stay in cache)
+COLUMN_TILE_CELLS = 1 << 10  # the same for the column-bitset sweep (16 words per bitset)
+COLUMNS_MAX_OUTER = 16  # rings reaching at most this far take the column-bitset sweep
 
 _MIN = np.int64(-(2**63))
 
@@ -202,10 +212,92 @@ def _sweep(rank, srt, tw, th, g, o, kk, out, y0, x0):
             step = -step
 
 
+@njit(inline="always", **_JIT)
+def _toggle(bits, at, r):
+    """Flip rank ``r`` of the bitset from word ``at`` of ``bits``."""
+    bits[at + (r >> 6)] ^= np.int64(1) << (r & 63)
+
+
+@njit(inline="always", **_JIT)
+def _kth(bits, k, n):
+    """The rank of the ``k``-th smallest set bit of the first ``n`` (unsigned) words of a
+    bitset (``k >= 1``, at most their count)."""
+    below = 0
+    for wi in range(n):
+        here = _popcount(bits[wi])
+        if below + here >= k:
+            return _pick(bits[wi], k - below, np.int64(wi))
+        below += here
+    return -1
+
+
+@njit(inline="always", **_JIT)
+def _pick(word, j, wi):
+    """The rank of the ``j``-th lowest set bit of ``word``, word ``wi`` of a bitset."""
+    for _ in range(j - 1):
+        word &= word - 1
+    return (wi << 6) + _lowest_bit(word)
+
+
 @njit(**_JIT)
-def _scratch(plane, span):
-    """The buffers of :func:`_select_plane` for tiles of ``span`` cells, allocated once per
-    call (fresh large arrays per tile would cost page faults)."""
+def _sweep_columns(rank, srt, tw, th, g, o, kk, out, y0, x0, outer, guard, ring):
+    """:func:`_sweep`'s result by whole-word operations, for small tiles (a dense bitset of
+    ``nw`` words). Per column of the halo'd tile, the bitsets of its rows in the outer
+    window and in the guard window (``outer``, ``guard``: scratch of ``(tw + 2o) nw``
+    words at least; a row down flips four bits per column). A pixel's ring is the XOR of
+    its ``2o + 1`` outer and ``2g + 1`` guard column bitsets (the guard lies inside the
+    outer square); a step right XORs four column bitsets into it (``ring``: ``nw`` words),
+    a loop that vectorises. The ``k``-th set bit is then found by counting words from the
+    first (:func:`_kth`). Indices are unsigned where the loops must vectorise (a signed
+    index carries numba's negative-index check, which turns the loads into gathers)."""
+    hh, wd = th + 2 * o, tw + 2 * o
+    nw = (srt.size + 63) >> 6
+    unw = np.uint64(nw)
+    outer[: wd * nw] = 0
+    guard[: wd * nw] = 0
+    lo, hi = o - g, o + g  # the guard rows and columns, in the window
+    for c in range(wd):
+        for r in range(2 * o + 1):
+            _toggle(outer, c * nw, rank[c * hh + r])
+        for r in range(lo, hi + 1):
+            _toggle(guard, c * nw, rank[c * hh + r])
+    for y in range(th):
+        if y:  # every column's windows one row down
+            for c in range(wd):
+                top = c * hh + y - 1
+                _toggle(outer, c * nw, rank[top])
+                _toggle(outer, c * nw, rank[top + 2 * o + 1])
+                _toggle(guard, c * nw, rank[top + lo])
+                _toggle(guard, c * nw, rank[top + hi + 1])
+        for wi in range(unw):
+            ring[wi] = 0
+        for c in range(2 * o + 1):
+            _xor_in(ring, outer, np.uint64(c * nw), unw)
+        for c in range(lo, hi + 1):
+            _xor_in(ring, guard, np.uint64(c * nw), unw)
+        for x in range(tw):
+            if x:
+                a, b = np.uint64((x - 1) * nw), np.uint64((x + 2 * o) * nw)
+                e, d = np.uint64((x - 1 + lo) * nw), np.uint64((x + hi) * nw)
+                for wi in range(unw):
+                    ring[wi] ^= (outer[a + wi] ^ outer[b + wi]) ^ (guard[e + wi] ^ guard[d + wi])
+            k = kk[y0 + y, x0 + x]
+            out[y0 + y, x0 + x] = srt[_kth(ring, k, unw)] if k > 0 else 0
+
+
+@njit(inline="always", **_JIT)
+def _xor_in(ring, bits, at, n):
+    """``ring[:n] ^= bits[at : at + n]`` (unsigned indices: a loop that vectorises)."""
+    for wi in range(n):
+        ring[wi] ^= bits[at + wi]
+
+
+@njit(**_JIT)
+def _scratch(plane, side, columns):
+    """The buffers of :func:`_select_plane` for halo'd tiles of ``side`` x ``side`` cells,
+    allocated once per call (fresh large arrays per tile would cost page faults)."""
+    span = side * side
+    words = (span + 63) >> 6
     narrow = plane.itemsize == 4  # float32: 32-bit keys, four radix passes at most
     return (
         np.empty(span, dtype=plane.dtype),  # cell values
@@ -217,14 +309,19 @@ def _scratch(plane, span):
         np.empty(span, dtype=np.int32),
         np.empty(span, dtype=np.uint32),  # ranks (unsigned: no negative-index wraparound)
         np.empty(span, dtype=plane.dtype),  # sorted values
+        np.zeros(side * words if columns else 0, dtype=np.int64),  # column bitsets
+        np.zeros(side * words if columns else 0, dtype=np.int64),
+        np.zeros(words, dtype=np.int64),  # the ring (_sweep_columns)
     )
 
 
 @njit(**_JIT)
-def _select_plane(plane, kk, valid, has_valid, g, o, tile, out, scratch):
-    """Every tile of one ``(H, W)`` plane: rank its halo'd cells, then sweep it."""
+def _select_plane(plane, kk, valid, has_valid, g, o, tile, columns, out, scratch):
+    """Every tile of one ``(H, W)`` plane: rank its halo'd cells, then sweep it (by column
+    bitsets where ``columns``, else by bit flips)."""
     h, w = plane.shape
-    vals, keys32, tmp32, keys64, tmp64, order, tmp_order, rank, srt = scratch
+    vals, keys32, tmp32, keys64, tmp64, order, tmp_order, rank, srt = scratch[:9]
+    outer, guard, ring = scratch[9:]
     narrow = plane.itemsize == 4
     for y0 in range(0, h, tile):
         for x0 in range(0, w, tile):
@@ -247,26 +344,38 @@ def _select_plane(plane, kk, valid, has_valid, g, o, tile, out, scratch):
             for i in range(m):
                 rank[order[i]] = i
                 srt[i] = vals[order[i]]
-            _sweep(rank[:m], srt[:m], tw, th, g, o, kk, out, y0, x0)
+            if columns:
+                _sweep_columns(rank[:m], srt[:m], tw, th, g, o, kk, out, y0, x0, outer, guard, ring)
+            else:
+                _sweep(rank[:m], srt[:m], tw, th, g, o, kk, out, y0, x0)
+
+
+def by_columns(o: int) -> bool:
+    """Whether rings reaching ``o`` cells from the pixel take the column-bitset sweep: its
+    work per pixel grows with the halo'd tile's area, the bit flips' with the ring's side,
+    so the flips win for wide rings."""
+    return o <= COLUMNS_MAX_OUTER
 
 
 def tile_side(h: int, w: int, o: int) -> int:
-    """Side of the output tiles: the whole plane when it fits :data:`TILE_CELLS` with its
-    halo, else the largest square that does (at least ``2o + 1`` and 16)."""
-    if (h + 2 * o) * (w + 2 * o) <= TILE_CELLS:
+    """Side of the output tiles: the whole plane when it fits the sweep's budget
+    (:data:`COLUMN_TILE_CELLS` for :func:`by_columns` rings, else :data:`TILE_CELLS`) with
+    its halo, else the largest square that does (at least ``2o + 1`` and 16)."""
+    cells = COLUMN_TILE_CELLS if by_columns(o) else TILE_CELLS
+    if (h + 2 * o) * (w + 2 * o) <= cells:
         return max(h, w)
-    return max(int(TILE_CELLS**0.5) - 2 * o, 2 * o + 1, 16)
+    return max(int(cells**0.5) - 2 * o, 2 * o + 1, 16)
 
 
 @njit(**_JIT)
-def _select_planes(planes, kk, valid, has_valid, g, o, tile, out):
+def _select_planes(planes, kk, valid, has_valid, g, o, tile, columns, out):
     """:func:`_select_plane` for every plane (``kk`` and ``valid`` may have one plane for
     all)."""
-    scratch = _scratch(planes, (tile + 2 * o) * (tile + 2 * o))
+    scratch = _scratch(planes, tile + 2 * o, columns)
     for p in range(planes.shape[0]):
         kp = kk[p if kk.shape[0] > 1 else 0]
         vp = valid[p if has_valid else 0]
-        _select_plane(planes[p], kp, vp, has_valid, g, o, tile, out[p], scratch)
+        _select_plane(planes[p], kp, vp, has_valid, g, o, tile, columns, out[p], scratch)
 
 
 def ring_select(
@@ -283,5 +392,6 @@ def ring_select(
     h, w = planes.shape[1:]
     out = np.empty_like(planes)
     mask = np.ones((1, 1, 1), dtype=np.bool_) if valid is None else valid
-    _select_planes(planes, kk, mask, valid is not None, guard, o, tile_side(h, w, o), out)
+    tile = tile_side(h, w, o)
+    _select_planes(planes, kk, mask, valid is not None, guard, o, tile, by_columns(o), out)
     return out

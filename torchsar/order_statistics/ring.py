@@ -5,9 +5,10 @@ It is the window statistic that sums cannot give, so it lives beside
 semantics: cells outside the image or marked invalid are not counted.
 
 On CPU with numba installed (:mod:`torchsar._jit`), one compiled algorithm does every
-ring: a sliding bitset of tile ranks with a pointer that follows the answer
-(:mod:`torchsar.order_statistics._kernels`), ``2(2(g+t)+1) + 2(2g+1)`` bit flips per pixel
-plus a radix sort per tile. Otherwise (other devices, or no numba) two exact torch
+ring: a bitset of tile ranks per pixel (:mod:`torchsar.order_statistics._kernels`), kept
+up to date by XORs of column bitsets (rings up to 16 cells from the pixel) or by
+``2(2(g+t)+1) + 2(2g+1)`` bit flips per pixel (wider rings), plus a radix sort per tile.
+Otherwise (other devices, or no numba) two exact torch
 algorithms share the work, chosen by the ring's size only (never by the data or the batch).
 All three return the same values bit for bit (one caveat: where the answer is a zero and
 the ring holds both ``+0.0`` and ``-0.0``, which of the two is returned may differ):
