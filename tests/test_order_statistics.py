@@ -361,3 +361,31 @@ def test_both_sweeps_agree_on_wide_rings_with_masks_and_tiles(guard, train):
     if ring.outer == 6:
         want = reference(img[1, 0], ring, k[1, 0].numpy(), valid[1, 0])
         np.testing.assert_array_equal(got["columns"][1, 0].numpy(), want)
+
+
+@needs_numba
+def test_bit_selection_equals_listing_the_bits():
+    """The column sweep's branch-free selection (the word by counting, the bit by byte
+    counts and a table) against the positions of the set bits listed one by one: random
+    words and bitsets, one bit, every bit, the sign bit."""
+    from numba import njit
+
+    from torchsar.order_statistics import _kernels
+
+    select = njit(lambda w, j: _kernels._select_bit(w, j))
+    kth = njit(lambda bits, k: _kernels._kth(bits, k, np.uint64(bits.size)))
+    rng = np.random.default_rng(5)
+    words = [np.int64(-1), np.int64(1), np.int64(-(2**63)), np.int64(2**62)]
+    words += list(rng.integers(-(2**63), 2**63 - 1, 300, dtype=np.int64))
+    for w in words:
+        pos = [i for i in range(64) if (int(w) >> i) & 1]
+        for j in range(len(pos)):
+            assert select(w, j) == pos[j]
+    for _ in range(300):
+        n = int(rng.integers(1, 20))
+        bits = rng.integers(-(2**63), 2**63 - 1, n, dtype=np.int64)
+        bits &= rng.integers(-(2**63), 2**63 - 1, n, dtype=np.int64)  # sparser
+        bits[rng.random(n) < 0.3] = 0
+        ranks = [64 * wi + i for wi in range(n) for i in range(64) if (int(bits[wi]) >> i) & 1]
+        for k in {1, len(ranks), int(rng.integers(1, len(ranks) + 1))} if ranks else ():
+            assert kth(bits, k) == ranks[k - 1]

@@ -221,14 +221,49 @@ def _toggle(bits, at, r):
 @njit(inline="always", **_JIT)
 def _kth(bits, k, n):
     """The rank of the ``k``-th smallest set bit of the first ``n`` (unsigned) words of a
-    bitset (``k >= 1``, at most their count)."""
-    below = 0
+    bitset (``k >= 1``, at most their count), without a data-dependent branch (a branch
+    per pixel that the predictor cannot learn cost more than the counting): every word's
+    bits are counted, the words wholly below the ``k``-th bit are counted with them, then
+    the bit is picked within its word (:func:`_select_bit`)."""
+    run, below, at = 0, 0, 0
     for wi in range(n):
-        here = _popcount(bits[wi])
-        if below + here >= k:
-            return _pick(bits[wi], k - below, np.int64(wi))
-        below += here
-    return -1
+        run += _popcount(bits[wi])
+        under = run < k
+        at += under
+        below = run if under else below
+    return (at << 6) + _select_bit(bits[at], k - 1 - below)
+
+
+_M1 = np.uint64(0x5555555555555555)
+_M2 = np.uint64(0x3333333333333333)
+_M4 = np.uint64(0x0F0F0F0F0F0F0F0F)
+_ONES = np.uint64(0x0101010101010101)  # 1 in every byte
+_HIGH = np.uint64(0x8080808080808080)  # the top bit of every byte
+_SELECT = np.array(  # _SELECT[8 v + r]: the position of the r-th set bit of the byte v
+    [
+        [[i for i in range(8) if v >> i & 1][r] if r < bin(v).count("1") else 0 for r in range(8)]
+        for v in range(256)
+    ],
+    dtype=np.int64,
+).reshape(-1)
+
+
+@njit(inline="always", **_JIT)
+def _select_bit(word, j):
+    """The position of the ``j``-th (from 0) set bit of a word with more than ``j``, without
+    a branch: each byte's count of the bits up to it (one multiplication), the bytes whose
+    count is at most ``j`` counted at once (the top bit of each byte of ``(count + 128) -
+    (j + 1)``: no borrow crosses a byte), then a table for the bit within its byte."""
+    x = np.uint64(word)
+    s = x - ((x >> np.uint64(1)) & _M1)
+    s = (s & _M2) + ((s >> np.uint64(2)) & _M2)
+    s = (s + (s >> np.uint64(4))) & _M4
+    upto = s * _ONES  # byte i: the set bits of bytes 0..i
+    q = 8 - _popcount(((upto | _HIGH) - np.uint64(j + 1) * _ONES) & _HIGH)
+    shift = np.uint64(8 * q)
+    before = ((upto << np.uint64(8)) >> shift) & np.uint64(255)  # bits of bytes 0..q-1
+    byte = (x >> shift) & np.uint64(255)
+    return 8 * q + _SELECT[np.int64(byte) * 8 + (j - np.int64(before))]
 
 
 @njit(inline="always", **_JIT)
