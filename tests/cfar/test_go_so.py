@@ -98,3 +98,34 @@ def test_factor_matches_quadrature(reduce, m, pfa):
     assert block_factor((m, m, m, m), pfa, reduce) == pytest.approx(
         block_alpha(m, 4, pfa, reduce), rel=1e-6
     )
+
+
+@pytest.mark.parametrize(("name", "fn", "pick"), VARIANTS)
+@pytest.mark.parametrize("kernels", [True, False])
+def test_zero_blocks_beside_bright_targets_on_the_no_data_path(
+    monkeypatch, name, fn, pick, kernels
+):
+    """Blocks of exact zeros in an image with bright targets (a plane mean far from the
+    zeros): the no-data path (a valid mask, summed as shifted integral images) gives
+    statistics that are never negative and the same detections as the direct sums. Before,
+    SO returned about -1e14 beside such blocks (a negative residue taken as the smallest
+    mean) where the direct sums give +inf."""
+    from torchsar import _jit
+
+    monkeypatch.setattr(_jit, "ENABLED", kernels)  # the masked rules: compiled, or tensors
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        h, w = (int(v) for v in rng.integers(24, 48, 2))
+        dtype = torch.float32 if seed % 2 else torch.float64
+        img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
+        for _ in range(2):
+            r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
+            img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
+            r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
+            img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+        x = torch.from_numpy(img).to(dtype)
+        g, t = int(rng.integers(0, 3)), int(rng.integers(1, 4))
+        direct = fn(x, guard=g, train=t)
+        masked = fn(x, guard=g, train=t, valid=torch.ones_like(x, dtype=torch.bool))
+        assert bool((masked.statistic >= 0).all()), (name, seed)
+        assert torch.equal(masked.mask, direct.mask), (name, seed)

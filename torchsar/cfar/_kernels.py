@@ -55,10 +55,9 @@ def block_extreme_ratio(x, count, s1, shift, is_max):
                         m = _mean(s1[k, b, c, i, j], n, sh) if n > 0 else fill
                         better = m > est if is_max else m < est
                         est = m if better else est
-                    if is_max:
-                        est = est if est > 0.0 else 0.0
-                    elif est == np.inf or est == -np.inf:
+                    if not is_max and (est == np.inf or est == -np.inf):
                         est = 0.0
+                    est = est if est > 0.0 else 0.0  # the means of non-negative data
                     out[b, c, i, j] = _ratio(np.float64(x[b, c, i, j]), est)
     return out
 

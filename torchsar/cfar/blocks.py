@@ -40,12 +40,14 @@ _NAMES = {"max": "go", "min": "so"}
 
 
 def extreme_mean(sums: list[Sums], reduce: str) -> Tensor:
-    """``max`` or ``min`` over the non-empty blocks of the block means (float64)."""
+    """``max`` or ``min`` over the non-empty blocks of the block means (float64), at least 0
+    (the means of non-negative data: a block of zeros whose shifted sums leave a negative
+    residue is 0, not a negative mean that would turn the statistic's sign)."""
     fill = -torch.inf if reduce == "max" else torch.inf
     means = [torch.where(s.count > 0, s.mean(), fill) for s in sums]
     stacked = torch.stack(torch.broadcast_tensors(*means), dim=0)
     out = stacked.amax(0) if reduce == "max" else stacked.amin(0)
-    return out.clamp_min(0.0) if reduce == "max" else torch.where(out.isinf(), 0.0, out)
+    return (out if reduce == "max" else torch.where(out.isinf(), 0.0, out)).clamp_min(0.0)
 
 
 def block_scale(counts: list[Tensor], interior: tuple[int, ...], factor) -> Tensor | None:
