@@ -21,7 +21,9 @@ Triton runs on; the interpreter without a GPU).
   bit for bit.
 - :func:`region_sums`: every other window statistic's sums (GO, SO, two-parameter, VI, the
   distribution CFARs, the speckle filters' window moments): ``sum(x - shift)`` and its
-  squares over disjoint rectangles, cell by cell in float64, instead of integral images.
+  squares over disjoint rectangles, cell by cell in float64, instead of integral images,
+  ``shift`` a cell of the pixel's own window (not the image's mean, which a bright target
+  far away moves: the variance of a ring of zeros beside it did not cancel to 0).
 
 Tiles whose windows lie inside the image load without masks. Launches run on the input's
 own GPU, with fused multiply-adds off (every operation rounded as written).
@@ -315,8 +317,8 @@ def _deviation_sums(
     MASKED: tl.constexpr,
 ):
     """``sum(x - shift)`` and ``sum((x - shift)^2)`` over the rectangles ``t0 .. t1 - 1`` of
-    the table around every pixel of the tile, cell by cell in float64 (only in-image cells
-    where ``MASKED``)."""
+    the table around every pixel of the tile (``shift``: a tile of per-pixel values), cell
+    by cell in float64 (only in-image cells where ``MASKED``)."""
     s1 = tl.zeros([BH, BW], dtype=tl.float64)
     s2 = tl.zeros([BH, BW], dtype=tl.float64)
     for t in range(t0, t1):
@@ -342,13 +344,33 @@ def _deviation_sums(
 
 
 @triton.jit
+def _first_cell(ptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr, BW: tl.constexpr):
+    """The value (float64) of the first in-image cell, in the order the sums add them, of
+    the rectangles ``0 .. n_rects - 1`` around every pixel of the tile (0 where none is)."""
+    c = tl.zeros([BH, BW], dtype=tl.float64)
+    found = tl.zeros([BH, BW], dtype=tl.int1)
+    for t in range(0, n_rects):
+        a0 = tl.load(rect_ptr + 4 * t)
+        a1 = tl.load(rect_ptr + 4 * t + 1)
+        b0 = tl.load(rect_ptr + 4 * t + 2)
+        b1 = tl.load(rect_ptr + 4 * t + 3)
+        ii = tl.maximum(i + a0, 0)
+        jj = tl.maximum(j + b0, 0)
+        ok = (ii <= tl.minimum(i + a1, h - 1)) & (jj <= tl.minimum(j + b1, w - 1)) & (found == 0)
+        v = tl.load(ptr + ii * w + jj, mask=ok, other=0.0).to(tl.float64)
+        c = tl.where(ok, v, c)
+        found = found | ok
+    return c
+
+
+@triton.jit
 def _region_sums_kernel(
     x_ptr,
-    shift_ptr,
     rect_ptr,
     start_ptr,
     s1_ptr,
     s2_ptr,
+    shift_ptr,
     planes,
     h,
     w,
@@ -367,7 +389,9 @@ def _region_sums_kernel(
     j = col0 + tl.arange(0, BW)[None, :]
     inside = (k < rr) & (j < w)
     ptr = x_ptr + plane.to(tl.int64) * h * w
-    shift = tl.load(shift_ptr + plane)
+    # every region summed as deviations from one cell of the pixel's own window
+    shift = _first_cell(ptr, i, j, h, w, rect_ptr, tl.load(start_ptr + regions), BH, BW)
+    tl.store(shift_ptr + (plane.to(tl.int64) * rr + k) * w + j, shift, mask=inside)
     # every window inside the image and the tile inside the strip: no masks to form
     full = _interior(i0, col0, h, w, pad, BH, BW) & (k0 + BH <= rr)
     for q in range(0, regions):
@@ -551,20 +575,29 @@ def region_sums(
     regions: list[list[tuple[int, int, int, int]]],
     r: int,
     rr: int,
-    shift: Tensor,
     moments: int,
-) -> tuple[Tensor, Tensor | None]:
+) -> tuple[Tensor, Tensor | None, Tensor]:
     """Window sums of the float32 image ``x`` ``(B, C, H, W)`` for output rows ``r .. r + rr
     - 1``: for each region (a list of disjoint rectangles ``(r0, r1, c0, c1)`` of offsets,
     inclusive), ``s1 = sum(x - shift)`` and (``moments >= 2``) ``s2 = sum((x - shift)^2)``
     over its in-image cells, each cell added directly in float64 in a fixed order (no
-    integral image, no subtraction of overlapping windows); ``shift`` is float64 ``(B, C, 1,
-    1)``. Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without)."""
+    integral image, no subtraction of overlapping windows).
+
+    ``shift`` is per pixel, the same for all its regions: the value of the first in-image
+    cell of its rectangles (in the order they are summed; 0 where none is). Sums of
+    deviations from a cell of the pixel's own window keep the variance ``s2 / n - (s1 /
+    n)^2`` precise whatever lies elsewhere in the image (a plane's mean, moved by a bright
+    target far away, made it cancel), and a region of equal cells has ``s1 = s2 = 0``
+    exactly when the cell is its own.
+
+    Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without), and the
+    shift ``(B, C, rr, W)``."""
     b, c, h, w = x.shape
     planes = _planes(x)
     shape = (len(regions), b, c, rr, w)
     s1 = torch.empty(shape, dtype=torch.float64, device=x.device)
     s2 = torch.empty(shape, dtype=torch.float64, device=x.device) if moments >= 2 else None
+    shift = torch.zeros((b, c, rr, w), dtype=torch.float64, device=x.device)
     rects = [rect for region in regions for rect in region]
     starts = np.cumsum([0] + [len(region) for region in regions])
     if s1.numel():
@@ -573,11 +606,11 @@ def region_sums(
         with _on(x):
             _region_sums_kernel[grid](
                 planes,
-                shift.reshape(-1).to(torch.float64).contiguous(),
                 _table(rects, torch.int32, x.device),
                 _table(starts, torch.int32, x.device),
                 s1,
                 s1 if s2 is None else s2,  # not written with one moment
+                shift,
                 planes.shape[0],
                 h,
                 w,
@@ -591,4 +624,4 @@ def region_sums(
                 num_warps=_REGION_WARPS,  # two float64 tiles: 16 values per thread
                 enable_fp_fusion=False,
             )
-    return s1, s2
+    return s1, s2, shift

@@ -140,7 +140,9 @@ class Sums:
     """Local sums over a window: ``count`` valid cells, ``s1 = sum(x - shift)``,
     ``s2 = sum((x - shift)^2)`` (float64, ``(B, C, H, W)``; ``s2`` may be ``None``).
 
-    ``shift`` is the per-image offset ``(B, C, 1, 1)`` subtracted before summing.
+    ``shift`` is the offset subtracted before summing: per image ``(B, C, 1, 1)`` (the
+    image's mean), or per pixel ``(B, C, H, W)`` (a cell of the pixel's own window, on a
+    GPU); the same for every region of one call, so sums of disjoint regions add.
     """
 
     count: Tensor
@@ -312,7 +314,7 @@ def _strip_sums(
     """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
     h, w = x.shape[-2:]
     if vmask is None and _triton.for_tensor(x):
-        sums = _gpu_strip_sums(x, rects, r, rr, shift, moments)
+        sums = _gpu_strip_sums(x, rects, r, rr, moments)
         if sums is not None:
             return sums
     if _jit.for_tensor(x):
@@ -412,16 +414,18 @@ def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
 
 
 def _gpu_strip_sums(
-    x: Tensor, rects: tuple[Region, ...], r: int, rr: int, shift: Tensor, moments: int
+    x: Tensor, rects: tuple[Region, ...], r: int, rr: int, moments: int
 ) -> list[Sums] | None:
     """:func:`_strip_sums` without no-data by the Triton kernel
     (:func:`torchsar._gpu_kernels.region_sums`: every window cell added directly in
-    float64), or ``None`` when a region is not a rectangle or a ring."""
+    float64, as deviations from a cell of the pixel's own window: the sums' ``shift`` is a
+    plane ``(B, C, rr, W)``, not the image's mean), or ``None`` when a region is not a
+    rectangle or a ring."""
     parts = [disjoint_rects(reg) for reg in rects]
     if any(p is None for p in parts):
         return None
     h, w = x.shape[-2:]
-    s1, s2 = _triton.kernels().region_sums(x, parts, r, rr, shift, moments)
+    s1, s2, shift = _triton.kernels().region_sums(x, parts, r, rr, moments)
     return [
         Sums(_region_count(reg, h, w, r, rr, x.device), s1[q], None if s2 is None else s2[q], shift)
         for q, reg in enumerate(rects)
