@@ -231,6 +231,7 @@ def _kth(bits, k, n):
         under = run < k
         at += under
         below = run if under else below
+    at = min(at, np.int64(n) - 1)  # in bounds even for a k past the count (never passed)
     return (at << 6) + _select_bit(bits[at], k - 1 - below)
 
 
@@ -263,7 +264,7 @@ def _select_bit(word, j):
     shift = np.uint64(8 * q)
     before = ((upto << np.uint64(8)) >> shift) & np.uint64(255)  # bits of bytes 0..q-1
     byte = (x >> shift) & np.uint64(255)
-    return 8 * q + _SELECT[np.int64(byte) * 8 + (j - np.int64(before))]
+    return 8 * q + _SELECT[np.int64(byte) * 8 + min(j - np.int64(before), 7)]
 
 
 @njit(inline="always", **_JIT)
