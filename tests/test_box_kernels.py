@@ -562,3 +562,91 @@ def test_two_parameter_flat_rings_in_the_corners_are_exact(monkeypatch):
         exact = (want == 0) | np.isinf(want)  # the flat rings: 0 at their value
         assert exact.sum() > 40 and np.array_equal(got[exact], want[exact])
         np.testing.assert_allclose(got[~exact], want[~exact], rtol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 3)])
+def test_two_parameter_with_no_data_is_the_exactly_summed_statistic(
+    monkeypatch, dtype, guard, train
+):
+    """With a valid mask the kernel sums and counts the ring's valid cells: at every pixel
+    the exactly summed statistic over them (degenerate planes, whole invalid blocks, rings
+    without a valid cell and invalid pixels, which are -inf, included)."""
+    x = _degenerate(23, dtype)
+    rng = np.random.default_rng(23)
+    valid = rng.random(x.shape) > 0.25
+    valid[0, 0, 2:11, 2:11] = False
+    valid[0, 0, 6, 6] = True  # a valid pixel whose ring holds no valid cell
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    d = cfar.two_parameter(x, guard=guard, train=train, valid=torch.from_numpy(valid))
+    got = d.statistic.double().numpy()
+    want = two_parameter_reference(x.double().numpy(), guard, train, valid)
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    assert want[0, 0, 6, 6] == -np.inf and (want == np.inf).any() and (want == 0).any()
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-12, atol=1e-300)
+    assert torch.equal(d.mask, d.statistic > d.threshold)
+
+
+def test_two_parameter_with_no_data_is_the_tensor_code_on_clutter(monkeypatch):
+    """On clutter, masked: within an ulp of the tensor code's integral images (float32);
+    the same with a mask of all valid cells as without a mask, bit for bit; independent of
+    the batch."""
+    x = _scene(24, dtype=torch.float32)
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(24)) > 0.2
+    a, b = _both(monkeypatch, lambda: cfar.two_parameter(x, guard=1, train=3, valid=valid))
+    assert _ulps(a.statistic, b.statistic) <= 1.0
+    _masks_agree(a, b)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    ones = torch.ones_like(x, dtype=torch.bool)
+    plain = cfar.two_parameter(x, guard=1, train=3)
+    assert torch.equal(
+        cfar.two_parameter(x, guard=1, train=3, valid=ones).statistic, plain.statistic
+    )
+    for i in range(x.shape[0]):
+        one = cfar.two_parameter(x[i : i + 1], guard=1, train=3, valid=valid[i : i + 1])
+        assert torch.equal(one.statistic, a.statistic[i : i + 1])
+    shared = valid[:1, :1]  # one mask for every image and channel
+    whole = cfar.two_parameter(x, guard=1, train=3, valid=shared).statistic
+    assert torch.equal(
+        whole[1:2], cfar.two_parameter(x[1:2], guard=1, train=3, valid=shared).statistic
+    )
+
+
+def test_two_parameter_with_no_data_beside_blocks_of_zeros(monkeypatch):
+    """Blocks of zeros and targets up to 1e12 times the clutter: the masked kernel (a mask
+    of all valid cells) gives the direct sums' detections; the tensor code's integral
+    images of deviations from the plane's mean disagreed on hundreds of pixels."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        h, w = (int(v) for v in rng.integers(24, 48, 2))
+        img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
+        for _ in range(2):
+            r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
+            img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
+            r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
+            img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+        x = torch.from_numpy(img).to(torch.float32 if seed % 2 else torch.float64)
+        ones = torch.ones_like(x, dtype=torch.bool)
+        direct = cfar.two_parameter(x, guard=1, train=2)
+        masked = cfar.two_parameter(x, guard=1, train=2, valid=ones)
+        assert torch.equal(masked.mask, direct.mask) and torch.equal(
+            masked.statistic, direct.statistic
+        )
+
+
+def test_two_parameter_with_no_data_refuses_bad_values_anywhere(monkeypatch):
+    """A NaN in an invalid cell is still refused, with the tensor code's words."""
+    from torchsar.errors import InputValueError
+
+    x = _scene(25, dtype=torch.float32)[:1]
+    valid = torch.ones_like(x, dtype=torch.bool)
+    x[0, 0, 5, 5] = float("nan")
+    valid[0, 0, 5, 5] = False
+    errs = _errors(monkeypatch, lambda: cfar.two_parameter(x, valid=valid))
+    assert errs[0] == errs[1] and errs[0][0] is InputValueError

@@ -26,6 +26,7 @@ __all__ = [
     "ring_levels",
     "ring_row",
     "take_row",
+    "valid_row",
 ]
 
 # The numba options of every kernel of the one-sweep filters. fastmath is always set: numba
@@ -198,4 +199,31 @@ def pair_row(rows1, rows2, q, depth, row, present, limit, counts):
     bad = _take_pair(rows1[0], rows2[0], q, row, present, limit, counts)
     ring_levels(rows1, q, size, depth, w)
     ring_levels(rows2, q, size, depth, w)
+    return bad
+
+
+@njit(**JIT, inline="always")
+def valid_row(rows1, rows2, rows3, q, depth, row, valid, present):
+    """Row ``q`` into three rings of row blocks (zeros where not ``present``): the values
+    of its valid cells, their squares, and the valid cells' count (1 or 0 per cell), every
+    level ending at ``q`` updated. Returns how many values of ``row``, valid or not, are
+    not a finite number ``>= 0`` (the whole image is checked, as everywhere)."""
+    size, w = rows1.shape[1], rows1.shape[2]
+    d1, d2, d3 = rows1[0, q % size], rows2[0, q % size], rows3[0, q % size]
+    bad = 0
+    if present:
+        for j in range(w):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
+            ok = valid[j] != 0
+            d1[j] = v if ok else 0.0
+            d2[j] = v * v if ok else 0.0
+            d3[j] = 1.0 if ok else 0.0
+    else:
+        d1[:] = 0.0
+        d2[:] = 0.0
+        d3[:] = 0.0
+    ring_levels(rows1, q, size, depth, w)
+    ring_levels(rows2, q, size, depth, w)
+    ring_levels(rows3, q, size, depth, w)
     return bad

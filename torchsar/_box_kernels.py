@@ -21,7 +21,8 @@ ring buffer of the window's rows, with, per row ``r``, the sums of rows ``r .. r
   its square (not shifted by the plane's mean, which bright targets far away would move),
   for the ring's mean and population variance; a near-flat ring (``n var < 2^-8 S2``, where that
   difference could cancel) is summed again from its cells, so a ring of equal cells has a
-  variance of exactly 0 (the documented ``+inf`` / ``-inf`` / 0).
+  variance of exactly 0 (the documented ``+inf`` / ``-inf`` / 0). With a no-data mask the
+  ring's valid cells are summed and counted alike (a third ring of counts).
 - the speckle filters (:func:`box_filter`) take the window mean and variance from the
   block sums of ``x`` and ``x^2``, near-flat windows summed again as deviations from the
   pixel (:mod:`torchsar._moment_kernels`: the variance within ``2^-38`` of its value, 0
@@ -48,6 +49,7 @@ from torchsar._block_sums import (
     pair_rings,
     pair_row,
     ring_row,
+    valid_row,
 )
 from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
 from torchsar._vector_exp import exp_neg
@@ -149,12 +151,16 @@ def ring_sums(ring, size, i, guard, train, band, mid, acc):
 
 
 @njit(**JIT)
-def deviation_ratio(x, guard, train, threshold, out, mask):
+def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
     """The two-parameter CFAR's statistic ``(x - mean_ring) / sigma_ring`` (population
     standard deviation) of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype) and
     the decision ``out > threshold[0]`` into ``mask``: the ring sums of ``x`` and of its
     square, summed as :func:`ring_ratio` sums its ring; a ring of zero variance gives
     ``+inf`` above its mean, ``-inf`` below and 0 at it.
+
+    With ``has_valid``, ``valid`` (uint8 ``(P, H, W)``) marks the cells that count: the
+    ring's valid cells are summed and counted the same way (a count is an exact sum); a
+    pixel with no valid ring cell, or not valid itself, gets ``-inf`` (never detected).
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
@@ -162,31 +168,39 @@ def deviation_ratio(x, guard, train, threshold, out, mask):
     size = 2 * o + 1
     depth = levels_for(max(train, 2 * g + 1))
     rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
+    rows3, _, ring3, _ = pair_rings(depth if has_valid else 1, size if has_valid else 1, w)
     band, mid = ring_buffers(g, train, w)
-    s1, s2 = np.zeros(w), np.zeros(w)
+    s1, s2, cnt = np.zeros(w), np.zeros(w), np.zeros(w)
     outer_cols, guard_cols = np.zeros(w), np.zeros(w)
     for j in range(w):
         outer_cols[j] = axis_count(j, w, -o, o)
         guard_cols[j] = axis_count(j, w, -g, g)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    none = np.ones(w, np.uint8)
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
-        xp = x[pl]
+        xp, vp = x[pl], valid[pl if has_valid else 0]
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
             row = xp[q] if inside else empty
-            bad += pair_row(rows1, rows2, q, depth, row, inside, np.inf, False)
+            bad += _take(rows1, rows2, rows3, q, depth, row, vp, inside, has_valid, none)
         for i in range(h):
             q = i + o
-            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, np.inf, False)
+            qr = min(q, h - 1)
+            bad += _take(rows1, rows2, rows3, q, depth, xp[qr], vp, q < h, has_valid, none)
             ring_sums(ring1, size, i, g, train, band, mid, s1)
             ring_sums(ring2, size, i, g, train, band, mid, s2)
-            ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
+            if has_valid:
+                ring_sums(ring3, size, i, g, train, band, mid, cnt)
+            else:
+                ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
+                for j in range(w):
+                    cnt[j] = ro * outer_cols[j] - rg * guard_cols[j]
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             flat = 0
             for j in range(w):
-                c = max(ro * outer_cols[j] - rg * guard_cols[j], 1.0)
+                c = max(cnt[j], 1.0)
                 m = s1[j] / c
                 var = s2[j] / c - m * m
                 flat += c * var < _FLAT * s2[j]
@@ -194,10 +208,26 @@ def deviation_ratio(x, guard, train, threshold, out, mask):
                 v = (np.float64(xi[j]) - m) / sigma
                 oi[j] = 0.0 if v != v else v
             if flat:
-                _near_flat_rings(rows1[0], i, h, g, o, s1, s2, xi, oi)
+                cells = rows3[0] if has_valid else rows1[0]
+                _near_flat_rings(rows1[0], cells, has_valid, i, h, g, o, s1, s2, xi, oi)
+            if has_valid:
+                vi = vp[i]
+                for j in range(w):
+                    if cnt[j] <= 0.0 or vi[j] == 0:
+                        oi[j] = -np.inf
             for j in range(w):
                 mi[j] = oi[j] > thr
     return bad
+
+
+@njit(**JIT, inline="always")
+def _take(rows1, rows2, rows3, q, depth, row, valid, present, has_valid, none):
+    """Row ``q`` into the rings: values and squares (:func:`pair_row`), or with
+    ``has_valid`` those of its valid cells and their count (:func:`valid_row`)."""
+    if has_valid:
+        vrow = valid[min(max(q, 0), valid.shape[0] - 1)] if valid.shape[0] else none
+        return valid_row(rows1, rows2, rows3, q, depth, row, vrow, present)
+    return pair_row(rows1, rows2, q, depth, row, present, np.inf, False)
 
 
 @njit(**JIT)
@@ -254,45 +284,46 @@ the plane's mean): only there can ``S2 / n - mean^2`` lose more than 8 bits."""
 
 
 @njit(**JIT, inline="always")
-def _first_ring_cell(cache, i, j, g, r0, r1, c0, c1):
-    """The first in-image cell of pixel ``(i, j)``'s ring in row order (rows ``r0 .. r1``,
-    columns ``c0 .. c1``, the guard box ``g`` around the pixel left out)."""
-    size = cache.shape[0]
-    for r in range(r0, r1 + 1):
-        for k in range(c0, c1 + 1):
-            if abs(r - i) > g or abs(k - j) > g:
-                return cache[r % size, k]
-    return 0.0
+def _counted(cache, vcache, has_valid, i, j, g, r, k):
+    """Whether cell ``(r, k)`` is a counted cell of pixel ``(i, j)``'s ring (outside the
+    guard box and, with ``has_valid``, valid: ``vcache`` holds 1 for a valid cell)."""
+    if abs(r - i) <= g and abs(k - j) <= g:
+        return False
+    return not has_valid or vcache[r % vcache.shape[0], k] > 0.0
 
 
 @njit(**JIT)
-def _near_flat_rings(cache, i, h, g, o, s1, s2, xi, oi):
+def _near_flat_rings(cache, vcache, has_valid, i, h, g, o, s1, s2, xi, oi):
     """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from two passes
-    over the ring's in-image cells (``cache``: the rows of ``x``, row ``r`` in slot
-    ``r % size``): their deviations from the ring's first cell, then from the mean of
-    those. Equal cells give a variance of exactly 0: ``+inf`` above their value, ``-inf``
-    below, 0 at it."""
+    over the ring's counted cells (in-image, and valid with ``has_valid``; ``cache``: the
+    rows of ``x``, row ``r`` in slot ``r % size``; ``vcache``: their valid flags): their
+    deviations from the ring's first counted cell, then from the mean of those. Equal
+    cells give a variance of exactly 0: ``+inf`` above their value, ``-inf`` below, 0 at
+    it."""
     size, w = cache.shape[0], cache.shape[1]
     r0, r1 = max(i - o, 0), min(i + o, h - 1)
     for j in range(w):
         c0, c1 = max(j - o, 0), min(j + o, w - 1)
-        n = (r1 - r0 + 1) * (c1 - c0 + 1)
-        n -= (min(i + g, h - 1) - max(i - g, 0) + 1) * (min(j + g, w - 1) - max(j - g, 0) + 1)
+        n, base = 0, 0.0
+        for r in range(r0, r1 + 1):
+            for k in range(c0, c1 + 1):
+                if _counted(cache, vcache, has_valid, i, j, g, r, k):
+                    base = cache[r % size, k] if n == 0 else base
+                    n += 1
         if n <= 0 or n * (s2[j] / n - (s1[j] / n) ** 2) >= _FLAT * s2[j]:
             continue
-        base = _first_ring_cell(cache, i, j, g, r0, r1, c0, c1)
         t1 = 0.0
         for r in range(r0, r1 + 1):
             row = cache[r % size]
             for k in range(c0, c1 + 1):
-                if abs(r - i) > g or abs(k - j) > g:
+                if _counted(cache, vcache, has_valid, i, j, g, r, k):
                     t1 += row[k] - base
         m = t1 / n
         e1, e2 = 0.0, 0.0
         for r in range(r0, r1 + 1):
             row = cache[r % size]
             for k in range(c0, c1 + 1):
-                if abs(r - i) > g or abs(k - j) > g:
+                if _counted(cache, vcache, has_valid, i, j, g, r, k):
                     e = (row[k] - base) - m
                     e1 += e
                     e2 += e * e

@@ -61,17 +61,26 @@ def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarra
     return out
 
 
-def two_parameter_reference(x: np.ndarray, guard: int, train: int) -> np.ndarray:
-    """The two-parameter CFAR's ``(I - mean) / sigma`` over the in-image ring cells (mean
-    and population variance summed exactly: ``math.fsum``), ``+inf`` / ``-inf`` / 0 above,
-    below or at the mean of a ring without variance, pixel by pixel, of ``x`` ``(B, C, H,
-    W)``."""
+def two_parameter_reference(
+    x: np.ndarray, guard: int, train: int, valid: np.ndarray | None = None
+) -> np.ndarray:
+    """The two-parameter CFAR's ``(I - mean) / sigma`` over the in-image (and ``valid``)
+    ring cells (mean and population variance summed exactly: ``math.fsum``), ``+inf`` /
+    ``-inf`` / 0 above, below or at the mean of a ring without variance, pixel by pixel, of
+    ``x`` ``(B, C, H, W)``; ``-inf`` where the pixel is not valid or its ring has no valid
+    cell."""
     out = np.empty(x.shape)
     for idx in np.ndindex(*x.shape[:2]):
         img = x[idx]
+        ok = None if valid is None else np.where(valid[idx], 1.0, np.nan)
         for i in range(img.shape[0]):
             for j in range(img.shape[1]):
                 cells = ring_cells(img, i, j, guard, train)
+                if ok is not None:
+                    cells = cells[~np.isnan(ring_cells(ok, i, j, guard, train))]
+                    if not valid[idx][i, j] or cells.size == 0:
+                        out[idx][i, j] = -math.inf
+                        continue
                 if (cells == cells[0]).all():  # exactly: fsum / n need not give the value back
                     mean, sigma = float(cells[0]), 0.0
                 else:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -66,12 +67,13 @@ def two_parameter(
     """
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector="two_parameter", values=False)
     thr = two_parameter_threshold(guard=guard, train=train, pfa=pfa, k=k)
-    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    gpu = vmask is None and _triton.for_tensor(x)
+    compiled = not gpu and _jit.for_tensor(x) and x.numel()
     if not compiled:  # the compiled kernel checks the values as it reads them
         check_image(x, "x")
     dtype = out_dtype(x)
     if compiled:
-        return _one_sweep(x, ring, thr, dtype)
+        return _one_sweep(x, ring, thr, dtype, vmask)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         s = sums[0]  # float64 strip sums of (x - shift), consumed in place below
@@ -85,20 +87,28 @@ def two_parameter(
     return conclude(stat, vmask, thr)
 
 
-def _one_sweep(x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype) -> Detection:
-    """:func:`two_parameter` without no-data on the CPU in one sweep per image plane
+def _one_sweep(
+    x: Tensor, ring: Ring, threshold: float, dtype: torch.dtype, vmask: Tensor | None
+) -> Detection:
+    """:func:`two_parameter` on the CPU in one sweep per image plane
     (:func:`torchsar._box_kernels.deviation_ratio`: the ring sums of ``x`` and its square
     summed directly, near-flat rings again from their cells; not shifted by the plane's mean
-    as the tensor code's sums are, which a few bright targets far away would move)."""
+    as the tensor code's sums are, which a few bright targets far away would move). With
+    no-data (``vmask``), the ring's valid cells are summed and counted alike; a pixel not
+    valid itself, or with no valid ring cell, is ``-inf``."""
     from torchsar import _box_kernels
 
     planes, rescaled = square_safe_planes(x)
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
     g, t = ring.guard, ring.train
+    if vmask is None:
+        valid = np.ones((1, 1, 1), np.uint8)
+    else:
+        valid = vmask.expand_as(x).reshape(planes.shape).contiguous().view(torch.uint8).numpy()
 
     def kernel(planes, thr, out, mask):
-        return _box_kernels.deviation_ratio(planes, g, t, thr, out, mask)
+        return _box_kernels.deviation_ratio(planes, valid, vmask is not None, g, t, thr, out, mask)
 
     return one_sweep(x, planes, dtype, threshold, kernel)
 
