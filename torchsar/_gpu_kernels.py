@@ -1,5 +1,6 @@
-"""Fused Triton kernels of the window CFARs without no-data (float32 images, any device
-Triton runs on; the interpreter without a GPU).
+"""Fused Triton kernels of the window CFARs (float32 images, any device Triton runs on;
+the interpreter without a GPU): CA and OS without no-data, every window's sums with it
+too.
 
 - :func:`ring_ratio`: CA-CFAR's ``I / mean_ring`` and its mask in one pass. Each pixel's
   ring is summed directly, cell by cell in a fixed order (rows top to bottom, each left to
@@ -303,6 +304,7 @@ def _os_ratio_kernel(
 @triton.jit
 def _deviation_sums(
     ptr,
+    vptr,
     i,
     j,
     h,
@@ -315,12 +317,15 @@ def _deviation_sums(
     BW: tl.constexpr,
     MOMENTS: tl.constexpr,
     MASKED: tl.constexpr,
+    VALID: tl.constexpr,
 ):
-    """``sum(x - shift)`` and ``sum((x - shift)^2)`` over the rectangles ``t0 .. t1 - 1`` of
-    the table around every pixel of the tile (``shift``: a tile of per-pixel values), cell
-    by cell in float64 (only in-image cells where ``MASKED``)."""
+    """``sum(x - shift)``, ``sum((x - shift)^2)`` and the count of cells over the
+    rectangles ``t0 .. t1 - 1`` of the table around every pixel of the tile (``shift``: a
+    tile of per-pixel values), cell by cell in float64: only in-image cells where
+    ``MASKED``, only valid ones (``vptr``: 1 for a valid cell) where ``VALID``."""
     s1 = tl.zeros([BH, BW], dtype=tl.float64)
     s2 = tl.zeros([BH, BW], dtype=tl.float64)
+    n = tl.zeros([BH, BW], dtype=tl.int32)
     for t in range(t0, t1):
         a0 = tl.load(rect_ptr + 4 * t)
         a1 = tl.load(rect_ptr + 4 * t + 1)
@@ -333,14 +338,18 @@ def _deviation_sums(
                 jj = j + b
                 if MASKED:
                     m = rows & (jj >= 0) & (jj < w)
+                    if VALID:
+                        m = m & (tl.load(vptr + ii * w + jj, mask=m, other=0) != 0)
                     v = tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
                     d = tl.where(m, v - shift, 0.0)
+                    if VALID:
+                        n += m.to(tl.int32)
                 else:
                     d = tl.load(ptr + ii * w + jj).to(tl.float64) - shift
                 s1 += d
                 if MOMENTS >= 2:
                     s2 += d * d
-    return s1, s2
+    return s1, s2, n
 
 
 @triton.jit
@@ -364,13 +373,39 @@ def _first_cell(ptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr, BW: tl.con
 
 
 @triton.jit
+def _first_valid_cell(ptr, vptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr, BW: tl.constexpr):
+    """:func:`_first_cell` among the valid cells (``vptr``: 1 for a valid cell): every cell
+    looked at, in the order the sums add them."""
+    c = tl.zeros([BH, BW], dtype=tl.float64)
+    found = tl.zeros([BH, BW], dtype=tl.int1)
+    for t in range(0, n_rects):
+        a0 = tl.load(rect_ptr + 4 * t)
+        a1 = tl.load(rect_ptr + 4 * t + 1)
+        b0 = tl.load(rect_ptr + 4 * t + 2)
+        b1 = tl.load(rect_ptr + 4 * t + 3)
+        for a in range(a0, a1 + 1):
+            ii = i + a
+            rows = (ii >= 0) & (ii < h)
+            for b in range(b0, b1 + 1):
+                jj = j + b
+                m = rows & (jj >= 0) & (jj < w) & (found == 0)
+                m = m & (tl.load(vptr + ii * w + jj, mask=m, other=0) != 0)
+                v = tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
+                c = tl.where(m, v, c)
+                found = found | m
+    return c
+
+
+@triton.jit
 def _region_sums_kernel(
     x_ptr,
+    valid_ptr,
     rect_ptr,
     start_ptr,
     s1_ptr,
     s2_ptr,
     shift_ptr,
+    count_ptr,
     planes,
     h,
     w,
@@ -379,6 +414,7 @@ def _region_sums_kernel(
     regions,
     pad,
     MOMENTS: tl.constexpr,
+    VALID: tl.constexpr,
     BH: tl.constexpr,
     BW: tl.constexpr,
 ):
@@ -389,26 +425,37 @@ def _region_sums_kernel(
     j = col0 + tl.arange(0, BW)[None, :]
     inside = (k < rr) & (j < w)
     ptr = x_ptr + plane.to(tl.int64) * h * w
+    vptr = valid_ptr + plane.to(tl.int64) * h * w
     # every region summed as deviations from one cell of the pixel's own window
-    shift = _first_cell(ptr, i, j, h, w, rect_ptr, tl.load(start_ptr + regions), BH, BW)
+    n_rects = tl.load(start_ptr + regions)
+    if VALID:
+        shift = _first_valid_cell(ptr, vptr, i, j, h, w, rect_ptr, n_rects, BH, BW)
+    else:
+        shift = _first_cell(ptr, i, j, h, w, rect_ptr, n_rects, BH, BW)
     tl.store(shift_ptr + (plane.to(tl.int64) * rr + k) * w + j, shift, mask=inside)
     # every window inside the image and the tile inside the strip: no masks to form
     full = _interior(i0, col0, h, w, pad, BH, BW) & (k0 + BH <= rr)
     for q in range(0, regions):
         t0 = tl.load(start_ptr + q)
         t1 = tl.load(start_ptr + q + 1)
-        if full:
-            s1, s2 = _deviation_sums(
-                ptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, False
+        if VALID:
+            s1, s2, n = _deviation_sums(
+                ptr, vptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, True, True
+            )
+        elif full:
+            s1, s2, n = _deviation_sums(
+                ptr, vptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, False, False
             )
         else:
-            s1, s2 = _deviation_sums(
-                ptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, True
+            s1, s2, n = _deviation_sums(
+                ptr, vptr, i, j, h, w, shift, rect_ptr, t0, t1, BH, BW, MOMENTS, True, False
             )
         out = ((q * planes + plane).to(tl.int64) * rr + k) * w + j
         tl.store(s1_ptr + out, s1, mask=inside)
         if MOMENTS >= 2:
             tl.store(s2_ptr + out, s2, mask=inside)
+        if VALID:
+            tl.store(count_ptr + out, n.to(tl.float64), mask=inside)
 
 
 def _planes(x: Tensor) -> Tensor:
@@ -576,28 +623,36 @@ def region_sums(
     r: int,
     rr: int,
     moments: int,
-) -> tuple[Tensor, Tensor | None, Tensor]:
+    valid: Tensor | None = None,
+) -> tuple[Tensor, Tensor | None, Tensor, Tensor | None]:
     """Window sums of the float32 image ``x`` ``(B, C, H, W)`` for output rows ``r .. r + rr
     - 1``: for each region (a list of disjoint rectangles ``(r0, r1, c0, c1)`` of offsets,
     inclusive), ``s1 = sum(x - shift)`` and (``moments >= 2``) ``s2 = sum((x - shift)^2)``
-    over its in-image cells, each cell added directly in float64 in a fixed order (no
-    integral image, no subtraction of overlapping windows).
+    over its in-image cells (and, with ``valid``, a bool mask of ``x``'s shape, only the
+    valid ones, which it also counts), each cell added directly in float64 in a fixed order
+    (no integral image, no subtraction of overlapping windows).
 
     ``shift`` is per pixel, the same for all its regions: the value of the first in-image
-    cell of its rectangles (in the order they are summed; 0 where none is). Sums of
-    deviations from a cell of the pixel's own window keep the variance ``s2 / n - (s1 /
+    (valid) cell of its rectangles (in the order they are summed; 0 where none is). Sums
+    of deviations from a cell of the pixel's own window keep the variance ``s2 / n - (s1 /
     n)^2`` precise whatever lies elsewhere in the image (a plane's mean, moved by a bright
     target far away, made it cancel), and a region of equal cells has ``s1 = s2 = 0``
     exactly when the cell is its own.
 
-    Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without), and the
-    shift ``(B, C, rr, W)``."""
+    Returns float64 ``(K, B, C, rr, W)`` for ``s1`` and ``s2`` (``None`` without), the
+    shift ``(B, C, rr, W)`` and, with ``valid``, the counts ``(K, B, C, rr, W)`` (else
+    ``None``)."""
     b, c, h, w = x.shape
     planes = _planes(x)
     shape = (len(regions), b, c, rr, w)
     s1 = torch.empty(shape, dtype=torch.float64, device=x.device)
     s2 = torch.empty(shape, dtype=torch.float64, device=x.device) if moments >= 2 else None
+    count = None if valid is None else torch.empty(shape, dtype=torch.float64, device=x.device)
     shift = torch.zeros((b, c, rr, w), dtype=torch.float64, device=x.device)
+    if valid is None:  # not read: a placeholder of the kernel's type
+        flags = torch.zeros(1, dtype=torch.int8, device=x.device)
+    else:
+        flags = _planes(valid.expand_as(x)).to(torch.int8)
     rects = [rect for region in regions for rect in region]
     starts = np.cumsum([0] + [len(region) for region in regions])
     if s1.numel():
@@ -606,11 +661,13 @@ def region_sums(
         with _on(x):
             _region_sums_kernel[grid](
                 planes,
+                flags,  # not read without a mask
                 _table(rects, torch.int32, x.device),
                 _table(starts, torch.int32, x.device),
                 s1,
                 s1 if s2 is None else s2,  # not written with one moment
                 shift,
+                s1 if count is None else count,  # not written without a mask
                 planes.shape[0],
                 h,
                 w,
@@ -619,9 +676,18 @@ def region_sums(
                 len(regions),
                 max(max(abs(v) for v in rect) for rect in rects),
                 MOMENTS=moments,
+                VALID=valid is not None,
                 BH=bh,
                 BW=bw,
-                num_warps=_REGION_WARPS,  # two float64 tiles: 16 values per thread
+                num_warps=region_warps(valid is not None),
                 enable_fp_fusion=False,
             )
-    return s1, s2, shift
+    return s1, s2, shift, count
+
+
+def region_warps(valid: bool) -> int:
+    """:func:`region_sums`' warps per program; with a mask (a count, the valid flags, the
+    first valid cell's search) twice as many, half the pixels per thread, so that the
+    registers hold them without spilling (58 and 60 registers for sm_90, against 52 and
+    68 bytes spilled with as many warps as without a mask)."""
+    return _REGION_WARPS * (2 if valid else 1)

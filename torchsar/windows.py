@@ -154,6 +154,12 @@ class Sums:
         s2 = None if self.s2 is None or other.s2 is None else self.s2 - other.s2
         return Sums(self.count - other.count, self.s1 - other.s1, s2, self.shift)
 
+    @property
+    def per_image(self) -> bool:
+        """Whether ``shift`` is one value per image (the CPU's sums; the compiled rules read
+        it so), not a plane of per-pixel values (a GPU's)."""
+        return self.shift.shape[-2:] == (1, 1)
+
     def mean(self) -> Tensor:
         """Mean over the valid cells (0 where there are none), float64."""
         c = self.count.clamp_min(1)
@@ -313,8 +319,8 @@ def _strip_sums(
 ) -> list[Sums]:
     """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
     h, w = x.shape[-2:]
-    if vmask is None and _triton.for_tensor(x):
-        sums = _gpu_strip_sums(x, rects, r, rr, moments)
+    if _triton.for_tensor(x):
+        sums = _gpu_strip_sums(x, rects, r, rr, vmask, moments)
         if sums is not None:
             return sums
     if _jit.for_tensor(x):
@@ -414,20 +420,25 @@ def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
 
 
 def _gpu_strip_sums(
-    x: Tensor, rects: tuple[Region, ...], r: int, rr: int, moments: int
+    x: Tensor, rects: tuple[Region, ...], r: int, rr: int, vmask: Tensor | None, moments: int
 ) -> list[Sums] | None:
-    """:func:`_strip_sums` without no-data by the Triton kernel
-    (:func:`torchsar._gpu_kernels.region_sums`: every window cell added directly in
-    float64, as deviations from a cell of the pixel's own window: the sums' ``shift`` is a
-    plane ``(B, C, rr, W)``, not the image's mean), or ``None`` when a region is not a
+    """:func:`_strip_sums` by the Triton kernel (:func:`torchsar._gpu_kernels.region_sums`:
+    every window cell added directly in float64, as deviations from a cell of the pixel's
+    own window: the sums' ``shift`` is a plane ``(B, C, rr, W)``, not the image's mean;
+    with no-data, the valid cells summed and counted), or ``None`` when a region is not a
     rectangle or a ring."""
     parts = [disjoint_rects(reg) for reg in rects]
     if any(p is None for p in parts):
         return None
     h, w = x.shape[-2:]
-    s1, s2, shift = _triton.kernels().region_sums(x, parts, r, rr, moments)
+    s1, s2, shift, cnt = _triton.kernels().region_sums(x, parts, r, rr, moments, vmask)
     return [
-        Sums(_region_count(reg, h, w, r, rr, x.device), s1[q], None if s2 is None else s2[q], shift)
+        Sums(
+            _region_count(reg, h, w, r, rr, x.device) if cnt is None else cnt[q],
+            s1[q],
+            None if s2 is None else s2[q],
+            shift,
+        )
         for q, reg in enumerate(rects)
     ]
 
@@ -497,7 +508,7 @@ def windowed(
     shift = _image_mean(x, vmask)
     pad = _pad_for(regions)
     rows = _strip_rows(x, pad, strip)
-    if strip is None and vmask is None and _triton.for_tensor(x):
+    if strip is None and _triton.for_tensor(x):
         rows = _gpu_strip_rows(x)
     outs: list[Tensor] = []
     single = False

@@ -21,6 +21,8 @@ POINTERS = {
     "mask_ptr": "*i8",
     "scale_ptr": "*fp64",
     "shift_ptr": "*fp64",
+    "valid_ptr": "*i8",
+    "count_ptr": "*fp64",
     "s1_ptr": "*fp64",
     "s2_ptr": "*fp64",
     "ranks_ptr": "*i32",
@@ -83,9 +85,11 @@ def main() -> None:
     bh, bw = gk._CA_TILE
     variants = [("ring_ratio", gk._ring_ratio_kernel, {"BH": bh, "BW": bw}, 4)]
     for moments in (1, 2):
-        consts = {"MOMENTS": moments, "BH": bh, "BW": bw}
-        name = f"region_sums MOMENTS={moments}"
-        variants.append((name, gk._region_sums_kernel, consts, gk._REGION_WARPS))
+        for valid in (False, True):
+            consts = {"MOMENTS": moments, "VALID": valid, "BH": bh, "BW": bw}
+            name = f"region_sums MOMENTS={moments} VALID={valid}"
+            warps = gk.region_warps(valid)
+            variants.append((name, gk._region_sums_kernel, consts, warps))
     decision = dict(zip(("BH", "BW"), gk._OS_TILE, strict=True))
     warps = gk._OS_DECISION_WARPS
     variants.append(("os_decision", gk._os_decision_kernel, decision, warps))

@@ -211,7 +211,7 @@ def through_triton(monkeypatch):
 def test_the_public_detectors_take_the_kernels(through_triton, monkeypatch):
     """``ca``, ``os``, ``os_mask`` and AC's ring mean go through the kernels on a float32
     image without no-data, and give the CPU code's results (OS bit for bit, CA to an ulp);
-    with a ``valid`` mask or float64 they take the tensor code."""
+    with a ``valid`` mask or float64 CA and OS take the tensor code."""
     x = _scene(6, shape=(1, 2, 27, 42))
     with_kernels = {
         "ca": ts.cfar.ca(x.to(DEVICE), guard=1, train=3),
@@ -222,10 +222,9 @@ def test_the_public_detectors_take_the_kernels(through_triton, monkeypatch):
     assert sorted(set(through_triton)) == ["os_decision", "os_ratio", "ring_ratio"]
     monkeypatch.setattr(_triton, "for_tensor", lambda t: False)
     for name, got in with_kernels.items():
-        # AC on the GPU is the tensor code over the windows' sums of x - shift; on the CPU
-        # its one-sweep kernel sums the censored ring directly (inf where the kept cells
-        # are all zero; the shifted sums leave a residue there): the tensor code compares
-        monkeypatch.setattr(_jit, "ENABLED", name != "ac")
+        # AC on the GPU is the tensor code over the kernel's direct window sums, as its
+        # CPU kernel sums the censored ring directly (inf where the kept cells are all
+        # zero, where integral images leave a residue): the CPU kernel compares
         want = getattr(ts.cfar, name)(x, guard=1, train=3)
         assert got.threshold.dtype == want.threshold.dtype and torch.equal(
             got.threshold.cpu(), want.threshold
@@ -283,7 +282,7 @@ def test_the_kernels_compile_for_a_hopper_gpu(tmp_path):
         pytest.skip("this triton ships no ptxas")
     assert run.returncode == 0, run.stderr[-2000:]
     lines = run.stdout.splitlines()
-    assert len(lines) == 7 and all(" ok " in line for line in lines), run.stdout
+    assert len(lines) == 9 and all(" ok " in line for line in lines), run.stdout
     # compiled as launched: no fused multiply-adds (IEEE operations as written), and where
     # ptxas reports them, at most a few bytes spilled (the float64 division's call frame)
     assert all(" fma=0 " in line for line in lines), run.stdout
@@ -291,11 +290,12 @@ def test_the_kernels_compile_for_a_hopper_gpu(tmp_path):
     assert all(v <= 32 for v in spills), run.stdout
 
 
-def _first_cells(x: np.ndarray, parts) -> np.ndarray:
-    """The value of the first in-image cell of the rectangles of ``parts`` (every region's
-    in order, each row by row) around every pixel of ``x`` ``(P, H, W)``: the kernel's
-    shift (0 where none is)."""
+def _first_cells(x: np.ndarray, parts, valid: np.ndarray | None = None) -> np.ndarray:
+    """The value of the first in-image (and ``valid``) cell of the rectangles of ``parts``
+    (every region's in order, each row by row) around every pixel of ``x`` ``(P, H, W)``:
+    the kernel's shift (0 where none is)."""
     p_, h, w = x.shape
+    ok = np.ones(x.shape, bool) if valid is None else valid
     out = np.zeros(x.shape)
     for p in range(p_):
         for i in range(h):
@@ -306,20 +306,21 @@ def _first_cells(x: np.ndarray, parts) -> np.ndarray:
                     for r0, r1, c0, c1 in rects
                     for a in range(r0, r1 + 1)
                     for b in range(c0, c1 + 1)
-                    if 0 <= i + a < h and 0 <= j + b < w
+                    if 0 <= i + a < h and 0 <= j + b < w and ok[p, i + a, j + b]
                 ]
                 out[p, i, j] = cells[0] if cells else 0.0
     return out
 
 
-def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
-    """``sum(x - shift)`` and ``sum((x - shift)^2)`` over the in-image cells of the union of
-    ``rects`` around every pixel of ``x`` ``(P, H, W)`` (``shift``: per pixel), summed
-    exactly (``math.fsum``)."""
+def _exact_sums(x: np.ndarray, rects, shift: np.ndarray, valid: np.ndarray | None = None):
+    """``sum(x - shift)``, ``sum((x - shift)^2)`` and the count over the in-image (and
+    ``valid``) cells of the union of ``rects`` around every pixel of ``x`` ``(P, H, W)``
+    (``shift``: per pixel), summed exactly (``math.fsum``)."""
     import math
 
     p_, h, w = x.shape
-    s1, s2 = np.zeros(x.shape), np.zeros(x.shape)
+    ok = np.ones(x.shape, bool) if valid is None else valid
+    s1, s2, n = np.zeros(x.shape), np.zeros(x.shape), np.zeros(x.shape)
     for p in range(p_):
         for i in range(h):
             for j in range(w):
@@ -328,11 +329,12 @@ def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
                     for r0, r1, c0, c1 in rects
                     for a in range(r0, r1 + 1)
                     for b in range(c0, c1 + 1)
-                    if 0 <= i + a < h and 0 <= j + b < w
+                    if 0 <= i + a < h and 0 <= j + b < w and ok[p, i + a, j + b]
                 ]
                 s1[p, i, j] = math.fsum(d)
                 s2[p, i, j] = math.fsum(v * v for v in d)
-    return s1, s2
+                n[p, i, j] = len(d)
+    return s1, s2, n
 
 
 @pytest.mark.parametrize(
@@ -344,29 +346,39 @@ def _exact_sums(x: np.ndarray, rects, shift: np.ndarray):
         ((1, 1, 40, 140), 0, 40),  # interior tiles (unmasked loads) beside border ones
     ],
 )
-def test_region_sums_are_the_exactly_summed_windows(shape, r, rr):
-    """A ring, a box and a pinwheel block, for a strip of rows: every cell added directly in
-    float64 as its deviation from the pixel's shift (the first in-image cell of its
-    regions), so within a few float64 ulps of the sums of the window (relative to the sum
-    of absolute deviations)."""
+@pytest.mark.parametrize("masked", [False, True])
+def test_region_sums_are_the_exactly_summed_windows(shape, r, rr, masked):
+    """A ring, a box and a pinwheel block, for a strip of rows: every cell (every valid
+    cell, with a mask, also counted) added directly in float64 as its deviation from the
+    pixel's shift (the first in-image, valid cell of its regions), so within a few float64
+    ulps of the sums of the window (relative to the sum of absolute deviations)."""
     from torchsar.windows import Rect, Region, disjoint_rects, pinwheel_rects
 
     x = _scene(8, shape=shape)
     h, w = shape[-2:]
+    valid = None
+    if masked:
+        valid = torch.rand(shape, generator=torch.Generator().manual_seed(8)) > 0.3
+        valid[..., 5:14, 3:12] = False  # windows without a valid cell
     regions = [Ring(1, 2).region, Region((Rect.box(2),)), Region((pinwheel_rects(1, 2)[1],))]
     parts = [disjoint_rects(reg) for reg in regions]
-    s1, s2, shift = _kernels().region_sums(x.to(DEVICE), parts, r, rr, moments=2)
+    on = None if valid is None else valid.to(DEVICE)
+    s1, s2, shift, count = _kernels().region_sums(x.to(DEVICE), parts, r, rr, 2, on)
     assert s1.shape == s2.shape == (3, shape[0], 1, rr, w)
+    assert (count is None) == (valid is None)
     flat = x.reshape(-1, h, w).double().numpy()
-    first = _first_cells(flat, parts)
+    ok = None if valid is None else valid.reshape(-1, h, w).numpy()
+    first = _first_cells(flat, parts, ok)
     assert np.array_equal(shift.cpu().reshape(-1, rr, w).numpy(), first[:, r : r + rr])
     for q, rects in enumerate(parts):
-        want1, want2 = _exact_sums(flat, rects, first)
+        want1, want2, n = _exact_sums(flat, rects, first, ok)
         got1 = s1[q].cpu().reshape(-1, rr, w).numpy()
         got2 = s2[q].cpu().reshape(-1, rr, w).numpy()
         scale = np.abs(want1[:, r : r + rr]).max() + want2[:, r : r + rr].max()
         np.testing.assert_allclose(got1, want1[:, r : r + rr], rtol=0, atol=1e-13 * scale)
         np.testing.assert_allclose(got2, want2[:, r : r + rr], rtol=1e-13, atol=1e-13 * scale)
+        if count is not None:
+            assert np.array_equal(count[q].cpu().reshape(-1, rr, w).numpy(), n[:, r : r + rr])
 
 
 @pytest.mark.parametrize("guard, train", [(0, 1), (2, 4), (1, 3)])
@@ -434,6 +446,29 @@ def test_window_statistics_through_the_kernel(sums_through_triton, monkeypatch):
     for name, out in filtered.items():
         want = ts.speckle.FILTERS[name](x)
         assert torch.allclose(out.cpu(), want, rtol=1e-4, atol=1e-6 * float(want.max())), name
+
+
+def test_window_statistics_with_no_data_through_the_kernel(sums_through_triton, monkeypatch):
+    """With a no-data mask the window CFARs take the kernel's sums of the valid cells and
+    their counts: the CPU's masked results to the device tests' tolerances (statistics 1e-5
+    relative, K 2e-3; masks up to near-ties; invalid pixels -inf on both)."""
+    x = _scene(10, shape=(1, 2, 24, 30))
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(10)) > 0.2
+    valid[0, 1, 4:12, 5:14] = False
+    got = {n: getattr(ts.cfar, n)(x.to(DEVICE), valid=valid.to(DEVICE)) for n in WINDOW_CFARS}
+    assert len(sums_through_triton) >= len(WINDOW_CFARS)
+    monkeypatch.setattr(_triton, "for_tensor", lambda t: False)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    for name, d in got.items():
+        want = getattr(ts.cfar, name)(x, valid=valid)
+        rtol = 2e-3 if name == "k" else 1e-5
+        ws, gs = want.statistic.double(), d.statistic.cpu().double()
+        fin = torch.isfinite(ws)
+        assert torch.equal(torch.isfinite(gs), fin), name
+        assert torch.equal(gs[~fin], ws[~fin]), name
+        assert torch.allclose(gs[fin], ws[fin], rtol=rtol, atol=1e-8), name
+        near = (ws - want.threshold.double()).abs() <= rtol * want.threshold.double().abs()
+        assert not ((d.mask.cpu() != want.mask) & ~near).any(), name
 
 
 def test_negative_zero_is_zero_on_every_path(monkeypatch):

@@ -79,7 +79,7 @@ def block_cfar(
         return _compiled_block_cfar(x, ring, pfa, reduce, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if _jit.for_tensor(xs):
+        if _jit.for_tensor(xs) and sums[0].per_image:
             stat = _compiled_extreme_ratio(xs, sums, reduce)
         else:
             est = extreme_mean(sums, reduce)

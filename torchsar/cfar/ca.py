@@ -108,7 +108,7 @@ def ring_mean_ratio(
             stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
             r0 = int(rows[0, 0]) if rows.numel() else 0
             return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
-        if _jit.for_tensor(xs):
+        if _jit.for_tensor(xs) and s.per_image:
             return _compiled_masked(xs, s, ring.n, factor).to(dtype)
         stat = ratio(xs, s.mean_())
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)

@@ -102,7 +102,7 @@ def vi(
         return _one_sweep(x, ring, pfa, (k_vi, k_mr), full, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if _jit.for_tensor(xs):
+        if _jit.for_tensor(xs) and sums[4].per_image:
             return _compiled(xs, sums, ring.n, full, factor, k_vi, k_mr, dtype)
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
