@@ -176,7 +176,6 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
         outer_cols[j] = axis_count(j, w, -o, o)
         guard_cols[j] = axis_count(j, w, -g, g)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
-    none = np.ones(w, np.uint8)
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
@@ -184,11 +183,11 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
             row = xp[q] if inside else empty
-            bad += _take(rows1, rows2, rows3, q, depth, row, vp, inside, has_valid, none)
+            bad += _take(rows1, rows2, rows3, q, depth, row, vp, inside, has_valid)
         for i in range(h):
             q = i + o
             qr = min(q, h - 1)
-            bad += _take(rows1, rows2, rows3, q, depth, xp[qr], vp, q < h, has_valid, none)
+            bad += _take(rows1, rows2, rows3, q, depth, xp[qr], vp, q < h, has_valid)
             ring_sums(ring1, size, i, g, train, band, mid, s1)
             ring_sums(ring2, size, i, g, train, band, mid, s2)
             if has_valid:
@@ -221,11 +220,12 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
 
 
 @njit(**JIT, inline="always")
-def _take(rows1, rows2, rows3, q, depth, row, valid, present, has_valid, none):
+def _take(rows1, rows2, rows3, q, depth, row, valid, present, has_valid):
     """Row ``q`` into the rings: values and squares (:func:`pair_row`), or with
-    ``has_valid`` those of its valid cells and their count (:func:`valid_row`)."""
+    ``has_valid`` those of its valid cells (``valid``: the plane's flags) and their count
+    (:func:`valid_row`)."""
     if has_valid:
-        vrow = valid[min(max(q, 0), valid.shape[0] - 1)] if valid.shape[0] else none
+        vrow = valid[min(max(q, 0), valid.shape[0] - 1)]  # not read where not present
         return valid_row(rows1, rows2, rows3, q, depth, row, vrow, present)
     return pair_row(rows1, rows2, q, depth, row, present, np.inf, False)
 
