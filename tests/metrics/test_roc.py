@@ -406,3 +406,31 @@ def test_a_state_round_trips_and_an_old_grid_state_is_refused():
     unsorted = {**vars(acc), "keys": acc.keys[::-1].copy()}
     with pytest.raises(ValueError, match="keys and counts"):
         RocAccumulator.__new__(RocAccumulator).__setstate__(unsorted)
+
+
+@pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
+@pytest.mark.parametrize("spread", ["narrow", "signed", "zero and up"])
+def test_dense_and_compact_tables_give_the_tensor_codes_counts(spread):
+    """A batch whose key range fits a dense table and batches whose range spans zero (a
+    table of only the exponents present): the compiled counts equal the tensor code's."""
+    from torchsar.metrics import _kernels as roc_kernels
+
+    g = torch.Generator().manual_seed(31)
+    stat = torch.rand(2, 1, 40, 40, generator=g, dtype=torch.float64) * 9 + 1
+    if spread == "signed":
+        stat = stat * torch.randn(stat.shape, generator=g, dtype=torch.float64)
+    elif spread == "zero and up":
+        stat[0, 0, :5] = 0.0
+        stat[1, 0, :3] = 1e-300
+    target = torch.rand(stat.shape, generator=g) < 0.3
+    ignore = torch.rand(stat.shape, generator=g) < 0.1
+    flat = stat.reshape(-1).numpy()
+    rows = roc_kernels._key(flat.max()) - roc_kernels._key(flat.min()) + 1
+    assert (rows > roc_kernels._DENSE_ROWS) == (spread != "narrow")
+    out = []
+    for on in (True, False):
+        with _kernels(on):
+            acc = RocAccumulator()
+            counts = acc.update(stat, target, ignore, detected=stat > 2.0)
+            out.append((acc, counts))
+    assert out[0][0] == out[1][0] and out[0][1] == out[1][1]

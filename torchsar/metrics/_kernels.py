@@ -65,36 +65,84 @@ def finite_range(values):
     return lo, hi
 
 
+_DENSE_ROWS = 1 << 13
+"""Rows of a batch's key range up to which its table is dense; beyond (a range that spans
+zero, whose every exponent from the smallest normal up then gets 32 rows on each side of
+it: 65,693 rows for a statistic from -1.4 to 94), only the exponents present get rows."""
+
+
+@njit(**_JIT)
+def _row_map(values, kmin, n):
+    """For a key range ``kmin .. kmin + n - 1``: each group of 32 keys' (one exponent's)
+    first row, or -1 where no finite value of ``values`` falls (a pass over the values),
+    the key of every row, and the count of rows."""
+    g0 = kmin >> 5
+    groups = ((kmin + n - 1) >> 5) - g0 + 1
+    first = np.full(groups, -1, np.int64)
+    for i in range(values.size):
+        x = values[i]
+        if abs(x) != math.inf:
+            first[(_key(x) >> 5) - g0] = 0
+    rows = 0
+    for g in range(groups):
+        if first[g] == 0:
+            first[g] = rows
+            rows += 32
+    row_keys = np.empty(rows, np.int64)
+    for g in range(groups):
+        if first[g] >= 0:
+            for r in range(32):
+                row_keys[first[g] + r] = ((g0 + g) << 5) + r
+    return first, row_keys, rows
+
+
 @njit(**_JIT)
 def roc_pass(values, lo, hi, target, ignore, has_ignore, detected, has_detected):
     """Per-key counts of a flat NaN-free float32 or float64 batch whose finite values lie in
     ``[lo, hi]`` (``lo > hi``: none is finite).
 
-    Returns ``(kmin, table, tp, detected)``: ``table`` ``(n + 2, 2)`` int64 holds the target
-    (column 0) and clutter (column 1) pixels not ignored of key ``kmin + j`` in row ``j <
-    n``, of ``+inf`` in row ``n`` and of ``-inf`` in row ``n + 1``; with ``has_detected``,
-    the detected target pixels and the detected pixels not ignored (else 0, 0).
+    Returns ``(row_keys, table, tp, detected)``: ``table`` ``(n + 2, 2)`` int64 holds the
+    target (column 0) and clutter (column 1) pixels not ignored of key ``row_keys[j]`` in
+    row ``j < n``, of ``+inf`` in row ``n`` and of ``-inf`` in row ``n + 1``; with
+    ``has_detected``, the detected target pixels and the detected pixels not ignored (else
+    0, 0). The rows are every key of the range (up to :data:`_DENSE_ROWS`), else only the
+    keys of the exponents present (:func:`_row_map`).
     """
     kmin, n = 0, 0
     if lo <= hi:
         kmin = _key(lo)
         n = _key(hi) - kmin + 1
+    compact = n > _DENSE_ROWS
+    if compact:
+        first, row_keys, n = _row_map(values, kmin, n)
+    else:
+        first, row_keys = np.zeros(0, np.int64), np.arange(kmin, kmin + n)
+    g0 = kmin >> 5
     table = np.zeros(2 * n + 5, np.int64)  # the last slot: ignored pixels, dropped below
     slot = np.empty(min(values.size, _CHUNK), np.int64)
     t8, i8 = target.view(np.uint8), ignore.view(np.uint8)
     for s0 in range(0, values.size, _CHUNK):  # each pixel's slot in a loop that vectorises,
         m = min(_CHUNK, values.size - s0)  # then the counts (a scatter: one at a time)
         v, tg, ig = values[s0 : s0 + m], t8[s0 : s0 + m], i8[s0 : s0 + m]
-        for i in range(m):
-            row = min(_key(v[i]) - kmin, n)  # only +inf is above the last finite key
-            row = n + 1 if row < 0 else row  # only -inf is below the first
-            k = 2 * row + 1 - np.int64(tg[i])
-            slot[i] = 2 * n + 4 if has_ignore and ig[i] else k
+        if compact:
+            for i in range(m):
+                x = v[i]
+                row = n if x == math.inf else n + 1
+                if abs(x) != math.inf:
+                    k = _key(x)
+                    row = first[(k >> 5) - g0] + (k & 31)
+                slot[i] = 2 * n + 4 if has_ignore and ig[i] else 2 * row + 1 - np.int64(tg[i])
+        else:
+            for i in range(m):
+                row = min(_key(v[i]) - kmin, n)  # only +inf is above the last finite key
+                row = n + 1 if row < 0 else row  # only -inf is below the first
+                k = 2 * row + 1 - np.int64(tg[i])
+                slot[i] = 2 * n + 4 if has_ignore and ig[i] else k
         for i in range(m):
             table[slot[i]] += 1
     table = table[: 2 * n + 4]
     tp, nd = _detected(target, ignore, has_ignore, detected) if has_detected else (0, 0)
-    return kmin, table.reshape(n + 2, 2), tp, nd
+    return row_keys, table.reshape(n + 2, 2), tp, nd
 
 
 @njit(**_JIT)

@@ -102,6 +102,12 @@ def _sparse(kmin: int, table: np.ndarray) -> _Sparse:
     return (rows + kmin).astype(np.int32), table[rows, 0].copy(), table[rows, 1].copy()
 
 
+def _sparse_rows(row_keys: np.ndarray, table: np.ndarray) -> _Sparse:
+    """:func:`_sparse` of a table whose row ``j`` counts the key ``row_keys[j]``."""
+    rows = np.flatnonzero(table[:, 0] | table[:, 1])
+    return row_keys[rows].astype(np.int32), table[rows, 0].copy(), table[rows, 1].copy()
+
+
 def _merge(a: _Sparse, b: _Sparse) -> _Sparse:
     """The union of two sparse counts, the counts of a key in both summed (new arrays)."""
     (keys, t, c), (kb, tb, cb) = a, b
@@ -341,11 +347,11 @@ def _compiled_count(
     tgt = _flat(target)
     ign = tgt if ignore is None else _flat(ignore)
     det = tgt if detected is None else _flat(detected)
-    kmin, table, tp, det_n = _kernels.roc_pass(
+    row_keys, table, tp, det_n = _kernels.roc_pass(
         flat, lo, hi, tgt, ign, ignore is not None, det, detected is not None
     )
     n_target, n_clutter = (int(v) for v in table.sum(0))
-    keys, t, c = _sparse(int(kmin), table[:-2])
+    keys, t, c = _sparse_rows(row_keys, table[:-2])
     if table[-2].any():  # +inf: the last key
         keys = np.append(keys, np.int32(_INF_KEY))
         t, c = np.append(t, table[-2, 0]), np.append(c, table[-2, 1])
