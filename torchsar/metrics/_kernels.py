@@ -6,8 +6,10 @@ tensors.
 A value's key (:func:`torchsar.metrics.roc.pixel_keys`) comes from the bits of its float64
 value (a float32 is converted exactly). Given the smallest and largest finite value of the
 batch (numpy's ``min`` and ``max``, :func:`finite_range` when one of them is infinite),
-:func:`roc_pass` counts the pixels in a dense table over the keys of that range, with one row
-for ``+inf`` and one for ``-inf``; the detection counts take a second loop, which vectorises.
+:func:`roc_pass` counts the pixels in a dense table over the keys of that range (a range
+that spans zero, tens of thousands of keys, over the keys of the exponents present), with
+one row for ``+inf`` and one for ``-inf``; the detection counts take a second loop, which
+vectorises.
 
 Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 """
