@@ -313,16 +313,15 @@ def _strip_sums(
     r: int,
     rr: int,
     pad: int,
-    shift: Tensor,
+    shift: Tensor | None,
     vmask: Tensor | None,
     moments: int,
 ) -> list[Sums]:
-    """:class:`Sums` of every region for output rows ``[r, r + rr)``."""
+    """:class:`Sums` of every region for output rows ``[r, r + rr)``: by the Triton kernel
+    where ``shift`` is ``None`` (:func:`_kernel_sums`), else of ``x - shift``."""
     h, w = x.shape[-2:]
-    if _triton.for_tensor(x):
-        sums = _gpu_strip_sums(x, rects, r, rr, vmask, moments)
-        if sums is not None:
-            return sums
+    if shift is None:
+        return _gpu_strip_sums(x, rects, r, rr, vmask, moments)
     if _jit.for_tensor(x):
         return _compiled_strip_sums(x, rects, r, rr, pad, shift, vmask, moments)
     buf = _strip_buffer(x, r, rr, pad, shift)
@@ -419,17 +418,22 @@ def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
     return [b for b in bands if b[0] <= b[1] and b[2] <= b[3]]
 
 
+def _kernel_sums(x: Tensor, regions: tuple[Region, ...]) -> bool:
+    """Whether the window sums of ``x`` are the Triton kernel's (a tensor it takes, every
+    region a rectangle or a ring): then they need no image mean, their shifts being per
+    pixel."""
+    return _triton.for_tensor(x) and all(disjoint_rects(reg) is not None for reg in regions)
+
+
 def _gpu_strip_sums(
     x: Tensor, rects: tuple[Region, ...], r: int, rr: int, vmask: Tensor | None, moments: int
-) -> list[Sums] | None:
+) -> list[Sums]:
     """:func:`_strip_sums` by the Triton kernel (:func:`torchsar._gpu_kernels.region_sums`:
     every window cell added directly in float64, as deviations from a cell of the pixel's
     own window: the sums' ``shift`` is a plane ``(B, C, rr, W)``, not the image's mean;
-    with no-data, the valid cells summed and counted), or ``None`` when a region is not a
-    rectangle or a ring."""
+    with no-data, the valid cells summed and counted); every region a rectangle or a ring
+    (:func:`_kernel_sums`)."""
     parts = [disjoint_rects(reg) for reg in rects]
-    if any(p is None for p in parts):
-        return None
     h, w = x.shape[-2:]
     s1, s2, shift, cnt = _triton.kernels().region_sums(x, parts, r, rr, moments, vmask)
     return [
@@ -505,7 +509,7 @@ def windowed(
     regions = tuple(_as_region(r) for r in rects)
     h, w = x.shape[-2:]
     vmask = None if valid is None else valid.expand_as(x)
-    shift = _image_mean(x, vmask)
+    shift = None if _kernel_sums(x, regions) else _image_mean(x, vmask)
     pad = _pad_for(regions)
     rows = _strip_rows(x, pad, strip)
     if strip is None and _triton.for_tensor(x):
@@ -543,16 +547,17 @@ def rect_sums(
         5.0
     """
     rects = tuple(rects)
+    per_pixel = _kernel_sums(x, tuple(_as_region(r) for r in rects))
 
     def collect(_xs: Tensor, sums: list[Sums]) -> tuple[Tensor, ...]:
         out: list[Tensor] = []
         for s in sums:
             out += [s.count.expand_as(s.s1), s.s1, s.s1 if s.s2 is None else s.s2]
-        return tuple(out)
+        return (*out, sums[0].shift.expand_as(sums[0].s1)) if per_pixel else tuple(out)
 
     flat = windowed(x, rects, collect, valid=valid, moments=moments)
     vmask = None if valid is None else valid.expand_as(x)
-    shift = _image_mean(x, vmask)
+    shift = flat[-1] if per_pixel else _image_mean(x, vmask)
     return [
         Sums(flat[3 * i], flat[3 * i + 1], flat[3 * i + 2] if moments >= 2 else None, shift)
         for i in range(len(rects))
