@@ -19,7 +19,7 @@ import pytest
 import torch
 
 import torchsar as ts
-from tests.reference.cfar import ca_reference, os_reference
+from tests.reference.cfar import ca_reference, os_reference, zero_blocks_scene
 from torchsar import _jit, _triton
 from torchsar.cfar.os_cfar import _factor, _gpu_tables
 from torchsar.cfar.thresholds import ca_factor
@@ -471,6 +471,25 @@ def test_window_statistics_with_no_data_through_the_kernel(sums_through_triton, 
         assert not ((d.mask.cpu() != want.mask) & ~near).any(), name
 
 
+def test_rect_sums_through_the_kernel_keep_their_shifts(sums_through_triton, monkeypatch):
+    """``rect_sums`` on the kernel's sums returns their per-pixel shifts with them, so its
+    means and variances are the CPU's (with and without a mask)."""
+    from torchsar.windows import Rect, rect_sums
+
+    x = _scene(11, shape=(1, 1, 14, 18))
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(11)) > 0.2
+    rects = [Ring(1, 2).region, Rect.box(1)]
+    for mask in (None, valid):
+        got = rect_sums(x.to(DEVICE), rects, valid=None if mask is None else mask.to(DEVICE))
+        assert sums_through_triton
+        with monkeypatch.context() as m:
+            m.setattr(_triton, "for_tensor", lambda t: False)
+            want = rect_sums(x, rects, valid=mask)
+        for a, b in zip(got, want, strict=True):
+            assert torch.allclose(a.mean().cpu(), b.mean(), rtol=1e-12, atol=1e-12)
+            assert torch.allclose(a.var().cpu(), b.var(), rtol=1e-9, atol=1e-9)
+
+
 def test_negative_zero_is_zero_on_every_path(monkeypatch):
     """``-0.0`` passes the input checks; a ring of ``-0.0`` around a bright cell is a ring of
     zeros on every path (compiled CPU kernels, tensor code, Triton kernels): ``+inf``, the
@@ -559,12 +578,7 @@ def test_zero_blocks_beside_bright_targets_through_the_kernel(
     up to 88 pixels beside such blocks, VI on up to 4: their variance did not cancel)."""
     rng = np.random.default_rng(seed)
     h, w = (int(v) for v in rng.integers(24, 32, 2))
-    img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
-    for _ in range(2):
-        r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
-        img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
-        r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
-        img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+    img = zero_blocks_scene(rng, h, w)
     x = torch.from_numpy(img).float()
     g, t = int(rng.integers(0, 3)), int(rng.integers(1, 4))
     names = ["two_parameter", "vi", "so", "go"]
