@@ -18,7 +18,12 @@ import torchsar.speckle as speckle
 from tests.kernel_paths import both as _both
 from tests.kernel_paths import errors as _errors
 from tests.kernel_paths import ulps as _ulps
-from tests.reference.cfar import ac_reference, ca_reference, two_parameter_reference
+from tests.reference.cfar import (
+    ac_reference,
+    ca_reference,
+    two_parameter_reference,
+    zero_blocks_scene,
+)
 from tests.reference.speckle import reference_batch
 from torchsar import _jit
 from torchsar.cfar.ca import ca_threshold
@@ -46,6 +51,17 @@ def _degenerate(seed: int, dtype=torch.float64) -> torch.Tensor:
     x[0, 3] = 1.0
     x[0, 3, 2, 3] = 1e12
     return x.to(dtype)
+
+
+def _finite_near(got: np.ndarray, want: np.ndarray, dtype, *, rtol: float, atol: float) -> None:
+    """Where ``want`` is finite: ``got`` within a float32 ulp of it (float32), else within
+    ``rtol`` / ``atol``."""
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=rtol, atol=atol)
 
 
 def _masks_agree(a, b) -> None:
@@ -101,12 +117,7 @@ def test_ca_is_the_exactly_summed_statistic_borders_included(monkeypatch, dtype,
     want = ca_reference(x.double().numpy(), guard, train, 1e-3)
     assert np.array_equal(np.isinf(got), np.isinf(want))
     assert np.isinf(want).any() and (want == 0).any()  # the degenerate cases are there
-    fin = np.isfinite(want)
-    if dtype == torch.float32:
-        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
-        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
-    else:
-        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=0)
+    _finite_near(got, want, dtype, rtol=1e-13, atol=0)
 
 
 def test_ca_keeps_its_precision_beside_a_very_bright_target(monkeypatch):
@@ -410,12 +421,7 @@ def test_two_parameter_is_the_exactly_summed_statistic(monkeypatch, dtype, guard
     want = two_parameter_reference(x.double().numpy(), guard, train)
     assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
     assert np.isinf(want).any() and (want == 0).any()  # the degenerate cases are there
-    fin = np.isfinite(want)
-    if dtype == torch.float32:
-        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
-        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
-    else:
-        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-12, atol=1e-300)
+    _finite_near(got, want, dtype, rtol=1e-12, atol=1e-300)
 
 
 def test_two_parameter_rings_without_variance_are_exact(monkeypatch):
@@ -509,12 +515,7 @@ def test_ac_is_the_exactly_summed_statistic(monkeypatch, dtype, guard, train, cl
     want = ac_reference(x.double().numpy(), guard, train, 1e-3, limit, mu)
     got = d.statistic.double().numpy()
     assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
-    fin = np.isfinite(want)
-    if dtype == torch.float32:
-        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
-        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
-    else:
-        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=1e-300)
+    _finite_near(got, want, dtype, rtol=1e-13, atol=1e-300)
 
 
 def test_ac_does_not_depend_on_the_batch_or_the_layout():
@@ -583,12 +584,7 @@ def test_two_parameter_with_no_data_is_the_exactly_summed_statistic(
     want = two_parameter_reference(x.double().numpy(), guard, train, valid)
     assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
     assert want[0, 0, 6, 6] == -np.inf and (want == np.inf).any() and (want == 0).any()
-    fin = np.isfinite(want)
-    if dtype == torch.float32:
-        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
-        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
-    else:
-        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-12, atol=1e-300)
+    _finite_near(got, want, dtype, rtol=1e-12, atol=1e-300)
     assert torch.equal(d.mask, d.statistic > d.threshold)
 
 
@@ -625,12 +621,7 @@ def test_two_parameter_with_no_data_beside_blocks_of_zeros(monkeypatch):
     for seed in range(8):
         rng = np.random.default_rng(seed)
         h, w = (int(v) for v in rng.integers(24, 48, 2))
-        img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
-        for _ in range(2):
-            r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
-            img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
-            r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
-            img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+        img = zero_blocks_scene(rng, h, w)
         x = torch.from_numpy(img).to(torch.float32 if seed % 2 else torch.float64)
         ones = torch.ones_like(x, dtype=torch.bool)
         direct = cfar.two_parameter(x, guard=1, train=2)

@@ -132,6 +132,20 @@ def ring_buffers(guard, train, w):
 
 
 @njit(**JIT)
+def paired_rings(guard, train, w):
+    """The working state of a kernel that sums two quantities over the ring (values and
+    squares, or kept values and counts): the outer half-width ``o``, the window side, the
+    row-block levels, the two rings of row blocks (:func:`pair_rings`) and the row
+    buffers of :func:`ring_sums`."""
+    o = guard + train
+    size = 2 * o + 1
+    depth = levels_for(max(train, 2 * guard + 1))
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
+    band, mid = ring_buffers(guard, train, w)
+    return o, size, depth, rows1, rows2, ring1, ring2, band, mid
+
+
+@njit(**JIT)
 def ring_sums(ring, size, i, guard, train, band, mid, acc):
     """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
     ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``): the top and bottom bands
@@ -164,12 +178,9 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
-    g, o = guard, guard + train
-    size = 2 * o + 1
-    depth = levels_for(max(train, 2 * g + 1))
-    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
+    g = guard
+    o, size, depth, rows1, rows2, ring1, ring2, band, mid = paired_rings(guard, train, w)
     rows3, _, ring3, _ = pair_rings(depth if has_valid else 1, size if has_valid else 1, w)
-    band, mid = ring_buffers(g, train, w)
     s1, s2, cnt = np.zeros(w), np.zeros(w), np.zeros(w)
     outer_cols, guard_cols = np.zeros(w), np.zeros(w)
     for j in range(w):
@@ -241,11 +252,8 @@ def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, 
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
-    g, o = guard, guard + train
-    size = 2 * o + 1
-    depth = levels_for(max(train, 2 * g + 1))
-    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
-    band, mid = ring_buffers(g, train, w)
+    g = guard
+    o, size, depth, rows1, rows2, ring1, ring2, band, mid = paired_rings(guard, train, w)
     s1, cnt = np.zeros(w), np.zeros(w)
     n_full = scale.shape[0] - 1
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
@@ -284,7 +292,7 @@ the plane's mean): only there can ``S2 / n - mean^2`` lose more than 8 bits."""
 
 
 @njit(**JIT, inline="always")
-def _counted(cache, vcache, has_valid, i, j, g, r, k):
+def _counted(vcache, has_valid, i, j, g, r, k):
     """Whether cell ``(r, k)`` is a counted cell of pixel ``(i, j)``'s ring (outside the
     guard box and, with ``has_valid``, valid: ``vcache`` holds 1 for a valid cell)."""
     if abs(r - i) <= g and abs(k - j) <= g:
@@ -307,7 +315,7 @@ def _near_flat_rings(cache, vcache, has_valid, i, h, g, o, s1, s2, xi, oi):
         n, base = 0, 0.0
         for r in range(r0, r1 + 1):
             for k in range(c0, c1 + 1):
-                if _counted(cache, vcache, has_valid, i, j, g, r, k):
+                if _counted(vcache, has_valid, i, j, g, r, k):
                     base = cache[r % size, k] if n == 0 else base
                     n += 1
         if n <= 0 or n * (s2[j] / n - (s1[j] / n) ** 2) >= _FLAT * s2[j]:
@@ -316,14 +324,14 @@ def _near_flat_rings(cache, vcache, has_valid, i, h, g, o, s1, s2, xi, oi):
         for r in range(r0, r1 + 1):
             row = cache[r % size]
             for k in range(c0, c1 + 1):
-                if _counted(cache, vcache, has_valid, i, j, g, r, k):
+                if _counted(vcache, has_valid, i, j, g, r, k):
                     t1 += row[k] - base
         m = t1 / n
         e1, e2 = 0.0, 0.0
         for r in range(r0, r1 + 1):
             row = cache[r % size]
             for k in range(c0, c1 + 1):
-                if _counted(cache, vcache, has_valid, i, j, g, r, k):
+                if _counted(vcache, has_valid, i, j, g, r, k):
                     e = (row[k] - base) - m
                     e1 += e
                     e2 += e * e

@@ -302,6 +302,17 @@ def _os_ratio_kernel(
 
 
 @triton.jit
+def _rect(rect_ptr, t):
+    """Rectangle ``t`` of the table: its row offsets ``a0 .. a1`` and column offsets
+    ``b0 .. b1``."""
+    a0 = tl.load(rect_ptr + 4 * t)
+    a1 = tl.load(rect_ptr + 4 * t + 1)
+    b0 = tl.load(rect_ptr + 4 * t + 2)
+    b1 = tl.load(rect_ptr + 4 * t + 3)
+    return a0, a1, b0, b1
+
+
+@triton.jit
 def _deviation_sums(
     ptr,
     vptr,
@@ -327,10 +338,7 @@ def _deviation_sums(
     s2 = tl.zeros([BH, BW], dtype=tl.float64)
     n = tl.zeros([BH, BW], dtype=tl.int32)
     for t in range(t0, t1):
-        a0 = tl.load(rect_ptr + 4 * t)
-        a1 = tl.load(rect_ptr + 4 * t + 1)
-        b0 = tl.load(rect_ptr + 4 * t + 2)
-        b1 = tl.load(rect_ptr + 4 * t + 3)
+        a0, a1, b0, b1 = _rect(rect_ptr, t)
         for a in range(a0, a1 + 1):
             ii = i + a
             rows = (ii >= 0) & (ii < h)
@@ -359,10 +367,7 @@ def _first_cell(ptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr, BW: tl.con
     c = tl.zeros([BH, BW], dtype=tl.float64)
     found = tl.zeros([BH, BW], dtype=tl.int1)
     for t in range(0, n_rects):
-        a0 = tl.load(rect_ptr + 4 * t)
-        a1 = tl.load(rect_ptr + 4 * t + 1)
-        b0 = tl.load(rect_ptr + 4 * t + 2)
-        b1 = tl.load(rect_ptr + 4 * t + 3)
+        a0, a1, b0, b1 = _rect(rect_ptr, t)
         ii = tl.maximum(i + a0, 0)
         jj = tl.maximum(j + b0, 0)
         ok = (ii <= tl.minimum(i + a1, h - 1)) & (jj <= tl.minimum(j + b1, w - 1)) & (found == 0)
@@ -379,10 +384,7 @@ def _first_valid_cell(ptr, vptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr
     c = tl.zeros([BH, BW], dtype=tl.float64)
     found = tl.zeros([BH, BW], dtype=tl.int1)
     for t in range(0, n_rects):
-        a0 = tl.load(rect_ptr + 4 * t)
-        a1 = tl.load(rect_ptr + 4 * t + 1)
-        b0 = tl.load(rect_ptr + 4 * t + 2)
-        b1 = tl.load(rect_ptr + 4 * t + 3)
+        a0, a1, b0, b1 = _rect(rect_ptr, t)
         for a in range(a0, a1 + 1):
             ii = i + a
             rows = (ii >= 0) & (ii < h)

@@ -9,7 +9,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import torchsar as ts
-from tests.reference.cfar import block_alpha, block_cells
+from tests.reference.cfar import block_alpha, block_cells, zero_blocks_scene
 from torchsar.cfar.thresholds import block_factor
 from torchsar.errors import InputValueError, OptionError, ShapeError, WindowSizeError
 
@@ -117,12 +117,7 @@ def test_zero_blocks_beside_bright_targets_on_the_no_data_path(
         rng = np.random.default_rng(seed)
         h, w = (int(v) for v in rng.integers(24, 48, 2))
         dtype = torch.float32 if seed % 2 else torch.float64
-        img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
-        for _ in range(2):
-            r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
-            img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
-            r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
-            img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+        img = zero_blocks_scene(rng, h, w)
         x = torch.from_numpy(img).to(dtype)
         g, t = int(rng.integers(0, 3)), int(rng.integers(1, 4))
         direct = fn(x, guard=g, train=t)

@@ -42,6 +42,25 @@ def block_cells(img: np.ndarray, i: int, j: int, guard: int, train: int) -> list
     ]
 
 
+def _ring_pixels(x: np.ndarray, guard: int, train: int, valid: np.ndarray | None = None):
+    """Every pixel of ``x`` ``(B, C, H, W)``: its ``(idx, i, j)`` (``x[idx][i, j]``), its
+    value and its in-image ring cells (only the ``valid`` ones, with a mask)."""
+    for idx in np.ndindex(*x.shape[:2]):
+        img = x[idx]
+        ok = None if valid is None else np.where(valid[idx], 1.0, np.nan)
+        for i in range(img.shape[0]):
+            for j in range(img.shape[1]):
+                cells = ring_cells(img, i, j, guard, train)
+                if ok is not None:
+                    cells = cells[~np.isnan(ring_cells(ok, i, j, guard, train))]
+                yield idx, i, j, img[i, j], cells
+
+
+def _over(value: float, mean: float) -> float:
+    """``value / mean`` for a mean ``>= 0``: ``0 / 0 = 0``, ``inf`` above a zero mean."""
+    return value / mean if mean > 0 else (0.0 if value == 0 else math.inf)
+
+
 def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarray:
     """CA-CFAR's ``I / mean_ring`` over the in-image ring cells (summed exactly:
     ``math.fsum``), times the border factor, pixel by pixel, of ``x`` ``(B, C, H, W)``;
@@ -50,14 +69,9 @@ def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarra
 
     n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
     out = np.empty(x.shape)
-    for idx in np.ndindex(*x.shape[:2]):
-        img = x[idx]
-        for i in range(img.shape[0]):
-            for j in range(img.shape[1]):
-                cells = ring_cells(img, i, j, guard, train)
-                mean = math.fsum(cells) / len(cells)
-                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
-                out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
+    for idx, i, j, value, cells in _ring_pixels(x, guard, train):
+        v = _over(value, math.fsum(cells) / len(cells))
+        out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
     return out
 
 
@@ -70,27 +84,20 @@ def two_parameter_reference(
     ``x`` ``(B, C, H, W)``; ``-inf`` where the pixel is not valid or its ring has no valid
     cell."""
     out = np.empty(x.shape)
-    for idx in np.ndindex(*x.shape[:2]):
-        img = x[idx]
-        ok = None if valid is None else np.where(valid[idx], 1.0, np.nan)
-        for i in range(img.shape[0]):
-            for j in range(img.shape[1]):
-                cells = ring_cells(img, i, j, guard, train)
-                if ok is not None:
-                    cells = cells[~np.isnan(ring_cells(ok, i, j, guard, train))]
-                    if not valid[idx][i, j] or cells.size == 0:
-                        out[idx][i, j] = -math.inf
-                        continue
-                if (cells == cells[0]).all():  # exactly: fsum / n need not give the value back
-                    mean, sigma = float(cells[0]), 0.0
-                else:
-                    mean = math.fsum(cells) / len(cells)
-                    sigma = math.sqrt(math.fsum((cells - mean) ** 2) / len(cells))
-                dev = img[i, j] - mean
-                if sigma > 0:
-                    out[idx][i, j] = dev / sigma
-                else:
-                    out[idx][i, j] = math.copysign(math.inf, dev) if dev else 0.0
+    for idx, i, j, value, cells in _ring_pixels(x, guard, train, valid):
+        if valid is not None and (not valid[idx][i, j] or cells.size == 0):
+            out[idx][i, j] = -math.inf
+            continue
+        if (cells == cells[0]).all():  # exactly: fsum / n need not give the value back
+            mean, sigma = float(cells[0]), 0.0
+        else:
+            mean = math.fsum(cells) / len(cells)
+            sigma = math.sqrt(math.fsum((cells - mean) ** 2) / len(cells))
+        dev = value - mean
+        if sigma > 0:
+            out[idx][i, j] = dev / sigma
+        else:
+            out[idx][i, j] = math.copysign(math.inf, dev) if dev else 0.0
     return out
 
 
@@ -106,18 +113,13 @@ def ac_reference(
     n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
     alpha = ca_factor(n, pfa)
     out = np.empty(x.shape)
-    for idx in np.ndindex(*x.shape[:2]):
-        img = x[idx]
-        for i in range(img.shape[0]):
-            for j in range(img.shape[1]):
-                cells = ring_cells(img, i, j, guard, train)
-                kept = cells[cells <= limit[idx]]
-                if kept.size == 0:
-                    out[idx][i, j] = img[i, j] / mu[idx] * (alpha / math.log(1.0 / pfa))
-                    continue
-                mean = math.fsum(kept) / kept.size
-                v = img[i, j] / mean if mean > 0 else (0.0 if img[i, j] == 0 else math.inf)
-                out[idx][i, j] = v * (alpha / ca_factor(kept.size, pfa))
+    for idx, i, j, value, cells in _ring_pixels(x, guard, train):
+        kept = cells[cells <= limit[idx]]
+        if kept.size == 0:
+            out[idx][i, j] = value / mu[idx] * (alpha / math.log(1.0 / pfa))
+            continue
+        v = _over(value, math.fsum(kept) / kept.size)
+        out[idx][i, j] = v * (alpha / ca_factor(kept.size, pfa))
     return out
 
 
@@ -291,3 +293,16 @@ def vi_statistic(
     else:
         est, alpha = np.concatenate([a, b]).mean(), ca_factor(a.size + b.size, pfa)
     return float(img[i, j] / est * full / alpha)
+
+
+def zero_blocks_scene(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """An ``(1, 1, h, w)`` exponential clutter plane with two bright targets (up to 1e12
+    times the clutter: a plane mean far from the clutter) and two blocks of exact zeros,
+    drawn from ``rng``: where sums of deviations from the plane's mean leave residues."""
+    img = rng.exponential(rng.uniform(0.1, 100.0), (1, 1, h, w))
+    for _ in range(2):
+        r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
+        img[0, 0, r : r + 3, c : c + 3] = 10 ** rng.uniform(3, 12)
+        r, c = rng.integers(0, h - 10), rng.integers(0, w - 10)
+        img[0, 0, r : r + int(rng.integers(4, 10)), c : c + int(rng.integers(4, 10))] = 0.0
+    return img

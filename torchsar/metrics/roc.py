@@ -95,15 +95,9 @@ def _flat(t: Tensor) -> np.ndarray:
     return t.contiguous().view(-1).numpy()
 
 
-def _sparse(kmin: int, table: np.ndarray) -> _Sparse:
-    """The keys present in a dense ``(n, 2)`` table of (target, clutter) counts of keys
-    ``kmin ..``, with their counts."""
-    rows = np.flatnonzero(table[:, 0] | table[:, 1])
-    return (rows + kmin).astype(np.int32), table[rows, 0].copy(), table[rows, 1].copy()
-
-
-def _sparse_rows(row_keys: np.ndarray, table: np.ndarray) -> _Sparse:
-    """:func:`_sparse` of a table whose row ``j`` counts the key ``row_keys[j]``."""
+def _sparse(row_keys: np.ndarray, table: np.ndarray) -> _Sparse:
+    """The keys present in an ``(n, 2)`` table of (target, clutter) counts whose row ``j``
+    counts the key ``row_keys[j]``, with their counts."""
     rows = np.flatnonzero(table[:, 0] | table[:, 1])
     return row_keys[rows].astype(np.int32), table[rows, 0].copy(), table[rows, 1].copy()
 
@@ -333,7 +327,7 @@ def _tensor_keys(values: Tensor, target: Tensor, ignore: Tensor | None) -> _Spar
         cls.masked_fill_(ignore, 2)
     index = pixel_keys(values).sub_(kmin - 1).clamp_(min=0).mul_(3).add_(cls)
     table = torch.bincount(index.view(-1), minlength=3 * n).view(n, 3)[1:, :2]
-    return _sparse(kmin, table.cpu().numpy())
+    return _sparse(np.arange(kmin, kmin + n - 1), table.cpu().numpy())
 
 
 def _compiled_count(
@@ -351,7 +345,7 @@ def _compiled_count(
         flat, lo, hi, tgt, ign, ignore is not None, det, detected is not None
     )
     n_target, n_clutter = (int(v) for v in table.sum(0))
-    keys, t, c = _sparse_rows(row_keys, table[:-2])
+    keys, t, c = _sparse(row_keys, table[:-2])
     if table[-2].any():  # +inf: the last key
         keys = np.append(keys, np.int32(_INF_KEY))
         t, c = np.append(t, table[-2, 0]), np.append(c, table[-2, 1])
