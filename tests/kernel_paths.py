@@ -19,6 +19,31 @@ def both(monkeypatch, fn) -> list:
     return out
 
 
+class _RulesOff:
+    """``torchsar._jit`` as a detector module sees it with its compiled code off: every
+    attribute the module's, but no tensor is for the kernels."""
+
+    def __getattr__(self, name: str):
+        return getattr(_jit, name)
+
+    @staticmethod
+    def for_tensor(_t) -> bool:
+        return False
+
+
+def rules_both(monkeypatch, fn, modules) -> list:
+    """``fn()`` with the kernels on, then with the kernels off in ``modules`` only (the
+    detectors' compiled rules and one-sweep kernels), still on for the window sums
+    (:func:`torchsar.windows.windowed`): both runs read the same sums."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    out = [fn()]
+    with monkeypatch.context() as m:
+        for module in modules:
+            m.setattr(module, "_jit", _RulesOff())
+        out.append(fn())
+    return out
+
+
 def errors(monkeypatch, call) -> list[tuple[type, str]]:
     """The error ``call`` raises with the kernels on, then off (type and words)."""
     out = []

@@ -1,18 +1,27 @@
 """Window geometry and fast box / ring / block sums (our ``filter2d``).
 
 Every local statistic in torchsar (CFAR rings, pinwheel blocks, speckle-filter boxes) goes
-through :func:`rect_sums`: sums of ``x`` (and optionally ``x**2``) over a rectangle placed at
-fixed offsets from each pixel, read from a zero-padded float64 integral image with four
-shifted slices. The cost per pixel is independent of the window size.
+through :func:`windowed` (:func:`rect_sums` for whole images): sums of ``x`` (and
+optionally ``x**2``) over rectangles placed at fixed offsets from each pixel, strip of rows
+by strip of rows.
+
+How the cells are summed:
+
+- rectangles and rings (every shape the detectors use), on the CPU with the compiled
+  kernels and on a GPU: every cell added on its own in float64, as its deviation from a
+  cell of the pixel's own window (the first in-image, valid one), in a fixed order. No
+  integral image, so nothing cancels: a bright target elsewhere in the image leaves no
+  residue in a window of clutter, a window of equal cells has sums of exactly 0, and the
+  CPU's sums are the GPU's bit for bit. The cost grows with the window's cells (a 144-cell
+  ring: about 2x the integral images on one CPU thread).
+- other regions, and without the compiled kernels: zero-padded float64 integral images
+  of ``x - mean`` (the image's mean) read with four shifted slices per rectangle, at a
+  cost per pixel independent of the window size.
 
 Borders and no-data: cells outside the image never count, and an optional boolean ``valid``
 mask removes no-data cells too. Every sum comes with the matching **count** of valid cells,
 so a statistic near the border is the textbook statistic over the cells that exist. Interior
 pixels (window fully inside, all valid) equal the textbook definition exactly.
-
-Precision: sums are accumulated in float64 after subtracting a per-image offset (the image
-mean), so variances of bright, nearly constant areas do not suffer from cancellation, and
-a constant image gives exactly zero variance.
 
 Geometry: ``guard`` g is the half-width of the guard box (``(2g+1)^2`` cells,
 CUT included, excluded from training); ``train`` t is the width of the training band; the
@@ -140,9 +149,10 @@ class Sums:
     """Local sums over a window: ``count`` valid cells, ``s1 = sum(x - shift)``,
     ``s2 = sum((x - shift)^2)`` (float64, ``(B, C, H, W)``; ``s2`` may be ``None``).
 
-    ``shift`` is the offset subtracted before summing: per image ``(B, C, 1, 1)`` (the
-    image's mean), or per pixel ``(B, C, H, W)`` (a cell of the pixel's own window, on a
-    GPU); the same for every region of one call, so sums of disjoint regions add.
+    ``shift`` is the offset subtracted before summing: per pixel ``(B, C, H, W)`` (a cell
+    of the pixel's own window, where the cells are added directly), or per image ``(B, C,
+    1, 1)`` (the image's mean, for integral images); the same for every region of one call,
+    so sums of disjoint regions add.
     """
 
     count: Tensor
@@ -154,11 +164,9 @@ class Sums:
         s2 = None if self.s2 is None or other.s2 is None else self.s2 - other.s2
         return Sums(self.count - other.count, self.s1 - other.s1, s2, self.shift)
 
-    @property
-    def per_image(self) -> bool:
-        """Whether ``shift`` is one value per image (the CPU's sums; the compiled rules read
-        it so), not a plane of per-pixel values (a GPU's)."""
-        return self.shift.shape[-2:] == (1, 1)
+    def shifts(self) -> Tensor:
+        """``shift`` as a plane of ``s1``'s shape (a per-image shift broadcast, not copied)."""
+        return self.shift.expand_as(self.s1)
 
     def mean(self) -> Tensor:
         """Mean over the valid cells (0 where there are none), float64."""
@@ -317,11 +325,12 @@ def _strip_sums(
     vmask: Tensor | None,
     moments: int,
 ) -> list[Sums]:
-    """:class:`Sums` of every region for output rows ``[r, r + rr)``: by the Triton kernel
-    where ``shift`` is ``None`` (:func:`_kernel_sums`), else of ``x - shift``."""
+    """:class:`Sums` of every region for output rows ``[r, r + rr)``: every cell added
+    directly where ``shift`` is ``None`` (:func:`_direct`), else of ``x - shift`` by
+    integral images."""
     h, w = x.shape[-2:]
     if shift is None:
-        return _gpu_strip_sums(x, rects, r, rr, vmask, moments)
+        return _direct_strip_sums(x, rects, r, rr, vmask, moments)
     if _jit.for_tensor(x):
         return _compiled_strip_sums(x, rects, r, rr, pad, shift, vmask, moments)
     buf = _strip_buffer(x, r, rr, pad, shift)
@@ -418,24 +427,30 @@ def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
     return [b for b in bands if b[0] <= b[1] and b[2] <= b[3]]
 
 
-def _kernel_sums(x: Tensor, regions: tuple[Region, ...]) -> bool:
-    """Whether the window sums of ``x`` are the Triton kernel's (a tensor it takes, every
-    region a rectangle or a ring): then they need no image mean, their shifts being per
-    pixel."""
-    return _triton.for_tensor(x) and all(disjoint_rects(reg) is not None for reg in regions)
+def _direct(x: Tensor, regions: tuple[Region, ...]) -> bool:
+    """Whether the window sums of ``x`` add every cell directly (the Triton kernel on a GPU,
+    :func:`torchsar._windows_kernels.direct_sums` on the CPU, the same additions in the
+    same order; every region a rectangle or a ring): then they need no image mean, their
+    shifts being per pixel."""
+    takes = _triton.for_tensor(x) or _jit.for_tensor(x)
+    return takes and all(disjoint_rects(reg) is not None for reg in regions)
 
 
-def _gpu_strip_sums(
+def _direct_strip_sums(
     x: Tensor, rects: tuple[Region, ...], r: int, rr: int, vmask: Tensor | None, moments: int
 ) -> list[Sums]:
-    """:func:`_strip_sums` by the Triton kernel (:func:`torchsar._gpu_kernels.region_sums`:
-    every window cell added directly in float64, as deviations from a cell of the pixel's
-    own window: the sums' ``shift`` is a plane ``(B, C, rr, W)``, not the image's mean;
-    with no-data, the valid cells summed and counted); every region a rectangle or a ring
-    (:func:`_kernel_sums`)."""
+    """:func:`_strip_sums` with every window cell added directly in float64, as deviations
+    from a cell of the pixel's own window (the sums' ``shift`` is a plane ``(B, C, rr, W)``,
+    not the image's mean; with no-data, the valid cells summed and counted): by the Triton
+    kernel (:func:`torchsar._gpu_kernels.region_sums`) where it takes ``x``, else by
+    :func:`torchsar._windows_kernels.direct_sums` (the same values bit for bit); every
+    region a rectangle or a ring (:func:`_direct`)."""
     parts = [disjoint_rects(reg) for reg in rects]
     h, w = x.shape[-2:]
-    s1, s2, shift, cnt = _triton.kernels().region_sums(x, parts, r, rr, moments, vmask)
+    if _triton.for_tensor(x):
+        s1, s2, shift, cnt = _triton.kernels().region_sums(x, parts, r, rr, moments, vmask)
+    else:
+        s1, s2, shift, cnt = _cpu_direct_sums(x, parts, r, rr, moments, vmask)
     return [
         Sums(
             _region_count(reg, h, w, r, rr, x.device) if cnt is None else cnt[q],
@@ -445,6 +460,41 @@ def _gpu_strip_sums(
         )
         for q, reg in enumerate(rects)
     ]
+
+
+def _cpu_direct_sums(
+    x: Tensor,
+    parts: list[list[tuple[int, int, int, int]]],
+    r: int,
+    rr: int,
+    moments: int,
+    vmask: Tensor | None,
+) -> tuple[Tensor, Tensor | None, Tensor, Tensor | None]:
+    """:func:`torchsar._gpu_kernels.region_sums`' results by the numba kernel."""
+    from torchsar import _windows_kernels
+
+    b, c, h, w = x.shape
+    planes = x.detach().reshape(-1, h, w).contiguous().numpy()
+    if vmask is None:
+        flags = np.zeros((1, 1, 1), np.uint8)
+    else:
+        flags = vmask.expand_as(x).reshape(-1, h, w).to(torch.uint8).contiguous().numpy()
+    rects = np.array([rect for region in parts for rect in region], np.int64).reshape(-1, 4)
+    starts = np.cumsum([0] + [len(region) for region in parts]).astype(np.int64)
+    s1, s2, shift, cnt = _windows_kernels.direct_sums(
+        planes, flags, vmask is not None, rects, starts, r, rr, moments
+    )
+    k = len(parts)
+
+    def shaped(a: np.ndarray) -> Tensor:
+        return torch.from_numpy(a).reshape(k, b, c, rr, w)
+
+    return (
+        shaped(s1),
+        shaped(s2) if moments >= 2 else None,
+        torch.from_numpy(shift).reshape(b, c, rr, w),
+        shaped(cnt) if vmask is not None else None,
+    )
 
 
 _STRIP_ELEMENTS = 1 << 17  # float64 strip rows of ~1 MB per image stay cache-resident
@@ -484,10 +534,11 @@ def windowed(
     """Compute a local statistic from rectangle sums, row strip by row strip.
 
     This is the one mechanism behind every window statistic: for each strip of output rows it
-    builds float64 integral images of ``x - shift`` (and its square) for the strip plus its
-    halo, reads the sums of every rectangle with four slices each, and calls
-    ``fn(x_strip, sums, *extra_strips)``. Memory stays bounded by the strip size and the work
-    per pixel does not depend on the window size.
+    sums every region around each pixel (cell by cell as deviations from a cell of the
+    pixel's window where the regions are rectangles or rings and the compiled kernels or
+    a GPU take ``x``, else from float64 integral images of ``x - mean``: see the module
+    notes) and calls ``fn(x_strip, sums, *extra_strips)``. Memory stays bounded by the strip
+    size.
 
     Args:
         x: real tensor ``(B, C, H, W)`` (validated by the caller).
@@ -509,7 +560,7 @@ def windowed(
     regions = tuple(_as_region(r) for r in rects)
     h, w = x.shape[-2:]
     vmask = None if valid is None else valid.expand_as(x)
-    shift = None if _kernel_sums(x, regions) else _image_mean(x, vmask)
+    shift = None if _direct(x, regions) else _image_mean(x, vmask)
     pad = _pad_for(regions)
     rows = _strip_rows(x, pad, strip)
     if strip is None and _triton.for_tensor(x):
@@ -547,7 +598,7 @@ def rect_sums(
         5.0
     """
     rects = tuple(rects)
-    per_pixel = _kernel_sums(x, tuple(_as_region(r) for r in rects))
+    per_pixel = _direct(x, tuple(_as_region(r) for r in rects))
 
     def collect(_xs: Tensor, sums: list[Sums]) -> tuple[Tensor, ...]:
         out: list[Tensor] = []

@@ -1,15 +1,17 @@
 """The compiled per-pixel rules of GO, SO and VI over windowed sums (with no-data), of CA
 over a masked ring (CA with no-data, AC) and OS-CFAR's ratio and border factors give the
-tensor code's statistic and mask bit for bit: clutter edges, flat zero images, bright
+tensor code's statistic and mask bit for bit over the same window sums: clutter edges, flat zero images, bright
 targets, no-data masks that empty whole halves, both float dtypes."""
 
 from __future__ import annotations
+
+import importlib
 
 import pytest
 import torch
 
 import torchsar.cfar as cfar
-from tests.kernel_paths import both as _both
+from tests.kernel_paths import rules_both
 from torchsar import _jit
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba kernels not available")
@@ -29,6 +31,11 @@ ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False), ("ac", 
 """Their one-sweep kernels sum the windows directly (within an ulp of the tensor code):
 tests/test_box_kernels.py, tests/test_pinwheel_kernels.py."""
 
+RULE_MODULES = [
+    importlib.import_module(f"torchsar.cfar.{m}") for m in ("blocks", "vi", "ca", "ac", "os_cfar")
+]
+"""The modules of the rules: switched off there, the same window sums take the tensor code."""
+
 RULES = [
     (name, masked)
     for name in ("go", "so", "vi", "ca", "ac", "os")
@@ -46,7 +53,8 @@ def test_compiled_rules_equal_the_tensor_code(monkeypatch, name, dtype, masked):
         valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(2)) > 0.3
         valid[4, :, :, :19] = False  # whole halves and blocks without a counted cell
     detector = getattr(cfar, name)
-    a, b = _both(monkeypatch, lambda: detector(x, guard=1, train=3, valid=valid))
+    call = lambda: detector(x, guard=1, train=3, valid=valid)  # noqa: E731
+    a, b = rules_both(monkeypatch, call, RULE_MODULES)
     assert a.statistic.dtype == b.statistic.dtype
     assert torch.equal(a.statistic, b.statistic) and torch.equal(a.mask, b.mask)
 

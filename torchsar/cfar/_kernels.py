@@ -7,7 +7,8 @@ no-data the CPU takes the one-sweep kernels instead (:mod:`torchsar._box_kernels
 :mod:`torchsar._pinwheel_kernels`); :func:`censor_mean` is AC's global pre-threshold.
 
 Counts may be geometric ``(1, 1, rr, W)`` planes shared by the batch or ``(B, C, rr, W)``
-(with a no-data mask); sums are ``(B, C, rr, W)``; ``shift`` is ``(B, C)``.
+(with a no-data mask); sums are ``(B, C, rr, W)``; ``shift`` is ``(B, C, rr, W)`` (each
+pixel's, or the image's value broadcast).
 
 Import this module only when :func:`torchsar._jit.enabled` (it imports numba).
 """
@@ -46,10 +47,10 @@ def block_extreme_ratio(x, count, s1, shift, is_max):
         bc = b if count.shape[1] > 1 else 0
         for c in range(c_):
             cc = c if count.shape[2] > 1 else 0
-            sh = shift[b, c]
             for i in range(rr):
                 for j in range(w):
                     est = fill
+                    sh = shift[b, c, i, j]
                     for k in range(k_):
                         n = count[k, bc, cc, i, j]
                         m = _mean(s1[k, b, c, i, j], n, sh) if n > 0 else fill
@@ -78,7 +79,6 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
             cc = c if count.shape[2] > 1 else 0
             rc = c if ring_count.shape[1] > 1 else 0
             sc = c if scale.shape[2] > 1 else 0
-            sh = shift[b, c]
             for i in range(rr):
                 for j in range(w):
                     na = count[0, bc, cc, i, j] + count[1, bc, cc, i, j]
@@ -90,6 +90,7 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
                     halves = (na, nb, a1, b1, a2, b2)
                     ring_n = ring_count[rb, rc, i, j]
                     v = np.float64(x[b, c, i, j])
+                    sh = shift[b, c, i, j]
                     rule, stat = vi_rule(v, halves, ring_s1[b, c, i, j], ring_n, sh, k_vi, k_mr)
                     out[b, c, i, j] = stat * scale[rule, sb, sc, i, j]
     return out
@@ -114,14 +115,14 @@ def ring_mean_ratio_masked(x, count, s1, shift, n, scale):
     out = np.empty((b_, c_, rr, w))
     for b in range(b_):
         for c in range(c_):
-            sh = shift[b, c]
             for i in range(rr):
                 for j in range(w):
                     cnt = count[b, c, i, j]
                     if cnt <= 0:
                         out[b, c, i, j] = -np.inf
                         continue
-                    stat = _ratio(np.float64(x[b, c, i, j]), s1[b, c, i, j] / max(cnt, 1.0) + sh)
+                    mean = s1[b, c, i, j] / max(cnt, 1.0) + shift[b, c, i, j]
+                    stat = _ratio(np.float64(x[b, c, i, j]), mean)
                     if cnt != n:
                         stat = stat * scale[int(np.rint(cnt))]
                     out[b, c, i, j] = stat

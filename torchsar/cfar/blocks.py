@@ -79,7 +79,7 @@ def block_cfar(
         return _compiled_block_cfar(x, ring, pfa, reduce, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if _jit.for_tensor(xs) and sums[0].per_image:
+        if _jit.for_tensor(xs):
             stat = _compiled_extreme_ratio(xs, sums, reduce)
         else:
             est = extreme_mean(sums, reduce)
@@ -103,9 +103,12 @@ def _compiled_extreme_ratio(xs: Tensor, sums: list[Sums], reduce: str) -> Tensor
 
     count = stack_planes([s.count for s in sums])
     s1 = stack_planes([s.s1 for s in sums])
-    shift = sums[0].shift.reshape(xs.shape[:2])
     out = _kernels.block_extreme_ratio(
-        xs.contiguous().numpy(), count.numpy(), s1.numpy(), shift.numpy(), reduce == "max"
+        xs.contiguous().numpy(),
+        count.numpy(),
+        s1.numpy(),
+        sums[0].shifts().numpy(),
+        reduce == "max",
     )
     return torch.from_numpy(out)
 

@@ -108,7 +108,7 @@ def ring_mean_ratio(
             stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
             r0 = int(rows[0, 0]) if rows.numel() else 0
             return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
-        if _jit.for_tensor(xs) and s.per_image:
+        if _jit.for_tensor(xs):
             return _compiled_masked(xs, s, ring.n, factor).to(dtype)
         stat = ratio(xs, s.mean_())
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)
@@ -161,9 +161,8 @@ def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]
 
     count = s.count.expand_as(s.s1).contiguous().numpy()
     scale = border_scale(np.flatnonzero(_kernels.counts_present(count, n + 1)), n, factor)
-    shift = s.shift.reshape(xs.shape[:2]).numpy()
     out = _kernels.ring_mean_ratio_masked(
-        xs.contiguous().numpy(), count, s.s1.numpy(), shift, n, scale
+        xs.contiguous().numpy(), count, s.s1.numpy(), s.shifts().numpy(), n, scale
     )
     return torch.from_numpy(out)
 

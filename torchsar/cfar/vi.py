@@ -102,7 +102,7 @@ def vi(
         return _one_sweep(x, ring, pfa, (k_vi, k_mr), full, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if _jit.for_tensor(xs) and sums[4].per_image:
+        if _jit.for_tensor(xs):
             return _compiled(xs, sums, ring.n, full, factor, k_vi, k_mr, dtype)
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
@@ -147,7 +147,7 @@ def _compiled(
         stack_planes([s.s2 for s in sums[:4]]).numpy(),
         ring_count.contiguous().numpy(),
         ring.s1.contiguous().numpy(),
-        ring.shift.reshape(xs.shape[:2]).numpy(),
+        ring.shifts().numpy(),
         k_vi,
         k_mr,
         scale.contiguous().numpy(),
