@@ -47,6 +47,20 @@ class TestCheckImage:
         with pytest.raises(E.InputValueError, match="must be finite"):
             C.check_image(x)
 
+    def test_the_fix_the_message_gives_works(self):
+        """A NaN no-data area: the message's advice (replace the values, pass the mask of
+        finite cells) runs, and the no-data pixels are never detected."""
+        import torchsar as ts
+
+        x = torch.ones(1, 1, 24, 24)
+        x[0, 0, 5:9, 5:9] = float("nan")
+        x[0, 0, 15, 15] = 1e3
+        with pytest.raises(E.InputValueError, match=r"x\.nan_to_num.*x\.isfinite\(\)") as err:
+            ts.cfar.ca(x)
+        assert "`valid` mask" in str(err.value)
+        det = ts.cfar.ca(x.nan_to_num(0.0, 0.0, 0.0), valid=x.isfinite())
+        assert det.mask[0, 0, 15, 15] and not det.mask[0, 0, 5:9, 5:9].any()
+
     @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float32, torch.float64])
     @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf"), -1.0, -0.0, 0.0])
     def test_one_bad_value_among_many_in_any_float_dtype(self, dtype, value):

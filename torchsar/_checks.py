@@ -157,7 +157,8 @@ def check_image(
         n_inf = int(torch.isinf(_summable(x)).sum())
         raise InputValueError(
             f"{name} must be finite, got {n_nan} NaN and {n_inf} Inf values; "
-            f"replace them (e.g. torch.nan_to_num) or mark them invalid with a `valid` mask"
+            f"replace them (e.g. {name}.nan_to_num(0.0, 0.0, 0.0)); where they mark no-data, "
+            f"also pass a detector's `valid` mask ({name}.isfinite()) so those cells count nowhere"
         )
     if low is not None and low < 0:
         raise InputValueError(
