@@ -1,4 +1,6 @@
-"""Benchmark cases: window-based CFAR against scipy.ndimage references of the same statistic."""
+"""Benchmark cases: window-based CFAR against scipy.ndimage references of the same statistic,
+and the cost of summing every window cell by cell (the CPU's sums of rectangles and rings,
+as a GPU adds them: nothing cancels) against the integral images they replaced."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ import torch
 from scipy import ndimage
 
 import torchsar as ts
+from torchsar import windows
 
 GUARD, TRAIN = 2, 4
 
@@ -37,8 +40,23 @@ def scipy_ca(a: np.ndarray) -> np.ndarray:
     return a / ((mo * o * o - mi * i * i) / (o * o - i * i))
 
 
+def _ring_sums(x: torch.Tensor, valid: torch.Tensor | None, direct: bool) -> object:
+    """The strip sums of the default ring (two moments) over ``x``, cell by cell
+    (``direct``) or by integral images of ``x - mean``."""
+    chosen = windows._direct
+    if not direct:
+        windows._direct = lambda *_: False
+    try:
+        ring = ts.windows.Ring(GUARD, TRAIN)
+        return windows.windowed(x, [ring.region], lambda xs, s: s[0].s1, valid=valid)
+    finally:
+        windows._direct = chosen
+
+
 def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
     gen = torch.Generator().manual_seed(0)
+    small = torch.empty(1, 1, 512, 512).exponential_(generator=gen)
+    valid = torch.rand(small.shape, generator=gen) > 0.05
     x = torch.empty(1, 1, 1024, 1024).exponential_(generator=gen)
     a = x[0, 0].numpy()
     return [
@@ -56,5 +74,15 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object]]]:
             "go 1024x1024 f32 (g=2,t=4) vs scipy ca (uniform_filter; not like for like)",
             lambda: ts.cfar.go(x, guard=GUARD, train=TRAIN),
             lambda: scipy_ca(a),
+        ),
+        (
+            "ring sums 512x512 f32 (g=2,t=4: 144 cells, 2 moments) cell by cell vs integral images",
+            lambda: _ring_sums(small, None, True),
+            lambda: _ring_sums(small, None, False),
+        ),
+        (
+            "ring sums 512x512 f32 (g=2,t=4, no-data mask) cell by cell vs integral images",
+            lambda: _ring_sums(small, valid, True),
+            lambda: _ring_sums(small, valid, False),
         ),
     ]
