@@ -641,3 +641,82 @@ def test_two_parameter_with_no_data_refuses_bad_values_anywhere(monkeypatch):
     valid[0, 0, 5, 5] = False
     errs = _errors(monkeypatch, lambda: cfar.two_parameter(x, valid=valid))
     assert errs[0] == errs[1] and errs[0][0] is InputValueError
+
+
+def _no_data(x: torch.Tensor, seed: int) -> np.ndarray:
+    """A no-data mask: random invalid cells, an invalid block, inside it a valid pixel whose
+    ring holds no valid cell (for guard 1 or less and train 3 or less); the bright cell
+    among zeros of :func:`_degenerate` valid (its statistic inf)."""
+    rng = np.random.default_rng(seed)
+    valid = rng.random(x.shape) > 0.25
+    valid[0, 0, 2:11, 2:11] = False
+    valid[0, 0, 6, 6] = True
+    if x.shape[1] > 2:
+        valid[0, 2, 5, 6] = True
+    return valid
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 3)])
+def test_ca_with_no_data_is_the_exactly_summed_statistic(monkeypatch, dtype, guard, train):
+    """With a valid mask the one-sweep kernel sums and counts the ring's valid cells: at
+    every pixel the exactly summed statistic over them with the border rule's factor for
+    their count (degenerate planes, rings without a valid cell and invalid pixels, which
+    are -inf, included); within an ulp of the tensor code on clutter."""
+    x = _degenerate(41, dtype)
+    valid = _no_data(x, 41)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    d = cfar.ca(x, guard=guard, train=train, valid=torch.from_numpy(valid))
+    got = d.statistic.double().numpy()
+    want = ca_reference(x.double().numpy(), guard, train, 1e-3, valid)
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    assert want[0, 0, 6, 6] == -np.inf and (want == np.inf).any() and (want == 0).any()
+    _finite_near(got, want, dtype, rtol=1e-13, atol=1e-300)
+    assert torch.equal(d.mask, d.statistic > d.threshold)
+    clutter = _scene(42, dtype=dtype)
+    mask = torch.rand(clutter.shape, generator=torch.Generator().manual_seed(42)) > 0.2
+    a, b = _both(monkeypatch, lambda: cfar.ca(clutter, guard=guard, train=train, valid=mask))
+    assert _ulps(a.statistic, b.statistic) <= (1.0 if dtype == torch.float32 else 1e4)
+    _masks_agree(a, b)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_ac_with_no_data_is_the_exactly_summed_statistic(monkeypatch, dtype):
+    """AC with a valid mask: the censored ring's valid cells summed and counted, a ring
+    with none kept taking the global ratio, invalid pixels -inf; the pre-threshold from the
+    valid pixels (:func:`torchsar.cfar.ac.global_censor_threshold`)."""
+    from torchsar.cfar.ac import global_censor_threshold
+
+    x = _censored(43, dtype)
+    valid = _no_data(x, 43)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    mask = torch.from_numpy(valid)
+    d = cfar.ac(x, guard=1, train=2, valid=mask)
+    mu, limit = global_censor_threshold(x, 1e-3, valid=mask)
+    mu, limit = mu[..., 0, 0].numpy(), limit[..., 0, 0].numpy()
+    want = ac_reference(x.double().numpy(), 1, 2, 1e-3, limit, mu, valid)
+    got = d.statistic.double().numpy()
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    assert (want == -np.inf).any()
+    _finite_near(got, want, dtype, rtol=1e-13, atol=1e-300)
+    assert torch.equal(d.mask, d.statistic > d.threshold)
+
+
+@pytest.mark.parametrize("name", ["ca", "ac"])
+def test_a_mask_of_all_valid_cells_changes_nothing(monkeypatch, name):
+    """The masked kernel with every cell valid gives the unmasked statistic bit for bit,
+    and each image of a batch its own (one mask shared by the batch, or one per image)."""
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    x = _scene(44)
+    detector = getattr(cfar, name)
+    plain = detector(x, guard=1, train=3).statistic
+    ones = torch.ones_like(x, dtype=torch.bool)
+    assert torch.equal(detector(x, guard=1, train=3, valid=ones).statistic, plain)
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(44)) > 0.2
+    whole = detector(x, guard=1, train=3, valid=valid).statistic
+    for i in range(x.shape[0]):
+        one = detector(x[i : i + 1], guard=1, train=3, valid=valid[i : i + 1]).statistic
+        assert torch.equal(one, whole[i : i + 1])
+    shared = valid[:1, :1]
+    both = detector(x, guard=1, train=3, valid=shared).statistic
+    assert torch.equal(both[1:2], detector(x[1:2], guard=1, train=3, valid=shared).statistic)

@@ -19,6 +19,7 @@ __all__ = [
     "JIT",
     "axis_count",
     "block_sums",
+    "kept_row",
     "level_up",
     "levels_for",
     "pair_rings",
@@ -171,10 +172,9 @@ def pair_rings(depth, size, w):
 
 
 @njit(**JIT, inline="always")
-def _take_pair(ring1, ring2, q, row, present, limit, counts):
+def _take_pair(ring1, ring2, q, row, present):
     """Row ``q`` into level 0 of the two rings (zeros where not ``present``): the values and
-    their squares, or (``counts``) the values at or below ``limit`` (0 elsewhere) and their
-    count (1 or 0). Returns how many values of ``row`` are not a finite number ``>= 0``."""
+    their squares. Returns how many values of ``row`` are not a finite number ``>= 0``."""
     size = ring1.shape[0]
     d1, d2 = ring1[q % size], ring2[q % size]
     bad = 0
@@ -182,9 +182,8 @@ def _take_pair(ring1, ring2, q, row, present, limit, counts):
         for j in range(d1.shape[0]):
             v = np.float64(row[j])
             bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
-            kept = v <= limit
-            d1[j] = v if kept or not counts else 0.0
-            d2[j] = (1.0 if kept else 0.0) if counts else v * v
+            d1[j] = v
+            d2[j] = v * v
     else:
         d1[:] = 0.0
         d2[:] = 0.0
@@ -192,11 +191,35 @@ def _take_pair(ring1, ring2, q, row, present, limit, counts):
 
 
 @njit(**JIT, inline="always")
-def pair_row(rows1, rows2, q, depth, row, present, limit, counts):
+def pair_row(rows1, rows2, q, depth, row, present):
     """Row ``q`` into the two rings of row blocks (:func:`_take_pair`), every level ending
     at ``q`` updated; the count of bad values read."""
     size, w = rows1.shape[1], rows1.shape[2]
-    bad = _take_pair(rows1[0], rows2[0], q, row, present, limit, counts)
+    bad = _take_pair(rows1[0], rows2[0], q, row, present)
+    ring_levels(rows1, q, size, depth, w)
+    ring_levels(rows2, q, size, depth, w)
+    return bad
+
+
+@njit(**JIT, inline="always")
+def kept_row(rows1, rows2, q, depth, row, present, limit, vrow, has_valid):
+    """Row ``q`` into the two rings of row blocks (zeros where not ``present``): the values
+    *kept*, at or below ``limit`` and (``has_valid``) valid (``vrow``: the row's flags),
+    0 elsewhere, and their count (1 or 0 per cell), every level ending at ``q`` updated.
+    Returns how many values of ``row``, kept or not, are not a finite number ``>= 0``."""
+    size, w = rows1.shape[1], rows1.shape[2]
+    d1, d2 = rows1[0, q % size], rows2[0, q % size]
+    bad = 0
+    if present:
+        for j in range(w):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
+            kept = v <= limit and (not has_valid or vrow[j] != 0)
+            d1[j] = v if kept else 0.0
+            d2[j] = 1.0 if kept else 0.0
+    else:
+        d1[:] = 0.0
+        d2[:] = 0.0
     ring_levels(rows1, q, size, depth, w)
     ring_levels(rows2, q, size, depth, w)
     return bad

@@ -1,5 +1,6 @@
-"""numba kernels of the one-pass window statistics: CA-CFAR's ring-mean ratio, the
-two-parameter CFAR's deviation ratio and the box-statistics speckle filters (Lee, Kuan,
+"""numba kernels of the one-pass window statistics: CA-CFAR's ring-mean ratio (with and
+without no-data, and AC-CFAR's over its censored ring), the two-parameter CFAR's deviation
+ratio and the box-statistics speckle filters (Lee, Kuan,
 enhanced Lee) from the image to the result in one sweep over its rows, with no full-size
 temporaries.
 
@@ -17,6 +18,9 @@ ring buffer of the window's rows, with, per row ``r``, the sums of rows ``r .. r
   ``1e-14``), where the integral images of :func:`torchsar.windows.windowed` lose up to
   the integral's magnitude in cancellation; the two paths agree to well within a float32
   ulp (the tests bound the difference).
+- CA-CFAR with no-data and AC-CFAR (:func:`kept_ratio`) sum the ring's *kept* cells (valid,
+  and for AC at or below the censoring pre-threshold) the same way, with a second ring of
+  their counts (a count is an exact sum); the border rule's factor then follows the count.
 - the two-parameter CFAR (:func:`deviation_ratio`) sums its ring likewise, of ``x`` and
   its square (not shifted by the plane's mean, which bright targets far away would move),
   for the ring's mean and population variance; a near-flat ring (``n var < 2^-8 S2``, where that
@@ -44,6 +48,7 @@ from torchsar._block_sums import (
     JIT,
     axis_count,
     block_sums,
+    kept_row,
     level_up,
     levels_for,
     pair_rings,
@@ -56,8 +61,8 @@ from torchsar._vector_exp import exp_neg
 
 __all__ = [
     "box_filter",
-    "censored_ratio",
     "deviation_ratio",
+    "kept_ratio",
     "ring_buffers",
     "ring_ratio",
     "ring_sums",
@@ -238,19 +243,24 @@ def _take(rows1, rows2, rows3, q, depth, row, valid, present, has_valid):
     if has_valid:
         vrow = valid[min(max(q, 0), valid.shape[0] - 1)]  # not read where not present
         return valid_row(rows1, rows2, rows3, q, depth, row, vrow, present)
-    return pair_row(rows1, rows2, q, depth, row, present, np.inf, False)
+    return pair_row(rows1, rows2, q, depth, row, present)
 
 
 @njit(**JIT)
-def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, out, mask):
-    """AC-CFAR's statistic of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype)
-    and the decision ``out > threshold[0]`` into ``mask``: ``x / mean`` over the ring's
-    cells at or below the plane's ``limit[p]`` (the censored ring, summed as
-    :func:`ring_ratio` sums its ring, its cells counted alike), times ``scale[c]`` for a
-    ring of ``c`` such cells (the border rule's ``factor(N) / factor(c)``); a ring with
-    none takes the global ratio ``(x / mu[p]) * global_factor``.
+def kept_ratio(
+    x, valid, has_valid, limit, mu, guard, train, scale, global_factor, threshold, out, mask
+):
+    """The statistic ``x / mean`` over the ring's *kept* cells of every plane of ``x``
+    ``(P, H, W)`` into ``out`` (its dtype) and the decision ``out > threshold[0]`` into
+    ``mask``: the cells at or below the plane's ``limit[p]`` (AC-CFAR's censored ring;
+    ``+inf`` keeps every cell, CA-CFAR's ring) and, with ``has_valid``, valid (``valid``
+    uint8 ``(P, H, W)``), summed as :func:`ring_ratio` sums its ring, their count summed
+    alike; times ``scale[c]`` for a ring of ``c`` such cells (the border rule's ``factor(N)
+    / factor(c)``). A ring with no kept cell takes the global ratio ``(x / mu[p])
+    global_factor`` where ``mu[p]`` is a number (AC), else ``-inf`` (``mu[p]`` NaN: CA); a
+    pixel not valid itself is ``-inf`` (never detected).
 
-    Returns how many values of ``x`` are not a finite number ``>= 0``."""
+    Returns how many values of ``x`` (valid or not) are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g = guard
     o, size, depth, rows1, rows2, ring1, ring2, band, mid = paired_rings(guard, train, w)
@@ -260,13 +270,16 @@ def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, 
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
-        xp, lim, m = x[pl], limit[pl], mu[pl]
+        xp, vp, lim, m = x[pl], valid[pl if has_valid else 0], limit[pl], mu[pl]
+        last = vp.shape[0] - 1  # vp's rows are read only where valid (a dummy row else)
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
-            bad += pair_row(rows1, rows2, q, depth, xp[q] if inside else empty, inside, lim, True)
+            row, vrow = (xp[q] if inside else empty), vp[min(max(q, 0), last)]
+            bad += kept_row(rows1, rows2, q, depth, row, inside, lim, vrow, has_valid)
         for i in range(h):
-            q = i + o
-            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, lim, True)
+            q, qr = i + o, min(i + o, h - 1)
+            vrow = vp[min(qr, last)]
+            bad += kept_row(rows1, rows2, q, depth, xp[qr], q < h, lim, vrow, has_valid)
             ring_sums(ring1, size, i, g, train, band, mid, s1)
             ring_sums(ring2, size, i, g, train, band, mid, cnt)
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
@@ -278,9 +291,16 @@ def censored_ratio(x, limit, mu, guard, train, scale, global_factor, threshold, 
                     r = 0.0 if r != r else r
                     k = int(c)
                     oi[j] = r * scale[k] if k != n_full else r
-                else:  # every ring cell censored: the global ratio
+                elif m == m:  # every ring cell censored: the global ratio
                     r = v / m
                     oi[j] = (0.0 if r != r else r) * global_factor
+                else:
+                    oi[j] = -np.inf
+            if has_valid:
+                vi = vp[i]
+                for j in range(w):
+                    if vi[j] == 0:
+                        oi[j] = -np.inf
             for j in range(w):
                 mi[j] = oi[j] > thr
     return bad

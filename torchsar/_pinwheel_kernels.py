@@ -276,10 +276,10 @@ def vi_ratio(x, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold
         for q in range(-o, min(o, h + o)):
             inside = 0 <= q < h
             row = xp[q] if inside else empty
-            bad += pair_row(rows1, rows2, q, depth, row, inside, np.inf, False)
+            bad += pair_row(rows1, rows2, q, depth, row, inside)
         for i in range(h):
             q = i + o
-            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h, np.inf, False)
+            bad += pair_row(rows1, rows2, q, depth, xp[min(q, h - 1)], q < h)
             _vi_row(xp, i, g, t, work, rule, states, out[pl], mask[pl])
     return bad
 

@@ -28,6 +28,7 @@ def _scene(seed: int) -> torch.Tensor:
 
 
 ONE_SWEEP = {("ca", False), ("go", False), ("so", False), ("vi", False), ("ac", False)}
+ONE_SWEEP |= {("ca", True), ("ac", True)}  # with no-data too
 """Their one-sweep kernels sum the windows directly (within an ulp of the tensor code):
 tests/test_box_kernels.py, tests/test_pinwheel_kernels.py."""
 

@@ -61,15 +61,21 @@ def _over(value: float, mean: float) -> float:
     return value / mean if mean > 0 else (0.0 if value == 0 else math.inf)
 
 
-def ca_reference(x: np.ndarray, guard: int, train: int, pfa: float) -> np.ndarray:
-    """CA-CFAR's ``I / mean_ring`` over the in-image ring cells (summed exactly:
-    ``math.fsum``), times the border factor, pixel by pixel, of ``x`` ``(B, C, H, W)``;
-    ``0 / 0 = 0``."""
+def ca_reference(
+    x: np.ndarray, guard: int, train: int, pfa: float, valid: np.ndarray | None = None
+) -> np.ndarray:
+    """CA-CFAR's ``I / mean_ring`` over the in-image (and ``valid``) ring cells (summed
+    exactly: ``math.fsum``), times the border factor, pixel by pixel, of ``x`` ``(B, C, H,
+    W)``; ``0 / 0 = 0``; ``-inf`` where the pixel is not valid or its ring has no valid
+    cell."""
     from torchsar.cfar.thresholds import ca_factor
 
     n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
     out = np.empty(x.shape)
-    for idx, i, j, value, cells in _ring_pixels(x, guard, train):
+    for idx, i, j, value, cells in _ring_pixels(x, guard, train, valid):
+        if valid is not None and (not valid[idx][i, j] or cells.size == 0):
+            out[idx][i, j] = -math.inf
+            continue
         v = _over(value, math.fsum(cells) / len(cells))
         out[idx][i, j] = v * (1.0 / ca_factor(len(cells), pfa)) * ca_factor(n, pfa)
     return out
@@ -102,24 +108,33 @@ def two_parameter_reference(
 
 
 def ac_reference(
-    x: np.ndarray, guard: int, train: int, pfa: float, limit: np.ndarray, mu: np.ndarray
+    x: np.ndarray,
+    guard: int,
+    train: int,
+    pfa: float,
+    limit: np.ndarray,
+    mu: np.ndarray,
+    valid: np.ndarray | None = None,
 ) -> np.ndarray:
-    """AC-CFAR's ``I / mean`` over the ring cells at or below each plane's ``limit`` (summed
-    exactly: ``math.fsum``), times ``factor(N) / factor(c)`` for ``c`` such cells, or
-    ``I / mu * alpha / ln(1 / pfa)`` where every ring cell is censored, pixel by pixel, of
-    ``x`` ``(B, C, H, W)`` (``limit``, ``mu``: ``(B, C)``)."""
+    """AC-CFAR's ``I / mean`` over the (``valid``) ring cells at or below each plane's
+    ``limit`` (summed exactly: ``math.fsum``), times ``factor(N) / factor(c)`` for ``c`` such
+    cells, or ``I / mu * alpha / ln(1 / pfa)`` where every ring cell is censored, pixel by
+    pixel, of ``x`` ``(B, C, H, W)`` (``limit``, ``mu``: ``(B, C)``); ``-inf`` where the
+    pixel is not valid."""
     from torchsar.cfar.thresholds import ca_factor
 
     n = (2 * (guard + train) + 1) ** 2 - (2 * guard + 1) ** 2
     alpha = ca_factor(n, pfa)
     out = np.empty(x.shape)
-    for idx, i, j, value, cells in _ring_pixels(x, guard, train):
+    for idx, i, j, value, cells in _ring_pixels(x, guard, train, valid):
         kept = cells[cells <= limit[idx]]
-        if kept.size == 0:
+        if valid is not None and not valid[idx][i, j]:
+            out[idx][i, j] = -math.inf
+        elif kept.size == 0:
             out[idx][i, j] = value / mu[idx] * (alpha / math.log(1.0 / pfa))
-            continue
-        v = _over(value, math.fsum(kept) / kept.size)
-        out[idx][i, j] = v * (alpha / ca_factor(kept.size, pfa))
+        else:
+            v = _over(value, math.fsum(kept) / kept.size)
+            out[idx][i, j] = v * (alpha / ca_factor(kept.size, pfa))
     return out
 
 

@@ -1,5 +1,5 @@
 """numba kernels of the window CFARs' per-pixel rules over :func:`torchsar.windows.windowed`'s
-sums (GO, SO and VI, CA over a masked ring, OS-CFAR's ratio and decision): from the window
+sums (GO, SO and VI with no-data, OS-CFAR's ratio and decision): from the window
 sums to the statistic in one pass, with the values of the tensor code in
 :mod:`torchsar.cfar.blocks` and :mod:`torchsar.cfar.vi` bit for bit (the same float64
 operations in the same order, elementwise), without its full-size temporaries. Without
@@ -25,10 +25,8 @@ from torchsar._pinwheel_kernels import vi_rule
 __all__ = [
     "block_extreme_ratio",
     "censor_mean",
-    "counts_present",
     "os_decision",
     "os_ratio",
-    "ring_mean_ratio_masked",
     "vi_rule_ratio",
 ]
 
@@ -93,39 +91,6 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
                     sh = shift[b, c, i, j]
                     rule, stat = vi_rule(v, halves, ring_s1[b, c, i, j], ring_n, sh, k_vi, k_mr)
                     out[b, c, i, j] = stat * scale[rule, sb, sc, i, j]
-    return out
-
-
-@njit(**_JIT)
-def counts_present(count, size):
-    """Which integer counts ``0 .. size - 1`` occur in ``count`` (rounded)."""
-    seen = np.zeros(size, np.bool_)
-    flat = count.ravel()
-    for i in range(flat.size):
-        seen[int(np.rint(flat[i]))] = True
-    return seen
-
-
-@njit(**_JIT)
-def ring_mean_ratio_masked(x, count, s1, shift, n, scale):
-    """CA's statistic over a masked ring (:func:`torchsar.cfar.ca.ring_mean_ratio` with a
-    mask): ``x / mean`` with the border rule (``scale[c] = factor(n) / factor(c)`` where the
-    count ``c != n``) and ``-inf`` where no cell counted; float64 ``(B, C, rr, W)``."""
-    b_, c_, rr, w = s1.shape
-    out = np.empty((b_, c_, rr, w))
-    for b in range(b_):
-        for c in range(c_):
-            for i in range(rr):
-                for j in range(w):
-                    cnt = count[b, c, i, j]
-                    if cnt <= 0:
-                        out[b, c, i, j] = -np.inf
-                        continue
-                    mean = s1[b, c, i, j] / max(cnt, 1.0) + shift[b, c, i, j]
-                    stat = _ratio(np.float64(x[b, c, i, j]), mean)
-                    if cnt != n:
-                        stat = stat * scale[int(np.rint(cnt))]
-                    out[b, c, i, j] = stat
     return out
 
 

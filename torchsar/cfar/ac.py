@@ -2,22 +2,17 @@
 
 from __future__ import annotations
 
-import functools
 import math
 from functools import partial
 
-import numpy as np
 import torch
 from torch import Tensor
 
 from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_int, check_positive, check_probability
-from torchsar.cfar.ca import ca_threshold, ring_mean_ratio
+from torchsar.cfar.ca import ca_threshold, count_scale, kept_ring_ratio, ring_mean_ratio
 from torchsar.cfar.core import (
-    border_scale,
     conclude,
-    kernel_planes,
-    one_sweep,
     out_dtype,
     prepare,
     ratio,
@@ -101,7 +96,7 @@ def ac(
     iterations = check_int(iterations, "iterations", minimum=0)
     if clutter_mean is not None:
         check_positive(clutter_mean, "clutter_mean", allow_zero=True)
-    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    compiled = not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
     if not compiled:  # the values last, after every option (the compiled kernel reads them)
         check_image(x, "x")
     if clutter_mean is None:
@@ -115,7 +110,7 @@ def ac(
     )
     dtype = out_dtype(x)
     if compiled:
-        return _one_sweep(x, ring, pfa, (thr, mu), alpha, dtype)
+        return _one_sweep(x, ring, pfa, (thr, mu), alpha, dtype, vmask)
     keep = x <= thr if vmask is None else vmask & (x <= thr)
     stat = ring_mean_ratio(x, ring, partial(ca_factor, pfa=pfa), keep, dtype)
     glob = ratio(x.to(torch.float64), mu) * (alpha / math.log(1.0 / pfa))
@@ -130,30 +125,15 @@ def _one_sweep(
     censor: tuple[Tensor, Tensor],
     alpha: float,
     dtype: torch.dtype,
+    vmask: Tensor | None,
 ) -> Detection:
-    """:func:`ac` without no-data on the CPU in one sweep per image plane
-    (:func:`torchsar._box_kernels.censored_ratio`: the censored ring's cells and their count
-    summed directly, as CA sums its ring); ``censor``: each plane's pre-threshold and
-    clutter mean ``(B, C, 1, 1)``."""
-    from torchsar import _box_kernels
-
-    limit, mu = (c.to(torch.float64).reshape(-1).contiguous().numpy() for c in censor)
-    g, t, scale = ring.guard, ring.train, _count_scale(ring.n, pfa)
-    global_factor = alpha / math.log(1.0 / pfa)
-
-    def kernel(planes, thr, out, mask):
-        return _box_kernels.censored_ratio(
-            planes, limit, mu, g, t, scale, global_factor, thr, out, mask
-        )
-
-    return one_sweep(x, kernel_planes(x), dtype, alpha, kernel)
-
-
-@functools.lru_cache(maxsize=32)
-def _count_scale(n: int, pfa: float) -> np.ndarray:
-    """The border rule's factors of a censored ring of every count ``0 .. n`` (as
-    :func:`torchsar.cfar.core.border_scale` rounds them)."""
-    return border_scale(range(n + 1), n, partial(ca_factor, pfa=pfa))
+    """:func:`ac` on the CPU in one sweep per image plane
+    (:func:`torchsar.cfar.ca.kept_ring_ratio`: the censored ring's cells, valid ones with
+    no-data, and their count summed directly, as CA sums its ring); ``censor``: each
+    plane's pre-threshold and clutter mean ``(B, C, 1, 1)``."""
+    scale = count_scale(ring.n, pfa, 1.0)
+    factor = alpha / math.log(1.0 / pfa)
+    return kept_ring_ratio(x, ring, vmask, scale, alpha, dtype, censor, factor)
 
 
 def ac_threshold(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from functools import partial
 
@@ -23,12 +24,13 @@ from torchsar.cfar.core import (
     ratio,
     rescale_border_,
     rescale_frame_,
+    valid_planes,
 )
 from torchsar.cfar.thresholds import ca_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.windows import Ring, Sums, windowed
 
-__all__ = ["ca", "ca_threshold", "ring_mean_ratio"]
+__all__ = ["ca", "ca_threshold", "count_scale", "kept_ring_ratio", "ring_mean_ratio"]
 
 
 def ca(
@@ -76,12 +78,15 @@ def ca(
     factor = partial(ca_factor, pfa=pfa, looks=check_positive(looks, "looks"))
     threshold = ca_threshold(guard=guard, train=train, pfa=pfa, looks=looks)
     gpu = vmask is None and _triton.for_tensor(x)
-    compiled = vmask is None and not gpu and _jit.for_tensor(x) and x.numel()
-    if not compiled:  # the compiled kernel checks the values as it reads them
+    compiled = not gpu and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernels check the values as they read them
         check_image(x, "x")
     if gpu:
         stat, mask = _gpu_ring_ratio(x, ring, factor, threshold)
         return Detection(mask=mask, statistic=stat, threshold=_threshold(threshold, stat))
+    if compiled and vmask is not None:
+        scale = count_scale(ring.n, pfa, check_positive(looks, "looks"))
+        return kept_ring_ratio(x, ring, vmask, scale, threshold, out_dtype(x))
     if compiled:
         return _compiled_ring_ratio(x, ring, factor, out_dtype(x), threshold)
     stat = ring_mean_ratio(x, ring, factor, vmask, out_dtype(x))
@@ -108,8 +113,6 @@ def ring_mean_ratio(
             stat = ratio(xs, s.s1.div_(s.count).add_(s.shift))  # float64 by promotion
             r0 = int(rows[0, 0]) if rows.numel() else 0
             return rescale_frame_(stat, s.count, r0, h, ring, factor).to(dtype)
-        if _jit.for_tensor(xs):
-            return _compiled_masked(xs, s, ring.n, factor).to(dtype)
         stat = ratio(xs, s.mean_())
         return finish(rescale_border_(stat, s.count, ring.n, factor), s.count, dtype)
 
@@ -135,6 +138,48 @@ def _compiled_ring_ratio(
     )
 
 
+def kept_ring_ratio(
+    x: Tensor,
+    ring: Ring,
+    vmask: Tensor | None,
+    scale: np.ndarray,
+    threshold: float,
+    dtype: torch.dtype,
+    censor: tuple[Tensor, Tensor] | None = None,
+    global_factor: float = 0.0,
+) -> Detection:
+    """``x / mean`` over the ring's kept cells and the decision in one sweep per image plane
+    on the CPU (:func:`torchsar._box_kernels.kept_ratio`: the kept cells and their count
+    summed directly, as the one-sweep CA sums its ring): the valid cells (``vmask``), and
+    with ``censor`` (AC-CFAR's pre-threshold and clutter mean per plane, ``(B, C, 1, 1)``)
+    those at or below the pre-threshold, a ring with none taking ``(x / mu)
+    global_factor``; without ``censor`` such a ring gives ``-inf``, as a pixel not valid
+    itself does. ``scale[c]``: the border rule's factor of a ring of ``c`` kept cells
+    (:func:`count_scale`)."""
+    from torchsar import _box_kernels
+
+    p = x.shape[0] * x.shape[1]
+    if censor is None:
+        limit, mu = np.full(p, np.inf), np.full(p, np.nan)
+    else:
+        limit, mu = (c.to(torch.float64).reshape(-1).contiguous().numpy() for c in censor)
+    valid, g, t = valid_planes(vmask, x), ring.guard, ring.train
+
+    def kernel(planes, thr, out, mask):
+        return _box_kernels.kept_ratio(
+            planes, valid, vmask is not None, limit, mu, g, t, scale, global_factor, thr, out, mask
+        )
+
+    return one_sweep(x, kernel_planes(x), dtype, threshold, kernel)
+
+
+@functools.lru_cache(maxsize=32)
+def count_scale(n: int, pfa: float, looks: float) -> np.ndarray:
+    """The border rule's factors ``factor(n) / factor(c)`` of a ring of every count ``c =
+    0 .. n`` (as :func:`torchsar.cfar.core.border_scale` rounds them), CA's factor."""
+    return border_scale(range(n + 1), n, partial(ca_factor, pfa=pfa, looks=looks))
+
+
 def _gpu_ring_ratio(
     x: Tensor, ring: Ring, factor: Callable[[int], float], threshold: float
 ) -> tuple[Tensor, Tensor]:
@@ -150,21 +195,6 @@ def _threshold(threshold: float, statistic: Tensor) -> Tensor:
     """The threshold as :func:`~torchsar.detection.detection_from` holds it: a scalar
     tensor of the statistic's dtype."""
     return torch.as_tensor(threshold, dtype=statistic.dtype, device=statistic.device)
-
-
-def _compiled_masked(xs: Tensor, s: Sums, n: int, factor: Callable[[int], float]) -> Tensor:
-    """The masked branch of :func:`ring_mean_ratio` by
-    :func:`torchsar.cfar._kernels.ring_mean_ratio_masked` (same values bit for bit): the
-    border factors are evaluated once per count that occurs, as :func:`rescale_border_`
-    does."""
-    from torchsar.cfar import _kernels
-
-    count = s.count.expand_as(s.s1).contiguous().numpy()
-    scale = border_scale(np.flatnonzero(_kernels.counts_present(count, n + 1)), n, factor)
-    out = _kernels.ring_mean_ratio_masked(
-        xs.contiguous().numpy(), count, s.s1.numpy(), s.shifts().numpy(), n, scale
-    )
-    return torch.from_numpy(out)
 
 
 def ca_threshold(*, guard: int, train: int, pfa: float, looks: float) -> float:

@@ -94,6 +94,15 @@ def one_sweep(
     return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
 
 
+def valid_planes(vmask: Tensor | None, x: Tensor) -> np.ndarray:
+    """A no-data mask as the one-sweep kernels read it: uint8 ``(P, H, W)`` planes of
+    ``x``'s shape (1 for a valid cell), or a ``(1, 1, 1)`` placeholder without a mask."""
+    if vmask is None:
+        return np.ones((1, 1, 1), np.uint8)
+    planes = vmask.expand_as(x).reshape(-1, *x.shape[-2:])
+    return planes.contiguous().view(torch.uint8).numpy()
+
+
 def square_safe_planes(x: Tensor) -> tuple[Tensor, bool]:
     """The ``(P, H, W)`` planes of ``x`` for a compiled kernel that sums squares in float64:
     a float64 plane whose peak lies outside ``[2^-384, 2^384]`` is divided by the power of

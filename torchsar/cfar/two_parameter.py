@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -16,6 +15,7 @@ from torchsar.cfar.core import (
     prepare,
     ratio_,
     square_safe_planes,
+    valid_planes,
 )
 from torchsar.cfar.thresholds import gaussian_factor
 from torchsar.detection import WINDOW, Detection, DetectorSpec
@@ -102,10 +102,7 @@ def _one_sweep(
     if rescaled:  # a tiny negative value divided could read as -0.0
         check_image(x.detach(), "x")
     g, t = ring.guard, ring.train
-    if vmask is None:
-        valid = np.ones((1, 1, 1), np.uint8)
-    else:
-        valid = vmask.expand_as(x).reshape(planes.shape).contiguous().view(torch.uint8).numpy()
+    valid = valid_planes(vmask, x)
 
     def kernel(planes, thr, out, mask):
         return _box_kernels.deviation_ratio(planes, valid, vmask is not None, g, t, thr, out, mask)
