@@ -631,7 +631,8 @@ def test_two_parameter_with_no_data_beside_blocks_of_zeros(monkeypatch):
         )
 
 
-def test_two_parameter_with_no_data_refuses_bad_values_anywhere(monkeypatch):
+@pytest.mark.parametrize("name", ["two_parameter", "ca", "ac"])
+def test_the_no_data_kernels_refuse_bad_values_anywhere(monkeypatch, name):
     """A NaN in an invalid cell is still refused, with the tensor code's words."""
     from torchsar.errors import InputValueError
 
@@ -639,7 +640,7 @@ def test_two_parameter_with_no_data_refuses_bad_values_anywhere(monkeypatch):
     valid = torch.ones_like(x, dtype=torch.bool)
     x[0, 0, 5, 5] = float("nan")
     valid[0, 0, 5, 5] = False
-    errs = _errors(monkeypatch, lambda: cfar.two_parameter(x, valid=valid))
+    errs = _errors(monkeypatch, lambda: getattr(cfar, name)(x, valid=valid))
     assert errs[0] == errs[1] and errs[0][0] is InputValueError
 
 
