@@ -108,10 +108,19 @@ def test_direct_sums_are_the_triton_kernels_bit_for_bit(masked):
 
 def test_windowed_sums_on_the_cpu_are_direct():
     """With the kernels on, a CPU tensor's rectangle and ring sums are the direct sums (a
-    plane of per-pixel shifts); regions of other shapes, and the kernels off, take the
-    integral images (one shift per image)."""
-    x = torch.from_numpy(_scene(5, (1, 12, 12))).float().reshape(1, 1, 12, 12)
-    assert rect_sums(x, [Ring(1, 1).region])[0].shift.shape == (1, 1, 12, 12)
+    plane of per-pixel shifts) up to ``DIRECT_CELLS`` cells in all; larger windows,
+    regions of other shapes, and the kernels off, take the integral images (one shift per
+    image)."""
+    x = torch.from_numpy(_scene(5, (1, 40, 40))).float().reshape(1, 1, 40, 40)
+    assert rect_sums(x, [Ring(1, 1).region])[0].shift.shape == (1, 1, 40, 40)
+    side = int(windows.DIRECT_CELLS**0.5)  # a box of at most DIRECT_CELLS cells
+    assert rect_sums(x, [Rect.box(side // 2)])[0].shift.shape == (1, 1, 40, 40)
+    cells = windows.DIRECT_CELLS // 2
+    half, rest = Rect(0, 0, 0, cells - 1), Rect(1, 1, 0, windows.DIRECT_CELLS - cells - 1)
+    assert half.area + rest.area == windows.DIRECT_CELLS  # two regions: as many cells
+    assert rect_sums(x, [half, rest])[0].shift.shape == (1, 1, 40, 40)
+    more = Rect(1, 1, 0, windows.DIRECT_CELLS - cells)  # one cell too many
+    assert rect_sums(x, [half, more])[0].shift.shape == (1, 1, 1, 1)
     other = Region((Rect.box(1),), (Rect(0, 0, 3, 3),))  # a box minus a cell outside it
     assert rect_sums(x, [other])[0].shift.shape == (1, 1, 1, 1)
     with pytest.MonkeyPatch.context() as m:

@@ -7,16 +7,17 @@ by strip of rows.
 
 How the cells are summed:
 
-- rectangles and rings (every shape the detectors use), on the CPU with the compiled
-  kernels and on a GPU: every cell added on its own in float64, as its deviation from a
-  cell of the pixel's own window (the first in-image, valid one), in a fixed order. No
-  integral image, so nothing cancels: a bright target elsewhere in the image leaves no
-  residue in a window of clutter, a window of equal cells has sums of exactly 0, and the
-  CPU's sums are the GPU's bit for bit. The cost grows with the window's cells (a 144-cell
-  ring: about 2x the integral images on one CPU thread).
-- other regions, and without the compiled kernels: zero-padded float64 integral images
-  of ``x - mean`` (the image's mean) read with four shifted slices per rectangle, at a
-  cost per pixel independent of the window size.
+- rectangles and rings (every shape the detectors use), on a GPU and, up to
+  :data:`DIRECT_CELLS` cells (the default ring's 144, its four pinwheel blocks with it,
+  boxes up to 17 x 17), on the CPU with the compiled kernels: every cell added on its own
+  in float64, as its deviation from a cell of the pixel's own window (the first in-image,
+  valid one), in a fixed order. No integral image, so nothing cancels: a bright target
+  elsewhere in the image leaves no residue in a window of clutter, a window of equal cells
+  has sums of exactly 0, and the CPU's sums are the GPU's bit for bit. The cost grows with
+  the window's cells (the 144-cell ring: about 2.4x the integral images on one CPU thread).
+- other regions, larger windows on the CPU, and without the compiled kernels: zero-padded
+  float64 integral images of ``x - mean`` (the image's mean) read with four shifted slices
+  per rectangle, at a cost per pixel independent of the window size.
 
 Borders and no-data: cells outside the image never count, and an optional boolean ``valid``
 mask removes no-data cells too. Every sum comes with the matching **count** of valid cells,
@@ -44,6 +45,7 @@ from torchsar import _jit, _triton
 from torchsar._checks import check_int, check_window_fits
 
 __all__ = [
+    "DIRECT_CELLS",
     "Rect",
     "Region",
     "Ring",
@@ -427,13 +429,23 @@ def disjoint_rects(region: Region) -> list[tuple[int, int, int, int]] | None:
     return [b for b in bands if b[0] <= b[1] and b[2] <= b[3]]
 
 
+DIRECT_CELLS = 320
+"""On the CPU, the most window cells (over all regions of one call) summed cell by cell;
+more take the integral images, whose cost does not grow with the window (cell by cell
+costs about 0.08 ms per cell and moment pair on a 512 x 512 image on one thread: the
+default ring's 144 cells 2.4x the integral images)."""
+
+
 def _direct(x: Tensor, regions: tuple[Region, ...]) -> bool:
     """Whether the window sums of ``x`` add every cell directly (the Triton kernel on a GPU,
-    :func:`torchsar._windows_kernels.direct_sums` on the CPU, the same additions in the
-    same order; every region a rectangle or a ring): then they need no image mean, their
-    shifts being per pixel."""
-    takes = _triton.for_tensor(x) or _jit.for_tensor(x)
-    return takes and all(disjoint_rects(reg) is not None for reg in regions)
+    whatever the window; :func:`torchsar._windows_kernels.direct_sums` on the CPU, the same
+    additions in the same order, up to :data:`DIRECT_CELLS` cells): every region a
+    rectangle or a ring. Then they need no image mean, their shifts being per pixel."""
+    if not all(disjoint_rects(reg) is not None for reg in regions):
+        return False
+    if _triton.for_tensor(x):
+        return True
+    return _jit.for_tensor(x) and sum(reg.area for reg in regions) <= DIRECT_CELLS
 
 
 def _direct_strip_sums(
