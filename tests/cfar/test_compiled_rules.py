@@ -60,6 +60,22 @@ def test_compiled_rules_equal_the_tensor_code(monkeypatch, name, dtype, masked):
     assert torch.equal(a.statistic, b.statistic) and torch.equal(a.mask, b.mask)
 
 
+@pytest.mark.parametrize("name", ["go", "so", "vi"])
+def test_compiled_rules_over_integral_images(monkeypatch, name):
+    """Windows of more cells than the CPU sums one by one take the integral images (one
+    shift per image, broadcast for the compiled rules): the tensor code's statistic bit
+    for bit there too."""
+    from torchsar.windows import DIRECT_CELLS, Ring
+
+    assert 2 * Ring(1, 9).n > DIRECT_CELLS
+    x = _scene(4)[:1, :1]
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(4)) > 0.3
+    detector = getattr(cfar, name)
+    call = lambda: detector(x, guard=1, train=9, valid=valid)  # noqa: E731
+    a, b = rules_both(monkeypatch, call, RULE_MODULES)
+    assert torch.equal(a.statistic, b.statistic) and torch.equal(a.mask, b.mask)
+
+
 @pytest.mark.parametrize("name", ["go", "vi"])
 def test_compiled_rules_do_not_depend_on_the_batch(name):
     x = _scene(3)
