@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import torchsar as ts
 from tests.reference.cfar import zero_blocks_scene
@@ -164,3 +166,47 @@ def test_no_data_detections_beside_zero_blocks_are_the_direct_sums(seed):
         m.setattr(windows, "_direct_strip_sums", lambda *a, **k: sums)
         want = ts.cfar.vi(x, guard=g, train=t, valid=valid)
     assert torch.equal(got.mask, want.mask)
+
+
+@st.composite
+def _cases(draw):
+    """A small plane stack, a strip of its rows, one to three regions of one to three
+    disjoint rectangles (row bands at distinct offsets), a mask or none."""
+    p, h, w = draw(st.integers(1, 2)), draw(st.integers(1, 9)), draw(st.integers(1, 11))
+    r = draw(st.integers(0, h - 1))
+    rr = draw(st.integers(1, h - r))
+    regions, row = [], -6
+    for _ in range(draw(st.integers(1, 3))):
+        rects = []
+        for _ in range(draw(st.integers(1, 3))):
+            top = row
+            row += draw(st.integers(1, 2))
+            c0 = draw(st.integers(-6, 5))
+            rects.append((top, row - 1, c0, c0 + draw(st.integers(0, 6))))
+        regions.append(rects)
+    seed = draw(st.integers(0, 2**16))
+    return (p, h, w), r, rr, regions, draw(st.booleans()), draw(st.sampled_from([1, 2])), seed
+
+
+@settings(max_examples=60, deadline=None)
+@given(_cases())
+def test_direct_sums_on_random_windows(case):
+    """Any rectangles (beside, inside and beyond the image), strips and masks: the cells
+    added in order, bit for bit, on clutter with exact zeros and a bright target."""
+    shape, r, rr, parts, masked, moments, seed = case
+    rng = np.random.default_rng(seed)
+    x = rng.exponential(size=shape).astype(np.float32)
+    x[rng.random(shape) < 0.2] = 0.0
+    x.flat[int(rng.integers(x.size))] *= 1e6
+    valid = rng.random(shape) > 0.3 if masked else None
+    s1, s2, shift, count = _kernel(x, parts, r, rr, moments, valid)
+    flat = x.astype(np.float64)
+    first = first_cells(flat, parts, valid)
+    assert np.array_equal(shift, first[:, r : r + rr])
+    for q, rects in enumerate(parts):
+        want1, want2, n = ordered_sums(flat, rects, first, valid)
+        assert np.array_equal(s1[q], want1[:, r : r + rr])
+        if moments == 2:
+            assert np.array_equal(s2[q], want2[:, r : r + rr])
+        if masked:
+            assert np.array_equal(count[q], n[:, r : r + rr])
