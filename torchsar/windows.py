@@ -8,13 +8,13 @@ by strip of rows.
 How the cells are summed:
 
 - rectangles and rings (every shape the detectors use), on a GPU and, up to
-  :data:`DIRECT_CELLS` cells (the default ring's 144, its four pinwheel blocks with it,
-  boxes up to 17 x 17), on the CPU with the compiled kernels: every cell added on its own
-  in float64, as its deviation from a cell of the pixel's own window (the first in-image,
-  valid one), in a fixed order. No integral image, so nothing cancels: a bright target
-  elsewhere in the image leaves no residue in a window of clutter, a window of equal cells
-  has sums of exactly 0, and the CPU's sums are the GPU's bit for bit. The cost grows with
-  the window's cells (the 144-cell ring: about 2.4x the integral images on one CPU thread).
+  :data:`DIRECT_CELLS` cells (the default ring's 144, boxes up to 17 x 17), on the CPU
+  with the compiled kernels: every cell added on its own in float64, as its deviation
+  from a cell of the pixel's own window (the first in-image, valid one), in a fixed
+  order. No integral image, so nothing cancels: a bright target elsewhere in the image
+  leaves no residue in a window of clutter, a window of equal cells has sums of exactly
+  0, and the CPU's sums are the GPU's bit for bit. The cost grows with the window's cells
+  (the 144-cell ring: about 2.4x the integral images on one CPU thread).
 - other regions, larger windows on the CPU, and without the compiled kernels: zero-padded
   float64 integral images of ``x - mean`` (the image's mean) read with four shifted slices
   per rectangle, at a cost per pixel independent of the window size.

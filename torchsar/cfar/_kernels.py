@@ -62,20 +62,18 @@ def block_extreme_ratio(x, count, s1, shift, is_max):
 
 
 @njit(**_JIT)
-def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scale):
+def vi_rule_ratio(x, count, s1, s2, shift, k_vi, k_mr, scale):
     """The VI rule and statistic of every pixel (:func:`torchsar.cfar.vi.vi`'s
     ``statistic`` before :func:`~torchsar.cfar.core.finish`): blocks 0, 1 form half A and 2,
-    3 half B; ``scale`` ``(5, Sb, Sc, rr, W)`` is ``full / alpha`` of each rule. Returns the
-    float64 statistic ``(B, C, rr, W)``."""
+    3 half B, the two halves the ring; ``scale`` ``(5, Sb, Sc, rr, W)`` is ``full / alpha``
+    of each rule. Returns the float64 statistic ``(B, C, rr, W)``."""
     _, b_, c_, rr, w = s1.shape
     out = np.empty((b_, c_, rr, w))
     for b in range(b_):
         bc = b if count.shape[1] > 1 else 0
-        rb = b if ring_count.shape[0] > 1 else 0
         sb = b if scale.shape[1] > 1 else 0
         for c in range(c_):
             cc = c if count.shape[2] > 1 else 0
-            rc = c if ring_count.shape[1] > 1 else 0
             sc = c if scale.shape[2] > 1 else 0
             for i in range(rr):
                 for j in range(w):
@@ -86,10 +84,9 @@ def vi_rule_ratio(x, count, s1, s2, ring_count, ring_s1, shift, k_vi, k_mr, scal
                     a2 = s2[0, b, c, i, j] + s2[1, b, c, i, j]
                     b2 = s2[2, b, c, i, j] + s2[3, b, c, i, j]
                     halves = (na, nb, a1, b1, a2, b2)
-                    ring_n = ring_count[rb, rc, i, j]
                     v = np.float64(x[b, c, i, j])
                     sh = shift[b, c, i, j]
-                    rule, stat = vi_rule(v, halves, ring_s1[b, c, i, j], ring_n, sh, k_vi, k_mr)
+                    rule, stat = vi_rule(v, halves, a1 + b1, na + nb, sh, k_vi, k_mr)
                     out[b, c, i, j] = stat * scale[rule, sb, sc, i, j]
     return out
 

@@ -107,12 +107,12 @@ def vi(
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
         rule = _decide(a, b, mean_a, mean_b, k_vi, k_mr)
-        est = _estimate(rule, mean_a, mean_b, sums[4])
+        est = _estimate(rule, mean_a, mean_b, _merge(a, b))  # the ring: the two halves
         stat = ratio(xs.to(torch.float64), est)
         scale = _rule_scale(rule, a.count, b.count, ring.n, full, factor)
         return finish(stat * scale, a.count + b.count, dtype)
 
-    rects = [*pinwheel_rects(ring.guard, ring.train), ring.region]
+    rects = pinwheel_rects(ring.guard, ring.train)  # the four blocks make the ring
     stat = windowed(x, rects, statistic, valid=vmask, moments=2)
     return conclude(stat, vmask, full)
 
@@ -138,16 +138,12 @@ def _compiled(
         [count_a, count_b],
         lambda: torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)]),
     )
-    ring = sums[4]
-    ring_count = ring.count if ring.count.dim() == 4 else ring.count.view(1, 1, *ring.count.shape)
     out = _kernels.vi_rule_ratio(
         xs.contiguous().numpy(),
         count.numpy(),
         stack_planes([s.s1 for s in sums[:4]]).numpy(),
         stack_planes([s.s2 for s in sums[:4]]).numpy(),
-        ring_count.contiguous().numpy(),
-        ring.s1.contiguous().numpy(),
-        ring.shifts().numpy(),
+        sums[0].shifts().numpy(),
         k_vi,
         k_mr,
         scale.contiguous().numpy(),
