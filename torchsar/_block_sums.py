@@ -210,11 +210,18 @@ def kept_row(rows1, rows2, q, depth, row, present, limit, vrow, has_valid):
     size, w = rows1.shape[1], rows1.shape[2]
     d1, d2 = rows1[0, q % size], rows2[0, q % size]
     bad = 0
-    if present:
+    if present and has_valid:
         for j in range(w):
             v = np.float64(row[j])
             bad += not (v >= 0.0 and v <= FINITE_MAX)  # NaN fails both
-            kept = v <= limit and (not has_valid or vrow[j] != 0)
+            kept = (v <= limit) & (vrow[j] != 0)  # no branch: vectorises
+            d1[j] = v if kept else 0.0
+            d2[j] = 1.0 if kept else 0.0
+    elif present:
+        for j in range(w):
+            v = np.float64(row[j])
+            bad += not (v >= 0.0 and v <= FINITE_MAX)
+            kept = v <= limit
             d1[j] = v if kept else 0.0
             d2[j] = 1.0 if kept else 0.0
     else:
