@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["direct_sums", "strip_sums"]
+__all__ = ["direct_sums", "strip_sums", "valid_counts"]
 
 _JIT = {"cache": True, "nogil": True}
 
@@ -311,3 +311,19 @@ def direct_sums(x, valid, has_valid, rects, starts, r, rr, moments):
                             _add_cells(row, weights, pad + b, n, sh, o1, o2, moments)
                             b += n
     return s1, s2, shift, cnt
+
+
+@njit(**_JIT)
+def valid_counts(valid, rects):
+    """How many valid cells (``valid`` uint8 ``(P, H, W)``, non-zero) of the rectangles
+    ``rects`` (rows ``(r0, r1, c0, c1)`` of offsets, inclusive, disjoint) lie in the image
+    around every pixel: float64 ``(P, H, W)``, exact (from an integral image of the mask)."""
+    p_, h, w = valid.shape
+    out = np.zeros((p_, h, w))
+    table = np.zeros((h + 1, w + 1), np.int64)
+    for p in range(p_):
+        _count_table(valid[p], 0, table)
+        for i in range(h):
+            for t in range(rects.shape[0]):
+                _count_rect(table, 0, h, i, rects[t], out[p, i])
+    return out

@@ -203,7 +203,7 @@ def test_the_counting_kernel_decides_as_the_statistic_at_any_threshold(thr):
     planes = x.reshape(-1, h, w).contiguous()
     est = ring_order_statistic(x, ring, ranks).reshape(-1, h, w)
     stat = np.empty(planes.shape, dtype=np.float32)
-    _kernels.os_ratio(planes.numpy(), est.numpy(), counts, ring.n, scale, stat)
+    _kernels.os_ratio(planes.numpy(), est.numpy(), counts[None], ring.n, scale, stat)
     got = np.empty(planes.shape, dtype=np.bool_)
     t = np.float32(thr)
     _kernels.os_decision(

@@ -93,17 +93,21 @@ def vi_rule_ratio(x, count, s1, s2, shift, k_vi, k_mr, scale):
 
 @njit(**_JIT)
 def os_ratio(x, est, count, n, scale, out):
-    """OS-CFAR's statistic without no-data (:func:`torchsar.cfar.os_cfar.os`'s tensor code
-    bit for bit): ``I / x_(k)`` in float64 (``0 / 0 = 0``), times ``scale[c]`` where the
-    pixel's ring count ``c`` (``count``, ``(H, W)``, shared by every plane) is not ``n``,
+    """OS-CFAR's statistic (:func:`torchsar.cfar.os_cfar.os`'s tensor code bit for bit):
+    ``I / x_(k)`` in float64 (``0 / 0 = 0``), times ``scale[c]`` where the pixel's ring
+    count ``c`` (``count`` ``(Pc, H, W)``: one plane shared by every image plane without
+    no-data, or one per plane) is not ``n``, ``-inf`` where it is 0 (no counted cell),
     cast to ``out``'s dtype; ``x``, ``est`` and ``out`` are ``(P, H, W)``."""
     p_, h, w = x.shape
     for p in range(p_):
+        cp = count[p if count.shape[0] > 1 else 0]
         for i in range(h):
             for j in range(w):
                 stat = _ratio(np.float64(x[p, i, j]), np.float64(est[p, i, j]))
-                c = count[i, j]
-                if c != n:
+                c = cp[i, j]
+                if c == 0:
+                    stat = -np.inf
+                elif c != n:
                     stat = stat * scale[c]
                 out[p, i, j] = stat
 

@@ -13,6 +13,7 @@ from torch import Tensor
 from torchsar import _jit, _triton
 from torchsar._checks import check_image, check_int, check_probability
 from torchsar.cfar.core import (
+    border_scale,
     conclude,
     finish,
     geometric_scale,
@@ -20,12 +21,13 @@ from torchsar.cfar.core import (
     prepare,
     ratio,
     rescale_border_,
+    valid_planes,
 )
 from torchsar.cfar.thresholds import factor_map, os_factor, os_rank
 from torchsar.detection import WINDOW, Detection, DetectorSpec
 from torchsar.errors import OptionError
 from torchsar.order_statistics import ring_order_statistic
-from torchsar.windows import Ring, Sums, region_count, windowed
+from torchsar.windows import Ring, Sums, disjoint_rects, region_count, windowed
 
 __all__ = ["os", "os_mask", "os_threshold"]
 
@@ -82,8 +84,8 @@ def os(
         *tables, thr = _gpu_args(x, ring, r, factor)
         stat, mask = _triton.kernels().os_ratio(x, *tables, thr)
         return Detection(mask=mask, statistic=stat, threshold=thr)
-    if vmask is None and _jit.for_tensor(x) and x.numel():
-        return conclude(_compiled(x, ring, r, factor), None, factor(ring.n))
+    if _jit.for_tensor(x) and x.numel():
+        return conclude(_compiled(x, ring, r, factor, vmask), vmask, factor(ring.n))
     counts = _ring_counts(x, ring, vmask)
     ranks = factor_map(counts, partial(os_rank, n_full=ring.n, rank=r)).long()
     est = ring_order_statistic(x, ring, ranks, valid=vmask)
@@ -185,21 +187,40 @@ def _check_rank(rank: int | None, ring: Ring) -> int:
     return r
 
 
-def _compiled(x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float]) -> Tensor:
-    """The statistic without no-data on CPU with the compiled kernels, the same values bit
-    for bit as the tensor code: the ring counts, ranks and border factors depend only on the
-    geometry (remembered per image size), the order statistic by the sliding rank bitset and
-    ``I / x_(k)`` with the border factor by :func:`torchsar.cfar._kernels.os_ratio`."""
+def _compiled(
+    x: Tensor, ring: Ring, rank: int, factor: Callable[[int], float], vmask: Tensor | None
+) -> Tensor:
+    """The statistic on CPU with the compiled kernels, the same values bit for bit as the
+    tensor code: the order statistic by the sliding rank bitset and ``I / x_(k)`` with the
+    border factor by :func:`torchsar.cfar._kernels.os_ratio`. Without no-data the ring
+    counts, ranks and border factors depend only on the geometry (remembered per image
+    size); with it the valid ring cells are counted per plane (exact, from an integral
+    image of the mask) and the ranks and factors looked up per count."""
     from torchsar.cfar import _kernels
 
     h, w = x.shape[-2:]
-    counts, ranks = _geometry(h, w, ring, rank)
-    est = ring_order_statistic(x, ring, ranks)
-    scale = geometric_scale(h, w, ring, factor)
+    if vmask is None:
+        counts, ranks = _geometry(h, w, ring, rank)
+        counts, scale = counts[None], geometric_scale(h, w, ring, factor)
+    else:
+        counts = _valid_counts(x, ring, vmask)
+        table = np.array([os_rank(c, ring.n, rank) for c in range(ring.n + 1)], np.int64)
+        ranks = torch.from_numpy(table[counts]).view(x.shape)
+        scale = border_scale(range(ring.n + 1), ring.n, factor)
+    est = ring_order_statistic(x, ring, ranks, valid=vmask)
     planes = x.detach().reshape(-1, h, w).contiguous().numpy()
     out = torch.empty(planes.shape, dtype=out_dtype(x))
     _kernels.os_ratio(planes, est.reshape(-1, h, w).numpy(), counts, ring.n, scale, out.numpy())
     return out.view(x.shape)
+
+
+def _valid_counts(x: Tensor, ring: Ring, vmask: Tensor) -> np.ndarray:
+    """The valid ring cells of every pixel, int64 ``(P, H, W)`` (exact)."""
+    from torchsar import _windows_kernels
+
+    rects = np.array(disjoint_rects(ring.region), np.int64)
+    counts = _windows_kernels.valid_counts(valid_planes(vmask, x), rects)
+    return counts.astype(np.int64)
 
 
 @lru_cache(maxsize=16)
