@@ -139,11 +139,13 @@ def strip_sums(x, r, rr, pad, shift, vmask, has_mask, moments, rects, n_regions)
 
 
 @njit(**_JIT)
-def _first_cells(xp, vp, has_valid, i, rects, out):
+def _first_cells(xp, has_valid, nxt, lo, i, rects, out):
     """The shift of every pixel of row ``i``: the value (float64) of the first in-image
     cell (valid cell, ``has_valid``) of the rectangles ``rects`` (rows ``(r0, r1, c0,
     c1)`` of offsets, inclusive), in the order the sums add them (rectangle by rectangle,
-    each row by row); 0 where none is."""
+    each row by row); 0 where none is. ``nxt[r - lo, j]``: the first valid column at or
+    after ``j`` in image row ``r`` (``W`` where none is), so each rectangle row is one
+    look-up."""
     h, w = xp.shape
     for j in range(w):
         c = 0.0
@@ -151,16 +153,27 @@ def _first_cells(xp, vp, has_valid, i, rects, out):
         for t in range(rects.shape[0]):
             top, bot = max(i + rects[t, 0], 0), min(i + rects[t, 1], h - 1)
             left, right = max(j + rects[t, 2], 0), min(j + rects[t, 3], w - 1)
+            if left > right:
+                continue
             for ii in range(top, bot + 1):
-                for jj in range(left, right + 1):
-                    if not has_valid or vp[ii, jj] != 0:
-                        c, found = np.float64(xp[ii, jj]), True
-                        break
-                if found:
+                jj = nxt[ii - lo, left] if has_valid else left
+                if jj <= right:
+                    c, found = np.float64(xp[ii, jj]), True
                     break
             if found:
                 break
         out[j] = c
+
+
+@njit(**_JIT)
+def _next_valid(vp, lo, nxt):
+    """``nxt[r, j]``: the first column at or after ``j`` where row ``lo + r`` of ``vp`` is
+    non-zero (``W`` where none is)."""
+    w = vp.shape[1]
+    for r in range(nxt.shape[0]):
+        nxt[r, w] = w
+        for j in range(w - 1, -1, -1):
+            nxt[r, j] = j if vp[lo + r, j] != 0 else nxt[r, j + 1]
 
 
 @njit(**_JIT)
@@ -246,16 +259,26 @@ def _count_table(vp, lo, table):
 def _count_rect(table, lo, h, i, rect, out):
     """``out[j] +=`` the valid cells of ``rect`` (offsets ``(r0, r1, c0, c1)``) around pixel
     ``(i, j)`` inside the image (``h`` rows), from :func:`_count_table`'s ``table`` of the
-    rows from ``lo``."""
+    rows from ``lo``: a difference of four corners, the columns whose rectangle lies inside
+    the image in one vectorised pass, the others clamped."""
     w = table.shape[1] - 1
     top, bot = min(max(i + rect[0], 0), h), min(max(i + rect[1] + 1, 0), h)
     if bot <= top:
         return
     up, down = table[top - lo], table[bot - lo]
-    for j in range(w):
-        left, right = min(max(j + rect[2], 0), w), min(max(j + rect[3] + 1, 0), w)
-        right = max(right, left)
-        out[j] += (down[right] - up[right]) - (down[left] - up[left])
+    a, b = min(max(-rect[2], 0), w), max(min(w - rect[3] - 1, w), 0)  # inside: a <= j < b
+    b = max(a, b)
+    if b > a:
+        d_lo, u_lo = down[a + rect[2] : b + rect[2]], up[a + rect[2] : b + rect[2]]
+        d_hi, u_hi = down[a + rect[3] + 1 : b + rect[3] + 1], up[a + rect[3] + 1 : b + rect[3] + 1]
+        o = out[a:b]
+        for j in range(b - a):
+            o[j] += (d_hi[j] - u_hi[j]) - (d_lo[j] - u_lo[j])
+    for lo_j, hi_j in ((0, a), (b, w)):
+        for j in range(lo_j, hi_j):
+            left, right = min(max(j + rect[2], 0), w), min(max(j + rect[3] + 1, 0), w)
+            right = max(right, left)
+            out[j] += (down[right] - up[right]) - (down[left] - up[left])
 
 
 @njit(**_JIT)
@@ -286,15 +309,17 @@ def direct_sums(x, valid, has_valid, rects, starts, r, rr, moments):
     rows = np.zeros((hi - lo, w + 2 * pad + 3))
     ok = np.zeros((hi - lo, w + 2 * pad + 3))
     table = np.zeros((hi - lo + 1, w + 1), np.int64)  # the valid cells' integral image
+    nxt = np.zeros((hi - lo if has_valid else 0, w + 1), np.int64)
     for p in range(p_):
         xp, vp = x[p], valid[p if has_valid else 0]
         _padded_rows(xp, vp, has_valid, lo, hi, pad, rows, ok)
         if has_valid:
             _count_table(vp, lo, table)
+            _next_valid(vp, lo, nxt)
         for k in range(rr):
             i = r + k
             sh = shift[p, k]
-            _first_cells(xp, vp, has_valid, i, rects[: starts[k_]], sh)
+            _first_cells(xp, has_valid, nxt, lo, i, rects[: starts[k_]], sh)
             for q in range(k_):
                 o1 = s1[q, p, k]
                 o2 = s2[q, p, k] if moments >= 2 else o1
