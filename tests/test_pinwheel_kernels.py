@@ -264,3 +264,48 @@ def test_huge_and_tiny_float64_planes_give_the_scaled_statistic(name, factor):
     got = fn(x * factor, guard=1, train=2)
     torch.testing.assert_close(got.statistic, want.statistic, rtol=1e-12, atol=1e-12)
     assert torch.equal(got.mask, want.mask)
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("guard, train", [(1, 2), (0, 3)])
+def test_go_so_with_no_data_are_the_exactly_summed_statistic(
+    monkeypatch, name, dtype, guard, train
+):
+    """With a valid mask the kernel sums and counts each block's valid cells: at every
+    pixel the exactly summed statistic over them with the factor of the blocks' counts
+    (degenerate planes, blocks without a valid cell, invalid pixels -inf); within an ulp of
+    the tensor code on clutter; with a mask of all valid cells, of the unmasked kernel."""
+    g = torch.Generator().manual_seed(5)
+    x = torch.empty(1, 3, 13, 15, dtype=torch.float64).exponential_(generator=g)
+    x[0, 1] = 0.0
+    x[0, 1, 6, 7] = 50.0
+    x[0, 2, 2, 3] = 1e12
+    x = x.to(dtype)
+    rng = np.random.default_rng(5)
+    valid = rng.random(x.shape) > 0.3
+    valid[0, 0, 2:12, 2:12] = False
+    valid[0, 0, 7, 7] = True  # a valid pixel whose blocks hold no valid cell
+    valid[0, 1, 6, 7] = True
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    fn = getattr(cfar, name)
+    d = fn(x, guard=guard, train=train, valid=torch.from_numpy(valid))
+    got = d.statistic.double().numpy()
+    want = block_reference(x.double().numpy(), guard, train, 1e-3, DETECTORS[name], valid)
+    assert np.array_equal(got[~np.isfinite(want)], want[~np.isfinite(want)])
+    assert want[0, 0, 7, 7] == -np.inf and (want == 0).any()
+    fin = np.isfinite(want)
+    if dtype == torch.float32:
+        ulp = np.spacing(np.abs(want[fin]).astype(np.float32)).astype(np.float64)
+        assert (np.abs(got[fin] - want[fin]) <= ulp).all()
+    else:
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-13, atol=1e-300)
+    assert torch.equal(d.mask, d.statistic > d.threshold)
+    clutter = _scene(6, dtype=dtype)
+    mask = torch.rand(clutter.shape, generator=torch.Generator().manual_seed(6)) > 0.2
+    a, b = _both(monkeypatch, lambda: fn(clutter, guard=guard, train=train, valid=mask))
+    assert _ulps(a.statistic, b.statistic) <= (1.0 if dtype == torch.float32 else 1e6)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    ones = torch.ones_like(clutter, dtype=torch.bool)
+    plain = fn(clutter, guard=guard, train=train).statistic
+    assert _ulps(fn(clutter, guard=guard, train=train, valid=ones).statistic, plain) <= 1.0

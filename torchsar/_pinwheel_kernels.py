@@ -1,5 +1,6 @@
-"""numba kernel of the pinwheel-block CFARs without no-data (GO, SO): from the image to the
-statistic and the mask in one sweep over its rows, with no full-size temporaries.
+"""numba kernels of the pinwheel-block CFARs (GO, SO, and VI without no-data): from the image
+to the statistic in one sweep over its rows, with no full-size temporaries (with no-data,
+GO and SO also give each block's count of valid cells, for the border factors).
 
 The four blocks (top ``t x (2g+t+1)``, right, bottom, left, tiling the ring) are summed as
 CA-CFAR's ring is (:mod:`torchsar._box_kernels`): each image row is converted once to
@@ -22,6 +23,7 @@ from torchsar._block_sums import (
     JIT,
     axis_count,
     block_sums,
+    kept_row,
     level_up,
     levels_for,
     pair_rings,
@@ -31,6 +33,7 @@ from torchsar._block_sums import (
 
 __all__ = [
     "block_ratio",
+    "block_ratio_valid",
     "block_rows",
     "mean_of",
     "pinwheel_buffers",
@@ -112,6 +115,50 @@ def pinwheel_sums(ring, size, i, guard, train, blocks, sums):
     block_sums(right, 0, t, (o + g + 1,), w, sums[1], False)  # j + g + 1 .. j + o
     block_sums(bottom, 0, side, (o - g,), w, sums[2], False)  # j - g .. j + o
     block_sums(left, 0, t, (0,), w, sums[3], False)  # j - o .. j - g - 1
+
+
+@njit(**JIT)
+def block_ratio_valid(x, valid, guard, train, is_max, stat, counts):
+    """:func:`block_ratio` over the valid cells (``valid`` uint8 ``(P, H, W)``) of each
+    block: the blocks' valid values and their counts summed alike (two rings), into the
+    float64 statistic ``x / extreme block mean`` ``stat`` ``(P, H, W)`` before the border
+    factor, and each block's count ``counts`` ``(4, P, H, W)`` (top, right, bottom, left),
+    from which the caller forms the factors and marks the pixels without a valid block
+    cell, or not valid themselves.
+
+    Returns how many values of ``x`` (valid or not) are not a finite number ``>= 0``."""
+    p_, h, w = x.shape
+    g, t, o = guard, train, guard + train
+    size = 2 * o + 1
+    depth = levels_for(o + g + 1)
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
+    blocks, _ = pinwheel_buffers(g, t, w)
+    sums, cnts = np.zeros((4, w)), np.zeros((4, w))
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    bad = 0
+    for pl in range(p_):
+        xp, vp = x[pl], valid[pl]
+        for q in range(-o, min(o, h + o)):
+            inside = 0 <= q < h
+            row, vrow = (xp[q] if inside else empty), vp[min(max(q, 0), h - 1)]
+            bad += kept_row(rows1, rows2, q, depth, row, inside, np.inf, vrow, True)
+        for i in range(h):
+            q, qr = i + o, min(i + o, h - 1)
+            bad += kept_row(rows1, rows2, q, depth, xp[qr], q < h, np.inf, vp[qr], True)
+            pinwheel_sums(ring1, size, i, g, t, blocks, sums)
+            pinwheel_sums(ring2, size, i, g, t, blocks, cnts)
+            xi, si = xp[i], stat[pl, i]
+            for j in range(w):
+                est = _extreme(
+                    sums[0, j], sums[1, j], sums[2, j], sums[3, j],
+                    cnts[0, j], cnts[1, j], cnts[2, j], cnts[3, j],
+                    is_max,
+                )  # fmt: skip
+                v = np.float64(xi[j]) / (est + 0.0)  # an estimate of -0.0 is 0
+                si[j] = 0.0 if v != v else v
+            for k in range(4):
+                counts[k, pl, i] = cnts[k]
+    return bad
 
 
 @njit(**JIT, inline="always")

@@ -138,12 +138,20 @@ def ac_reference(
     return out
 
 
-def block_reference(x: np.ndarray, guard: int, train: int, pfa: float, reduce: str) -> np.ndarray:
-    """GO's (``reduce="max"``) or SO's ``I / extreme block mean`` over the in-image cells
-    of the four pinwheel blocks (each mean summed exactly: ``math.fsum``; GO's estimate at
-    least 0, SO's 0 where no block has cells; ``0 / 0 = 0``), times ``factor(interior) /
-    factor(sizes)`` where a pixel's block sizes are not the interior's, ``-inf`` where no
-    block has a cell, pixel by pixel, of ``x`` ``(B, C, H, W)``."""
+def block_reference(
+    x: np.ndarray,
+    guard: int,
+    train: int,
+    pfa: float,
+    reduce: str,
+    valid: np.ndarray | None = None,
+) -> np.ndarray:
+    """GO's (``reduce="max"``) or SO's ``I / extreme block mean`` over the in-image (and
+    ``valid``) cells of the four pinwheel blocks (each mean summed exactly: ``math.fsum``;
+    GO's estimate at least 0, SO's 0 where no block has cells; ``0 / 0 = 0``), times
+    ``factor(interior) / factor(sizes)`` where a pixel's block sizes are not the interior's,
+    ``-inf`` where no block has a cell or the pixel is not valid, pixel by pixel, of ``x``
+    ``(B, C, H, W)``."""
     from torchsar.cfar.thresholds import block_factor
 
     size = train * (2 * guard + train + 1)
@@ -151,11 +159,15 @@ def block_reference(x: np.ndarray, guard: int, train: int, pfa: float, reduce: s
     out = np.empty(x.shape)
     for idx in np.ndindex(*x.shape[:2]):
         img = x[idx]
+        ok = None if valid is None else np.where(valid[idx], 1.0, np.nan)
         for i in range(img.shape[0]):
             for j in range(img.shape[1]):
                 blocks = block_cells(img, i, j, guard, train)
+                if ok is not None:
+                    keep = block_cells(ok, i, j, guard, train)
+                    blocks = [b[~np.isnan(k)] for b, k in zip(blocks, keep, strict=True)]
                 sizes = tuple(len(b) for b in blocks)
-                if sum(sizes) == 0:
+                if sum(sizes) == 0 or (ok is not None and np.isnan(ok[i, j])):
                     out[idx][i, j] = -math.inf
                     continue
                 means = [math.fsum(b) / len(b) for b in blocks if len(b)]

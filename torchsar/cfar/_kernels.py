@@ -1,7 +1,7 @@
 """numba kernels of the window CFARs' per-pixel rules over :func:`torchsar.windows.windowed`'s
-sums (GO, SO and VI with no-data, OS-CFAR's ratio and decision): from the window
+sums (VI with no-data, OS-CFAR's ratio and decision): from the window
 sums to the statistic in one pass, with the values of the tensor code in
-:mod:`torchsar.cfar.blocks` and :mod:`torchsar.cfar.vi` bit for bit (the same float64
+:mod:`torchsar.cfar.vi` and :mod:`torchsar.cfar.os_cfar` bit for bit (the same float64
 operations in the same order, elementwise), without its full-size temporaries. Without
 no-data the CPU takes the one-sweep kernels instead (:mod:`torchsar._box_kernels`,
 :mod:`torchsar._pinwheel_kernels`); :func:`censor_mean` is AC's global pre-threshold.
@@ -18,12 +18,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from torchsar._pinwheel_kernels import mean_of as _mean
 from torchsar._pinwheel_kernels import ratio_of as _ratio
 from torchsar._pinwheel_kernels import vi_rule
 
 __all__ = [
-    "block_extreme_ratio",
     "censor_mean",
     "os_decision",
     "os_ratio",
@@ -31,34 +29,6 @@ __all__ = [
 ]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # x / 0: inf or NaN, as torch
-
-
-@njit(**_JIT)
-def block_extreme_ratio(x, count, s1, shift, is_max):
-    """``x / extreme block mean`` (:func:`torchsar.cfar.blocks.extreme_mean`, then
-    :func:`~torchsar.cfar.core.ratio`): ``count`` ``(K, Bc, Cc, rr, W)``, ``s1`` ``(K, B, C,
-    rr, W)``; float64 ``(B, C, rr, W)``."""
-    k_, b_, c_, rr, w = s1.shape
-    out = np.empty((b_, c_, rr, w))
-    fill = -np.inf if is_max else np.inf
-    for b in range(b_):
-        bc = b if count.shape[1] > 1 else 0
-        for c in range(c_):
-            cc = c if count.shape[2] > 1 else 0
-            for i in range(rr):
-                for j in range(w):
-                    est = fill
-                    sh = shift[b, c, i, j]
-                    for k in range(k_):
-                        n = count[k, bc, cc, i, j]
-                        m = _mean(s1[k, b, c, i, j], n, sh) if n > 0 else fill
-                        better = m > est if is_max else m < est
-                        est = m if better else est
-                    if not is_max and (est == np.inf or est == -np.inf):
-                        est = 0.0
-                    est = est if est > 0.0 else 0.0  # the means of non-negative data
-                    out[b, c, i, j] = _ratio(np.float64(x[b, c, i, j]), est)
-    return out
 
 
 @njit(**_JIT)

@@ -21,7 +21,8 @@ from torchsar.cfar.core import (
     out_dtype,
     prepare,
     ratio,
-    stack_planes,
+    refuse_values,
+    valid_planes,
 )
 from torchsar.cfar.thresholds import block_factor, keyed_factor_map
 from torchsar.detection import Detection
@@ -68,22 +69,22 @@ def block_cfar(
 ) -> Detection:
     """GO (``reduce="max"``) or SO (``"min"``) CFAR on the 4 pinwheel blocks."""
     ring, pfa, vmask = prepare(x, guard, train, pfa, valid, detector=_NAMES[reduce], values=False)
-    compiled = vmask is None and not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
-    if not compiled:  # the compiled kernel checks the values as it reads them
+    compiled = not _triton.for_tensor(x) and _jit.for_tensor(x) and x.numel()
+    if not compiled:  # the compiled kernels check the values as they read them
         check_image(x, "x")
     rects = pinwheel_rects(ring.guard, ring.train)
     interior = tuple(r.area for r in rects)
     factor = partial(_factor, pfa=pfa, reduce=reduce)
     dtype = out_dtype(x)
+    if compiled and vmask is not None:
+        stat = _compiled_valid_blocks(x, ring, vmask, reduce, factor, dtype)
+        return conclude(stat, vmask, factor(interior))
     if compiled:
         return _compiled_block_cfar(x, ring, pfa, reduce, dtype)
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
-        if _jit.for_tensor(xs):
-            stat = _compiled_extreme_ratio(xs, sums, reduce)
-        else:
-            est = extreme_mean(sums, reduce)
-            stat = ratio(xs.to(est.dtype), est)
+        est = extreme_mean(sums, reduce)
+        stat = ratio(xs.to(est.dtype), est)
         counts = [s.count for s in sums]
         scale = geometric_cached(
             ("block", interior, pfa, reduce), counts, lambda: block_scale(counts, interior, factor)
@@ -96,21 +97,35 @@ def block_cfar(
     return conclude(stat, vmask, factor(interior))
 
 
-def _compiled_extreme_ratio(xs: Tensor, sums: list[Sums], reduce: str) -> Tensor:
-    """``xs / extreme_mean(sums, reduce)`` (as :func:`ratio`) by
-    :func:`torchsar.cfar._kernels.block_extreme_ratio`, bit for bit."""
-    from torchsar.cfar import _kernels
+def _compiled_valid_blocks(
+    x: Tensor, ring: Ring, vmask: Tensor, reduce: str, factor, dtype: torch.dtype
+) -> Tensor:
+    """:func:`block_cfar`'s statistic with no-data on the CPU in one sweep per image plane
+    (:func:`torchsar._pinwheel_kernels.block_ratio_valid`: each block's valid cells and
+    their count summed directly), then the border factors of the blocks' counts
+    (:func:`block_scale`) and the ending (``-inf`` where no block has a valid cell)."""
+    from torchsar import _pinwheel_kernels
 
-    count = stack_planes([s.count for s in sums])
-    s1 = stack_planes([s.s1 for s in sums])
-    out = _kernels.block_extreme_ratio(
-        xs.contiguous().numpy(),
-        count.numpy(),
-        s1.numpy(),
-        sums[0].shifts().numpy(),
-        reduce == "max",
+    planes = kernel_planes(x)
+    stat = np.empty(planes.shape)
+    counts = np.empty((4, *planes.shape))
+    valid = valid_planes(vmask, x)
+    g, t = ring.guard, ring.train
+    if _pinwheel_kernels.block_ratio_valid(
+        planes.numpy(), valid, g, t, reduce == "max", stat, counts
+    ):
+        refuse_values(x)
+    out = torch.from_numpy(stat).view(x.shape)
+    count = [torch.from_numpy(c).view(x.shape) for c in counts]
+    interior = tuple(r.area for r in pinwheel_rects(g, t))
+    scale = geometric_cached(
+        ("block", interior, factor.keywords["pfa"], reduce),
+        count,
+        lambda: block_scale(count, interior, factor),
     )
-    return torch.from_numpy(out)
+    if scale is not None:
+        out = out * scale
+    return finish(out, sum(count), dtype)
 
 
 def _compiled_block_cfar(

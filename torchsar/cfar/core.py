@@ -89,9 +89,15 @@ def one_sweep(
     mask = torch.empty(planes.shape, dtype=torch.bool)
     thr = torch.as_tensor(threshold, dtype=dtype)
     if kernel(planes.numpy(), thr.reshape(1).numpy(), out.numpy(), mask.numpy()):
-        check_image(x.detach(), "x")
-        raise InputValueError("x must be finite and non-negative")  # not reached
+        refuse_values(x)
     return Detection(mask=mask.view(x.shape), statistic=out.view(x.shape), threshold=thr)
+
+
+def refuse_values(x: Tensor) -> None:
+    """Raise the input check's error for ``x``, in which a compiled kernel counted values
+    that are not a finite number ``>= 0``."""
+    check_image(x.detach(), "x")
+    raise InputValueError("x must be finite and non-negative")  # not reached
 
 
 def valid_planes(vmask: Tensor | None, x: Tensor) -> np.ndarray:
