@@ -721,3 +721,66 @@ def test_a_mask_of_all_valid_cells_changes_nothing(monkeypatch, name):
     shared = valid[:1, :1]
     both = detector(x, guard=1, train=3, valid=shared).statistic
     assert torch.equal(both[1:2], detector(x[1:2], guard=1, train=3, valid=shared).statistic)
+
+
+def _ring_moments(x: np.ndarray, guard: int, train: int, r0: int, rows: int, valid=None):
+    from torchsar import _box_kernels
+
+    p_, _, w = x.shape
+    count, mean, var = (np.empty((p_, rows, w)) for _ in range(3))
+    flags = np.ones((1, 1, 1), np.uint8) if valid is None else valid.astype(np.uint8)
+    _box_kernels.ring_moments(x, flags, valid is not None, guard, train, r0, count, mean, var)
+    return count, mean, var
+
+
+@pytest.mark.parametrize("masked", [False, True])
+@pytest.mark.parametrize("guard, train, r0, rows", [(1, 2, 0, 20), (0, 3, 7, 6), (2, 1, 15, 5)])
+def test_ring_moments_are_the_exact_moments(masked, guard, train, r0, rows):
+    """Signed values (logarithms), strips of rows, masks: each pixel's ring count, mean and
+    population variance within float64 ulps of the exactly summed ones; a ring of equal
+    cells has a variance of exactly 0."""
+    import math
+
+    from tests.reference.cfar import ring_cells
+
+    rng = np.random.default_rng(guard + 3 * train + r0)
+    x = np.log(rng.exponential(size=(2, 20, 23)))
+    x[1, 4:16, 4:18] = -0.3  # equal cells: near-flat rings
+    valid = rng.random(x.shape) > 0.25 if masked else None
+    count, mean, var = _ring_moments(x, guard, train, r0, rows, valid)
+    for p in range(2):
+        ok = None if valid is None else np.where(valid[p], 1.0, np.nan)
+        for i in range(r0, r0 + rows):
+            for j in range(23):
+                cells = ring_cells(x[p], i, j, guard, train)
+                if ok is not None:
+                    cells = cells[~np.isnan(ring_cells(ok, i, j, guard, train))]
+                n = len(cells)
+                assert count[p, i - r0, j] == n
+                if n == 0:
+                    continue
+                m = math.fsum(cells) / n
+                v = math.fsum((cells - m) ** 2) / n
+                assert abs(mean[p, i - r0, j] - m) <= 1e-14 * (1 + abs(m))
+                assert abs(var[p, i - r0, j] - v) <= 1e-13 * (v + m * m)
+                if (cells == cells[0]).all():
+                    assert var[p, i - r0, j] == 0.0 and mean[p, i - r0, j] == cells[0]
+
+
+@pytest.mark.parametrize("name", ["lognormal", "weibull", "gamma", "k", "g0"])
+def test_distribution_cfars_on_the_ring_moments_kernel(monkeypatch, name):
+    """The distribution CFARs take the ring moments kernel on the CPU: within a float32 ulp
+    or two of the tensor code (the K and G0 laws' shape fits amplify an ulp: 1e-4), with
+    and without no-data, and whatever the batch."""
+    x = _scene(50)
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(50)) > 0.2
+    fn = getattr(cfar, name)
+    for mask in (None, valid):
+        a, b = _both(monkeypatch, lambda m=mask: fn(x, valid=m))
+        fin = torch.isfinite(b.statistic)
+        assert torch.equal(torch.isfinite(a.statistic), fin)
+        tol = 1e-4 if name in ("k", "g0") else 3e-7
+        assert torch.allclose(a.statistic[fin], b.statistic[fin], rtol=tol, atol=0)
+    monkeypatch.setattr(_jit, "ENABLED", True)
+    whole = fn(x).statistic
+    assert torch.equal(fn(x[1:2]).statistic, whole[1:2])

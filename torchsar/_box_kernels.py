@@ -63,7 +63,9 @@ __all__ = [
     "box_filter",
     "deviation_ratio",
     "kept_ratio",
+    "moment_rings",
     "ring_buffers",
+    "ring_moments",
     "ring_ratio",
     "ring_sums",
 ]
@@ -170,6 +172,59 @@ def ring_sums(ring, size, i, guard, train, band, mid, acc):
 
 
 @njit(**JIT)
+def moment_rings(guard, train, w, has_valid):
+    """The working state of a kernel that sums a row's values and their squares over the
+    ring (:func:`_moment_row`): the guard and train widths, the row-block levels, the rings
+    of values, squares and (``has_valid``) valid cells' counts, the row buffers of
+    :func:`ring_sums`, each column's in-image outer and guard widths ``(2, w)``, and the
+    row's sums and counts ``(3, w)``."""
+    o, size, depth, rows1, rows2, ring1, ring2, band, mid = paired_rings(guard, train, w)
+    rows3, _, ring3, _ = pair_rings(depth if has_valid else 1, size if has_valid else 1, w)
+    cols = np.zeros((2, w))
+    for j in range(w):
+        cols[0, j] = axis_count(j, w, -o, o)
+        cols[1, j] = axis_count(j, w, -guard, guard)
+    rings = (ring1, ring2, ring3, size, band, mid)
+    return guard, train, depth, rows1, rows2, rows3, rings, cols, np.zeros((3, w))
+
+
+@njit(**JIT)
+def _prime_moments(state, xp, vp, empty, has_valid, r0):
+    """The rows above row ``r0``'s window bottom into the rings of :func:`moment_rings`
+    (zeros above the image); the count of bad values read."""
+    g, t, depth, rows1, rows2, rows3 = state[0], state[1], state[2], state[3], state[4], state[5]
+    o, h = g + t, xp.shape[0]
+    bad = 0
+    for q in range(r0 - o, min(r0 + o, h + o)):
+        inside = 0 <= q < h
+        row = xp[q] if inside else empty
+        bad += _take(rows1, rows2, rows3, q, depth, row, vp, inside, has_valid)
+    return bad
+
+
+@njit(**JIT)
+def _moment_row(state, xp, vp, i, has_valid):
+    """Row ``i + o`` into the rings of :func:`moment_rings`, then row ``i``'s ring sums of
+    the values and their squares and its counted cells into the state's sums ``(3, w)``
+    (the counts geometric without ``has_valid``); the count of bad values read."""
+    g, t, depth, rows1, rows2, rows3, rings, cols, sums = state
+    ring1, ring2, ring3, size, band, mid = rings
+    o, h, w = g + t, xp.shape[0], xp.shape[1]
+    q = i + o
+    bad = _take(rows1, rows2, rows3, q, depth, xp[min(q, h - 1)], vp, q < h, has_valid)
+    ring_sums(ring1, size, i, g, t, band, mid, sums[0])
+    ring_sums(ring2, size, i, g, t, band, mid, sums[1])
+    cnt = sums[2]
+    if has_valid:
+        ring_sums(ring3, size, i, g, t, band, mid, cnt)
+    else:
+        ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
+        for j in range(w):
+            cnt[j] = ro * cols[0, j] - rg * cols[1, j]
+    return bad
+
+
+@njit(**JIT)
 def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
     """The two-parameter CFAR's statistic ``(x - mean_ring) / sigma_ring`` (population
     standard deviation) of every plane of ``x`` ``(P, H, W)`` into ``out`` (its dtype) and
@@ -184,34 +239,18 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g = guard
-    o, size, depth, rows1, rows2, ring1, ring2, band, mid = paired_rings(guard, train, w)
-    rows3, _, ring3, _ = pair_rings(depth if has_valid else 1, size if has_valid else 1, w)
-    s1, s2, cnt = np.zeros(w), np.zeros(w), np.zeros(w)
-    outer_cols, guard_cols = np.zeros(w), np.zeros(w)
-    for j in range(w):
-        outer_cols[j] = axis_count(j, w, -o, o)
-        guard_cols[j] = axis_count(j, w, -g, g)
+    state = moment_rings(guard, train, w, has_valid)
+    s1, s2, cnt = state[-1][0], state[-1][1], state[-1][2]
+    rows1, rows3 = state[3], state[5]
+    o = guard + train
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
         xp, vp = x[pl], valid[pl if has_valid else 0]
-        for q in range(-o, min(o, h + o)):
-            inside = 0 <= q < h
-            row = xp[q] if inside else empty
-            bad += _take(rows1, rows2, rows3, q, depth, row, vp, inside, has_valid)
+        bad += _prime_moments(state, xp, vp, empty, has_valid, 0)
         for i in range(h):
-            q = i + o
-            qr = min(q, h - 1)
-            bad += _take(rows1, rows2, rows3, q, depth, xp[qr], vp, q < h, has_valid)
-            ring_sums(ring1, size, i, g, train, band, mid, s1)
-            ring_sums(ring2, size, i, g, train, band, mid, s2)
-            if has_valid:
-                ring_sums(ring3, size, i, g, train, band, mid, cnt)
-            else:
-                ro, rg = axis_count(i, h, -o, o), axis_count(i, h, -g, g)
-                for j in range(w):
-                    cnt[j] = ro * outer_cols[j] - rg * guard_cols[j]
+            bad += _moment_row(state, xp, vp, i, has_valid)
             xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
             flat = 0
             for j in range(w):
@@ -321,44 +360,95 @@ def _counted(vcache, has_valid, i, j, g, r, k):
 
 
 @njit(**JIT)
-def _near_flat_rings(cache, vcache, has_valid, i, h, g, o, s1, s2, xi, oi):
-    """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from two passes
-    over the ring's counted cells (in-image, and valid with ``has_valid``; ``cache``: the
-    rows of ``x``, row ``r`` in slot ``r % size``; ``vcache``: their valid flags): their
-    deviations from the ring's first counted cell, then from the mean of those. Equal
-    cells give a variance of exactly 0: ``+inf`` above their value, ``-inf`` below, 0 at
-    it."""
+def _flat_moments(cache, vcache, has_valid, i, j, h, g, o, s1, s2):
+    """Pixel ``(i, j)``'s ring moments again from its counted cells where the sums ``s1``,
+    ``s2`` make the ring near-flat (in-image cells, and valid with ``has_valid``; ``cache``:
+    the rows of ``x``, row ``r`` in slot ``r % size``; ``vcache``: their valid flags): the
+    deviations from the ring's first counted cell ``base``, then from their mean ``m``, in
+    two passes. Returns ``(near_flat, base, m, var)``, the population variance exactly 0
+    for equal cells; ``near_flat`` false (the rest unset) where the sums do."""
     size, w = cache.shape[0], cache.shape[1]
     r0, r1 = max(i - o, 0), min(i + o, h - 1)
-    for j in range(w):
-        c0, c1 = max(j - o, 0), min(j + o, w - 1)
-        n, base = 0, 0.0
-        for r in range(r0, r1 + 1):
-            for k in range(c0, c1 + 1):
-                if _counted(vcache, has_valid, i, j, g, r, k):
-                    base = cache[r % size, k] if n == 0 else base
-                    n += 1
-        if n <= 0 or n * (s2[j] / n - (s1[j] / n) ** 2) >= _FLAT * s2[j]:
+    c0, c1 = max(j - o, 0), min(j + o, w - 1)
+    n, base = 0, 0.0
+    for r in range(r0, r1 + 1):
+        for k in range(c0, c1 + 1):
+            if _counted(vcache, has_valid, i, j, g, r, k):
+                base = cache[r % size, k] if n == 0 else base
+                n += 1
+    if n <= 0 or n * (s2 / n - (s1 / n) ** 2) >= _FLAT * s2:
+        return False, 0.0, 0.0, 0.0
+    t1 = 0.0
+    for r in range(r0, r1 + 1):
+        row = cache[r % size]
+        for k in range(c0, c1 + 1):
+            if _counted(vcache, has_valid, i, j, g, r, k):
+                t1 += row[k] - base
+    m = t1 / n
+    e1, e2 = 0.0, 0.0
+    for r in range(r0, r1 + 1):
+        row = cache[r % size]
+        for k in range(c0, c1 + 1):
+            if _counted(vcache, has_valid, i, j, g, r, k):
+                e = (row[k] - base) - m
+                e1 += e
+                e2 += e * e
+    return True, base, m, (e2 - e1 * (e1 / n)) / n
+
+
+@njit(**JIT)
+def _near_flat_rings(cache, vcache, has_valid, i, h, g, o, s1, s2, xi, oi):
+    """Row ``i``'s statistic (of ``h`` rows) where the ring is near-flat, from its counted
+    cells (:func:`_flat_moments`). Equal cells give a variance of exactly 0: ``+inf``
+    above their value, ``-inf`` below, 0 at it."""
+    for j in range(oi.shape[0]):
+        flat, base, m, var = _flat_moments(cache, vcache, has_valid, i, j, h, g, o, s1[j], s2[j])
+        if not flat:
             continue
-        t1 = 0.0
-        for r in range(r0, r1 + 1):
-            row = cache[r % size]
-            for k in range(c0, c1 + 1):
-                if _counted(vcache, has_valid, i, j, g, r, k):
-                    t1 += row[k] - base
-        m = t1 / n
-        e1, e2 = 0.0, 0.0
-        for r in range(r0, r1 + 1):
-            row = cache[r % size]
-            for k in range(c0, c1 + 1):
-                if _counted(vcache, has_valid, i, j, g, r, k):
-                    e = (row[k] - base) - m
-                    e1 += e
-                    e2 += e * e
-        var = (e2 - e1 * (e1 / n)) / n
         sigma = np.sqrt(var if var > 0.0 else 0.0)
         v = (np.float64(xi[j]) - (base + m)) / sigma
         oi[j] = 0.0 if v != v else v
+
+
+@njit(**JIT)
+def ring_moments(x, valid, has_valid, guard, train, r0, count, mean, var):
+    """The ring's cell count, mean and population variance at every pixel of rows ``r0 ..
+    r0 + R - 1`` of every plane of ``x`` ``(P, H, W)`` (float64, any sign, finite: checked
+    by the caller) into the float64 ``count``, ``mean``, ``var`` ``(P, R, W)``: the ring
+    sums of ``x`` and of its square summed as :func:`ring_ratio` sums its ring (only the
+    valid cells, also counted, with ``has_valid``: ``valid`` uint8 ``(P, H, W)``); a
+    near-flat ring (``n var < 2^-8 S2``) from its cells again (:func:`_flat_moments`):
+    equal cells give a variance of exactly 0. A ring without a counted cell: count 0, mean
+    and variance 0."""
+    p_, h, w = x.shape
+    g = guard
+    state = moment_rings(guard, train, w, has_valid)
+    s1, s2, cnt = state[-1][0], state[-1][1], state[-1][2]
+    rows1, rows3 = state[3], state[5]
+    o = guard + train
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)
+    for pl in range(p_):
+        xp, vp = x[pl], valid[pl if has_valid else 0]
+        _prime_moments(state, xp, vp, empty, has_valid, r0)
+        for i in range(r0, r0 + count.shape[1]):
+            _moment_row(state, xp, vp, i, has_valid)
+            ci, mi, vi = count[pl, i - r0], mean[pl, i - r0], var[pl, i - r0]
+            for j in range(w):
+                c = cnt[j]
+                m = s1[j] / max(c, 1.0)
+                v = s2[j] / max(c, 1.0) - m * m
+                ci[j] = c
+                mi[j] = m
+                vi[j] = v if v > 0.0 else 0.0
+            cells = rows3[0] if has_valid else rows1[0]
+            for j in range(w):
+                if cnt[j] > 0 and cnt[j] * (s2[j] / cnt[j] - mi[j] * mi[j]) < _FLAT * s2[j]:
+                    flat, base, m, v = _flat_moments(
+                        rows1[0], cells, has_valid, i, j, h, g, o, s1[j], s2[j]
+                    )
+                    if flat:
+                        mi[j] = base + m
+                        vi[j] = v if v > 0.0 else 0.0
 
 
 @njit(**JIT)

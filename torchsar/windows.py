@@ -1,9 +1,12 @@
 """Window geometry and fast box / ring / block sums (our ``filter2d``).
 
-Every local statistic in torchsar (CFAR rings, pinwheel blocks, speckle-filter boxes) goes
-through :func:`windowed` (:func:`rect_sums` for whole images): sums of ``x`` (and
-optionally ``x**2``) over rectangles placed at fixed offsets from each pixel, strip of rows
-by strip of rows.
+Every window statistic in torchsar without a kernel of its own goes through
+:func:`windowed` (:func:`rect_sums` for whole images): sums of ``x`` (and optionally
+``x**2``) over rectangles placed at fixed offsets from each pixel, strip of rows by strip
+of rows. On the CPU most detectors sum their windows in one-sweep kernels instead (CA, AC,
+two-parameter, GO, SO, OS and the distribution CFARs, with and without no-data; VI and the
+speckle filters without; :mod:`torchsar._box_kernels`); :func:`windowed` serves the rest
+(VI with no-data, Gamma-MAP) and every window statistic on a GPU.
 
 How the cells are summed:
 

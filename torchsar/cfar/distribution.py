@@ -26,11 +26,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import torch
 from torch import Tensor
 
+from torchsar import _jit
 from torchsar._checks import check_image, check_positive, check_probability
-from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio
+from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, valid_planes
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
 from torchsar.detection import Detection
 from torchsar.windows import Ring, Sums, windowed
@@ -69,8 +71,46 @@ def distribution_cfar(
         stat = ratio(xs.to(torch.float64), q)
         return finish(stat, sums[0].count - 1, dtype)
 
-    stat = windowed(src, [ring.region], statistic, valid=fit, moments=2, extras=(x,))
+    if _jit.for_tensor(src) and src.numel():
+        stat = _compiled_fit(x, src, fit, ring, statistic)
+    else:
+        stat = windowed(src, [ring.region], statistic, valid=fit, moments=2, extras=(x,))
     return conclude(stat, vmask, distribution_threshold(guard=guard, train=train, pfa=pfa))
+
+
+def _compiled_fit(
+    x: Tensor,
+    src: Tensor,
+    fit: Tensor | None,
+    ring: Ring,
+    statistic: Callable[[Tensor, list[Sums], Tensor], Tensor],
+) -> Tensor:
+    """The ring moments of ``src`` on the CPU in one sweep per strip of rows
+    (:func:`torchsar._box_kernels.ring_moments`: the ring sums of the values and their
+    squares in row blocks, near-flat rings again from their cells, so a ring of equal
+    cells has a variance of exactly 0), handed to ``statistic`` as :class:`Sums` of
+    deviations from the ring's own mean (``s1 = 0``, ``s2 = n var``), strip by strip."""
+    from torchsar import _box_kernels
+
+    b, c, h, w = src.shape
+    planes = src.detach().reshape(-1, h, w).to(torch.float64).contiguous().numpy()
+    valid = valid_planes(fit, src)
+    rows = max(16, (1 << 17) // max(w, 1))  # strips of about 1 MB per plane and moment
+    out = None
+    for r in range(0, h, rows):
+        rr = min(rows, h - r)
+        count, mean, var = (np.empty((b * c, rr, w)) for _ in range(3))
+        _box_kernels.ring_moments(
+            planes, valid, fit is not None, ring.guard, ring.train, r, count, mean, var
+        )
+        n = torch.from_numpy(count).view(b, c, rr, w)
+        spread = torch.from_numpy(var).view(b, c, rr, w).mul_(n)
+        sums = Sums(n, torch.zeros_like(n), spread, torch.from_numpy(mean).view(b, c, rr, w))
+        part = statistic(src[..., r : r + rr, :], [sums], x[..., r : r + rr, :])
+        if out is None:
+            out = part.new_empty((b, c, h, w))
+        out[..., r : r + rr, :] = part
+    return out
 
 
 def distribution_threshold(*, guard: int, train: int, pfa: float, looks: float = 1.0) -> float:
