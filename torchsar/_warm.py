@@ -41,7 +41,10 @@ def warm() -> float:
     from torchsar.region import region_cfar
 
     start = time.perf_counter()
-    window = (cfar.ca, cfar.go, cfar.so, cfar.os, cfar.vi, cfar.ac, cfar.two_parameter)
+    window = (
+        *(cfar.ca, cfar.go, cfar.so, cfar.os, cfar.vi, cfar.ac, cfar.two_parameter),
+        cfar.lognormal,  # the distribution CFARs' ring moments
+    )
     for dtype in (torch.float32, torch.float64):
         x = _images(dtype)
         valid = torch.ones_like(x, dtype=torch.bool)
@@ -50,7 +53,7 @@ def warm() -> float:
             for detector in window:
                 detector(x, valid=mask)
         cfar.os_mask(x)  # the counting decision (float32)
-        for name in ("lee", "enhanced_lee", "frost", "enhanced_frost"):
+        for name in ("lee", "enhanced_lee", "frost", "enhanced_frost", "gamma_map"):
             speckle.FILTERS[name](x, window=3)
         region_cfar(x)
         det = cfar.ca(x)  # detects the bright spots: objects to label and close
