@@ -188,6 +188,15 @@ def moment_rings(guard, train, w, has_valid):
     return guard, train, depth, rows1, rows2, rows3, rings, cols, np.zeros((3, w))
 
 
+@njit(**JIT, inline="always")
+def moment_views(state, has_valid):
+    """The row's ring sums of the values and their squares and its counted cells in
+    :func:`moment_rings`' state, and the rows of values and of counted-cell flags the
+    near-flat rings are summed again from (:func:`_flat_moments`)."""
+    sums, rows1, rows3 = state[-1], state[3], state[5]
+    return sums[0], sums[1], sums[2], rows1[0], rows3[0] if has_valid else rows1[0]
+
+
 @njit(**JIT)
 def _prime_moments(state, xp, vp, empty, has_valid, r0):
     """The rows above row ``r0``'s window bottom into the rings of :func:`moment_rings`
@@ -240,8 +249,7 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
     p_, h, w = x.shape
     g = guard
     state = moment_rings(guard, train, w, has_valid)
-    s1, s2, cnt = state[-1][0], state[-1][1], state[-1][2]
-    rows1, rows3 = state[3], state[5]
+    s1, s2, cnt, values, cells = moment_views(state, has_valid)
     o = guard + train
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     thr = threshold[0]
@@ -262,8 +270,7 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
                 v = (np.float64(xi[j]) - m) / sigma
                 oi[j] = 0.0 if v != v else v
             if flat:
-                cells = rows3[0] if has_valid else rows1[0]
-                _near_flat_rings(rows1[0], cells, has_valid, i, h, g, o, s1, s2, xi, oi)
+                _near_flat_rings(values, cells, has_valid, i, h, g, o, s1, s2, xi, oi)
             if has_valid:
                 vi = vp[i]
                 for j in range(w):
@@ -423,10 +430,9 @@ def ring_moments(x, valid, has_valid, guard, train, r0, count, mean, var):
     p_, h, w = x.shape
     g = guard
     state = moment_rings(guard, train, w, has_valid)
-    s1, s2, cnt = state[-1][0], state[-1][1], state[-1][2]
-    rows1, rows3 = state[3], state[5]
+    s1, s2, cnt, values, cells = moment_views(state, has_valid)
     o = guard + train
-    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)
+    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     for pl in range(p_):
         xp, vp = x[pl], valid[pl if has_valid else 0]
         _prime_moments(state, xp, vp, empty, has_valid, r0)
@@ -440,11 +446,10 @@ def ring_moments(x, valid, has_valid, guard, train, r0, count, mean, var):
                 ci[j] = c
                 mi[j] = m
                 vi[j] = v if v > 0.0 else 0.0
-            cells = rows3[0] if has_valid else rows1[0]
             for j in range(w):
                 if cnt[j] > 0 and cnt[j] * (s2[j] / cnt[j] - mi[j] * mi[j]) < _FLAT * s2[j]:
                     flat, base, m, v = _flat_moments(
-                        rows1[0], cells, has_valid, i, j, h, g, o, s1[j], s2[j]
+                        values, cells, has_valid, i, j, h, g, o, s1[j], s2[j]
                     )
                     if flat:
                         mi[j] = base + m

@@ -313,6 +313,15 @@ def _rect(rect_ptr, t):
 
 
 @triton.jit
+def _cell(ptr, vptr, ii, jj, w, m, VALID: tl.constexpr):
+    """The cells ``(ii, jj)`` where ``m`` (and, ``VALID``, where ``vptr`` flags them
+    valid): that mask and their values in float64 (0 elsewhere)."""
+    if VALID:
+        m = m & (tl.load(vptr + ii * w + jj, mask=m, other=0) != 0)
+    return m, tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
+
+
+@triton.jit
 def _deviation_sums(
     ptr,
     vptr,
@@ -345,10 +354,7 @@ def _deviation_sums(
             for b in range(b0, b1 + 1):
                 jj = j + b
                 if MASKED:
-                    m = rows & (jj >= 0) & (jj < w)
-                    if VALID:
-                        m = m & (tl.load(vptr + ii * w + jj, mask=m, other=0) != 0)
-                    v = tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
+                    m, v = _cell(ptr, vptr, ii, jj, w, rows & (jj >= 0) & (jj < w), VALID)
                     d = tl.where(m, v - shift, 0.0)
                     if VALID:
                         n += m.to(tl.int32)
@@ -391,8 +397,7 @@ def _first_valid_cell(ptr, vptr, i, j, h, w, rect_ptr, n_rects, BH: tl.constexpr
             for b in range(b0, b1 + 1):
                 jj = j + b
                 m = rows & (jj >= 0) & (jj < w) & (found == 0)
-                m = m & (tl.load(vptr + ii * w + jj, mask=m, other=0) != 0)
-                v = tl.load(ptr + ii * w + jj, mask=m, other=0.0).to(tl.float64)
+                m, v = _cell(ptr, vptr, ii, jj, w, m, True)
                 c = tl.where(m, v, c)
                 found = found | m
     return c

@@ -36,6 +36,7 @@ __all__ = [
     "block_ratio_valid",
     "block_rows",
     "mean_of",
+    "paired_pinwheel",
     "pinwheel_buffers",
     "pinwheel_sums",
     "ratio_of",
@@ -95,6 +96,19 @@ def pinwheel_buffers(guard, train, w):
 
 
 @njit(**JIT)
+def paired_pinwheel(guard, train, w):
+    """The working state of a kernel that sums two quantities over the four blocks: the
+    window side, the row-block levels, the two rings of row blocks (:func:`pair_rings`),
+    the blocks' buffers and in-image columns (:func:`pinwheel_buffers`) and the row's sums
+    of each quantity ``(4, w)``."""
+    o = guard + train
+    size, depth = 2 * o + 1, levels_for(o + guard + 1)
+    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
+    blocks, cols = pinwheel_buffers(guard, train, w)
+    return size, depth, rows1, rows2, ring1, ring2, blocks, cols, np.zeros((4, w)), np.zeros((4, w))
+
+
+@njit(**JIT)
 def pinwheel_sums(ring, size, i, guard, train, blocks, sums):
     """The sums of the four blocks (top, right, bottom, left) at every pixel of row ``i``
     into ``sums`` ``(4, w)``, from the row-block ring ``ring`` (level ``k``, row ``r`` in
@@ -129,11 +143,7 @@ def block_ratio_valid(x, valid, guard, train, is_max, stat, counts):
     Returns how many values of ``x`` (valid or not) are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g, t, o = guard, train, guard + train
-    size = 2 * o + 1
-    depth = levels_for(o + g + 1)
-    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
-    blocks, _ = pinwheel_buffers(g, t, w)
-    sums, cnts = np.zeros((4, w)), np.zeros((4, w))
+    size, depth, rows1, rows2, ring1, ring2, blocks, _, sums, cnts = paired_pinwheel(g, t, w)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     bad = 0
     for pl in range(p_):
@@ -309,11 +319,7 @@ def vi_ratio(x, guard, train, k_vi, k_mr, row_state, col_state, scale, threshold
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
     g, t, o = guard, train, guard + train
-    size = 2 * o + 1
-    depth = levels_for(o + g + 1)
-    rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
-    blocks, cols = pinwheel_buffers(g, t, w)
-    s1, s2 = np.zeros((4, w)), np.zeros((4, w))
+    size, depth, rows1, rows2, ring1, ring2, blocks, cols, s1, s2 = paired_pinwheel(g, t, w)
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     work = (ring1, ring2, size, blocks, cols, s1, s2)
     rule, states = (k_vi, k_mr, threshold[0]), (row_state, col_state, scale)

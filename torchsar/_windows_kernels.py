@@ -308,8 +308,9 @@ def direct_sums(x, valid, has_valid, rects, starts, r, rr, moments):
     lo = min(lo, hi)
     rows = np.zeros((hi - lo, w + 2 * pad + 3))
     ok = np.zeros((hi - lo, w + 2 * pad + 3))
-    table = np.zeros((hi - lo + 1, w + 1), np.int64)  # the valid cells' integral image
-    nxt = np.zeros((hi - lo if has_valid else 0, w + 1), np.int64)
+    read = hi - lo if has_valid else 0  # the mask's tables: with a mask only
+    table = np.zeros((read + 1, w + 1), np.int64)  # the valid cells' integral image
+    nxt = np.zeros((read, w + 1), np.int64)  # each row's next valid column
     for p in range(p_):
         xp, vp = x[p], valid[p if has_valid else 0]
         _padded_rows(xp, vp, has_valid, lo, hi, pad, rows, ok)

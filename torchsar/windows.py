@@ -62,6 +62,7 @@ __all__ = [
     "region_count",
     "ring_counts",
     "ring_sums",
+    "strip_rows",
     "windowed",
 ]
 
@@ -515,9 +516,11 @@ def _cpu_direct_sums(
 _STRIP_ELEMENTS = 1 << 17  # float64 strip rows of ~1 MB per image stay cache-resident
 
 
-def _strip_rows(x: Tensor, pad: int, strip: int | None) -> int:
-    """Rows per strip. Depends on the image width only, never on the batch size, so every
-    image is summed in the same strips whatever batch it comes in (bit-identical results)."""
+def strip_rows(x: Tensor, pad: int, strip: int | None = None) -> int:
+    """Rows per strip of a window statistic over ``x`` with windows ``pad`` cells past the
+    pixel (``strip``: a given height). Depends on the image width only, never on the batch
+    size, so every image is summed in the same strips whatever batch it comes in
+    (bit-identical results)."""
     h, w = x.shape[-2:]
     if strip is not None:
         return max(1, min(strip, h))
@@ -577,7 +580,7 @@ def windowed(
     vmask = None if valid is None else valid.expand_as(x)
     shift = None if _direct(x, regions) else _image_mean(x, vmask)
     pad = _pad_for(regions)
-    rows = _strip_rows(x, pad, strip)
+    rows = strip_rows(x, pad, strip)
     if strip is None and _triton.for_tensor(x):
         rows = _gpu_strip_rows(x)
     outs: list[Tensor] = []
@@ -770,7 +773,7 @@ def exp_distance_mean(x: Tensor, radius: int, decay: Tensor, *, strip: int | Non
     h = x.shape[-2]
     decay = decay.to(x.dtype).expand_as(x)
     shells = distance_shells(radius)
-    rows = _strip_rows(x, radius, strip)
+    rows = strip_rows(x, radius, strip)
     out = torch.empty_like(x)
     for r in range(0, h, rows):
         rr = min(rows, h - r)

@@ -35,7 +35,7 @@ from torchsar._checks import check_image, check_positive, check_probability
 from torchsar.cfar.core import conclude, finish, out_dtype, prepare, ratio, valid_planes
 from torchsar.cfar.log_t import LOG_T_SHAPES, log_t_table, trigamma_table
 from torchsar.detection import Detection
-from torchsar.windows import Ring, Sums, windowed
+from torchsar.windows import Ring, Sums, strip_rows, windowed
 
 __all__ = [
     "distribution_cfar",
@@ -95,7 +95,7 @@ def _compiled_fit(
     b, c, h, w = src.shape
     planes = src.detach().reshape(-1, h, w).to(torch.float64).contiguous().numpy()
     valid = valid_planes(fit, src)
-    rows = max(16, (1 << 17) // max(w, 1))  # strips of about 1 MB per plane and moment
+    rows = strip_rows(src, ring.outer)
     out = None
     for r in range(0, h, rows):
         rr = min(rows, h - r)
