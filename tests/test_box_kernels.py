@@ -311,6 +311,51 @@ def test_the_enhanced_classes_are_the_tensor_codes_on_their_borders(monkeypatch,
         assert a[0, 0, 0, 0] == b[0, 0, 0, 0] == x[0, 0, 0, 0]
 
 
+def _border_moments(rng, cu: float, cmax: float, n: float, size: int):
+    """Window means and variances whose ``Ci`` lies on, within a few ulps of, or well off
+    the class borders ``Cu``, ``Cmax`` and the clamp ``sqrt(n - 1)``; zero and tiny means."""
+    mu = rng.uniform(1e-3, 1e3, size) * 10.0 ** rng.integers(-30, 30, size)
+    borders = np.array([cu, cmax, np.sqrt(n - 1.0)])
+    ci = borders[rng.integers(0, 3, size)]
+    steps = rng.integers(-3, 4, size)  # a few ulps either side
+    ci = np.where(steps > 0, np.nextafter(ci, np.inf), np.where(steps < 0, np.nextafter(ci, 0), ci))
+    off = rng.random(size) < 0.4  # anywhere in [0, sqrt(n - 1)] instead
+    ci = np.where(off, rng.uniform(0.0, np.sqrt(n - 1.0), size), ci)
+    var = (ci * mu) ** 2
+    mu[:4], var[:4] = [0.0, 0.0, 1e-160, 2.0**-500], [0.0, 1.0, 1e-318, 2.0**-999]
+    return mu, var
+
+
+@pytest.mark.parametrize("looks", [1.0, 3.0])
+@pytest.mark.parametrize("n", [4.0, 9.0, 49.0])
+def test_the_quick_heterogeneity_is_the_heterogeneity_or_doubts(looks, n):
+    """One division and one square root instead of two and one: outside its doubtful
+    pixels the class of every pixel is the exact formula's and ``h`` within ``2^-50``
+    of it plus the cancellation both incur beside a border; at least the doubtful pixels
+    are those on a border, near the clamp or with a mean of 0 or below ``2^-480``."""
+    from torchsar._moment_kernels import heterogeneity, quick_heterogeneity
+
+    cu, cmax = 1.0 / np.sqrt(looks), np.sqrt(1.0 + 2.0 / looks)
+    mu, var = _border_moments(np.random.default_rng(int(n * looks)), cu, cmax, n, 4000)
+    for damping in (0.0, 1.0, 5.0):
+        for m, v in zip(mu.tolist(), var.tolist(), strict=True):
+            h, doubt = quick_heterogeneity(m, v, n, cu, cmax, damping)
+            if doubt:
+                continue
+            want = heterogeneity(m, v, n, cu, cmax, damping)
+            ci = np.sqrt(v) / m
+            assert ci > 0 and min(abs(ci - cu), abs(ci - cmax)) > 2.0**-41 * ci
+            assert (h == 0) == (want == 0) and (h == np.inf) == (want == np.inf)
+            if 0 < want < np.inf:
+                cancel = ci / min(abs(ci - cu), abs(ci - cmax))
+                assert abs(h - want) <= 2.0**-50 * (1.0 + cancel) * want
+    doubts = [quick_heterogeneity(m, v, n, cu, cmax, 1.0)[1] for m, v in zip(mu, var, strict=True)]
+    assert all(doubts[:4])
+    ci = np.sqrt(var[4:]) / mu[4:]
+    on = np.isin(ci, [cu, cmax, np.sqrt(n - 1.0)])
+    assert np.asarray(doubts[4:])[on].all() and on.any()
+
+
 def test_a_bad_option_and_a_bad_value_give_one_error_on_both_paths(monkeypatch):
     """The values are checked after the options whether or not a kernel reads them."""
     from torchsar.errors import OptionError, WindowSizeError

@@ -56,7 +56,13 @@ from torchsar._block_sums import (
     ring_row,
     valid_row,
 )
-from torchsar._moment_kernels import heterogeneity, moment_state, next_moments, prime
+from torchsar._moment_kernels import (
+    heterogeneity,
+    moment_state,
+    next_moments,
+    prime,
+    quick_heterogeneity,
+)
 from torchsar._vector_exp import exp_neg
 
 __all__ = [
@@ -509,9 +515,25 @@ def _lee_row(xi, mu, var, cu2_over, cu2, weight_scale, oi):
 @njit(**FMA)  # exp_neg's polynomial with FMAs
 def _enhanced_lee_row(xi, mu, var, tn, cu, cmax, damping, oi):
     """Enhanced Lee: ``I + W (mu - I)``, ``W = exp(-damping (Ci - Cu) / (Cmax - Ci))``, 1
-    at or below ``Cu`` and 0 at or above ``Cmax`` (``tn``: the window counts)."""
+    at or below ``Cu`` and 0 at or above ``Cmax`` (``tn``: the window counts). The row by
+    :func:`~torchsar._moment_kernels.quick_heterogeneity` (vectorised), its doubtful
+    pixels again by :func:`~torchsar._moment_kernels.heterogeneity`."""
+    doubtful = 0
     for j in range(oi.shape[0]):
-        h = heterogeneity(mu[j], var[j], tn[j], cu, cmax, damping)
-        obs = np.float64(xi[j])
-        o = obs + exp_neg(-(h)) * (mu[j] - obs)
-        oi[j] = o if o > 0.0 else 0.0  # a convex mix of values >= 0, but for rounding
+        h, doubt = quick_heterogeneity(mu[j], var[j], tn[j], cu, cmax, damping)
+        doubtful += doubt
+        oi[j] = _enhanced_lee(xi[j], mu[j], h)
+    if doubtful:
+        for j in range(oi.shape[0]):
+            if quick_heterogeneity(mu[j], var[j], tn[j], cu, cmax, damping)[1]:
+                h = heterogeneity(mu[j], var[j], tn[j], cu, cmax, damping)
+                oi[j] = _enhanced_lee(xi[j], mu[j], h)
+
+
+@njit(**FMA, inline="always")
+def _enhanced_lee(obs, mu, h):
+    """``I + exp(-h) (mu - I)`` in float64, at least 0 (a convex mix of values >= 0, but
+    for rounding)."""
+    x = np.float64(obs)
+    o = x + exp_neg(-(h)) * (mu - x)
+    return o if o > 0.0 else 0.0
