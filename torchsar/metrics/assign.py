@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from torchsar import _jit
 from torchsar.metrics.batch import BatchMatch, by_plane
 from torchsar.metrics.greedy import assign_pairs
 from torchsar.metrics.matching import COCO_IOUS, Matching, pair_box_iou
@@ -84,11 +85,22 @@ range is at most 16 times the pixels joined (else by sorting: memory follows the
 
 def join_pixels(a_owner: np.ndarray, a_pix: np.ndarray, b_owner: np.ndarray, b_pix: np.ndarray):
     """Pixel intersections of two sets of pixel lists: ``(a, b, shared pixels)`` for every
-    pair sharing a pixel (the ``b`` lists may overlap each other: then by sorting, else by a
-    dense lookup of the ``b`` owners over the pixel range)."""
+    pair sharing a pixel, ascending by ``(a, b)`` (the ``b`` lists may overlap each other:
+    then by sorting, else by a dense lookup of the ``b`` owners over the pixel range; with
+    the compiled kernels in one call: :func:`torchsar.metrics._match_kernels.join_pixels`)."""
     if a_pix.size == 0 or b_pix.size == 0:
         z = np.zeros(0, np.int64)
         return z, z, z
+    if _jit.enabled():  # one compiled call: the same pairs and counts
+        from torchsar.metrics import _match_kernels
+
+        a_owner, a_pix, b_owner, b_pix = (
+            np.asarray(v, np.int64) for v in (a_owner, a_pix, b_owner, b_pix)
+        )
+        if not _match_kernels.ascending(b_pix):  # (ground truth's lists usually are)
+            order = np.argsort(b_pix, kind="stable")
+            b_owner, b_pix = b_owner[order], b_pix[order]
+        return _match_kernels.join_pixels(a_owner, a_pix, b_owner, b_pix)
     top = int(max(a_pix.max(), b_pix.max())) + 1
     if top <= max(DENSE_LOOKUP, 16 * (a_pix.size + b_pix.size)) and b_owner.max() < 2**31 - 2:
         lut = np.zeros(top, np.int32)

@@ -14,12 +14,16 @@ rank at a time.
 arrays (detections and instances numbered by problem) and returns, per detection, area
 range and threshold, the instance it took; it visits only the candidate pairs (no padded
 problem arrays). :func:`greedy_assign` is the same matching on padded dense arrays (one
-problem of a few detections, or a reference).
+problem of a few detections, or a reference). With the compiled kernels
+(:mod:`torchsar._jit`) :func:`assign_pairs` makes the same choices in one compiled loop
+over the pairs (:func:`torchsar.metrics._match_kernels.greedy_pairs`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from torchsar import _jit
 
 __all__ = ["assign_pairs", "greedy_assign"]
 
@@ -128,6 +132,12 @@ def assign_pairs(
     # pairs orders pycocotools' choice (highest quality; ties: the later instance)
     order = np.lexsort((pg, pq, pd_))
     pd_, pg, pq = pd_[order].astype(np.int64), pg[order].astype(np.int64), pq[order]
+    if _jit.enabled():  # one compiled call (the same choices)
+        from torchsar.metrics import _match_kernels
+
+        ignore, crowd = np.ascontiguousarray(g_ignore, bool), np.asarray(g_crowd, bool)
+        _match_kernels.greedy_pairs(pd_, pg, pq.astype(np.float64), ignore, crowd, thr, out)
+        return out
     per_det = np.bincount(pd_, minlength=D)
     rank = np.arange(pd_.size) - (np.cumsum(per_det) - per_det)[pd_]
     # the key (0: not a candidate) is largest for the choice: counted instances first
