@@ -76,6 +76,7 @@ def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
         "torchsar._windows_kernels",
         "torchsar.cfar._kernels",
         "torchsar.metrics._kernels",
+        "torchsar.metrics._match_kernels",
         "torchsar.objects._kernels",
         "torchsar.order_statistics._kernels",
         "torchsar.region._kernels",

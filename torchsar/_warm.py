@@ -5,8 +5,8 @@ machine code in its on-disk cache (``__pycache__`` beside the sources). On a fre
 that first call costs up to a minute for all kernels together; :func:`warm` (run by ``make
 setup`` through ``scripts/warm_kernels.py``) pays it once, so the first evaluation, detector
 call or test run does not. It runs every compiled path (the window CFARs, OS-CFAR, the speckle
-filters, the region CFAR, object labelling and closing, the pixel ROC) on tiny float32 and float64
-batches (the window CFARs with and without a valid mask). Without numba (or with
+filters, the region CFAR, object labelling and closing, the matching, the pixel ROC) on tiny
+float32 and float64 batches (the window CFARs with and without a valid mask). Without numba (or with
 ``TORCHSAR_NUMBA=0``) it does nothing. :func:`warm_tables` computes the K and G0 CFARs'
 default design tables into their on-disk cache.
 """
@@ -36,7 +36,7 @@ def warm() -> float:
     if not _jit.enabled():
         return 0.0
     from torchsar import cfar, speckle
-    from torchsar.metrics import RocAccumulator
+    from torchsar.metrics import Matching, RocAccumulator, ground_truth, match_batch
     from torchsar.objects import ObjectRules, discriminate
     from torchsar.region import region_cfar
 
@@ -58,7 +58,12 @@ def warm() -> float:
         region_cfar(x)
         det = cfar.ca(x)  # detects the bright spots: objects to label and close
         for closing in (0, 2):
-            discriminate(det.statistic, det.threshold, rules=ObjectRules(closing=closing))
+            obj = discriminate(det.statistic, det.threshold, rules=ObjectRules(closing=closing))
+        ids = torch.zeros(x.shape[0], *x.shape[-2:], dtype=torch.int64)
+        ids[:, 18:23, 18:23] = 1
+        gt = ground_truth(ids.numpy())
+        for kind in ("mask", "centroid"):  # the greedy assignment and the pixel joins
+            match_batch(obj, gt, Matching(kind=kind))
         acc = RocAccumulator()
         target = torch.zeros_like(x, dtype=torch.bool)
         target[..., 18:23, 18:23] = True
