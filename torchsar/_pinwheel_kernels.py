@@ -37,9 +37,12 @@ __all__ = [
     "block_rows",
     "mean_of",
     "paired_pinwheel",
+    "pending_sizes",
     "pinwheel_buffers",
     "pinwheel_sums",
     "ratio_of",
+    "scale_by_sizes",
+    "size_ranks",
     "vi_ratio",
     "vi_rule",
 ]
@@ -360,3 +363,79 @@ def _vi_row(xp, i, g, t, work, rule, states, out, mask):
         oi[j] = -np.inf if f == -np.inf else v * f
     for j in range(xi.shape[0]):
         mi[j] = oi[j] > thr
+
+
+@njit(**JIT, inline="always")
+def _sorted4(a, b, c, d):
+    """The four values in ascending order (five compare-exchanges)."""
+    a, b = min(a, b), max(a, b)
+    c, d = min(c, d), max(c, d)
+    a, c = min(a, c), max(a, c)
+    b, d = min(b, d), max(b, d)
+    b, c = min(b, c), max(b, c)
+    return a, b, c, d
+
+
+@njit(**JIT, inline="always")
+def _size_rank(a, b, c, d):
+    """The rank of the ascending sizes ``a <= b <= c <= d`` among all such tuples (the
+    combinatorial number system of ``a < b + 1 < c + 2 < d + 3``): ``< size_ranks(n)``
+    for sizes up to ``n``."""
+    x2, x3, x4 = b + 1, c + 2, d + 3
+    return (
+        a
+        + x2 * (x2 - 1) // 2
+        + x3 * (x3 - 1) * (x3 - 2) // 6
+        + x4 * (x4 - 1) * (x4 - 2) * (x4 - 3) // 24
+    )
+
+
+def size_ranks(n: int) -> int:
+    """How many ascending 4-tuples of sizes in ``[0, n]`` there are: ``C(n + 4, 4)``."""
+    return (n + 1) * (n + 2) * (n + 3) * (n + 4) // 24
+
+
+@njit(**JIT, inline="always")
+def _block_sizes(counts, k, interior):
+    """Pixel ``k``'s four block sizes (``counts`` ``(4, N)``) and whether they are the
+    interior ones."""
+    a, b = np.int64(counts[0, k]), np.int64(counts[1, k])
+    c, d = np.int64(counts[2, k]), np.int64(counts[3, k])
+    same = a == interior[0] and b == interior[1] and c == interior[2] and d == interior[3]
+    return a, b, c, d, same
+
+
+@njit(**JIT)
+def pending_sizes(counts, interior, table):
+    """The distinct ascending size tuples ``(K, 4)`` of the pixels (``counts`` ``(4, N)``,
+    float64 whole numbers) whose sizes are not the interior ones and whose factor ``table``
+    (by :func:`_size_rank`) holds no value yet (NaN), each once, in pixel order."""
+    seen = np.zeros(table.shape[0], np.bool_)
+    out = np.empty((min(counts.shape[1], table.shape[0]), 4), np.int64)
+    m = 0
+    for k in range(counts.shape[1]):
+        a, b, c, d, same = _block_sizes(counts, k, interior)
+        if same:
+            continue
+        a, b, c, d = _sorted4(a, b, c, d)
+        r = _size_rank(a, b, c, d)
+        if table[r] == table[r] or seen[r]:  # has a value, or listed already
+            continue
+        seen[r] = True
+        out[m, 0], out[m, 1], out[m, 2], out[m, 3] = a, b, c, d
+        m += 1
+    return out[:m]
+
+
+@njit(**JIT)
+def scale_by_sizes(stat, counts, interior, table, full):
+    """``stat[k] *= full (1 / table[rank of pixel k's ascending sizes])`` (float64, in
+    place) where the sizes are not the interior ones: the border factors of GO and SO, one
+    look-up per pixel (``full`` times the reciprocal, as torch divides a number by a tensor
+    and the kernel without no-data forms its factors, so that a mask of valid cells gives
+    its statistic bit for bit)."""
+    for k in range(counts.shape[1]):
+        a, b, c, d, same = _block_sizes(counts, k, interior)
+        if not same:
+            a, b, c, d = _sorted4(a, b, c, d)
+            stat[k] = stat[k] * (full * (1.0 / table[_size_rank(a, b, c, d)]))

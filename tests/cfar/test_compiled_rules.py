@@ -106,7 +106,7 @@ def test_remembered_border_factors_change_nothing(monkeypatch, name):
     x = _scene(5)
     first, again = detector(x).statistic, detector(x[:2]).statistic  # the second reuses them
     for module in modules:
-        monkeypatch.setattr(module, "geometric_cached", lambda key, counts, make: make())
+        monkeypatch.setattr(module, "geometric_cached", lambda key, counts, make, **_: make())
     assert torch.equal(detector(x).statistic, first)
     assert torch.equal(detector(x[:2]).statistic, again)
 
@@ -120,10 +120,54 @@ def test_only_counts_shared_by_the_batch_are_remembered():
         calls.append(1)
         return torch.zeros(1)
 
+    def cached(counts, geometric=True):
+        return geometric_cached(("t",), counts, make, geometric=geometric)
+
     shared = torch.ones(4, 6)
-    geometric_cached(("t",), [shared], make), geometric_cached(("t",), [shared.clone()], make)
+    cached([shared]), cached([shared.clone()])
     assert len(calls) == 1
-    geometric_cached(("t",), [shared + 1], make)  # other counts: evaluated again
+    cached([shared + 1])  # other counts: evaluated again
     per_image = torch.ones(2, 1, 4, 6)
-    geometric_cached(("t",), [per_image], make), geometric_cached(("t",), [per_image], make)
+    cached([per_image]), cached([per_image])
     assert len(calls) == 4
+    one_image = torch.ones(1, 1, 4, 6)  # one image's counts of a no-data mask
+    cached([one_image], geometric=False), cached([one_image], geometric=False)
+    assert len(calls) == 6
+
+
+@pytest.mark.parametrize("name", ["go", "so", "vi"])
+def test_the_counts_of_a_mask_are_not_remembered(name):
+    """A single image's no-data counts look like the geometry's (unit batch and channel
+    dims) but are the mask's: hashed and kept as keys they cost more than the factors (and
+    up to 16 copies of 4 full-size planes in memory)."""
+    from torchsar.cfar import core
+
+    x = _scene(6)[:1, :1]
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(6)) > 0.1
+    before = dict(core._GEOMETRIC)
+    for _ in range(2):
+        getattr(cfar, name)(x, valid=valid)
+    assert dict(core._GEOMETRIC).keys() == before.keys()
+
+
+@pytest.mark.parametrize("name", ["go", "so", "vi"])
+def test_factors_remembered_from_other_masks_change_nothing(name):
+    """With no-data the border factors are looked up in tables filled as block sizes are
+    met (each factor evaluated once per process): a mask met after others gives the
+    statistic it gives with empty tables, bit for bit."""
+    import importlib
+
+    blocks, vi = (importlib.import_module(f"torchsar.cfar.{m}") for m in ("blocks", "vi"))
+    x = _scene(7)[:1, :1].double()
+    gen = torch.Generator().manual_seed(7)
+    masks = [torch.rand(x.shape, generator=gen) > p for p in (0.05, 0.3, 0.6)]
+    detector = getattr(cfar, name)
+    fresh = []
+    for m in masks:
+        blocks._size_factors.cache_clear()
+        vi._half_tables.cache_clear()
+        fresh.append(detector(x, valid=m).statistic)
+    for m in reversed(masks):
+        detector(x, valid=m)  # tables holding every mask's sizes
+    for m, want in zip(masks, fresh, strict=True):
+        assert torch.equal(detector(x, valid=m).statistic, want)

@@ -23,8 +23,10 @@ from torchsar._pinwheel_kernels import vi_rule
 
 __all__ = [
     "censor_mean",
+    "half_maps",
     "os_decision",
     "os_ratio",
+    "pending_halves",
     "vi_rule_ratio",
 ]
 
@@ -222,3 +224,35 @@ def censor_mean(planes, q, ratio_kept, iterations):
             mu = total / max(count, 1) / ratio_kept
         out[p] = mu
     return out
+
+
+@njit(**_JIT)
+def pending_halves(a, b, half, tables):
+    """The distinct ``(rule, a, b)`` whose entry of the factor ``tables`` ``(5, S, S)`` is
+    missing (NaN), at the pixels (flat ``a``, ``b``: the two halves' sizes) where a half
+    is not whole (``!= half``), each once, in pixel order."""
+    seen = np.zeros(tables.shape, np.bool_)
+    out = np.empty((min(5 * a.shape[0], tables.size), 3), np.int64)
+    m = 0
+    for k in range(a.shape[0]):
+        p, q = a[k], b[k]
+        if p == half and q == half:
+            continue
+        for r in range(5):
+            if tables[r, p, q] != tables[r, p, q] and not seen[r, p, q]:
+                seen[r, p, q] = True
+                out[m, 0], out[m, 1], out[m, 2] = r, p, q
+                m += 1
+    return out[:m]
+
+
+@njit(**_JIT)
+def half_maps(a, b, half, tables, inner, full, out):
+    """``out[r, k]``: ``full / alpha_r`` at pixel ``k`` for each rule ``r`` (``out`` ``(5,
+    N)``): ``inner[r]`` where both halves are whole, else ``full (1 / tables[r, a, b])``
+    (times the reciprocal, as torch divides a number by a tensor)."""
+    for k in range(a.shape[0]):
+        p, q = a[k], b[k]
+        whole = p == half and q == half
+        for r in range(5):
+            out[r, k] = inner[r] if whole else full * (1.0 / tables[r, p, q])

@@ -4,6 +4,7 @@ the exact threshold factor for each pixel's block sizes."""
 from __future__ import annotations
 
 import functools
+import math
 from functools import partial
 
 import numpy as np
@@ -87,7 +88,10 @@ def block_cfar(
         stat = ratio(xs.to(est.dtype), est)
         counts = [s.count for s in sums]
         scale = geometric_cached(
-            ("block", interior, pfa, reduce), counts, lambda: block_scale(counts, interior, factor)
+            ("block", interior, pfa, reduce),
+            counts,
+            lambda: block_scale(counts, interior, factor),
+            geometric=vmask is None,
         )
         if scale is not None:
             stat = stat * scale
@@ -115,17 +119,33 @@ def _compiled_valid_blocks(
         planes.numpy(), valid, g, t, reduce == "max", stat, counts
     ):
         refuse_values(x)
-    out = torch.from_numpy(stat).view(x.shape)
-    count = [torch.from_numpy(c).view(x.shape) for c in counts]
     interior = tuple(r.area for r in pinwheel_rects(g, t))
-    scale = geometric_cached(
-        ("block", interior, factor.keywords["pfa"], reduce),
-        count,
-        lambda: block_scale(count, interior, factor),
-    )
-    if scale is not None:
-        out = out * scale
-    return finish(out, sum(count), dtype)
+    flat = counts.reshape(4, -1)
+    table = _size_factors(interior, factor.keywords["pfa"], reduce)
+    sizes = np.array(interior, np.int64)
+    for row in _pinwheel_kernels.pending_sizes(flat, sizes, table).tolist():
+        table[_rank(row)] = factor(tuple(row))  # (idempotent: threads may share the table)
+    _pinwheel_kernels.scale_by_sizes(stat.reshape(-1), flat, sizes, table, factor(interior))
+    count = [torch.from_numpy(c).view(x.shape) for c in counts]
+    return finish(torch.from_numpy(stat).view(x.shape), sum(count), dtype)
+
+
+@functools.lru_cache(maxsize=8)
+def _size_factors(interior: tuple[int, ...], pfa: float, reduce: str) -> np.ndarray:
+    """The GO / SO factors of the block sizes met so far with no-data, by the rank of the
+    ascending sizes (:func:`torchsar._pinwheel_kernels.size_ranks` of them, up to the
+    largest interior block; NaN: not met yet). A mask gives thousands of size tuples per
+    image, a few hundred ascending ones, most of them the same from image to image:
+    each factor (a numerical integration) is evaluated once."""
+    from torchsar import _pinwheel_kernels
+
+    return np.full(_pinwheel_kernels.size_ranks(max(interior)), np.nan)
+
+
+def _rank(sizes: list[int]) -> int:
+    """:func:`torchsar._pinwheel_kernels._size_rank` of ascending sizes."""
+    a, b, c, d = sizes
+    return a + math.comb(b + 1, 2) + math.comb(c + 2, 3) + math.comb(d + 3, 4)
 
 
 def _compiled_block_cfar(

@@ -158,14 +158,18 @@ _GEOMETRIC: OrderedDict = OrderedDict()
 _GEOMETRIC_SIZE = 16
 
 
-def geometric_cached(key: tuple, counts: list[Tensor], make: Callable[[], Tensor | None]):
-    """``make()``, remembered for counts that depend only on the window geometry (no no-data
-    mask: ``(rr, W)`` planes or planes with unit batch and channel dims, the same for every
-    batch of images of one size): the border factors of the rules then cost one evaluation
-    per strip of a image size, not one per batch. ``key`` names everything else ``make``
-    depends on; the counts' values and device are part of the key (a value made on one device
-    is never handed to another). Other counts: ``make()`` as is."""
-    if any(c.dim() > 2 and (c.shape[0] != 1 or c.shape[1] != 1) for c in counts):
+def geometric_cached(
+    key: tuple, counts: list[Tensor], make: Callable[[], Tensor | None], *, geometric: bool
+):
+    """``make()``, remembered for counts that depend only on the window geometry
+    (``geometric``: no no-data mask; ``(rr, W)`` planes or planes with unit batch and
+    channel dims, the same for every batch of images of one size): the border factors of the
+    rules then cost one evaluation per strip of a image size, not one per batch. ``key``
+    names everything else ``make`` depends on; the counts' values and device are part of the
+    key (a value made on one device is never handed to another). Other counts, and counts
+    of a no-data mask (whose bytes, hashed and kept as a key, would cost more time and
+    memory than the factors: 8 MB per 512 x 512 image), get ``make()`` as is."""
+    if not geometric or any(c.dim() > 2 and (c.shape[0] != 1 or c.shape[1] != 1) for c in counts):
         return make()
     full = (
         key,

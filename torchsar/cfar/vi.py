@@ -103,7 +103,7 @@ def vi(
 
     def statistic(xs: Tensor, sums: list[Sums]) -> Tensor:
         if _jit.for_tensor(xs):
-            return _compiled(xs, sums, ring.n, full, factor, k_vi, k_mr, dtype)
+            return _compiled(xs, sums, ring.n, full, factor, (k_vi, k_mr), dtype, vmask is None)
         a, b = _merge(sums[0], sums[1]), _merge(sums[2], sums[3])
         mean_a, mean_b = a.mean(), b.mean()
         rule = _decide(a, b, mean_a, mean_b, k_vi, k_mr)
@@ -123,12 +123,14 @@ def _compiled(
     n: int,
     full: float,
     factor: Callable[[tuple[int, ...]], float],
-    k_vi: float,
-    k_mr: float,
+    ks: tuple[float, float],
     dtype: torch.dtype,
+    geometric: bool,
 ) -> Tensor:
     """The statistic of :func:`vi` by :func:`torchsar.cfar._kernels.vi_rule_ratio` (same
-    values bit for bit); the rules' factor planes come from :func:`_rule_scale`'s maps."""
+    values bit for bit); the rules' factor planes come from :func:`_rule_scale`'s maps
+    (remembered where the counts are ``geometric``: no no-data mask)."""
+    k_vi, k_mr = ks
     from torchsar.cfar import _kernels
 
     count = stack_planes([s.count for s in sums[:4]])
@@ -136,7 +138,8 @@ def _compiled(
     scale = geometric_cached(
         ("vi", n, full, factor.keywords["pfa"]),
         [count_a, count_b],
-        lambda: torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)]),
+        lambda: _rule_maps(count_a, count_b, n, full, factor),
+        geometric=geometric,
     )
     out = _kernels.vi_rule_ratio(
         xs.contiguous().numpy(),
@@ -191,7 +194,7 @@ def rule_states(
             for rule in range(5):
                 if na + nb == 0:
                     table[rule, a, b] = -np.inf
-                elif na != n // 2 or nb != n // 2:  # as _one_rule's float / tensor
+                elif na != n // 2 or nb != n // 2:  # as _rule_maps' float / tensor
                     table[rule, a, b] = full * (1.0 / factor((rule, na, nb)))
                 else:
                     table[rule, a, b] = _inner(rule, n, full, factor)
@@ -219,7 +222,7 @@ def _rule_scale(
     on the border band. The factors are mapped once per rule over the half-size planes
     (without a mask one plane shared by the batch) and each pixel picks its rule's."""
     count_a, count_b = torch.broadcast_tensors(count_a, count_b)
-    maps = torch.stack([_one_rule(r, count_a, count_b, n, full, factor) for r in range(5)])
+    maps = _rule_maps(count_a, count_b, n, full, factor)
     lead = (1,) * (rule.dim() - count_a.dim())  # counts may lack the leading dims
     maps = maps.reshape(5, *lead, *count_a.shape).expand(5, *rule.shape)
     return torch.gather(maps, 0, rule.unsqueeze(0)).squeeze(0)
@@ -230,23 +233,48 @@ def _inner(rule: int, n: int, full: float, factor: Callable[[tuple[int, ...]], f
     return 1.0 if rule == _CA else full / factor((rule, n // 2, n // 2))
 
 
-def _one_rule(
-    rule: int,
+def _rule_maps(
     count_a: Tensor,
     count_b: Tensor,
     n: int,
     full: float,
     factor: Callable[[tuple[int, ...]], float],
 ) -> Tensor:
-    """``full / alpha_rule`` at every pixel of the half-size planes for one rule."""
-    out = torch.full(
-        count_a.shape, _inner(rule, n, full, factor), dtype=torch.float64, device=count_a.device
-    )
+    """``full / alpha_rule`` at every pixel of the half-size planes, for each of the five
+    rules ``(5, ...)``: the interior value, and the exact factor of each pixel's half
+    sizes where a half is not whole (with the compiled kernels looked up in
+    :func:`_half_tables`, else evaluated per distinct key; ``full`` times the factor's
+    reciprocal, as torch divides a number by a tensor)."""
+    inner = [_inner(r, n, full, factor) for r in range(5)]
+    if count_a.device.type == "cpu" and isinstance(factor, partial) and _jit.enabled():
+        from torchsar.cfar import _kernels
+
+        a = count_a.round().long().reshape(-1).numpy()
+        b = count_b.round().long().reshape(-1).numpy()
+        tables = _half_tables(n, factor.keywords["pfa"])
+        for r, p, q in _kernels.pending_halves(a, b, n // 2, tables).tolist():
+            tables[r, p, q] = factor((r, p, q))  # (idempotent: threads may share the tables)
+        maps = np.empty((5, a.size))
+        _kernels.half_maps(a, b, n // 2, tables, np.array(inner), full, maps)
+        return torch.from_numpy(maps).view(5, *count_a.shape)
+    maps = torch.stack([torch.full(count_a.shape, v, dtype=torch.float64) for v in inner])
+    maps = maps.to(count_a.device)
     edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
-    if edge[0].numel():
-        keys = torch.stack([torch.full_like(count_a[edge], rule), count_a[edge], count_b[edge]], -1)
-        out[edge] = full / keyed_factor_map(keys.double(), factor)
-    return out
+    for r in range(5 if edge[0].numel() else 0):
+        a, b = count_a[edge], count_b[edge]
+        keys = torch.stack([torch.full_like(a, r), a, b], -1)
+        maps[r][edge] = full / keyed_factor_map(keys.double(), factor)
+    return maps
+
+
+@functools.lru_cache(maxsize=32)
+def _half_tables(n: int, pfa: float) -> np.ndarray:
+    """The factors of the five rules by half sizes ``(rule, a, b)``, ``0 <= a, b <= n //
+    2``, met so far (NaN: not met yet). A no-data mask gives nearly every pixel half sizes
+    of its own, a few hundred pairs, most of them the same from image to image: each
+    factor is evaluated once. Entries are only ever filled in, with values that do not
+    depend on who computes them, so threads may share the tables."""
+    return np.full((5, n // 2 + 1, n // 2 + 1), np.nan)
 
 
 def _merge(p: Sums, q: Sums) -> Sums:
