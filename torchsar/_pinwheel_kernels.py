@@ -407,11 +407,12 @@ def _block_sizes(counts, k, interior):
 
 @njit(**JIT)
 def pending_sizes(counts, interior, table):
-    """The distinct ascending size tuples ``(K, 4)`` of the pixels (``counts`` ``(4, N)``,
-    float64 whole numbers) whose sizes are not the interior ones and whose factor ``table``
-    (by :func:`_size_rank`) holds no value yet (NaN), each once, in pixel order."""
+    """The distinct ascending size tuples of the pixels (``counts`` ``(4, N)``, float64
+    whole numbers) whose sizes are not the interior ones and whose factor ``table`` (by
+    :func:`_size_rank`) holds no value yet (NaN), each once, in pixel order: rows ``(K, 5)``
+    of the four sizes and their rank."""
     seen = np.zeros(table.shape[0], np.bool_)
-    out = np.empty((min(counts.shape[1], table.shape[0]), 4), np.int64)
+    out = np.empty((min(counts.shape[1], table.shape[0]), 5), np.int64)
     m = 0
     for k in range(counts.shape[1]):
         a, b, c, d, same = _block_sizes(counts, k, interior)
@@ -422,7 +423,7 @@ def pending_sizes(counts, interior, table):
         if table[r] == table[r] or seen[r]:  # has a value, or listed already
             continue
         seen[r] = True
-        out[m, 0], out[m, 1], out[m, 2], out[m, 3] = a, b, c, d
+        out[m, 0], out[m, 1], out[m, 2], out[m, 3], out[m, 4] = a, b, c, d, r
         m += 1
     return out[:m]
 

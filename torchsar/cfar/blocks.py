@@ -4,7 +4,6 @@ the exact threshold factor for each pixel's block sizes."""
 from __future__ import annotations
 
 import functools
-import math
 from functools import partial
 
 import numpy as np
@@ -123,8 +122,8 @@ def _compiled_valid_blocks(
     flat = counts.reshape(4, -1)
     table = _size_factors(interior, factor.keywords["pfa"], reduce)
     sizes = np.array(interior, np.int64)
-    for row in _pinwheel_kernels.pending_sizes(flat, sizes, table).tolist():
-        table[_rank(row)] = factor(tuple(row))  # (idempotent: threads may share the table)
+    for *row, rank in _pinwheel_kernels.pending_sizes(flat, sizes, table).tolist():
+        table[rank] = factor(tuple(row))  # (idempotent: threads may share the table)
     _pinwheel_kernels.scale_by_sizes(stat.reshape(-1), flat, sizes, table, factor(interior))
     count = [torch.from_numpy(c).view(x.shape) for c in counts]
     return finish(torch.from_numpy(stat).view(x.shape), sum(count), dtype)
@@ -140,12 +139,6 @@ def _size_factors(interior: tuple[int, ...], pfa: float, reduce: str) -> np.ndar
     from torchsar import _pinwheel_kernels
 
     return np.full(_pinwheel_kernels.size_ranks(max(interior)), np.nan)
-
-
-def _rank(sizes: list[int]) -> int:
-    """:func:`torchsar._pinwheel_kernels._size_rank` of ascending sizes."""
-    a, b, c, d = sizes
-    return a + math.comb(b + 1, 2) + math.comb(c + 2, 3) + math.comb(d + 3, 4)
 
 
 def _compiled_block_cfar(

@@ -130,8 +130,9 @@ def _compiled(
     """The statistic of :func:`vi` by :func:`torchsar.cfar._kernels.vi_rule_ratio` (same
     values bit for bit); the rules' factor planes come from :func:`_rule_scale`'s maps
     (remembered where the counts are ``geometric``: no no-data mask)."""
-    k_vi, k_mr = ks
     from torchsar.cfar import _kernels
+
+    k_vi, k_mr = ks
 
     count = stack_planes([s.count for s in sums[:4]])
     count_a, count_b = count[0] + count[1], count[2] + count[3]
@@ -257,11 +258,15 @@ def _rule_maps(
         maps = np.empty((5, a.size))
         _kernels.half_maps(a, b, n // 2, tables, np.array(inner), full, maps)
         return torch.from_numpy(maps).view(5, *count_a.shape)
-    maps = torch.stack([torch.full(count_a.shape, v, dtype=torch.float64) for v in inner])
-    maps = maps.to(count_a.device)
+    dev = count_a.device
+    maps = torch.stack(
+        [torch.full(count_a.shape, v, dtype=torch.float64, device=dev) for v in inner]
+    )
     edge = ((count_a != n // 2) | (count_b != n // 2)).nonzero(as_tuple=True)
-    for r in range(5 if edge[0].numel() else 0):
-        a, b = count_a[edge], count_b[edge]
+    if not edge[0].numel():
+        return maps
+    a, b = count_a[edge], count_b[edge]
+    for r in range(5):
         keys = torch.stack([torch.full_like(a, r), a, b], -1)
         maps[r][edge] = full / keyed_factor_map(keys.double(), factor)
     return maps

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["greedy_pairs", "join_pixels"]
+__all__ = ["ascending", "greedy_pairs", "join_pixels"]
 
 _JIT = {"cache": True, "nogil": True, "boundscheck": False}
 
