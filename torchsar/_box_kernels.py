@@ -204,6 +204,18 @@ def moment_views(state, has_valid):
 
 
 @njit(**JIT)
+def _moment_sweep(x, guard, train, has_valid):
+    """What a kernel summing the values and squares of ``x`` ``(P, H, W)`` over the ring
+    starts from: :func:`moment_rings`' state, its views (:func:`moment_views`) and a row
+    of ``x``'s type to hand over where no image row is read."""
+    w = x.shape[2]
+    state = moment_rings(guard, train, w, has_valid)
+    s1, s2, cnt, values, cells = moment_views(state, has_valid)
+    empty = x[0, 0] if x.shape[0] and x.shape[1] else np.zeros(w, x.dtype)  # a row not read
+    return state, s1, s2, cnt, values, cells, empty
+
+
+@njit(**JIT)
 def _prime_moments(state, xp, vp, empty, has_valid, r0):
     """The rows above row ``r0``'s window bottom into the rings of :func:`moment_rings`
     (zeros above the image); the count of bad values read."""
@@ -253,11 +265,8 @@ def deviation_ratio(x, valid, has_valid, guard, train, threshold, out, mask):
 
     Returns how many values of ``x`` are not a finite number ``>= 0``."""
     p_, h, w = x.shape
-    g = guard
-    state = moment_rings(guard, train, w, has_valid)
-    s1, s2, cnt, values, cells = moment_views(state, has_valid)
-    o = guard + train
-    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    g, o = guard, guard + train
+    state, s1, s2, cnt, values, cells, empty = _moment_sweep(x, guard, train, has_valid)
     thr = threshold[0]
     bad = 0
     for pl in range(p_):
@@ -434,11 +443,8 @@ def ring_moments(x, valid, has_valid, guard, train, r0, count, mean, var):
     equal cells give a variance of exactly 0. A ring without a counted cell: count 0, mean
     and variance 0."""
     p_, h, w = x.shape
-    g = guard
-    state = moment_rings(guard, train, w, has_valid)
-    s1, s2, cnt, values, cells = moment_views(state, has_valid)
-    o = guard + train
-    empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
+    g, o = guard, guard + train
+    state, s1, s2, cnt, values, cells, empty = _moment_sweep(x, guard, train, has_valid)
     for pl in range(p_):
         xp, vp = x[pl], valid[pl if has_valid else 0]
         _prime_moments(state, xp, vp, empty, has_valid, r0)

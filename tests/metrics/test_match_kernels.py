@@ -11,6 +11,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.reference.coco import random_problems
 from torchsar import _jit
 from torchsar.metrics import Matching, match_batch
 from torchsar.metrics.assign import join_pixels
@@ -81,20 +82,7 @@ def test_the_compiled_greedy_makes_the_numpy_choices(seed, problems):
     """Ties in quality, crowd instances, instances ignored in some area ranges only, one
     and several thresholds (the operating point's and COCO's ten)."""
     rng = np.random.default_rng(seed)
-    sizes = rng.integers(0, 9, (problems, 2))
-    d_problem = np.repeat(np.arange(problems), sizes[:, 0])
-    g_problem = np.repeat(np.arange(problems), sizes[:, 1])
-    ignore = rng.random((g_problem.size, 4)) < 0.3
-    crowd = rng.random(g_problem.size) < 0.2
-    ignore[crowd] = True
-    pairs, d0, g0 = ([], [], []), 0, 0
-    for d, g in sizes:
-        q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
-        i, j = np.nonzero(q > 0)
-        for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
-            a.append(v)
-        d0, g0 = d0 + d, g0 + g
-    flat = tuple(np.concatenate(a) for a in pairs)
+    d_problem, g_problem, ignore, crowd, flat, _ = random_problems(rng, problems, 4)
     for thresholds in (COCO_IOUS, [0.5], [1e-12]):
         got, want = _both(
             lambda t=thresholds: assign_pairs(d_problem, g_problem, ignore, crowd, flat, t)

@@ -6,7 +6,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.reference.coco import coco_match
+from tests.reference.coco import coco_match, random_problems
 from torchsar.errors import OptionError
 from torchsar.metrics import Matching, box_iou, greedy_match, ground_truth, match_batch
 from torchsar.metrics.greedy import assign_pairs, greedy_assign
@@ -62,25 +62,11 @@ def test_problems_with_ignored_instances_per_area_range_equal_the_dense_matcher(
     """Instances ignored in some area ranges and not others, crowd ones, tied qualities:
     the pair-by-pair matcher equals the padded one, problem by problem."""
     rng = np.random.default_rng(seed)
-    sizes = rng.integers(0, 9, (problems, 2))
-    d_problem = np.repeat(np.arange(problems), sizes[:, 0])
-    g_problem = np.repeat(np.arange(problems), sizes[:, 1])
-    ignore = rng.random((g_problem.size, 3)) < 0.3
-    crowd = rng.random(g_problem.size) < 0.2
-    ignore[crowd] = True
-    pairs, dense, d0, g0 = ([], [], []), [], 0, 0
-    for d, g in sizes:
-        q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
-        dense.append(q)
-        i, j = np.nonzero(q > 0)
-        for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
-            a.append(v)
-        d0, g0 = d0 + d, g0 + g
-    col = assign_pairs(
-        d_problem, g_problem, ignore, crowd, tuple(np.concatenate(a) for a in pairs), COCO_IOUS
-    )
+    d_problem, g_problem, ignore, crowd, flat, dense = random_problems(rng, problems, 3)
+    col = assign_pairs(d_problem, g_problem, ignore, crowd, flat, COCO_IOUS)
     d0 = g0 = 0
-    for (d, g), q in zip(sizes, dense, strict=True):
+    for q in dense:
+        d, g = q.shape
         quality = np.where(q > 0, q, -np.inf)[None]
         ref = greedy_assign(
             quality, ignore[g0 : g0 + g].T[None], crowd[g0 : g0 + g][None], np.array([d]), COCO_IOUS

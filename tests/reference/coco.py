@@ -28,3 +28,27 @@ def coco_match(ious: np.ndarray, is_crowd: np.ndarray, thresholds) -> np.ndarray
             out[ti, d] = -2 if is_crowd[m] else m
             gtm[m] = True
     return out
+
+
+def random_problems(rng: np.random.Generator, problems: int, ranges: int) -> tuple:
+    """Random matching problems for :func:`torchsar.metrics.greedy.assign_pairs`: up to 8
+    detections and instances each, instances ignored in some of ``ranges`` area ranges,
+    some crowd (ignored everywhere), qualities with ties. Returns ``(d_problem, g_problem,
+    ignore, crowd, pairs, dense)``: the flat candidate pairs ``(d, g, quality)`` and each
+    problem's ``(D, G)`` quality block (0: not a candidate)."""
+    sizes = rng.integers(0, 9, (problems, 2))
+    d_problem = np.repeat(np.arange(problems), sizes[:, 0])
+    g_problem = np.repeat(np.arange(problems), sizes[:, 1])
+    ignore = rng.random((g_problem.size, ranges)) < 0.3
+    crowd = rng.random(g_problem.size) < 0.2
+    ignore[crowd] = True
+    pairs, dense, d0, g0 = ([], [], []), [], 0, 0
+    for d, g in sizes:
+        q = rng.choice([0.0, 0.3, 0.5, 0.55, 0.7, 0.9, 1.0], size=(d, g))
+        dense.append(q)
+        i, j = np.nonzero(q > 0)
+        for a, v in zip(pairs, (i + d0, j + g0, q[i, j]), strict=True):
+            a.append(v)
+        d0, g0 = d0 + d, g0 + g
+    flat = tuple(np.concatenate(a) for a in pairs)
+    return d_problem, g_problem, ignore, crowd, flat, dense
