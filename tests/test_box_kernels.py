@@ -120,6 +120,43 @@ def test_ca_is_the_exactly_summed_statistic_borders_included(monkeypatch, dtype,
     _finite_near(got, want, dtype, rtol=1e-13, atol=0)
 
 
+@pytest.mark.parametrize(
+    "guard, train", [(0, 1), (2, 4), (2, 7), (1, 15), (5, 20), (3, 31), (7, 63), (0, 2)]
+)
+def test_the_fold_in_the_dividing_loop_is_the_ring_sum_bit_for_bit(guard, train):
+    """CA's kernel adds the last terms of each ring sum in the loop that divides
+    (``ring_fold_plan``: a head folded first when there are more than four terms): on
+    random levels, head then tail make the very additions of ``ring_sums``' two block-sum
+    calls, in their order (every sum equal bit for bit), for windows of few and of many
+    blocks."""
+    from torchsar import _box_kernels as bk
+    from torchsar._block_sums import block_sums
+
+    w = 23
+    band, mid, levels = bk.ring_buffers(guard, train, w)
+    levels[:-2] = np.random.default_rng(guard * 100 + train).exponential(size=levels[:-2].shape)
+    o = guard + train
+    want = np.zeros(w)
+    block_sums(band, 0, 2 * o + 1, (0,), w, want, False)
+    block_sums(mid, 0, train, (0, o + guard + 1), w, want, True)
+    head, tail = bk.ring_fold_plan(guard, train, band.shape[0], mid.shape[0])
+    terms = _terms(o, train)
+    assert tail.shape == (4, 4) and len(head) == (terms - 3 if terms > 4 else 0)
+    bk.fold_head(levels, head, w)
+    got = np.zeros(w)
+    for k, (r0, p0, r1, p1) in enumerate(tail):
+        term = levels[r0, p0 : p0 + w] + levels[r1, p1 : p1 + w]
+        got = term if k == 0 else got + term
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))
+
+
+def _terms(o: int, train: int) -> int:
+    """How many pair terms the ring's two block-sum calls add: the band's blocks in pairs,
+    then the middle rows' (both sides) in pairs."""
+    band, side = bin(2 * o + 1).count("1"), bin(train).count("1")
+    return (band + 1) // 2 + side
+
+
 def test_ca_keeps_its_precision_beside_a_very_bright_target(monkeypatch):
     """Clutter of 1 beside cells of 1e12: the integral image carries the target into every
     later sum and cancels it back out; the direct sums never add it where it is not."""

@@ -17,7 +17,9 @@ __all__ = [
     "FINITE_MAX",
     "FMA",
     "JIT",
+    "add_blocks",
     "axis_count",
+    "block_list",
     "block_sums",
     "kept_row",
     "level_up",
@@ -84,7 +86,7 @@ def ring_levels(ring, q, size, depth, w):
 
 
 @njit(**JIT, inline="always")
-def _put(a, b, n, out, first, pair):
+def add_blocks(a, b, n, out, first, pair):
     """``out[:n] (+)= a (+ b)``: assign when ``first``, add otherwise; ``b`` only when
     ``pair`` (two terms in one pass)."""
     o = out[:n]
@@ -123,16 +125,33 @@ def block_sums(src, size, length, starts, n, out, accumulate):
                     held, held_off = row, off
                 else:
                     a = src[held, held_off : held_off + n]
-                    _put(a, src[row, off : off + n], n, out, first, True)
+                    add_blocks(a, src[row, off : off + n], n, out, first, True)
                     first, held = False, -1
                 pos += 1 << k
             k -= 1
     if held >= 0:
         a = src[held, held_off : held_off + n]
-        _put(a, a, n, out, first, False)
+        add_blocks(a, a, n, out, first, False)
     elif first:
         for j in range(n):
             out[j] = 0.0
+
+
+@njit(**JIT)
+def block_list(length, starts, row0, out, n):
+    """The blocks :func:`block_sums` takes along a row, in its order: for each of ``starts``
+    the blocks of ``length``'s set bits, largest first, as ``(row0 + k, position)`` (level
+    ``k``) into ``out[n:]``; returns the new ``n``."""
+    for start in starts:
+        pos = start
+        k = levels_for(length) - 1
+        while k >= 0:
+            if (length >> k) & 1:
+                out[n, 0], out[n, 1] = row0 + k, pos
+                n += 1
+                pos += 1 << k
+            k -= 1
+    return n
 
 
 @njit(**JIT, inline="always")

@@ -46,7 +46,9 @@ from numba import njit
 from torchsar._block_sums import (
     FMA,
     JIT,
+    add_blocks,
     axis_count,
+    block_list,
     block_sums,
     kept_row,
     level_up,
@@ -89,7 +91,9 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
 
     Each part is a sum of power-of-two blocks (rows ``r .. r + 2^k - 1`` kept per row as
     it arrives, then columns likewise): about a dozen additions per pixel, every one of
-    non-negative terms in an order fixed by the pixel's position alone.
+    non-negative terms in an order fixed by the pixel's position alone. The last additions
+    along the row (:func:`ring_fold_plan`) are made in the loop that divides, so the row
+    of ring sums is never written out.
 
     Returns how many values of ``x`` are not a finite number ``>= 0`` (the input check,
     made as the values are read; ``out`` and ``mask`` mean nothing unless 0)."""
@@ -100,8 +104,8 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
     depth = levels_for(max(train, 2 * g + 1))
     rows = np.zeros((depth, size, w))
     ring = rows.reshape(depth * size, w)  # level k, row r in row k size + r % size
-    band, mid = ring_buffers(guard, train, w)
-    acc = np.zeros(w)
+    band, mid, levels = ring_buffers(guard, train, w)
+    head, tail = ring_fold_plan(guard, train, band.shape[0], mid.shape[0])
     empty = x[0, 0] if p_ and h else np.zeros(w, x.dtype)  # a row not read
     outer_cols, guard_cols = np.zeros(w, np.int64), np.zeros(w, np.int64)
     for j in range(w):
@@ -125,23 +129,88 @@ def ring_ratio(x, guard, train, scale, threshold, out, mask):
                     c = counts[0] * outer_cols[j] - counts[1] * guard_cols[j]
                     cf[j] = c * (scale[c] if c != n_full else 1.0)
                 last_rows = counts
-            ring_sums(ring, size, i, g, train, band, mid, acc)
-            xi, oi, mi = xp[i], out[pl, i], mask[pl, i]
-            for j in range(w):
-                v = np.float64(xi[j]) * cf[j] / (acc[j] + 0.0)  # a ring of -0.0 is 0
-                oi[j] = v if v == v else 0.0
-                mi[j] = oi[j] > thr
+            ring_levels_row(ring, size, i, g, train, band, mid)
+            fold_head(levels, head, w)
+            _ratio_row(levels, tail, xp[i], cf, thr, out[pl, i], mask[pl, i])
     return bad
 
 
 @njit(**JIT)
+def _ratio_row(levels, tail, xi, cf, thr, oi, mi):
+    """One row of :func:`ring_ratio`: each pixel's ring sum as the left fold of the four
+    pair terms ``tail`` (:func:`ring_fold_plan`) over ``levels``, then ``x cf / sum`` and
+    the decision."""
+    w = xi.shape[0]
+    a0, a1 = levels[tail[0, 0], tail[0, 1] :], levels[tail[0, 2], tail[0, 3] :]
+    b0, b1 = levels[tail[1, 0], tail[1, 1] :], levels[tail[1, 2], tail[1, 3] :]
+    c0, c1 = levels[tail[2, 0], tail[2, 1] :], levels[tail[2, 2], tail[2, 3] :]
+    d0, d1 = levels[tail[3, 0], tail[3, 1] :], levels[tail[3, 2], tail[3, 3] :]
+    for j in range(w):
+        acc = a0[j] + a1[j]
+        acc += b0[j] + b1[j]
+        acc += c0[j] + c1[j]
+        acc += d0[j] + d1[j]
+        v = np.float64(xi[j]) * cf[j] / (acc + 0.0)  # a ring of -0.0 is 0
+        oi[j] = v if v == v else 0.0
+        mi[j] = oi[j] > thr
+
+
+@njit(**JIT)
 def ring_buffers(guard, train, w):
-    """The working rows of :func:`ring_sums` for rows ``w`` long: the top and bottom bands'
-    column sums and the middle rows' (``o`` zero columns a side), with their levels."""
+    """The working rows of :func:`ring_sums` for rows ``w`` long (``o`` zero columns a
+    side), in one array ``levels``: the top and bottom bands' column sums with their levels
+    (``band``, rows ``0 ..``), the middle rows' (``mid``, the rows after), a row of zeros
+    and a row for :func:`fold_head`. Returns ``band``, ``mid`` and ``levels``."""
     o = guard + train
-    band = np.zeros((levels_for(2 * o + 1), w + 2 * o))
-    mid = np.zeros((levels_for(train), w + 2 * o))
-    return band, mid
+    nb, nm = levels_for(2 * o + 1), levels_for(train)
+    levels = np.zeros((nb + nm + 2, w + 2 * o))
+    return levels[:nb], levels[nb : nb + nm], levels
+
+
+@njit(**JIT)
+def ring_fold_plan(guard, train, nb, nm, slots=4):
+    """The ring sum of :func:`ring_sums` as a left fold of pair terms ``(row, position,
+    row, position)`` over :func:`ring_buffers`' ``levels`` (``nb`` band and ``nm`` middle
+    levels), term for term the additions of its two :func:`block_sums` calls (a block
+    without a partner paired with the zero row; ``a + 0 = a``). Returns the terms to fold
+    first (``head``, :func:`fold_head`; none unless there are more than ``slots``) and
+    ``slots`` terms to fold in the loop that uses the sum (``tail``: when there is a head,
+    its row first; padded with zero pairs)."""
+    o = guard + train
+    zero, pre = nb + nm, nb + nm + 1
+    blocks = np.zeros((2 * 64 + 1, 2), np.int64)
+    terms = np.zeros((2 * 64, 4), np.int64)
+    n = 0
+    for part in range(2):  # the band, then both sides of the middle rows
+        if part == 0:
+            m = block_list(2 * o + 1, (0,), 0, blocks, 0)
+        else:
+            m = block_list(train, (0, o + guard + 1), nb, blocks, 0)
+        blocks[m, 0], blocks[m, 1] = zero, 0  # the partner of an odd last block
+        for b in range(0, m, 2):
+            terms[n] = blocks[b, 0], blocks[b, 1], blocks[b + 1, 0], blocks[b + 1, 1]
+            n += 1
+    split = n - slots + 1 if n > slots else 0
+    tail = np.zeros((slots, 4), np.int64)
+    tail[:, 0], tail[:, 2] = zero, zero
+    k = 0
+    if split:
+        tail[0, 0] = pre
+        k = 1
+    tail[k : k + n - split] = terms[split:n]
+    return terms[:split].copy(), tail
+
+
+@njit(**JIT)
+def fold_head(levels, head, w):
+    """The left fold of the pair terms ``head`` (:func:`ring_fold_plan`) of a row ``w``
+    long into ``levels``' last row, as :func:`block_sums` adds them; nothing without
+    terms."""
+    out = levels[-1]
+    for k in range(head.shape[0]):
+        a = levels[head[k, 0], head[k, 1] : head[k, 1] + w]
+        b = levels[head[k, 2], head[k, 3] : head[k, 3] + w]
+        add_blocks(a, b, w, out, k == 0, True)
 
 
 @njit(**JIT)
@@ -154,17 +223,17 @@ def paired_rings(guard, train, w):
     size = 2 * o + 1
     depth = levels_for(max(train, 2 * guard + 1))
     rows1, rows2, ring1, ring2 = pair_rings(depth, size, w)
-    band, mid = ring_buffers(guard, train, w)
+    band, mid, _ = ring_buffers(guard, train, w)
     return o, size, depth, rows1, rows2, ring1, ring2, band, mid
 
 
 @njit(**JIT)
-def ring_sums(ring, size, i, guard, train, band, mid, acc):
-    """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
-    ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``): the top and bottom bands
-    and the left and right parts of the middle rows (no subtraction). Not inlined: inlined
-    twice into a kernel it made numba compile it for 16 s instead of 3."""
-    g, o, w = guard, guard + train, acc.shape[0]
+def ring_levels_row(ring, size, i, guard, train, band, mid):
+    """Row ``i``'s top and bottom bands' and middle rows' column sums from the row-block
+    ring ``ring`` (level ``k``, row ``r`` in row ``k size + r % size``) into ``band[0]``
+    and ``mid[0]``, and their block sums along the row into the higher levels."""
+    g, o = guard, guard + train
+    w = band.shape[1] - 2 * o
     b0, m0 = band[0, o : o + w], mid[0, o : o + w]
     block_sums(ring, size, train, (i - o, i + g + 1), w, b0, False)  # top, bottom
     block_sums(ring, size, 2 * g + 1, (i - g,), w, m0, False)
@@ -173,6 +242,16 @@ def ring_sums(ring, size, i, guard, train, band, mid, acc):
         level_up(band[k - 1], band[k], 1 << (k - 1), n)
         if k < mid.shape[0]:
             level_up(mid[k - 1], mid[k], 1 << (k - 1), n)
+
+
+@njit(**JIT)
+def ring_sums(ring, size, i, guard, train, band, mid, acc):
+    """The ring sums of every pixel of row ``i`` into ``acc``, from the row-block ring
+    ``ring`` (:func:`ring_levels_row`): the top and bottom bands and the left and right
+    parts of the middle rows (no subtraction). Not inlined: inlined twice into a kernel it
+    made numba compile it for 16 s instead of 3."""
+    g, o, w = guard, guard + train, acc.shape[0]
+    ring_levels_row(ring, size, i, guard, train, band, mid)
     block_sums(band, 0, 2 * o + 1, (0,), w, acc, False)
     block_sums(mid, 0, train, (0, o + g + 1), w, acc, True)  # left, right
 
