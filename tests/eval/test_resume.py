@@ -19,7 +19,7 @@ ARGS = [
     "--dataset",
     "sim-chips",
     "--n",
-    "12",
+    "40",  # 20 shards: after the second is saved, the rest outlasts the poll by far
     "--detectors",
     "ca,so",
     "--shard-size",
@@ -47,7 +47,7 @@ def _interrupt_after(out: Path, shards: int, sig: int) -> int:
     deadline = time.monotonic() + 120
     while _saved(out.parent, out.name) < shards and proc.poll() is None:
         assert time.monotonic() < deadline, "the run saved no shard in time"
-        time.sleep(0.05)
+        time.sleep(0.01)
     os.kill(proc.pid, sig)
     proc.wait(timeout=60)
     return proc.returncode, proc.stderr.read().decode()
