@@ -178,7 +178,7 @@ def ring_fold_plan(guard, train, nb, nm, slots=4):
     its row first; padded with zero pairs)."""
     o = guard + train
     zero, pre = nb + nm, nb + nm + 1
-    blocks = np.zeros((2 * 64 + 1, 2), np.int64)
+    blocks = np.zeros((2 * 64 + 1, 2), np.int64)  # a length's set bits, for two starts
     terms = np.zeros((2 * 64, 4), np.int64)
     n = 0
     for part in range(2):  # the band, then both sides of the middle rows
