@@ -3,14 +3,15 @@
 # baseline it is judged against measured beside it, every result written under $OUT.
 #
 #   OUT=/some/folder bash scripts/device_check.sh        # on the GPU machine
-#   DEVICE=cpu N=2 SCENE=1024 THROUGHPUT_N=32 CPU_WORKERS=1 bash scripts/device_check.sh  # dry run
+#   DEVICE=cpu N=2 SCENE=1024 THROUGHPUT_N=32 CPU_WORKERS=1 DEVICE_WORKERS=1 bash scripts/device_check.sh  # dry run
 #
 # It installs nothing (such machines often reach no network): it runs the checkout with
 # the machine's python3 (its CUDA build of torch) and the project on PYTHONPATH; numba,
 # pandas, scikit-image, matplotlib, hypothesis and pytest-xdist must be there. Each step
 # has its own time limit, so a slow one cannot eat the others' time: 9 min 40 s at most,
-# inside one 10-minute device command. Compiling the numba kernels (the warm step) took 55 s
-# on a 2-core VM's core; a step cut short leaves what it compiled in the cache for the next.
+# inside one 10-minute device command. Compiling every numba kernel from an empty cache takes
+# about 170 s of one core (a 2-core VM's); the warm step compiles them in one process per
+# core (111 s on that VM's two), and a step cut short leaves what it compiled in the cache.
 set -uo pipefail
 OUT=${OUT:-device-out}
 DEVICE=${DEVICE:-cuda}
@@ -18,6 +19,7 @@ N=${N:-64}                       # images of 1024^2 per CFAR batch (the issue's 
 SCENE=${SCENE:-16384}            # the whole-scene side
 THROUGHPUT_N=${THROUGHPUT_N:-2048}
 CPU_WORKERS=${CPU_WORKERS:-1 4 8 16}  # the CPU side: one worker, and the counts to find its best
+DEVICE_WORKERS=${DEVICE_WORKERS:-1 4 8}  # the device side likewise (each worker its own context)
 PY=${PYTHON:-python3}
 mkdir -p "$OUT"
 export PYTHONPATH="$PWD:$PWD/eval${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
@@ -38,11 +40,11 @@ step() {  # step NAME LIMIT COMMAND...: run it, append its output to the log, no
 }
 
 step machine 20 "$PY" -c "import torch, numba, sys; print(sys.version); print('torch', torch.__version__, 'cuda', torch.version.cuda, torch.cuda.is_available() and torch.cuda.get_device_name()); print('numba', numba.__version__); import triton; print('triton', triton.__version__)"
-step warm 100 "$PY" scripts/warm_kernels.py
-step device_tests 140 "$PY" -m pytest -q -p no:cacheprovider -o addopts=--import-mode=importlib tests/test_devices.py tests/cfar/test_gpu_kernels.py
-step gpu_cfars 100 "$PY" scripts/benchmark.py --topic gpu --n "$N" --device "$DEVICE" --csv "$OUT/gpu_cfars.csv"
-step scene 60 "$PY" scripts/scene_device.py --size "$SCENE" --device "$DEVICE" --tile 2048
-step throughput_device 70 "$PY" scripts/benchmark.py --topic throughput --n "$THROUGHPUT_N" --workers 1 --device "$DEVICE" --csv "$OUT/throughput_device.csv"
-step throughput_cpu 90 "$PY" scripts/benchmark.py --topic throughput --n "$THROUGHPUT_N" --workers $CPU_WORKERS --csv "$OUT/throughput_cpu.csv"
+step warm 60 "$PY" scripts/warm_kernels.py
+step device_tests 150 "$PY" -m pytest -q -p no:cacheprovider -o addopts=--import-mode=importlib tests/test_devices.py tests/cfar/test_gpu_kernels.py
+step gpu_cfars 90 "$PY" scripts/benchmark.py --topic gpu --n "$N" --device "$DEVICE" --csv "$OUT/gpu_cfars.csv"
+step scene 50 "$PY" scripts/scene_device.py --size "$SCENE" --device "$DEVICE" --tile 2048
+step throughput_device 100 "$PY" scripts/benchmark.py --topic throughput --n "$THROUGHPUT_N" --workers $DEVICE_WORKERS --device "$DEVICE" --csv "$OUT/throughput_device.csv"
+step throughput_cpu 110 "$PY" scripts/benchmark.py --topic throughput --n "$THROUGHPUT_N" --workers $CPU_WORKERS --csv "$OUT/throughput_cpu.csv"
 echo "results in $OUT:"
 ls "$OUT"

@@ -38,6 +38,7 @@ def test_the_device_check_dry_run_passes_every_step(tmp_path):
         "SCENE": "512",
         "THROUGHPUT_N": "16",
         "CPU_WORKERS": "1",
+        "DEVICE_WORKERS": "1",
         "TMPDIR": str(tmp_path),
     }
     run = subprocess.run(

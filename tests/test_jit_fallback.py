@@ -99,3 +99,46 @@ def test_the_warm_up_compiles_every_kernel_the_default_run_uses(monkeypatch):
         progress=False,
     )
     assert compiled() == before
+
+
+_CHECK_CACHE = """
+import sys, torch
+from numba.core.registry import CPUDispatcher
+import torchsar.metrics._kernels as mk, torchsar._box_kernels as bk
+from torchsar._warm import run_task
+for task in sys.argv[1:]:
+    run_task(task, torch.float32)
+found = [f for m in (mk, bk) for f in vars(m).values() if isinstance(f, CPUDispatcher)]
+print(sum(sum(f.stats.cache_hits.values()) for f in found),
+      sum(sum(f.stats.cache_misses.values()) for f in found))
+"""
+
+
+@pytest.mark.integration
+def test_the_parallel_warm_up_fills_the_cache_a_fresh_process_reads(tmp_path):
+    """``warm(workers=2)`` compiles its tasks in two processes (their writes into numba's
+    cache one at a time): a fresh process then runs the same tasks from the cache alone,
+    every kernel a hit and none compiled again."""
+    import os
+    import subprocess
+    import sys
+
+    if not _jit.enabled():
+        pytest.skip("numba is not available")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    tasks = ["ca", "lee", "scoring"]
+    warm = (
+        "import torch; from torchsar._warm import warm; "
+        f"print(warm((torch.float32,), workers=2, tasks={tuple(tasks)!r}))"
+    )
+    subprocess.run([sys.executable, "-c", warm], env=env, check=True, timeout=600)
+    run = subprocess.run(
+        [sys.executable, "-c", _CHECK_CACHE, *tasks],
+        env=env,
+        check=True,
+        timeout=600,
+        capture_output=True,
+        text=True,
+    )
+    hits, misses = map(int, run.stdout.split())
+    assert hits > 0 and misses == 0, run.stdout
