@@ -37,11 +37,9 @@ __all__ = [
     "block_rows",
     "mean_of",
     "paired_pinwheel",
-    "pending_sizes",
     "pinwheel_buffers",
     "pinwheel_sums",
     "ratio_of",
-    "scale_by_sizes",
     "size_ranks",
     "vi_ratio",
     "vi_rule",
@@ -379,64 +377,30 @@ def _sorted4(a, b, c, d):
 @njit(**JIT, inline="always")
 def _size_rank(a, b, c, d):
     """The rank of the ascending sizes ``a <= b <= c <= d`` among all such tuples (the
-    combinatorial number system of ``a < b + 1 < c + 2 < d + 3``): ``< size_ranks(n)``
-    for sizes up to ``n``."""
-    x2, x3, x4 = b + 1, c + 2, d + 3
+    combinatorial number system of ``a < b + 1 < c + 2 < d + 3``): distinct tuples, distinct
+    ranks."""
+    x2, x3, x4 = b + 1, c + 2, d + 3  # each binomial divided as it grows (exact)
     return (
         a
         + x2 * (x2 - 1) // 2
-        + x3 * (x3 - 1) * (x3 - 2) // 6
-        + x4 * (x4 - 1) * (x4 - 2) * (x4 - 3) // 24
+        + x3 * (x3 - 1) // 2 * (x3 - 2) // 3
+        + x4 * (x4 - 1) // 2 * (x4 - 2) // 3 * (x4 - 3) // 4
     )
 
 
-def size_ranks(n: int) -> int:
-    """How many ascending 4-tuples of sizes in ``[0, n]`` there are: ``C(n + 4, 4)``."""
-    return (n + 1) * (n + 2) * (n + 3) * (n + 4) // 24
-
-
-@njit(**JIT, inline="always")
-def _block_sizes(counts, k, interior):
-    """Pixel ``k``'s four block sizes (``counts`` ``(4, N)``) and whether they are the
-    interior ones."""
-    a, b = np.int64(counts[0, k]), np.int64(counts[1, k])
-    c, d = np.int64(counts[2, k]), np.int64(counts[3, k])
-    same = a == interior[0] and b == interior[1] and c == interior[2] and d == interior[3]
-    return a, b, c, d, same
-
-
 @njit(**JIT)
-def pending_sizes(counts, interior, table):
-    """The distinct ascending size tuples of the pixels (``counts`` ``(4, N)``, float64
-    whole numbers) whose sizes are not the interior ones and whose factor ``table`` (by
-    :func:`_size_rank`) holds no value yet (NaN), each once, in pixel order: rows ``(K, 5)``
-    of the four sizes and their rank."""
-    seen = np.zeros(table.shape[0], np.bool_)
-    out = np.empty((min(counts.shape[1], table.shape[0]), 5), np.int64)
-    m = 0
+def size_ranks(counts, interior):
+    """Each pixel's rank of its ascending block sizes (``counts`` ``(4, N)``, float64 whole
+    numbers; :func:`_size_rank`), ``-1`` where the sizes are the interior ones (in the
+    blocks' order): the key of GO's and SO's border factor, which depends only on the
+    sorted sizes."""
+    out = np.empty(counts.shape[1], np.int64)
     for k in range(counts.shape[1]):
-        a, b, c, d, same = _block_sizes(counts, k, interior)
-        if same:
-            continue
-        a, b, c, d = _sorted4(a, b, c, d)
-        r = _size_rank(a, b, c, d)
-        if table[r] == table[r] or seen[r]:  # has a value, or listed already
-            continue
-        seen[r] = True
-        out[m, 0], out[m, 1], out[m, 2], out[m, 3], out[m, 4] = a, b, c, d, r
-        m += 1
-    return out[:m]
-
-
-@njit(**JIT)
-def scale_by_sizes(stat, counts, interior, table, full):
-    """``stat[k] *= full (1 / table[rank of pixel k's ascending sizes])`` (float64, in
-    place) where the sizes are not the interior ones: the border factors of GO and SO, one
-    look-up per pixel (``full`` times the reciprocal, as torch divides a number by a tensor
-    and the kernel without no-data forms its factors, so that a mask of valid cells gives
-    its statistic bit for bit)."""
-    for k in range(counts.shape[1]):
-        a, b, c, d, same = _block_sizes(counts, k, interior)
-        if not same:
+        a, b = np.int64(counts[0, k]), np.int64(counts[1, k])
+        c, d = np.int64(counts[2, k]), np.int64(counts[3, k])
+        if a == interior[0] and b == interior[1] and c == interior[2] and d == interior[3]:
+            out[k] = -1
+        else:
             a, b, c, d = _sorted4(a, b, c, d)
-            stat[k] = stat[k] * (full * (1.0 / table[_size_rank(a, b, c, d)]))
+            out[k] = _size_rank(a, b, c, d)
+    return out

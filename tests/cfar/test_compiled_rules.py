@@ -171,3 +171,20 @@ def test_factors_remembered_from_other_masks_change_nothing(name):
         detector(x, valid=m)  # tables holding every mask's sizes
     for m, want in zip(masks, fresh, strict=True):
         assert torch.equal(detector(x, valid=m).statistic, want)
+
+
+@pytest.mark.parametrize("name", ["go", "so"])
+def test_no_data_factors_of_a_wide_window_are_kept_by_the_sizes_met(monkeypatch, name):
+    """GO / SO with no-data and a wide window (blocks of 620 cells: billions of possible
+    size tuples, a table over them would need tens of GB): the factors of the sizes met,
+    the tensor code's statistic to float64 rounding (its window sums come from integral
+    images here, the kernel's cell by cell) and its mask."""
+    x = torch.empty(1, 1, 56, 60, dtype=torch.float64).exponential_(
+        generator=torch.Generator().manual_seed(8)
+    )
+    valid = torch.rand(x.shape, generator=torch.Generator().manual_seed(9)) > 0.05
+    detector = getattr(cfar, name)
+    call = lambda: detector(x, guard=5, train=20, valid=valid)  # noqa: E731
+    a, b = rules_both(monkeypatch, call, RULE_MODULES)
+    torch.testing.assert_close(a.statistic, b.statistic, rtol=1e-14, atol=0)
+    assert torch.equal(a.mask, b.mask)

@@ -120,25 +120,32 @@ def _compiled_valid_blocks(
         refuse_values(x)
     interior = tuple(r.area for r in pinwheel_rects(g, t))
     flat = counts.reshape(4, -1)
-    table = _size_factors(interior, factor.keywords["pfa"], reduce)
-    sizes = np.array(interior, np.int64)
-    for *row, rank in _pinwheel_kernels.pending_sizes(flat, sizes, table).tolist():
-        table[rank] = factor(tuple(row))  # (idempotent: threads may share the table)
-    _pinwheel_kernels.scale_by_sizes(stat.reshape(-1), flat, sizes, table, factor(interior))
+    ranks = _pinwheel_kernels.size_ranks(flat, np.array(interior, np.int64))
+    edge = np.flatnonzero(ranks >= 0)
+    if edge.size:  # the border factors, each distinct size tuple's once
+        known = _size_factors(interior, factor.keywords["pfa"], reduce)
+        keys, first, which = np.unique(ranks[edge], return_index=True, return_inverse=True)
+        found = np.empty(keys.size)
+        for i, (key, k) in enumerate(zip(keys.tolist(), edge[first].tolist(), strict=True)):
+            if key not in known:  # (idempotent: threads may share the table)
+                known[key] = factor(tuple(sorted(int(c) for c in flat[:, k])))
+            found[i] = known[key]
+        # full times the reciprocal, as torch divides a number by a tensor: bit for bit
+        # the statistic the tensor code gives
+        with np.errstate(invalid="ignore"):  # -inf times a factor of 0: NaN, as torch
+            stat.reshape(-1)[edge] *= (factor(interior) * (1.0 / found))[which]
     count = [torch.from_numpy(c).view(x.shape) for c in counts]
     return finish(torch.from_numpy(stat).view(x.shape), sum(count), dtype)
 
 
 @functools.lru_cache(maxsize=8)
-def _size_factors(interior: tuple[int, ...], pfa: float, reduce: str) -> np.ndarray:
+def _size_factors(interior: tuple[int, ...], pfa: float, reduce: str) -> dict[int, float]:
     """The GO / SO factors of the block sizes met so far with no-data, by the rank of the
-    ascending sizes (:func:`torchsar._pinwheel_kernels.size_ranks` of them, up to the
-    largest interior block; NaN: not met yet). A mask gives thousands of size tuples per
-    image, a few hundred ascending ones, most of them the same from image to image:
-    each factor (a numerical integration) is evaluated once."""
-    from torchsar import _pinwheel_kernels
-
-    return np.full(_pinwheel_kernels.size_ranks(max(interior)), np.nan)
+    ascending sizes (:func:`torchsar._pinwheel_kernels.size_ranks`). A mask gives
+    thousands of size tuples per image, a few hundred ascending ones, most of them the
+    same from image to image: each factor (a numerical integration) is evaluated once.
+    Entries are only ever added, with values that do not depend on who computes them."""
+    return {}
 
 
 def _compiled_block_cfar(
